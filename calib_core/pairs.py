@@ -1,0 +1,152 @@
+"""Point pairs: a laser point (a depth-matrix cell or an xyz) and a camera pixel.
+
+File format (YAML)::
+
+    pairs:
+      - laser_rc: [row, col]        # a depth-matrix cell, 0-based
+        pixel: [u, v]               # original camera image, (column, row)
+      - laser_xyz: [x, y, z]        # lidar frame, metres
+        pixel: [u, v]
+
+Pixels use the package convention: the centre of the top-left pixel is (0, 0).
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from .cameras.base import in_image
+from .errors import CalibError
+from .io.atomic import write_yaml_atomic
+from .io.yaml_files import finite_vector, read_yaml_mapping
+
+
+@dataclass(frozen=True)
+class Pair:
+    """One correspondence.  Exactly one of ``laser_rc`` / ``laser_xyz`` is set.
+
+    Attributes
+    ----------
+    laser_rc : (row, col) or None
+        Depth-matrix cell.
+    laser_xyz : (x, y, z) or None
+        Laser point in the lidar frame, metres.
+    pixel : (u, v)
+        Camera pixel in the original image (column, row).
+    """
+
+    laser_rc: tuple[int, int] | None
+    laser_xyz: tuple[float, float, float] | None
+    pixel: tuple[float, float]
+
+    def to_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        if self.laser_rc is not None:
+            out["laser_rc"] = [int(self.laser_rc[0]), int(self.laser_rc[1])]
+        if self.laser_xyz is not None:
+            out["laser_xyz"] = [float(x) for x in self.laser_xyz]
+        out["pixel"] = [float(self.pixel[0]), float(self.pixel[1])]
+        return out
+
+    @staticmethod
+    def from_dict(entry: Any, where: str) -> "Pair":
+        """Parse one entry of a pairs file; ``where`` names it in errors."""
+        if not isinstance(entry, dict):
+            raise CalibError(f"{where}: expected a mapping with laser_rc or laser_xyz and pixel")
+        unknown = set(entry) - {"laser_rc", "laser_xyz", "pixel", "id", "label"}
+        if unknown:
+            raise CalibError(f"{where}: unknown key(s) {sorted(unknown)}")
+        has_rc, has_xyz = "laser_rc" in entry, "laser_xyz" in entry
+        if has_rc == has_xyz:
+            raise CalibError(f"{where}: give exactly one of laser_rc or laser_xyz")
+        if "pixel" not in entry:
+            raise CalibError(f"{where}: missing pixel: [u, v]")
+        pixel = tuple(finite_vector(entry["pixel"], 2, f"{where} pixel"))
+        if has_rc:
+            rc = finite_vector(entry["laser_rc"], 2, f"{where} laser_rc")
+            if any(v != int(v) or v < 0 for v in rc):
+                raise CalibError(f"{where} laser_rc: expected two non-negative whole numbers, got {rc}")
+            return Pair((int(rc[0]), int(rc[1])), None, pixel)  # type: ignore[arg-type]
+        xyz = tuple(finite_vector(entry["laser_xyz"], 3, f"{where} laser_xyz"))
+        return Pair(None, xyz, pixel)  # type: ignore[arg-type]
+
+
+def load_pairs_yaml(path: str | os.PathLike) -> list[Pair]:
+    """Read a pairs file.  Malformed content raises a one-line :class:`CalibError`."""
+    path = Path(path)
+    data = read_yaml_mapping(path, "pairs file")
+    entries = data.get("pairs")
+    if entries is None:
+        raise CalibError(f"{path}: missing top-level key 'pairs'")
+    if not isinstance(entries, list):
+        raise CalibError(f"{path}: 'pairs' must be a list")
+    return [Pair.from_dict(e, f"{path}: pair {i}") for i, e in enumerate(entries)]
+
+
+def pairs_to_list(pairs: Sequence[Pair]) -> list[dict[str, Any]]:
+    return [p.to_dict() for p in pairs]
+
+
+def save_pairs_yaml(path: str | os.PathLike, pairs: Sequence[Pair]) -> None:
+    """Write a pairs file atomically (temporary file, then rename)."""
+    write_yaml_atomic(path, {"pairs": pairs_to_list(pairs)})
+
+
+def resolve_pairs(pairs: Sequence[Pair], depth, camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Turn pairs into solver input.
+
+    Parameters
+    ----------
+    pairs : sequence of Pair
+    depth : DepthMatrix or None
+        Needed when a pair names a ``laser_rc`` cell.
+    camera : CameraModel
+        Maps clicked pixels to bearings.
+
+    Returns
+    -------
+    points_lidar : (N, 3) float64
+        Laser points in the lidar frame, metres.
+    bearings_camera : (N, 3) float64
+        Unit rays of the clicked pixels, OpenCV camera frame.
+    pixels : (N, 2) float64
+        The clicked pixels ``(u, v)``.
+    """
+    n = len(pairs)
+    points = np.empty((n, 3))
+    pixels = np.array([p.pixel for p in pairs], dtype=np.float64).reshape(n, 2)
+    rc_idx = [i for i, p in enumerate(pairs) if p.laser_rc is not None]
+    xyz_idx = [i for i, p in enumerate(pairs) if p.laser_rc is None]
+    if xyz_idx:
+        points[xyz_idx] = np.array([pairs[i].laser_xyz for i in xyz_idx], dtype=np.float64)
+    if rc_idx:
+        if depth is None:
+            raise CalibError("pairs name depth-matrix cells (laser_rc) but no scan was given")
+        rc = np.array([pairs[i].laser_rc for i in rc_idx], dtype=np.int64)
+        h, w = depth.shape
+        outside = (rc[:, 0] >= h) | (rc[:, 1] >= w) | (rc < 0).any(axis=1)
+        if outside.any():
+            i = rc_idx[int(np.argmax(outside))]
+            raise CalibError(f"pair {i}: laser cell {tuple(pairs[i].laser_rc)} is outside the {h}x{w} depth matrix")
+        no_return = ~depth.valid[rc[:, 0], rc[:, 1]]
+        if no_return.any():
+            i = rc_idx[int(np.argmax(no_return))]
+            raise CalibError(f"pair {i}: laser cell {tuple(pairs[i].laser_rc)} has no laser return; pick a valid cell")
+        points[rc_idx] = depth.points[rc[:, 0], rc[:, 1]]
+    inside = in_image(pixels, camera.width, camera.height)
+    if not inside.all():
+        i = int(np.argmin(inside))
+        raise CalibError(
+            f"pair {i}: pixel {tuple(pixels[i])} is outside the {camera.width}x{camera.height} camera image"
+        )
+    bearings = camera.bearing(pixels) if n else np.empty((0, 3))
+    bad = ~np.isfinite(bearings).all(axis=1)
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise CalibError(f"pair {i}: pixel {tuple(pixels[i])} has no ray under the {camera.model} camera model")
+    return points, bearings, pixels
