@@ -1,0 +1,196 @@
+"""Extrinsics YAML: export and import of ``T_camera_lidar`` with its quality figures.
+
+Layout::
+
+    ba_calib_version: 0.1.0
+    T_camera_lidar:
+      matrix: [[r00, r01, r02, tx], ..., [0, 0, 0, 1]]   # X_camera = matrix @ X_lidar
+      translation_m: [tx, ty, tz]
+      quaternion_xyzw: [qx, qy, qz, qw]
+      rpy_deg: [roll, pitch, yaw]                           # R = Rz(yaw) Ry(pitch) Rx(roll)
+    sigma: {translation_m: [...], rpy_deg: [...]}            # 1-sigma at the optimum
+    residuals: {mean_px, std_px, mean_deg, std_deg, per_pair: [...], warnings: [...]}
+    camera: {...}                                           # the camera description
+    pairs: [...]                                            # the pairs that were solved
+
+Floats are written with Python's shortest round-trip representation, so
+saving and loading again reproduces every number exactly.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from .. import __version__
+from ..errors import CalibError
+from ..transforms import R_from_quat_xyzw, R_from_rpy_deg, make_T, quat_xyzw_from_R, rpy_deg_from_R
+from .atomic import write_yaml_atomic
+from .yaml_files import finite_vector, read_yaml_mapping
+
+CONVENTION = "X_camera = matrix @ X_lidar (metres); rpy: R = Rz(yaw) @ Ry(pitch) @ Rx(roll)"
+
+
+def _floats(a) -> list:
+    """Nested Python floats (``yaml.safe_dump`` cannot write numpy scalars)."""
+    return np.asarray(a, dtype=np.float64).tolist()
+
+
+def _nan_to_none(values) -> list:
+    return [None if not np.isfinite(v) else float(v) for v in np.asarray(values, dtype=np.float64)]
+
+
+def transform_to_dict(T_camera_lidar: np.ndarray) -> dict[str, Any]:
+    """The ``T_camera_lidar`` block: matrix plus the same pose in three other forms."""
+    T = np.asarray(T_camera_lidar, dtype=np.float64)
+    return {
+        "matrix": _floats(T),
+        "translation_m": _floats(T[:3, 3]),
+        "quaternion_xyzw": _floats(quat_xyzw_from_R(T[:3, :3])),
+        "rpy_deg": _floats(rpy_deg_from_R(T[:3, :3])),
+        "convention": CONVENTION,
+    }
+
+
+def result_to_dict(result) -> dict[str, Any]:
+    """``sigma`` and ``residuals`` blocks of a :class:`CalibrationResult`."""
+    per_pair = []
+    outliers = set(int(i) for i in result.outliers)
+    res_px = np.asarray(result.residual_px, dtype=np.float64)
+    for i, deg in enumerate(np.asarray(result.residual_deg, dtype=np.float64)):
+        px = res_px[i] if i < len(res_px) else np.nan
+        per_pair.append(
+            {
+                "index": i,
+                "deg": float(deg),
+                "px": None if not np.isfinite(px) else float(px),
+                "outlier": i in outliers,
+            }
+        )
+    return {
+        "sigma": {
+            "translation_m": _floats(result.sigma_translation_m),
+            "rpy_deg": _floats(result.sigma_rpy_deg),
+        },
+        "residuals": {
+            "n_pairs": int(result.n_pairs),
+            "cost": str(result.cost_name),
+            "mean_px": _nan_to_none([result.mean_px])[0],
+            "std_px": _nan_to_none([result.std_px])[0],
+            "mean_deg": float(result.mean_deg),
+            "std_deg": float(result.std_deg),
+            "per_pair": per_pair,
+            "warnings": [str(w) for w in result.warnings],
+        },
+    }
+
+
+def extrinsics_to_dict(
+    T_camera_lidar: np.ndarray,
+    result=None,
+    camera=None,
+    pairs: Sequence | None = None,
+    base_dir: Path | None = None,
+) -> dict[str, Any]:
+    """The whole extrinsics document as plain Python data."""
+    doc: dict[str, Any] = {"ba_calib_version": __version__, "T_camera_lidar": transform_to_dict(T_camera_lidar)}
+    if result is not None:
+        doc.update(result_to_dict(result))
+    if camera is not None:
+        doc["camera"] = camera.to_dict(base_dir)
+    if pairs is not None:
+        doc["pairs"] = [p.to_dict() if hasattr(p, "to_dict") else dict(p) for p in pairs]
+    return doc
+
+
+def save_extrinsics_yaml(
+    path: str | os.PathLike,
+    T_camera_lidar: np.ndarray,
+    result=None,
+    camera=None,
+    pairs: Sequence | None = None,
+) -> None:
+    """Write the extrinsics YAML atomically.
+
+    Parameters
+    ----------
+    path : path-like
+        Output file.
+    T_camera_lidar : (4, 4) array
+        Lidar-to-camera transform, metres.
+    result : CalibrationResult, optional
+        Adds the ``sigma`` and ``residuals`` blocks.
+    camera : CameraModel, optional
+        Adds the ``camera`` block (paths relative to the output file).
+    pairs : sequence of Pair, optional
+        Adds the ``pairs`` block.
+    """
+    path = Path(path)
+    write_yaml_atomic(path, extrinsics_to_dict(T_camera_lidar, result, camera, pairs, base_dir=path.parent))
+
+
+def _check_rotation(R: np.ndarray, where: str) -> None:
+    if not np.allclose(R @ R.T, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
+        raise CalibError(f"{where}: the 3x3 rotation block is not a proper rotation (orthonormal, det +1)")
+
+
+def parse_transform(block: Any, where: str) -> np.ndarray:
+    """A ``T_camera_lidar`` block -> (4, 4) array.
+
+    Accepts ``matrix``, or ``translation_m`` with ``quaternion_xyzw`` or
+    ``rpy_deg``.  When several forms are present they must agree.
+    """
+    if not isinstance(block, dict):
+        raise CalibError(f"{where}: expected a mapping with 'matrix' or 'translation_m' + rotation")
+    candidates: list[tuple[str, np.ndarray]] = []
+    if "matrix" in block:
+        rows = block["matrix"]
+        if not isinstance(rows, list) or len(rows) != 4:
+            raise CalibError(f"{where}.matrix: expected a 4x4 nested list")
+        T = np.array([finite_vector(r, 4, f"{where}.matrix row {i}") for i, r in enumerate(rows)])
+        if not np.allclose(T[3], [0, 0, 0, 1], atol=1e-9):
+            raise CalibError(f"{where}.matrix: last row must be [0, 0, 0, 1], got {T[3].tolist()}")
+        _check_rotation(T[:3, :3], f"{where}.matrix")
+        candidates.append(("matrix", T))
+    if "translation_m" in block:
+        t = np.array(finite_vector(block["translation_m"], 3, f"{where}.translation_m"))
+        if "quaternion_xyzw" in block:
+            q = np.array(finite_vector(block["quaternion_xyzw"], 4, f"{where}.quaternion_xyzw"))
+            if not 0.99 < np.linalg.norm(q) < 1.01:
+                raise CalibError(f"{where}.quaternion_xyzw: must have unit norm, got {np.linalg.norm(q):.4f}")
+            candidates.append(("quaternion_xyzw", make_T(R_from_quat_xyzw(q), t)))
+        if "rpy_deg" in block:
+            rpy = np.array(finite_vector(block["rpy_deg"], 3, f"{where}.rpy_deg"))
+            candidates.append(("rpy_deg", make_T(R_from_rpy_deg(rpy), t)))
+    if not candidates:
+        raise CalibError(f"{where}: needs 'matrix', or 'translation_m' with 'quaternion_xyzw' or 'rpy_deg'")
+    name0, T0 = candidates[0]
+    for name, T in candidates[1:]:
+        # Values printed with fewer digits by hand still agree to ~1e-6.
+        if not np.allclose(T, T0, atol=1e-5):
+            raise CalibError(f"{where}: '{name}' disagrees with '{name0}'; fix or remove one of them")
+    return T0
+
+
+def load_extrinsics_yaml(path: str | os.PathLike) -> dict[str, Any]:
+    """Read an extrinsics YAML.
+
+    Returns
+    -------
+    dict
+        The document as read, except that ``"T_camera_lidar"`` is replaced by
+        the (4, 4) float64 array (the authoritative ``matrix`` when present).
+        The original block is kept under ``"T_camera_lidar_block"``.
+    """
+    path = Path(path)
+    doc = read_yaml_mapping(path, "extrinsics file")
+    if "T_camera_lidar" not in doc:
+        raise CalibError(f"{path}: missing top-level key 'T_camera_lidar'")
+    block = doc["T_camera_lidar"]
+    out = dict(doc)
+    out["T_camera_lidar_block"] = block
+    out["T_camera_lidar"] = parse_transform(block, f"{path}: T_camera_lidar")
+    return out
