@@ -1,0 +1,299 @@
+"""The ``ba-calib`` command.
+
+``ba-calib`` alone serves the bundled sample scene in the browser app; the
+sub-commands run the same calibration headless.  Every user error prints one
+line, ``error: <what is wrong>``, and exits with code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from pathlib import Path
+from typing import Sequence
+
+EXIT_USAGE = 2
+
+
+def default_sample_dir() -> Path:
+    """The bundled sample scene; generated into the user cache when absent.
+
+    An editable install finds ``sample_data/`` in the checkout.  A plain
+    install has no checkout, so the sample is generated once (seed 0, the
+    same scene) into ``~/.cache/ba-calib/sample``.
+    """
+    repo_sample = Path(__file__).resolve().parents[1] / "sample_data"
+    if (repo_sample / "scan.npz").is_file():
+        return repo_sample
+    cache = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "ba-calib" / "sample"
+    if not (cache / "scan.npz").is_file():
+        from calib_core.synthetic import write_sample
+
+        print(f"Generating the sample scene into {cache} (one time, about a minute) ...", flush=True)
+        write_sample(cache, seed=0)
+    return cache
+
+
+# --- scan options shared by every command that reads a scan -----------------
+
+
+def _add_scan_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--scan", required=True, type=Path, help="scan file: .npz (native), .pcd, .ply, .bin (KITTI), .las/.laz, .npy")
+    p.add_argument(
+        "--organize",
+        choices=["auto", "ring", "elevation", "firing", "spherical"],
+        default="auto",
+        help="how an unorganized cloud becomes a depth matrix (default: ring field if present, else --beams, else spherical)",
+    )
+    p.add_argument("--beams", type=int, default=None, help="number of beams, for clouds without a ring field")
+    p.add_argument("--h-res-deg", type=float, default=None, help="azimuth resolution of the spherical fallback")
+    p.add_argument("--v-res-deg", type=float, default=None, help="elevation resolution of the spherical fallback")
+
+
+def scan_options(args: argparse.Namespace) -> dict:
+    opts: dict = {"organize": args.organize}
+    for key in ("beams", "h_res_deg", "v_res_deg"):
+        if getattr(args, key, None) is not None:
+            opts[key] = getattr(args, key)
+    return opts
+
+
+def load_scan_from_args(args: argparse.Namespace):
+    from calib_core.io.scan_readers import load_scan
+
+    return load_scan(args.scan, **scan_options(args))
+
+
+def _add_camera_arg(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--camera", required=True, type=Path, help="camera file: our YAML, ROS camera_info YAML, OCamCalib calib_results.txt")
+    p.add_argument("--image-size", type=int, nargs=2, metavar=("W", "H"), default=None, help="override the camera file's image size")
+
+
+def load_camera_from_args(args: argparse.Namespace):
+    from calib_core.cameras import load_camera
+
+    size = tuple(args.image_size) if args.image_size else None
+    return load_camera(args.camera, image_size=size) if size else load_camera(args.camera)
+
+
+# --- commands ----------------------------------------------------------------
+
+
+def format_summary(result, pairs_count: int) -> str:
+    """The solve summary table (paper Table I layout), as text."""
+    import numpy as np
+
+    from calib_core.transforms import rpy_deg_from_R
+
+    T = result.T_camera_lidar
+    rpy = rpy_deg_from_R(T[:3, :3])
+    lines = [
+        f"Calibrated from {pairs_count} pairs (cost: {result.cost_name})",
+        "",
+        f"{'':14}{'value':>12}{'sigma':>10}",
+    ]
+    for name, v, s in zip(("tx [m]", "ty [m]", "tz [m]"), T[:3, 3], result.sigma_translation_m):
+        lines.append(f"{name:14}{v:12.4f}{s:10.4f}")
+    for name, v, s in zip(("roll [deg]", "pitch [deg]", "yaw [deg]"), rpy, result.sigma_rpy_deg):
+        lines.append(f"{name:14}{v:12.3f}{s:10.3f}")
+    lines.append("")
+    if np.isfinite(result.mean_px):
+        lines.append(f"reprojection error: {result.mean_px:.3f} +/- {result.std_px:.3f} px, {result.mean_deg:.4f} +/- {result.std_deg:.4f} deg")
+    else:
+        lines.append(f"reprojection error: {result.mean_deg:.4f} +/- {result.std_deg:.4f} deg")
+    lines.append("")
+    lines.append(f"{'pair':>4}{'error [px]':>12}{'error [deg]':>13}")
+    outliers = set(result.outliers)
+    for i, (px, deg) in enumerate(zip(result.residual_px, result.residual_deg)):
+        flag = "  <- outlier" if i in outliers else ""
+        px_s = f"{px:12.3f}" if np.isfinite(px) else f"{'-':>12}"
+        lines.append(f"{i:4d}{px_s}{deg:13.4f}{flag}")
+    for w in result.warnings:
+        lines.append(f"warning: {w}")
+    lines.append("")
+    lines.append("T_camera_lidar (X_camera = T @ X_lidar):")
+    lines.extend("  " + " ".join(f"{x:12.6f}" for x in row) for row in T)
+    return "\n".join(lines)
+
+
+def cmd_solve(args: argparse.Namespace) -> int:
+    from calib_core.io.extrinsics import save_extrinsics_yaml
+    from calib_core.pairs import load_pairs_yaml, resolve_pairs
+    from calib_core.solve import solve_extrinsics
+
+    pairs = load_pairs_yaml(args.pairs)
+    camera = load_camera_from_args(args)
+    needs_scan = any(p.laser_rc is not None for p in pairs)
+    if needs_scan and args.scan is None:
+        from calib_core.errors import CalibError
+
+        raise CalibError(f"{args.pairs}: pairs name depth-matrix cells (laser_rc); give the scan with --scan")
+    depth = load_scan_from_args(args) if args.scan is not None else None
+    points, bearings, pixels = resolve_pairs(pairs, depth, camera)
+    result = solve_extrinsics(points, bearings, camera=camera, pixels=pixels, cost=args.cost)
+    print(format_summary(result, len(pairs)))
+    save_extrinsics_yaml(args.output, result.T_camera_lidar, result=result, camera=camera, pairs=pairs)
+    print(f"\nwrote {args.output}")
+    return 0
+
+
+def cmd_ba_images(args: argparse.Namespace) -> int:
+    from calib_core.bearing_angle import BA_DIRECTIONS, ba_to_display, bearing_angle_images
+    from calib_core.io.images import save_image_rgb
+
+    depth = load_scan_from_args(args)
+    images = bearing_angle_images(depth)
+    args.output.mkdir(parents=True, exist_ok=True)
+    for name in BA_DIRECTIONS:
+        out = args.output / f"ba_{name}.png"
+        save_image_rgb(out, ba_to_display(images[name]))
+        print(f"wrote {out}")
+    h, w = depth.shape
+    print(f"depth matrix {h} x {w}, {int(depth.valid.sum())} valid cells ({100.0 * depth.valid.mean():.1f} %)")
+    return 0
+
+
+def cmd_colorize(args: argparse.Namespace) -> int:
+    from calib_core.io.extrinsics import load_extrinsics_yaml
+    from calib_core.io.images import load_image_rgb
+    from calib_core.overlays import colorize_points, export_colored_ply
+
+    depth = load_scan_from_args(args)
+    camera = load_camera_from_args(args)
+    image = load_image_rgb(args.image)
+    T = load_extrinsics_yaml(args.extrinsics)["T_camera_lidar"]
+    points, _ = depth.valid_points()
+    colors, has_color = colorize_points(points, image, camera, T, occlusion=not args.no_occlusion)
+    export_colored_ply(args.output, points, colors, has_color)
+    print(f"coloured {int(has_color.sum())} of {len(points)} points; wrote {args.output}")
+    return 0
+
+
+def cmd_sample(args: argparse.Namespace) -> int:
+    import time
+
+    from calib_core.synthetic import write_sample
+
+    t0 = time.perf_counter()
+    print(f"Generating the synthetic scene (seed {args.seed}) into {args.output} ...", flush=True)
+    write_sample(args.output, seed=args.seed)
+    print(f"done in {time.perf_counter() - t0:.1f} s")
+    for f in sorted(args.output.iterdir()):
+        print(f"  {f.name:20} {f.stat().st_size / 1024:8.1f} KiB")
+    return 0
+
+
+def cmd_serve(args: argparse.Namespace) -> int:
+    from app.server import serve
+
+    if args.scan is None and args.image is None and args.camera is None:
+        sample = default_sample_dir()
+        args.scan, args.image, args.camera = sample / "scan.npz", sample / "image.png", sample / "camera.yaml"
+        if args.session is None:
+            args.session = Path.cwd() / "ba-calib-sample-session.yaml"
+    missing = [n for n in ("scan", "image", "camera") if getattr(args, n) is None]
+    if missing:
+        from calib_core.errors import CalibError
+
+        raise CalibError("serve needs --scan, --image and --camera (or none of them, for the sample); missing: " + ", ".join("--" + m for m in missing))
+    serve(
+        args.scan,
+        args.image,
+        args.camera,
+        session_path=args.session,
+        output_path=args.output,
+        host=args.host,
+        port=args.port,
+        scan_options=scan_options(args),
+        image_size=tuple(args.image_size) if args.image_size else None,
+    )
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="ba-calib",
+        description="Targetless camera / 3D-lidar extrinsic calibration with Bearing Angle images. "
+        "With no command, serves the bundled sample scene at http://127.0.0.1:8080.",
+    )
+    parser.add_argument("--debug", action="store_true", help="show tracebacks of internal errors")
+    sub = parser.add_subparsers(dest="command")
+
+    p = sub.add_parser("serve", help="open the browser app on a scene")
+    p.add_argument("--scan", type=Path)
+    p.add_argument("--image", type=Path)
+    p.add_argument("--camera", type=Path)
+    p.add_argument("--image-size", type=int, nargs=2, metavar=("W", "H"), default=None)
+    p.add_argument("--organize", choices=["auto", "ring", "elevation", "firing", "spherical"], default="auto")
+    p.add_argument("--beams", type=int, default=None)
+    p.add_argument("--h-res-deg", type=float, default=None)
+    p.add_argument("--v-res-deg", type=float, default=None)
+    p.add_argument("--session", type=Path, default=None, help="pairs session file, saved after every change and restored on start")
+    p.add_argument("--output", type=Path, default=None, help="where Export also writes the extrinsics YAML")
+    p.add_argument("--host", default="127.0.0.1", help="interface to bind (default 127.0.0.1: this machine only)")
+    p.add_argument("--port", type=int, default=8080)
+    p.set_defaults(func=cmd_serve)
+
+    p = sub.add_parser("solve", help="calibrate from a pairs file and print the summary")
+    p.add_argument("--scan", type=Path, default=None, help="scan file (needed when pairs use laser_rc)")
+    p.add_argument("--organize", choices=["auto", "ring", "elevation", "firing", "spherical"], default="auto")
+    p.add_argument("--beams", type=int, default=None)
+    p.add_argument("--h-res-deg", type=float, default=None)
+    p.add_argument("--v-res-deg", type=float, default=None)
+    _add_camera_arg(p)
+    p.add_argument("--pairs", required=True, type=Path, help="pairs YAML")
+    p.add_argument("--cost", choices=["angular", "pixel"], default="angular", help="angular = paper eq. 7 (default), pixel = eq. 6")
+    p.add_argument("-o", "--output", required=True, type=Path, help="extrinsics YAML to write")
+    p.set_defaults(func=cmd_solve)
+
+    p = sub.add_parser("ba-images", help="write the four Bearing Angle images as PNG")
+    _add_scan_args(p)
+    p.add_argument("-o", "--output", required=True, type=Path, help="output folder")
+    p.set_defaults(func=cmd_ba_images)
+
+    p = sub.add_parser("colorize", help="colour the scan from the image and write a PLY")
+    _add_scan_args(p)
+    p.add_argument("--image", required=True, type=Path)
+    _add_camera_arg(p)
+    p.add_argument("--extrinsics", required=True, type=Path)
+    p.add_argument("--no-occlusion", action="store_true", help="skip the depth test (colours occluded points too)")
+    p.add_argument("-o", "--output", required=True, type=Path)
+    p.set_defaults(func=cmd_colorize)
+
+    p = sub.add_parser("sample", help="generate a synthetic scene with ground truth")
+    p.add_argument("-o", "--output", required=True, type=Path)
+    p.add_argument("--seed", type=int, default=0, help="changes the layout and the ground truth")
+    p.set_defaults(func=cmd_sample)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    from calib_core.errors import CalibError
+
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.command is None:
+        debug = args.debug
+        args = parser.parse_args(["serve"])
+        args.debug = debug
+    try:
+        return int(args.func(args) or 0)
+    except CalibError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except (FileNotFoundError, IsADirectoryError, PermissionError) as exc:
+        print(f"error: {exc.filename or ''}: {exc.strerror}", file=sys.stderr)
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+    except Exception as exc:  # noqa: BLE001 - last resort: one line unless --debug
+        if args.debug:
+            raise
+        print(f"internal error: {type(exc).__name__}: {exc} (run with --debug for the traceback)", file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
