@@ -142,11 +142,11 @@ def resolve_pairs(pairs: Sequence[Pair], depth, camera) -> tuple[np.ndarray, np.
     if not inside.all():
         i = int(np.argmin(inside))
         raise CalibError(
-            f"pair {i}: pixel {tuple(pixels[i])} is outside the {camera.width}x{camera.height} camera image"
+            f"pair {i}: pixel ({pixels[i, 0]:.1f}, {pixels[i, 1]:.1f}) is outside the {camera.width}x{camera.height} camera image"
         )
     bearings = camera.bearing(pixels) if n else np.empty((0, 3))
     bad = ~np.isfinite(bearings).all(axis=1)
     if bad.any():
         i = int(np.argmax(bad))
-        raise CalibError(f"pair {i}: pixel {tuple(pixels[i])} has no ray under the {camera.model} camera model")
+        raise CalibError(f"pair {i}: pixel ({pixels[i, 0]:.1f}, {pixels[i, 1]:.1f}) has no ray under the {camera.model} camera model")
     return points, bearings, pixels
