@@ -1,0 +1,286 @@
+"""Camera files: loading, saving and checking the numbers in them.
+
+Accepted inputs (:func:`load_camera`):
+
+* ``.yaml`` / ``.yml`` in our own format::
+
+      model: pinhole            # or fisheye, ocam
+      width: 1920
+      height: 1200
+      K: [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]
+      dist: [k1, k2, p1, p2, k3]  # pinhole: any OpenCV length
+      # D: [k1, k2, k3, k4]       # fisheye (Kannala-Brandt, cv2.fisheye)
+      # file: calib_results.txt   # ocam, relative to this YAML's folder
+
+* ``.yaml`` / ``.yml`` in ROS ``camera_info`` format (``image_width``,
+  ``image_height``, ``camera_matrix``, ``distortion_model``,
+  ``distortion_coefficients``); ``plumb_bob`` and ``rational_polynomial`` map
+  to ``pinhole``, ``equidistant`` to ``fisheye``.
+* ``.txt``: the OCamCalib toolbox's C export ``calib_results.txt``.
+* ``.json``: the PJLab OpenCalib intrinsic JSON (``cam_K``, ``cam_dist``,
+  ``img_dist_w``, ``img_dist_h``), or our own format as JSON.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any, Iterable
+
+import numpy as np
+
+from ..errors import CalibError
+from ..io.atomic import write_yaml_atomic
+from ..io.yaml_files import read_yaml_mapping
+from .base import CAMERA_MODELS, CameraModel
+
+#: ROS ``distortion_model`` names -> our model names.
+ROS_DISTORTION_MODELS = {
+    "plumb_bob": "pinhole",
+    "rational_polynomial": "pinhole",
+    "equidistant": "fisheye",
+    "fisheye": "fisheye",
+}
+
+#: File name of the OCamCalib sidecar written by :func:`save_camera_yaml`.
+OCAM_SIDECAR_NAME = "calib_results.txt"
+
+
+# -- checking numbers from user files ---------------------------------------------
+def _numeric_array(value: Any, name: str) -> np.ndarray:
+    try:
+        arr = np.asarray(value)
+    except (ValueError, TypeError):
+        raise CalibError(f"{name}: expected numbers, got {value!r}") from None
+    if arr.dtype == object or arr.dtype.kind not in "iuf":
+        raise CalibError(f"{name}: expected numbers, got {value!r}")
+    arr = arr.astype(np.float64)
+    if not np.all(np.isfinite(arr)):
+        raise CalibError(f"{name}: numbers must be finite, got {arr.tolist()}")
+    return arr
+
+
+def param_matrix(value: Any, name: str, shape: tuple[int, int]) -> np.ndarray:
+    """``value`` as a finite float matrix of exactly ``shape``, or a :class:`CalibError`."""
+    arr = _numeric_array(value, name)
+    if arr.shape != shape:
+        raise CalibError(f"{name} must be a {shape[0]}x{shape[1]} matrix, got shape {arr.shape}")
+    return arr
+
+
+def param_vector(value: Any, name: str, lengths: Iterable[int] | None = None) -> np.ndarray:
+    """``value`` as a finite 1-D float vector (optionally of an allowed length)."""
+    arr = _numeric_array(value, name)
+    if arr.ndim != 1:
+        raise CalibError(f"{name} must be a list of numbers, got shape {arr.shape}")
+    if lengths is not None:
+        lengths = tuple(lengths)
+        if arr.size not in lengths:
+            allowed = ", ".join(map(str, lengths))
+            raise CalibError(f"{name} must have {allowed} coefficients, got {arr.size}")
+    return arr
+
+
+def param_float(value: Any, name: str) -> float:
+    """``value`` as one finite float."""
+    arr = _numeric_array(value, name)
+    if arr.ndim != 0:
+        raise CalibError(f"{name} must be one number, got {value!r}")
+    return float(arr)
+
+
+def param_image_size(width: Any, height: Any) -> tuple[int, int]:
+    """Positive integer ``(width, height)`` in pixels."""
+    out = []
+    for name, value in (("width", width), ("height", height)):
+        if isinstance(value, bool):
+            raise CalibError(f"{name} must be a positive integer, got {value!r}")
+        v = param_float(value, name)
+        if v <= 0 or v != int(v):
+            raise CalibError(f"{name} must be a positive integer, got {value!r}")
+        out.append(int(v))
+    return out[0], out[1]
+
+
+def require_keys(data: Any, keys: Iterable[str], what: str) -> None:
+    """Raise a :class:`CalibError` naming the first key of ``keys`` missing from ``data``."""
+    if not isinstance(data, dict):
+        raise CalibError(f"{what}: expected a mapping, got {type(data).__name__}")
+    for key in keys:
+        if key not in data:
+            raise CalibError(f"{what}: missing key '{key}'")
+
+
+# -- format conversions ---------------------------------------------------------------
+def _ros_matrix(block: Any, name: str) -> np.ndarray:
+    """The ``data`` of a ROS ``{rows, cols, data}`` block, shape ``(rows, cols)``."""
+    require_keys(block, ("data",), name)
+    data = param_vector(block["data"] if block["data"] is not None else [], f"{name}.data")
+    rows, cols = block.get("rows"), block.get("cols")
+    if rows is not None and cols is not None:
+        r, c = int(param_float(rows, f"{name}.rows")), int(param_float(cols, f"{name}.cols"))
+        if r * c != data.size:
+            raise CalibError(f"{name}: rows x cols = {r}x{c} but data has {data.size} numbers")
+        return data.reshape(r, c)
+    return data.reshape(1, -1)
+
+
+def ros_camera_info_to_dict(data: dict[str, Any]) -> dict[str, Any]:
+    """A ROS ``camera_info`` YAML mapping -> our own camera mapping."""
+    require_keys(data, ("image_width", "image_height", "camera_matrix"), "ROS camera_info")
+    K = _ros_matrix(data["camera_matrix"], "camera_matrix")
+    if K.size != 9:
+        raise CalibError(f"camera_matrix must be 3x3, got {K.size} numbers")
+    dist_model = data.get("distortion_model", "plumb_bob")
+    if dist_model not in ROS_DISTORTION_MODELS:
+        known = ", ".join(ROS_DISTORTION_MODELS)
+        raise CalibError(f"unknown ROS distortion_model {dist_model!r} (known: {known})")
+    D = _ros_matrix(data.get("distortion_coefficients", {"data": []}), "distortion_coefficients")
+    out: dict[str, Any] = {
+        "model": ROS_DISTORTION_MODELS[dist_model],
+        "width": data["image_width"],
+        "height": data["image_height"],
+        "K": K.reshape(3, 3).tolist(),
+    }
+    out["D" if out["model"] == "fisheye" else "dist"] = D.ravel().tolist()
+    return out
+
+
+def pjlab_intrinsic_to_dict(data: dict[str, Any]) -> dict[str, Any]:
+    """A PJLab OpenCalib ``*-intrinsic.json`` mapping -> our own pinhole mapping."""
+    param = data.get("param")
+    if param is None:
+        blocks = [v for v in data.values() if isinstance(v, dict) and "param" in v]
+        if len(blocks) != 1:
+            raise CalibError("not a PJLab intrinsic JSON: expected one block with a 'param' mapping")
+        param = blocks[0]["param"]
+    require_keys(param, ("cam_K", "img_dist_w", "img_dist_h"), "PJLab intrinsic param")
+    require_keys(param["cam_K"], ("data",), "cam_K")
+    K = _numeric_array(param["cam_K"]["data"], "cam_K.data")
+    if K.size != 9:
+        raise CalibError(f"cam_K.data must be 3x3, got shape {K.shape}")
+    dist: list[float] = []
+    if "cam_dist" in param:
+        require_keys(param["cam_dist"], ("data",), "cam_dist")
+        dist = _numeric_array(param["cam_dist"]["data"], "cam_dist.data").ravel().tolist()
+    return {
+        "model": "pinhole",
+        "width": param["img_dist_w"],
+        "height": param["img_dist_h"],
+        "K": K.reshape(3, 3).tolist(),
+        "dist": dist,
+    }
+
+
+def _normalise(data: Any) -> dict[str, Any]:
+    """Own format as is; a ROS camera_info converted; anything else an error."""
+    if not isinstance(data, dict):
+        raise CalibError(f"expected a mapping describing a camera, got {type(data).__name__}")
+    if "model" in data:
+        return dict(data)
+    if "camera_matrix" in data or "image_width" in data:
+        return ros_camera_info_to_dict(data)
+    raise CalibError("not a camera description: no 'model' key and not a ROS camera_info")
+
+
+def camera_from_dict(data: dict[str, Any], base_dir: str | os.PathLike | None = None) -> CameraModel:
+    """Build a camera from our YAML mapping (or a ROS ``camera_info`` mapping).
+
+    Parameters
+    ----------
+    data : dict
+        ``{model: pinhole | fisheye | ocam, ...}`` as described in this module.
+    base_dir : path-like, optional
+        Folder against which relative paths (``file:`` of an ``ocam`` camera)
+        are resolved; the current folder if omitted.
+    """
+    data = _normalise(data)
+    name = data["model"]
+    if not isinstance(name, str) or name not in CAMERA_MODELS:
+        known = ", ".join(sorted(CAMERA_MODELS))
+        raise CalibError(f"unknown camera model {name!r} (known: {known})")
+    return CAMERA_MODELS[name].from_dict(data, Path(base_dir) if base_dir is not None else Path.cwd())
+
+
+def _read_json(path: Path) -> Any:
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise CalibError(f"{path}: cannot read camera file: {exc}") from None
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise CalibError(f"{path}: malformed JSON at line {exc.lineno}: {exc.msg}") from None
+
+
+def load_camera(path: str | os.PathLike, image_size: tuple[int, int] | None = None) -> CameraModel:
+    """Load a camera model from a file.
+
+    Parameters
+    ----------
+    path : path-like
+        ``.yaml``/``.yml`` (own format or ROS camera_info), ``.txt`` (OCamCalib
+        ``calib_results.txt``) or ``.json`` (PJLab intrinsic, or own format).
+    image_size : (int, int), optional
+        ``(width, height)`` in pixels replacing the size stated in the file
+        (e.g. PJLab's manual_calib JSON claims 1920x1080 for a 1920x1200 image).
+
+    Raises
+    ------
+    CalibError
+        Missing or malformed file, missing keys, wrong shapes, unknown model,
+        non-finite numbers; the message names the file.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise CalibError(f"{path}: camera file not found")
+    if path.is_dir():
+        raise CalibError(f"{path}: is a folder, expected a camera file")
+    suffix = path.suffix.lower()
+    try:
+        if image_size is not None:
+            if len(image_size) != 2:
+                raise CalibError(f"image_size must be (width, height), got {image_size!r}")
+            param_image_size(*image_size)
+        if suffix == ".txt":
+            camera = CAMERA_MODELS["ocam"].from_calib_results(path)
+            if image_size is not None:
+                data = camera.to_dict(None)
+                data["width"], data["height"] = image_size
+                camera = camera_from_dict(data, path.parent)
+            return camera
+        if suffix in (".yaml", ".yml"):
+            data = _normalise(read_yaml_mapping(path, "camera file"))
+        elif suffix == ".json":
+            raw = _read_json(path)
+            if not isinstance(raw, dict):
+                raise CalibError(f"expected a JSON object, got {type(raw).__name__}")
+            data = dict(raw) if "model" in raw else pjlab_intrinsic_to_dict(raw)
+        else:
+            raise CalibError(f"unsupported camera file type '{suffix}' (use .yaml, .yml, .txt or .json)")
+        if image_size is not None:
+            data["width"], data["height"] = image_size
+        return camera_from_dict(data, path.parent)
+    except CalibError as exc:
+        msg = str(exc)
+        if msg.startswith(str(path)):
+            raise
+        raise CalibError(f"{path}: {msg}") from None
+
+
+def save_camera_yaml(camera: CameraModel, path: str | os.PathLike) -> None:
+    """Write ``camera`` as our YAML format (atomically).
+
+    An ``ocam`` camera is written as ``model: ocam`` + ``file:
+    calib_results.txt``, with the OCamCalib C-export file written next to the
+    YAML file (overwriting any file of that name there).
+    """
+    path = Path(path)
+    if camera.model == "ocam":
+        sidecar = path.parent / OCAM_SIDECAR_NAME
+        camera.write_calib_results(sidecar)
+        data = {"model": "ocam", "file": OCAM_SIDECAR_NAME}
+    else:
+        data = camera.to_dict(path.parent)
+    write_yaml_atomic(path, data)

@@ -1,0 +1,346 @@
+"""Scaramuzza's OCamCalib omnidirectional camera model (fisheye and catadioptric).
+
+Conventions of the toolbox (see ``shared/notes/math.md``):
+
+* ``pol = [a0, a1, ..., a_{N-1}]`` in ascending powers (a0 < 0, a1 = 0);
+  ``invpol`` likewise.
+* ``xc`` is the ROW and ``yc`` the COLUMN of the distortion centre, 0-based.
+* OCam frame: ``x`` along image rows, ``y`` along columns, optical axis ``-z``.
+
+cam2world: pixel ``(row r, column q)`` ->
+``xp = ((r - xc) - d (q - yc)) / (c - d e)``,
+``yp = (-e (r - xc) + c (q - yc)) / (c - d e)``,
+ray ``(xp, yp, pol(hypot(xp, yp)))``.
+
+world2cam: the ray at angle ``alpha`` from the axis lands at the radius
+``rho`` solving ``pol(rho) sin(alpha) + rho cos(alpha) = 0`` (i.e.
+``pol(rho) - m rho = 0`` with ``m = z / hypot(x, y)``), then
+``row = c x + d y + xc``, ``column = e x + y + yc``.  We solve that equation
+directly (lookup table of ``alpha(rho)`` + Newton), which is exact at every
+angle; the toolbox's ``invpol`` is only a fit, valid out to about the
+image-corner radius, and is kept for file export.
+
+Frame change to OpenCV (x right, y down, z forward), a proper rotation::
+
+    X_cv = y_oc,  Y_cv = x_oc,  Z_cv = -z_oc
+
+Rays more than 90 deg from the axis (catadioptric cameras) are handled; the
+accepted field of view is the angle reached at the largest radius the image
+covers, or where ``alpha(rho)`` stops increasing, whichever comes first
+(:attr:`OCamCamera.max_angle_rad`).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any, ClassVar
+
+import numpy as np
+from numpy.polynomial import polynomial as npoly
+
+from ..errors import CalibError
+from ..io.atomic import write_bytes_atomic
+from .base import as_points, in_image, register_camera_model
+from .io import param_float, param_image_size, param_vector, require_keys
+
+#: Rotation taking OCam-frame vectors to the OpenCV camera frame (det +1).
+R_CV_OCAM = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+
+_TABLE_SIZE = 4097
+_INVPOL_MAX_ERR_PX = 0.01  # the toolbox's own stopping criterion
+_INVPOL_MAX_DEGREE = 30
+
+
+@register_camera_model
+class OCamCamera:
+    """OCamCalib camera (Scaramuzza's polynomial omnidirectional model).
+
+    Parameters
+    ----------
+    pol : array_like
+        ``a0, a1, ...`` of the direct polynomial (cam2world), ascending powers.
+    invpol : array_like or None
+        Inverse polynomial (world2cam) in ascending powers of
+        ``theta = atan(z / hypot(x, y))`` (OCam frame), or None to fit one as
+        the toolbox does (max error 0.01 px).
+    xc, yc : float
+        Centre ROW and COLUMN, 0-based pixels.
+    c, d, e : float
+        Affine parameters.
+    width, height : int
+        Image size in pixels.
+
+    Attributes
+    ----------
+    rho_max : float
+        Largest accepted radius (pixels, before the affine map).
+    max_angle_rad : float
+        Largest accepted angle between a ray and the optical axis, radians;
+        may exceed pi/2.
+    source_path : Path or None
+        The calib_results.txt the camera was read from, if unchanged since.
+    """
+
+    model: ClassVar[str] = "ocam"
+
+    def __init__(
+        self,
+        pol: Any,
+        invpol: Any,
+        xc: float,
+        yc: float,
+        c: float,
+        d: float,
+        e: float,
+        width: int,
+        height: int,
+    ) -> None:
+        self.pol = param_vector(pol, "pol")
+        if self.pol.size < 1 or not self.pol[0] < 0:
+            raise CalibError(f"pol: a0 must be negative (optical axis along -z), got {self.pol.tolist()}")
+        self.xc, self.yc = param_float(xc, "xc"), param_float(yc, "yc")
+        self.c, self.d, self.e = param_float(c, "c"), param_float(d, "d"), param_float(e, "e")
+        det = self.c - self.d * self.e
+        if abs(det) < 1e-9:
+            raise CalibError(f"affine parameters c={self.c}, d={self.d}, e={self.e} are singular (c - d*e = 0)")
+        self._invdet = 1.0 / det
+        self.width, self.height = param_image_size(width, height)
+        self._dpol = npoly.polyder(self.pol) if self.pol.size > 1 else np.zeros(1)
+        self.source_path: Path | None = None
+        self._build_table()
+        if invpol is None:
+            self.invpol = self.fit_invpol()
+        else:
+            self.invpol = param_vector(invpol, "invpol")
+            if self.invpol.size < 1:
+                raise CalibError("invpol: needs at least one coefficient")
+
+    # -- geometry helpers (OCam frame) ----------------------------------------------
+    def _image_plane(self, rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Pixel (row, column) -> sensor-plane ``(xp, yp)`` (undo the affine map)."""
+        dr, dq = rows - self.xc, cols - self.yc
+        return self._invdet * (dr - self.d * dq), self._invdet * (-self.e * dr + self.c * dq)
+
+    def _build_table(self) -> None:
+        """Monotonic table of ``alpha(rho)`` over the radii the image covers."""
+        rows = np.array([-0.5, -0.5, self.height - 0.5, self.height - 0.5])
+        cols = np.array([-0.5, self.width - 0.5, -0.5, self.width - 0.5])
+        xp, yp = self._image_plane(rows, cols)
+        # rho is convex in the pixel, so its maximum over the image is at a corner.
+        rho_image = float(np.max(np.hypot(xp, yp)))
+        rho = np.linspace(0.0, rho_image, _TABLE_SIZE)
+        z = npoly.polyval(rho, self.pol)
+        # d alpha / d rho has the sign of rho pol'(rho) - pol(rho).
+        increasing = rho * npoly.polyval(rho, self._dpol) - z > 0
+        n = int(np.argmin(increasing)) if not increasing.all() else rho.size
+        if n < 2:
+            raise CalibError(f"pol={self.pol.tolist()}: the ray angle decreases right from the centre")
+        self.rho_max = float(rho[n - 1])
+        self._table_rho = rho[:n]
+        self._table_alpha = np.arctan2(rho[:n], -z[:n])
+        self.max_angle_rad = float(self._table_alpha[-1])
+
+    def rho_from_angle(self, alpha: np.ndarray) -> np.ndarray:
+        """Radius (pixels) at which rays at ``alpha`` rad from the axis land.
+
+        Solves ``pol(rho) sin(alpha) + rho cos(alpha) = 0`` for ``alpha`` in
+        ``[0, max_angle_rad]``: table interpolation, then Newton steps.
+        """
+        alpha = np.asarray(alpha, dtype=np.float64)
+        rho = np.interp(alpha, self._table_alpha, self._table_rho)
+        s, co = np.sin(alpha), np.cos(alpha)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            for _ in range(8):
+                h = npoly.polyval(rho, self.pol) * s + rho * co
+                dh = npoly.polyval(rho, self._dpol) * s + co
+                step = np.where(dh > 0, h / np.where(dh > 0, dh, 1.0), 0.0)
+                rho = np.clip(rho - step, 0.0, self.rho_max)
+                if not np.any(np.abs(step) > 1e-12):
+                    break
+        return rho
+
+    def fit_invpol(self) -> np.ndarray:
+        """The toolbox's inverse polynomial, ``rho(theta)`` with
+        ``theta = alpha - pi/2``, of the lowest degree with max error < 0.01 px
+        over ``[0, max_angle_rad]``."""
+        alpha = np.linspace(0.0, self.max_angle_rad, 1000)
+        theta = alpha - np.pi / 2
+        rho = self.rho_from_angle(alpha)
+        best, best_err = None, np.inf
+        for degree in range(2, _INVPOL_MAX_DEGREE + 1):
+            coeffs = npoly.polyfit(theta, rho, degree)
+            err = float(np.max(np.abs(npoly.polyval(theta, coeffs) - rho)))
+            if err < best_err:
+                best, best_err = coeffs, err
+            if err < _INVPOL_MAX_ERR_PX:
+                break
+        return best
+
+    # -- F: camera -> image ---------------------------------------------------------
+    def project(self, points: Any) -> tuple[np.ndarray, np.ndarray]:
+        """Pixels of points in the OpenCV camera frame (metres).
+
+        Returns ``(pixels (N, 2), valid (N,))``.  Pixels are NaN for the zero
+        vector and for rays beyond :attr:`max_angle_rad`; ``valid`` also
+        requires the pixel inside the image.  Rays behind the image plane
+        (``Z <= 0``) are fine as long as they are within the field of view.
+        """
+        P = as_points(points, "points", 3)
+        x_oc, y_oc, z_oc = P[:, 1], P[:, 0], -P[:, 2]
+        pixels = np.full((P.shape[0], 2), np.nan)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            n = np.hypot(x_oc, y_oc)
+            alpha = np.arctan2(n, -z_oc)
+            ok = np.isfinite(P).all(axis=1) & ((n > 0) | (z_oc != 0)) & (alpha <= self.max_angle_rad)
+            rho = self.rho_from_angle(alpha[ok])
+            scale = np.where(n[ok] > 0, rho / np.where(n[ok] > 0, n[ok], 1.0), 0.0)
+            x, y = x_oc[ok] * scale, y_oc[ok] * scale
+            pixels[ok, 1] = self.c * x + self.d * y + self.xc  # row
+            pixels[ok, 0] = self.e * x + y + self.yc  # column
+        return pixels, ok & in_image(pixels, self.width, self.height)
+
+    # -- F^-1: image -> camera ------------------------------------------------------
+    def bearing(self, pixels: Any) -> np.ndarray:
+        """Unit rays (OpenCV camera frame) for ``(u, v)`` = (column, row) pixels.
+
+        NaN rows where the radius exceeds :attr:`rho_max` (outside the
+        calibrated, monotonic part of the model).
+        """
+        uv = as_points(pixels, "pixels", 2)
+        xp, yp = self._image_plane(uv[:, 1], uv[:, 0])
+        rho = np.hypot(xp, yp)
+        zp = npoly.polyval(rho, self.pol)
+        with np.errstate(invalid="ignore"):
+            rays = np.stack([yp, xp, -zp], axis=1)  # OCam (xp, yp, zp) -> OpenCV
+            rays /= np.linalg.norm(rays, axis=1, keepdims=True)
+            rays[~(rho <= self.rho_max * (1.0 + 1e-12))] = np.nan
+        return rays
+
+    # -- files ----------------------------------------------------------------------
+    @classmethod
+    def from_calib_results(cls, path: str | os.PathLike) -> "OCamCamera":
+        """Read the toolbox's C export ``calib_results.txt``.
+
+        Lines starting with ``#`` are comments; the numbers that remain are, in
+        order: ``N a0..a_{N-1}``, ``M p0..p_{M-1}``, ``xc yc``, ``c d e``,
+        ``height width``.
+        """
+        path = Path(path)
+        try:
+            text = path.read_text(encoding="utf-8")
+        except FileNotFoundError:
+            raise CalibError(f"{path}: calib_results file not found") from None
+        except (OSError, UnicodeDecodeError) as exc:
+            raise CalibError(f"{path}: cannot read calib_results file: {exc}") from None
+        tokens = [t for line in text.splitlines() if not line.lstrip().startswith("#") for t in line.split()]
+        try:
+            values = [float(t) for t in tokens]
+        except ValueError as exc:
+            raise CalibError(f"{path}: not a number in calib_results: {exc}") from None
+        pos = 0
+
+        def take(count: int, what: str) -> list[float]:
+            nonlocal pos
+            if pos + count > len(values):
+                raise CalibError(f"{path}: calib_results ends early, missing {what}")
+            out = values[pos : pos + count]
+            pos += count
+            return out
+
+        def take_count(what: str) -> int:
+            (n,) = take(1, f"the length of {what}")
+            if not (n == int(n) and 1 <= n <= 100):
+                raise CalibError(f"{path}: bad length {n!r} of {what}")
+            return int(n)
+
+        pol = take(take_count("pol"), "pol coefficients")
+        invpol = take(take_count("invpol"), "invpol coefficients")
+        xc, yc = take(2, "the centre 'xc yc'")
+        c, d, e = take(3, "the affine parameters 'c d e'")
+        height, width = take(2, "the image size 'height width'")
+        if pos != len(values):
+            raise CalibError(f"{path}: {len(values) - pos} unexpected numbers after the image size")
+        try:
+            camera = cls(pol, invpol, xc, yc, c, d, e, width, height)
+        except CalibError as exc:
+            raise CalibError(f"{path}: {exc}") from None
+        camera.source_path = path
+        return camera
+
+    def calib_results_text(self) -> str:
+        """The C-export text; numbers are written with ``repr`` so they read
+        back bit-exactly."""
+
+        def nums(values: Any) -> str:
+            return " ".join(repr(float(v)) for v in values)
+
+        return (
+            "#polynomial coefficients for the DIRECT mapping function (ocam_model.ss in MATLAB). "
+            "These are used by cam2world\n\n"
+            f"{self.pol.size} {nums(self.pol)} \n\n"
+            "#polynomial coefficients for the inverse mapping function (ocam_model.invpol in MATLAB). "
+            "These are used by world2cam\n\n"
+            f"{self.invpol.size} {nums(self.invpol)} \n\n"
+            '#center: "row" and "column", starting from 0 (C convention)\n\n'
+            f"{nums([self.xc, self.yc])}\n\n"
+            '#affine parameters "c", "d", "e"\n\n'
+            f"{nums([self.c, self.d, self.e])}\n\n"
+            '#image size: "height" and "width"\n\n'
+            f"{self.height} {self.width}\n\n"
+        )
+
+    def write_calib_results(self, path: str | os.PathLike) -> None:
+        """Write the toolbox's C export ``calib_results.txt`` (atomically)."""
+        write_bytes_atomic(path, self.calib_results_text().encode("utf-8"))
+
+    def to_dict(self, base_dir: Path | None = None) -> dict[str, Any]:
+        """``{model: ocam, file: ...}`` when the camera came unchanged from a
+        file and ``base_dir`` is given (path relative to it), else all
+        parameters inline."""
+        if self.source_path is not None and base_dir is not None:
+            return {"model": self.model, "file": os.path.relpath(self.source_path.resolve(), Path(base_dir).resolve())}
+        return {
+            "model": self.model,
+            "pol": [float(v) for v in self.pol],
+            "invpol": [float(v) for v in self.invpol],
+            "xc": self.xc,
+            "yc": self.yc,
+            "c": self.c,
+            "d": self.d,
+            "e": self.e,
+            "width": self.width,
+            "height": self.height,
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any], base_dir: Path | None = None) -> "OCamCamera":
+        """Build from ``{model: ocam, file: calib_results.txt}`` (relative to
+        ``base_dir``) or from inline ``pol, [invpol], xc, yc, c, d, e, width,
+        height``.  With ``file``, optional ``width``/``height`` replace the
+        file's image size."""
+        if "file" in data:
+            if not isinstance(data["file"], str) or not data["file"]:
+                raise CalibError(f"ocam camera: 'file' must be a path, got {data['file']!r}")
+            file = Path(data["file"])
+            if not file.is_absolute():
+                file = Path(base_dir if base_dir is not None else ".") / file
+            camera = cls.from_calib_results(file)
+            if "width" in data or "height" in data:
+                require_keys(data, ("width", "height"), "ocam camera")
+                size = param_image_size(data["width"], data["height"])
+                if size != (camera.width, camera.height):
+                    camera = cls(camera.pol, camera.invpol, camera.xc, camera.yc, camera.c, camera.d, camera.e, *size)
+            return camera
+        require_keys(data, ("pol", "xc", "yc", "c", "d", "e", "width", "height"), "ocam camera")
+        return cls(
+            data["pol"], data.get("invpol"), data["xc"], data["yc"], data["c"], data["d"], data["e"],
+            data["width"], data["height"],
+        )
+
+    def __repr__(self) -> str:
+        return (
+            f"OCamCamera(pol={self.pol.tolist()}, xc={self.xc:.6g}, yc={self.yc:.6g}, c={self.c:.6g}, "
+            f"d={self.d:.6g}, e={self.e:.6g}, {self.width}x{self.height}, "
+            f"max_angle={np.degrees(self.max_angle_rad):.1f} deg)"
+        )
