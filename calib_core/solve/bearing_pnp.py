@@ -1,0 +1,456 @@
+"""Initial pose from laser points and camera bearing vectors (PnP on the sphere).
+
+Two closed-form routes, both on unit bearings that may point anywhere on the
+sphere (catadioptric cameras see more than 90 deg off axis; nothing here
+assumes ``z > 0``).  A bearing fixes the *signed* direction of its point: the
+point lies at depth ``d > 0`` along it.
+
+1. The paper's route (Sec. IV-B): Quan & Lan's linear N-point method
+   (L. Quan and Z. Lan, "Linear N-point camera pose determination", IEEE PAMI
+   21(7), 1999) gives the depth of every point; the camera-frame points
+   ``d_i * b_i`` are then registered to the laser points in closed form
+   (:func:`calib_core.solve.rigid.rigid_fit`).
+2. A robust fallback, because the linear method is noise-sensitive (the paper
+   says so): Grunert's P3P in the form reviewed by R. M. Haralick, C. Lee,
+   K. Ottenberg and M. Noelle, "Review and analysis of solutions of the three
+   point perspective pose estimation problem", IJCV 13(3), 1994, solved on many
+   well-spread triples; every candidate pose is scored on all pairs.
+
+:func:`initial_pose` returns whichever candidate has the smaller angular cost
+(paper eq. 7).
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+
+from .rigid import rigid_fit
+
+__all__ = [
+    "angular_errors_rad",
+    "quan_lan_quartic",
+    "quan_lan_depths",
+    "quan_lan_pose",
+    "p3p_grunert",
+    "initial_pose",
+]
+
+
+def angular_errors_rad(
+    T_camera_lidar: np.ndarray, points_lidar: np.ndarray, bearings_camera: np.ndarray
+) -> np.ndarray:
+    """Geodesic angle between each bearing and its transformed laser point.
+
+    Parameters
+    ----------
+    T_camera_lidar : (..., 4, 4) ndarray
+        One or a stack of candidate poses.
+    points_lidar : (N, 3) ndarray
+        Laser points, lidar frame, metres.
+    bearings_camera : (N, 3) ndarray
+        Unit bearings, camera frame.
+
+    Returns
+    -------
+    (..., N) ndarray
+        ``atan2(|b x p|, b . p)`` in radians, in [0, pi] (smooth and exact
+        everywhere, unlike ``arccos``).
+    """
+    T = np.asarray(T_camera_lidar, dtype=np.float64)
+    P = np.einsum("...ij,nj->...ni", T[..., :3, :3], points_lidar) + T[..., None, :3, 3]
+    cross = np.linalg.norm(np.cross(bearings_camera, P), axis=-1)
+    dot = np.sum(bearings_camera * P, axis=-1)
+    return np.arctan2(cross, dot)
+
+
+# --------------------------------------------------------------------------
+# Quan & Lan (PAMI 1999)
+# --------------------------------------------------------------------------
+
+
+def quan_lan_quartic(
+    c12: np.ndarray,
+    c13: np.ndarray,
+    c23: np.ndarray,
+    d12: np.ndarray,
+    d13: np.ndarray,
+    d23: np.ndarray,
+) -> np.ndarray:
+    """Quan & Lan's quartic ``g(x) = a0 + a1 x + a2 x^2 + a3 x^3 + a4 x^4``.
+
+    For three points with depths ``x1, x2, x3`` along unit bearings, the law of
+    cosines gives ``f_ij = x_i^2 + x_j^2 - 2 c_ij x_i x_j - d_ij = 0`` with
+    ``c_ij = b_i . b_j`` and ``d_ij = |p_i - p_j|^2`` (squared distance).
+    Eliminating ``x2`` and ``x3`` (Quan & Lan 1999, Sec. 2) leaves a degree-8
+    polynomial in ``x1`` with only even powers, i.e. a quartic in
+    ``x = x1^2``.  The coefficients below are the resultant
+    ``Res_x3(Res_x2(f12, f23), f13)`` expanded with sympy and regrouped in
+    ``m = d12 + d13 - d23`` (derivation script not shipped; the formula is
+    checked in the tests by evaluating ``g`` at true depths).
+
+    Parameters
+    ----------
+    c12, c13, c23 : ndarray
+        Cosines between the bearings (broadcast together).
+    d12, d13, d23 : ndarray
+        Squared distances between the points.
+
+    Returns
+    -------
+    (..., 5) ndarray
+        ``(a0, a1, a2, a3, a4)``, ascending powers of ``x = x1^2``.
+    """
+    m = d12 + d13 - d23
+    s = d12 + d13
+    # D = -det(Gram matrix of the three bearings); a4 vanishes for coplanar rays.
+    D = c12**2 + c13**2 + c23**2 - 2 * c12 * c13 * c23 - 1
+    a0 = (m**2 - 4 * c23**2 * d12 * d13) ** 2
+    a1 = (
+        8 * (c12**2 - c12 * c13 * c23 + c13**2 - 1) * m**3
+        - 8
+        * (
+            2 * c12**2 * c23**2 * d13
+            + c12**2 * d12
+            - 2 * c12 * c13 * c23 * s
+            + 2 * c13**2 * c23**2 * d12
+            + c13**2 * d13
+            - c23**2 * s
+        )
+        * m**2
+        + 32 * c23 * d12 * d13 * (c12**2 * c23 - c12 * c13 * c23**2 - 2 * c12 * c13 + c13**2 * c23 + c23) * m
+        - 32 * c23**2 * d12 * d13 * (c12**2 * d12 - 2 * c12 * c13 * c23 * s + c13**2 * d13 + c23**2 * s)
+    )
+    a2 = (
+        8
+        * (
+            2 * c12**4
+            - 4 * c12**3 * c13 * c23
+            + 6 * c12**2 * c13**2
+            + 2 * c12**2 * c23**2
+            - 5 * c12**2
+            - 4 * c12 * c13**3 * c23
+            + 2 * c12 * c13 * c23
+            + 2 * c13**4
+            + 2 * c13**2 * c23**2
+            - 5 * c13**2
+            - c23**2
+            + 3
+        )
+        * m**2
+        - 32
+        * (
+            c12**4 * d12
+            - 3 * c12**3 * c13 * c23 * d12
+            + 2 * c12**2 * c13**2 * c23**2 * s
+            + c12**2 * c13**2 * s
+            + c12**2 * c23**2 * (d12 - d13)
+            - c12**2 * d12
+            - 3 * c12 * c13**3 * c23 * d13
+            - c12 * c13 * c23**3 * s
+            + c13**4 * d13
+            - c13**2 * c23**2 * (d12 - d13)
+            - c13**2 * d13
+            + c23**2 * s
+        )
+        * m
+        + 16
+        * (
+            c12**4 * d12**2
+            - 4 * c12**3 * c13 * c23 * d12 * s
+            + 4 * c12**2 * c13**2 * c23**2 * (d12**2 + 3 * d12 * d13 + d13**2)
+            - 2 * c12**2 * c13**2 * d12 * d13
+            + 2 * c12**2 * c23**2 * d12**2
+            - 4 * c12 * c13**3 * c23 * d13 * s
+            - 4 * c12 * c13 * c23**3 * (d12**2 + 3 * d12 * d13 + d13**2)
+            + 8 * c12 * c13 * c23 * d12 * d13
+            + c13**4 * d13**2
+            + 2 * c13**2 * c23**2 * d13**2
+            + c23**4 * (d12**2 + 4 * d12 * d13 + d13**2)
+            - 2 * c23**2 * d12 * d13
+        )
+    )
+    a3 = (
+        32
+        * D
+        * (
+            (2 * c12**2 * c13**2 - c12**2 - c12 * c13 * c23 - c13**2 + 1) * m
+            - (2 * c12**2 * c13**2 * s - c12**2 * d12 - 2 * c12 * c13 * c23 * s - c13**2 * d13 + c23**2 * s)
+        )
+    )
+    a4 = 16 * D**2
+    return np.stack(np.broadcast_arrays(a0, a1, a2, a3, a4), axis=-1)
+
+
+# Index pairs (a, b, c, e) with a + b = c + e: for t = (1, x, ..., x^4),
+# t_a t_b = t_c t_e.  Quan & Lan use them to pin down t when n = 4.
+_QL_PRODUCT_CONSTRAINTS = np.array(
+    [(0, 2, 1, 1), (0, 3, 1, 2), (0, 4, 1, 3), (0, 4, 2, 2), (1, 3, 2, 2), (1, 4, 2, 3), (2, 4, 3, 3)]
+)
+
+_QL_MAX_ROWS = 300  # quartics per reference point (subsampled beyond this)
+
+
+def _x_from_t(t: np.ndarray) -> np.ndarray:
+    """Least-squares ``x`` with ``t_{k+1} = x t_k`` for ``t ~ (1, x, ..., x^4)``."""
+    return np.sum(t[..., :-1] * t[..., 1:], axis=-1) / np.sum(t[..., :-1] ** 2, axis=-1)
+
+
+def _quan_lan_x(points: np.ndarray, bearings: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Squared depths ``x_i`` (in the units of ``points``) by Quan & Lan; NaN where unsolved."""
+    n = len(points)
+    cos = np.clip(bearings @ bearings.T, -1.0, 1.0)
+    sq = np.sum((points[:, None, :] - points[None, :, :]) ** 2, axis=-1)
+    # For every reference i, all pairs (j, k), j < k, that do not contain i.
+    J, K = np.triu_indices(n, 1)
+    ref = np.arange(n)[:, None]
+    keep = (J[None, :] != ref) & (K[None, :] != ref)
+    m = (n - 1) * (n - 2) // 2
+    cols = np.nonzero(keep)[1].reshape(n, m)
+    if m > _QL_MAX_ROWS:
+        pick = np.argsort(rng.random((n, m)), axis=1)[:, :_QL_MAX_ROWS]
+        cols = np.take_along_axis(cols, pick, axis=1)
+    j, k = J[cols], K[cols]
+    i = np.broadcast_to(ref, j.shape)
+    A = quan_lan_quartic(cos[i, j], cos[i, k], cos[j, k], sq[i, j], sq[i, k], sq[j, k])
+    # Each quartic is defined up to scale: give every row the same weight.
+    norms = np.linalg.norm(A, axis=-1, keepdims=True)
+    A = A / np.where(norms > 0, norms, 1.0)
+    _, _, Vt = np.linalg.svd(A, full_matrices=True)  # A: (n, rows, 5)
+    if n >= 5:
+        # Over-determined: t is the right singular vector of the smallest
+        # singular value (Quan & Lan, Sec. 3).
+        t = Vt[:, -1, :]
+    else:
+        # n = 4: three equations, five unknowns -> t = lam v4 + rho v5 (Quan &
+        # Lan, Sec. 4).  The products t_a t_b = t_c t_e are linear in
+        # (lam^2, lam rho, rho^2); their null vector gives lam : rho.
+        v4, v5 = Vt[:, 3, :], Vt[:, 4, :]
+        a, b, c, e = _QL_PRODUCT_CONSTRAINTS.T
+        B = np.stack(
+            [
+                v4[:, a] * v4[:, b] - v4[:, c] * v4[:, e],
+                v4[:, a] * v5[:, b] + v5[:, a] * v4[:, b] - v4[:, c] * v5[:, e] - v5[:, c] * v4[:, e],
+                v5[:, a] * v5[:, b] - v5[:, c] * v5[:, e],
+            ],
+            axis=-1,
+        )  # (n, 7, 3)
+        y = np.linalg.svd(B)[2][:, -1, :]  # ~ (lam^2, lam rho, rho^2)
+        # lam : rho = y0 : y1 = y1 : y2; use the better-conditioned ratio.
+        use_first = np.abs(y[:, 0]) >= np.abs(y[:, 2])
+        lam = np.where(use_first, y[:, 0], y[:, 1])
+        rho = np.where(use_first, y[:, 1], y[:, 2])
+        t = lam[:, None] * v4 + rho[:, None] * v5
+    with np.errstate(invalid="ignore", divide="ignore"):
+        x = _x_from_t(t)
+    return np.where(np.isfinite(x) & (x > 0), x, np.nan)
+
+
+def quan_lan_depths(points_lidar: np.ndarray, bearings_camera: np.ndarray, seed: int = 0) -> np.ndarray:
+    """Depth of every point along its bearing by Quan & Lan's linear method.
+
+    Parameters
+    ----------
+    points_lidar : (N, 3) ndarray
+        Laser points (any rigid frame; only their distances matter), metres,
+        ``N >= 4``.
+    bearings_camera : (N, 3) ndarray
+        Unit bearings, camera frame.
+    seed : int
+        Seed for subsampling the quartics when N is large (N > 25).
+
+    Returns
+    -------
+    (N,) ndarray
+        Depths in metres (> 0); NaN where the method gives no positive root.
+
+    Notes
+    -----
+    The problem is scale-covariant, so it is solved in normalised units (two
+    passes: first scaled by the spread of the points, then by the median
+    depth) to keep ``t = (1, x, ..., x^4)`` well balanced.
+    """
+    P = np.asarray(points_lidar, dtype=np.float64)
+    Bm = np.asarray(bearings_camera, dtype=np.float64)
+    rng = np.random.default_rng(seed)
+    scale = np.sqrt(np.mean(np.sum((P - P.mean(axis=0)) ** 2, axis=1)))
+    if not scale > 0:
+        return np.full(len(P), np.nan)
+    for _ in range(2):
+        x = _quan_lan_x(P / scale, Bm, rng)
+        depths = np.sqrt(x) * scale
+        median = np.nanmedian(depths) if np.any(np.isfinite(depths)) else np.nan
+        if not np.isfinite(median) or median <= 0:
+            break
+        scale = median
+    return depths
+
+
+def quan_lan_pose(points_lidar: np.ndarray, bearings_camera: np.ndarray, seed: int = 0) -> np.ndarray | None:
+    """``T_camera_lidar`` from Quan & Lan depths and a rigid 3-D/3-D fit.
+
+    Returns None when fewer than three depths are recovered.
+    """
+    depths = quan_lan_depths(points_lidar, bearings_camera, seed=seed)
+    ok = np.isfinite(depths)
+    if ok.sum() < 3:
+        return None
+    points_camera = depths[ok, None] * bearings_camera[ok]
+    T = rigid_fit(points_lidar[ok], points_camera)
+    return T if np.all(np.isfinite(T)) else None
+
+
+# --------------------------------------------------------------------------
+# Grunert's P3P (Haralick et al. 1994)
+# --------------------------------------------------------------------------
+
+
+def p3p_grunert(points_lidar: np.ndarray, bearings_camera: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """All P3P poses of a batch of triples, Grunert's solution.
+
+    Notation of Haralick et al. (1994), Sec. 2: ``s1, s2, s3`` are the depths,
+    ``a = |p2 - p3|``, ``b = |p1 - p3|``, ``c = |p1 - p2|``, and
+    ``alpha, beta, gamma`` the angles between bearings (2,3), (1,3), (1,2).
+    With ``s2 = u s1`` and ``s3 = v s1`` the law of cosines gives the quartic
+    ``A4 v^4 + ... + A0 = 0`` (their eq. 9) and ``u`` from ``v`` (eq. 8).  Only
+    roots with ``u, v > 0`` are kept: the points lie in front along their
+    bearings.
+
+    Parameters
+    ----------
+    points_lidar : (M, 3, 3) ndarray
+        M triples of laser points, metres.
+    bearings_camera : (M, 3, 3) ndarray
+        Their unit bearings, camera frame.
+
+    Returns
+    -------
+    T_camera_lidar : (K, 4, 4) ndarray
+        Up to four poses per triple.
+    triple_index : (K,) int ndarray
+        The triple each pose comes from.
+    """
+    P = np.asarray(points_lidar, dtype=np.float64)
+    Bm = np.asarray(bearings_camera, dtype=np.float64)
+    a2 = np.sum((P[:, 1] - P[:, 2]) ** 2, axis=-1)
+    b2 = np.sum((P[:, 0] - P[:, 2]) ** 2, axis=-1)
+    c2 = np.sum((P[:, 0] - P[:, 1]) ** 2, axis=-1)
+    ca = np.sum(Bm[:, 1] * Bm[:, 2], axis=-1)
+    cb = np.sum(Bm[:, 0] * Bm[:, 2], axis=-1)
+    cg = np.sum(Bm[:, 0] * Bm[:, 1], axis=-1)
+    valid = (a2 > 0) & (b2 > 0) & (c2 > 0)
+    b2 = np.where(valid, b2, 1.0)
+    q = (a2 - c2) / b2
+    p = (a2 + c2) / b2
+    A4 = (q - 1) ** 2 - 4 * c2 / b2 * ca**2
+    A3 = 4 * (q * (1 - q) * cb - (1 - p) * ca * cg + 2 * c2 / b2 * ca**2 * cb)
+    A2 = 2 * (q**2 - 1 + 2 * q**2 * cb**2 + 2 * (b2 - c2) / b2 * ca**2 - 4 * p * ca * cb * cg + 2 * (b2 - a2) / b2 * cg**2)
+    A1 = 4 * (-q * (1 + q) * cb + 2 * a2 / b2 * cg**2 * cb - (1 - p) * ca * cg)
+    A0 = (1 + q) ** 2 - 4 * a2 / b2 * cg**2
+    coeffs = np.stack([A4, A3, A2, A1, A0], axis=-1)
+    # A vanishing leading coefficient would send a root to infinity.
+    valid &= np.abs(A4) > 1e-12 * np.max(np.abs(coeffs), axis=-1)
+    idx = np.nonzero(valid)[0]
+    if idx.size == 0:
+        return np.zeros((0, 4, 4)), np.zeros(0, dtype=np.int64)
+    mon = coeffs[idx, 1:] / coeffs[idx, :1]
+    companion = np.zeros((idx.size, 4, 4))
+    companion[:, 0, :] = -mon
+    companion[:, 1, 0] = companion[:, 2, 1] = companion[:, 3, 2] = 1.0
+    roots = np.linalg.eigvals(companion)  # (M', 4)
+    # Noise can turn a double root into a close complex pair: keep its real
+    # part as a candidate; the scoring on all pairs sorts it out.
+    real = np.abs(roots.imag) <= 1e-2 * (1 + np.abs(roots.real))
+    tri = np.repeat(idx, 4)[real.ravel()]
+    v = roots.real.ravel()[real.ravel()]
+    keep = v > 0
+    tri, v = tri[keep], v[keep]
+    s1 = np.sqrt(b2[tri] / np.maximum(1 + v**2 - 2 * v * cb[tri], 1e-300))
+    s3 = v * s1
+    # s2 from the c-equation (two roots) and from Grunert's u (eq. 8); keep the
+    # one that best satisfies the a-equation (robust where eq. 8 divides by 0).
+    disc = np.sqrt(np.maximum(c2[tri] - s1**2 * (1 - cg[tri] ** 2), 0.0))
+    qq = q[tri]
+    den = 2 * (cg[tri] - v * ca[tri])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = ((-1 + qq) * v**2 - 2 * qq * cb[tri] * v + 1 + qq) / den
+    s2_cand = np.stack([s1 * cg[tri] + disc, s1 * cg[tri] - disc, u * s1], axis=-1)
+    a_res = np.abs(s2_cand**2 + s3[:, None] ** 2 - 2 * s2_cand * s3[:, None] * ca[tri, None] - a2[tri, None])
+    a_res = np.where(np.isfinite(s2_cand) & (s2_cand > 0), a_res, np.inf)
+    best = np.argmin(a_res, axis=-1)
+    s2 = s2_cand[np.arange(len(best)), best]
+    ok = np.isfinite(a_res[np.arange(len(best)), best]) & np.isfinite(s1) & (s1 > 0)
+    tri, s1, s2, s3 = tri[ok], s1[ok], s2[ok], s3[ok]
+    depths = np.stack([s1, s2, s3], axis=-1)
+    points_camera = depths[..., None] * Bm[tri]
+    T = rigid_fit(P[tri], points_camera)
+    good = np.all(np.isfinite(T), axis=(-1, -2))
+    return T[good], tri[good]
+
+
+def _spread_order(bearings: np.ndarray) -> np.ndarray:
+    """Indices in farthest-point order on the sphere (greedy max-min angle)."""
+    n = len(bearings)
+    order = [int(np.argmin(bearings @ bearings.mean(axis=0)))]
+    min_cos = bearings @ bearings[order[0]]
+    for _ in range(n - 1):  # n is a handful of clicked pairs
+        nxt = int(np.argmin(np.where(np.isin(np.arange(n), order), np.inf, min_cos)))
+        order.append(nxt)
+        min_cos = np.maximum(min_cos, bearings @ bearings[nxt])
+    return np.array(order)
+
+
+def _triples(bearings: np.ndarray, rng: np.random.Generator, max_random: int = 200) -> np.ndarray:
+    """Triples for P3P: all of them for small N, else well-spread plus random ones."""
+    n = len(bearings)
+    if n <= 12:
+        return np.array(list(itertools.combinations(range(n), 3)))
+    spread = _spread_order(bearings)[:8]
+    tri = [tuple(sorted(t)) for t in itertools.combinations(spread.tolist(), 3)]
+    rand = np.sort(np.argsort(rng.random((max_random, n)), axis=1)[:, :3], axis=1)
+    tri.extend(map(tuple, rand.tolist()))
+    return np.unique(np.array(tri), axis=0)
+
+
+def initial_pose(
+    points_lidar: np.ndarray, bearings_camera: np.ndarray, seed: int = 0
+) -> tuple[np.ndarray, str, float]:
+    """Best closed-form pose among Quan & Lan and P3P candidates.
+
+    Parameters
+    ----------
+    points_lidar : (N, 3) ndarray
+        Laser points, lidar frame, metres, ``N >= 4``.
+    bearings_camera : (N, 3) ndarray
+        Unit bearings, camera frame.
+    seed : int
+        Seed of the random triples/quartic subsampling (deterministic output).
+
+    Returns
+    -------
+    T_camera_lidar : (4, 4) ndarray
+        The candidate with the smallest sum of squared angles over all pairs.
+    method : str
+        ``"quan_lan"`` or ``"p3p"``.
+    cost : float
+        Its angular cost ``0.5 * sum(angle^2)``, rad^2.
+    """
+    rng = np.random.default_rng(seed)
+    candidates: list[np.ndarray] = []
+    methods: list[str] = []
+    T_ql = quan_lan_pose(points_lidar, bearings_camera, seed=seed)
+    if T_ql is not None:
+        candidates.append(T_ql[None])
+        methods.append("quan_lan")
+    tri = _triples(bearings_camera, rng)
+    T_p3p, _ = p3p_grunert(points_lidar[tri], bearings_camera[tri])
+    if len(T_p3p):
+        candidates.append(T_p3p)
+        methods.extend(["p3p"] * len(T_p3p))
+    if not candidates:
+        return np.eye(4), "none", float("inf")
+    T_all = np.concatenate(candidates, axis=0)
+    cost = 0.5 * np.sum(angular_errors_rad(T_all, points_lidar, bearings_camera) ** 2, axis=-1)
+    best = int(np.argmin(cost))
+    return T_all[best], methods[best], float(cost[best])

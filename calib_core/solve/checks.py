@@ -1,0 +1,196 @@
+"""Degeneracy checks for the pose solver.
+
+Input checks raise :class:`calib_core.errors.CalibError` with a one-line
+message naming the problem (and the pair indices, 0-based); weak but usable
+geometry gives warning strings that the solver passes on in its result.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import CalibError
+from .refine import PARAMETER_NAMES
+
+__all__ = [
+    "MIN_PAIRS",
+    "validate_pairs",
+    "validate_pixels",
+    "validate_initial_T",
+    "conditioning_warning",
+    "outlier_indices",
+]
+
+MIN_PAIRS = 4
+#: |norm - 1| above this is an error (not float rounding): the array is not bearings.
+UNIT_TOLERANCE = 1e-3
+#: Two laser points closer than this (metres) are the same point.
+SAME_POINT_M = 1e-6
+#: Two bearings closer than this (radians) are the same click.
+SAME_BEARING_RAD = 1e-6
+#: Second / first singular value of the centred laser points below this: collinear.
+COLLINEAR_RATIO = 1e-3
+#: Largest angle between two bearings: error below, warning below the second.
+CONE_ERROR_DEG = 2.0
+CONE_WARNING_DEG = 15.0
+#: Condition number of the Jacobi-scaled J^T J above which we warn (well-spread
+#: pairs give 10-1e3; laser points 1 % off a line give ~1e5).
+CONDITION_WARNING = 1e4
+
+
+def _as_array(value: object, name: str, dim: int) -> np.ndarray:
+    a = np.asarray(value, dtype=np.float64)
+    if a.ndim != 2 or a.shape[1] != dim:
+        raise CalibError(f"{name} must be an (N, {dim}) array, got shape {a.shape}")
+    return a
+
+
+def _pairs_text(pairs: np.ndarray) -> str:
+    shown = ", ".join(f"{i} and {j}" for i, j in pairs[:3])
+    return shown + (f" (and {len(pairs) - 3} more)" if len(pairs) > 3 else "")
+
+
+def validate_pairs(points_lidar: object, bearings_camera: object) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """Check laser points and bearings; return clean float64 copies and warnings.
+
+    Parameters
+    ----------
+    points_lidar : (N, 3) array_like
+        Laser points, lidar frame, metres.
+    bearings_camera : (N, 3) array_like
+        Unit bearings, camera frame.  Norms within 1e-3 of 1 are renormalised.
+
+    Returns
+    -------
+    points_lidar : (N, 3) ndarray
+    bearings_camera : (N, 3) ndarray
+        Exactly unit.
+    warnings : list of str
+
+    Raises
+    ------
+    CalibError
+        Wrong shapes; fewer than 4 pairs; NaN or inf (names the pair); a zero
+        or non-unit bearing; the same laser point or the same bearing in two
+        pairs (names them); coincident or (nearly) collinear laser points; all
+        bearings within 2 deg of each other.
+    """
+    points = _as_array(points_lidar, "points_lidar", 3)
+    bearings = _as_array(bearings_camera, "bearings_camera", 3)
+    if len(points) != len(bearings):
+        raise CalibError(f"got {len(points)} laser points but {len(bearings)} bearings")
+    n = len(points)
+    if n < MIN_PAIRS:
+        raise CalibError(f"need at least {MIN_PAIRS} pairs to solve the pose, got {n}")
+    for name, arr in (("laser point", points), ("bearing", bearings)):
+        bad = np.nonzero(~np.all(np.isfinite(arr), axis=1))[0]
+        if bad.size:
+            raise CalibError(f"pair {bad[0]}: {name} is not finite (NaN or inf)")
+    norms = np.linalg.norm(bearings, axis=1)
+    zero = np.nonzero(norms < 1e-12)[0]
+    if zero.size:
+        raise CalibError(f"pair {zero[0]}: bearing has zero length")
+    off = np.nonzero(np.abs(norms - 1) > UNIT_TOLERANCE)[0]
+    if off.size:
+        raise CalibError(f"pair {off[0]}: bearing is not a unit vector (norm {norms[off[0]]:.6g})")
+    bearings = bearings / norms[:, None]
+
+    iu, ju = np.triu_indices(n, 1)
+    dist = np.linalg.norm(points[iu] - points[ju], axis=1)
+    same = np.nonzero(dist <= SAME_POINT_M)[0]
+    if same.size:
+        pairs = np.stack([iu[same], ju[same]], axis=1)
+        raise CalibError(f"pairs {_pairs_text(pairs)} use the same laser point")
+    angle = np.arctan2(np.linalg.norm(np.cross(bearings[iu], bearings[ju]), axis=1), np.sum(bearings[iu] * bearings[ju], axis=1))
+    same = np.nonzero(angle <= SAME_BEARING_RAD)[0]
+    if same.size:
+        pairs = np.stack([iu[same], ju[same]], axis=1)
+        raise CalibError(f"pairs {_pairs_text(pairs)} use the same bearing (the same pixel clicked twice)")
+
+    s = np.linalg.svd(points - points.mean(axis=0), compute_uv=False)
+    if s[1] < COLLINEAR_RATIO * s[0]:
+        raise CalibError(
+            "the laser points are (nearly) collinear, so the rotation about their line is undetermined; "
+            "pick points off that line"
+        )
+
+    warnings: list[str] = []
+    max_angle_deg = float(np.degrees(angle.max()))
+    if max_angle_deg < CONE_ERROR_DEG:
+        raise CalibError(
+            f"all pairs lie within {max_angle_deg:.2g} deg of each other in the view; "
+            "spread them over the whole image"
+        )
+    if max_angle_deg < CONE_WARNING_DEG:
+        warnings.append(
+            f"all pairs lie in a small part of the view (within {max_angle_deg:.1f} deg); spread them out"
+        )
+    return points, bearings, warnings
+
+
+def validate_pixels(pixels: object, n: int) -> np.ndarray:
+    """Check clicked pixels ``(N, 2)``; return a float64 copy."""
+    px = _as_array(pixels, "pixels", 2)
+    if len(px) != n:
+        raise CalibError(f"got {len(px)} pixels for {n} pairs")
+    bad = np.nonzero(~np.all(np.isfinite(px), axis=1))[0]
+    if bad.size:
+        raise CalibError(f"pair {bad[0]}: pixel is not finite (NaN or inf)")
+    return px
+
+
+def validate_initial_T(T: object) -> np.ndarray:
+    """Check a user-supplied initial ``T_camera_lidar`` and re-orthonormalise its rotation."""
+    a = np.asarray(T, dtype=np.float64)
+    if a.shape != (4, 4):
+        raise CalibError(f"initial_T_camera_lidar must be 4x4, got shape {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise CalibError("initial_T_camera_lidar contains NaN or infinite values")
+    R = a[:3, :3]
+    if np.abs(R.T @ R - np.eye(3)).max() > 1e-3 or np.linalg.det(R) <= 0:
+        raise CalibError("initial_T_camera_lidar does not hold a rotation matrix")
+    U, _, Vt = np.linalg.svd(R)
+    out = np.eye(4)
+    out[:3, :3] = U @ Vt
+    out[:3, 3] = a[:3, 3]
+    return out
+
+
+def conditioning_warning(JtJ: np.ndarray) -> str | None:
+    """A warning naming poorly constrained pose parameters, or None.
+
+    ``J^T J`` is scaled to unit diagonal first (rotations in radians and
+    translations in metres are not comparable); if its condition number
+    exceeds :data:`CONDITION_WARNING`, the parameters with a large share in
+    the weakest eigenvector are named.
+    """
+    d = np.sqrt(np.diag(JtJ))
+    if not (np.all(np.isfinite(JtJ)) and np.all(d > 0)):
+        weak = [PARAMETER_NAMES[k] for k in np.nonzero(~(d > 0))[0]] or list(PARAMETER_NAMES)
+        return f"the pairs do not constrain {', '.join(weak)}"
+    eigval, eigvec = np.linalg.eigh(JtJ / d[:, None] / d[None, :])
+    cond = eigval[-1] / max(eigval[0], 1e-300)
+    if cond <= CONDITION_WARNING:
+        return None
+    v = np.abs(eigvec[:, 0])
+    weak = [PARAMETER_NAMES[k] for k in np.argsort(-v) if v[k] >= 0.3]
+    return (
+        f"the pairs barely constrain {' + '.join(weak)} (condition number {cond:.1e}); "
+        "add pairs at other depths and directions"
+    )
+
+
+def outlier_indices(residual_deg: np.ndarray, min_deg: float = 1.0, k: float = 3.0) -> list[int]:
+    """Pairs whose angular residual is an outlier.
+
+    Rule: ``r_i > median(r) + k * 1.4826 * MAD(r)`` *and* ``r_i > min_deg``,
+    where MAD is the median absolute deviation (1.4826 MAD estimates the
+    standard deviation of Gaussian data without being dragged by the outliers
+    themselves).  The absolute floor keeps sub-degree clicks from being flagged
+    when all residuals are tiny.
+    """
+    r = np.asarray(residual_deg, dtype=np.float64)
+    med = np.median(r)
+    mad = np.median(np.abs(r - med))
+    flagged = (r > med + k * 1.4826 * mad) & (r > min_deg)
+    return np.nonzero(flagged)[0].tolist()
