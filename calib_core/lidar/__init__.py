@@ -1,0 +1,26 @@
+"""Laser models: every scanner becomes a :class:`DepthMatrix` (paper Sec. II-B, III).
+
+* :func:`rotating_scanner_depth` -- the paper's 2-D scanner on a rotating
+  support (eq. 3, with axis offsets); :func:`rotating_scanner_beams` gives its
+  beams for ray casting.
+* :func:`spherical_depth` -- per-row elevation, per-column azimuth.
+* :func:`organized_cloud_depth` -- any organized point cloud.
+* :func:`save_depth_npz` / :func:`load_depth_npz` -- the native scan file.
+"""
+
+from .depth_matrix import DepthMatrix
+from .npz_format import load_depth_npz, save_depth_npz
+from .organized import organized_cloud_depth
+from .rotating_scanner import rotating_scanner_beams, rotating_scanner_depth
+from .spherical import spherical_depth, spherical_directions
+
+__all__ = [
+    "DepthMatrix",
+    "load_depth_npz",
+    "organized_cloud_depth",
+    "rotating_scanner_beams",
+    "rotating_scanner_depth",
+    "save_depth_npz",
+    "spherical_depth",
+    "spherical_directions",
+]
