@@ -1,0 +1,669 @@
+"""Lay out an unorganized spinning-lidar cloud as a depth matrix.
+
+A spinning lidar measures one column of ``n_beams`` ranges per firing and
+turns about its z axis, so its natural image has one row per beam (ring) and
+one column per azimuth step.  Most drivers store the cloud as a flat list
+with the no-return points dropped; this module puts the points back on that
+grid, as array code.
+
+Grid conventions (shared by every function here)
+------------------------------------------------
+* Lidar frame: metres, x forward, y left, z up.  Elevation
+  ``asin(z / |p|)`` and azimuth ``atan2(y, x)`` in radians.
+* Row 0 is the HIGHEST beam, so the image reads top-down.
+* Columns cover 360 degrees (``wrap_cols=True``).  Column ``c`` is centred on
+  azimuth ``pi - (c + 0.5) * 2 pi / W``: column 0 looks backwards, the image
+  centre looks forward (+x), a quarter of the width looks left (+y), so the
+  panorama is seen from inside, not mirrored.
+* A cell keeps the NEARER point when several points fall into it.
+* Valid cells hold the real measured point (never re-projected) with
+  ``range_m = |point|`` and ``direction = point / |point|``.  Empty cells are
+  invalid (range and point NaN) but still get a direction, from the row's
+  elevation and the column's azimuth, so overlays and the UI can reason about
+  them.
+* Points that are not finite or sit at the origin (a common no-return code)
+  are dropped and counted in ``meta["n_points_dropped"]``.
+
+``DepthMatrix.meta`` records ``organize`` (the method), ``model =
+"organized"`` with ``points`` (so the native file stores the exact points),
+``wrap_cols``, ``point_index`` ((H, W) index of each cell's point in the
+input, -1 where empty), ``row_elevation_rad`` (H,), ``col_azimuth_rad`` (W,)
+and the counts ``n_points_in``, ``n_points_dropped``, ``n_points_kept``,
+``n_points_collided`` (points lost to a nearer one in the same cell) and
+``n_cells_with_collision``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import CalibError
+from .depth_matrix import DepthMatrix
+from .organized import organized_cloud_depth
+from .spherical import spherical_directions
+
+TWO_PI = 2.0 * np.pi
+
+#: Field names that carry a spinning lidar's beam index.
+RING_FIELD_NAMES = ("ring", "laser_id", "channel")
+
+
+# --------------------------------------------------------------------------
+# Small array helpers
+# --------------------------------------------------------------------------
+
+
+def _clean_points(xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Points ``(N, 3)`` as float64 and the mask of usable ones (finite, not at the origin)."""
+    points = np.asarray(xyz, dtype=np.float64)
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise CalibError(f"expected points of shape (N, 3), got {points.shape}")
+    keep = np.isfinite(points).all(axis=1)
+    keep[keep] = np.any(points[keep] != 0.0, axis=1)
+    if not keep.any():
+        raise CalibError(f"no usable points: all {len(points)} points are NaN/inf or at the origin")
+    return points, keep
+
+
+def _spherical_angles(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Range (m), elevation and azimuth (rad) of points ``(N, 3)`` in the lidar frame."""
+    range_m = np.linalg.norm(points, axis=1)
+    elevation = np.arcsin(np.clip(points[:, 2] / range_m, -1.0, 1.0))
+    azimuth = np.arctan2(points[:, 1], points[:, 0])
+    return range_m, elevation, azimuth
+
+
+def _group_median(values: np.ndarray, labels: np.ndarray, n_groups: int) -> np.ndarray:
+    """Median of ``values`` per integer label ``0..n_groups-1`` (NaN for empty groups)."""
+    order = np.lexsort((values, labels))
+    sorted_labels = labels[order]
+    sorted_values = values[order]
+    ids = np.arange(n_groups)
+    starts = np.searchsorted(sorted_labels, ids, side="left")
+    counts = np.searchsorted(sorted_labels, ids, side="right") - starts
+    medians = np.full(n_groups, np.nan)
+    has = counts > 0
+    lo = starts[has] + (counts[has] - 1) // 2
+    hi = starts[has] + counts[has] // 2
+    medians[has] = 0.5 * (sorted_values[lo] + sorted_values[hi])
+    return medians
+
+
+def column_azimuths(n_cols: int) -> np.ndarray:
+    """Azimuth (rad) of the centre of each of ``n_cols`` columns over 360 degrees.
+
+    Column ``c`` looks at ``pi - (c + 0.5) * 2 pi / n_cols`` (column 0 looks
+    backwards, the centre column forwards along +x, azimuth decreasing to the
+    right so the panorama is not mirrored).
+    """
+    return np.pi - (np.arange(n_cols) + 0.5) * (TWO_PI / n_cols)
+
+
+# --------------------------------------------------------------------------
+# Estimating the grid
+# --------------------------------------------------------------------------
+
+
+def estimate_n_cols(azimuth_rad: np.ndarray, beam: np.ndarray) -> int:
+    """Number of azimuth columns over 360 degrees, from the points of each beam.
+
+    The typical azimuth step is the median gap between azimuth-sorted points
+    of the same beam (gaps from dropped returns are rarer than regular steps,
+    so they do not move the median).
+
+    Parameters
+    ----------
+    azimuth_rad : (N,) float
+        Point azimuths in radians.
+    beam : (N,) int
+        Beam (ring) label of every point.
+
+    Returns
+    -------
+    int
+        ``round(2 pi / step)``.
+    """
+    order = np.lexsort((azimuth_rad, beam))
+    az = azimuth_rad[order]
+    same_beam = beam[order][1:] == beam[order][:-1]
+    steps = np.diff(az)[same_beam]
+    # Ignore exact duplicates (e.g. the start/end overlap of a sweep).
+    steps = steps[steps > 1e-7]
+    if steps.size < 8:
+        raise CalibError(f"cannot estimate the azimuth resolution from {steps.size} azimuth steps; pass n_cols")
+    step = float(np.median(steps))
+    return max(int(round(TWO_PI / step)), 1)
+
+
+def cluster_elevations(elevation_rad: np.ndarray, n_beams: int, max_iter: int = 50) -> tuple[np.ndarray, np.ndarray]:
+    """Cluster point elevations into ``n_beams`` beams (1-D k-means).
+
+    Initialisation splits the sorted elevations at the ``n_beams - 1``
+    widest gaps between *populated* elevation bins (bins holding at least a
+    small share of a beam's points, so that isolated outliers cannot claim a
+    gap); Lloyd iterations then refine the centres.  In one dimension the
+    nearest-centre assignment is a ``searchsorted`` against the midpoints.
+
+    Parameters
+    ----------
+    elevation_rad : (N,) float
+        Point elevations in radians.
+    n_beams : int
+        Number of beams of the sensor.
+
+    Returns
+    -------
+    labels : (N,) int64
+        Beam index of every point, 0 = lowest beam.
+    centres_rad : (n_beams,) float64
+        Median elevation of every beam, ascending.
+    """
+    el = np.asarray(elevation_rad, dtype=np.float64)
+    n_beams = int(n_beams)
+    if n_beams < 1:
+        raise CalibError(f"beams must be a positive integer, got {n_beams}")
+    if el.size < n_beams:
+        raise CalibError(f"cannot find {n_beams} beams in {el.size} points")
+    if n_beams == 1:
+        return np.zeros(el.size, dtype=np.int64), np.array([np.median(el)])
+
+    lo, hi = float(el.min()), float(el.max())
+    span = hi - lo
+    if span <= 0.0:
+        raise CalibError(f"cannot find {n_beams} beams: all points have the same elevation")
+    # Bins much finer than any beam spacing (0.005 deg, or finer if the span is tiny).
+    bin_width = min(np.radians(0.005), span / (50.0 * n_beams))
+    n_bins = int(np.ceil(span / bin_width)) + 1
+    bin_index = np.minimum(((el - lo) / bin_width).astype(np.int64), n_bins - 1)
+    counts = np.bincount(bin_index, minlength=n_bins)
+    min_support = max(2, int(0.002 * el.size / n_beams))
+    populated = np.flatnonzero(counts >= min_support)
+    if populated.size < n_beams:
+        populated = np.flatnonzero(counts > 0)
+    if populated.size < n_beams:
+        raise CalibError(f"cannot find {n_beams} beams: the elevations take only {populated.size} distinct values")
+    gaps = np.diff(populated)
+    cut_after = np.sort(np.argpartition(gaps, -(n_beams - 1))[-(n_beams - 1):])
+    # Bin boundaries halfway across each chosen gap -> initial labels.
+    boundary_bins = 0.5 * (populated[cut_after] + populated[cut_after + 1])
+    boundaries = lo + (boundary_bins + 0.5) * bin_width
+    labels = np.searchsorted(boundaries, el)
+
+    centres = np.full(n_beams, np.nan)
+    for _ in range(max_iter):
+        sums = np.bincount(labels, weights=el, minlength=n_beams)
+        sizes = np.bincount(labels, minlength=n_beams)
+        new_centres = np.where(sizes > 0, sums / np.maximum(sizes, 1), centres)
+        new_centres = np.sort(np.where(np.isnan(new_centres), np.nanmean(new_centres), new_centres))
+        new_labels = np.searchsorted(0.5 * (new_centres[1:] + new_centres[:-1]), el)
+        converged = np.array_equal(new_labels, labels)
+        labels, centres = new_labels, new_centres
+        if converged:
+            break
+    return labels.astype(np.int64), _group_median(el, labels, n_beams)
+
+
+def firing_order_rings(xyz: np.ndarray, n_beams: int, min_jump_deg: float = 1.0, window_deg: float = 2.0) -> np.ndarray:
+    """Ring index of every point of a cloud stored ring after ring.
+
+    Supports the layout in which the points of one beam are stored as one
+    360-degree sweep in azimuth, then the next beam's sweep (e.g. KITTI raw
+    scans).  All sweeps start at a common azimuth, the *cut*.  Measured in
+    the scan direction from the cut, the azimuth only grows within a sweep,
+    so every step back by more than ``min_jump_deg`` is a ring change, even
+    when a sweep has long gaps (sky).
+
+    The cut is found from the ring changes themselves: consecutive points of
+    different beams differ in elevation, so the ``n_beams - 1`` largest
+    elevation jumps of the sequence mark (mostly) ring changes, and the cut is
+    the azimuth inside most of their arcs (from the last point of one sweep
+    forward to the first point of the next).  Each detected change is then
+    placed at the largest elevation jump within ``window_deg`` of azimuth,
+    which settles which sweep owns the points around the cut (sweeps may
+    start a little before or after it, e.g. by per-laser azimuth offsets).
+
+    Parameters
+    ----------
+    xyz : (N, 3) float
+        Finite, non-zero points in storage order, lidar frame, metres.
+    n_beams : int
+        Number of beams; the number of sweeps found must equal it.
+    min_jump_deg : float
+        Smallest backward azimuth step (degrees) taken as a ring change.
+    window_deg : float
+        Azimuth half-width (degrees) of the search for the exact change.
+
+    Returns
+    -------
+    (N,) int64
+        Sweep index in storage order (0 = first stored sweep).
+
+    Raises
+    ------
+    CalibError
+        If the number of sweeps found is not ``n_beams``.
+    """
+    points = np.asarray(xyz, dtype=np.float64)
+    n_beams = int(n_beams)
+    if n_beams < 1:
+        raise CalibError(f"beams must be a positive integer, got {n_beams}")
+    if len(points) < 2 * n_beams:
+        raise CalibError(f"cannot find {n_beams} sweeps in {len(points)} points")
+    _, elevation, azimuth = _spherical_angles(points)
+    steps = np.angle(np.exp(1j * np.diff(azimuth)))  # wrapped to (-pi, pi]
+    direction = 1.0 if np.median(steps) >= 0.0 else -1.0
+    phase = direction * azimuth
+    elevation_jump = np.abs(np.diff(elevation))
+
+    if n_beams > 1:
+        # The cut lies inside the forward arc from the last point of one sweep
+        # to the first point of the next, for every ring change: take the
+        # angle inside most of the arcs of the largest elevation jumps.
+        top = np.argpartition(elevation_jump, -(n_beams - 1))[-(n_beams - 1):]
+        arc_start = phase[top]
+        arc_length = np.mod(phase[top + 1] - phase[top], TWO_PI)
+        arc_end = arc_start + arc_length
+        # depth[i, j]: arc j contains the end of arc i.
+        contains = np.mod(arc_end[:, None] - arc_start[None, :], TWO_PI) <= arc_length[None, :]
+        deepest = int(np.argmax(contains.sum(axis=1)))
+        # The deepest region runs from the latest start among the containing arcs to that end.
+        back = np.mod(arc_end[deepest] - arc_start[contains[deepest]], TWO_PI)
+        cut = float(arc_end[deepest] - 0.5 * back.min())
+    else:
+        cut = float(phase[0])
+    swept = np.mod(phase - cut, TWO_PI)
+    drops = np.flatnonzero(np.diff(swept) < -np.radians(min_jump_deg)) + 1  # first index after a step back
+    # A sweep that starts a little before the cut steps back twice (to its
+    # start, then across the cut): drops closer than the window are one
+    # change, placed at the largest elevation jump around them.
+    typical_step = max(float(np.median(np.abs(steps))), 1e-9)
+    window = max(int(np.ceil(np.radians(window_deg) / typical_step)), 1)
+    # The first sweep may start, and the last end, across the cut.
+    drops = drops[(drops > window) & (drops < len(points) - window)]
+    changes = np.zeros(0, dtype=np.int64)
+    if drops.size:
+        opens = np.r_[True, np.diff(drops) > window]
+        first = drops[opens]
+        last = drops[np.r_[opens[1:], True]]
+        lo = np.maximum(first - window, np.r_[1, last[:-1] + 1])
+        hi = np.minimum(last + window, np.r_[first[1:] - 1, len(points) - 1])
+        candidates = lo[:, None] + np.arange(int((hi - lo).max()) + 1)[None, :]
+        jump = np.where(candidates <= hi[:, None], elevation_jump[np.minimum(candidates, len(points) - 1) - 1], -np.inf)
+        changes = candidates[np.arange(len(first)), np.argmax(jump, axis=1)]
+    n_found = len(changes) + 1
+    if n_found != n_beams:
+        raise CalibError(
+            f"the cloud does not look like {n_beams} beams stored in firing order: found {n_found} azimuth sweeps"
+        )
+    starts = np.zeros(len(points), dtype=np.int64)
+    starts[changes] = 1
+    return np.cumsum(starts)
+
+
+# --------------------------------------------------------------------------
+# Building the depth matrix
+# --------------------------------------------------------------------------
+
+
+def _assemble(
+    points: np.ndarray,
+    keep: np.ndarray,
+    rows: np.ndarray,
+    cols: np.ndarray,
+    row_elevation: np.ndarray,
+    cell_azimuth: np.ndarray,
+    meta: dict,
+) -> DepthMatrix:
+    """Scatter kept points into cells, nearer point wins.
+
+    ``rows``/``cols`` are given for the kept points only; ``cell_azimuth`` is
+    ``(W,)`` or ``(H, W)`` and, with ``row_elevation (H,)``, gives the
+    direction of empty cells.
+    """
+    n_rows, n_cols = len(row_elevation), cell_azimuth.shape[-1]
+    kept_points = points[keep]
+    kept_range = np.linalg.norm(kept_points, axis=1)
+    cell = rows * n_cols + cols
+    order = np.lexsort((kept_range, cell))
+    sorted_cell = cell[order]
+    first = np.ones(len(order), dtype=bool)
+    first[1:] = sorted_cell[1:] != sorted_cell[:-1]
+    winners = order[first]
+    n_occupied = int(first.sum())
+    cells_with_collision = int(np.count_nonzero(np.diff(np.flatnonzero(np.r_[first, True])) > 1))
+
+    range_m = np.full(n_rows * n_cols, np.nan)
+    cell_points = np.full((n_rows * n_cols, 3), np.nan)
+    range_m[cell[winners]] = kept_range[winners]
+    cell_points[cell[winners]] = kept_points[winners]
+    directions = spherical_directions(row_elevation[:, None], cell_azimuth).reshape(-1, 3).copy()
+    directions[cell[winners]] = kept_points[winners] / kept_range[winners, None]
+    valid = np.zeros(n_rows * n_cols, dtype=bool)
+    valid[cell[winners]] = True
+    point_index = np.full(n_rows * n_cols, -1, dtype=np.int64)
+    point_index[cell[winners]] = np.flatnonzero(keep)[winners]
+
+    meta = dict(meta)
+    meta.update(
+        wrap_cols=True,
+        n_points_in=int(len(points)),
+        n_points_dropped=int(len(points) - keep.sum()),
+        n_points_kept=n_occupied,
+        n_points_collided=int(keep.sum() - n_occupied),
+        n_cells_with_collision=cells_with_collision,
+        row_elevation_rad=np.asarray(row_elevation, dtype=np.float64),
+        col_azimuth_rad=column_azimuths(n_cols),
+        point_index=point_index.reshape(n_rows, n_cols),
+    )
+    # model "organized": the native file stores these exact points (see npz_format).
+    meta["model"] = "organized"
+    meta["points"] = cell_points.reshape(n_rows, n_cols, 3)
+    return DepthMatrix(
+        range_m=range_m.reshape(n_rows, n_cols),
+        directions=directions.reshape(n_rows, n_cols, 3),
+        points=meta["points"],
+        valid=valid.reshape(n_rows, n_cols),
+        meta=meta,
+    )
+
+
+def _organize_labelled(xyz: np.ndarray, beam: np.ndarray, n_cols: int | None, meta: dict) -> DepthMatrix:
+    """Shared core: one row per distinct beam label, columns by azimuth."""
+    points, keep = _clean_points(xyz)
+    beam = np.asarray(beam)
+    if beam.shape != (len(points),):
+        raise CalibError(f"beam labels have shape {beam.shape}, expected ({len(points)},)")
+    _, elevation, azimuth = _spherical_angles(points[keep])
+    beam_ids, beam_index = np.unique(beam[keep], return_inverse=True)
+    n_rows = len(beam_ids)
+    median_elevation = _group_median(elevation, beam_index, n_rows)
+    # Row 0 = highest beam.
+    beam_order = np.argsort(-median_elevation, kind="stable")
+    row_of_beam = np.empty(n_rows, dtype=np.int64)
+    row_of_beam[beam_order] = np.arange(n_rows)
+    rows = row_of_beam[beam_index]
+
+    if n_cols is None:
+        n_cols = estimate_n_cols(azimuth, beam_index)
+    n_cols = int(n_cols)
+    if n_cols < 1:
+        raise CalibError(f"n_cols must be positive, got {n_cols}")
+    step = TWO_PI / n_cols
+    col_coord = (np.pi - azimuth) / step  # column centres at c + 0.5
+    # Each beam may fire at its own azimuth offset: centre its points in their
+    # cells (circular mean of the fractional column) so that jitter does not
+    # push neighbours into one cell.
+    frac_angle = TWO_PI * (col_coord - np.floor(col_coord))
+    mean_cos = np.bincount(rows, weights=np.cos(frac_angle), minlength=n_rows)
+    mean_sin = np.bincount(rows, weights=np.sin(frac_angle), minlength=n_rows)
+    row_shift = np.angle(mean_cos + 1j * mean_sin) / TWO_PI - 0.5
+    row_shift = row_shift - np.round(row_shift)  # in [-0.5, 0.5] columns
+    cols = np.mod(np.floor(col_coord - row_shift[rows]).astype(np.int64), n_cols)
+    cell_azimuth = np.pi - (np.arange(n_cols)[None, :] + 0.5 + row_shift[:, None]) * step
+
+    meta = dict(meta)
+    meta.update(
+        beam_ids=beam_ids[beam_order],
+        column_shift=row_shift,
+        n_cols_estimated=bool(meta.pop("_n_cols_estimated", False)),
+    )
+    return _assemble(points, keep, rows, cols, median_elevation[beam_order], cell_azimuth, meta)
+
+
+# --------------------------------------------------------------------------
+# Public organisers
+# --------------------------------------------------------------------------
+
+
+def organize_by_ring(xyz: np.ndarray, ring: np.ndarray, n_cols: int | None = None) -> DepthMatrix:
+    """Depth matrix of a spinning-lidar cloud with a per-point ring (beam) index.
+
+    Parameters
+    ----------
+    xyz : (N, 3) float
+        Points in the lidar frame, metres.
+    ring : (N,) int
+        Beam index of every point (any numbering; rows are ordered by the
+        rings' median elevation, highest first).  Ring ids without points
+        get no row.
+    n_cols : int, optional
+        Azimuth columns over 360 degrees; default: estimated from the
+        azimuth step between points of the same ring.
+
+    Returns
+    -------
+    DepthMatrix
+        ``(n_rings, n_cols)``, ``wrap_cols=True``.  ``meta`` records
+        ``organize="ring"``, the ring id of each row (``beam_ids``), the row
+        elevations and column azimuths (radians), and the counts of points
+        kept, dropped and lost to collisions.
+    """
+    ring = np.asarray(ring)
+    if ring.dtype.kind == "f":
+        if not np.all(np.isfinite(ring)) or not np.all(ring == np.round(ring)):
+            raise CalibError("ring field must hold whole numbers")
+        ring = ring.astype(np.int64)
+    elif ring.dtype.kind not in "iu":
+        raise CalibError(f"ring field must be integer, got dtype {ring.dtype}")
+    return _organize_labelled(xyz, ring, n_cols, {"organize": "ring", "_n_cols_estimated": n_cols is None})
+
+
+def organize_by_elevation(xyz: np.ndarray, n_beams: int, n_cols: int | None = None) -> DepthMatrix:
+    """Depth matrix of a cloud without ring field, beams found by elevation clustering.
+
+    Works for sensors whose beams leave from (nearly) the lidar origin, so
+    that every beam has one elevation.  See :func:`cluster_elevations`.
+
+    Parameters
+    ----------
+    xyz : (N, 3) float
+        Points in the lidar frame, metres.
+    n_beams : int
+        Number of beams of the sensor.
+    n_cols : int, optional
+        Azimuth columns over 360 degrees (default: estimated).
+
+    Returns
+    -------
+    DepthMatrix
+        ``(n_beams, n_cols)``; ``meta["organize"] = "elevation"`` and
+        ``meta["beam_spread_rad"]`` (largest 1-99 percentile elevation spread
+        of a beam, a check that ``n_beams`` was right).
+    """
+    points, keep = _clean_points(xyz)
+    _, elevation, _ = _spherical_angles(points[keep])
+    labels_kept, centres = cluster_elevations(elevation, n_beams)
+    labels = np.zeros(len(points), dtype=np.int64)
+    labels[keep] = labels_kept
+    residual = np.abs(elevation - centres[labels_kept])
+    meta = {
+        "organize": "elevation",
+        "n_beams": int(n_beams),
+        "beam_spread_rad": float(np.percentile(residual, 99)) * 2.0,
+        "_n_cols_estimated": n_cols is None,
+    }
+    return _organize_labelled(points, labels, n_cols, meta)
+
+
+def organize_by_firing_order(xyz: np.ndarray, n_beams: int, n_cols: int | None = None) -> DepthMatrix:
+    """Depth matrix of a cloud stored ring after ring (sensor firing order).
+
+    Rings are found from the azimuth wrap between sweeps (see
+    :func:`firing_order_rings`), then laid out as in :func:`organize_by_ring`.
+
+    Parameters
+    ----------
+    xyz : (N, 3) float
+        Points in storage order, lidar frame, metres.
+    n_beams : int
+        Number of beams; must match the number of sweeps found.
+    n_cols : int, optional
+        Azimuth columns over 360 degrees (default: estimated).
+    """
+    points, keep = _clean_points(xyz)
+    labels = np.zeros(len(points), dtype=np.int64)
+    labels[keep] = firing_order_rings(points[keep], n_beams)
+    meta = {"organize": "firing_order", "n_beams": int(n_beams), "_n_cols_estimated": n_cols is None}
+    return _organize_labelled(points, labels, n_cols, meta)
+
+
+def default_spherical_resolution_deg(xyz: np.ndarray) -> float:
+    """Square cell size (degrees) for the spherical fallback.
+
+    The typical azimuth step between points of (almost) the same elevation
+    -- points are grouped by 0.02-degree elevation bins, which for a
+    multi-beam lidar are its beams -- so that each beam's consecutive points
+    get their own columns.  If there is no such structure (fewer than a few
+    steps), about one cell per point over the cloud's field of view:
+    ``sqrt(360 * elevation_span / N)``.  Rounded to 0.01 degree, at least 0.01.
+    """
+    points, keep = _clean_points(xyz)
+    _, elevation, azimuth = _spherical_angles(points[keep])
+    try:
+        n_cols = estimate_n_cols(azimuth, np.floor(np.degrees(elevation) / 0.02).astype(np.int64))
+        resolution = 360.0 / n_cols
+    except CalibError:
+        span_deg = max(float(np.degrees(elevation.max() - elevation.min())), 0.01)
+        resolution = float(np.sqrt(360.0 * span_deg / keep.sum()))
+    return max(round(resolution, 2), 0.01)
+
+
+def organize_spherical(
+    xyz: np.ndarray,
+    v_res_deg: float,
+    h_res_deg: float,
+    v_range_deg: tuple[float, float] | None = None,
+) -> DepthMatrix:
+    """Plain spherical projection grid: fixed elevation and azimuth bins.
+
+    The fallback for clouds whose beams are unknown.  Rows are elevation bins
+    from the top of ``v_range_deg`` down; columns follow the module's azimuth
+    convention over 360 degrees.  Points outside ``v_range_deg`` are dropped.
+
+    Parameters
+    ----------
+    xyz : (N, 3) float
+        Points in the lidar frame, metres.
+    v_res_deg, h_res_deg : float
+        Elevation and azimuth bin sizes in degrees.
+    v_range_deg : (low, high), optional
+        Elevation interval in degrees; default: the cloud's elevation span.
+
+    Returns
+    -------
+    DepthMatrix
+        ``meta["organize"] = "spherical"`` with the resolutions and range.
+        Valid cells hold the measured points; empty cells the bin-centre
+        direction.
+    """
+    v_res, h_res = float(v_res_deg), float(h_res_deg)
+    if not (np.isfinite(v_res) and v_res > 0 and np.isfinite(h_res) and h_res > 0):
+        raise CalibError(f"spherical resolution must be positive, got v={v_res_deg} h={h_res_deg} deg")
+    points, keep = _clean_points(xyz)
+    _, elevation, azimuth = _spherical_angles(points)
+    if v_range_deg is None:
+        low, high = np.degrees(elevation[keep].min()), np.degrees(elevation[keep].max())
+    else:
+        low, high = (float(v) for v in v_range_deg)
+        if not high > low:
+            raise CalibError(f"v_range_deg must be (low, high) with low < high, got {v_range_deg}")
+    n_rows = max(int(np.ceil((high - low) / v_res - 1e-9)), 1)
+    n_cols = max(int(round(360.0 / h_res)), 1)
+    if n_rows * n_cols > 50_000_000:
+        raise CalibError(f"spherical grid of {n_rows} x {n_cols} cells is too large; use a coarser resolution")
+    # Bins of v_res centred on the interval, row 0 at the top.
+    top = 0.5 * (low + high) + 0.5 * n_rows * v_res
+    row_coord = (top - np.degrees(elevation)) / v_res
+    keep &= (np.degrees(elevation) >= low) & (np.degrees(elevation) <= high)
+    if not keep.any():
+        raise CalibError(f"no points inside the elevation range {low:.3f}..{high:.3f} deg")
+    rows = np.clip(np.floor(row_coord[keep]).astype(np.int64), 0, n_rows - 1)
+    cols = np.mod(np.floor((np.pi - azimuth[keep]) / (TWO_PI / n_cols)).astype(np.int64), n_cols)
+    row_elevation = np.radians(top - (np.arange(n_rows) + 0.5) * v_res)
+    meta = {
+        "organize": "spherical",
+        "v_res_deg": v_res,
+        "h_res_deg": 360.0 / n_cols,
+        "v_range_deg": (float(low), float(high)),
+    }
+    return _assemble(points, keep, rows, cols, row_elevation, column_azimuths(n_cols), meta)
+
+
+def organize_grid(points: np.ndarray, wrap_cols: bool | None = None) -> DepthMatrix:
+    """Depth matrix of an already organized cloud, turned to this module's orientation.
+
+    Drivers differ in how they lay out organized clouds (e.g. ring 0 = lowest
+    beam in the first row).  The grid is flipped upside down when the rows'
+    median elevation grows downwards, and left-right when the columns'
+    azimuth grows to the right (a mirrored panorama); the cells themselves
+    are kept.  Empty cells get the direction of their row's median elevation
+    and column's mean azimuth.
+
+    Parameters
+    ----------
+    points : (H, W, 3) float
+        Organized points in the lidar frame, metres; NaN/inf or (0, 0, 0)
+        marks a missing return.
+    wrap_cols : bool, optional
+        Whether the columns close 360 degrees; default: detected (the
+        columns' azimuth step times W is one turn).
+
+    Returns
+    -------
+    DepthMatrix
+        ``meta["organize"] = "organized"`` with ``flipped_rows``,
+        ``flipped_cols``, ``wrap_cols`` (and ``wrap_cols_detected``) and
+        ``point_index`` (index of each cell in the input's row-major order).
+    """
+    cloud = organized_cloud_depth(points, wrap_cols=False)  # validates the shape
+    if not cloud.valid.any():
+        raise CalibError(f"the organized cloud of {cloud.shape[0]} x {cloud.shape[1]} cells has no valid point")
+    n_rows, n_cols = cloud.shape
+    index = np.arange(n_rows * n_cols).reshape(n_rows, n_cols)
+    valid = cloud.valid
+    direction = np.where(valid[..., None], cloud.directions, 0.0)
+    elevation = np.arcsin(np.clip(direction[..., 2], -1.0, 1.0))
+    azimuth = np.arctan2(direction[..., 1], direction[..., 0])
+
+    counts_row = valid.sum(axis=1)
+    row_elevation = np.where(counts_row > 0, (elevation * valid).sum(axis=1) / np.maximum(counts_row, 1), np.nan)
+    col_azimuth = np.angle((np.exp(1j * azimuth) * valid).sum(axis=0))
+    col_has = valid.any(axis=0)
+    col_azimuth[~col_has] = np.nan
+
+    def slope(values: np.ndarray) -> float:
+        has = np.isfinite(values)
+        if has.sum() < 2:
+            return 0.0
+        return float(np.polyfit(np.flatnonzero(has), values[has], 1)[0])
+
+    flip_rows = slope(row_elevation) > 0.0
+    col_step = 0.0
+    if col_has.sum() > 1:
+        unwrapped = np.full(n_cols, np.nan)
+        unwrapped[col_has] = np.unwrap(col_azimuth[col_has])
+        col_step = slope(unwrapped)
+    flip_cols = col_step > 0.0
+    detected_wrap = bool(col_step != 0.0 and abs(abs(col_step) * n_cols - TWO_PI) <= max(2.0 * abs(col_step), 0.02 * TWO_PI))
+    wrap = detected_wrap if wrap_cols is None else bool(wrap_cols)
+
+    rows = slice(None, None, -1) if flip_rows else slice(None)
+    cols = slice(None, None, -1) if flip_cols else slice(None)
+    oriented = organized_cloud_depth(np.asarray(points, dtype=np.float64)[rows, cols], wrap_cols=wrap)
+    fill = spherical_directions(row_elevation[rows][:, None], col_azimuth[cols][None, :])
+    directions = np.where(oriented.valid[..., None], oriented.directions, fill)
+    point_index = np.where(oriented.valid, index[rows, cols], -1)
+    meta = dict(oriented.meta)
+    meta.update(
+        organize="organized",
+        flipped_rows=bool(flip_rows),
+        flipped_cols=bool(flip_cols),
+        wrap_cols_detected=detected_wrap,
+        n_points_in=int(n_rows * n_cols),
+        n_points_dropped=int(n_rows * n_cols - valid.sum()),
+        n_points_kept=int(valid.sum()),
+        point_index=point_index,
+    )
+    return DepthMatrix(
+        range_m=oriented.range_m, directions=directions, points=oriented.points, valid=oriented.valid, meta=meta
+    )
