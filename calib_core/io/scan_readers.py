@@ -31,9 +31,7 @@ one-line message naming the file.
 from __future__ import annotations
 
 import dataclasses
-import re
 import struct
-import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any

@@ -510,21 +510,27 @@ def organize_by_firing_order(xyz: np.ndarray, n_beams: int, n_cols: int | None =
 def default_spherical_resolution_deg(xyz: np.ndarray) -> float:
     """Square cell size (degrees) for the spherical fallback.
 
-    The typical azimuth step between points of (almost) the same elevation
-    -- points are grouped by 0.02-degree elevation bins, which for a
-    multi-beam lidar are its beams -- so that each beam's consecutive points
-    get their own columns.  If there is no such structure (fewer than a few
-    steps), about one cell per point over the cloud's field of view:
+    The typical azimuth step between points of (almost) the same elevation,
+    so that consecutive points of a beam get their own columns: points are
+    grouped into runs of sorted elevations without a gap wider than 0.01
+    degree (for a multi-beam lidar, its beams).  Without such structure (one
+    run, or too few steps) -- and never finer than a quarter of it -- about
+    one cell per point over the cloud's field of view,
     ``sqrt(360 * elevation_span / N)``.  Rounded to 0.01 degree, at least 0.01.
     """
     points, keep = _clean_points(xyz)
     _, elevation, azimuth = _spherical_angles(points[keep])
-    try:
-        n_cols = estimate_n_cols(azimuth, np.floor(np.degrees(elevation) / 0.02).astype(np.int64))
-        resolution = 360.0 / n_cols
-    except CalibError:
-        span_deg = max(float(np.degrees(elevation.max() - elevation.min())), 0.01)
-        resolution = float(np.sqrt(360.0 * span_deg / keep.sum()))
+    span_deg = max(float(np.degrees(elevation.max() - elevation.min())), 0.01)
+    equal_area = float(np.sqrt(360.0 * span_deg / keep.sum()))
+    order = np.argsort(elevation)
+    runs = np.empty(len(order), dtype=np.int64)
+    runs[order] = np.concatenate([[0], np.cumsum(np.diff(elevation[order]) > np.radians(0.01))])
+    resolution = equal_area
+    if runs.max() >= 1:
+        try:
+            resolution = max(360.0 / estimate_n_cols(azimuth, runs), 0.25 * equal_area)
+        except CalibError:
+            pass
     return max(round(resolution, 2), 0.01)
 
 
