@@ -83,8 +83,11 @@ class CalibrationResult:
     warnings : list of str
         Weak geometry, outliers, poorly constrained parameters.
     outliers : list of int
-        Indices of pairs with outlying angular residuals (see
-        :func:`calib_core.solve.checks.outlier_indices`).
+        Indices of pairs with outlying angular residuals (rule of
+        :func:`calib_core.solve.checks.outlier_indices`, applied after
+        refitting without the worst pairs so that one bad click does not
+        implicate its neighbours).  They are reported, not removed:
+        ``T_camera_lidar`` uses all pairs.
     iterations : int
         Levenberg-Marquardt iterations (Jacobian evaluations).
     cost_name : str
@@ -123,6 +126,32 @@ def _pixel_errors(camera: Any, T: np.ndarray, points_lidar: np.ndarray, pixels: 
     projected, valid = camera.project(points_lidar @ T[:3, :3].T + T[:3, 3])
     err = np.linalg.norm(np.asarray(projected, dtype=np.float64) - pixels, axis=1)
     return np.where(np.asarray(valid, dtype=bool) & np.isfinite(err), err, np.nan)
+
+
+def _find_outliers(T: np.ndarray, points: np.ndarray, bearings: np.ndarray, residual_deg: np.ndarray) -> list[int]:
+    """Outlying pairs, robust to the pull a bad pair has on the least-squares fit.
+
+    A bad click drags the fit, so good pairs near it get large residuals too.
+    Greedy backward elimination: while the rule of
+    :func:`~calib_core.solve.checks.outlier_indices` flags a pair, drop the
+    worst one and refit on the rest; finally judge every pair against the fit
+    and the residual statistics of the pairs kept.  Keeps at least 5 pairs.
+    """
+    if not outlier_indices(residual_deg):
+        return []
+    keep = np.ones(len(points), dtype=bool)
+    r = residual_deg
+    while keep.sum() > MIN_PAIRS + 1:
+        flagged = [i for i in outlier_indices(r, reference_deg=r[keep]) if keep[i]]
+        if not flagged:
+            break
+        keep[max(flagged, key=lambda i: r[i])] = False
+        try:
+            T, _ = refine_pose(T, points[keep], bearings[keep], cost="angular")
+        except CalibError:
+            break
+        r = np.degrees(angular_errors_rad(T, points, bearings))
+    return outlier_indices(r, reference_deg=r[keep])
 
 
 def solve_extrinsics(
@@ -239,7 +268,7 @@ def solve_extrinsics(
         residual_px = np.full(n, np.nan)
     mean_deg, std_deg = _mean_std(residual_deg)
     mean_px, std_px = _mean_std(residual_px)
-    outliers = outlier_indices(residual_deg)
+    outliers = _find_outliers(T, points, bearings, residual_deg)
     if outliers:
         worst = ", ".join(f"{residual_deg[i]:.2f}" for i in outliers[:5])
         warnings.append(f"pairs {outliers} have large residuals ({worst} deg); check these clicks")

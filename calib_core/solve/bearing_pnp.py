@@ -202,22 +202,25 @@ def _quan_lan_x(points: np.ndarray, bearings: np.ndarray, rng: np.random.Generat
     n = len(points)
     cos = np.clip(bearings @ bearings.T, -1.0, 1.0)
     sq = np.sum((points[:, None, :] - points[None, :, :]) ** 2, axis=-1)
-    # For every reference i, all pairs (j, k), j < k, that do not contain i.
-    J, K = np.triu_indices(n, 1)
     ref = np.arange(n)[:, None]
-    keep = (J[None, :] != ref) & (K[None, :] != ref)
     m = (n - 1) * (n - 2) // 2
-    cols = np.nonzero(keep)[1].reshape(n, m)
-    if m > _QL_MAX_ROWS:
-        pick = np.argsort(rng.random((n, m)), axis=1)[:, :_QL_MAX_ROWS]
-        cols = np.take_along_axis(cols, pick, axis=1)
-    j, k = J[cols], K[cols]
+    if m <= _QL_MAX_ROWS:
+        # For every reference i, all pairs (j, k), j < k, that do not contain i.
+        J, K = np.triu_indices(n, 1)
+        keep = (J[None, :] != ref) & (K[None, :] != ref)
+        cols = np.nonzero(keep)[1].reshape(n, m)
+        j, k = J[cols], K[cols]
+    else:
+        # Random pairs (with repetition) of distinct j, k, both != i.
+        j = (ref + 1 + rng.integers(0, n - 1, (n, _QL_MAX_ROWS))) % n
+        k0 = (ref + 1 + rng.integers(0, n - 2, (n, _QL_MAX_ROWS))) % n  # never i or i - 1
+        k = np.where(k0 == j, (ref - 1) % n, k0)
     i = np.broadcast_to(ref, j.shape)
     A = quan_lan_quartic(cos[i, j], cos[i, k], cos[j, k], sq[i, j], sq[i, k], sq[j, k])
     # Each quartic is defined up to scale: give every row the same weight.
     norms = np.linalg.norm(A, axis=-1, keepdims=True)
     A = A / np.where(norms > 0, norms, 1.0)
-    _, _, Vt = np.linalg.svd(A, full_matrices=True)  # A: (n, rows, 5)
+    _, _, Vt = np.linalg.svd(A, full_matrices=n < 5)  # A: (n, rows, 5); Vt: (n, 5, 5)
     if n >= 5:
         # Over-determined: t is the right singular vector of the smallest
         # singular value (Quan & Lan, Sec. 3).
@@ -389,15 +392,16 @@ def p3p_grunert(points_lidar: np.ndarray, bearings_camera: np.ndarray) -> tuple[
     return T[good], tri[good]
 
 
-def _spread_order(bearings: np.ndarray) -> np.ndarray:
-    """Indices in farthest-point order on the sphere (greedy max-min angle)."""
+def _spread_order(bearings: np.ndarray, count: int) -> np.ndarray:
+    """First ``count`` indices in farthest-point order on the sphere (greedy max-min angle)."""
     n = len(bearings)
     order = [int(np.argmin(bearings @ bearings.mean(axis=0)))]
-    min_cos = bearings @ bearings[order[0]]
-    for _ in range(n - 1):  # n is a handful of clicked pairs
-        nxt = int(np.argmin(np.where(np.isin(np.arange(n), order), np.inf, min_cos)))
+    max_cos = bearings @ bearings[order[0]]  # cosine to the nearest chosen bearing
+    for _ in range(min(count, n) - 1):  # a handful of picks
+        max_cos[order] = np.inf
+        nxt = int(np.argmin(max_cos))
         order.append(nxt)
-        min_cos = np.maximum(min_cos, bearings @ bearings[nxt])
+        max_cos = np.maximum(max_cos, bearings @ bearings[nxt])
     return np.array(order)
 
 
@@ -406,7 +410,7 @@ def _triples(bearings: np.ndarray, rng: np.random.Generator, max_random: int = 2
     n = len(bearings)
     if n <= 12:
         return np.array(list(itertools.combinations(range(n), 3)))
-    spread = _spread_order(bearings)[:8]
+    spread = _spread_order(bearings, 8)
     tri = [tuple(sorted(t)) for t in itertools.combinations(spread.tolist(), 3)]
     rand = np.sort(np.argsort(rng.random((max_random, n)), axis=1)[:, :3], axis=1)
     tri.extend(map(tuple, rand.tolist()))

@@ -180,17 +180,21 @@ def conditioning_warning(JtJ: np.ndarray) -> str | None:
     )
 
 
-def outlier_indices(residual_deg: np.ndarray, min_deg: float = 1.0, k: float = 3.0) -> list[int]:
+def outlier_indices(
+    residual_deg: np.ndarray, reference_deg: np.ndarray | None = None, min_deg: float = 1.0, k: float = 3.0
+) -> list[int]:
     """Pairs whose angular residual is an outlier.
 
-    Rule: ``r_i > median(r) + k * 1.4826 * MAD(r)`` *and* ``r_i > min_deg``,
-    where MAD is the median absolute deviation (1.4826 MAD estimates the
-    standard deviation of Gaussian data without being dragged by the outliers
-    themselves).  The absolute floor keeps sub-degree clicks from being flagged
-    when all residuals are tiny.
+    Rule: ``r_i > median(ref) + k * 1.4826 * MAD(ref)`` *and* ``r_i > min_deg``,
+    where ``ref`` are the reference residuals (default: all of them) and MAD is
+    the median absolute deviation (1.4826 MAD estimates the standard deviation
+    of Gaussian data without being dragged by the outliers themselves).  The
+    absolute floor keeps sub-degree clicks from being flagged when all
+    residuals are tiny.
     """
     r = np.asarray(residual_deg, dtype=np.float64)
-    med = np.median(r)
-    mad = np.median(np.abs(r - med))
+    ref = r if reference_deg is None else np.asarray(reference_deg, dtype=np.float64)
+    med = np.median(ref)
+    mad = np.median(np.abs(ref - med))
     flagged = (r > med + k * 1.4826 * mad) & (r > min_deg)
     return np.nonzero(flagged)[0].tolist()
