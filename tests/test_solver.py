@@ -428,3 +428,16 @@ def test_lm_failure_becomes_calib_error(monkeypatch):
     monkeypatch.setattr(refine_module, "least_squares", boom)
     with pytest.raises(CalibError, match="not finite in the initial point"):
         solve_extrinsics(p, b)
+
+
+def test_pixel_cost_with_the_package_pinhole_model():
+    cameras = pytest.importorskip("calib_core.cameras")
+    cam = cameras.PinholeCamera(np.array([[500.0, 0, 320], [0, 500, 240], [0, 0, 1]]), np.array([-0.2, 0.05, 0, 0, 0]), 640, 480)
+    rng = np.random.default_rng(6)
+    T_true, _, _ = random_scene(6, 1)
+    pixels = np.column_stack([rng.uniform(30, 610, 9), rng.uniform(30, 450, 9)])
+    points_camera = cam.bearing(pixels) * rng.uniform(2, 12, (9, 1))
+    points_lidar = (points_camera - T_true[:3, 3]) @ T_true[:3, :3]
+    res = solve_extrinsics(points_lidar, cam.bearing(pixels), camera=cam, pixels=pixels, cost="pixel")
+    assert max(pose_error(res.T_camera_lidar, T_true)) < 1e-6
+    assert res.mean_px < 1e-4
