@@ -62,6 +62,18 @@ def project_lidar_points(T_camera_lidar: np.ndarray, camera, points_lidar: np.nd
     return camera.project(transform_points(T_camera_lidar, pts))
 
 
+def sample_bilinear(image: np.ndarray, pixels: np.ndarray) -> np.ndarray:
+    """Bilinear colours of ``image`` at ``(u, v)`` pixels: ``(N, C)``, same dtype."""
+    n = len(pixels)
+    # cv2.remap maps are limited to 32767 per side: lay the N samples out as rows of 4096.
+    cols = 4096
+    rows = -(-n // cols)
+    grid = np.zeros((rows * cols, 2), np.float32)
+    grid[:n] = pixels
+    out = cv2.remap(image, grid.reshape(rows, cols, 2), None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    return out.reshape(rows * cols, -1)[:n]
+
+
 def _auto_cell_px(pixels: np.ndarray, width: int, height: int) -> int:
     """Z-buffer cell size from the density of projected points.
 
@@ -145,9 +157,7 @@ def colorize_points(
         zmin = cv2.erode(zbuf.reshape(gh, gw), np.ones((3, 3), np.uint8), borderType=cv2.BORDER_REPLICATE).ravel()
         visible = dist <= zmin[flat] * (1.0 + depth_tolerance) + 0.05
         idx, pixels = idx[visible], pixels[visible]
-    map_xy = pixels.astype(np.float32).reshape(-1, 1, 2)
-    sampled = cv2.remap(img[..., :3], map_xy, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-    colors[idx] = sampled.reshape(-1, 3)
+    colors[idx] = sample_bilinear(img[..., :3], pixels)
     has_color[idx] = True
     return colors, has_color
 
