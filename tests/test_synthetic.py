@@ -13,7 +13,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import trimesh
 from trimesh.ray.ray_triangle import RayMeshIntersector
 
 from calib_core.errors import CalibError
@@ -257,6 +256,9 @@ def test_seeds_change_layout_and_ground_truth():
         assert not np.allclose(other.size_m, rooms[0].size_m)
         assert not np.allclose(other.T_world_lidar, rooms[0].T_world_lidar)
         assert not np.allclose(other.corners_world[:20], rooms[0].corners_world[:20])
+    for bad in (-1, 1.5, "3"):
+        with pytest.raises(CalibError, match="seed"):
+            build_room(bad)
     # Same seed, same scene.
     again = build_room(1)
     np.testing.assert_array_equal(again.mesh.vertices, rooms[1].mesh.vertices)

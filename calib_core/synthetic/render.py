@@ -39,7 +39,7 @@ _AMBIENT = 0.50
 
 
 def cast(room: Room, origins_world: np.ndarray, directions_world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """First hits of rays in the room: ``(t (N,), part index (N,), -1 = miss)`` and the faces.
+    """First hits of rays ``(N, 3)`` (world frame) in the room's mesh.
 
     Returns
     -------

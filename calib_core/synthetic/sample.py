@@ -143,8 +143,8 @@ def make_sample_scene(seed: int = 0, *, image_scale: int = 1, scan_step: int = 1
     -------
     SampleScene
     """
-    seed = int(seed)
     room = build_room(seed)
+    seed = room.seed
     camera = sample_camera(image_scale)
     theta, phi = scanner_angles_grid(scan_step)
     depth = render_scan(room, theta, phi, SCANNER_DX_M, SCANNER_DZ_M, np.random.default_rng([seed, 2]),
@@ -169,11 +169,11 @@ def write_sample(out_dir: str | os.PathLike, seed: int = 0, *, image_scale: int 
         What was written.
     """
     out = Path(out_dir)
+    scene = make_sample_scene(seed, image_scale=image_scale, scan_step=scan_step)
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as err:
         raise CalibError(f"cannot create output folder {out}: {err.strerror or err}") from None
-    scene = make_sample_scene(seed, image_scale=image_scale, scan_step=scan_step)
     save_depth_npz(out / "scan.npz", scene.depth)
     save_image_rgb(out / "image.png", scene.image)
     save_camera_yaml(scene.camera, out / "camera.yaml")

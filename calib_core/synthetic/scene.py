@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 import trimesh
 
+from ..errors import CalibError
 from ..transforms import R_from_rpy_deg, invert_T, make_T
 
 #: Ground truth of seed 0: the paper's Table I (roll, pitch, yaw in degrees;
@@ -196,6 +197,8 @@ def build_room(seed: int = 0) -> Room:
     -------
     Room
     """
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise CalibError(f"seed must be a non-negative whole number, got {seed!r}")
     rng = np.random.default_rng([int(seed), 0])
     Lx, Ly, H = rng.uniform(6.6, 7.4), rng.uniform(4.7, 5.3), rng.uniform(2.65, 2.95)
     t = WALL_THICKNESS_M
