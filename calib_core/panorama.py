@@ -92,6 +92,8 @@ class Panorama:
         elevation_range_rad: tuple[float, float] | None = None,
         max_elevation_rad: float = np.deg2rad(80.0),
         max_width: int = _DEFAULT_MAX_WIDTH,
+        oversample: float = 1.0,
+        image_mask: np.ndarray | None = None,
     ) -> "Panorama":
         """Panorama of ``camera`` about the axis ``up_camera``.
 
@@ -116,6 +118,12 @@ class Panorama:
             degenerate).
         max_width : int
             Cap on the automatic width (a browser texture is at most 8192 px).
+        oversample : float
+            Panorama pixels per camera pixel (at the image centre) for the
+            automatic size, e.g. 2 for a smoother display.
+        image_mask : (camera.height, camera.width) bool array, optional
+            Raw pixels that show the scene (e.g. inside the image circle of a
+            fisheye lens); only their directions define the automatic extent.
         """
         up = _unit(up_camera, "up_camera")
         fwd = _unit(forward_camera, "forward_camera")
@@ -123,7 +131,7 @@ class Panorama:
         right = np.cross(fwd, up)
 
         if azimuth_range_rad is None or elevation_range_rad is None:
-            az_auto, el_auto = _field_of_view(camera, up, fwd, right, float(max_elevation_rad))
+            az_auto, el_auto = _field_of_view(camera, up, fwd, right, float(max_elevation_rad), image_mask)
             azimuth_range_rad = azimuth_range_rad or az_auto
             elevation_range_rad = elevation_range_rad or el_auto
         az = (float(azimuth_range_rad[0]), float(azimuth_range_rad[1]))
@@ -134,7 +142,9 @@ class Panorama:
             raise CalibError(f"elevation range {el} rad must be increasing within [-pi/2, pi/2]")
 
         if width is None or height is None:
-            step = _pixel_angle(camera)
+            if not oversample > 0:
+                raise CalibError(f"oversample must be positive, got {oversample}")
+            step = _pixel_angle(camera) / float(oversample)
             aspect = (az[1] - az[0]) / (el[1] - el[0])
             if width is None and height is None:
                 width = int(np.clip(round((az[1] - az[0]) / step), 16, max_width))
@@ -264,12 +274,18 @@ def _pixel_angle(camera: Any) -> float:
 
 
 def _field_of_view(
-    camera: Any, up: np.ndarray, fwd: np.ndarray, right: np.ndarray, max_el: float
+    camera: Any, up: np.ndarray, fwd: np.ndarray, right: np.ndarray, max_el: float, image_mask: np.ndarray | None
 ) -> tuple[tuple[float, float], tuple[float, float]]:
     """Azimuth and elevation ranges (rad) of the directions the camera sees."""
     n = _RANGE_GRID
-    us, vs = np.meshgrid(np.linspace(-0.5, camera.width - 0.5, n), np.linspace(-0.5, camera.height - 0.5, n))
-    b = camera.bearing(np.stack([us.ravel(), vs.ravel()], axis=1))
+    us, vs = np.meshgrid(np.linspace(0.0, camera.width - 1.0, n), np.linspace(0.0, camera.height - 1.0, n))
+    grid = np.stack([us.ravel(), vs.ravel()], axis=1)
+    if image_mask is not None:
+        mask = np.asarray(image_mask, dtype=bool)
+        if mask.shape != (camera.height, camera.width):
+            raise CalibError(f"image_mask shape {mask.shape} does not match the {camera.width}x{camera.height} camera")
+        grid = grid[mask[np.round(grid[:, 1]).astype(int), np.round(grid[:, 0]).astype(int)]]
+    b = camera.bearing(grid)
     b = b[np.isfinite(b).all(axis=1)]
     if b.shape[0] < 4:
         raise CalibError(f"the {camera.model} camera has no valid rays to build a panorama from")

@@ -1,0 +1,128 @@
+"""Where the 2-D annotation images sit in the viser scene, and click geometry.
+
+The annotation view is a flat arrangement of scene images in the world plane
+``z = 0``, looked at from ``-z`` (camera looking along ``+z`` with up ``-y``),
+so that world ``+x`` is screen-right and world ``+y`` is screen-down, like
+image coordinates.  A viser scene image lies in its node's local XY plane,
+centred on the node, ``+x`` image-right and ``+y`` image-down.
+
+Layout (world units)::
+
+    +---------------------------------------+
+    |      camera image (raw or panorama)    |   width CAMERA_WIDTH
+    +-------------------+-------------------+
+    | BA horizontal     | BA vertical       |
+    +-------------------+-------------------+
+    | BA +45 deg        | BA -45 deg        |
+    +-------------------+-------------------+
+
+This is display geometry only (pixels <-> scene positions); no calibration
+maths lives here.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+CAMERA_WIDTH = 8.0  # world units
+GAP = 0.12
+LABEL_HEIGHT = 0.22
+
+
+@dataclass(frozen=True)
+class ImageSlot:
+    """A scene image of ``width_px`` x ``height_px`` pixels centred at ``center``.
+
+    Pixel ``(u, v)`` (top-left pixel centre = 0, image spans
+    ``[-0.5, W - 0.5]``) sits at world
+    ``center + ((u + 0.5) / W - 0.5) * render_width`` along x (and likewise v
+    along y).
+    """
+
+    key: str
+    width_px: int
+    height_px: int
+    center: tuple[float, float, float]
+    render_width: float
+    render_height: float
+
+    @property
+    def units_per_px(self) -> float:
+        return self.render_width / self.width_px
+
+    def world_from_pixel(self, uv: np.ndarray, z_offset: float = 0.0) -> np.ndarray:
+        """World positions ``(N, 3)`` of pixels ``(N, 2)``; ``z_offset`` < 0 is towards the viewer."""
+        uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+        x = self.center[0] + ((uv[:, 0] + 0.5) / self.width_px - 0.5) * self.render_width
+        y = self.center[1] + ((uv[:, 1] + 0.5) / self.height_px - 0.5) * self.render_height
+        z = np.full(len(uv), self.center[2] + z_offset)
+        return np.stack([x, y, z], axis=1)
+
+    def pixel_from_world(self, xyz: np.ndarray) -> np.ndarray:
+        """Pixels ``(N, 2)`` of world points ``(N, 3)`` on (or projected onto) the image plane."""
+        p = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
+        u = ((p[:, 0] - self.center[0]) / self.render_width + 0.5) * self.width_px - 0.5
+        v = ((p[:, 1] - self.center[1]) / self.render_height + 0.5) * self.height_px - 0.5
+        return np.stack([u, v], axis=1)
+
+    def pixel_from_ray(self, ray_origin, ray_direction) -> tuple[float, float] | None:
+        """Pixel where a click ray meets the image plane (node rotation is identity).
+
+        Returns None when the ray is parallel to the plane or points away from it.
+        """
+        o = np.asarray(ray_origin, dtype=np.float64)
+        d = np.asarray(ray_direction, dtype=np.float64)
+        if abs(d[2]) < 1e-12:
+            return None
+        t = (self.center[2] - o[2]) / d[2]
+        if t <= 0:
+            return None
+        uv = self.pixel_from_world((o + t * d)[None])[0]
+        return float(uv[0]), float(uv[1])
+
+    def contains(self, uv) -> bool:
+        u, v = float(uv[0]), float(uv[1])
+        return -0.5 <= u <= self.width_px - 0.5 and -0.5 <= v <= self.height_px - 0.5
+
+    def bounds(self) -> tuple[float, float, float, float]:
+        """``(x_min, y_min, x_max, y_max)`` in world units."""
+        cx, cy, _ = self.center
+        return (cx - self.render_width / 2, cy - self.render_height / 2, cx + self.render_width / 2, cy + self.render_height / 2)
+
+
+def annotation_layout(
+    camera_sizes: dict[str, tuple[int, int]], ba_size: tuple[int, int], ba_keys: tuple[str, ...]
+) -> dict[str, ImageSlot]:
+    """Slots for the camera image variants and the four BA images.
+
+    Parameters
+    ----------
+    camera_sizes : dict
+        ``{"raw": (W, H), "panorama": (W, H)}`` (panorama optional).  All
+        camera variants share the top area; their bottom edges line up.
+    ba_size : (W, H)
+        Depth-matrix size (columns, rows).
+    ba_keys : tuple of str
+        Keys of the four BA images, in reading order.
+    """
+    slots: dict[str, ImageSlot] = {}
+    bw, bh = ba_size
+    cell_w = (CAMERA_WIDTH - GAP) / 2
+    cell_h = cell_w * bh / bw
+    for i, key in enumerate(ba_keys):
+        row, col = divmod(i, 2)
+        cx = -CAMERA_WIDTH / 2 + cell_w / 2 + col * (cell_w + GAP)
+        cy = LABEL_HEIGHT + cell_h / 2 + row * (cell_h + GAP + LABEL_HEIGHT)
+        slots[key] = ImageSlot(key, bw, bh, (cx, cy, 0.0), cell_w, cell_h)
+    for name, (w, h) in camera_sizes.items():
+        height = CAMERA_WIDTH * h / w
+        slots[name] = ImageSlot(name, w, h, (0.0, -GAP - height / 2, 0.0), CAMERA_WIDTH, height)
+    return slots
+
+
+def bounds_of(slots: list[ImageSlot]) -> tuple[float, float, float, float]:
+    """Union of the slots' bounds ``(x_min, y_min, x_max, y_max)``."""
+    b = np.array([s.bounds() for s in slots])
+    return float(b[:, 0].min()), float(b[:, 1].min()), float(b[:, 2].max()), float(b[:, 3].max())

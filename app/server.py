@@ -1,0 +1,985 @@
+"""The browser annotation app: a viser server around :mod:`calib_core`.
+
+The page shows the four Bearing Angle images beside the camera image (raw, or
+unwrapped into a panorama for ``ocam`` / ``fisheye`` cameras).  The user
+clicks a BA image and the camera image, in either order, to make a pair; from
+4 pairs on the extrinsics are solved live in a worker thread and the page
+shows the errors, a per-pair residual table, the reprojected points and BA
+edges, and a coloured point cloud in a 3-D view.
+
+Every number shown comes from :mod:`calib_core`; this module only routes
+clicks, draws, and moves data between the state, the solver and the page.
+
+Use :func:`serve` (what ``ba-calib`` runs), or :class:`CalibrationApp` to
+start and stop the server from Python (tests).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+import threading
+import time
+import traceback
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+import viser
+import viser.transforms as vtf
+
+from calib_core.bearing_angle import BA_DIRECTIONS, ba_to_display, bearing_angle_images
+from calib_core.cameras import load_camera
+from calib_core.errors import CalibError
+from calib_core.io.extrinsics import save_extrinsics_yaml
+from calib_core.io.images import load_image_rgb
+from calib_core.overlays import ba_edge_points, colorize_points, export_colored_ply
+from calib_core.pairs import Pair, resolve_pairs, save_pairs_yaml
+from calib_core.panorama import Panorama, refine_click_to_corner
+from calib_core.solve import solve_extrinsics
+from calib_core.transforms import invert_T, rpy_deg_from_R, transform_points
+
+from .layout import CAMERA_WIDTH, ImageSlot, annotation_layout, bounds_of
+from .live_solver import LiveSolver
+from .state import AnnotationState, Pick
+
+BA_TITLES = {
+    "horizontal": "BA horizontal",
+    "vertical": "BA vertical",
+    "diag_pos45": "BA +45 deg",
+    "diag_neg45": "BA -45 deg",
+}
+MIN_PAIRS = 4
+#: Display points of the 3-D cloud (software WebGL slows down beyond ~100k).
+MAX_CLOUD_POINTS = 100_000
+MAX_EDGE_POINTS = 3000
+#: The 3-D pane's content sits far behind the annotation camera, so both
+#: share one scene without seeing each other.
+CLOUD_ORIGIN = np.array([0.0, 0.0, -5000.0])
+#: Width (CSS px) kept free on the right for the floating control panel.
+PANEL_PX = 400
+MARKER_SIZE = 0.075  # world units (the camera image is 8 units wide)
+PICK_RADIUS = 0.14  # world units: shift+click / drag this close to a marker selects it
+SNAP_RADIUS_PX = 4.0
+UP_AXES = {"+z": (0.0, 0.0, 1.0), "+y": (0.0, 1.0, 0.0), "-y": (0.0, -1.0, 0.0), "camera up (-y of camera)": None}
+
+
+def md_escape(text: str) -> str:
+    """Text safe to show literally inside viser markdown (no HTML, no markup)."""
+    out = []
+    for ch in str(text).replace("\r", " ").replace("\n", " "):
+        if ch == "&":
+            out.append("&amp;")
+        elif ch == "<":
+            out.append("&lt;")
+        elif ch == ">":
+            out.append("&gt;")
+        elif ch in "\\`*_{}[]()#+-.!|~":
+            out.append("\\" + ch)
+        else:
+            out.append(ch)
+    return "".join(out)
+
+
+def _fmt(x: float, digits: int = 3) -> str:
+    return "n/a" if x is None or not np.isfinite(x) else f"{x:.{digits}f}"
+
+
+@dataclass
+class SolveBundle:
+    """One finished solve and what the overlays need from it (computed off the UI thread)."""
+
+    pick_ids: list[int]
+    pairs: list[Pair]
+    result: Any  # calib_core.solve.CalibrationResult
+    pixels: np.ndarray  # (N, 2) clicked, original image
+    points_camera: np.ndarray  # (N, 3) laser points moved by the solved pose
+    edges_camera: np.ndarray  # (M, 3) BA-edge points moved by the solved pose
+    cloud_colors: np.ndarray  # (K, 3) uint8 display-cloud colours
+    seconds: float
+
+
+def _load_scan(path: Path):
+    from calib_core.io.scan_readers import load_scan
+
+    return load_scan(path)
+
+
+class CalibrationApp:
+    """The annotation app on one scene; the viser server runs from construction.
+
+    Parameters
+    ----------
+    scan_path, image_path, camera_path : path-like
+        The laser scan (any format :func:`calib_core.io.scan_readers.load_scan`
+        reads), the camera image and the camera model file.
+    session_path : path-like, optional
+        Session file (pairs and view settings), saved after every change and
+        restored on start.  Default: ``<scan stem>.ba-calib-session.yaml`` in
+        the current directory.
+    output_path : path-like, optional
+        Where "Download extrinsics YAML" also writes the file.
+    host, port : str, int
+        Bind address (``127.0.0.1`` by default: local only).  If the port is
+        busy viser takes the next free one; see :attr:`port`.
+    title : str, optional
+        Page title.
+    max_cloud_points : int
+        Points shown in the 3-D pane (the PLY export has all of them).
+
+    Raises
+    ------
+    CalibError
+        Unreadable or inconsistent input files.
+    """
+
+    def __init__(
+        self,
+        scan_path: str | os.PathLike,
+        image_path: str | os.PathLike,
+        camera_path: str | os.PathLike,
+        *,
+        session_path: str | os.PathLike | None = None,
+        output_path: str | os.PathLike | None = None,
+        host: str = "127.0.0.1",
+        port: int = 8080,
+        title: str | None = None,
+        max_cloud_points: int = MAX_CLOUD_POINTS,
+    ) -> None:
+        self.scan_path, self.image_path, self.camera_path = Path(scan_path), Path(image_path), Path(camera_path)
+        self.output_path = None if output_path is None else Path(output_path)
+        if session_path is None:
+            session_path = Path.cwd() / f"{self.scan_path.stem}.ba-calib-session.yaml"
+        self.session_path = Path(session_path)
+        self.title = title or f"ba-calib: {self.scan_path.name} + {self.image_path.name}"
+
+        # -- data (all maths from calib_core) ------------------------------------
+        self.depth = _load_scan(self.scan_path)
+        self.camera = load_camera(self.camera_path)
+        self.image = load_image_rgb(self.image_path)
+        h, w = self.image.shape[:2]
+        if (w, h) != (self.camera.width, self.camera.height):
+            raise CalibError(
+                f"{self.image_path}: image is {w}x{h} but the camera model {self.camera_path} is "
+                f"{self.camera.width}x{self.camera.height}"
+            )
+        self.ba_rad = bearing_angle_images(self.depth)
+        self.ba_keys = tuple(k for k in BA_DIRECTIONS if k in self.ba_rad)
+        self.ba_gray = {k: ba_to_display(self.ba_rad[k]) for k in self.ba_keys}
+        self.image_gray = self.image.mean(axis=2).astype(np.uint8)
+        self.panorama: Panorama | None = None
+        if self.camera.model in ("ocam", "fisheye"):
+            self.panorama = Panorama.for_camera(self.camera, image_mask=self.image.max(axis=2) > 0, oversample=2.0)
+            self.pano_image = self.panorama.render(self.image)
+            self.pano_gray = self.pano_image.mean(axis=2).astype(np.uint8)
+        edge_rc = [ba_edge_points(self.ba_rad[k], self.depth)[1] for k in ("horizontal", "vertical") if k in self.ba_rad]
+        rc = np.unique(np.concatenate(edge_rc), axis=0) if edge_rc else np.empty((0, 2), np.int64)
+        if len(rc) > MAX_EDGE_POINTS:
+            rc = rc[np.linspace(0, len(rc) - 1, MAX_EDGE_POINTS).astype(np.int64)]
+        self.edge_points_lidar = self.depth.cell_points(rc) if len(rc) else np.empty((0, 3))
+        self.all_points_lidar, _ = self.depth.valid_points()
+        stride = max(1, int(math.ceil(len(self.all_points_lidar) / max(1, int(max_cloud_points)))))
+        self.cloud_points_lidar = self.all_points_lidar[::stride]
+
+        # -- state ------------------------------------------------------------------
+        self.state = AnnotationState(self.depth.valid, (self.camera.width, self.camera.height), self.session_path)
+        view = self.state.view_settings()
+        self._use_panorama = bool(view.get("panorama", True)) and self.panorama is not None
+        self._show_reprojection = bool(view.get("show_reprojection", True))
+        self._show_edges = bool(view.get("show_edges", True))
+        self._snap = bool(view.get("snap", False))
+        self._up_axis = str(view.get("up_axis", "+y" if self.depth.meta.get("model") == "rotating_2d" else "+z"))
+        if self._up_axis not in UP_AXES:
+            self._up_axis = "+z"
+
+        camera_sizes = {"raw": (self.camera.width, self.camera.height)}
+        if self.panorama is not None:
+            camera_sizes["panorama"] = (self.panorama.width, self.panorama.height)
+        self.slots = annotation_layout(camera_sizes, (self.depth.shape[1], self.depth.shape[0]), self.ba_keys)
+
+        self._ui_lock = threading.RLock()
+        self._bundle: SolveBundle | None = None
+        self._solve_error: str | None = None
+        self._submitted: tuple | None = None
+        self._job = 0
+        self._result_floor = 0
+        self._solving = False
+        self._client_mode: dict[int, str] = {}
+        self._view_target: dict[int, tuple[np.ndarray, np.ndarray, float]] = {}
+        self._label_names: set[str] = set()
+        self._overlay_names: set[str] = set()
+        self._stopped = False
+
+        # -- server -------------------------------------------------------------------
+        self.server = viser.ViserServer(host=host, port=port, label=self.title, verbose=False)
+        self.host = host
+        self.port = self.server.get_port()
+        shown_host = "127.0.0.1" if host in ("0.0.0.0", "") else host
+        self.url = f"http://{shown_host}:{self.port}"
+        self._build_scene()
+        self._build_gui()
+        self.server.on_client_connect(self._on_connect)
+        self.server.on_client_disconnect(self._on_disconnect)
+
+        self._solver = LiveSolver(self._solve_job, self._on_solved)
+        self.state.subscribe(self._on_state_change)
+        self._on_state_change(self.state)
+
+    # ======================================================================= scene
+    def _build_scene(self) -> None:
+        scene = self.server.scene
+        backdrop = scene.add_image(
+            "/annot/backdrop", np.full((2, 2, 3), 238, np.uint8), 600.0, 600.0, format="png", position=(0.0, 0.0, 0.5)
+        )
+        # A no-op drag on the backdrop keeps left-drags from orbiting the flat view.
+        backdrop.on_drag(lambda event: None)
+        self._image_handles: dict[str, Any] = {}
+        raw = scene.add_image(
+            "/annot/camera_raw", self.image, self.slots["raw"].render_width, self.slots["raw"].render_height,
+            format="jpeg", jpeg_quality=92, position=self.slots["raw"].center, visible=not self._use_panorama,
+        )
+        self._image_handles["raw"] = raw
+        if self.panorama is not None:
+            s = self.slots["panorama"]
+            self._image_handles["panorama"] = scene.add_image(
+                "/annot/camera_pano", self.pano_image, s.render_width, s.render_height,
+                format="jpeg", jpeg_quality=92, position=s.center, visible=self._use_panorama,
+            )
+        for key in self.ba_keys:
+            s = self.slots[key]
+            self._image_handles[key] = scene.add_image(
+                f"/annot/ba_{key}", self.ba_gray[key], s.render_width, s.render_height, format="png", position=s.center
+            )
+            x0, y0, _, _ = s.bounds()
+            scene.add_label(f"/annot/titles/{key}", BA_TITLES.get(key, key), position=(x0, y0 - 0.03, -0.01),
+                            anchor="bottom-left", font_screen_scale=0.9)
+        for key, handle in self._image_handles.items():
+            handle.on_click(self._make_click_handler(key))
+            handle.on_click(modifier="shift")(self._make_select_handler(key))
+            handle.on_drag(self._make_drag_handler(key))
+        self._camera_title = scene.add_label("/annot/titles/camera", "", position=(0, 0, -0.01), anchor="bottom-left",
+                                             font_screen_scale=0.9)
+        self._update_camera_title()
+
+        # 3-D pane: cloud and frames, far from the annotation plane.
+        self._cloud_root = scene.add_frame("/cloud", show_axes=False, position=CLOUD_ORIGIN, visible=False)
+        grey = np.full((len(self.cloud_points_lidar), 3), 150, np.uint8)
+        self._cloud = scene.add_point_cloud(
+            "/cloud/points", self.cloud_points_lidar.astype(np.float32), grey, point_size=0.015,
+            precision="float32", point_shape="rounded", point_shading="flat",
+        )
+        scene.add_frame("/cloud/lidar", axes_length=0.25, axes_radius=0.01)
+        scene.add_label("/cloud/lidar/label", "lidar", position=(0.0, 0.0, 0.0), anchor="top-right")
+        self._camera_frame = scene.add_frame("/cloud/camera", axes_length=0.2, axes_radius=0.008, visible=False)
+        scene.add_label("/cloud/camera/label", "camera", position=(0.0, 0.0, 0.0))
+
+    def _camera_slot(self) -> ImageSlot:
+        return self.slots["panorama" if self._use_panorama else "raw"]
+
+    def _update_camera_title(self) -> None:
+        s = self._camera_slot()
+        x0, y0, _, _ = s.bounds()
+        self._camera_title.position = (x0, y0 - 0.03, -0.01)
+        self._camera_title.text = (
+            f"Camera, unwrapped panorama ({self.camera.model}); errors are measured in the original image"
+            if self._use_panorama
+            else f"Camera image ({self.camera.model}, {self.camera.width}x{self.camera.height})"
+        )
+
+    # ========================================================================= GUI
+    def _build_gui(self) -> None:
+        gui = self.server.gui
+        gui.configure_theme(control_width="large", show_share_button=False, dark_mode=False)
+        gui.add_markdown(
+            f"**{md_escape(self.title)}**  \n"
+            "Click a point in any **BA image** and the same point in the **camera image** (either order) "
+            "to make a pair. **Shift+click** a marker to select its pair; then clicks move it. "
+            "**Drag** a marker to move it. Wheel zooms, right-drag pans."
+        )
+        with gui.add_folder("Pairs"):
+            self._md_pairs = gui.add_markdown("")
+            self._dd_selected = gui.add_dropdown("Selected pair", ("none",), initial_value="none")
+            self._dd_selected.on_update(self._guard(self._on_select_dropdown))
+            self._bg_edit = gui.add_button_group("Edit", ("Undo", "Redo", "Deselect", "Delete"))
+            self._bg_edit.on_click(self._guard(self._on_edit))
+            self._btn_clear = gui.add_button("Clear all pairs", color="red", icon=viser.Icon.TRASH)
+            self._btn_clear.on_click(self._guard(lambda event: self.state.clear()))
+            self._cb_snap = gui.add_checkbox("Snap clicks to corners", initial_value=self._snap,
+                                             hint="Refine each click to the strongest corner within 4 pixels")
+            self._cb_snap.on_update(self._guard(self._on_view_checkbox))
+            self._upload = gui.add_upload_button("Import pairs YAML", icon=viser.Icon.UPLOAD, mime_type="*/*")
+            self._upload.on_upload(self._guard(self._on_upload))
+            self._btn_pairs = gui.add_button("Download pairs YAML", icon=viser.Icon.DOWNLOAD)
+            self._btn_pairs.on_click(self._guard(self._on_download_pairs))
+        with gui.add_folder("Calibration"):
+            self._md_result = gui.add_markdown("")
+            self._md_table = gui.add_markdown("")
+        with gui.add_folder("View"):
+            self._bg_view = gui.add_button_group("Show", ("2D annotation", "3D cloud"))
+            self._bg_view.on_click(self._guard(self._on_view_mode))
+            self._bg_zoom = gui.add_button_group("Frame", ("All", "Camera", "BA images"))
+            self._bg_zoom.on_click(self._guard(self._on_zoom))
+            self._cb_pano = gui.add_checkbox(
+                "Unwrapped panorama", initial_value=self._use_panorama, disabled=self.panorama is None,
+                hint="Show the camera image unwrapped (azimuth x elevation); clicks still give original-image pixels",
+            )
+            self._cb_pano.on_update(self._guard(self._on_view_checkbox))
+            self._cb_reproj = gui.add_checkbox("Reprojected pairs and residuals", initial_value=self._show_reprojection)
+            self._cb_reproj.on_update(self._guard(self._on_view_checkbox))
+            self._cb_edges = gui.add_checkbox("Reprojected BA-edge points", initial_value=self._show_edges)
+            self._cb_edges.on_update(self._guard(self._on_view_checkbox))
+            self._dd_up = gui.add_dropdown("3D up axis (lidar)", tuple(UP_AXES), initial_value=self._up_axis)
+            self._dd_up.on_update(self._guard(self._on_up_axis))
+        with gui.add_folder("Export"):
+            self._btn_yaml = gui.add_button("Download extrinsics YAML", icon=viser.Icon.DOWNLOAD, color="green")
+            self._btn_yaml.on_click(self._guard(self._on_download_yaml))
+            self._btn_ply = gui.add_button("Download coloured PLY", icon=viser.Icon.DOWNLOAD)
+            self._btn_ply.on_click(self._guard(self._on_download_ply))
+            where = f"Also written to {md_escape(str(self.output_path))}  \n" if self.output_path else ""
+            self._md_export = gui.add_markdown(
+                f"{where}Session (saved after every change): {md_escape(str(self.session_path))}"
+            )
+
+    # ================================================================== callbacks
+    def _guard(self, fn: Callable) -> Callable:
+        """Wrap a callback: user errors become notifications, nothing escapes."""
+
+        def wrapped(event: Any) -> None:
+            try:
+                fn(event)
+            except CalibError as exc:
+                self._notify(getattr(event, "client", None), "Not accepted", str(exc))
+            except Exception as exc:  # never let a click kill anything
+                traceback.print_exc()
+                self._notify(getattr(event, "client", None), "Internal error", f"{type(exc).__name__}: {exc}")
+
+        return wrapped
+
+    def _notify(self, client: Any, title: str, body: str, color: str = "red") -> None:
+        body = " ".join(str(body).split())
+        targets = [client] if client is not None else list(self.server.get_clients().values())
+        for c in targets:
+            try:
+                c.add_notification(title, body, color=color, auto_close_seconds=8.0, with_close_button=True)
+            except Exception:
+                pass
+
+    def _make_click_handler(self, key: str) -> Callable:
+        def on_click(event: Any) -> None:
+            uv = self.slots[key].pixel_from_ray(event.ray_origin, event.ray_direction)
+            if uv is None or not self.slots[key].contains(uv):
+                raise CalibError("click landed outside the image")
+            self._click(key, uv)
+
+        return self._guard(on_click)
+
+    def _click(self, key: str, uv: tuple[float, float], pick_id: int | None = None) -> int:
+        """A click at display pixel ``uv`` of slot ``key``: add a pair end, or move ``pick_id``'s end."""
+        if key in self.ba_keys:
+            if self._snap:
+                uv = tuple(refine_click_to_corner(self.ba_gray[key], uv, 3.0))
+            row, col = int(round(uv[1])), int(round(uv[0]))
+            if pick_id is not None:
+                return self.state.move_laser(pick_id, row, col)
+            return self.state.click_laser(row, col)
+        if key != self._camera_slot().key:
+            raise CalibError("that camera view is hidden; click the visible one")
+        if self._snap:
+            gray = self.pano_gray if key == "panorama" else self.image_gray
+            uv = tuple(refine_click_to_corner(gray, uv, SNAP_RADIUS_PX))
+        pixel = self._original_from_display(uv)
+        if pick_id is not None:
+            return self.state.move_pixel(pick_id, *pixel)
+        return self.state.click_pixel(*pixel)
+
+    def _original_from_display(self, uv: tuple[float, float]) -> tuple[float, float]:
+        """Original camera pixel of a click on the visible camera view."""
+        if not self._use_panorama:
+            return float(uv[0]), float(uv[1])
+        raw, valid = self.panorama.to_camera_pixels(np.array([uv], dtype=np.float64))
+        if not valid[0]:
+            raise CalibError("the camera does not see that part of the panorama; click inside the picture")
+        return float(raw[0, 0]), float(raw[0, 1])
+
+    def _pick_ends(self, key: str) -> tuple[list[int], np.ndarray]:
+        """Ids and display pixels of the pick ends drawn on slot ``key``."""
+        picks = self.state.picks
+        if key in self.ba_keys:
+            sel = [p for p in picks if p.laser_rc is not None]
+            uv = np.array([[p.laser_rc[1], p.laser_rc[0]] for p in sel], dtype=np.float64).reshape(-1, 2)
+            return [p.id for p in sel], uv
+        sel = [p for p in picks if p.pixel is not None]
+        uv, ok = self._display_from_pixels(np.array([p.pixel for p in sel], dtype=np.float64).reshape(-1, 2))
+        return [p.id for p, good in zip(sel, ok) if good], uv[ok]
+
+    def _nearest_pick(self, key: str, uv: tuple[float, float]) -> int | None:
+        ids, ends = self._pick_ends(key)
+        if not ids:
+            return None
+        slot = self.slots[key]
+        d = np.hypot(*(ends - np.asarray(uv)).T) * slot.units_per_px
+        k = int(np.argmin(d))
+        return ids[k] if d[k] <= PICK_RADIUS else None
+
+    def _make_select_handler(self, key: str) -> Callable:
+        def on_shift_click(event: Any) -> None:
+            uv = self.slots[key].pixel_from_ray(event.ray_origin, event.ray_direction)
+            pick_id = None if uv is None else self._nearest_pick(key, uv)
+            self.state.select(pick_id)
+
+        return self._guard(on_shift_click)
+
+    def _make_drag_handler(self, key: str) -> Callable:
+        def on_drag(event: Any) -> None:
+            if event.phase != "end":
+                return
+            slot = self.slots[key]
+            start = slot.pixel_from_world(np.asarray(event.start_position)[None])[0]
+            end = slot.pixel_from_world(np.asarray(event.end_position)[None])[0]
+            pick_id = self._nearest_pick(key, tuple(start))
+            moved = np.hypot(*(np.asarray(event.end_screen_pos) - np.asarray(event.start_screen_pos)))
+            if pick_id is None:
+                if moved < 0.01 and slot.contains(start):  # a shaky click, not a drag
+                    self._click(key, tuple(start))
+                return
+            if not slot.contains(end):
+                raise CalibError("dropped outside the image; the pair was not moved")
+            self._click(key, (float(end[0]), float(end[1])), pick_id=pick_id)
+
+        return self._guard(on_drag)
+
+    def _on_select_dropdown(self, event: Any) -> None:
+        if event.client is None:  # our own update of the widget
+            return
+        value = self._dd_selected.value
+        self.state.select(None if value == "none" else int(value.split()[0].lstrip("#")))
+
+    def _on_edit(self, event: Any) -> None:
+        action = self._bg_edit.value
+        if action == "Undo":
+            if not self.state.undo():
+                raise CalibError("nothing to undo")
+        elif action == "Redo":
+            if not self.state.redo():
+                raise CalibError("nothing to redo")
+        elif action == "Deselect":
+            self.state.select(None)
+        elif action == "Delete":
+            sel = self.state.selected
+            if sel is None:
+                raise CalibError("select a pair first (shift+click its marker or use the dropdown)")
+            self.state.delete(sel)
+
+    def _on_view_checkbox(self, event: Any) -> None:
+        with self._ui_lock:
+            self._use_panorama = bool(self._cb_pano.value) and self.panorama is not None
+            self._show_reprojection = bool(self._cb_reproj.value)
+            self._show_edges = bool(self._cb_edges.value)
+            self._snap = bool(self._cb_snap.value)
+            if "panorama" in self._image_handles:
+                self._image_handles["panorama"].visible = self._use_panorama
+            self._image_handles["raw"].visible = not self._use_panorama
+            self._update_camera_title()
+        self.state.set_view(panorama=self._use_panorama, show_reprojection=self._show_reprojection,
+                            show_edges=self._show_edges, snap=self._snap)
+        self._refresh_scene()
+
+    def _on_up_axis(self, event: Any) -> None:
+        self._up_axis = str(self._dd_up.value)
+        self.state.set_view(up_axis=self._up_axis)
+        for cid, mode in list(self._client_mode.items()):
+            if mode == "3d":
+                client = self.server.get_clients().get(cid)
+                if client is not None:
+                    self._set_view(client, "3d")
+
+    def _on_view_mode(self, event: Any) -> None:
+        if event.client is not None:
+            self._set_view(event.client, "3d" if self._bg_view.value == "3D cloud" else "all")
+
+    def _on_zoom(self, event: Any) -> None:
+        if event.client is not None:
+            self._set_view(event.client, {"All": "all", "Camera": "camera", "BA images": "ba"}[self._bg_zoom.value])
+
+    def _on_upload(self, event: Any) -> None:
+        f = self._upload.value
+        if not f.content:
+            raise CalibError(f"{f.name or 'upload'}: the file is empty")
+        with tempfile.TemporaryDirectory() as tmp:
+            path = Path(tmp) / (Path(f.name).name or "pairs.yaml")
+            path.write_bytes(f.content)
+            try:
+                ids = self.state.import_pairs_file(path)
+            except CalibError as exc:
+                raise CalibError(str(exc).replace(str(path), Path(f.name).name)) from None
+        self._notify(event.client, "Pairs imported", f"{len(ids)} pairs added from {Path(f.name).name} (undo removes them)",
+                     color="green")
+
+    def _on_download_pairs(self, event: Any) -> None:
+        with tempfile.TemporaryDirectory() as tmp:
+            path = Path(tmp) / "pairs.yaml"
+            n = self.state.export_pairs_file(path)
+            data = path.read_bytes()
+        if event.client is not None:
+            event.client.send_file_download("pairs.yaml", data, save_immediately=True)
+        self._notify(event.client, "Pairs", f"{n} complete pairs downloaded", color="green")
+
+    def _on_download_yaml(self, event: Any) -> None:
+        data, path = self.export_extrinsics()
+        if event.client is not None:
+            event.client.send_file_download("extrinsics.yaml", data, save_immediately=True)
+        where = f" and written to {path}" if path is not None else ""
+        self._notify(event.client, "Extrinsics exported", f"extrinsics.yaml downloaded{where}", color="green")
+
+    def _on_download_ply(self, event: Any) -> None:
+        bundle = self._bundle
+        if bundle is None:
+            raise CalibError(f"no calibration yet: pick at least {MIN_PAIRS} pairs")
+        T = bundle.result.T_camera_lidar
+        colors, has_color = colorize_points(self.all_points_lidar, self.image, self.camera, T, occlusion=True)
+        with tempfile.TemporaryDirectory() as tmp:
+            path = Path(tmp) / "colored_cloud.ply"
+            export_colored_ply(path, self.all_points_lidar, colors, has_color)
+            data = path.read_bytes()
+        if event.client is not None:
+            event.client.send_file_download("colored_cloud.ply", data, save_immediately=True)
+
+    def export_extrinsics(self) -> tuple[bytes, Path | None]:
+        """The extrinsics YAML of the last good solve, also written to ``output_path``.
+
+        Returns ``(file bytes, path written or None)``; CalibError before the first solve.
+        """
+        bundle = self._bundle
+        if bundle is None:
+            raise CalibError(f"no calibration yet: pick at least {MIN_PAIRS} pairs")
+        if self.output_path is not None:
+            save_extrinsics_yaml(self.output_path, bundle.result.T_camera_lidar, bundle.result, self.camera, bundle.pairs)
+            return self.output_path.read_bytes(), self.output_path
+        with tempfile.TemporaryDirectory() as tmp:
+            path = Path(tmp) / "extrinsics.yaml"
+            save_extrinsics_yaml(path, bundle.result.T_camera_lidar, bundle.result, self.camera, bundle.pairs)
+            return path.read_bytes(), None
+
+    # ================================================================ live solve
+    def _on_state_change(self, state: AnnotationState) -> None:
+        picks = [p for p in state.picks if p.complete]
+        key = tuple((p.id, p.to_pair()) for p in picks)
+        with self._ui_lock:
+            if key != self._submitted:
+                self._submitted = key
+                self._job += 1
+                if len(picks) >= MIN_PAIRS:
+                    self._solving = True
+                    self._solver.submit(self._job, ([p.id for p in picks], [p.to_pair() for p in picks]))
+                else:
+                    # Too few pairs: results of older jobs no longer describe these pairs.
+                    self._result_floor = self._job
+                    self._bundle = None
+                    self._solve_error = None
+                    self._solving = False
+                    self._refresh_cloud()
+        self._refresh_scene()
+        self._refresh_panel()
+
+    def _solve_job(self, payload: tuple[list[int], list[Pair]]) -> SolveBundle:
+        ids, pairs = payload
+        t0 = time.perf_counter()
+        points, bearings, pixels = resolve_pairs(pairs, self.depth, self.camera)
+        result = solve_extrinsics(points, bearings, camera=self.camera, pixels=pixels)
+        T = result.T_camera_lidar
+        colors, has_color = colorize_points(self.cloud_points_lidar, self.image, self.camera, T, occlusion=True)
+        # Pure black is the unlit border of a fisheye image, not scene colour: show it grey too.
+        has_color &= colors.any(axis=1)
+        colors = np.where(has_color[:, None], colors, np.uint8(110)).astype(np.uint8)
+        return SolveBundle(
+            pick_ids=ids, pairs=pairs, result=result, pixels=pixels,
+            points_camera=transform_points(T, points),
+            edges_camera=transform_points(T, self.edge_points_lidar) if len(self.edge_points_lidar) else np.empty((0, 3)),
+            cloud_colors=colors, seconds=time.perf_counter() - t0,
+        )
+
+    def _on_solved(self, job: int, bundle: SolveBundle | None, error: BaseException | None) -> None:
+        with self._ui_lock:
+            if job < self._result_floor or self._stopped:
+                return
+            self._solving = job < self._job
+            if error is not None:
+                msg = str(error) if isinstance(error, CalibError) else f"{type(error).__name__}: {error}"
+                self._solve_error = " ".join(msg.split())
+                if not isinstance(error, CalibError):
+                    traceback.print_exception(error)
+            else:
+                self._bundle = bundle
+                self._solve_error = None
+                self._refresh_cloud()
+        self._refresh_scene()
+        self._refresh_panel()
+
+    # ================================================================== drawing
+    def _display_from_pixels(self, pixels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Display coordinates (visible camera view) of original-image pixels."""
+        pixels = np.asarray(pixels, dtype=np.float64).reshape(-1, 2)
+        if len(pixels) == 0:
+            return pixels, np.zeros(0, bool)
+        if not self._use_panorama:
+            return pixels, np.isfinite(pixels).all(axis=1)
+        return self.panorama.from_camera_pixels(pixels)
+
+    def _display_from_camera_points(self, points_camera: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Display coordinates (visible camera view) of points in the camera frame."""
+        pts = np.asarray(points_camera, dtype=np.float64).reshape(-1, 3)
+        if len(pts) == 0:
+            return np.empty((0, 2)), np.zeros(0, bool)
+        if self._use_panorama:
+            uv, ok = self.panorama.project(pts)
+            # Only directions the camera model can see (the panorama is wider).
+            ok &= self.camera.project(pts)[1]
+            return uv, ok
+        return self.camera.project(pts)
+
+    def _set_points(self, name: str, points: np.ndarray, colors, size: float, shape: str = "circle") -> None:
+        if len(points) == 0:
+            if name in self._overlay_names:
+                self.server.scene.remove_by_name(name)
+                self._overlay_names.discard(name)
+            return
+        self.server.scene.add_point_cloud(
+            name, np.asarray(points, np.float32), np.asarray(colors, np.uint8), point_size=size,
+            point_shape=shape, precision="float32", point_shading="flat",
+        )
+        self._overlay_names.add(name)
+
+    def _set_lines(self, name: str, segments: np.ndarray, colors, thickness: float = 2.0) -> None:
+        if len(segments) == 0:
+            if name in self._overlay_names:
+                self.server.scene.remove_by_name(name)
+                self._overlay_names.discard(name)
+            return
+        self.server.scene.add_line_segments(name, np.asarray(segments, np.float32), colors, thickness=thickness,
+                                            thickness_units="screen")
+        self._overlay_names.add(name)
+
+    def _refresh_scene(self) -> None:
+        """Redraw markers, labels, selection and the reprojection overlays."""
+        with self._ui_lock, self.server.atomic():
+            picks = {p.id: p for p in self.state.picks}
+            selected = self.state.selected
+            labels: dict[str, tuple[str, np.ndarray]] = {}
+            cam_slot = self._camera_slot()
+            for key in (*self.ba_keys, cam_slot.key):
+                slot = self.slots[key]
+                ids, uv = self._pick_ends(key)
+                world = slot.world_from_pixel(uv, z_offset=-0.01)
+                colors = np.array([picks[i].color for i in ids], np.uint8).reshape(-1, 3)
+                self._set_points(f"/annot/markers/{key}", world, colors, MARKER_SIZE)
+                # A dark dot marks the exact clicked spot inside the coloured disc.
+                self._set_points(f"/annot/centres/{key}", slot.world_from_pixel(uv, z_offset=-0.011), (20, 20, 20),
+                                 MARKER_SIZE * 0.22)
+                sel = [k for k, i in enumerate(ids) if i == selected]
+                self._set_points(f"/annot/selected/{key}", slot.world_from_pixel(uv[sel], z_offset=-0.005),
+                                 (255, 255, 255), MARKER_SIZE * 1.9)
+                for i, w in zip(ids, world):
+                    labels[f"/annot/labels/{key}/{i}"] = (str(i), w + np.array([0.03, -0.03, -0.005]))
+            for other in ("raw", "panorama"):
+                if other in self.slots and other != cam_slot.key:
+                    self._set_points(f"/annot/markers/{other}", np.empty((0, 3)), (0, 0, 0), MARKER_SIZE)
+                    self._set_points(f"/annot/selected/{other}", np.empty((0, 3)), (0, 0, 0), MARKER_SIZE)
+                    self._set_points(f"/annot/centres/{other}", np.empty((0, 3)), (0, 0, 0), MARKER_SIZE)
+            for name in self._label_names - set(labels):
+                self.server.scene.remove_by_name(name)
+            for name, (text, pos) in labels.items():
+                self.server.scene.add_label(name, text, position=tuple(pos), anchor="bottom-left", font_screen_scale=0.8)
+            self._label_names = set(labels)
+            self._draw_overlays(picks)
+
+    def _draw_overlays(self, picks: dict[int, Pick]) -> None:
+        slot = self._camera_slot()
+        bundle = self._bundle
+        reproj_pts, reproj_cols, segs, seg_cols = [], [], [], []
+        edge_world = np.empty((0, 3))
+        pred_segs, pred_cols = [], []
+        if bundle is not None:
+            if self._show_reprojection and len(bundle.pick_ids):
+                clicked, ok_c = self._display_from_pixels(bundle.pixels)
+                proj, ok_p = self._display_from_camera_points(bundle.points_camera)
+                for k, pid in enumerate(bundle.pick_ids):
+                    color = picks[pid].color if pid in picks else (255, 255, 0)
+                    if ok_p[k]:
+                        reproj_pts.append(slot.world_from_pixel(proj[k], z_offset=-0.012)[0])
+                        reproj_cols.append(color)
+                        if ok_c[k]:
+                            segs.append(slot.world_from_pixel(np.stack([clicked[k], proj[k]]), z_offset=-0.008))
+                            seg_cols.append((255, 230, 0))
+            if self._show_edges and len(bundle.edges_camera):
+                uv, ok = self._display_from_camera_points(bundle.edges_camera)
+                edge_world = slot.world_from_pixel(uv[ok], z_offset=-0.004)
+            # Where the current calibration predicts pending laser picks in the camera image.
+            T = bundle.result.T_camera_lidar
+            for p in picks.values():
+                if p.laser_rc is None or p.pixel is not None:
+                    continue
+                pt = transform_points(T, self.depth.cell_points(np.array([p.laser_rc])))
+                uv, ok = self._display_from_camera_points(pt)
+                if ok[0]:
+                    c = slot.world_from_pixel(uv, z_offset=-0.015)[0]
+                    r = MARKER_SIZE * 1.2
+                    for d in (np.array([1.0, 0, 0]), np.array([0, 1.0, 0])):
+                        pred_segs.append(np.stack([c - r * d, c - 0.35 * r * d]))
+                        pred_segs.append(np.stack([c + 0.35 * r * d, c + r * d]))
+                        pred_cols += [p.color, p.color]
+        self._set_points("/annot/overlay/reprojected", np.array(reproj_pts).reshape(-1, 3),
+                         np.array(reproj_cols, np.uint8).reshape(-1, 3), MARKER_SIZE * 0.55, shape="diamond")
+        self._set_lines("/annot/overlay/residuals", np.array(segs).reshape(-1, 2, 3),
+                        np.repeat(np.array(seg_cols, np.uint8).reshape(-1, 1, 3), 2, axis=1), thickness=2.0)
+        self._set_points("/annot/overlay/edges", edge_world, (0, 190, 255), slot.units_per_px * 1.6, shape="square")
+        self._set_lines("/annot/overlay/predicted", np.array(pred_segs).reshape(-1, 2, 3),
+                        np.repeat(np.array(pred_cols, np.uint8).reshape(-1, 1, 3), 2, axis=1), thickness=3.0)
+
+    def _refresh_cloud(self) -> None:
+        bundle = self._bundle
+        if bundle is None:
+            self._camera_frame.visible = False
+            self._cloud.colors = np.full((len(self.cloud_points_lidar), 3), 150, np.uint8)
+            return
+        T_lidar_camera = invert_T(bundle.result.T_camera_lidar)
+        self._camera_frame.wxyz = vtf.SO3.from_matrix(T_lidar_camera[:3, :3]).wxyz
+        self._camera_frame.position = T_lidar_camera[:3, 3]
+        self._camera_frame.visible = True
+        self._cloud.colors = bundle.cloud_colors
+
+    def _refresh_panel(self) -> None:
+        with self._ui_lock:
+            picks = self.state.picks
+            complete = [p for p in picks if p.complete]
+            pending = self.state.pending()
+            selected = self.state.selected
+            lines = [f"**Pairs:** {len(complete)} complete"]
+            if pending is not None:
+                need = "camera" if pending.pixel is None else "BA"
+                lines.append(f"Pair {pending.id} waits for a {need} click.")
+            if selected is not None:
+                lines.append(f"**Pair {selected} selected:** clicks now move its ends (Deselect to add pairs).")
+            if len(complete) < MIN_PAIRS:
+                lines.append(f"Pick {MIN_PAIRS - len(complete)} more to calibrate.")
+            lines.append(f"Undo: {'yes' if self.state.can_undo else 'no'}, redo: {'yes' if self.state.can_redo else 'no'}")
+            self._md_pairs.content = "  \n".join(lines)
+            options = ("none",) + tuple(f"#{p.id}" for p in picks)
+            if tuple(self._dd_selected.options) != options:
+                self._dd_selected.options = options
+            want = "none" if selected is None else f"#{selected}"
+            if self._dd_selected.value != want:
+                self._dd_selected.value = want
+
+            bundle, error = self._bundle, self._solve_error
+            out = []
+            if self._solving:
+                out.append(f"*Solving {len(complete)} pairs ...*")
+            if error is not None:
+                keep = " Showing the last good result." if bundle is not None else ""
+                out.append(f"**Solve failed:** {md_escape(error)}.{keep}")
+            if bundle is None:
+                if len(complete) < MIN_PAIRS:
+                    out.append(f"No calibration yet (needs {MIN_PAIRS} pairs).")
+                self._md_result.content = "  \n".join(out)
+                self._md_table.content = ""
+                return
+            r = bundle.result
+            T = r.T_camera_lidar
+            t, rpy = T[:3, 3], rpy_deg_from_R(T[:3, :3])
+            st, sr = np.asarray(r.sigma_translation_m), np.asarray(r.sigma_rpy_deg)
+            out += [
+                f"**Solved with {r.n_pairs} pairs** ({md_escape(r.cost_name)} cost, {r.iterations} iterations, "
+                f"{bundle.seconds * 1000:.0f} ms)",
+                f"**Mean error: {_fmt(r.mean_px)} px** (std {_fmt(r.std_px)} px), "
+                f"**{_fmt(r.mean_deg, 4)} deg** (std {_fmt(r.std_deg, 4)} deg)",
+                f"t = ({t[0]:.4f}, {t[1]:.4f}, {t[2]:.4f}) m, sigma T = ({st[0] * 100:.2f}, {st[1] * 100:.2f}, "
+                f"{st[2] * 100:.2f}) cm",
+                f"rpy = ({rpy[0]:.3f}, {rpy[1]:.3f}, {rpy[2]:.3f}) deg, sigma R = ({sr[0]:.3f}, {sr[1]:.3f}, "
+                f"{sr[2]:.3f}) deg",
+            ]
+            for w in r.warnings:
+                out.append(f"Warning: {md_escape(w)}")
+            self._md_result.content = "  \n".join(out)
+            outliers = set(int(i) for i in r.outliers)
+            rows = ["| pair | px | deg | |", "|---:|---:|---:|:---|"]
+            for k, pid in enumerate(bundle.pick_ids):
+                px, deg = float(r.residual_px[k]), float(r.residual_deg[k])
+                if k in outliers:
+                    rows.append(f"| **{pid}** | **{_fmt(px, 2)}** | **{_fmt(deg, 3)}** | **outlier** |")
+                else:
+                    rows.append(f"| {pid} | {_fmt(px, 2)} | {_fmt(deg, 3)} | |")
+            self._md_table.content = "\n".join(rows)
+
+    # ================================================================== cameras
+    def _on_connect(self, client: Any) -> None:
+        try:
+            self._set_view(client, "all")
+        except Exception:
+            traceback.print_exc()
+
+    def _on_disconnect(self, client: Any) -> None:
+        self._client_mode.pop(client.client_id, None)
+        self._view_target.pop(client.client_id, None)
+        self._update_cloud_visibility()
+
+    def _update_cloud_visibility(self) -> None:
+        self._cloud_root.visible = any(m == "3d" for m in self._client_mode.values())
+
+    def _set_view(self, client: Any, mode: str) -> None:
+        """Point one client's camera at the annotation images (``all``, ``camera``, ``ba``) or the 3-D cloud."""
+        cam = client.camera
+        fov = math.radians(30.0)
+        if mode == "3d":
+            self._client_mode[client.client_id] = "3d"
+            self._update_cloud_visibility()
+            up = self._up_vector()
+            bundle = self._bundle
+            if bundle is not None:
+                # Stand a little behind and above the solved camera, look where it looks (paper Fig. 9).
+                T_lidar_camera = invert_T(bundle.result.T_camera_lidar)
+                eye, forward = T_lidar_camera[:3, 3], T_lidar_camera[:3, :3] @ np.array([0.0, 0.0, 1.0])
+            else:
+                eye, forward = np.zeros(3), np.array([1.0, 0.0, 0.0])
+            level = forward - float(forward @ up) * up
+            if np.linalg.norm(level) < 0.1:
+                level = np.cross(up, [0.0, 0.0, 1.0]) if abs(up[2]) < 0.9 else np.cross(up, [1.0, 0.0, 0.0])
+            level /= np.linalg.norm(level)
+            pos = CLOUD_ORIGIN + eye - 1.5 * level + 0.7 * up
+            look = CLOUD_ORIGIN + eye + 3.0 * level
+            self._apply_camera(client, pos, look, up, math.radians(70.0))
+            return
+        self._client_mode[client.client_id] = "2d"
+        self._update_cloud_visibility()
+        if mode == "camera":
+            slots = [self._camera_slot()]
+        elif mode == "ba":
+            slots = [self.slots[k] for k in self.ba_keys]
+        else:
+            slots = [self._camera_slot()] + [self.slots[k] for k in self.ba_keys]
+        x0, y0, x1, y1 = bounds_of(slots)
+        y0 -= 0.3  # room for the titles
+        w_px, h_px = max(cam.image_width, 1), max(cam.image_height, 1)
+        usable_px = w_px - PANEL_PX if w_px > 2 * PANEL_PX else w_px
+        tan = math.tan(fov / 2)
+        margin = 1.06
+        dist = max((y1 - y0) * margin / (2 * tan), (x1 - x0) * margin * h_px / (usable_px * 2 * tan))
+        units_per_px = 2 * dist * tan / h_px
+        cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
+        look = np.array([cx + (w_px - usable_px) / 2 * units_per_px, cy, 0.0])
+        self._apply_camera(client, look + np.array([0.0, 0.0, -dist]), look, np.array([0.0, -1.0, 0.0]), fov)
+
+    def _apply_camera(self, client: Any, position: np.ndarray, look_at: np.ndarray, up: np.ndarray, fov: float) -> None:
+        cam = client.camera
+        with client.atomic():
+            cam.fov = fov
+            cam.up_direction = tuple(up)
+            cam.position = tuple(position)
+            cam.look_at = tuple(look_at)
+            cam.up_direction = tuple(up)
+        self._view_target[client.client_id] = (np.asarray(position, float), np.asarray(look_at, float), time.time())
+
+    def _up_vector(self) -> np.ndarray:
+        axis = UP_AXES.get(self._up_axis)
+        if axis is None:
+            bundle = self._bundle
+            if bundle is None:
+                return np.array([0.0, 0.0, 1.0])
+            R_lidar_camera = bundle.result.T_camera_lidar[:3, :3].T
+            return R_lidar_camera @ np.array([0.0, -1.0, 0.0])
+        return np.array(axis, dtype=np.float64)
+
+    # ================================================================ test hooks
+    def client_ids(self) -> list[int]:
+        """Ids of the connected browser tabs."""
+        return sorted(self.server.get_clients())
+
+    def show_view(self, client_id: int, mode: str = "all") -> None:
+        """Set one tab's view: ``all``, ``camera``, ``ba`` or ``3d``."""
+        self._set_view(self.server.get_clients()[client_id], mode)
+
+    def view_settled(self, client_id: int) -> bool:
+        """True once the tab reported a camera at the pose this app last set."""
+        client = self.server.get_clients().get(client_id)
+        target = self._view_target.get(client_id)
+        if client is None or target is None:
+            return False
+        try:
+            cam = client.camera
+            fresh = cam.update_timestamp > target[2]
+            return bool(fresh and np.allclose(cam.position, target[0], atol=1e-4)
+                        and np.allclose(cam.look_at, target[1], atol=1e-4))
+        except AssertionError:
+            return False
+
+    def page_position(self, client_id: int, target: str, uv: tuple[float, float]) -> tuple[float, float]:
+        """Where a pixel appears in a tab's canvas, as fractions of the canvas width and height.
+
+        Parameters
+        ----------
+        target : str
+            ``"camera"`` (``uv`` is an ORIGINAL camera-image pixel, shown in the
+            visible camera view) or a BA key (``uv`` = (col, row) of a cell).
+        """
+        slot = self._camera_slot() if target == "camera" else self.slots[target]
+        disp = np.asarray(uv, dtype=np.float64).reshape(1, 2)
+        if target == "camera":
+            disp, ok = self._display_from_pixels(disp)
+            if not ok[0]:
+                raise CalibError(f"pixel {uv} is not shown in the camera view")
+        world = slot.world_from_pixel(disp)[0]
+        cam = self.server.get_clients()[client_id].camera
+        R_world_cam = vtf.SO3(np.asarray(cam.wxyz)).as_matrix()
+        p = R_world_cam.T @ (world - np.asarray(cam.position))
+        f = (cam.image_height / 2) / math.tan(cam.fov / 2)
+        x = f * p[0] / p[2] + cam.image_width / 2
+        y = f * p[1] / p[2] + cam.image_height / 2
+        return x / cam.image_width, y / cam.image_height
+
+    @property
+    def result(self):
+        """The last good :class:`calib_core.solve.CalibrationResult`, or None."""
+        bundle = self._bundle
+        return None if bundle is None else bundle.result
+
+    def wait_idle(self, timeout: float = 30.0) -> bool:
+        """Block until the live solver has nothing queued or running."""
+        return self._solver.wait_idle(timeout)
+
+    def stop(self) -> None:
+        """Stop the solver thread and the server."""
+        self._stopped = True
+        self._solver.stop()
+        self.server.stop()
+
+
+def serve(
+    scan_path: str | os.PathLike,
+    image_path: str | os.PathLike,
+    camera_path: str | os.PathLike,
+    *,
+    session_path: str | os.PathLike | None = None,
+    output_path: str | os.PathLike | None = None,
+    host: str = "127.0.0.1",
+    port: int = 8080,
+    title: str | None = None,
+) -> None:
+    """Serve the annotation app until Ctrl+C; prints the URL.
+
+    See :class:`CalibrationApp` for the parameters.  Bad input files raise
+    :class:`CalibError` before the server starts.
+    """
+    app = CalibrationApp(scan_path, image_path, camera_path, session_path=session_path, output_path=output_path,
+                         host=host, port=port, title=title)
+    print(f"ba-calib: open {app.url} in a browser (Ctrl+C to stop)", flush=True)
+    print(f"ba-calib: session file {app.session_path}", flush=True)
+    if host not in ("127.0.0.1", "localhost", "::1"):
+        print(f"ba-calib: listening on {host}: anyone who can reach this address can use the app", flush=True)
+    try:
+        while True:
+            time.sleep(3600)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        app.stop()

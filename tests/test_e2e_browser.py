@@ -1,0 +1,197 @@
+"""End to end in a real headless Chromium: annotate the sample, check the result.
+
+The browser is Debian's ``chromium`` driven by the ``playwright`` package
+(``executable_path="/usr/bin/chromium"``; no browser download).  The test
+clicks pairs at ground-truth positions of the sample scene: for each chosen
+scene corner, the BA cell a user would click (the valid cell nearest the
+corner, :func:`calib_core.synthetic.simulate_pairs` without noise) and the
+corner's true camera pixel.  Screen positions come from the app's test hook
+(the viser camera pose the tab reported and the image node layout).
+"""
+
+from __future__ import annotations
+
+import io
+import re
+import socket
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from calib_core.io.extrinsics import load_extrinsics_yaml
+from calib_core.synthetic import load_sample, simulate_pairs
+from calib_core.transforms import rotation_angle_deg
+
+pytestmark = pytest.mark.browser
+
+ROOT = Path(__file__).resolve().parents[1]
+SAMPLE = ROOT / "sample_data"
+SCREENSHOT = ROOT / "docs" / "screenshot.png"
+CHROMIUM = Path("/usr/bin/chromium")
+CHROMIUM_ARGS = [
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
+N_PAIRS = 8
+TIMEOUT_S = 30.0
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def wait_for(condition, what: str, timeout: float = TIMEOUT_S, interval: float = 0.05):
+    """Poll ``condition()`` until it returns something truthy; fail naming ``what``."""
+    deadline = time.monotonic() + timeout
+    while True:
+        value = condition()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            pytest.fail(f"timed out after {timeout:.0f} s waiting for {what}")
+        time.sleep(interval)
+
+
+def page_text(page) -> str:
+    return " ".join(page.inner_text("body").split())
+
+
+def test_annotate_sample_in_headless_chromium(tmp_path):
+    if not CHROMIUM.exists():
+        pytest.skip("/usr/bin/chromium is missing (apt-get install chromium); CI installs it")
+    sync_api = pytest.importorskip("playwright.sync_api", reason="the playwright package is not installed")
+    from app.server import CalibrationApp
+
+    t_start = time.monotonic()
+    scene = load_sample(SAMPLE)
+    truth = load_extrinsics_yaml(SAMPLE / "ground_truth.yaml")["T_camera_lidar"]
+    # Spread-out corners; the camera pixel is the true projection, the laser
+    # end the depth-matrix cell a careful user clicks.
+    pairs = simulate_pairs(scene, N_PAIRS, np.random.default_rng(3), pixel_noise_px=0.0)
+
+    app = CalibrationApp(
+        SAMPLE / "scan.npz", SAMPLE / "image.png", SAMPLE / "camera.yaml",
+        session_path=tmp_path / "session.yaml", output_path=tmp_path / "extrinsics.yaml", port=free_port(),
+    )
+    mean_px_after: list[float] = []
+    try:
+        with sync_api.sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS)
+            page = browser.new_page(viewport={"width": 1400, "height": 900}, accept_downloads=True)
+            page.goto(app.url)
+            cid = wait_for(lambda: app.client_ids(), "the tab to connect")[0]
+            wait_for(lambda: app.view_settled(cid), "the annotation view to be set")
+
+            # The software-WebGL notice swallows clicks at the top left: close it.
+            notice = page.locator(".mantine-Notification-root", has_text="Software WebGL")
+            notice.first.wait_for(timeout=TIMEOUT_S * 1000)
+            notice.first.locator("button").click()
+            notice.first.wait_for(state="detached", timeout=TIMEOUT_S * 1000)
+
+            canvas = page.locator("canvas").first
+            box = canvas.bounding_box()
+            assert box is not None
+
+            def click(target: str, uv) -> None:
+                fx, fy = app.page_position(cid, target, uv)
+                assert 0.0 < fx < 1.0 and 0.0 < fy < 1.0, f"{target} {uv} is off screen"
+                page.mouse.click(box["x"] + fx * box["width"], box["y"] + fy * box["height"])
+
+            # Wait until the images are drawn (their meshes take the clicks): the
+            # page shows something other than the light-grey backdrop there.
+            def drawn() -> bool:
+                for target, uv in (("camera", (320.0, 300.0)), (app.ba_keys[0], (360.0, 90.0))):
+                    fx, fy = app.page_position(cid, target, uv)
+                    x, y = box["x"] + fx * box["width"], box["y"] + fy * box["height"]
+                    shot = page.screenshot(clip={"x": x - 2, "y": y - 2, "width": 4, "height": 4})
+                    rgb = np.asarray(Image.open(io.BytesIO(shot)).convert("RGB"), dtype=float).reshape(-1, 3)
+                    if np.abs(rgb.mean(axis=0) - 238.0).max() < 12:
+                        return False
+                return True
+
+            wait_for(drawn, "the page to draw the images", interval=0.2)
+            ba_keys = app.ba_keys
+            for k, pair in enumerate(pairs):
+                row, col = pair.laser_rc
+                # BA first on even pairs, camera first on odd ones: either order works.
+                steps = [("ba", ba_keys[k % len(ba_keys)], (col, row)), ("camera", "camera", pair.pixel)]
+                if k % 2:
+                    steps.reverse()
+                for kind, target, uv in steps:
+                    before = app.state.version
+                    click(target, uv)
+                    wait_for(lambda: app.state.version > before, f"pair {k + 1}: the {kind} click to register")
+                pick = app.state.picks[-1]
+                assert pick.complete and len(app.state.complete_picks()) == k + 1
+                # The click landed where we aimed: the same cell, the same pixel.
+                assert pick.laser_rc == (row, col)
+                assert np.hypot(*(np.subtract(pick.pixel, pair.pixel))) < 0.05, (pick.pixel, pair.pixel)
+
+                n = k + 1
+                wait_for(lambda: f"Pairs: {n} complete" in page_text(page), f"the page to show {n} pairs")
+                if n < 4:
+                    assert f"Pick {4 - n} more to calibrate" in page_text(page)
+                    continue
+                def solved_text(n=n):
+                    text = page_text(page)
+                    return text if f"Solved with {n} pairs" in text and "Solving" not in text else None
+
+                text = wait_for(solved_text, f"the error display for {n} pairs")
+                m = re.search(r"Mean error: ([0-9.]+) px \(std ([0-9.]+) px\), ([0-9.]+) deg", text)
+                assert m, text
+                mean_px_after.append(float(m.group(1)))
+                # The residual table lists every pair.
+                assert all(re.search(rf"\b{pid}\b", text) for pid in range(1, n + 1))
+
+            result = app.result
+            assert result is not None and result.n_pairs == N_PAIRS
+            rot_err = rotation_angle_deg(result.T_camera_lidar[:3, :3], truth[:3, :3])
+            trans_err = float(np.linalg.norm(result.T_camera_lidar[:3, 3] - truth[:3, 3]))
+
+            # Export: the browser downloads the YAML; the same file is written to --output.
+            with page.expect_download(timeout=TIMEOUT_S * 1000) as download_info:
+                page.get_by_role("button", name="Download extrinsics YAML").click()
+            download = download_info.value
+            assert download.suggested_filename == "extrinsics.yaml"
+            downloaded = Path(download.path())
+            doc = load_extrinsics_yaml(downloaded)
+            np.testing.assert_allclose(doc["T_camera_lidar"], result.T_camera_lidar, atol=1e-12)
+            assert downloaded.read_bytes() == (tmp_path / "extrinsics.yaml").read_bytes()
+
+            # A second tab sees the same pairs.
+            page2 = browser.new_page(viewport={"width": 1400, "height": 900})
+            page2.goto(app.url)
+            wait_for(lambda: f"Pairs: {N_PAIRS} complete" in page_text(page2), "the second tab to show the pairs")
+            page2.close()
+
+            # Screenshot for the README, without transient notifications.
+            notes = page.locator(".mantine-Notification-root")
+            for i in range(notes.count()):
+                notes.nth(i).locator("button").click()
+            wait_for(lambda: notes.count() == 0, "notifications to close")
+            SCREENSHOT.parent.mkdir(exist_ok=True)
+            page.screenshot(path=str(SCREENSHOT))
+            browser.close()
+    finally:
+        app.stop()
+
+    elapsed = time.monotonic() - t_start
+    print(
+        f"\ne2e: rotation error {rot_err:.4f} deg, translation error {100 * trans_err:.2f} cm, "
+        f"mean px error after pairs 4..{N_PAIRS}: {mean_px_after}, run time {elapsed:.1f} s"
+    )
+    assert len(mean_px_after) == N_PAIRS - 3
+    assert rot_err <= 0.5
+    assert trans_err <= 0.05
+    # The session file holds every pair (nothing is lost if the server dies now).
+    assert "laser_rc" in (tmp_path / "session.yaml").read_text()
