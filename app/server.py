@@ -474,6 +474,7 @@ class CalibrationApp:
 
     def _on_view_checkbox(self, event: Any) -> None:
         with self._ui_lock:
+            was_panorama = self._use_panorama
             self._use_panorama = bool(self._cb_pano.value) and self.panorama is not None
             self._show_reprojection = bool(self._cb_reproj.value)
             self._show_edges = bool(self._cb_edges.value)
@@ -485,6 +486,12 @@ class CalibrationApp:
         self.state.set_view(panorama=self._use_panorama, show_reprojection=self._show_reprojection,
                             show_edges=self._show_edges, snap=self._snap)
         self._refresh_scene()
+        if was_panorama != self._use_panorama:
+            # The camera view changed size: re-frame every tab that shows the 2-D view.
+            clients = self.server.get_clients()
+            for cid, mode in list(self._client_mode.items()):
+                if mode != "3d" and cid in clients:
+                    self._set_view(clients[cid], mode)
 
     def _on_up_axis(self, event: Any) -> None:
         self._up_axis = str(self._dd_up.value)
@@ -850,7 +857,7 @@ class CalibrationApp:
             look = CLOUD_ORIGIN + eye + 3.0 * level
             self._apply_camera(client, pos, look, up, math.radians(70.0))
             return
-        self._client_mode[client.client_id] = "2d"
+        self._client_mode[client.client_id] = mode
         self._update_cloud_visibility()
         if mode == "camera":
             slots = [self._camera_slot()]

@@ -244,3 +244,75 @@ def test_concurrent_changes_from_threads_lose_nothing(tmp_path):
     while s.undo():
         n_undo += 1
     assert n_undo == n_threads * per_thread and s.picks == ()
+
+
+# --------------------------------------------------------------------------- layout
+def test_click_ray_maps_to_the_pixel_under_it():
+    from app.layout import ImageSlot
+
+    # 200 x 100 px image drawn 2 x 1 units wide, centred at (3, 4, 0).
+    slot = ImageSlot("img", 200, 100, (3.0, 4.0, 0.0), 2.0, 1.0)
+    # Pixel centres: u = 0 is 0.005 units right of the left edge x = 2.
+    np.testing.assert_allclose(slot.world_from_pixel([[0.0, 0.0], [199.0, 99.0]]), [[2.005, 3.505, 0.0], [3.995, 4.495, 0.0]])
+    # A ray from a viewer at z = -10 through the world point of pixel (10, 20).
+    target = np.array([2.0 + 10.5 / 100.0, 3.5 + 20.5 / 100.0, 0.0])
+    origin = np.array([0.3, -0.2, -10.0])
+    uv = slot.pixel_from_ray(origin, (target - origin) / np.linalg.norm(target - origin))
+    np.testing.assert_allclose(uv, (10.0, 20.0), atol=1e-9)
+    assert slot.pixel_from_ray(origin, (origin - target)) is None  # pointing away
+    assert slot.contains((-0.5, 99.5)) and not slot.contains((199.6, 0.0))
+
+
+def test_layout_puts_four_ba_images_under_the_camera_image():
+    from app.layout import CAMERA_WIDTH, annotation_layout
+
+    keys = ("horizontal", "vertical", "diag_pos45", "diag_neg45")
+    slots = annotation_layout({"raw": (640, 480), "panorama": (1000, 500)}, (720, 180), keys)
+    for key in keys:
+        s = slots[key]
+        assert s.render_width / s.render_height == pytest.approx(720 / 180)  # square cells
+        for cam in ("raw", "panorama"):
+            assert slots[cam].bounds()[3] < s.bounds()[1]  # camera image above every BA image
+    assert slots["raw"].render_width == CAMERA_WIDTH
+    assert slots["raw"].bounds()[3] == pytest.approx(slots["panorama"].bounds()[3])  # bottoms aligned
+    # No two BA images overlap.
+    b = [slots[k].bounds() for k in keys]
+    for i in range(4):
+        for j in range(i + 1, 4):
+            assert b[i][2] <= b[j][0] or b[j][2] <= b[i][0] or b[i][3] <= b[j][1] or b[j][3] <= b[i][1]
+
+
+# ---------------------------------------------------------------------- live solver
+def test_live_solver_coalesces_bursts_and_survives_failures():
+    from app.live_solver import LiveSolver
+
+    started, release = threading.Event(), threading.Event()
+    solved, done = [], []
+
+    def solve(payload):
+        if payload == "first":
+            started.set()
+            release.wait(5)
+        if payload == "bad":
+            raise CalibError("degenerate pairs")
+        solved.append(payload)
+        return payload.upper()
+
+    solver = LiveSolver(solve, lambda version, result, error: done.append((version, result, error)))
+    try:
+        solver.submit(1, "first")
+        assert started.wait(5)
+        for v in range(2, 10):  # a burst while the first solve runs
+            solver.submit(v, f"job{v}")
+        release.set()
+        assert solver.wait_idle(5)
+        assert solved == ["first", "job9"]  # only the newest of the burst was solved
+        assert [d[0] for d in done] == [1, 9]
+        solver.submit(10, "bad")
+        assert solver.wait_idle(5)
+        version, result, error = done[-1]
+        assert version == 10 and result is None and isinstance(error, CalibError)
+        solver.submit(11, "ok")  # the worker is still alive after a failure
+        assert solver.wait_idle(5) and done[-1] == (11, "OK", None)
+    finally:
+        solver.stop()

@@ -173,3 +173,20 @@ def test_snap_leaves_clicks_without_a_corner_alone():
     np.testing.assert_array_equal(refine_click_to_corner(_quadrant_image(), (39.5, 39.5), 4.0), [39.5, 39.5])
     with pytest.raises(CalibError):
         refine_click_to_corner(np.zeros((10, 10, 3)), (1, 1))
+
+
+def test_image_mask_limits_the_extent_and_oversample_sets_the_size():
+    cam = ocam_200deg()
+    rows, cols = np.mgrid[0:600, 0:800]
+    disk = np.hypot(rows - 300.0, cols - 400.0) <= 300.0  # lens circle of radius 300 px
+    pano = Panorama.for_camera(cam, image_mask=disk)
+    # At rho = 300 px, pol = -300 + 0.001552 * 300^2 = -160.32, so the ray is
+    # atan2(300, 160.32) = 61.88 deg off the axis; the extent adds a 1 deg margin.
+    # The field of view is sampled on a 256 x 256 grid (2.3 px ~ 0.5 deg steps here).
+    half = np.degrees(np.arctan2(300.0, 300.0 - 0.001552 * 300.0**2)) + 1.0
+    np.testing.assert_allclose(np.degrees(pano.azimuth_range_rad), [-half, half], atol=0.75)
+    np.testing.assert_allclose(np.degrees(pano.elevation_range_rad), [-half, half], atol=0.75)
+    twice = Panorama.for_camera(cam, image_mask=disk, oversample=2.0)
+    assert twice.width == pytest.approx(2 * pano.width, abs=2)
+    with pytest.raises(CalibError, match="image_mask shape"):
+        Panorama.for_camera(cam, image_mask=disk[:10])
