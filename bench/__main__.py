@@ -1,0 +1,326 @@
+"""``python -m bench``: run every benchmark and write docs/performance.md + docs/perf/*.png.
+
+Options: ``--quick`` (fewer trials and repeats, a smoke run), ``--out DIR``
+(where performance.md and perf/ go; default docs/), ``--seeds`` (extra
+generated scenes besides the committed sample; generated once and cached in
+bench/out/).
+"""
+
+from __future__ import annotations
+
+import argparse
+import platform
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .common import REPO, fmt_ms, log
+
+#: Pair counts of the side-by-side comparison (a subset of the accuracy sweep, to keep the run short).
+COMPARE_N = (4, 5, 6, 8, 10, 12, 15, 20)
+
+
+def _cpu() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown CPU"
+
+
+def _commit() -> str:
+    try:
+        h = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=REPO, capture_output=True, text=True, check=True)
+        return h.stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
+def _status(ok: bool) -> str:
+    return "PASS" if ok else "**MISS**"
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(prog="python -m bench", description=__doc__.splitlines()[0])
+    p.add_argument("--quick", action="store_true", help="fewer trials and repeats (smoke run, about a minute)")
+    p.add_argument("--out", type=Path, default=REPO / "docs", help="output folder (default: docs/)")
+    p.add_argument("--seeds", type=int, nargs="*", default=None,
+                   help="extra generated scenes (default: 1 2 3; --quick: 1)")
+    p.add_argument("--workers", type=int, default=2,
+                   help="processes for the accuracy trials (default 2); speed is always timed in one process")
+    args = p.parse_args(argv)
+
+    import os
+
+    import cv2
+
+    from . import accuracy, compare, report, speed
+    from .common import load_scenes
+
+    t_start = time.perf_counter()
+    load_start = os.getloadavg()[0]
+    quick = args.quick
+    seeds = tuple(args.seeds) if args.seeds is not None else ((1,) if quick else (1, 2, 3))
+    trials = 8 if quick else 50
+    n_values = (4, 6, 8, 10, 14, 20) if quick else accuracy.N_VALUES
+    crb_sets, crb_draws = (2, 40) if quick else (5, 100)
+    out = args.out.resolve()
+    perf = out / "perf"
+    perf.mkdir(parents=True, exist_ok=True)
+
+    log(f"ba-calib benchmarks ({'quick' if quick else 'full'} run), writing {out}")
+    log("loading scenes ...")
+    scenes = load_scenes(seeds)
+    names = [s.name for s in scenes]
+    log(f"scenes: {', '.join(names)}")
+
+    # ---------------------------------------------------------- accuracy
+    log(f"accuracy: n = {n_values[0]}..{n_values[-1]}, {trials} trials each, {len(scenes)} scenes")
+    trials_in = accuracy.make_trials(scenes, n_values, trials)
+    compare_n = tuple(n for n in COMPARE_N if n in n_values)
+    omni_res, _ = accuracy.run_accuracy(scenes, trials_in, methods=("angular", "pixel"), workers=args.workers,
+                                        method_n_values={"pixel": compare_n})
+
+    log(f"Cramer-Rao check: {crb_sets} sets x {crb_draws} draws of pure click noise, plus the n = 10 trials")
+    real10 = [t for t in trials_in if t.scene_index == 0 and t.n == 10]
+    crb_rows = accuracy.cramer_rao_check(
+        scenes[0], crb_sets, crb_draws, 10, real10,
+        {m: omni_res[(0, 10, m)] for m in ("angular", "pixel")}, workers=args.workers,
+    )
+
+    # ---------------------------------------------------------- compare
+    log("comparison on the pinhole variants ...")
+    pin_scenes = [compare.pinhole_variant(s) for s in scenes]
+    for s in pin_scenes:
+        log(f"  {s.name}: {len(s.scene.corners_lidar)} corners in the pinhole view")
+    pin_trials = compare.make_pinhole_trials(pin_scenes, compare_n, trials)
+    pin_res, _ = compare.run_pinhole(pin_scenes, pin_trials, workers=args.workers)
+
+    # ---------------------------------------------------------- speed
+    log("speed ...")
+    sp = speed.run_speed(scenes[0], quick=quick)
+
+    # ---------------------------------------------------------- targets
+    s10 = report.pooled(omni_res, [0], 10, "angular")
+    pure = [r for r in crb_rows if r.label.startswith("pure") and r.method == "angular"][0]
+    t_solve = sp.get("solve", "10 pairs").median_s
+    t_ba = sp.get("ba", "128x2048").median_s
+    t_col = sp.get("colorize", "1M points").median_s
+    t_click = sp.get("click", "click to updated error and overlays").median_s
+    real = [r for r in crb_rows if r.label.startswith("realistic") and r.method == "angular"]
+    fl_pure = pure.floor
+    fl_real = real[0].floor if real else {}
+
+    def floor_txt(key: str, unit: str, scale: float = 1.0, nd: int = 3) -> str:
+        txt = f"{scale * fl_pure[key]:.{nd}f} {unit}"
+        if fl_real:
+            txt += f" ({scale * fl_real[key]:.{nd}f} with the laser noise)"
+        return txt
+
+    targets = [
+        ("solve, 10 pairs (initial + LM + covariance)", "<= 5 ms", fmt_ms(t_solve), t_solve <= 5e-3, "solve 10", ""),
+        ("BA images, 4 directions, 128x2048", "<= 10 ms", fmt_ms(t_ba), t_ba <= 10e-3, "ba 128x2048", ""),
+        ("colorize 1M points with the occlusion test", "<= 100 ms", fmt_ms(t_col), t_col <= 0.1, "colorize 1M", ""),
+        ("server-side click to updated error and overlays", "<= 50 ms", fmt_ms(t_click), t_click <= 0.05, "click", ""),
+        (f"sample, 10 pairs: rotation error (mean of {s10.trials} trials)", "<= 0.1 deg",
+         f"{s10.rot_err_mean:.4f} deg (p95 {s10.rot_err_p95:.4f})", s10.rot_err_mean <= 0.1, None,
+         floor_txt("rotation_deg", "deg", nd=4)),
+        ("sample, 10 pairs: translation error (mean)", "<= 1 cm",
+         f"{100 * s10.trans_err_mean:.3f} cm (p95 {100 * s10.trans_err_p95:.3f})", s10.trans_err_mean <= 0.01, None,
+         floor_txt("translation_m", "cm", 100.0)),
+        ("sample, 10 pairs: mean pixel error against ground truth", "<= 1.0 px", f"{s10.gt_px_mean:.3f} px",
+         s10.gt_px_mean <= 1.0, None, floor_txt("gt_px", "px")),
+        ("(for reference) sample, 10 pairs: mean reprojection residual at the clicked pairs", "<= 1.0 px",
+         f"{s10.residual_px_mean:.3f} +/- {s10.residual_px_std:.3f} px", s10.residual_px_mean <= 1.0, None,
+         "about 1.05 px: the click noise itself (mean of a 2-D Gaussian of 1 px, 2n - 6 of 2n degrees of freedom left)"),
+        ("empirical spread within 20 % of the Cramer-Rao bound (pure 1 px click noise, angular cost)",
+         "0.8 .. 1.2 for all 6", "sigma / bound = " + ", ".join(f"{x:.2f}" for x in pure.ratio),
+         bool(np.all((pure.ratio >= 0.8) & (pure.ratio <= 1.2))), None, ""),
+    ]
+
+    log("profiling the missed speed targets ...")
+    profiles = {}
+    for label, _, _, ok, step, _ in targets:
+        if not ok and step is not None:
+            profiles[label] = speed.profile_text(sp.steps[step], runs=3 if "colorize" in step or "click" in step else 10)
+
+    # ---------------------------------------------------------- plots
+    log("plots ...")
+    have_plots = report.plot_fig6_fig7(perf / "fig6_translation.png", perf / "fig7_rotation.png", omni_res, scenes[0].scene, n_values)
+    report.plot_errors_vs_n(perf / "errors_vs_n.png", omni_res, names, n_values)
+    report.plot_compare(perf / "compare.png", omni_res, range(len(scenes)), pin_res, range(len(pin_scenes)), compare_n)
+    report.plot_crb(perf / "crb.png", crb_rows)
+
+    # ---------------------------------------------------------- markdown
+    run_s = time.perf_counter() - t_start
+    md = _markdown(
+        quick=quick, scenes=scenes, pin_scenes=pin_scenes, n_values=n_values, trials=trials, omni_res=omni_res,
+        pin_res=pin_res, crb_rows=crb_rows, crb_sets=crb_sets, crb_draws=crb_draws, sp=sp, targets=targets,
+        profiles=profiles, have_plots=have_plots, run_s=run_s, cv2_version=cv2.__version__, cores=os.cpu_count(),
+        load=(load_start, os.getloadavg()[0]),
+    )
+    (out / "performance.md").write_text(md)
+    log(f"wrote {out / 'performance.md'} and {perf}/*.png in {run_s:.0f} s")
+    print()
+    print(_targets_table(targets))
+    print()
+    print(report.table_one(scenes[0].scene, s10))
+    return 0
+
+
+def _targets_table(targets) -> str:
+    lines = ["| target | required | measured | status | best possible (Cramer-Rao, 1 px clicks) |", "|---|---|---|---|---|"]
+    for label, req, meas, ok, _, floor in targets:
+        lines.append(f"| {label} | {req} | {meas} | {_status(ok)} | {floor} |")
+    return "\n".join(lines)
+
+
+def _markdown(*, quick, scenes, pin_scenes, n_values, trials, omni_res, pin_res, crb_rows, crb_sets, crb_draws, sp,
+              targets, profiles, have_plots, run_s, cv2_version, cores, load) -> str:
+    from . import report
+    from .accuracy import RANGE_NOISE_M
+    from .compare import PINHOLE_F_PX, PINHOLE_SIZE
+
+    idx_all = list(range(len(scenes)))
+    s10 = report.pooled(omni_res, [0], 10, "angular")
+    s10_all = report.pooled(omni_res, idx_all, 10, "angular")
+    img = (lambda name, alt: f"![{alt}](perf/{name})\n") if have_plots else (lambda name, alt: "*(plots skipped: matplotlib is not installed; `pip install -e .[bench]`)*\n")
+    L: list[str] = []
+    a = L.append
+    a("# Performance and accuracy\n")
+    a("Generated by `python -m bench`" + (" --quick" if quick else "") + " (bench/) -- do not edit by hand. "
+      f"Commit `{_commit()}`, {time.strftime('%Y-%m-%d')}, {_cpu()} ({cores} cores, shared), Python "
+      f"{platform.python_version()}, numpy {np.__version__}, OpenCV {cv2_version}. Whole run: {run_s:.0f} s. "
+      f"Load average (1 min) {load[0]:.1f} at the start and {load[1]:.1f} at the end: other jobs shared the cores.\n")
+    if quick:
+        a("> **Quick run**: few trials and repeats; numbers are a smoke test, not the reference.\n")
+    a("Reproduce with `pip install -e .[bench]` then `python -m bench` (about "
+      f"{max(1, round(run_s / 60))} min here; the first run also generates the extra scenes, "
+      "about 25 s each, cached in bench/out/). `python -m bench --quick` is a one-minute smoke run.\n")
+
+    a("## Targets (issue 5)\n")
+    a(_targets_table(targets) + "\n")
+    a("Speed figures are medians of repeated single-process runs on the machine above, shared with other jobs. "
+      "Accuracy figures are against the exact ground truth of the synthetic sample.\n")
+
+    a("## Accuracy against the number of pairs (paper Fig. 6, Fig. 7, Table I)\n")
+    a(f"Scenes: the committed sample (`sample_data/`, seed 0, the paper's Table I pose) and generated seeds "
+      f"{', '.join(s.name.split()[-1] for s in scenes[1:]) or '(none)'} (`ba-calib sample --seed N`). For every scene, "
+      f"n = {n_values[0]} .. {n_values[-1]} pairs, {trials} trials each. Each trial is "
+      "`calib_core.synthetic.simulate_pairs`: corners of the scene seen by both sensors, chosen spread over the view "
+      "(farthest-point sampling from a random first corner); the camera click is the true projection plus 1 px "
+      "Gaussian noise per axis; the laser pick is a whole depth-matrix cell (the valid cell among the 3x3 around the "
+      f"corner's beam whose measured point is nearest the corner), whose point carries the scan's {100 * RANGE_NOISE_M:.0f} cm "
+      "range noise. Solved with `solve_extrinsics(..., cost=\"angular\")` (Quan-Lan / P3P initial pose, LM on eq. 7).\n")
+    a("Errors are estimate minus truth of `T_camera_lidar` (translation = the lidar origin in the camera frame; "
+      "roll, pitch, yaw of R = Rz(yaw) Ry(pitch) Rx(roll)). *Rotation error* is the angle of R_true^T R_est; "
+      "*translation error* the norm of the translation difference. Two pixel errors: the **reprojection residual at "
+      "the clicked pairs** (what the paper's Table I reports, it contains the 1 px click noise itself) and the **pixel "
+      "error against ground truth**: the mean image distance between the projections of about "
+      f"{len(scenes[0].check_points_lidar)} scan points under "
+      "the estimated and the true pose (what a user sees as misalignment of the overlays).\n")
+    a("### Table I: n = 10 pairs, sample scene\n")
+    a(f"Our estimate, {s10.trials} trials ({s10.failures} failed):\n")
+    a(report.table_one(scenes[0].scene, s10) + "\n")
+    a("The paper's Table I (real rig, 10 pairs, 10 trials, no ground truth: sigma is the spread of the estimates): "
+      "T = (0.207, 0.042, 0.139) m with sigma (0.05, 0.017, 0.005) m; roll, pitch, yaw = (0.64, -1.24, 166.95) deg with "
+      "sigma (0.21, 0.85, 1.08) deg; pixel error 1.6 +/- 1.2 px (640x480 omnidirectional image). The sample uses the "
+      "same pose as ground truth.\n")
+    a(f"All {len(scenes)} scenes pooled at n = 10: rotation error {s10_all.rot_err_mean:.4f} deg (p95 "
+      f"{s10_all.rot_err_p95:.4f}), translation error {100 * s10_all.trans_err_mean:.3f} cm (p95 "
+      f"{100 * s10_all.trans_err_p95:.3f}), pixel error vs truth {s10_all.gt_px_mean:.3f} px, residual "
+      f"{s10_all.residual_px_mean:.2f} +/- {s10_all.residual_px_std:.2f} px.\n")
+    a(img("fig6_translation.png", "Fig. 6: translation vs n"))
+    a(img("fig7_rotation.png", "Fig. 7: rotation vs n"))
+    a(img("errors_vs_n.png", "errors vs n, all scenes"))
+    a("### Error against ground truth vs n (sample scene)\n")
+    a(report.error_vs_n_table(omni_res, [0], n_values, "angular") + "\n")
+    a(f"### Error against ground truth vs n (all {len(scenes)} scenes pooled)\n")
+    a(report.error_vs_n_table(omni_res, idx_all, n_values, "angular") + "\n")
+    fails = sorted({m for k, v in omni_res.items() for r in v if not r.ok for m in [r.message]})
+    if fails:
+        a("Solver refusals (CalibError) seen: " + "; ".join(f"`{m}`" for m in fails[:6]) + "\n")
+
+    a("## Cramer-Rao check\n")
+    a("The bound is computed in bench/crb.py, independently of the solver, for the pose parameters "
+      "(roll, pitch, yaw, T_x, T_y, T_z) of `T_camera_lidar` at the true pose: F = sum_i J_i^T S_i^-1 J_i with J_i "
+      "the derivative of the projected pixel of laser point i (central differences of `camera.project`, so the OCam "
+      "model's non-uniform resolution is included) and S_i the pixel covariance of pair i. Two noise models:\n")
+    a(f"1. **Pure click noise** (the bound the target refers to): S_i = (1 px)^2 I. The laser points are exact (the "
+      f"points of the picked cells themselves), the clicks are their true projections plus 1 px Gaussian noise; "
+      f"{crb_sets} fixed sets of 10 pairs on the sample x {crb_draws} noise draws each. Here the bound is the exact "
+      "first-order bound, so an efficient estimator's spread must match it.\n"
+      f"2. **Realistic picking** (the n = 10 trials above): S_i = (1 px)^2 I + J_X S_L J_X^T, where S_L models the "
+      f"laser pick: uniform over one cell along the row and the column (variance step^2 / 12 each, step = the beam's "
+      f"angular step times the range) plus ({100 * RANGE_NOISE_M:.0f} cm)^2 along the beam, mapped to pixels by "
+      "J_X = d pixel / d X. This is a Gaussian stand-in for the real laser error, which is neither Gaussian nor "
+      "independent between trials: a corner's picked cell and its range noise are fixed in the scan, and the "
+      "farthest-point sampling reuses the same corners in many trials.\n")
+    a("Columns: empirical sigma (spread about the mean), empirical RMS error about the truth (includes bias), our "
+      "Cramer-Rao sigma (root of the mean bound variance over the sets / trials), their ratio, and the solver's own "
+      "covariance (`calib_core.solve.refine.pose_covariance` at the true pose, with the isotropic angular noise "
+      "equivalent to the pixel covariance at those pixels, as printed) for comparison.\n")
+    a(report.crb_table(crb_rows))
+    a(img("crb.png", "Cramer-Rao ratios"))
+
+    a("## Comparison: angular cost vs pixel cost vs OpenCV\n")
+    a("Same trials for every method. On the scenes' own omnidirectional camera: eq. 7 (angular, ours) and eq. 6 "
+      "(pixel reprojection, `cost=\"pixel\"`). OpenCV's PnP cannot use rays beyond 90 deg from the axis, so it runs "
+      f"only on a **pinhole variant** of every scene: a {PINHOLE_SIZE[0]}x{PINHOLE_SIZE[1]} undistorted pinhole, "
+      f"f = {PINHOLE_F_PX:.0f} px, at the scene's true pose (same centre and axes as the OCam camera), with the same "
+      "scan and laser picks; pairs are the scene corners that project inside its image, clicked with 1 px noise "
+      "(`simulate_pairs` on that camera). OpenCV: `solvePnP(SOLVEPNP_SQPNP)` then `solvePnPRefineLM`. Times: "
+      "median per solve; `solve_extrinsics` also computes the covariance and the residuals, OpenCV does not.\n")
+    a("Corners in the pinhole view: " + ", ".join(f"{s.name}: {len(s.scene.corners_lidar)}" for s in pin_scenes) + ".\n")
+    for n in (6, 10, 20):
+        if n not in n_values:
+            continue
+        a(f"### n = {n}, omnidirectional camera, all scenes\n")
+        a(report.compare_table(omni_res, idx_all, n, ("angular", "pixel")) + "\n")
+        a(f"### n = {n}, pinhole variant, all scenes\n")
+        a(report.compare_table(pin_res, idx_all, n, ("angular", "pixel", "opencv")) + "\n")
+    a(img("compare.png", "comparison vs n"))
+
+    a("## Speed of the live steps\n")
+    groups = [("ba", "Bearing Angle images, 4 directions (`bearing_angle_images`)"),
+              ("solve", "Solve: initial pose + LM + covariance (`solve_extrinsics`)"),
+              ("colorize", "Colourise with the occlusion test (`colorize_points`)"),
+              ("panorama", "Panorama unwrap (`Panorama`)"),
+              ("click", "Server-side click to updated error and overlays")]
+    for g, title in groups:
+        a(f"### {title}\n")
+        a("| input | median | fastest | runs | notes |\n|---|---:|---:|---:|---|")
+        for t in sp.timings:
+            if t.group == g:
+                a(f"| {t.label} | {fmt_ms(t.median_s)} | {fmt_ms(t.min_s)} | {t.runs} | {t.detail} |")
+        a("")
+        if g == "solve" and sp.solve_breakdown:
+            a("Stages of the 10-pair solve, each timed alone through the package's functions:\n")
+            a("| stage | median | fastest |\n|---|---:|---:|")
+            for t in sp.solve_breakdown:
+                a(f"| {t.label} | {fmt_ms(t.median_s)} | {fmt_ms(t.min_s)} |")
+            a("")
+    a(sp.click_note + " Breakdown (medians of each step alone):\n")
+    a("| step | median | fastest |\n|---|---:|---:|")
+    for t in sp.click_breakdown:
+        a(f"| {t.label} | {fmt_ms(t.median_s)} | {fmt_ms(t.min_s)} |")
+    a("")
+    if profiles:
+        a("## Profiles of the missed speed targets\n")
+        a("cProfile, functions sorted by own time, per call of the step.\n")
+        for label, text in profiles.items():
+            a(f"### {label}\n")
+            a(text + "\n")
+    notes = REPO / "bench" / "analysis.md"
+    if notes.exists():
+        a(notes.read_text())
+    return "\n".join(L) + "\n"
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,138 @@
+"""Cramer-Rao bound of the pose, computed here independently of the solver.
+
+Noise model (stated once, used by the report)
+----------------------------------------------
+Pair ``i`` is a laser point ``X_i`` (lidar frame, metres) and a clicked pixel
+``m_i``.  The click is the true projection plus isotropic Gaussian noise of
+``sigma_px`` pixels per axis.  Optionally the laser point carries a zero-mean
+error of covariance ``Sigma_L,i`` (3x3, metres^2): the pick rounded to a whole
+depth-matrix cell (uniform over the cell, variance ``step^2 / 12`` along the
+row and the column direction of the beam) plus the range noise along the beam.
+Linearised, the laser error moves the predicted pixel by ``J_X,i dX``, so the
+pixel residual of pair ``i`` has covariance
+
+    Sigma_i = sigma_px^2 I_2 + J_X,i Sigma_L,i J_X,i^T.
+
+With ``J_p,i`` the derivative of the predicted pixel with respect to the pose
+parameters ``p = (roll, pitch, yaw [rad], tx, ty, tz [m])`` of
+``T_camera_lidar``, the Fisher information is ``F = sum_i J_p,i^T Sigma_i^-1 J_p,i``
+and any unbiased estimator has ``cov(p_hat) >= F^-1``.  Derivatives are
+central finite differences of ``camera.project`` (any camera model).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from calib_core.transforms import R_from_rpy_deg, rpy_deg_from_R
+
+_H_ROT_RAD = 1e-6
+_H_POS_M = 1e-6
+
+
+def _project(camera, rpy_rad: np.ndarray, t: np.ndarray, points_lidar: np.ndarray) -> np.ndarray:
+    R = R_from_rpy_deg(np.degrees(rpy_rad))
+    return camera.project(points_lidar @ R.T + t)[0]
+
+
+def pose_jacobian_px(camera, T_camera_lidar: np.ndarray, points_lidar: np.ndarray) -> np.ndarray:
+    """``d pixel / d p`` at ``T_camera_lidar``: ``(N, 2, 6)``, pixels per radian / metre."""
+    p0 = np.concatenate([np.radians(rpy_deg_from_R(T_camera_lidar[:3, :3])), T_camera_lidar[:3, 3]])
+    J = np.empty((len(points_lidar), 2, 6))
+    for k in range(6):  # six parameters, each a vectorised projection of all points
+        h = _H_ROT_RAD if k < 3 else _H_POS_M
+        dp = np.zeros(6)
+        dp[k] = h
+        plus, minus = p0 + dp, p0 - dp
+        J[:, :, k] = (_project(camera, plus[:3], plus[3:], points_lidar) - _project(camera, minus[:3], minus[3:], points_lidar)) / (2 * h)
+    return J
+
+
+def point_jacobian_px(camera, T_camera_lidar: np.ndarray, points_lidar: np.ndarray) -> np.ndarray:
+    """``d pixel / d X_lidar``: ``(N, 2, 3)``, pixels per metre."""
+    J = np.empty((len(points_lidar), 2, 3))
+    R, t = T_camera_lidar[:3, :3], T_camera_lidar[:3, 3]
+    for k in range(3):
+        d = np.zeros(3)
+        d[k] = _H_POS_M
+        J[:, :, k] = (camera.project((points_lidar + d) @ R.T + t)[0] - camera.project((points_lidar - d) @ R.T + t)[0]) / (2 * _H_POS_M)
+    return J
+
+
+def cell_rounding_covariance(depth, rows_cols: np.ndarray, range_sigma_m: float) -> np.ndarray:
+    """Laser-point covariance ``(N, 3, 3)`` (metres^2) of picks rounded to whole cells.
+
+    The true corner lies anywhere in the picked cell: uniform over one step of
+    the beam direction along the row and along the column (variance
+    ``rho^2 |d dir|^2 / 12`` each, ``d dir`` the central difference of the
+    beam directions), plus ``range_sigma_m^2`` along the beam.  The surface
+    slope and the far side of a depth edge are ignored: this is the
+    first-order size of the error, not its exact law.
+    """
+    rc = np.asarray(rows_cols, dtype=np.int64).reshape(-1, 2)
+    H, W = depth.shape
+    r = np.clip(rc[:, 0], 1, H - 2)
+    c = rc[:, 1]
+    wrap = bool(depth.meta.get("wrap_cols", False))
+    cp = (c + 1) % W if wrap else np.clip(c + 1, 0, W - 1)
+    cm = (c - 1) % W if wrap else np.clip(c - 1, 0, W - 1)
+    dirs = depth.directions
+    g_row = (dirs[r + 1, c] - dirs[r - 1, c]) / 2.0
+    # One column step: the central difference spans two steps except at a clipped border.
+    col_span = ((cp - cm) % W) if wrap else np.maximum(cp - cm, 1)
+    g_col = (dirs[rc[:, 0], cp] - dirs[rc[:, 0], cm]) / col_span[:, None]
+    rho = depth.range_m[rc[:, 0], rc[:, 1]]
+    beam = dirs[rc[:, 0], rc[:, 1]]
+    outer = lambda a: a[:, :, None] * a[:, None, :]  # noqa: E731
+    return (rho**2 / 12.0)[:, None, None] * (outer(g_row) + outer(g_col)) + range_sigma_m**2 * outer(beam)
+
+
+@dataclass(frozen=True)
+class Bound:
+    """Cramer-Rao bound of ``p = (roll, pitch, yaw, tx, ty, tz)``.
+
+    Attributes
+    ----------
+    covariance : (6, 6)
+        In radians and metres.
+    sigma_rpy_deg : (3,)
+    sigma_translation_m : (3,)
+    """
+
+    covariance: np.ndarray
+    sigma_rpy_deg: np.ndarray
+    sigma_translation_m: np.ndarray
+
+
+def cramer_rao(
+    camera,
+    T_camera_lidar: np.ndarray,
+    points_lidar: np.ndarray,
+    sigma_px: float,
+    laser_covariance: np.ndarray | None = None,
+) -> Bound:
+    """The bound for one set of pairs at the true pose (see the module docstring)."""
+    X = np.asarray(points_lidar, dtype=np.float64).reshape(-1, 3)
+    Jp = pose_jacobian_px(camera, T_camera_lidar, X)
+    S = np.broadcast_to(sigma_px**2 * np.eye(2), (len(X), 2, 2)).copy()
+    if laser_covariance is not None:
+        Jx = point_jacobian_px(camera, T_camera_lidar, X)
+        S += Jx @ laser_covariance @ np.swapaxes(Jx, 1, 2)
+    F = np.einsum("nai,nab,nbj->ij", Jp, np.linalg.inv(S), Jp)
+    C = np.linalg.inv(F)
+    s = np.sqrt(np.diag(C))
+    return Bound(C, np.degrees(s[:3]), s[3:])
+
+
+def radians_per_pixel(camera, pixels: np.ndarray) -> np.ndarray:
+    """Angle between the rays of pixels half a pixel either side, per axis: ``(N, 2)`` rad/px."""
+    px = np.asarray(pixels, dtype=np.float64).reshape(-1, 2)
+    out = np.empty((len(px), 2))
+    for k in range(2):
+        d = np.zeros(2)
+        d[k] = 0.5
+        a, b = camera.bearing(px - d), camera.bearing(px + d)
+        out[:, k] = np.arccos(np.clip(np.sum(a * b, axis=1), -1.0, 1.0))
+    return out
