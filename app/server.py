@@ -689,6 +689,9 @@ class CalibrationApp:
                                  (255, 255, 255), MARKER_SIZE * 1.9)
                 for i, w in zip(ids, world):
                     labels[f"/annot/labels/{key}/{i}"] = (str(i), w + np.array([0.03, -0.03, -0.005]))
+            for pid, uv in self._predictions(picks):
+                w = cam_slot.world_from_pixel(uv[None], z_offset=-0.015)[0]
+                labels[f"/annot/labels/predicted/{pid}"] = (f"{pid}?", w + np.array([0.06, -0.06, 0.0]))
             for other in ("raw", "panorama"):
                 if other in self.slots and other != cam_slot.key:
                     self._set_points(f"/annot/markers/{other}", np.empty((0, 3)), (0, 0, 0), MARKER_SIZE)
@@ -723,26 +726,35 @@ class CalibrationApp:
                 uv, ok = self._display_from_camera_points(bundle.edges_camera)
                 edge_world = slot.world_from_pixel(uv[ok], z_offset=-0.004)
             # Where the current calibration predicts pending laser picks in the camera image.
-            T = bundle.result.T_camera_lidar
-            for p in picks.values():
-                if p.laser_rc is None or p.pixel is not None:
-                    continue
-                pt = transform_points(T, self.depth.cell_points(np.array([p.laser_rc])))
-                uv, ok = self._display_from_camera_points(pt)
-                if ok[0]:
-                    c = slot.world_from_pixel(uv, z_offset=-0.015)[0]
-                    r = MARKER_SIZE * 1.2
-                    for d in (np.array([1.0, 0, 0]), np.array([0, 1.0, 0])):
-                        pred_segs.append(np.stack([c - r * d, c - 0.35 * r * d]))
-                        pred_segs.append(np.stack([c + 0.35 * r * d, c + r * d]))
-                        pred_cols += [p.color, p.color]
+            for pid, uv in self._predictions(picks):
+                c = slot.world_from_pixel(uv[None], z_offset=-0.015)[0]
+                r = MARKER_SIZE * 2.0
+                for d in (np.array([1.0, 0, 0]), np.array([0, 1.0, 0])):
+                    pred_segs.append(np.stack([c - r * d, c - 0.3 * r * d]))
+                    pred_segs.append(np.stack([c + 0.3 * r * d, c + r * d]))
+                    pred_cols += [picks[pid].color, picks[pid].color]
         self._set_points("/annot/overlay/reprojected", np.array(reproj_pts).reshape(-1, 3),
                          np.array(reproj_cols, np.uint8).reshape(-1, 3), MARKER_SIZE * 0.55, shape="diamond")
         self._set_lines("/annot/overlay/residuals", np.array(segs).reshape(-1, 2, 3),
                         np.repeat(np.array(seg_cols, np.uint8).reshape(-1, 1, 3), 2, axis=1), thickness=2.0)
         self._set_points("/annot/overlay/edges", edge_world, (0, 190, 255), slot.units_per_px * 1.6, shape="square")
         self._set_lines("/annot/overlay/predicted", np.array(pred_segs).reshape(-1, 2, 3),
-                        np.repeat(np.array(pred_cols, np.uint8).reshape(-1, 1, 3), 2, axis=1), thickness=3.0)
+                        np.repeat(np.array(pred_cols, np.uint8).reshape(-1, 1, 3), 2, axis=1), thickness=4.0)
+
+    def _predictions(self, picks: dict[int, Pick]) -> list[tuple[int, np.ndarray]]:
+        """Display pixels where the last good calibration expects picks that have only a BA end."""
+        bundle = self._bundle
+        if bundle is None:
+            return []
+        out = []
+        for p in picks.values():
+            if p.laser_rc is None or p.pixel is not None:
+                continue
+            point = transform_points(bundle.result.T_camera_lidar, self.depth.cell_points(np.array([p.laser_rc])))
+            uv, ok = self._display_from_camera_points(point)
+            if ok[0]:
+                out.append((p.id, uv[0]))
+        return out
 
     def _refresh_cloud(self) -> None:
         bundle = self._bundle
@@ -766,6 +778,12 @@ class CalibrationApp:
             if pending is not None:
                 need = "camera" if pending.pixel is None else "BA"
                 lines.append(f"Pair {pending.id} waits for a {need} click.")
+                bundle = self._bundle
+                if bundle is not None and pending.laser_rc is not None and pending.pixel is None:
+                    point = self.depth.cell_points(np.array([pending.laser_rc]))
+                    uv, ok = self.camera.project(transform_points(bundle.result.T_camera_lidar, point))
+                    if ok[0]:
+                        lines.append(f"Predicted camera pixel: ({uv[0, 0]:.1f}, {uv[0, 1]:.1f}) (cross in the image).")
             if selected is not None:
                 lines.append(f"**Pair {selected} selected:** clicks now move its ends (Deselect to add pairs).")
             if len(complete) < MIN_PAIRS:

@@ -168,6 +168,21 @@ def test_annotate_sample_in_headless_chromium(tmp_path):
             np.testing.assert_allclose(doc["T_camera_lidar"], result.T_camera_lidar, atol=1e-12)
             assert downloaded.read_bytes() == (tmp_path / "extrinsics.yaml").read_bytes()
 
+            # With a calibration, a BA click alone shows where the camera should see that point.
+            extra = simulate_pairs(scene, N_PAIRS + 1, np.random.default_rng(3), pixel_noise_px=0.0)[-1]
+            before = app.state.version
+            click(ba_keys[0], (extra.laser_rc[1], extra.laser_rc[0]))
+            wait_for(lambda: app.state.version > before, "the extra BA click to register")
+            def predicted_text():
+                text = page_text(page)
+                return text if "Predicted camera pixel" in text else None
+
+            text = wait_for(predicted_text, "the predicted camera pixel")
+            m = re.search(r"Predicted camera pixel: \(([-0-9.]+), ([-0-9.]+)\)", text)
+            assert m, text
+            predicted_err_px = float(np.hypot(float(m.group(1)) - extra.pixel[0], float(m.group(2)) - extra.pixel[1]))
+            assert predicted_err_px < 3.0
+
             # A second tab sees the same pairs.
             page2 = browser.new_page(viewport={"width": 1400, "height": 900})
             page2.goto(app.url)
@@ -176,9 +191,18 @@ def test_annotate_sample_in_headless_chromium(tmp_path):
 
             # Screenshot for the README, without transient notifications.
             notes = page.locator(".mantine-Notification-root")
-            for i in range(notes.count()):
-                notes.nth(i).locator("button").click()
-            wait_for(lambda: notes.count() == 0, "notifications to close")
+
+            def close_notifications() -> bool:
+                if notes.count() == 0:
+                    return True
+                try:  # they also close by themselves, so one may vanish under the click
+                    notes.first.locator("button").first.click(timeout=1000)
+                except sync_api.TimeoutError:
+                    pass
+                return notes.count() == 0
+
+            wait_for(close_notifications, "notifications to close")
+            page.get_by_text("Calibration", exact=True).first.evaluate("e => e.scrollIntoView({block: 'start'})")
             SCREENSHOT.parent.mkdir(exist_ok=True)
             page.screenshot(path=str(SCREENSHOT))
             browser.close()
@@ -188,7 +212,8 @@ def test_annotate_sample_in_headless_chromium(tmp_path):
     elapsed = time.monotonic() - t_start
     print(
         f"\ne2e: rotation error {rot_err:.4f} deg, translation error {100 * trans_err:.2f} cm, "
-        f"mean px error after pairs 4..{N_PAIRS}: {mean_px_after}, run time {elapsed:.1f} s"
+        f"mean px error after pairs 4..{N_PAIRS}: {mean_px_after}, predicted pixel of a 9th BA click "
+        f"{predicted_err_px:.2f} px from the truth, run time {elapsed:.1f} s"
     )
     assert len(mean_px_after) == N_PAIRS - 3
     assert rot_err <= 0.5
