@@ -77,23 +77,25 @@ class TrialResult:
     message: str = ""
 
 
-def make_trials(scenes: list[BenchScene], n_values, trials: int) -> list[TrialInput]:
-    """Seeded simulated pairs for every scene, ``n`` and trial index."""
+def make_trials(scenes: list[BenchScene], n_values, trials: int, workers: int = 1) -> list[TrialInput]:
+    """Seeded simulated pairs for every scene, ``n`` and trial index (``workers`` processes)."""
     from calib_core.synthetic import simulate_pairs
 
-    out = []
-    for si, bs in enumerate(scenes):
-        t0 = time.perf_counter()
-        for n in n_values:
-            for k in range(trials):
-                rng = np.random.default_rng([BENCH_SEED, si, n, k])
-                pairs = simulate_pairs(bs.scene, n, rng, pixel_noise_px=PIXEL_NOISE_PX)
-                pts, brg, px = resolve_pairs(pairs, bs.scene.depth, bs.scene.camera)
-                rc = None
-                if all(p.laser_rc is not None for p in pairs):
-                    rc = np.array([p.laser_rc for p in pairs], dtype=np.int64)
-                out.append(TrialInput(si, n, k, pts, brg, px, rc))
-        log(f"  {bs.name}: {len(n_values) * trials} trials simulated in {time.perf_counter() - t0:.1f} s")
+    def one(key):
+        si, n, k = key
+        bs = scenes[si]
+        rng = np.random.default_rng([BENCH_SEED, si, n, k])
+        pairs = simulate_pairs(bs.scene, n, rng, pixel_noise_px=PIXEL_NOISE_PX)
+        pts, brg, px = resolve_pairs(pairs, bs.scene.depth, bs.scene.camera)
+        rc = None
+        if all(p.laser_rc is not None for p in pairs):
+            rc = np.array([p.laser_rc for p in pairs], dtype=np.int64)
+        return TrialInput(si, n, k, pts, brg, px, rc)
+
+    t0 = time.perf_counter()
+    keys = [(si, n, k) for si in range(len(scenes)) for n in n_values for k in range(trials)]
+    out = parallel_map(one, keys, workers)
+    log(f"  {len(out)} trials simulated in {time.perf_counter() - t0:.1f} s ({workers} processes)")
     return out
 
 

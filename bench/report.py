@@ -145,7 +145,7 @@ def plot_fig6_fig7(path6: Path, path7: Path, results: dict, scene, n_values, met
     return True
 
 
-def plot_errors_vs_n(path: Path, results: dict, scene_names, n_values, method="angular") -> bool:
+def plot_errors_vs_n(path: Path, results: dict, scene_names, n_values, method="angular", floor=None) -> bool:
     plt = _plt()
     if plt is None:
         return False
@@ -159,6 +159,9 @@ def plot_errors_vs_n(path: Path, results: dict, scene_names, n_values, method="a
             ax.plot(n_values, y, "o-", ms=3, label=name)
     titles = ("rotation error (deg)", "translation error (cm)", "pixel error vs ground truth (px)")
     targets = (0.1, 1.0, 1.0)
+    if floor and 10 in n_values:
+        for ax, v in zip(axes, (floor["rotation_deg"], 100 * floor["translation_m"], floor["gt_px"])):
+            ax.plot([10], [v], "kx", ms=9, mew=2, label="Cramer-Rao floor, 1 px clicks (sample, n = 10)")
     for ax, t, tg in zip(axes, titles, targets):
         ax.axhline(tg, color="r", lw=1, ls=":", label="target at n = 10")
         ax.set_yscale("log")
@@ -215,7 +218,8 @@ def plot_crb(path: Path, rows) -> bool:
     ax.axhline(1.0, color="k", lw=1)
     ax.set_xticks(x, PARAM_NAMES)
     ax.set_ylabel("empirical sigma / Cramer-Rao sigma")
-    ax.legend(fontsize=8, ncol=2)
+    ax.set_ylim(0, 1.75)
+    ax.legend(fontsize=8, ncol=3, loc="upper center")
     ax.grid(alpha=0.3, axis="y")
     ax.set_title("Cramer-Rao check (n = 10 pairs, sample scene)")
     fig.savefig(path, dpi=110)
