@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 import os
+import queue
 import tempfile
 import threading
 import time
@@ -36,12 +37,12 @@ from calib_core.errors import CalibError
 from calib_core.io.extrinsics import save_extrinsics_yaml
 from calib_core.io.images import load_image_rgb
 from calib_core.overlays import ba_edge_points, colorize_points, export_colored_ply
-from calib_core.pairs import Pair, resolve_pairs, save_pairs_yaml
+from calib_core.pairs import Pair, resolve_pairs
 from calib_core.panorama import Panorama, refine_click_to_corner
 from calib_core.solve import solve_extrinsics
 from calib_core.transforms import invert_T, rpy_deg_from_R, transform_points
 
-from .layout import CAMERA_WIDTH, ImageSlot, annotation_layout, bounds_of
+from .layout import ImageSlot, annotation_layout, bounds_of
 from .live_solver import LiveSolver
 from .state import AnnotationState, Pick
 
@@ -101,10 +102,22 @@ class SolveBundle:
     seconds: float
 
 
-def _load_scan(path: Path):
+class _Action:
+    """A queued viser event plus the widget value at the moment it fired."""
+
+    def __init__(self, event: Any, value: Any) -> None:
+        self.event = event
+        self.value = value
+        self.client = getattr(event, "client", None)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.event, name)
+
+
+def _load_scan(path: Path, options: dict | None):
     from calib_core.io.scan_readers import load_scan
 
-    return load_scan(path)
+    return load_scan(path, **(options or {}))
 
 
 class CalibrationApp:
@@ -126,6 +139,11 @@ class CalibrationApp:
         busy viser takes the next free one; see :attr:`port`.
     title : str, optional
         Page title.
+    scan_options : dict, optional
+        Keyword options of :func:`calib_core.io.scan_readers.load_scan`
+        (``organize``, ``beams``, ...).
+    image_size : (width, height), optional
+        Overrides the camera file's image size (see :func:`calib_core.cameras.load_camera`).
     max_cloud_points : int
         Points shown in the 3-D pane (the PLY export has all of them).
 
@@ -146,6 +164,8 @@ class CalibrationApp:
         host: str = "127.0.0.1",
         port: int = 8080,
         title: str | None = None,
+        scan_options: dict | None = None,
+        image_size: tuple[int, int] | None = None,
         max_cloud_points: int = MAX_CLOUD_POINTS,
     ) -> None:
         self.scan_path, self.image_path, self.camera_path = Path(scan_path), Path(image_path), Path(camera_path)
@@ -156,8 +176,8 @@ class CalibrationApp:
         self.title = title or f"ba-calib: {self.scan_path.name} + {self.image_path.name}"
 
         # -- data (all maths from calib_core) ------------------------------------
-        self.depth = _load_scan(self.scan_path)
-        self.camera = load_camera(self.camera_path)
+        self.depth = _load_scan(self.scan_path, scan_options)
+        self.camera = load_camera(self.camera_path, image_size=image_size)
         self.image = load_image_rgb(self.image_path)
         h, w = self.image.shape[:2]
         if (w, h) != (self.camera.width, self.camera.height):
@@ -213,19 +233,26 @@ class CalibrationApp:
         self._stopped = False
 
         # -- server -------------------------------------------------------------------
+        self._actions: queue.Queue = queue.Queue()
+        self._action_thread = threading.Thread(target=self._run_actions, name="ba-calib-actions", daemon=True)
+        self._action_thread.start()
         self.server = viser.ViserServer(host=host, port=port, label=self.title, verbose=False)
         self.host = host
         self.port = self.server.get_port()
         shown_host = "127.0.0.1" if host in ("0.0.0.0", "") else host
         self.url = f"http://{shown_host}:{self.port}"
-        self._build_scene()
-        self._build_gui()
-        self.server.on_client_connect(self._on_connect)
-        self.server.on_client_disconnect(self._on_disconnect)
-
-        self._solver = LiveSolver(self._solve_job, self._on_solved)
-        self.state.subscribe(self._on_state_change)
-        self._on_state_change(self.state)
+        try:
+            self._build_scene()
+            self._build_gui()
+            self.server.on_client_connect(self._on_connect)
+            self.server.on_client_disconnect(self._on_disconnect)
+            self._solver = LiveSolver(self._solve_job, self._on_solved)
+            self.state.subscribe(self._on_state_change)
+            self._on_state_change(self.state)
+        except BaseException:
+            self._actions.put(None)
+            self.server.stop()
+            raise
 
     # ======================================================================= scene
     def _build_scene(self) -> None:
@@ -344,18 +371,38 @@ class CalibrationApp:
 
     # ================================================================== callbacks
     def _guard(self, fn: Callable) -> Callable:
-        """Wrap a callback: user errors become notifications, nothing escapes."""
+        """Wrap a callback: queue it for the ordered action worker.
 
-        def wrapped(event: Any) -> None:
+        Viser runs plain callbacks on a thread pool, where two quick clicks
+        can be handled out of order (a BA, camera, BA sequence would then pair
+        the wrong ends).  This async wrapper runs on the event loop, in arrival
+        order, and only snapshots the widget value and queues the work.
+        """
+
+        async def enqueue(event: Any) -> None:
+            target = getattr(event, "target", None)
+            value = getattr(target, "value", None) if not isinstance(target, viser.SceneNodeHandle) else None
+            self._actions.put((fn, _Action(event, value)))
+
+        return enqueue
+
+    def _run_actions(self) -> None:
+        """The action worker: applies queued user actions one by one; errors become notifications."""
+        while True:
+            item = self._actions.get()
             try:
-                fn(event)
-            except CalibError as exc:
-                self._notify(getattr(event, "client", None), "Not accepted", str(exc))
-            except Exception as exc:  # never let a click kill anything
-                traceback.print_exc()
-                self._notify(getattr(event, "client", None), "Internal error", f"{type(exc).__name__}: {exc}")
-
-        return wrapped
+                if item is None:
+                    return
+                fn, action = item
+                try:
+                    fn(action)
+                except CalibError as exc:
+                    self._notify(action.client, "Not accepted", str(exc))
+                except Exception as exc:  # never let a click kill anything
+                    traceback.print_exc()
+                    self._notify(action.client, "Internal error", f"{type(exc).__name__}: {exc}")
+            finally:
+                self._actions.task_done()
 
     def _notify(self, client: Any, title: str, body: str, color: str = "red") -> None:
         body = " ".join(str(body).split())
@@ -453,11 +500,11 @@ class CalibrationApp:
     def _on_select_dropdown(self, event: Any) -> None:
         if event.client is None:  # our own update of the widget
             return
-        value = self._dd_selected.value
+        value = str(event.value)
         self.state.select(None if value == "none" else int(value.split()[0].lstrip("#")))
 
     def _on_edit(self, event: Any) -> None:
-        action = self._bg_edit.value
+        action = event.value
         if action == "Undo":
             if not self.state.undo():
                 raise CalibError("nothing to undo")
@@ -494,7 +541,7 @@ class CalibrationApp:
                     self._set_view(clients[cid], mode)
 
     def _on_up_axis(self, event: Any) -> None:
-        self._up_axis = str(self._dd_up.value)
+        self._up_axis = str(event.value)
         self.state.set_view(up_axis=self._up_axis)
         for cid, mode in list(self._client_mode.items()):
             if mode == "3d":
@@ -504,15 +551,15 @@ class CalibrationApp:
 
     def _on_view_mode(self, event: Any) -> None:
         if event.client is not None:
-            self._set_view(event.client, "3d" if self._bg_view.value == "3D cloud" else "all")
+            self._set_view(event.client, "3d" if event.value == "3D cloud" else "all")
 
     def _on_zoom(self, event: Any) -> None:
         if event.client is not None:
-            self._set_view(event.client, {"All": "all", "Camera": "camera", "BA images": "ba"}[self._bg_zoom.value])
+            self._set_view(event.client, {"All": "all", "Camera": "camera", "BA images": "ba"}[event.value])
 
     def _on_upload(self, event: Any) -> None:
-        f = self._upload.value
-        if not f.content:
+        f = event.value
+        if f is None or not f.content:
             raise CalibError(f"{f.name or 'upload'}: the file is empty")
         with tempfile.TemporaryDirectory() as tmp:
             path = Path(tmp) / (Path(f.name).name or "pairs.yaml")
@@ -969,12 +1016,19 @@ class CalibrationApp:
         return None if bundle is None else bundle.result
 
     def wait_idle(self, timeout: float = 30.0) -> bool:
-        """Block until the live solver has nothing queued or running."""
-        return self._solver.wait_idle(timeout)
+        """Block until queued user actions are applied and the live solver is idle."""
+        deadline = time.monotonic() + timeout
+        while self._actions.unfinished_tasks:
+            if time.monotonic() > deadline:
+                return False
+            time.sleep(0.01)
+        return self._solver.wait_idle(max(0.0, deadline - time.monotonic()))
 
     def stop(self) -> None:
         """Stop the solver thread and the server."""
         self._stopped = True
+        self._actions.put(None)
+        self._action_thread.join(timeout=5.0)
         self._solver.stop()
         self.server.stop()
 
@@ -989,6 +1043,8 @@ def serve(
     host: str = "127.0.0.1",
     port: int = 8080,
     title: str | None = None,
+    scan_options: dict | None = None,
+    image_size: tuple[int, int] | None = None,
 ) -> None:
     """Serve the annotation app until Ctrl+C; prints the URL.
 
@@ -996,7 +1052,7 @@ def serve(
     :class:`CalibError` before the server starts.
     """
     app = CalibrationApp(scan_path, image_path, camera_path, session_path=session_path, output_path=output_path,
-                         host=host, port=port, title=title)
+                         host=host, port=port, title=title, scan_options=scan_options, image_size=image_size)
     print(f"ba-calib: open {app.url} in a browser (Ctrl+C to stop)", flush=True)
     print(f"ba-calib: session file {app.session_path}", flush=True)
     if host not in ("127.0.0.1", "localhost", "::1"):

@@ -32,7 +32,6 @@ from pathlib import Path
 from typing import Any, Callable, Sequence
 
 import numpy as np
-import yaml
 
 from calib_core.errors import CalibError
 from calib_core.io.atomic import write_yaml_atomic

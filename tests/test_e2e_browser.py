@@ -127,10 +127,17 @@ def test_annotate_sample_in_headless_chromium(tmp_path):
                 steps = [("ba", ba_keys[k % len(ba_keys)], (col, row)), ("camera", "camera", pair.pixel)]
                 if k % 2:
                     steps.reverse()
-                for kind, target, uv in steps:
+                if k % 2:
+                    # Two quick clicks without waiting: both must land, in order.
                     before = app.state.version
-                    click(target, uv)
-                    wait_for(lambda: app.state.version > before, f"pair {k + 1}: the {kind} click to register")
+                    for _, target, uv in steps:
+                        click(target, uv)
+                    wait_for(lambda: len(app.state.complete_picks()) == k + 1, f"pair {k + 1}: two quick clicks to register")
+                else:
+                    for kind, target, uv in steps:
+                        before = app.state.version
+                        click(target, uv)
+                        wait_for(lambda: app.state.version > before, f"pair {k + 1}: the {kind} click to register")
                 pick = app.state.picks[-1]
                 assert pick.complete and len(app.state.complete_picks()) == k + 1
                 # The click landed where we aimed: the same cell, the same pixel.
