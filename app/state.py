@@ -472,6 +472,12 @@ class AnnotationState:
             pairs = load_pairs_yaml(path)
             picks = []
             for i, p in enumerate(pairs):
+                try:
+                    if p.laser_rc is not None:
+                        self.check_laser_cell(*p.laser_rc)
+                    self.check_pixel(*p.pixel)
+                except CalibError as exc:
+                    raise CalibError(f"{path}: pair {i}: {exc} (pairs from another scene?)") from None
                 picks.append(Pick(i + 1, laser_rc=p.laser_rc, laser_xyz=p.laser_xyz, pixel=p.pixel))
             self._snap = Snapshot(tuple(picks), len(picks) + 1)
             return

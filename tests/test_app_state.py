@@ -202,6 +202,9 @@ def test_session_accepts_a_plain_pairs_file_and_rejects_other_scenes(tmp_path):
     )
     with pytest.raises(CalibError, match="outside the 20x40 scan"):
         make_state(tmp_path)
+    save_pairs_yaml(path, [Pair((4, 5), None, (1.0, 900.0))])
+    with pytest.raises(CalibError, match="outside the 320x240 camera image"):
+        make_state(tmp_path)
 
 
 def test_listeners_hear_every_change():
