@@ -36,7 +36,7 @@ from calib_core.cameras import load_camera
 from calib_core.errors import CalibError
 from calib_core.io.extrinsics import save_extrinsics_yaml
 from calib_core.io.images import load_image_rgb
-from calib_core.overlays import ba_edge_points, colorize_points, export_colored_ply
+from calib_core.overlays import ba_edge_points_consensus, colorize_points, export_colored_ply
 from calib_core.pairs import Pair, resolve_pairs
 from calib_core.panorama import Panorama, refine_click_to_corner
 from calib_core.solve import solve_extrinsics
@@ -194,11 +194,7 @@ class CalibrationApp:
             self.panorama = Panorama.for_camera(self.camera, image_mask=self.image.max(axis=2) > 0, oversample=2.0)
             self.pano_image = self.panorama.render(self.image)
             self.pano_gray = self.pano_image.mean(axis=2).astype(np.uint8)
-        edge_rc = [ba_edge_points(self.ba_rad[k], self.depth)[1] for k in ("horizontal", "vertical") if k in self.ba_rad]
-        rc = np.unique(np.concatenate(edge_rc), axis=0) if edge_rc else np.empty((0, 2), np.int64)
-        if len(rc) > MAX_EDGE_POINTS:
-            rc = rc[np.linspace(0, len(rc) - 1, MAX_EDGE_POINTS).astype(np.int64)]
-        self.edge_points_lidar = self.depth.cell_points(rc) if len(rc) else np.empty((0, 3))
+        self.edge_points_lidar, _ = ba_edge_points_consensus(self.ba_rad, self.depth, max_points=MAX_EDGE_POINTS)
         self.all_points_lidar, _ = self.depth.valid_points()
         stride = max(1, int(math.ceil(len(self.all_points_lidar) / max(1, int(max_cloud_points)))))
         self.cloud_points_lidar = self.all_points_lidar[::stride]

@@ -7,7 +7,7 @@ import os
 import cv2
 import numpy as np
 
-from .bearing_angle import ba_to_uint8
+from .bearing_angle import PREVIOUS_NEIGHBOUR, ba_to_uint8
 from .errors import CalibError
 from .io.atomic import write_bytes_atomic
 from .transforms import transform_points
@@ -62,6 +62,65 @@ def ba_edge_points(
     if max_points is not None and rows.size > max_points:
         keep = np.linspace(0, rows.size - 1, max_points).astype(np.int64)
         rows, cols = rows[keep], cols[keep]
+    return depth.points[rows, cols], np.stack([rows, cols], axis=1).astype(np.int64)
+
+
+def trace_spacing_ok(depth, direction: str, min_spacing_m: float = 0.025) -> np.ndarray:
+    """Cells far enough from their trace neighbour for the BA to mean something.
+
+    The BA compares two ranges a distance ``rho * dphi`` apart; where that is
+    not well above the range noise (about 1 cm for common scanners; 2.5 cm by default), the BA
+    is noise -- near the poles of a rotating scanner, on the ground right
+    under it.  Returns ``(H, W)`` bool: ``range_m * dphi >= min_spacing_m``,
+    with ``dphi`` the true angle to the previous beam of ``direction``.
+    """
+    d_row, d_col = PREVIOUS_NEIGHBOUR[direction]
+    dirs = depth.directions
+    h, w = depth.shape
+    rows = np.arange(h) + d_row
+    cols = np.arange(w) + d_col
+    if depth.meta.get("wrap_cols", False):
+        cols = cols % w
+    r_ok, c_ok = (rows >= 0) & (rows < h), (cols >= 0) & (cols < w)
+    prev = dirs[np.clip(rows, 0, h - 1)][:, np.clip(cols, 0, w - 1)]
+    with np.errstate(invalid="ignore"):
+        dphi = np.arccos(np.clip(np.einsum("ijk,ijk->ij", dirs, prev), -1.0, 1.0))
+        ok = depth.range_m * dphi >= min_spacing_m
+    return ok & r_ok[:, None] & c_ok[None, :]
+
+
+def ba_edge_points_consensus(
+    ba_images: dict[str, np.ndarray], depth, min_votes: int = 2, max_points: int | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """BA-edge points confirmed by several BA directions.
+
+    Range noise makes spurious edges that differ from one direction to the
+    next, while a plane intersection shows in most of them.  A cell is kept
+    when it is an edge (:func:`ba_edge_points`) of some direction whose beam
+    spacing there is sound (:func:`trace_spacing_ok`) and at least
+    ``min_votes`` directions have an edge within one cell of it.
+
+    Returns
+    -------
+    points_lidar : (M, 3) float64
+    rows_cols : (M, 2) int64
+    """
+    h, w = depth.shape
+    kernel = np.ones((3, 3), np.uint8)
+    maps = {}
+    for name, ba in ba_images.items():
+        m = np.zeros((h, w), np.uint8)
+        _, rc = ba_edge_points(ba, depth)
+        m[rc[:, 0], rc[:, 1]] = 1
+        maps[name] = m & trace_spacing_ok(depth, name)
+    if not maps:
+        return np.empty((0, 3)), np.empty((0, 2), dtype=np.int64)
+    votes = sum(cv2.dilate(m, kernel) for m in maps.values())
+    keep = np.logical_or.reduce([m > 0 for m in maps.values()]) & (votes >= min_votes)
+    rows, cols = np.nonzero(keep)
+    if max_points is not None and rows.size > max_points:
+        pick = np.linspace(0, rows.size - 1, max_points).astype(np.int64)
+        rows, cols = rows[pick], cols[pick]
     return depth.points[rows, cols], np.stack([rows, cols], axis=1).astype(np.int64)
 
 

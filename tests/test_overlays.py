@@ -97,3 +97,59 @@ def test_ply_round_trip(tmp_path):
     cloud = trimesh.load(path)
     np.testing.assert_allclose(cloud.vertices, pts[:2])
     np.testing.assert_array_equal(cloud.colors[:, :3], [[255, 0, 0], [128, 128, 128]])
+
+
+def _box_room_depth(noise_m=0.0, seed=0):
+    """A 6 x 4 x 3 m room around a sensor at (0.5, -0.3, 0.2), ranges cast by hand."""
+    from calib_core.lidar.spherical import spherical_depth
+
+    el = np.radians(np.arange(60, -60, -1.0))
+    az = np.radians(np.arange(-180, 180, 0.5))
+    E, A = np.meshgrid(el, az, indexing="ij")
+    d = np.stack([np.cos(E) * np.cos(A), np.cos(E) * np.sin(A), np.sin(E)], axis=-1)
+    origin = np.array([0.5, -0.3, 0.2])
+    lo, hi = np.array([-3.0, -2.0, -1.5]), np.array([3.0, 2.0, 1.5])
+    with np.errstate(divide="ignore"):
+        t = np.where(d > 0, (hi - origin) / d, (lo - origin) / d)
+    rng_m = np.min(np.where(np.isfinite(t) & (t > 0), t, np.inf), axis=-1)
+    rng_m = rng_m + np.random.default_rng(seed).normal(0, noise_m, rng_m.shape)
+    return spherical_depth(rng_m, el, az, wrap_cols=True), origin, lo, hi
+
+
+def _distance_to_box_edges(points, lo, hi):
+    """Distance of each point to the nearest of the box's 12 edges (points on the box surface)."""
+    # On an edge two coordinates sit on a bound; the distance is over those two.
+    dist_to_bound = np.minimum(np.abs(points - lo), np.abs(points - hi))
+    two_smallest = np.sort(dist_to_bound, axis=1)[:, :2]
+    return np.linalg.norm(two_smallest, axis=1)
+
+
+def test_ba_edges_lie_on_the_rooms_edges():
+    from calib_core.bearing_angle import bearing_angle_images
+    from calib_core.overlays import ba_edge_points_consensus
+
+    depth, origin, lo, hi = _box_room_depth(noise_m=0.003)
+    pts_sensor, rc = ba_edge_points_consensus(bearing_angle_images(depth), depth)
+    assert len(pts_sensor) > 500
+    pts_world = pts_sensor + origin
+    near = _distance_to_box_edges(pts_world, lo, hi) < 0.15
+    all_points, _ = depth.valid_points()
+    baseline = (_distance_to_box_edges(all_points + origin, lo, hi) < 0.15).mean()
+    assert baseline < 0.15, "the test room must not be all edges"
+    assert near.mean() > 0.9, f"only {near.mean():.0%} of the edge points lie near a wall intersection"
+    # Edges are found at every vertical corner of the room, not only one.
+    for cx, cy in [(lo[0], lo[1]), (lo[0], hi[1]), (hi[0], lo[1]), (hi[0], hi[1])]:
+        assert (np.hypot(pts_world[:, 0] - cx, pts_world[:, 1] - cy) < 0.15).sum() > 5
+    np.testing.assert_array_equal(depth.points[rc[:, 0], rc[:, 1]], pts_sensor)
+
+
+def test_no_edges_where_beams_are_closer_than_the_noise():
+    from calib_core.overlays import trace_spacing_ok
+
+    depth, _, _, _ = _box_room_depth()
+    ok = trace_spacing_ok(depth, "horizontal", min_spacing_m=0.025)
+    # Horizontal neighbours are 0.5 deg apart times cos(elevation): at 60 deg
+    # elevation and under 2.86 m range they are closer than 2.5 cm.
+    spacing = depth.range_m * np.radians(0.5) * np.cos(np.radians(np.arange(60, -60, -1.0)))[:, None]
+    np.testing.assert_array_equal(ok[:, 1:], (spacing >= 0.025)[:, 1:])
+    assert not ok[:, 0].any() or depth.meta.get("wrap_cols")
