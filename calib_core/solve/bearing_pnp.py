@@ -417,6 +417,10 @@ def _triples(bearings: np.ndarray, rng: np.random.Generator, max_random: int = 2
     return np.unique(np.array(tri), axis=0)
 
 
+#: Quan & Lan's pose is kept without a P3P search when its RMS angular error is below this.
+QUAN_LAN_ACCEPT_RMS_RAD = np.radians(2.0)
+
+
 def initial_pose(
     points_lidar: np.ndarray, bearings_camera: np.ndarray, seed: int = 0
 ) -> tuple[np.ndarray, str, float]:
@@ -445,6 +449,12 @@ def initial_pose(
     methods: list[str] = []
     T_ql = quan_lan_pose(points_lidar, bearings_camera, seed=seed)
     if T_ql is not None:
+        errors = angular_errors_rad(T_ql[None], points_lidar, bearings_camera)[0]
+        # Clicks are good to a fraction of a degree: an initial pose that fits every
+        # pair to within a few degrees is in LM's basin, and the P3P search (the
+        # larger share of the solve time) adds nothing.
+        if np.sqrt(np.mean(errors**2)) < QUAN_LAN_ACCEPT_RMS_RAD:
+            return T_ql, "quan_lan", float(0.5 * np.sum(errors**2))
         candidates.append(T_ql[None])
         methods.append("quan_lan")
     tri = _triples(bearings_camera, rng)
