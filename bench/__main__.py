@@ -100,6 +100,11 @@ def main(argv=None) -> int:
         log(f"  {s.name}: {len(s.scene.corners_lidar)} corners in the pinhole view")
     pin_trials = compare.make_pinhole_trials(pin_scenes, compare_n, trials)
     pin_res, _ = compare.run_pinhole(pin_scenes, pin_trials, workers=args.workers)
+    log("solve times per method, interleaved in one process ...")
+    per_n = 6 if quick else 12
+    omni_times = compare.interleaved_times(scenes, [t for t in trials_in if t.n in compare_n], ("angular", "pixel"),
+                                           per_n)
+    pin_times = compare.interleaved_times(pin_scenes, pin_trials, ("angular", "pixel", "opencv"), per_n)
 
     # ---------------------------------------------------------- speed
     log("speed ...")
@@ -158,14 +163,16 @@ def main(argv=None) -> int:
     log("plots ...")
     have_plots = report.plot_fig6_fig7(perf / "fig6_translation.png", perf / "fig7_rotation.png", omni_res, scenes[0].scene, n_values)
     report.plot_errors_vs_n(perf / "errors_vs_n.png", omni_res, names, n_values, floor=pure.floor)
-    report.plot_compare(perf / "compare.png", omni_res, range(len(scenes)), pin_res, range(len(pin_scenes)), compare_n)
+    report.plot_compare(perf / "compare.png", omni_res, range(len(scenes)), pin_res, range(len(pin_scenes)), compare_n,
+                        omni_times, pin_times)
     report.plot_crb(perf / "crb.png", crb_rows)
 
     # ---------------------------------------------------------- markdown
     run_s = time.perf_counter() - t_start
     md = _markdown(
         quick=quick, scenes=scenes, pin_scenes=pin_scenes, n_values=n_values, trials=trials, omni_res=omni_res,
-        pin_res=pin_res, crb_rows=crb_rows, crb_sets=crb_sets, crb_draws=crb_draws, sp=sp, targets=targets,
+        pin_res=pin_res, omni_times=omni_times, pin_times=pin_times, per_n=per_n, compare_n=compare_n,
+        crb_rows=crb_rows, crb_sets=crb_sets, crb_draws=crb_draws, sp=sp, targets=targets,
         profiles=profiles, have_plots=have_plots, run_s=run_s, cv2_version=cv2.__version__, cores=os.cpu_count(),
         load=(load_start, os.getloadavg()[0]),
     )
@@ -185,7 +192,8 @@ def _targets_table(targets) -> str:
     return "\n".join(lines)
 
 
-def _markdown(*, quick, scenes, pin_scenes, n_values, trials, omni_res, pin_res, crb_rows, crb_sets, crb_draws, sp,
+def _markdown(*, quick, scenes, pin_scenes, n_values, trials, omni_res, pin_res, omni_times, pin_times, per_n,
+              compare_n, crb_rows, crb_sets, crb_draws, sp,
               targets, profiles, have_plots, run_s, cv2_version, cores, load) -> str:
     from . import report
     from .accuracy import RANGE_NOISE_M
@@ -296,16 +304,20 @@ def _markdown(*, quick, scenes, pin_scenes, n_values, trials, omni_res, pin_res,
       f"only on a **pinhole variant** of every scene: a {PINHOLE_SIZE[0]}x{PINHOLE_SIZE[1]} undistorted pinhole, "
       f"f = {PINHOLE_F_PX:.0f} px, at the scene's true pose (same centre and axes as the OCam camera), with the same "
       "scan and laser picks; pairs are the scene corners that project inside its image, clicked with 1 px noise "
-      "(`simulate_pairs` on that camera). OpenCV: `solvePnP(SOLVEPNP_SQPNP)` then `solvePnPRefineLM`. Times: "
-      "median per solve; `solve_extrinsics` also computes the covariance and the residuals, OpenCV does not.\n")
+      "(`simulate_pairs` on that camera). OpenCV: `solvePnP(SOLVEPNP_SQPNP)` then `solvePnPRefineLM`. "
+      "`solve_extrinsics` also computes the covariance, the residuals and an outlier check, OpenCV does not; "
+      "the pixel cost runs the angular LM first and continues from its optimum.\n")
     a("Corners in the pinhole view: " + ", ".join(f"{s.name}: {len(s.scene.corners_lidar)}" for s in pin_scenes) + ".\n")
+    a(f"Accuracy: n = {', '.join(map(str, compare_n))}, {trials} trials per scene and n. Time per solve: the "
+      "trials above run in parallel processes on a shared machine, so for a fair comparison the times are "
+      f"medians of a re-run of {per_n} trials per n in one process, every method in turn on the same trial.\n")
     for n in (6, 10, 20):
-        if n not in n_values:
+        if n not in compare_n:
             continue
         a(f"### n = {n}, omnidirectional camera, all scenes\n")
-        a(report.compare_table(omni_res, idx_all, n, ("angular", "pixel")) + "\n")
+        a(report.compare_table(omni_res, idx_all, n, ("angular", "pixel"), omni_times) + "\n")
         a(f"### n = {n}, pinhole variant, all scenes\n")
-        a(report.compare_table(pin_res, idx_all, n, ("angular", "pixel", "opencv")) + "\n")
+        a(report.compare_table(pin_res, idx_all, n, ("angular", "pixel", "opencv"), pin_times) + "\n")
     a(img("compare.png", "comparison vs n"))
 
     a("## Speed of the live steps\n")
@@ -334,7 +346,9 @@ def _markdown(*, quick, scenes, pin_scenes, n_values, trials, omni_res, pin_res,
     a("")
     if profiles:
         a("## Profiles of the missed speed targets\n")
-        a("cProfile, functions sorted by own time, per call of the step.\n")
+        a("cProfile (which adds overhead), times per call of the step. The click is profiled on the calling "
+          "thread only (cProfile does not follow the live solver's worker thread, whose waiting shows as lock "
+          "acquire time); the worker's main step, recolouring the display cloud, is profiled separately.\n")
         for label, text in profiles.items():
             a(f"### {label}\n")
             a(text + "\n")

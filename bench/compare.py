@@ -118,3 +118,26 @@ def run_pinhole(pin_scenes: list[BenchScene], trials_in: list[TrialInput], metho
             results.setdefault((tr.scene_index, tr.n, method), []).append(r)
         log(f"  pinhole, {method}: {len(trials_in)} solves in {time.perf_counter() - t0:.1f} s ({workers} processes)")
     return results, {k: summarize(v, k[1]) for k, v in results.items()}
+
+
+def interleaved_times(scenes: list[BenchScene], trials_in: list[TrialInput], methods, per_n: int = 12,
+                      pinhole: bool = False) -> dict:
+    """Median solve time per ``(n, method)``, measured fairly.
+
+    The accuracy runs use several processes on a shared machine, so their
+    times are not comparable between methods.  Here a few trials per ``n``
+    are solved again in one process, every method in turn on the same trial,
+    so that load changes hit all methods alike.
+    """
+    from .accuracy import solve_trial
+
+    per_scene = max(1, -(-per_n // len(scenes)))
+    times: dict = {}
+    for tr in trials_in:
+        if tr.trial >= per_scene:
+            continue
+        bs = scenes[tr.scene_index]
+        for m in methods:
+            r = solve_opencv(bs, tr) if m == "opencv" else solve_trial(bs, tr, m)
+            times.setdefault((tr.n, m), []).append(r.time_s)
+    return {k: float(np.median(v)) for k, v in times.items()}

@@ -66,14 +66,17 @@ def error_vs_n_table(results: dict, scene_indices, n_values, method: str) -> str
     return "\n".join(lines)
 
 
-def compare_table(results: dict, scene_indices, n: int, methods) -> str:
+def compare_table(results: dict, scene_indices, n: int, methods, times: dict | None = None) -> str:
+    """Accuracy of each method at ``n``; ``times`` ((n, method) -> s) replaces the trial-run time."""
     lines = [
         "| method | trials | failed | rotation error mean / p95 (deg) | translation error mean / p95 (cm) | "
-        "pixel error vs truth (px) | residual at pairs (px) | time (median) |",
+        "pixel error vs truth (px) | residual at pairs (px) | time per solve (median) |",
         "|---|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for m in methods:
         s = pooled(results, scene_indices, n, m)
+        if times and (n, m) in times:
+            s.time_median_s = times[(n, m)]
         lines.append(
             f"| {METHOD_NAMES[m]} | {s.trials} | {s.failures} | {f(s.rot_err_mean, 4)} / {f(s.rot_err_p95, 4)} | "
             f"{f(100 * s.trans_err_mean, 3)} / {f(100 * s.trans_err_p95, 3)} | {f(s.gt_px_mean, 3)} | "
@@ -175,14 +178,15 @@ def plot_errors_vs_n(path: Path, results: dict, scene_names, n_values, method="a
     return True
 
 
-def plot_compare(path: Path, omni: dict, omni_idx, pin: dict, pin_idx, n_values) -> bool:
+def plot_compare(path: Path, omni: dict, omni_idx, pin: dict, pin_idx, n_values, omni_times=None,
+                 pin_times=None) -> bool:
     plt = _plt()
     if plt is None:
         return False
     fig, axes = plt.subplots(2, 3, figsize=(13, 7), constrained_layout=True)
-    for row, (res, idx, methods, cam) in enumerate(
-        ((omni, omni_idx, ("angular", "pixel"), "omnidirectional (OCam) camera"),
-         (pin, pin_idx, ("angular", "pixel", "opencv"), "pinhole variant"))
+    for row, (res, idx, methods, cam, times) in enumerate(
+        ((omni, omni_idx, ("angular", "pixel"), "omnidirectional (OCam) camera", omni_times),
+         (pin, pin_idx, ("angular", "pixel", "opencv"), "pinhole variant", pin_times))
     ):
         for m in methods:
             ns = [n for n in n_values if any((si, n, m) in res for si in idx)]
@@ -190,7 +194,8 @@ def plot_compare(path: Path, omni: dict, omni_idx, pin: dict, pin_idx, n_values)
             kw = dict(color=METHOD_COLORS[m], label=METHOD_NAMES[m], ms=3)
             axes[row, 0].plot(ns, [s.rot_err_mean for s in sums], "o-", **kw)
             axes[row, 1].plot(ns, [100 * s.trans_err_mean for s in sums], "o-", **kw)
-            axes[row, 2].plot(ns, [1e3 * s.time_median_s for s in sums], "o-", **kw)
+            t = [times.get((n, m), np.nan) if times else s.time_median_s for n, s in zip(ns, sums)]
+            axes[row, 2].plot(ns, 1e3 * np.asarray(t), "o-", **kw)
         for col, t in enumerate(("rotation error (deg)", "translation error (cm)", "time per solve (ms)")):
             ax = axes[row, col]
             ax.set_yscale("log")
