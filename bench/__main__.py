@@ -1,7 +1,8 @@
 """``python -m bench``: run every benchmark and write docs/performance.md + docs/perf/*.png.
 
 Options: ``--quick`` (fewer trials and repeats, a smoke run), ``--out DIR``
-(where performance.md and perf/ go; default docs/), ``--seeds`` (extra
+(where performance.md and perf/ go; default docs/, or bench/out/quick/ with
+``--quick`` so a smoke run never overwrites the reference report), ``--seeds`` (extra
 generated scenes besides the committed sample; generated once and cached in
 bench/out/).
 """
@@ -48,7 +49,8 @@ def _status(ok: bool) -> str:
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m bench", description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true", help="fewer trials and repeats (smoke run, about a minute)")
-    p.add_argument("--out", type=Path, default=REPO / "docs", help="output folder (default: docs/)")
+    p.add_argument("--out", type=Path, default=None,
+                   help="output folder (default: docs/; with --quick: bench/out/quick/, git-ignored)")
     p.add_argument("--seeds", type=int, nargs="*", default=None,
                    help="extra generated scenes (default: 1 2 3; --quick: 1)")
     p.add_argument("--workers", type=int, default=2,
@@ -69,7 +71,7 @@ def main(argv=None) -> int:
     trials = 8 if quick else 50
     n_values = (4, 6, 8, 10, 14, 20) if quick else accuracy.N_VALUES
     crb_sets, crb_draws = (2, 40) if quick else (5, 100)
-    out = args.out.resolve()
+    out = (args.out or (REPO / "bench" / "out" / "quick" if quick else REPO / "docs")).resolve()
     perf = out / "perf"
     perf.mkdir(parents=True, exist_ok=True)
 
