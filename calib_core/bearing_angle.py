@@ -315,35 +315,40 @@ def ba_to_uint8(ba_rad) -> np.ndarray:
     return np.nan_to_num(gray, nan=0.0).astype(np.uint8)
 
 
-def ba_to_display(ba_rad, low_percentile: float = 1.0, high_percentile: float = 99.0) -> np.ndarray:
-    """Contrast-stretched gray levels of a BA image for the UI.
+def ba_to_display(ba_rad, min_gray: int = 32, bins: int = 1024) -> np.ndarray:
+    """Gray levels of a BA image for the UI, by histogram equalisation.
 
-    Angles between the ``low_percentile`` and ``high_percentile`` of the
-    valid pixels are stretched linearly over 1..255; 0 is kept for invalid
-    pixels, so holes stay black.
+    A linear 0..pi mapping wastes the gray range: in a road scene a third of
+    the cells (the ground) share one angle and wash out to white or black.
+    Ranking the valid cells instead spreads them evenly over
+    ``min_gray..255``, so kerbs and fences stand out, while gray 0 stays
+    reserved for cells without a return -- holes never look like dark ground.
 
     Parameters
     ----------
     ba_rad : (H, W) array_like
         Bearing angles in radians, NaN where invalid.
-    low_percentile, high_percentile : float
-        Percentiles (0..100) mapped to gray 1 and 255.
+    min_gray : int
+        Gray level of the smallest valid angle (1..254).
+    bins : int
+        Angle bins of the equalisation over 0..pi.
 
     Returns
     -------
     (H, W) uint8
+        Monotone in the angle over valid cells; 0 where invalid.
     """
-    if not 0.0 <= low_percentile < high_percentile <= 100.0:
-        raise CalibError(f"need 0 <= low_percentile < high_percentile <= 100, got {low_percentile}, {high_percentile}")
+    if not 1 <= int(min_gray) <= 254:
+        raise CalibError(f"min_gray must be within 1..254, got {min_gray}")
     ba = np.asarray(ba_rad, dtype=np.float32)
     finite = np.isfinite(ba)
     gray = np.zeros(ba.shape, dtype=np.uint8)
     if not finite.any():
         return gray
-    low, high = np.percentile(ba[finite], [low_percentile, high_percentile])
-    if high <= low:
-        gray[finite] = 128
-        return gray
-    scaled = (ba[finite] - np.float32(low)) * np.float32(254.0 / (high - low))
-    gray[finite] = 1 + np.rint(np.clip(scaled, 0.0, 254.0)).astype(np.uint8)
+    idx = np.clip((ba[finite] * np.float32(bins / np.pi)).astype(np.int64), 0, bins - 1)
+    counts = np.bincount(idx, minlength=bins)
+    # Mid-rank of each bin, so a flat image lands in the middle of the range.
+    cdf = (np.cumsum(counts) - 0.5 * counts) / idx.size
+    lut = np.rint(min_gray + (255 - min_gray) * cdf).astype(np.uint8)
+    gray[finite] = lut[idx]
     return gray

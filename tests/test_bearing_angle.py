@@ -319,17 +319,23 @@ def test_ba_to_uint8():
     assert ba_to_uint8(ba).dtype == np.uint8
 
 
-def test_ba_to_display_stretches_valid_pixels_only():
+def test_ba_to_display_equalises_valid_pixels_only():
     ba = np.full((10, 10), np.nan, dtype=np.float32)
-    ba[:, :5] = np.linspace(1.0, 1.2, 50).reshape(10, 5)
-    gray = ba_to_display(ba, 0.0, 100.0)
+    # 40 cells share one angle (like a road surface), 10 spread above it.
+    ba[:8, :5] = 1.0
+    ba[8:, :5] = np.linspace(2.0, 3.0, 10).reshape(2, 5)
+    gray = ba_to_display(ba)
     assert gray.dtype == np.uint8
-    assert (gray[:, 5:] == 0).all()
+    assert (gray[:, 5:] == 0).all(), "no-return cells stay black"
     valid = gray[:, :5].ravel()
-    assert valid.min() == 1 and valid.max() == 255
-    assert np.all(np.diff(valid.astype(int)) >= 0)  # order kept
+    assert valid.min() >= 32, "valid cells never look like holes"
+    # Ranks: the shared angle sits at its mid-rank 20/50, the rest spread above it.
+    assert abs(int(gray[0, 0]) - (32 + 223 * 0.4)) <= 1
+    spread = gray[8:, :5].ravel()
+    assert np.all(np.diff(spread.astype(int)) > 0) and spread.max() >= 250
     # A flat image maps to mid-gray; an empty one to black.
-    assert set(np.unique(ba_to_display(np.where(np.isnan(ba), np.nan, 1.0)))) == {0, 128}
+    flat = ba_to_display(np.where(np.isnan(ba), np.nan, 1.0))
+    assert set(np.unique(flat)) == {0, int(np.rint(32 + 223 * 0.5))}
     assert not ba_to_display(np.full((2, 2), np.nan)).any()
     with pytest.raises(CalibError):
-        ba_to_display(ba, 50.0, 10.0)
+        ba_to_display(ba, min_gray=0)
