@@ -211,6 +211,12 @@ def cmd_serve(args: argparse.Namespace) -> int:
     return 0
 
 
+def _version() -> str:
+    from calib_core import __version__
+
+    return __version__
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="ba-calib",
@@ -218,6 +224,7 @@ def build_parser() -> argparse.ArgumentParser:
         "With no command, serves the bundled sample scene at http://127.0.0.1:8080.",
     )
     parser.add_argument("--debug", action="store_true", help="show tracebacks of internal errors")
+    parser.add_argument("--version", action="version", version=f"ba-calib {_version()}")
     sub = parser.add_subparsers(dest="command")
 
     p = sub.add_parser("serve", help="open the browser app on a scene")

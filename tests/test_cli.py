@@ -125,3 +125,10 @@ def test_pairs_with_cells_need_a_scan(tmp_path):
         "-o", str(tmp_path / "e.yaml"),
     )
     assert_one_line_error(proc, "--scan")
+
+
+def test_version_is_the_package_version():
+    from calib_core import __version__
+
+    proc = run_cli("--version")
+    assert proc.returncode == 0 and proc.stdout.strip() == f"ba-calib {__version__}"
