@@ -33,14 +33,14 @@ from .checks import (
 from .refine import (
     PARAMETER_NAMES,
     PoseUncertainty,
-    angular_jacobian,
+    angular_at_pose,
+    bearing_frames,
     covariance_from_jacobian,
-    log_map_residuals,
     pixel_jacobian,
     pixel_residuals,
     pose_covariance,
+    refine_angular,
     refine_pose,
-    tangent_basis,
 )
 
 __all__ = [
@@ -128,7 +128,9 @@ def _pixel_errors(camera: Any, T: np.ndarray, points_lidar: np.ndarray, pixels: 
     return np.where(np.asarray(valid, dtype=bool) & np.isfinite(err), err, np.nan)
 
 
-def _find_outliers(T: np.ndarray, points: np.ndarray, bearings: np.ndarray, residual_deg: np.ndarray) -> list[int]:
+def _find_outliers(
+    T: np.ndarray, points: np.ndarray, bearings: np.ndarray, residual_deg: np.ndarray, frames: np.ndarray
+) -> list[int]:
     """Outlying pairs, robust to the pull a bad pair has on the least-squares fit.
 
     A bad click drags the fit, so good pairs near it get large residuals too.
@@ -147,7 +149,7 @@ def _find_outliers(T: np.ndarray, points: np.ndarray, bearings: np.ndarray, resi
             break
         keep[max(flagged, key=lambda i: r[i])] = False
         try:
-            T, _ = refine_pose(T, points[keep], bearings[keep], cost="angular")
+            T, _ = refine_angular(T, points[keep], frames[keep])
         except CalibError:
             break
         r = np.degrees(angular_errors_rad(T, points, bearings))
@@ -228,23 +230,22 @@ def solve_extrinsics(
             raise CalibError("no initial pose found from these pairs (all closed-form solutions failed)")
 
     # 2. Refinement: always on the angle; the pixel cost continues from there.
-    T, iterations = refine_pose(T_init, points, bearings, cost="angular")
+    frames = bearing_frames(bearings)  # tangent bases, computed once per solve
+    T, iterations = refine_angular(T_init, points, frames)
     if cost == "pixel":
         T, more = refine_pose(T, points, bearings, cost="pixel", camera=camera, pixels=pixels)
         iterations += more
 
     # 3. Covariance at the optimum (parameters: delta about R_hat, t).
-    x_opt = np.concatenate([np.zeros(3), T[:3, 3]])
     dof = 2 * n - 6
+    J, r, angle_rad = angular_at_pose(T, points, frames)
     if cost == "angular":
-        E = tangent_basis(bearings)
-        J = angular_jacobian(x_opt, T[:3, :3], points, bearings, E)
         if noise_rad is not None:
             sigma = float(noise_rad)
         else:
-            r = log_map_residuals(points @ T[:3, :3].T + T[:3, 3], bearings, E)
             sigma = float(np.sqrt(np.sum(r**2) / dof))
     else:
+        x_opt = np.concatenate([np.zeros(3), T[:3, 3]])
         J = pixel_jacobian(x_opt, T[:3, :3], points, pixels, camera)
         r = pixel_residuals(x_opt, T[:3, :3], points, pixels, camera)
         sigma = float(np.sqrt(np.nansum(r**2) / dof))
@@ -255,8 +256,8 @@ def solve_extrinsics(
     if weak:
         warnings.append(weak)
 
-    # 4. Report.
-    residual_deg = np.degrees(angular_errors_rad(T, points, bearings))
+    # 4. Report.  The log map's norm is the geodesic angle (atan2 form, as angular_errors_rad).
+    residual_deg = np.degrees(angle_rad)
     if camera is not None and pixels is not None:
         residual_px = _pixel_errors(camera, T, points, pixels)
         off = np.nonzero(~np.isfinite(residual_px))[0]
@@ -268,7 +269,7 @@ def solve_extrinsics(
         residual_px = np.full(n, np.nan)
     mean_deg, std_deg = _mean_std(residual_deg)
     mean_px, std_px = _mean_std(residual_px)
-    outliers = _find_outliers(T, points, bearings, residual_deg)
+    outliers = _find_outliers(T, points, bearings, residual_deg, frames)
     if outliers:
         worst = ", ".join(f"{residual_deg[i]:.2f}" for i in outliers[:5])
         warnings.append(f"pairs {outliers} have large residuals ({worst} deg); check these clicks")

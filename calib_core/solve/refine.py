@@ -22,11 +22,11 @@ reported in these coordinates at the optimum (``R0 = R_hat``, ``delta = 0``).
 
 from __future__ import annotations
 
+import math
 from typing import Any, Callable, NamedTuple
 
 import numpy as np
 from scipy.optimize import least_squares
-from scipy.spatial.transform import Rotation
 
 from ..errors import CalibError
 
@@ -39,6 +39,9 @@ __all__ = [
     "pixel_residuals",
     "pixel_jacobian",
     "refine_pose",
+    "refine_angular",
+    "angular_at_pose",
+    "bearing_frames",
     "rpy_jacobian",
     "pose_covariance",
     "covariance_from_jacobian",
@@ -61,28 +64,54 @@ _UNPROJECTABLE_PX = 1e4
 
 
 def _skew(v: np.ndarray) -> np.ndarray:
-    """``[v]_x`` for (..., 3) vectors."""
-    z = np.zeros(v.shape[:-1])
-    return np.stack(
+    """``[v]_x`` of one 3-vector (one small array, no stacking)."""
+    x, y, z = float(v[0]), float(v[1]), float(v[2])
+    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+
+
+def _so3_matrix(phi: np.ndarray, a: float, b: float, d: float) -> np.ndarray:
+    """``d I + a [phi]_x + b phi phi^T`` built from Python floats in one array call
+    (numpy's per-call overhead dominates for one 3x3 matrix)."""
+    x, y, z = float(phi[0]), float(phi[1]), float(phi[2])
+    bx, by, bz = b * x, b * y, b * z
+    return np.array(
         [
-            np.stack([z, -v[..., 2], v[..., 1]], axis=-1),
-            np.stack([v[..., 2], z, -v[..., 0]], axis=-1),
-            np.stack([-v[..., 1], v[..., 0], z], axis=-1),
-        ],
-        axis=-2,
+            [d + bx * x, bx * y - a * z, bx * z + a * y],
+            [bx * y + a * z, d + by * y, by * z - a * x],
+            [bx * z - a * y, by * z + a * x, d + bz * z],
+        ]
     )
 
 
-def _left_jacobian_so3(phi: np.ndarray) -> np.ndarray:
-    """``J_l(phi)`` with ``exp([phi + dphi]) = exp([J_l dphi]) exp([phi])`` to first order."""
-    theta = float(np.linalg.norm(phi))
-    K = _skew(phi)
-    if theta < 1e-4:
-        a, b = 0.5 - theta**2 / 24, 1.0 / 6 - theta**2 / 120
+def _rotation_matrix(phi: np.ndarray) -> np.ndarray:
+    """``exp([phi]_x)`` by Rodrigues' formula, ``cos I + (sin/theta) [phi]_x + ((1 - cos)/theta^2) phi phi^T``.
+
+    Plain arithmetic: scipy's ``Rotation.from_rotvec`` costs more than the
+    rest of a residual evaluation for a few pairs.
+    """
+    theta2 = float(phi[0]) ** 2 + float(phi[1]) ** 2 + float(phi[2]) ** 2
+    if theta2 < 1e-8:  # theta < 1e-4: Taylor series, exact to float rounding
+        cos, a, b = 1.0 - theta2 / 2 + theta2**2 / 24, 1.0 - theta2 / 6, 0.5 - theta2 / 24
     else:
-        a = (1 - np.cos(theta)) / theta**2
-        b = (theta - np.sin(theta)) / theta**3
-    return np.eye(3) + a * K + b * (K @ K)
+        theta = math.sqrt(theta2)
+        cos = math.cos(theta)
+        a, b = math.sin(theta) / theta, (1.0 - cos) / theta2
+    return _so3_matrix(phi, a, b, cos)
+
+
+def _left_jacobian_so3(phi: np.ndarray) -> np.ndarray:
+    """``J_l(phi)`` with ``exp([phi + dphi]) = exp([J_l dphi]) exp([phi])`` to first order.
+
+    ``I + a K + b K^2`` with ``K = [phi]_x`` and ``K^2 = phi phi^T - theta^2 I``.
+    """
+    theta2 = float(phi[0]) ** 2 + float(phi[1]) ** 2 + float(phi[2]) ** 2
+    if theta2 < 1e-8:
+        a, b = 0.5 - theta2 / 24, 1.0 / 6 - theta2 / 120
+    else:
+        theta = math.sqrt(theta2)
+        a = (1 - math.cos(theta)) / theta2
+        b = (theta - math.sin(theta)) / (theta2 * theta)
+    return _so3_matrix(phi, a, b, 1.0 - b * theta2)
 
 
 def tangent_basis(bearings_camera: np.ndarray) -> np.ndarray:
@@ -107,19 +136,78 @@ def tangent_basis(bearings_camera: np.ndarray) -> np.ndarray:
     return np.stack([e1, e2], axis=1)
 
 
-def _log_map_parts(points_camera: np.ndarray, bearings_camera: np.ndarray, E: np.ndarray):
-    norm = np.linalg.norm(points_camera, axis=1, keepdims=True)
-    q = points_camera / np.where(norm > 0, norm, 1.0)
-    w = np.einsum("nij,nj->ni", E, q)  # components of q in the tangent plane
-    s = np.linalg.norm(w, axis=1)
-    c = np.sum(bearings_camera * q, axis=1)
-    theta = np.arctan2(s, c)
+def bearing_frames(bearings_camera: np.ndarray, E: np.ndarray | None = None) -> np.ndarray:
+    """Per-bearing orthonormal frames, rows ``e1, e2, b``.
+
+    Parameters
+    ----------
+    bearings_camera : (N, 3) ndarray
+        Unit bearings, camera frame.
+    E : (N, 2, 3) ndarray, optional
+        Their :func:`tangent_basis`, if already computed.
+
+    Returns
+    -------
+    (N, 3, 3) ndarray
+        One product ``frames @ P`` gives a point's two tangent components and
+        its component along the bearing (metres, like ``P``).
+    """
+    b = np.asarray(bearings_camera, dtype=np.float64)
+    if E is None:
+        E = tangent_basis(b)
+    return np.concatenate([E, b[:, None, :]], axis=1)
+
+
+class _LogMap(NamedTuple):
+    """Log map of points (camera frame) against bearings, with what its derivative needs."""
+
+    w: np.ndarray  # (N, 2) tangent components of the unit direction q
+    theta: np.ndarray  # (N,) geodesic angle, radians
+    g: np.ndarray  # (N,) theta / sin(theta)
+    h: np.ndarray  # (N,) (cos sin - theta) / sin^3
+    inv_norm: np.ndarray  # (N,) 1 / |P| (1 for P = 0)
+
+    @property
+    def residuals(self) -> np.ndarray:
+        return self.g[:, None] * self.w
+
+
+def _log_map(points_camera: np.ndarray, frames: np.ndarray) -> _LogMap:
+    y = np.einsum("nij,nj->ni", frames, points_camera)  # (e1.P, e2.P, b.P)
+    s_unit = np.hypot(y[:, 0], y[:, 1])
+    norm = np.hypot(s_unit, y[:, 2])  # |P|: the frame is orthonormal
+    inv_norm = 1.0 / np.where(norm > 0, norm, 1.0)
+    theta = np.arctan2(s_unit, y[:, 2])
+    s, c = s_unit * inv_norm, y[:, 2] * inv_norm
     small = theta < 1e-3
-    s_safe = np.where(small, 1.0, s)
-    # g = theta / sin(theta); h = (cos sin - theta) / sin^3 (series near 0).
-    g = np.where(small, 1 + theta**2 / 6 + 7 * theta**4 / 360, theta / s_safe)
-    h = np.where(small, -2.0 / 3 - theta**2 / 5, (c * s_safe - theta) / s_safe**3)
-    return q, norm[:, 0], w, g, h
+    if small.any():
+        s_safe = np.where(small, 1.0, s)
+        # g = theta / sin(theta); h = (cos sin - theta) / sin^3 (series near 0).
+        g = np.where(small, 1 + theta**2 / 6 + 7 * theta**4 / 360, theta / s_safe)
+        h = np.where(small, -2.0 / 3 - theta**2 / 5, (c * s_safe - theta) / s_safe**3)
+    else:
+        g = theta / s
+        h = (c * s - theta) / s**3
+    return _LogMap(y[:, :2] * inv_norm[:, None], theta, g, h, inv_norm)
+
+
+def _d_residual_d_point(lm: _LogMap, frames: np.ndarray) -> np.ndarray:
+    """``d r_i / d P_i`` (N, 2, 3) of the log-map residuals.
+
+    In the frame ``(e1, e2, b)`` of each bearing, with ``q = P / |P|`` in that
+    frame ``(w1, w2, c)``: ``dr/dq = [g I + h w w^T | -w]``.  Its component
+    along ``q`` is ``w (g + h s^2 - c) = 0`` (``r`` depends on the direction
+    only), so ``dr/dP = dr/dq F / |P|`` with no projection needed.
+    """
+    n = len(lm.w)
+    D = np.empty((n, 2, 3))
+    hw = lm.h[:, None] * lm.w
+    D[:, :, :2] = hw[:, :, None] * lm.w[:, None, :]
+    D[:, 0, 0] += lm.g
+    D[:, 1, 1] += lm.g
+    D[:, :, 2] = -lm.w
+    D *= lm.inv_norm[:, None, None]
+    return D @ frames
 
 
 def log_map_residuals(points_camera: np.ndarray, bearings_camera: np.ndarray, E: np.ndarray) -> np.ndarray:
@@ -129,35 +217,62 @@ def log_map_residuals(points_camera: np.ndarray, bearings_camera: np.ndarray, E:
     bearing and the direction of the point.  ``E`` comes from
     :func:`tangent_basis` of the same bearings.
     """
-    _, _, w, g, _ = _log_map_parts(points_camera, bearings_camera, E)
-    return g[:, None] * w
-
-
-def _d_residual_d_point(points_camera: np.ndarray, bearings_camera: np.ndarray, E: np.ndarray) -> np.ndarray:
-    """``d r_i / d P_i`` (N, 2, 3) of :func:`log_map_residuals`."""
-    q, norm, w, g, h = _log_map_parts(points_camera, bearings_camera, E)
-    # dr/dq = g E + w (h w^T E - b^T); only its part orthogonal to q matters.
-    wE = np.einsum("ni,nij->nj", w, E)
-    dr_dq = g[:, None, None] * E + w[:, :, None] * (h[:, None] * wE - bearings_camera)[:, None, :]
-    dq_dP = (np.eye(3) - q[:, :, None] * q[:, None, :]) / norm[:, None, None]
-    return dr_dq @ dq_dP
+    return _log_map(points_camera, bearing_frames(bearings_camera, E)).residuals
 
 
 def _pose(x: np.ndarray, R0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    return Rotation.from_rotvec(x[:3]).as_matrix() @ R0, x[3:]
+    return _rotation_matrix(x[:3]) @ R0, x[3:]
+
+
+class _AngularCost:
+    """Residuals and Jacobian of the angular cost as functions of ``x = (delta, t)``.
+
+    MINPACK asks for the Jacobian at the point whose residuals it evaluated
+    last, so the pose-dependent quantities are kept for the last ``x``.
+    """
+
+    def __init__(self, R0: np.ndarray, points_lidar: np.ndarray, frames: np.ndarray) -> None:
+        self.R0 = R0
+        self.points = points_lidar
+        self.frames = frames
+        self._key: bytes | None = None
+
+    def _at(self, x: np.ndarray) -> tuple[np.ndarray, _LogMap]:
+        key = x.tobytes()
+        if key != self._key:
+            R, t = _pose(x, self.R0)
+            rotated = self.points @ R.T
+            self._rotated, self._lm = rotated, _log_map(rotated + t, self.frames)
+            self._key = key
+        return self._rotated, self._lm
+
+    def residuals(self, x: np.ndarray) -> np.ndarray:
+        """``(2N,)`` log-map residuals, radians."""
+        return self._at(x)[1].residuals.ravel()
+
+    def jacobian(self, x: np.ndarray) -> np.ndarray:
+        """``(2N, 6)`` analytic Jacobian w.r.t. ``(delta, t)``."""
+        rotated, lm = self._at(x)
+        dr_dP = _d_residual_d_point(lm, self.frames)
+        n = len(rotated)
+        J = np.empty((n, 2, 6))
+        J[:, :, 3:] = dr_dP  # dP/dt = I
+        # d(exp(delta) R0 p)/d delta = -[R p]_x J_l(delta); a row d times -[a]_x is a x d.
+        a, d = rotated[:, None, :], dr_dP
+        cross = np.empty((n, 2, 3))
+        cross[..., 0] = a[..., 1] * d[..., 2] - a[..., 2] * d[..., 1]
+        cross[..., 1] = a[..., 2] * d[..., 0] - a[..., 0] * d[..., 2]
+        cross[..., 2] = a[..., 0] * d[..., 1] - a[..., 1] * d[..., 0]
+        J[:, :, :3] = cross @ _left_jacobian_so3(x[:3])
+        return J.reshape(-1, 6)
 
 
 def angular_jacobian(
     x: np.ndarray, R0: np.ndarray, points_lidar: np.ndarray, bearings_camera: np.ndarray, E: np.ndarray
 ) -> np.ndarray:
     """Analytic Jacobian ``(2N, 6)`` of the log-map residuals w.r.t. ``x = (delta, t)``."""
-    R, t = _pose(x, R0)
-    rotated = points_lidar @ R.T
-    dr_dP = _d_residual_d_point(rotated + t, bearings_camera, E)
-    # d(exp(delta) R0 p) / d delta = -[R p]_x J_l(delta);  dP/dt = I.
-    dP_ddelta = -_skew(rotated) @ _left_jacobian_so3(x[:3])
-    J = np.concatenate([dr_dP @ dP_ddelta, dr_dP], axis=2)
-    return J.reshape(-1, 6)
+    frames = bearing_frames(bearings_camera, E)
+    return _AngularCost(R0, np.asarray(points_lidar, dtype=np.float64), frames).jacobian(np.asarray(x, dtype=np.float64))
 
 
 def pixel_residuals(
@@ -238,19 +353,11 @@ def refine_pose(
         If LM fails (the message carries the reason) or, for the pixel cost, a
         point cannot be projected at the start.
     """
+    if cost == "angular":
+        return refine_angular(T_initial, points_lidar, bearing_frames(bearings_camera))
     R0 = T_initial[:3, :3]
     x0 = np.concatenate([np.zeros(3), T_initial[:3, 3]])
-    if cost == "angular":
-        E = tangent_basis(bearings_camera)
-
-        def fun(x: np.ndarray) -> np.ndarray:
-            R, t = _pose(x, R0)
-            return log_map_residuals(points_lidar @ R.T + t, bearings_camera, E).ravel()
-
-        def jac(x: np.ndarray) -> np.ndarray:
-            return angular_jacobian(x, R0, points_lidar, bearings_camera, E)
-
-    elif cost == "pixel":
+    if cost == "pixel":
         start = pixel_residuals(x0, R0, points_lidar, pixels, camera)
         bad = np.nonzero(~np.all(np.isfinite(start), axis=1))[0]
         if bad.size:
@@ -270,12 +377,49 @@ def refine_pose(
     else:
         raise CalibError(f"unknown cost {cost!r}; use 'angular' or 'pixel'")
     sol = _run_lm(fun, jac, x0, cost)
-    R, t = _pose(sol.x, R0)
+    return _pose_matrix(sol.x, R0), _iterations(sol)
+
+
+def _pose_matrix(x: np.ndarray, R0: np.ndarray) -> np.ndarray:
     T = np.eye(4)
-    T[:3, :3] = R
-    T[:3, 3] = t
-    iterations = int(sol.njev) if sol.njev is not None else int(sol.nfev)
-    return T, iterations
+    T[:3, :3], T[:3, 3] = _pose(x, R0)
+    return T
+
+
+def _iterations(sol: Any) -> int:
+    return int(sol.njev) if sol.njev is not None else int(sol.nfev)
+
+
+def refine_angular(T_initial: np.ndarray, points_lidar: np.ndarray, frames: np.ndarray) -> tuple[np.ndarray, int]:
+    """:func:`refine_pose` with the angular cost, given the bearing frames.
+
+    ``frames`` (N, 3, 3) has rows ``e1, e2, b`` per bearing (:func:`bearing_frames`),
+    so a caller that refines several times computes them once.
+    """
+    problem = _AngularCost(T_initial[:3, :3], np.asarray(points_lidar, dtype=np.float64), frames)
+    sol = _run_lm(problem.residuals, problem.jacobian, np.concatenate([np.zeros(3), T_initial[:3, 3]]), "angular")
+    return _pose_matrix(sol.x, problem.R0), _iterations(sol)
+
+
+def angular_at_pose(
+    T_camera_lidar: np.ndarray, points_lidar: np.ndarray, frames: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Jacobian, residuals and angles of the angular cost at a pose.
+
+    Returns
+    -------
+    J : (2N, 6) ndarray
+        Jacobian w.r.t. ``(delta, t)`` about ``T_camera_lidar`` (``delta = 0``).
+    residuals : (2N,) ndarray
+        Log-map residuals, radians.
+    angle_rad : (N,) ndarray
+        Geodesic angle between each bearing and its transformed point.
+    """
+    problem = _AngularCost(T_camera_lidar[:3, :3], np.asarray(points_lidar, dtype=np.float64), frames)
+    x = np.concatenate([np.zeros(3), T_camera_lidar[:3, 3]])
+    J = problem.jacobian(x)
+    lm = problem._at(x)[1]
+    return J, lm.residuals.ravel(), lm.theta
 
 
 def rpy_jacobian(R: np.ndarray) -> np.ndarray:
@@ -286,12 +430,13 @@ def rpy_jacobian(R: np.ndarray) -> np.ndarray:
     ``delta = M (roll, pitch, yaw)`` with those three columns; the answer is
     ``M^-1``, singular at pitch = +-90 deg (gimbal lock).
     """
-    roll, pitch, yaw = Rotation.from_matrix(R).as_euler("xyz")
-    Rz = Rotation.from_euler("z", yaw).as_matrix()
-    Ry = Rotation.from_euler("y", pitch).as_matrix()
-    M = np.stack([Rz @ Ry @ np.array([1.0, 0, 0]), Rz @ np.array([0, 1.0, 0]), np.array([0, 0, 1.0])], axis=1)
-    if abs(np.cos(pitch)) < 1e-9:
+    R = np.asarray(R, dtype=np.float64)
+    # R e_x = Rz Ry e_x = (cos yaw cos pitch, sin yaw cos pitch, -sin pitch).
+    cos_pitch = float(np.hypot(R[0, 0], R[1, 0]))
+    if cos_pitch < 1e-9:
         return np.full((3, 3), np.inf)
+    cos_yaw, sin_yaw = R[0, 0] / cos_pitch, R[1, 0] / cos_pitch
+    M = np.array([[R[0, 0], -sin_yaw, 0.0], [R[1, 0], cos_yaw, 0.0], [R[2, 0], 0.0, 1.0]])
     return np.linalg.inv(M)
 
 
