@@ -16,6 +16,12 @@ Layout (world units)::
     | BA +45 deg        | BA -45 deg        |
     +-------------------+-------------------+
 
+The BA images are arranged 2 x 2 as above, stacked 4 x 1 when they are very
+wide (a whole 360 deg lidar scan), or side by side 1 x 4 when they are tall
+(a narrow column window): whichever gives the biggest cells once the block is
+fitted into a typical browser view.  A BA slot counts pixels in *cells* of the
+shown window; a cell may be drawn taller than wide (``cell_aspect``).
+
 This is display geometry only (pixels <-> scene positions); no calibration
 maths lives here.
 """
@@ -29,6 +35,11 @@ import numpy as np
 CAMERA_WIDTH = 8.0  # world units
 GAP = 0.12
 LABEL_HEIGHT = 0.22
+#: Width / height of the 3-D canvas left of the control panel, typical of a
+#: laptop browser; only used to choose the BA grid.
+VIEW_ASPECT = 1.2
+#: Candidate BA grids: number of images per row.
+BA_GRID_COLUMNS = (2, 1, 4)
 
 
 @dataclass(frozen=True)
@@ -50,7 +61,13 @@ class ImageSlot:
 
     @property
     def units_per_px(self) -> float:
+        """World units per pixel along x (image columns)."""
         return self.render_width / self.width_px
+
+    @property
+    def units_per_px_y(self) -> float:
+        """World units per pixel along y (image rows); differs from x for stretched BA cells."""
+        return self.render_height / self.height_px
 
     def world_from_pixel(self, uv: np.ndarray, z_offset: float = 0.0) -> np.ndarray:
         """World positions ``(N, 3)`` of pixels ``(N, 2)``; ``z_offset`` < 0 is towards the viewer."""
@@ -92,8 +109,30 @@ class ImageSlot:
         return (cx - self.render_width / 2, cy - self.render_height / 2, cx + self.render_width / 2, cy + self.render_height / 2)
 
 
+def ba_grid_columns(ba_aspect: float, n_images: int = 4, view_aspect: float = VIEW_ASPECT) -> int:
+    """Images per row for ``n_images`` BA images of width / height ``ba_aspect``.
+
+    Picks, from :data:`BA_GRID_COLUMNS`, the grid whose images are widest once
+    the whole block (images, gaps, titles) is fitted into a view of width /
+    height ``view_aspect``.  Ties keep the earlier candidate (2 x 2).
+    """
+    best, best_score = BA_GRID_COLUMNS[0], -1.0
+    for n_cols in BA_GRID_COLUMNS:
+        n_cols = min(n_cols, n_images)
+        n_rows = -(-n_images // n_cols)
+        slot_w = (CAMERA_WIDTH - (n_cols - 1) * GAP) / n_cols
+        block_h = n_rows * (slot_w / ba_aspect + GAP + LABEL_HEIGHT)
+        score = slot_w / max(CAMERA_WIDTH / view_aspect, block_h)
+        if score > best_score * (1 + 1e-9):
+            best, best_score = n_cols, score
+    return best
+
+
 def annotation_layout(
-    camera_sizes: dict[str, tuple[int, int]], ba_size: tuple[int, int], ba_keys: tuple[str, ...]
+    camera_sizes: dict[str, tuple[int, int]],
+    ba_size: tuple[int, int],
+    ba_keys: tuple[str, ...],
+    cell_aspect: float = 1.0,
 ) -> dict[str, ImageSlot]:
     """Slots for the camera image variants and the four BA images.
 
@@ -103,16 +142,20 @@ def annotation_layout(
         ``{"raw": (W, H), "panorama": (W, H)}`` (panorama optional).  All
         camera variants share the top area; their bottom edges line up.
     ba_size : (W, H)
-        Depth-matrix size (columns, rows).
+        Cells shown of the depth matrix (window columns, rows).
     ba_keys : tuple of str
         Keys of the four BA images, in reading order.
+    cell_aspect : float
+        Drawn height / width of one cell (1 = square).
     """
     slots: dict[str, ImageSlot] = {}
     bw, bh = ba_size
-    cell_w = (CAMERA_WIDTH - GAP) / 2
-    cell_h = cell_w * bh / bw
+    ba_aspect = bw / (bh * cell_aspect)
+    n_cols = ba_grid_columns(ba_aspect, len(ba_keys))
+    cell_w = (CAMERA_WIDTH - (n_cols - 1) * GAP) / n_cols
+    cell_h = cell_w / ba_aspect
     for i, key in enumerate(ba_keys):
-        row, col = divmod(i, 2)
+        row, col = divmod(i, n_cols)
         cx = -CAMERA_WIDTH / 2 + cell_w / 2 + col * (cell_w + GAP)
         cy = LABEL_HEIGHT + cell_h / 2 + row * (cell_h + GAP + LABEL_HEIGHT)
         slots[key] = ImageSlot(key, bw, bh, (cx, cy, 0.0), cell_w, cell_h)

@@ -42,6 +42,7 @@ from calib_core.panorama import Panorama, refine_click_to_corner
 from calib_core.solve import solve_extrinsics
 from calib_core.transforms import invert_T, rpy_deg_from_R, transform_points
 
+from .ba_view import ColumnWindow, ba_texture, cell_aspect_from_directions, covering_window, texture_factor
 from .layout import ImageSlot, annotation_layout, bounds_of
 from .live_solver import LiveSolver
 from .state import AnnotationState, Pick
@@ -61,8 +62,20 @@ MAX_EDGE_POINTS = 3000
 CLOUD_ORIGIN = np.array([0.0, 0.0, -5000.0])
 #: Width (CSS px) kept free on the right for the floating control panel.
 PANEL_PX = 400
-MARKER_SIZE = 0.075  # world units (the camera image is 8 units wide)
-PICK_RADIUS = 0.14  # world units: shift+click / drag this close to a marker selects it
+MARKER_SIZE = 0.075  # world units (the camera image is 8 units wide): reprojection overlays
+#: Pick markers are hollow rings (screen-thin lines), so they never hide the
+#: picked cell: radius RING_CELLS cells, at least RING_MIN_RADIUS world units.
+RING_CELLS = 1.5
+RING_MIN_RADIUS = 0.03
+RING_SEGMENTS = 20
+#: Shift+click / drag this many ring radii from a marker selects it.
+PICK_RADII = 2.5
+#: "Zoom: on last click" magnifies to this many screen pixels per BA cell
+#: (narrow side) or per camera-image pixel.
+ZOOM_PX_PER_CELL = 14.0
+ZOOM_PX_PER_IMAGE_PX = 4.0
+ZOOM_STEP = 2.0
+BA_WINDOW_MODES = {"all": "All columns", "camera": "Facing the camera", "custom": "Custom"}
 SNAP_RADIUS_PX = 4.0
 UP_AXES = {"+z": (0.0, 0.0, 1.0), "+y": (0.0, 1.0, 0.0), "-y": (0.0, -1.0, 0.0), "camera up (-y of camera)": None}
 
@@ -99,7 +112,32 @@ class SolveBundle:
     points_camera: np.ndarray  # (N, 3) laser points moved by the solved pose
     edges_camera: np.ndarray  # (M, 3) BA-edge points moved by the solved pose
     cloud_colors: np.ndarray  # (K, 3) uint8 display-cloud colours
+    facing_window: ColumnWindow | None  # scan columns whose points project into the camera image
     seconds: float
+
+
+def marker_segments(centres: np.ndarray, radius: float, cell_half_size: tuple[float, float] | None = None,
+                    ticks: bool = True) -> np.ndarray:
+    """Line segments ``(N * K, 2, 3)`` of a ring marker around each world point ``centres (N, 3)``.
+
+    A ring of :data:`RING_SEGMENTS` segments; with ``ticks``, four ticks from
+    the ring towards the centre that stop short of it; with
+    ``cell_half_size = (hx, hy)``, the outline of the rectangle ``+-hx, +-hy``
+    around the centre (the picked cell).  Lines lie in the plane z = const.
+    """
+    c = np.asarray(centres, dtype=np.float64).reshape(-1, 3)
+    a = np.linspace(0.0, 2.0 * np.pi, RING_SEGMENTS + 1)
+    circle = radius * np.stack([np.cos(a), np.sin(a), np.zeros_like(a)], axis=1)
+    shape = [np.stack([circle[:-1], circle[1:]], axis=1)]
+    if ticks:
+        d = np.array([[1.0, 0, 0], [-1.0, 0, 0], [0, 1.0, 0], [0, -1.0, 0]])
+        shape.append(np.stack([radius * d, 0.4 * radius * d], axis=1))
+    if cell_half_size is not None:
+        hx, hy = cell_half_size
+        corners = np.array([[-hx, -hy, 0], [hx, -hy, 0], [hx, hy, 0], [-hx, hy, 0]])
+        shape.append(np.stack([corners, np.roll(corners, -1, axis=0)], axis=1))
+    segs = np.concatenate(shape)  # (K, 2, 3)
+    return (c[:, None, None, :] + segs[None]).reshape(-1, 2, 3)
 
 
 class _Action:
@@ -195,7 +233,10 @@ class CalibrationApp:
             self.pano_image = self.panorama.render(self.image)
             self.pano_gray = self.pano_image.mean(axis=2).astype(np.uint8)
         self.edge_points_lidar, _ = ba_edge_points_consensus(self.ba_rad, self.depth, max_points=MAX_EDGE_POINTS)
-        self.all_points_lidar, _ = self.depth.valid_points()
+        self.all_points_lidar, self.all_rows_cols = self.depth.valid_points()
+        # BA display: rows stretched to about square cells in angle, a column window, crisp textures.
+        self.ba_cell_aspect = cell_aspect_from_directions(self.depth.directions)
+        self._wrap_cols = bool(self.depth.meta.get("wrap_cols", False))
         stride = max(1, int(math.ceil(len(self.all_points_lidar) / max(1, int(max_cloud_points)))))
         self.cloud_points_lidar = self.all_points_lidar[::stride]
 
@@ -210,10 +251,21 @@ class CalibrationApp:
         if self._up_axis not in UP_AXES:
             self._up_axis = "+z"
 
-        camera_sizes = {"raw": (self.camera.width, self.camera.height)}
+        n_cols = self.depth.shape[1]
+        self._ba_mode = str(view.get("ba_window_mode", "all"))
+        if self._ba_mode not in BA_WINDOW_MODES:
+            self._ba_mode = "all"
+        try:
+            start, width = int(view.get("ba_window_start", 0)), int(view.get("ba_window_width", n_cols))
+        except (TypeError, ValueError):
+            start, width = 0, n_cols
+        self._ba_custom = ColumnWindow.make(start, width, n_cols, self._wrap_cols)
+        self._ba_facing: ColumnWindow | None = None  # from the last good solve
+        self._ba_window = self._wanted_ba_window()
+        self._camera_sizes = {"raw": (self.camera.width, self.camera.height)}
         if self.panorama is not None:
-            camera_sizes["panorama"] = (self.panorama.width, self.panorama.height)
-        self.slots = annotation_layout(camera_sizes, (self.depth.shape[1], self.depth.shape[0]), self.ba_keys)
+            self._camera_sizes["panorama"] = (self.panorama.width, self.panorama.height)
+        self.slots = self._layout()
 
         self._ui_lock = threading.RLock()
         self._bundle: SolveBundle | None = None
@@ -223,6 +275,7 @@ class CalibrationApp:
         self._result_floor = 0
         self._solving = False
         self._client_mode: dict[int, str] = {}
+        self._last_click: dict[int, tuple] = {}  # client id -> ("ba", key, row, col) or ("camera", u, v)
         self._view_target: dict[int, tuple[np.ndarray, np.ndarray, float]] = {}
         self._label_names: set[str] = set()
         self._overlay_names: set[str] = set()
@@ -270,14 +323,17 @@ class CalibrationApp:
                 "/annot/camera_pano", self.pano_image, s.render_width, s.render_height,
                 format="jpeg", jpeg_quality=92, position=s.center, visible=self._use_panorama,
             )
+        self._ba_titles: dict[str, Any] = {}
         for key in self.ba_keys:
             s = self.slots[key]
             self._image_handles[key] = scene.add_image(
-                f"/annot/ba_{key}", self.ba_gray[key], s.render_width, s.render_height, format="png", position=s.center
+                f"/annot/ba_{key}", self._ba_texture(key), s.render_width, s.render_height, format="png",
+                position=s.center,
             )
             x0, y0, _, _ = s.bounds()
-            scene.add_label(f"/annot/titles/{key}", BA_TITLES.get(key, key), position=(x0, y0 - 0.03, -0.01),
-                            anchor="bottom-left", font_screen_scale=0.9)
+            self._ba_titles[key] = scene.add_label(f"/annot/titles/{key}", self._ba_title(key),
+                                                   position=(x0, y0 - 0.03, -0.01), anchor="bottom-left",
+                                                   font_screen_scale=0.9)
         for key, handle in self._image_handles.items():
             handle.on_click(self._make_click_handler(key))
             handle.on_click(modifier="shift")(self._make_select_handler(key))
@@ -297,6 +353,68 @@ class CalibrationApp:
         scene.add_label("/cloud/lidar/label", "lidar", position=(0.0, 0.0, 0.0), anchor="top-right")
         self._camera_frame = scene.add_frame("/cloud/camera", axes_length=0.2, axes_radius=0.008, visible=False)
         scene.add_label("/cloud/camera/label", "camera", position=(0.0, 0.0, 0.0))
+
+    # ------------------------------------------------------------ BA display
+    def _layout(self) -> dict[str, ImageSlot]:
+        window = self._ba_window
+        return annotation_layout(self._camera_sizes, (window.width, self.depth.shape[0]), self.ba_keys,
+                                 cell_aspect=self.ba_cell_aspect)
+
+    def _wanted_ba_window(self) -> ColumnWindow:
+        """The column window the current mode asks for (custom until a solve says what the camera sees)."""
+        if self._ba_mode == "all":
+            return ColumnWindow.full(self.depth.shape[1], self._wrap_cols)
+        if self._ba_mode == "camera" and self._ba_facing is not None:
+            return self._ba_facing
+        return self._ba_custom
+
+    def _ba_texture(self, key: str) -> np.ndarray:
+        window = self._ba_window
+        return ba_texture(self.ba_gray[key], window, texture_factor(window.width, self.depth.shape[0]))
+
+    def _ba_title(self, key: str) -> str:
+        w = self._ba_window
+        title = BA_TITLES.get(key, key)
+        if w.is_full:
+            return title
+        last = (w.start + w.width - 1) % w.n_cols
+        return f"{title} (columns {w.start}-{last} of {w.n_cols})"
+
+    def _apply_ba_window(self, force: bool = False) -> None:
+        """Show the window the mode asks for: new textures, slots, markers; re-frame 2-D tabs."""
+        with self._ui_lock:
+            window = self._wanted_ba_window()
+            if window == self._ba_window and not force:
+                return
+            self._ba_window = window
+            self.slots = self._layout()
+            with self.server.atomic():
+                for key in self.ba_keys:
+                    s, handle = self.slots[key], self._image_handles[key]
+                    handle.image = self._ba_texture(key)
+                    handle.render_width = s.render_width
+                    handle.render_height = s.render_height
+                    handle.position = s.center
+                    x0, y0, _, _ = s.bounds()
+                    self._ba_titles[key].position = (x0, y0 - 0.03, -0.01)
+                    self._ba_titles[key].text = self._ba_title(key)
+            self._sync_window_widgets()
+        self._refresh_scene()
+        clients = self.server.get_clients()
+        for cid, mode in list(self._client_mode.items()):
+            if mode != "3d" and cid in clients:
+                self._set_view(clients[cid], mode)
+
+    def _sync_window_widgets(self) -> None:
+        """Show the current window in the GUI (server-side updates; their callbacks ignore them)."""
+        w = self._ba_window
+        want = BA_WINDOW_MODES[self._ba_mode]
+        if self._dd_ba_window.value != want:
+            self._dd_ba_window.value = want
+        if self._sl_ba_start.value != w.start:
+            self._sl_ba_start.value = w.start
+        if self._sl_ba_width.value != w.width:
+            self._sl_ba_width.value = max(w.width, self._sl_ba_width.min)
 
     def _camera_slot(self) -> ImageSlot:
         return self.slots["panorama" if self._use_panorama else "raw"]
@@ -319,7 +437,9 @@ class CalibrationApp:
             f"**{md_escape(self.title)}**  \n"
             "Click a point in any **BA image** and the same point in the **camera image** (either order) "
             "to make a pair. **Shift+click** a marker to select its pair; then clicks move it. "
-            "**Drag** a marker to move it. Wheel zooms, right-drag pans."
+            "**Drag** a marker to move it. Wheel zooms on the view centre, right-drag pans; "
+            "**Zoom: on last click** centres and magnifies the point you last clicked. "
+            "**BA columns** shows only part of a wide scan, e.g. the part facing the camera."
         )
         with gui.add_folder("Pairs"):
             self._md_pairs = gui.add_markdown("")
@@ -344,6 +464,21 @@ class CalibrationApp:
             self._bg_view.on_click(self._guard(self._on_view_mode))
             self._bg_zoom = gui.add_button_group("Frame", ("All", "Camera", "BA images"))
             self._bg_zoom.on_click(self._guard(self._on_zoom))
+            self._bg_magnify = gui.add_button_group("Zoom", ("In", "Out", "On last click"))
+            self._bg_magnify.on_click(self._guard(self._on_magnify))
+            n_cols = self.depth.shape[1]
+            self._dd_ba_window = gui.add_dropdown(
+                "BA columns", tuple(BA_WINDOW_MODES.values()), initial_value=BA_WINDOW_MODES[self._ba_mode],
+                hint="Show all scan columns, the ones whose points the current calibration projects into the "
+                     "camera image, or the range set below",
+            )
+            self._dd_ba_window.on_update(self._guard(self._on_ba_window_mode))
+            self._sl_ba_start = gui.add_slider("BA first column", 0, max(n_cols - 1, 1), 1,
+                                               initial_value=self._ba_window.start)
+            self._sl_ba_start.on_update(self._guard(self._on_ba_window_slider))
+            self._sl_ba_width = gui.add_slider("BA columns shown", min(16, n_cols), n_cols, 1,
+                                               initial_value=max(self._ba_window.width, min(16, n_cols)))
+            self._sl_ba_width.on_update(self._guard(self._on_ba_window_slider))
             self._cb_pano = gui.add_checkbox(
                 "Unwrapped panorama", initial_value=self._use_panorama, disabled=self.panorama is None,
                 hint="Show the camera image unwrapped (azimuth x elevation); clicks still give original-image pixels",
@@ -364,6 +499,7 @@ class CalibrationApp:
             self._md_export = gui.add_markdown(
                 f"{where}Session (saved after every change): {md_escape(str(self.session_path))}"
             )
+        self._sync_window_widgets()
 
     # ================================================================== callbacks
     def _guard(self, fn: Callable) -> Callable:
@@ -414,28 +550,41 @@ class CalibrationApp:
             uv = self.slots[key].pixel_from_ray(event.ray_origin, event.ray_direction)
             if uv is None or not self.slots[key].contains(uv):
                 raise CalibError("click landed outside the image")
-            self._click(key, uv)
+            self._click(key, uv, client=event.client)
 
         return self._guard(on_click)
 
-    def _click(self, key: str, uv: tuple[float, float], pick_id: int | None = None) -> int:
+    def cell_from_display(self, key: str, uv: tuple[float, float]) -> tuple[int, int]:
+        """Scan cell ``(row, col)`` under display pixel ``uv`` of BA slot ``key`` (window applied)."""
+        return self._ba_window.cell_at(uv, self.depth.shape[0])
+
+    def _click(self, key: str, uv: tuple[float, float], pick_id: int | None = None, client: Any = None) -> int:
         """A click at display pixel ``uv`` of slot ``key``: add a pair end, or move ``pick_id``'s end."""
         if key in self.ba_keys:
             if self._snap:
-                uv = tuple(refine_click_to_corner(self.ba_gray[key], uv, 3.0))
-            row, col = int(round(uv[1])), int(round(uv[0]))
+                shown = self.ba_gray[key][:, self._ba_window.columns]
+                uv = tuple(refine_click_to_corner(shown, uv, 3.0))
+            row, col = self.cell_from_display(key, uv)
             if pick_id is not None:
-                return self.state.move_laser(pick_id, row, col)
-            return self.state.click_laser(row, col)
-        if key != self._camera_slot().key:
-            raise CalibError("that camera view is hidden; click the visible one")
-        if self._snap:
-            gray = self.pano_gray if key == "panorama" else self.image_gray
-            uv = tuple(refine_click_to_corner(gray, uv, SNAP_RADIUS_PX))
-        pixel = self._original_from_display(uv)
-        if pick_id is not None:
-            return self.state.move_pixel(pick_id, *pixel)
-        return self.state.click_pixel(*pixel)
+                out = self.state.move_laser(pick_id, row, col)
+            else:
+                out = self.state.click_laser(row, col)
+            last: tuple = ("ba", key, row, col)
+        else:
+            if key != self._camera_slot().key:
+                raise CalibError("that camera view is hidden; click the visible one")
+            if self._snap:
+                gray = self.pano_gray if key == "panorama" else self.image_gray
+                uv = tuple(refine_click_to_corner(gray, uv, SNAP_RADIUS_PX))
+            pixel = self._original_from_display(uv)
+            if pick_id is not None:
+                out = self.state.move_pixel(pick_id, *pixel)
+            else:
+                out = self.state.click_pixel(*pixel)
+            last = ("camera", pixel[0], pixel[1])
+        if client is not None:
+            self._last_click[client.client_id] = last
+        return out
 
     def _original_from_display(self, uv: tuple[float, float]) -> tuple[float, float]:
         """Original camera pixel of a click on the visible camera view."""
@@ -450,9 +599,12 @@ class CalibrationApp:
         """Ids and display pixels of the pick ends drawn on slot ``key``."""
         picks = self.state.picks
         if key in self.ba_keys:
+            # Only cells inside the shown column window have a place on the BA image.
             sel = [p for p in picks if p.laser_rc is not None]
-            uv = np.array([[p.laser_rc[1], p.laser_rc[0]] for p in sel], dtype=np.float64).reshape(-1, 2)
-            return [p.id for p in sel], uv
+            rc = np.array([p.laser_rc for p in sel], dtype=np.int64).reshape(-1, 2)
+            u, shown = self._ba_window.display_cols(rc[:, 1])
+            uv = np.stack([u, rc[:, 0].astype(np.float64)], axis=1)[shown]
+            return [p.id for p, ok in zip(sel, shown) if ok], uv
         sel = [p for p in picks if p.pixel is not None]
         uv, ok = self._display_from_pixels(np.array([p.pixel for p in sel], dtype=np.float64).reshape(-1, 2))
         return [p.id for p, good in zip(sel, ok) if good], uv[ok]
@@ -462,9 +614,10 @@ class CalibrationApp:
         if not ids:
             return None
         slot = self.slots[key]
-        d = np.hypot(*(ends - np.asarray(uv)).T) * slot.units_per_px
+        delta = ends - np.asarray(uv, dtype=np.float64)
+        d = np.hypot(delta[:, 0] * slot.units_per_px, delta[:, 1] * slot.units_per_px_y)  # world units
         k = int(np.argmin(d))
-        return ids[k] if d[k] <= PICK_RADIUS else None
+        return ids[k] if d[k] <= PICK_RADII * self._ring_radius(slot) else None
 
     def _make_select_handler(self, key: str) -> Callable:
         def on_shift_click(event: Any) -> None:
@@ -485,11 +638,11 @@ class CalibrationApp:
             moved = np.hypot(*(np.asarray(event.end_screen_pos) - np.asarray(event.start_screen_pos)))
             if pick_id is None:
                 if moved < 0.01 and slot.contains(start):  # a shaky click, not a drag
-                    self._click(key, tuple(start))
+                    self._click(key, tuple(start), client=event.client)
                 return
             if not slot.contains(end):
                 raise CalibError("dropped outside the image; the pair was not moved")
-            self._click(key, (float(end[0]), float(end[1])), pick_id=pick_id)
+            self._click(key, (float(end[0]), float(end[1])), pick_id=pick_id, client=event.client)
 
         return self._guard(on_drag)
 
@@ -552,6 +705,44 @@ class CalibrationApp:
     def _on_zoom(self, event: Any) -> None:
         if event.client is not None:
             self._set_view(event.client, {"All": "all", "Camera": "camera", "BA images": "ba"}[event.value])
+
+    def _on_magnify(self, event: Any) -> None:
+        if event.client is None:
+            return
+        if self._client_mode.get(event.client.client_id) == "3d":
+            raise CalibError("the zoom buttons work in the 2-D annotation view (the wheel zooms the 3-D view)")
+        if event.value == "In":
+            self._zoom(event.client, factor=ZOOM_STEP)
+        elif event.value == "Out":
+            self._zoom(event.client, factor=1.0 / ZOOM_STEP)
+        else:
+            self.zoom_on_last_click(event.client.client_id)
+
+    def _on_ba_window_mode(self, event: Any) -> None:
+        if event.client is None:  # our own update of the widget
+            return
+        mode = {label: m for m, label in BA_WINDOW_MODES.items()}.get(str(event.value), "all")
+        self._set_ba_mode(mode)
+        if mode == "camera" and self._ba_facing is None:
+            self._notify(event.client, "No calibration yet",
+                         f"Showing the columns set by the sliders; once {MIN_PAIRS} pairs are solved the BA images "
+                         "show the columns the camera sees.", color="yellow")
+
+    def _on_ba_window_slider(self, event: Any) -> None:
+        if event.client is None:
+            return
+        if event.value != event.target.value:
+            return  # a newer slider position is queued behind this one
+        self._ba_custom = ColumnWindow.make(int(self._sl_ba_start.value), int(self._sl_ba_width.value),
+                                            self.depth.shape[1], self._wrap_cols)
+        self._set_ba_mode("custom")
+
+    def _set_ba_mode(self, mode: str) -> None:
+        self._ba_mode = mode
+        self._apply_ba_window()
+        self._sync_window_widgets()
+        w = self._ba_custom
+        self.state.set_view(ba_window_mode=mode, ba_window_start=int(w.start), ba_window_width=int(w.width))
 
     def _on_upload(self, event: Any) -> None:
         f = event.value
@@ -643,11 +834,18 @@ class CalibrationApp:
         # Pure black is the unlit border of a fisheye image, not scene colour: show it grey too.
         has_color &= colors.any(axis=1)
         colors = np.where(has_color[:, None], colors, np.uint8(110)).astype(np.uint8)
+        _, in_image = self.camera.project(transform_points(T, self.all_points_lidar))
+        n_cols = self.depth.shape[1]
+        seen = np.zeros(n_cols, bool)
+        seen[self.all_rows_cols[in_image, 1]] = True
+        # A margin and coarse ends, so that the next solve usually keeps the same window.
+        step = max(1, round(n_cols / 225))
+        facing = covering_window(seen, self._wrap_cols, margin=step, quantum=step)
         return SolveBundle(
             pick_ids=ids, pairs=pairs, result=result, pixels=pixels,
             points_camera=transform_points(T, points),
             edges_camera=transform_points(T, self.edge_points_lidar) if len(self.edge_points_lidar) else np.empty((0, 3)),
-            cloud_colors=colors, seconds=time.perf_counter() - t0,
+            cloud_colors=colors, facing_window=facing, seconds=time.perf_counter() - t0,
         )
 
     def _on_solved(self, job: int, bundle: SolveBundle | None, error: BaseException | None) -> None:
@@ -664,6 +862,11 @@ class CalibrationApp:
                 self._bundle = bundle
                 self._solve_error = None
                 self._refresh_cloud()
+                if bundle.facing_window is not None:
+                    self._ba_facing = bundle.facing_window
+        if self._ba_mode == "camera" and not self._stopped:
+            # In the action worker, so a click is never mapped through a window that changed under it.
+            self._actions.put((lambda action: self._apply_ba_window(), _Action(None, None)))
         self._refresh_scene()
         self._refresh_panel()
 
@@ -723,29 +926,39 @@ class CalibrationApp:
                 ids, uv = self._pick_ends(key)
                 world = slot.world_from_pixel(uv, z_offset=-0.01)
                 colors = np.array([picks[i].color for i in ids], np.uint8).reshape(-1, 3)
-                self._set_points(f"/annot/markers/{key}", world, colors, MARKER_SIZE)
-                # A dark dot marks the exact clicked spot inside the coloured disc.
-                self._set_points(f"/annot/centres/{key}", slot.world_from_pixel(uv, z_offset=-0.011), (20, 20, 20),
-                                 MARKER_SIZE * 0.22)
+                r = self._ring_radius(slot)
+                # Hollow rings with ticks pointing at the clicked spot, and on BA images the
+                # outline of the picked cell: they mark the spot without hiding it.
+                outline = (0.5 * slot.units_per_px, 0.5 * slot.units_per_px_y) if key in self.ba_keys else None
+                segs = marker_segments(world, r, cell_half_size=outline)
+                per = len(segs) // max(len(ids), 1)
+                seg_colors = np.repeat(colors, per * 2, axis=0).reshape(-1, 2, 3)
+                self._set_lines(f"/annot/markers/{key}/halo", segs + np.array([0.0, 0.0, 0.002]),
+                                np.full(seg_colors.shape, 25, np.uint8), thickness=4.5)
+                self._set_lines(f"/annot/markers/{key}/ring", segs, seg_colors, thickness=2.0)
                 sel = [k for k, i in enumerate(ids) if i == selected]
-                self._set_points(f"/annot/selected/{key}", slot.world_from_pixel(uv[sel], z_offset=-0.005),
-                                 (255, 255, 255), MARKER_SIZE * 1.9)
+                self._set_lines(f"/annot/selected/{key}", marker_segments(world[sel] + [0.0, 0.0, 0.003], 1.5 * r),
+                                np.full((RING_SEGMENTS * len(sel), 2, 3), 255, np.uint8), thickness=4.0)
                 for i, w in zip(ids, world):
-                    labels[f"/annot/labels/{key}/{i}"] = (str(i), w + np.array([0.03, -0.03, -0.005]))
+                    labels[f"/annot/labels/{key}/{i}"] = (str(i), w + np.array([0.75 * r, -0.75 * r, -0.005]))
             for pid, uv in self._predictions(picks):
                 w = cam_slot.world_from_pixel(uv[None], z_offset=-0.015)[0]
                 labels[f"/annot/labels/predicted/{pid}"] = (f"{pid}?", w + np.array([0.06, -0.06, 0.0]))
             for other in ("raw", "panorama"):
                 if other in self.slots and other != cam_slot.key:
-                    self._set_points(f"/annot/markers/{other}", np.empty((0, 3)), (0, 0, 0), MARKER_SIZE)
-                    self._set_points(f"/annot/selected/{other}", np.empty((0, 3)), (0, 0, 0), MARKER_SIZE)
-                    self._set_points(f"/annot/centres/{other}", np.empty((0, 3)), (0, 0, 0), MARKER_SIZE)
+                    for name in (f"/annot/markers/{other}/halo", f"/annot/markers/{other}/ring",
+                                 f"/annot/selected/{other}"):
+                        self._set_lines(name, np.empty((0, 2, 3)), (0, 0, 0))
             for name in self._label_names - set(labels):
                 self.server.scene.remove_by_name(name)
             for name, (text, pos) in labels.items():
                 self.server.scene.add_label(name, text, position=tuple(pos), anchor="bottom-left", font_screen_scale=0.8)
             self._label_names = set(labels)
             self._draw_overlays(picks)
+
+    def _ring_radius(self, slot: ImageSlot) -> float:
+        """Pick-marker ring radius on ``slot`` (world units): a few cells, never vanishingly small."""
+        return max(RING_CELLS * max(slot.units_per_px, slot.units_per_px_y), RING_MIN_RADIUS)
 
     def _draw_overlays(self, picks: dict[int, Pick]) -> None:
         slot = self._camera_slot()
@@ -890,6 +1103,7 @@ class CalibrationApp:
     def _on_disconnect(self, client: Any) -> None:
         self._client_mode.pop(client.client_id, None)
         self._view_target.pop(client.client_id, None)
+        self._last_click.pop(client.client_id, None)
         self._update_cloud_visibility()
 
     def _update_cloud_visibility(self) -> None:
@@ -937,6 +1151,61 @@ class CalibrationApp:
         cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
         look = np.array([cx + (w_px - usable_px) / 2 * units_per_px, cy, 0.0])
         self._apply_camera(client, look + np.array([0.0, 0.0, -dist]), look, np.array([0.0, -1.0, 0.0]), fov)
+
+    def _zoom(self, client: Any, factor: float = 1.0, centre: np.ndarray | None = None,
+              units_per_screen_px: float | None = None) -> None:
+        """Magnify one tab's flat 2-D view by ``factor`` (or to ``units_per_screen_px``).
+
+        The point shown at the middle of the free canvas area (left of the
+        control panel) stays put, or ``centre`` (world) moves there.  The view
+        is squared up to face the image plane again.
+        """
+        cam = client.camera
+        try:
+            position, look = np.asarray(cam.position, float), np.asarray(cam.look_at, float)
+            fov, w_px, h_px = float(cam.fov), max(int(cam.image_width), 1), max(int(cam.image_height), 1)
+        except AssertionError:  # the tab has not reported its camera yet
+            return
+        tan = math.tan(fov / 2)
+        dist = max(abs(look[2] - position[2]), 1e-6)
+        units = 2 * dist * tan / h_px  # world units per screen pixel on the image plane
+        shift_px = (w_px - (w_px - PANEL_PX if w_px > 2 * PANEL_PX else w_px)) / 2
+        if centre is None:
+            centre = look - np.array([shift_px * units, 0.0, 0.0])
+        new_units = units / factor if units_per_screen_px is None else units_per_screen_px
+        new_units = float(np.clip(new_units, 1e-6, 0.2))  # 0.2 units/px: the whole layout is tiny
+        new_look = np.array([centre[0] + shift_px * new_units, centre[1], 0.0])
+        new_dist = new_units * h_px / (2 * tan)
+        self._apply_camera(client, new_look + np.array([0.0, 0.0, -new_dist]), new_look, np.array([0.0, -1.0, 0.0]),
+                           fov)
+
+    def zoom_on_last_click(self, client_id: int) -> None:
+        """Centre one tab's 2-D view on the point it last clicked, magnified for precise picking.
+
+        A BA cell becomes :data:`ZOOM_PX_PER_CELL` screen pixels across its
+        narrow side; a camera pixel :data:`ZOOM_PX_PER_IMAGE_PX` screen pixels.
+        """
+        client = self.server.get_clients()[client_id]
+        last = self._last_click.get(client_id)
+        if last is None:
+            raise CalibError("nothing clicked yet in this tab: click a BA or camera image first")
+        with self._ui_lock:
+            if last[0] == "ba":
+                _, key, row, col = last
+                slot = self.slots[key]
+                u, shown = self._ba_window.display_cols(np.array([col]))
+                if not shown[0]:
+                    raise CalibError(f"the last clicked cell (column {col}) is outside the shown BA columns")
+                centre = slot.world_from_pixel(np.array([[u[0], row]]))[0]
+                units = min(slot.units_per_px, slot.units_per_px_y) / ZOOM_PX_PER_CELL
+            else:
+                slot = self._camera_slot()
+                uv, ok = self._display_from_pixels(np.array([[last[1], last[2]]]))
+                if not ok[0]:
+                    raise CalibError("the last clicked camera pixel is not shown in this camera view")
+                centre = slot.world_from_pixel(uv)[0]
+                units = slot.units_per_px / ZOOM_PX_PER_IMAGE_PX
+        self._zoom(client, centre=centre, units_per_screen_px=units)
 
     def _apply_camera(self, client: Any, position: np.ndarray, look_at: np.ndarray, up: np.ndarray, fov: float) -> None:
         cam = client.camera
@@ -996,6 +1265,11 @@ class CalibrationApp:
             disp, ok = self._display_from_pixels(disp)
             if not ok[0]:
                 raise CalibError(f"pixel {uv} is not shown in the camera view")
+        else:
+            u, shown = self._ba_window.display_cols(np.array([int(round(disp[0, 0]))]))
+            if not shown[0]:
+                raise CalibError(f"BA column {uv[0]} is outside the shown columns")
+            disp = np.array([[u[0] + disp[0, 0] - round(disp[0, 0]), disp[0, 1]]])
         world = slot.world_from_pixel(disp)[0]
         cam = self.server.get_clients()[client_id].camera
         R_world_cam = vtf.SO3(np.asarray(cam.wxyz)).as_matrix()
@@ -1006,6 +1280,11 @@ class CalibrationApp:
         return x / cam.image_width, y / cam.image_height
 
     @property
+    def ba_window(self) -> ColumnWindow:
+        """The scan columns the BA images show."""
+        return self._ba_window
+
+    @property
     def result(self):
         """The last good :class:`calib_core.solve.CalibrationResult`, or None."""
         bundle = self._bundle
@@ -1014,11 +1293,15 @@ class CalibrationApp:
     def wait_idle(self, timeout: float = 30.0) -> bool:
         """Block until queued user actions are applied and the live solver is idle."""
         deadline = time.monotonic() + timeout
-        while self._actions.unfinished_tasks:
-            if time.monotonic() > deadline:
+        while True:
+            while self._actions.unfinished_tasks:
+                if time.monotonic() > deadline:
+                    return False
+                time.sleep(0.01)
+            if not self._solver.wait_idle(max(0.0, deadline - time.monotonic())):
                 return False
-            time.sleep(0.01)
-        return self._solver.wait_idle(max(0.0, deadline - time.monotonic()))
+            if not self._actions.unfinished_tasks:  # a finished solve may have queued a view update
+                return True
 
     def stop(self) -> None:
         """Stop the solver thread and the server."""

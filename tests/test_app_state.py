@@ -319,3 +319,134 @@ def test_live_solver_coalesces_bursts_and_survives_failures():
         assert solver.wait_idle(5) and done[-1] == (11, "OK", None)
     finally:
         solver.stop()
+
+
+# ------------------------------------------------------------------ BA display
+def sphere_directions(elevation_deg: np.ndarray, azimuth_deg: np.ndarray) -> np.ndarray:
+    """Unit directions (H, W, 3) of a spinning lidar: rows = elevation, columns = azimuth."""
+    e, a = np.meshgrid(np.radians(elevation_deg), np.radians(azimuth_deg), indexing="ij")
+    return np.stack([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)], axis=-1)
+
+
+def test_cell_aspect_makes_cells_square_in_angle():
+    from app.ba_view import cell_aspect_from_directions
+
+    # 64 beams 0.625 deg apart (+15 ... -24.4 deg), 1800 columns 0.2 deg apart: cells 3.125x taller.
+    d = sphere_directions(15.0 - 0.625 * np.arange(64), 0.2 * np.arange(1800))
+    assert cell_aspect_from_directions(d) == pytest.approx(0.625 / 0.2, rel=1e-6)
+    # Uneven beams 1, 3, 1 deg apart: one average stretch (5 deg / 3 rows) over the 0.5 deg columns
+    # (measured at the horizon row; at 4 deg elevation 0.5 deg of azimuth is only 0.4988 deg).
+    d = sphere_directions(np.array([4.0, 3.0, 0.0, -1.0]), 0.5 * np.arange(720))
+    assert cell_aspect_from_directions(d) == pytest.approx((5.0 / 3.0) / 0.5, rel=1e-6)
+    # Unknown directions (NaN rows, or all NaN) do not break it.
+    d[1] = np.nan
+    assert np.isfinite(cell_aspect_from_directions(d))
+    assert cell_aspect_from_directions(np.full((4, 5, 3), np.nan)) == 1.0
+
+
+def test_column_window_wraps_and_clips():
+    from app.ba_view import ColumnWindow
+
+    w = ColumnWindow.make(1790, 20, 1800, wrap=True)
+    assert list(w.columns[:11]) == list(range(1790, 1800)) + [0] and w.columns[-1] == 9
+    u, shown = w.display_cols(np.array([1790, 5, 9, 10, 1000]))
+    np.testing.assert_array_equal(u[shown], [0, 15, 19])
+    np.testing.assert_array_equal(shown, [True, True, True, False, False])
+    assert ColumnWindow.make(-5, 20, 1800, wrap=True).start == 1795
+    assert ColumnWindow.make(1790, 20, 1800, wrap=False).start == 1780  # stays inside the scan
+    assert ColumnWindow.make(7, 5000, 1800, wrap=False) == ColumnWindow(0, 1800, 1800, False)
+    assert ColumnWindow.make(7, 0, 1800, wrap=True).width == 1
+
+
+def test_covering_window_is_the_narrowest_arc_through_the_seen_columns():
+    from app.ba_view import covering_window
+
+    seen = np.zeros(1800, bool)
+    seen[780:1027] = True  # what the published calibration of auto_calib projects
+    w = covering_window(seen, wrap=True)
+    assert (w.start, w.width) == (780, 247)
+    # Margin 8, ends moved out to multiples of 8: 772 -> 768, 1034 + 1 -> 1040.
+    w = covering_window(seen, wrap=True, margin=8, quantum=8)
+    assert (w.start, w.width) == (768, 272)
+    # A view across column 0 (the lidar's back) is one arc through 0, not the whole scan.
+    seen[:] = False
+    seen[1795:] = True
+    seen[:11] = True
+    w = covering_window(seen, wrap=True, margin=2)
+    assert (w.start, w.width) == (1793, 20)
+    assert covering_window(seen, wrap=False).width == 1800  # without wrap it must span 0 ... 1799
+    seen[:] = False
+    assert covering_window(seen, wrap=True) is None
+    seen[42] = True
+    assert (covering_window(seen, wrap=True).start, covering_window(seen, wrap=True).width) == (42, 1)
+
+
+def test_ba_texture_is_a_nearest_neighbour_enlargement_of_the_window():
+    from app.ba_view import ColumnWindow, ba_texture, texture_factor
+
+    gray = np.arange(2 * 6, dtype=np.uint8).reshape(2, 6) * 10
+    w = ColumnWindow.make(4, 3, 6, wrap=True)  # scan columns 4, 5, 0
+    tex = ba_texture(gray, w, 3)
+    assert tex.shape == (6, 9) and tex.dtype == np.uint8
+    np.testing.assert_array_equal(tex[0:3, 0:3], 40)  # cell (row 0, col 4)
+    np.testing.assert_array_equal(tex[3:6, 6:9], 60)  # cell (row 1, col 0)
+    np.testing.assert_array_equal(tex[::3, ::3], [[40, 50, 0], [100, 110, 60]])
+    # Factors: 64 x 1800 is limited by the 8192 px side, a 64 x 272 window by the texel budget.
+    assert texture_factor(1800, 64) == 4  # 7200 px wide
+    assert texture_factor(272, 64) == 10  # 2720 x 640 = 1.7 Mpx
+    assert texture_factor(10000, 64) == 1
+
+
+def test_clicks_on_a_stretched_windowed_ba_image_map_to_the_exact_cell():
+    from app.ba_view import ColumnWindow
+    from app.layout import annotation_layout
+
+    keys = ("horizontal", "vertical", "diag_pos45", "diag_neg45")
+    window = ColumnWindow.make(1790, 40, 1800, wrap=True)
+    slots = annotation_layout({"raw": (1920, 1200)}, (window.width, 64), keys, cell_aspect=3.24)
+    slot = slots["diag_neg45"]
+    # Drawn cells are 3.24 times taller than wide.
+    assert slot.units_per_px_y / slot.units_per_px == pytest.approx(3.24)
+    rng = np.random.default_rng(0)
+    viewer = np.array([0.4, -1.0, -9.0])
+    for _ in range(200):
+        row, u = int(rng.integers(0, 64)), int(rng.integers(0, window.width))
+        # Aim anywhere inside the cell, up to 0.49 cell from its centre.
+        du, dv = rng.uniform(-0.49, 0.49, size=2)
+        x0, y0, _, _ = slot.bounds()
+        target = np.array([x0 + (u + 0.5 + du) * slot.units_per_px, y0 + (row + 0.5 + dv) * slot.units_per_px_y, 0.0])
+        uv = slot.pixel_from_ray(viewer, target - viewer)
+        assert window.cell_at(uv, 64) == (row, (1790 + u) % 1800)
+    # The image border belongs to the edge cells.
+    assert window.cell_at((-0.5, -0.5), 64) == (0, 1790)
+    assert window.cell_at((39.5, 63.5), 64) == (63, 29)
+
+
+def test_ba_grid_follows_the_shape_of_the_shown_images():
+    from app.layout import annotation_layout
+
+    keys = ("horizontal", "vertical", "diag_pos45", "diag_neg45")
+
+    def columns(ba_size, aspect):
+        slots = annotation_layout({"raw": (1920, 1200)}, ba_size, keys, cell_aspect=aspect)
+        return len({round(slots[k].center[0], 6) for k in keys})
+
+    assert columns((1800, 64), 3.24) == 1  # a whole 360 deg scan: stacked, full width
+    assert columns((272, 64), 3.24) == 2  # the part facing the camera: 2 x 2
+    assert columns((60, 64), 3.24) == 4  # a narrow window: side by side
+    assert columns((720, 180), 2.0) == 2  # the sample
+
+
+def test_pick_markers_are_rings_that_leave_the_picked_cell_visible():
+    from app.server import RING_SEGMENTS, marker_segments
+
+    centre = np.array([[1.0, 2.0, -0.01]])
+    segs = marker_segments(centre, 0.1, cell_half_size=(0.01, 0.03))
+    assert segs.shape == (RING_SEGMENTS + 4 + 4, 2, 3)
+    dist = np.linalg.norm(segs[..., :2] - centre[0, :2], axis=-1)
+    np.testing.assert_allclose(dist[:RING_SEGMENTS], 0.1)  # ring
+    assert dist[RING_SEGMENTS:RING_SEGMENTS + 4].min() == pytest.approx(0.04)  # ticks stop short of the centre
+    outline = segs[RING_SEGMENTS + 4:, :, :2] - centre[0, :2]
+    np.testing.assert_allclose(np.abs(outline), np.broadcast_to([0.01, 0.03], outline.shape))  # the cell's border
+    assert np.all(segs[..., 2] == -0.01)
+    assert marker_segments(np.empty((0, 3)), 0.1).shape == (0, 2, 3)
