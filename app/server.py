@@ -7,6 +7,11 @@ clicks a BA image and the camera image, in either order, to make a pair; from
 shows the errors, a per-pair residual table, the reprojected points and BA
 edges, and a coloured point cloud in a 3-D view.
 
+Wide lidar scans (e.g. 64 x 1800) are shown with rows stretched to about
+square cells in angle and, on request, only a window of columns such as the
+part facing the camera (:mod:`app.ba_view`); zoom buttons centre and magnify
+the last click.
+
 Every number shown comes from :mod:`calib_core`; this module only routes
 clicks, draws, and moves data between the state, the solver and the page.
 
@@ -75,6 +80,7 @@ PICK_RADII = 2.5
 ZOOM_PX_PER_CELL = 14.0
 ZOOM_PX_PER_IMAGE_PX = 4.0
 ZOOM_STEP = 2.0
+EDGE_MIN_SIZE = 0.012  # world units
 BA_WINDOW_MODES = {"all": "All columns", "camera": "Facing the camera", "custom": "Custom"}
 SNAP_RADIUS_PX = 4.0
 UP_AXES = {"+z": (0.0, 0.0, 1.0), "+y": (0.0, 1.0, 0.0), "-y": (0.0, -1.0, 0.0), "camera up (-y of camera)": None}
@@ -380,14 +386,14 @@ class CalibrationApp:
         last = (w.start + w.width - 1) % w.n_cols
         return f"{title} (columns {w.start}-{last} of {w.n_cols})"
 
-    def _apply_ba_window(self, force: bool = False) -> None:
+    def _apply_ba_window(self) -> None:
         """Show the window the mode asks for: new textures, slots, markers; re-frame 2-D tabs."""
         with self._ui_lock:
             window = self._wanted_ba_window()
-            if window == self._ba_window and not force:
+            if window == self._ba_window:
                 return
             self._ba_window = window
-            self.slots = self._layout()
+            old_slots, self.slots = self.slots, self._layout()
             with self.server.atomic():
                 for key in self.ba_keys:
                     s, handle = self.slots[key], self._image_handles[key]
@@ -400,6 +406,8 @@ class CalibrationApp:
                     self._ba_titles[key].text = self._ba_title(key)
             self._sync_window_widgets()
         self._refresh_scene()
+        if self.slots == old_slots:
+            return  # same size (only the first column moved): keep every tab's zoom and pan
         clients = self.server.get_clients()
         for cid, mode in list(self._client_mode.items()):
             if mode != "3d" and cid in clients:
@@ -716,7 +724,7 @@ class CalibrationApp:
         elif event.value == "Out":
             self._zoom(event.client, factor=1.0 / ZOOM_STEP)
         else:
-            self.zoom_on_last_click(event.client.client_id)
+            self._zoom_on_last(event.client)
 
     def _on_ba_window_mode(self, event: Any) -> None:
         if event.client is None:  # our own update of the widget
@@ -993,7 +1001,9 @@ class CalibrationApp:
                          np.array(reproj_cols, np.uint8).reshape(-1, 3), MARKER_SIZE * 0.55, shape="diamond")
         self._set_lines("/annot/overlay/residuals", np.array(segs).reshape(-1, 2, 3),
                         np.repeat(np.array(seg_cols, np.uint8).reshape(-1, 1, 3), 2, axis=1), thickness=2.0)
-        self._set_points("/annot/overlay/edges", edge_world, (0, 190, 255), slot.units_per_px * 1.6, shape="square")
+        # At least EDGE_MIN_SIZE: one pixel of a 1920 px image is too small to see in the full view.
+        self._set_points("/annot/overlay/edges", edge_world, (0, 190, 255), max(slot.units_per_px * 1.6, EDGE_MIN_SIZE),
+                         shape="square")
         self._set_lines("/annot/overlay/predicted", np.array(pred_segs).reshape(-1, 2, 3),
                         np.repeat(np.array(pred_cols, np.uint8).reshape(-1, 1, 3), 2, axis=1), thickness=4.0)
 
@@ -1185,8 +1195,10 @@ class CalibrationApp:
         A BA cell becomes :data:`ZOOM_PX_PER_CELL` screen pixels across its
         narrow side; a camera pixel :data:`ZOOM_PX_PER_IMAGE_PX` screen pixels.
         """
-        client = self.server.get_clients()[client_id]
-        last = self._last_click.get(client_id)
+        self._zoom_on_last(self.server.get_clients()[client_id])
+
+    def _zoom_on_last(self, client: Any) -> None:
+        last = self._last_click.get(client.client_id)
         if last is None:
             raise CalibError("nothing clicked yet in this tab: click a BA or camera image first")
         with self._ui_lock:
@@ -1257,7 +1269,9 @@ class CalibrationApp:
         ----------
         target : str
             ``"camera"`` (``uv`` is an ORIGINAL camera-image pixel, shown in the
-            visible camera view) or a BA key (``uv`` = (col, row) of a cell).
+            visible camera view) or a BA key (``uv`` = (col, row) of a scan
+            cell, which must lie in the shown column window; fractions of a
+            cell aim off its centre).
         """
         slot = self._camera_slot() if target == "camera" else self.slots[target]
         disp = np.asarray(uv, dtype=np.float64).reshape(1, 2)

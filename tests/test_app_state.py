@@ -450,3 +450,94 @@ def test_pick_markers_are_rings_that_leave_the_picked_cell_visible():
     np.testing.assert_allclose(np.abs(outline), np.broadcast_to([0.01, 0.03], outline.shape))  # the cell's border
     assert np.all(segs[..., 2] == -0.01)
     assert marker_segments(np.empty((0, 3)), 0.1).shape == (0, 2, 3)
+
+
+# ------------------------------------------------ the app on the sample (no browser)
+class FakeCamera:
+    """The parts of a viser client camera the app reads and sets."""
+
+    def __init__(self):
+        self.position, self.look_at, self.up_direction = (0.0, 0.0, -10.0), (0.0, 0.0, 0.0), (0.0, -1.0, 0.0)
+        self.fov, self.image_width, self.image_height = 0.5, 1400, 900
+
+
+class FakeClient:
+    def __init__(self):
+        self.client_id, self.camera, self.notes = 991, FakeCamera(), []
+
+    def atomic(self):
+        import contextlib
+
+        return contextlib.nullcontext()
+
+    def add_notification(self, title, body, **kwargs):
+        self.notes.append(title)
+
+
+def test_app_column_window_clicks_markers_and_zoom_on_the_sample(tmp_path):
+    import socket
+    from pathlib import Path
+    from types import SimpleNamespace
+
+    from app.ba_view import ColumnWindow
+    from app.server import PANEL_PX, ZOOM_PX_PER_CELL, CalibrationApp, _Action
+
+    sample = Path(__file__).resolve().parents[1] / "sample_data"
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        port = sock.getsockname()[1]
+    session = tmp_path / "session.yaml"
+    app = CalibrationApp(sample / "scan.npz", sample / "image.png", sample / "camera.yaml", session_path=session,
+                         port=port)
+    client = FakeClient()
+    try:
+        assert app.depth.shape == (180, 720) and app.ba_window.is_full
+        # 180 rows over 180 deg, 720 columns over 360 deg: cells drawn twice as tall as wide.
+        assert app.ba_cell_aspect == pytest.approx(2.0, rel=1e-3)
+        s = app.slots["horizontal"]
+        assert s.units_per_px_y / s.units_per_px == pytest.approx(2.0, rel=1e-3)
+
+        # "Facing the camera" before any calibration: the slider window (all columns) stays.
+        app._on_ba_window_mode(_Action(SimpleNamespace(client=client), "Facing the camera"))
+        assert app.ba_window.is_full and client.notes == ["No calibration yet"]
+        # The user sets a custom window across column 0 with the sliders.
+        app._sl_ba_start.value, app._sl_ba_width.value = 700, 60
+        app._on_ba_window_slider(_Action(SimpleNamespace(client=client, target=app._sl_ba_width), 60))
+        assert app.ba_window == ColumnWindow(700, 60, 720, True)
+        assert app._image_handles["horizontal"].image.shape[1] == 60 * (app._image_handles["horizontal"].image.shape[0] // 180)
+
+        # A click at display (25.3, 10.4) is scan cell (row 10, column 700 + 25 - 720 = 5).
+        pid = app._click("horizontal", (25.3, 10.4), client=client)
+        assert app.state.get(pid).laser_rc == (10, 5)
+        app.state.add_pixel(100.0, 100.0)
+        other = app.state.add_laser(20, 300)  # outside the window
+        ids, uv = app._pick_ends("vertical")
+        assert ids == [pid] and other not in ids
+        np.testing.assert_array_equal(uv, [[25.0, 10.0]])
+
+        # Zoom on that click: the cell comes to the middle of the canvas left of the panel, 14 px wide.
+        app._click("diag_neg45", (25.0, 10.0), client=client)  # the same cell, re-clicked on another trace
+        app._zoom_on_last(client)
+        cam = client.camera
+        centre = app.slots["diag_neg45"].world_from_pixel([[25.0, 10.0]])[0]
+        dist = cam.look_at[2] - cam.position[2]
+        f = (cam.image_height / 2) / np.tan(cam.fov / 2)
+        x = cam.image_width / 2 + f * (centre[0] - cam.position[0]) / dist
+        y = cam.image_height / 2 + f * (centre[1] - cam.position[1]) / dist
+        assert (x, y) == pytest.approx(((cam.image_width - PANEL_PX) / 2, cam.image_height / 2))
+        assert f * app.slots["diag_neg45"].units_per_px / dist == pytest.approx(ZOOM_PX_PER_CELL)
+        app._zoom(client, factor=0.5)  # "Out": half the magnification, same point in the middle
+        dist2 = cam.look_at[2] - cam.position[2]
+        assert dist2 == pytest.approx(2 * dist)
+        assert cam.image_width / 2 + f * (centre[0] - cam.position[0]) / dist2 == pytest.approx(x)
+    finally:
+        app.stop()
+
+    # The window is part of the session.
+    app = CalibrationApp(sample / "scan.npz", sample / "image.png", sample / "camera.yaml", session_path=session,
+                         port=port)
+    try:
+        assert app.ba_window == ColumnWindow(700, 60, 720, True)
+        assert app._dd_ba_window.value == "Custom"
+    finally:
+        app.stop()

@@ -1,0 +1,237 @@
+"""The browser app on a real 64 x 1800 scan (PJLab OpenCalib ``auto_calib``).
+
+A spinning-lidar BA image is a 28:1 strip; these tests check that the app
+shows the part facing the camera and that clicks land on the exact cell the
+user aims at, also after zooming.  The independent truth is the dataset's
+published extrinsic (which scan columns the camera sees) and the cells and
+pixels of ``real_data/pairs/auto_calib_pairs.yaml`` (generated from that
+calibration, see ``real_data/README.md``).
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import socket
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from calib_core.pairs import load_pairs_yaml, save_pairs_yaml
+from calib_core.transforms import transform_points
+
+pytestmark = pytest.mark.realdata
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA = ROOT.parent / "shared" / "data" / "pjlab_opencalib_lidar2camera" / "auto_calib"
+PAIRS = ROOT / "real_data" / "pairs" / "auto_calib_pairs.yaml"
+CHROMIUM = Path("/usr/bin/chromium")
+CHROMIUM_ARGS = [
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
+TIMEOUT_S = 30.0
+N_PRELOADED = 6  # pairs imported before the browser test clicks more
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def wait_for(condition, what: str, timeout: float = TIMEOUT_S, interval: float = 0.05):
+    """Poll ``condition()`` until it returns something truthy; fail naming ``what``."""
+    deadline = time.monotonic() + timeout
+    while True:
+        value = condition()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            pytest.fail(f"timed out after {timeout:.0f} s waiting for {what}")
+        time.sleep(interval)
+
+
+def scene_files() -> tuple[Path, Path, Path]:
+    if not DATA.is_dir():
+        pytest.skip(f"real data not found at {DATA} (the PJLab OpenCalib scenes of ../shared/data)")
+    return DATA / "calib.pcd", DATA / "calib.png", DATA / "center_camera-intrinsic.json"
+
+
+def published_T() -> np.ndarray:
+    data = json.loads((DATA / "top_center_lidar-to-center_camera-extrinsic.json").read_text())
+    return np.array(data["top_center_lidar-to-center_camera-extrinsic"]["param"]["sensor_calib"]["data"], dtype=float)
+
+
+def make_app(session: Path, **kwargs):
+    from app.server import CalibrationApp
+
+    scan, image, camera = scene_files()
+    return CalibrationApp(scan, image, camera, session_path=session, port=free_port(), **kwargs)
+
+
+def test_camera_facing_window_shows_what_the_published_calibration_projects(tmp_path):
+    session = tmp_path / "session.yaml"
+    app = make_app(session)
+    try:
+        assert app.depth.shape == (64, 1800)
+        # 40 deg of beams over 360 deg of columns: cells drawn about 3.2x taller than wide.
+        assert 2.5 < app.ba_cell_aspect < 4.5
+        assert app.ba_window.is_full  # default: every column
+        app.state.import_pairs_file(PAIRS)
+        assert app.wait_idle(60) and app.result is not None
+        app._set_ba_mode("camera")
+        assert app.wait_idle(10)
+        window = app.ba_window
+
+        # Truth: the columns whose points the PUBLISHED extrinsic projects into the image.
+        points, rows_cols = app.depth.valid_points()
+        _, in_image = app.camera.project(transform_points(published_T(), points))
+        seen = np.unique(rows_cols[in_image, 1])
+        assert seen.max() - seen.min() < 400  # one arc, not across column 0
+        shown = set(window.columns.tolist())
+        assert set(range(seen.min(), seen.max() + 1)) <= shown
+        assert window.width <= (seen.max() - seen.min() + 1) + 40  # small margins only
+        # The BA images show exactly those columns, each cell a square block of texels.
+        tex = app._image_handles["horizontal"].image
+        k = tex.shape[0] // 64
+        assert tex.shape == (64 * k, window.width * k) and k >= 4
+        np.testing.assert_array_equal(tex[::k, ::k], app.ba_gray["horizontal"][:, window.columns])
+        # Markers of pairs outside the window are hidden; those inside keep their cell.
+        ids, uv = app._pick_ends("horizontal")
+        assert len(ids) == len(load_pairs_yaml(PAIRS))  # every generated pair faces the camera
+        for pid, (u, v) in zip(ids, uv):
+            assert (int(v), window.scan_col(int(u))) == app.state.get(pid).laser_rc
+    finally:
+        app.stop()
+
+    # The choice is part of the session: a restart shows the same window after its first solve.
+    app = make_app(session)
+    try:
+        assert app.wait_idle(60) and app.result is not None
+        assert app.wait_idle(10)
+        assert app.ba_window == window
+    finally:
+        app.stop()
+
+
+@pytest.mark.browser
+def test_pick_exact_cells_on_the_real_scan_in_headless_chromium(tmp_path):
+    if not CHROMIUM.exists():
+        pytest.skip("/usr/bin/chromium is missing (apt-get install chromium); CI installs it")
+    sync_api = pytest.importorskip("playwright.sync_api", reason="the playwright package is not installed")
+    from PIL import Image
+
+    scene_files()
+    t_start = time.monotonic()
+    pairs = load_pairs_yaml(PAIRS)
+    preloaded = tmp_path / "first_pairs.yaml"
+    save_pairs_yaml(preloaded, pairs[:N_PRELOADED])
+    app = make_app(tmp_path / "session.yaml")
+    report: list[str] = []
+    try:
+        app.state.import_pairs_file(preloaded)  # a calibration exists: the camera-facing window is known
+        assert app.wait_idle(60) and app.result is not None
+        with sync_api.sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS)
+            page = browser.new_page(viewport={"width": 1400, "height": 900})
+            page.goto(app.url)
+            cid = wait_for(lambda: app.client_ids(), "the tab to connect")[0]
+            wait_for(lambda: app.view_settled(cid), "the annotation view to be set")
+            notice = page.locator(".mantine-Notification-root", has_text="Software WebGL")
+            notice.first.wait_for(timeout=TIMEOUT_S * 1000)
+            notice.first.locator("button").click()
+            notice.first.wait_for(state="detached", timeout=TIMEOUT_S * 1000)
+            box = page.locator("canvas").first.bounding_box()
+            assert box is not None
+
+            def screen(target: str, uv) -> tuple[float, float]:
+                fx, fy = app.page_position(cid, target, uv)
+                assert 0.0 < fx < 1.0 and 0.0 < fy < 1.0, f"{target} {uv} is off screen"
+                return box["x"] + fx * box["width"], box["y"] + fy * box["height"]
+
+            def px_per_cell(key: str, row: int, col: int) -> tuple[float, float]:
+                x0, y0 = screen(key, (col, row))
+                x1, _ = screen(key, (col + 1, row))
+                _, y1 = screen(key, (col, row + 1))
+                return x1 - x0, y1 - y0
+
+            def drawn(target: str, uv) -> bool:
+                x, y = screen(target, uv)
+                shot = page.screenshot(clip={"x": x - 2, "y": y - 2, "width": 4, "height": 4})
+                rgb = np.asarray(Image.open(io.BytesIO(shot)).convert("RGB"), dtype=float).reshape(-1, 3)
+                return bool(np.abs(rgb.mean(axis=0) - 238.0).max() >= 12)  # not the grey backdrop
+
+            def set_view(button: str) -> None:
+                before = app._view_target.get(cid, (None, None, 0.0))[2]
+                page.get_by_role("button", name=button, exact=True).click()
+                wait_for(lambda: app._view_target.get(cid, (None, None, 0.0))[2] > before, f"'{button}' to apply")
+                wait_for(lambda: app.view_settled(cid), f"the view after '{button}'")
+
+            def click_ba(key: str, row: int, col: int, offset=(0.0, 0.0)) -> tuple[int, int]:
+                """Click display position cell + offset (in cells); return the cell the app recorded."""
+                before = app.state.version
+                page.mouse.click(*screen(key, (col + offset[0], row + offset[1])))
+                wait_for(lambda: app.state.version > before, f"the click on cell {(row, col)} to register")
+                return app.state.picks[-1].laser_rc
+
+            key = "diag_pos45"  # the trace where poles and the block stand out most
+            target = pairs[N_PRELOADED]  # a real foreground corner (a pole or block edge)
+            row, col = target.laser_rc
+            assert app.ba_window.is_full
+            report.append(f"all 1800 columns: {'x'.join(f'{s:.2f}' for s in px_per_cell(key, row, col))} px per cell")
+
+            # The user picks "Facing the camera" in the BA columns dropdown.
+            page.get_by_label("BA columns").click()
+            page.get_by_role("option", name="Facing the camera").click()
+            wait_for(lambda: not app.ba_window.is_full, "the BA images to show the camera-facing columns")
+            wait_for(lambda: app.view_settled(cid), "the view to re-frame")
+            set_view("BA images")
+            wait_for(lambda: drawn(key, (col, row)), "the windowed BA image to be drawn", interval=0.2)
+            w = app.ba_window
+            report.append(f"window {w.start}-{(w.start + w.width - 1) % w.n_cols} ({w.width} columns), framed: "
+                          f"{'x'.join(f'{s:.2f}' for s in px_per_cell(key, row, col))} px per cell")
+            hits = []
+            hits.append((click_ba(key, row, col), (row, col)))
+
+            # Zoom on the clicked cell, then pick its neighbours near their edges (0.3 cell off centre).
+            set_view("On last click")
+            wait_for(lambda: drawn(key, (col, row)), "the zoomed view to be drawn", interval=0.2)
+            zoomed = px_per_cell(key, row, col)
+            report.append(f"zoomed on last click: {'x'.join(f'{s:.2f}' for s in zoomed)} px per cell")
+            assert min(zoomed) >= 10.0
+            for d_row, d_col, off in ((0, 1, (0.3, -0.3)), (1, 0, (-0.3, 0.3)), (-1, -1, (0.3, 0.3)), (0, 0, (-0.3, -0.3))):
+                aim = (row + d_row, col + d_col)
+                hits.append((click_ba(key, aim[0], aim[1], off), aim))
+
+            # Frame the camera image and click the true pixel of the same corner: the pair completes.
+            set_view("Camera")
+            wait_for(lambda: drawn("camera", target.pixel), "the camera image to be drawn", interval=0.2)
+            before = app.state.version
+            page.mouse.click(*screen("camera", target.pixel))
+            wait_for(lambda: app.state.version > before, "the camera click to register")
+            pick = app.state.picks[-1]
+            assert pick.complete and pick.laser_rc == (row, col)
+            pixel_err = float(np.hypot(*np.subtract(pick.pixel, target.pixel)))
+            text_ok = wait_for(lambda: f"Solved with {N_PRELOADED + 1} pairs" in page.inner_text("body"),
+                               "the solve with the clicked pair")
+            assert text_ok
+            set_view("BA images")
+            page.screenshot(path=str(tmp_path / "real_scene.png"))
+            browser.close()
+    finally:
+        app.stop()
+
+    exact = sum(got == aim for got, aim in hits)
+    print(f"\nreal scene ({time.monotonic() - t_start:.1f} s): " + "; ".join(report)
+          + f"; BA clicks on the aimed cell: {exact}/{len(hits)}; camera click {pixel_err:.3f} px from the aim; "
+          + f"screenshot {tmp_path / 'real_scene.png'}")
+    assert exact == len(hits), hits
+    assert pixel_err < 0.5
