@@ -22,10 +22,13 @@ point lies at depth ``d > 0`` along it.
 
 from __future__ import annotations
 
+import functools
 import itertools
 
 import numpy as np
 
+from .checks import median
+from .refine import cross3
 from .rigid import rigid_fit
 
 __all__ = [
@@ -60,8 +63,9 @@ def angular_errors_rad(
     """
     T = np.asarray(T_camera_lidar, dtype=np.float64)
     P = np.einsum("...ij,nj->...ni", T[..., :3, :3], points_lidar) + T[..., None, :3, 3]
-    cross = np.linalg.norm(np.cross(bearings_camera, P), axis=-1)
-    dot = np.sum(bearings_camera * P, axis=-1)
+    c = cross3(bearings_camera, P)
+    cross = np.sqrt(np.einsum("...i,...i->...", c, c))
+    dot = np.einsum("ni,...ni->...n", bearings_camera, P)
     return np.arctan2(cross, dot)
 
 
@@ -88,7 +92,8 @@ def quan_lan_quartic(
     ``x = x1^2``.  The coefficients below are the resultant
     ``Res_x3(Res_x2(f12, f23), f13)`` expanded with sympy and regrouped in
     ``m = d12 + d13 - d23`` (derivation script not shipped; the formula is
-    checked in the tests by evaluating ``g`` at true depths).
+    checked in the tests by evaluating ``g`` at true depths).  ``a_k`` is
+    homogeneous of degree ``4 - k`` in the squared distances.
 
     Parameters
     ----------
@@ -102,84 +107,66 @@ def quan_lan_quartic(
     (..., 5) ndarray
         ``(a0, a1, a2, a3, a4)``, ascending powers of ``x = x1^2``.
     """
-    m = d12 + d13 - d23
+    # Short names and shared products: the expansion has ~250 array operations otherwise.
+    A, B, C = c12, c13, c23
     s = d12 + d13
-    # D = -det(Gram matrix of the three bearings); a4 vanishes for coplanar rays.
-    D = c12**2 + c13**2 + c23**2 - 2 * c12 * c13 * c23 - 1
-    a0 = (m**2 - 4 * c23**2 * d12 * d13) ** 2
-    a1 = (
-        8 * (c12**2 - c12 * c13 * c23 + c13**2 - 1) * m**3
-        - 8
-        * (
-            2 * c12**2 * c23**2 * d13
-            + c12**2 * d12
-            - 2 * c12 * c13 * c23 * s
-            + 2 * c13**2 * c23**2 * d12
-            + c13**2 * d13
-            - c23**2 * s
-        )
-        * m**2
-        + 32 * c23 * d12 * d13 * (c12**2 * c23 - c12 * c13 * c23**2 - 2 * c12 * c13 + c13**2 * c23 + c23) * m
-        - 32 * c23**2 * d12 * d13 * (c12**2 * d12 - 2 * c12 * c13 * c23 * s + c13**2 * d13 + c23**2 * s)
+    m = s - d23
+    A2, B2, C2 = A * A, B * B, C * C
+    ABC = A * B * C
+    A2B2 = A2 * B2
+    p = d12 * d13
+    m2 = m * m
+    D = A2 + B2 + C2 - 2 * ABC - 1
+    u = m2 - 4 * C2 * p
+    a0 = u * u
+    # Terms shared by a1, a2 and a3.
+    A2d12, B2d13 = A2 * d12, B2 * d13
+    ABCs, C2s = ABC * s, C2 * s
+    a1 = 8 * (
+        (A2 - ABC + B2 - 1) * m2 * m
+        - (2 * C2 * (A2 * d13 + B2 * d12) + A2d12 - 2 * ABCs + B2d13 - C2s) * m2
+        + 4 * C * p * ((A2 + B2 + 1 - ABC) * C - 2 * A * B) * m
+        - 4 * C2 * p * (A2d12 - 2 * ABCs + B2d13 + C2s)
     )
+    A4, B4 = A2 * A2, B2 * B2
+    d12_2, d13_2 = d12 * d12, d13 * d13
+    q3 = d12_2 + 3 * p + d13_2
+    dd = d12 - d13
     a2 = (
-        8
-        * (
-            2 * c12**4
-            - 4 * c12**3 * c13 * c23
-            + 6 * c12**2 * c13**2
-            + 2 * c12**2 * c23**2
-            - 5 * c12**2
-            - 4 * c12 * c13**3 * c23
-            + 2 * c12 * c13 * c23
-            + 2 * c13**4
-            + 2 * c13**2 * c23**2
-            - 5 * c13**2
-            - c23**2
-            + 3
-        )
-        * m**2
+        8 * (2 * A4 - 4 * A2 * ABC + 6 * A2B2 + 2 * A2 * C2 - 5 * A2 - 4 * B2 * ABC + 2 * ABC + 2 * B4 + 2 * B2 * C2 - 5 * B2 - C2 + 3) * m2
         - 32
         * (
-            c12**4 * d12
-            - 3 * c12**3 * c13 * c23 * d12
-            + 2 * c12**2 * c13**2 * c23**2 * s
-            + c12**2 * c13**2 * s
-            + c12**2 * c23**2 * (d12 - d13)
-            - c12**2 * d12
-            - 3 * c12 * c13**3 * c23 * d13
-            - c12 * c13 * c23**3 * s
-            + c13**4 * d13
-            - c13**2 * c23**2 * (d12 - d13)
-            - c13**2 * d13
-            + c23**2 * s
+            A4 * d12
+            - 3 * A2 * ABC * d12
+            + 2 * ABC * ABC * s
+            + A2B2 * s
+            + (A2 - B2) * C2 * dd
+            - A2d12
+            - 3 * B2 * ABC * d13
+            - C2 * ABCs
+            + B4 * d13
+            - B2d13
+            + C2s
         )
         * m
         + 16
         * (
-            c12**4 * d12**2
-            - 4 * c12**3 * c13 * c23 * d12 * s
-            + 4 * c12**2 * c13**2 * c23**2 * (d12**2 + 3 * d12 * d13 + d13**2)
-            - 2 * c12**2 * c13**2 * d12 * d13
-            + 2 * c12**2 * c23**2 * d12**2
-            - 4 * c12 * c13**3 * c23 * d13 * s
-            - 4 * c12 * c13 * c23**3 * (d12**2 + 3 * d12 * d13 + d13**2)
-            + 8 * c12 * c13 * c23 * d12 * d13
-            + c13**4 * d13**2
-            + 2 * c13**2 * c23**2 * d13**2
-            + c23**4 * (d12**2 + 4 * d12 * d13 + d13**2)
-            - 2 * c23**2 * d12 * d13
+            A4 * d12_2
+            - 4 * A2 * ABCs * d12
+            + 4 * ABC * ABC * q3
+            - 2 * A2B2 * p
+            + 2 * A2 * C2 * d12_2
+            - 4 * B2 * ABCs * d13
+            - 4 * C2 * ABC * q3
+            + 8 * ABC * p
+            + B4 * d13_2
+            + 2 * B2 * C2 * d13_2
+            + C2 * C2 * (q3 + p)
+            - 2 * C2 * p
         )
     )
-    a3 = (
-        32
-        * D
-        * (
-            (2 * c12**2 * c13**2 - c12**2 - c12 * c13 * c23 - c13**2 + 1) * m
-            - (2 * c12**2 * c13**2 * s - c12**2 * d12 - 2 * c12 * c13 * c23 * s - c13**2 * d13 + c23**2 * s)
-        )
-    )
-    a4 = 16 * D**2
+    a3 = 32 * D * ((2 * A2B2 - A2 - ABC - B2 + 1) * m - (2 * A2B2 * s - A2d12 - 2 * ABCs - B2d13 + C2s))
+    a4 = 16 * D * D
     return np.stack(np.broadcast_arrays(a0, a1, a2, a3, a4), axis=-1)
 
 
@@ -197,28 +184,42 @@ def _x_from_t(t: np.ndarray) -> np.ndarray:
     return np.sum(t[..., :-1] * t[..., 1:], axis=-1) / np.sum(t[..., :-1] ** 2, axis=-1)
 
 
-def _quan_lan_x(points: np.ndarray, bearings: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    """Squared depths ``x_i`` (in the units of ``points``) by Quan & Lan; NaN where unsolved."""
-    n = len(points)
-    cos = np.clip(bearings @ bearings.T, -1.0, 1.0)
-    sq = np.sum((points[:, None, :] - points[None, :, :]) ** 2, axis=-1)
+@functools.lru_cache(maxsize=64)
+def _ql_all_triples(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For every reference i, all pairs (j, k), j < k, that do not contain i: ``(n, m)`` each."""
     ref = np.arange(n)[:, None]
-    m = (n - 1) * (n - 2) // 2
-    if m <= _QL_MAX_ROWS:
-        # For every reference i, all pairs (j, k), j < k, that do not contain i.
-        J, K = np.triu_indices(n, 1)
-        keep = (J[None, :] != ref) & (K[None, :] != ref)
-        cols = np.nonzero(keep)[1].reshape(n, m)
-        j, k = J[cols], K[cols]
-    else:
-        # Random pairs (with repetition) of distinct j, k, both != i.
-        j = (ref + 1 + rng.integers(0, n - 1, (n, _QL_MAX_ROWS))) % n
-        k0 = (ref + 1 + rng.integers(0, n - 2, (n, _QL_MAX_ROWS))) % n  # never i or i - 1
-        k = np.where(k0 == j, (ref - 1) % n, k0)
-    i = np.broadcast_to(ref, j.shape)
-    A = quan_lan_quartic(cos[i, j], cos[i, k], cos[j, k], sq[i, j], sq[i, k], sq[j, k])
+    J, K = np.triu_indices(n, 1)
+    keep = (J[None, :] != ref) & (K[None, :] != ref)
+    cols = np.nonzero(keep)[1].reshape(n, -1)
+    out = np.broadcast_to(ref, cols.shape), J[cols], K[cols]
+    for a in out[1:]:
+        a.flags.writeable = False  # cached: shared between calls
+    return out
+
+
+def _ql_triples(n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Index triples ``(i, j, k)`` of the quartics, ``(n, rows)`` each."""
+    if (n - 1) * (n - 2) // 2 <= _QL_MAX_ROWS:
+        return _ql_all_triples(n)
+    # Random pairs (with repetition) of distinct j, k, both != i.
+    ref = np.arange(n)[:, None]
+    j = (ref + 1 + rng.integers(0, n - 1, (n, _QL_MAX_ROWS))) % n
+    k0 = (ref + 1 + rng.integers(0, n - 2, (n, _QL_MAX_ROWS))) % n  # never i or i - 1
+    k = np.where(k0 == j, (ref - 1) % n, k0)
+    return np.broadcast_to(ref, j.shape), j, k
+
+
+def _ql_rows(cos: np.ndarray, sq: np.ndarray, triples: tuple[np.ndarray, np.ndarray, np.ndarray]) -> np.ndarray:
+    """Quartic coefficients ``(n, rows, 5)`` for bearing cosines and squared distances."""
+    i, j, k = triples
+    return quan_lan_quartic(cos[i, j], cos[i, k], cos[j, k], sq[i, j], sq[i, k], sq[j, k])
+
+
+def _quan_lan_x(A: np.ndarray) -> np.ndarray:
+    """Squared depths ``x_i`` from the quartics ``A`` (n, rows, 5) of every reference point; NaN where unsolved."""
+    n = A.shape[0]
     # Each quartic is defined up to scale: give every row the same weight.
-    norms = np.linalg.norm(A, axis=-1, keepdims=True)
+    norms = np.sqrt(np.einsum("nrk,nrk->nr", A, A))[..., None]
     A = A / np.where(norms > 0, norms, 1.0)
     _, _, Vt = np.linalg.svd(A, full_matrices=n < 5)  # A: (n, rows, 5); Vt: (n, 5, 5)
     if n >= 5:
@@ -276,17 +277,31 @@ def quan_lan_depths(points_lidar: np.ndarray, bearings_camera: np.ndarray, seed:
     """
     P = np.asarray(points_lidar, dtype=np.float64)
     Bm = np.asarray(bearings_camera, dtype=np.float64)
-    rng = np.random.default_rng(seed)
+    rng = None  # created only if the quartics are subsampled (n > 25)
     scale = np.sqrt(np.mean(np.sum((P - P.mean(axis=0)) ** 2, axis=1)))
     if not scale > 0:
         return np.full(len(P), np.nan)
+    cos = np.clip(Bm @ Bm.T, -1.0, 1.0)
+    sq = np.sum((P[:, None, :] - P[None, :, :]) ** 2, axis=-1)
+    n = len(P)
+    sampled = (n - 1) * (n - 2) // 2 > _QL_MAX_ROWS
+    A = None
     for _ in range(2):
-        x = _quan_lan_x(P / scale, Bm, rng)
+        if A is None or sampled:  # (sampled: new random quartics for each pass)
+            if sampled and rng is None:
+                rng = np.random.default_rng(seed)
+            A = _ql_rows(cos, sq / scale**2, _ql_triples(n, rng))
+        else:
+            # The same quartics in the new units: a_k scales as (squared distance)^(4 - k).
+            A = A * ((A_scale / scale) ** 2) ** np.arange(4, -1, -1)
+        A_scale = scale
+        x = _quan_lan_x(A)
         depths = np.sqrt(x) * scale
-        median = np.nanmedian(depths) if np.any(np.isfinite(depths)) else np.nan
-        if not np.isfinite(median) or median <= 0:
+        finite = depths[np.isfinite(depths)]
+        mid = median(finite) if finite.size else np.nan
+        if not np.isfinite(mid) or mid <= 0:
             break
-        scale = median
+        scale = mid
     return depths
 
 
@@ -419,6 +434,8 @@ def _triples(bearings: np.ndarray, rng: np.random.Generator, max_random: int = 2
 
 #: Quan & Lan's pose is kept without a P3P search when its RMS angular error is below this.
 QUAN_LAN_ACCEPT_RMS_RAD = np.radians(2.0)
+#: With more pairs, Quan & Lan runs on this many well-spread ones (farthest-point order of the bearings).
+QUAN_LAN_MAX_PAIRS = 20
 
 
 def initial_pose(
@@ -435,6 +452,11 @@ def initial_pose(
     seed : int
         Seed of the random triples/quartic subsampling (deterministic output).
 
+    Notes
+    -----
+    With more than :data:`QUAN_LAN_MAX_PAIRS` pairs, Quan & Lan's depths come
+    from that many well-spread pairs; every candidate is scored on all pairs.
+
     Returns
     -------
     T_camera_lidar : (4, 4) ndarray
@@ -444,10 +466,13 @@ def initial_pose(
     cost : float
         Its angular cost ``0.5 * sum(angle^2)``, rad^2.
     """
-    rng = np.random.default_rng(seed)
     candidates: list[np.ndarray] = []
     methods: list[str] = []
-    T_ql = quan_lan_pose(points_lidar, bearings_camera, seed=seed)
+    # Quan-Lan costs O(n^3) (n quartic systems of (n-1)(n-2)/2 rows): run it on
+    # well-spread pairs only; the candidate is still scored on all of them.
+    n = len(points_lidar)
+    sub = np.sort(_spread_order(bearings_camera, QUAN_LAN_MAX_PAIRS)) if n > QUAN_LAN_MAX_PAIRS else slice(None)
+    T_ql = quan_lan_pose(points_lidar[sub], bearings_camera[sub], seed=seed)
     if T_ql is not None:
         errors = angular_errors_rad(T_ql[None], points_lidar, bearings_camera)[0]
         # Clicks are good to a fraction of a degree: an initial pose that fits every
@@ -457,7 +482,7 @@ def initial_pose(
             return T_ql, "quan_lan", float(0.5 * np.sum(errors**2))
         candidates.append(T_ql[None])
         methods.append("quan_lan")
-    tri = _triples(bearings_camera, rng)
+    tri = _triples(bearings_camera, np.random.default_rng(seed))
     T_p3p, _ = p3p_grunert(points_lidar[tri], bearings_camera[tri])
     if len(T_p3p):
         candidates.append(T_p3p)

@@ -45,6 +45,13 @@ def _as_array(value: object, name: str, dim: int) -> np.ndarray:
     return a
 
 
+def median(values: np.ndarray) -> float:
+    """``np.median`` of a 1-D array (same value), without its overhead for a few elements."""
+    v = np.sort(values)
+    k = v.size // 2
+    return float(v[k]) if v.size % 2 else float((v[k - 1] + v[k]) / 2)
+
+
 def _pairs_text(pairs: np.ndarray) -> str:
     shown = ", ".join(f"{i} and {j}" for i, j in pairs[:3])
     return shown + (f" (and {len(pairs) - 3} more)" if len(pairs) > 3 else "")
@@ -194,7 +201,7 @@ def outlier_indices(
     """
     r = np.asarray(residual_deg, dtype=np.float64)
     ref = r if reference_deg is None else np.asarray(reference_deg, dtype=np.float64)
-    med = np.median(ref)
-    mad = np.median(np.abs(ref - med))
+    med = median(ref)
+    mad = median(np.abs(ref - med))
     flagged = (r > med + k * 1.4826 * mad) & (r > min_deg)
     return np.nonzero(flagged)[0].tolist()

@@ -114,6 +114,14 @@ def _left_jacobian_so3(phi: np.ndarray) -> np.ndarray:
     return _so3_matrix(phi, a, b, 1.0 - b * theta2)
 
 
+def cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a x b`` for (..., 3) arrays (broadcast): np.cross's axis handling costs
+    more than the arithmetic for a few vectors."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+
+
 def tangent_basis(bearings_camera: np.ndarray) -> np.ndarray:
     """Orthonormal tangent-plane bases of unit bearings.
 
@@ -130,9 +138,9 @@ def tangent_basis(bearings_camera: np.ndarray) -> np.ndarray:
     b = np.asarray(bearings_camera, dtype=np.float64)
     # Cross with the coordinate axis least aligned with b (never parallel).
     axis = np.eye(3)[np.argmin(np.abs(b), axis=1)]
-    e1 = np.cross(b, axis)
-    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
-    e2 = np.cross(b, e1)
+    e1 = cross3(b, axis)
+    e1 /= np.sqrt(np.einsum("ij,ij->i", e1, e1))[:, None]
+    e2 = cross3(b, e1)
     return np.stack([e1, e2], axis=1)
 
 
