@@ -8,9 +8,10 @@ geometry gives warning strings that the solver passes on in its result.
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from ..errors import CalibError
-from .refine import PARAMETER_NAMES
+from .refine import PARAMETER_NAMES, cross3
 
 __all__ = [
     "MIN_PAIRS",
@@ -55,6 +56,48 @@ def median(values: np.ndarray) -> float:
 def _pairs_text(pairs: np.ndarray) -> str:
     shown = ", ".join(f"{i} and {j}" for i, j in pairs[:3])
     return shown + (f" (and {len(pairs) - 3} more)" if len(pairs) > 3 else "")
+
+
+def _angle_rad(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Angle between rows of unit vectors, ``atan2(|a x b|, a . b)`` (precise near 0 and pi)."""
+    c = cross3(a, b)
+    return np.arctan2(np.sqrt(np.einsum("ij,ij->i", c, c)), np.einsum("ij,ij->i", a, b))
+
+
+def _close_pairs(vectors: np.ndarray, radius: float, distance) -> np.ndarray:
+    """Index pairs ``(i, j)``, ``i < j``, in lexicographic order, with ``distance(i, j) <= radius``.
+
+    A k-d tree finds the candidates within a Euclidean radius a little larger
+    than ``radius`` in O(n log n) (all pairs would be O(n^2)); ``distance``
+    (index arrays -> distances, never smaller than the Euclidean one) decides.
+    """
+    cand = cKDTree(vectors).query_pairs(radius * (1 + 1e-6), output_type="ndarray")
+    if cand.size:
+        cand = cand[distance(cand[:, 0], cand[:, 1]) <= radius]
+        cand = cand[np.lexsort((cand[:, 1], cand[:, 0]))]
+    return cand.reshape(-1, 2)
+
+
+def _largest_angle_deg(bearings: np.ndarray) -> float:
+    """Largest angle between two unit bearings, degrees: exact below :data:`CONE_WARNING_DEG`,
+    otherwise only known to be at least that.
+
+    The angle ``alpha`` from the mean direction to the farthest bearing is a
+    cheap bound: for that bearing ``b``, the mean of ``b . b_j`` over all
+    ``j`` is ``|mean| cos(alpha) <= cos(alpha)`` when ``alpha <= 90`` deg, so
+    some ``b_j`` is at least ``alpha`` away from ``b``; when ``alpha > 90``
+    deg that mean is negative, so some ``b_j`` is over 90 deg away.  Only a
+    narrow cone, the case the checks are about, needs all pairs.
+    """
+    total = bearings.sum(axis=0)
+    norm = float(np.sqrt(total @ total))
+    if norm > 0:
+        alpha = _angle_rad(bearings, np.broadcast_to(total / norm, bearings.shape))
+        if np.degrees(alpha.max()) >= CONE_WARNING_DEG:
+            return float(np.degrees(alpha.max()))
+    cos = bearings @ bearings.T
+    i, j = np.unravel_index(np.argmin(cos), cos.shape)
+    return float(np.degrees(_angle_rad(bearings[i : i + 1], bearings[j : j + 1])[0]))
 
 
 def validate_pairs(points_lidar: object, bearings_camera: object) -> tuple[np.ndarray, np.ndarray, list[str]]:
@@ -102,17 +145,13 @@ def validate_pairs(points_lidar: object, bearings_camera: object) -> tuple[np.nd
         raise CalibError(f"pair {off[0]}: bearing is not a unit vector (norm {norms[off[0]]:.6g})")
     bearings = bearings / norms[:, None]
 
-    iu, ju = np.triu_indices(n, 1)
-    dist = np.linalg.norm(points[iu] - points[ju], axis=1)
-    same = np.nonzero(dist <= SAME_POINT_M)[0]
+    same = _close_pairs(points, SAME_POINT_M, lambda i, j: np.linalg.norm(points[i] - points[j], axis=1))
     if same.size:
-        pairs = np.stack([iu[same], ju[same]], axis=1)
-        raise CalibError(f"pairs {_pairs_text(pairs)} use the same laser point")
-    angle = np.arctan2(np.linalg.norm(np.cross(bearings[iu], bearings[ju]), axis=1), np.sum(bearings[iu] * bearings[ju], axis=1))
-    same = np.nonzero(angle <= SAME_BEARING_RAD)[0]
+        raise CalibError(f"pairs {_pairs_text(same)} use the same laser point")
+    # A chord is never longer than its angle: the tree's radius catches every candidate.
+    same = _close_pairs(bearings, SAME_BEARING_RAD, lambda i, j: _angle_rad(bearings[i], bearings[j]))
     if same.size:
-        pairs = np.stack([iu[same], ju[same]], axis=1)
-        raise CalibError(f"pairs {_pairs_text(pairs)} use the same bearing (the same pixel clicked twice)")
+        raise CalibError(f"pairs {_pairs_text(same)} use the same bearing (the same pixel clicked twice)")
 
     s = np.linalg.svd(points - points.mean(axis=0), compute_uv=False)
     if s[1] < COLLINEAR_RATIO * s[0]:
@@ -122,7 +161,7 @@ def validate_pairs(points_lidar: object, bearings_camera: object) -> tuple[np.nd
         )
 
     warnings: list[str] = []
-    max_angle_deg = float(np.degrees(angle.max()))
+    max_angle_deg = _largest_angle_deg(bearings)
     if max_angle_deg < CONE_ERROR_DEG:
         raise CalibError(
             f"all pairs lie within {max_angle_deg:.2g} deg of each other in the view; "
