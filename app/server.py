@@ -283,8 +283,9 @@ class CalibrationApp:
         self._client_mode: dict[int, str] = {}
         self._last_click: dict[int, tuple] = {}  # client id -> ("ba", key, row, col) or ("camera", u, v)
         self._view_target: dict[int, tuple[np.ndarray, np.ndarray, float]] = {}
-        self._label_names: set[str] = set()
-        self._overlay_names: set[str] = set()
+        # What the scene shows now, per node name: (handle, data sent).  Redraws diff against it, so a
+        # click only sends the nodes it changed, mostly as in-place property updates.
+        self._drawn: dict[str, tuple[Any, tuple]] = {}
         self._stopped = False
 
         # -- server -------------------------------------------------------------------
@@ -900,27 +901,73 @@ class CalibrationApp:
             return uv, ok
         return self.camera.project(pts)
 
+    def _remove_node(self, name: str) -> None:
+        if self._drawn.pop(name, None) is not None:
+            self.server.scene.remove_by_name(name)
+
     def _set_points(self, name: str, points: np.ndarray, colors, size: float, shape: str = "circle") -> None:
-        if len(points) == 0:
-            if name in self._overlay_names:
-                self.server.scene.remove_by_name(name)
-                self._overlay_names.discard(name)
+        """Show ``points (N, 3)`` (world) as node ``name``; empty removes it.  Only changes are sent."""
+        pts = np.asarray(points, np.float32).reshape(-1, 3)
+        if len(pts) == 0:
+            self._remove_node(name)
             return
-        self.server.scene.add_point_cloud(
-            name, np.asarray(points, np.float32), np.asarray(colors, np.uint8), point_size=size,
-            point_shape=shape, precision="float32", point_shading="flat",
+        cols = np.asarray(colors, np.uint8)
+        size = float(size)
+        old = self._drawn.get(name)
+        if old is not None and old[1][0] == "points" and old[1][4] == shape:
+            handle, (_, old_pts, old_cols, old_size, _) = old
+            if old_pts.shape == pts.shape and old_cols.shape == cols.shape:
+                if old_size == size and np.array_equal(old_pts, pts) and np.array_equal(old_cols, cols):
+                    return
+                # In place: viser sends only the properties that differ.
+                handle.points = pts
+                handle.colors = cols
+                handle.point_size = size
+                self._drawn[name] = (handle, ("points", pts, cols, size, shape))
+                return
+        handle = self.server.scene.add_point_cloud(
+            name, pts, cols, point_size=size, point_shape=shape, precision="float32", point_shading="flat",
         )
-        self._overlay_names.add(name)
+        self._drawn[name] = (handle, ("points", pts, cols, size, shape))
 
     def _set_lines(self, name: str, segments: np.ndarray, colors, thickness: float = 2.0) -> None:
-        if len(segments) == 0:
-            if name in self._overlay_names:
-                self.server.scene.remove_by_name(name)
-                self._overlay_names.discard(name)
+        """Show line ``segments (N, 2, 3)`` (world) as node ``name``; empty removes it.  Only changes are sent."""
+        segs = np.asarray(segments, np.float32).reshape(-1, 2, 3)
+        if len(segs) == 0:
+            self._remove_node(name)
             return
-        self.server.scene.add_line_segments(name, np.asarray(segments, np.float32), colors, thickness=thickness,
-                                            thickness_units="screen")
-        self._overlay_names.add(name)
+        cols = np.asarray(colors, np.uint8)
+        thickness = float(thickness)
+        old = self._drawn.get(name)
+        if old is not None and old[1][0] == "lines" and old[1][3] == thickness:
+            handle, (_, old_segs, old_cols, _) = old
+            if old_segs.shape == segs.shape and old_cols.shape == cols.shape:
+                if np.array_equal(old_segs, segs) and np.array_equal(old_cols, cols):
+                    return
+                # Same number of segments: update in place (viser skips unchanged arrays).
+                handle.points = segs
+                handle.colors = cols
+                self._drawn[name] = (handle, ("lines", segs, cols, thickness))
+                return
+        # A new node, or a different number of segments (points and colours must change together).
+        handle = self.server.scene.add_line_segments(name, segs, cols, thickness=thickness, thickness_units="screen")
+        self._drawn[name] = (handle, ("lines", segs, cols, thickness))
+
+    def _set_label(self, name: str, text: str, position: np.ndarray) -> None:
+        """Show a pick-number label at ``position`` (world); an existing label is moved, not re-created."""
+        pos = tuple(float(x) for x in position)
+        old = self._drawn.get(name)
+        if old is not None and old[1][0] == "label":
+            handle, (_, old_text, old_pos) = old
+            if old_text == text and old_pos == pos:
+                return
+            if old_text != text:
+                handle.text = text
+            if old_pos != pos:
+                handle.position = pos
+        else:
+            handle = self.server.scene.add_label(name, text, position=pos, anchor="bottom-left", font_screen_scale=0.8)
+        self._drawn[name] = (handle, ("label", text, pos))
 
     def _refresh_scene(self) -> None:
         """Redraw markers, labels, selection and the reprojection overlays."""
@@ -957,11 +1004,10 @@ class CalibrationApp:
                     for name in (f"/annot/markers/{other}/halo", f"/annot/markers/{other}/ring",
                                  f"/annot/selected/{other}"):
                         self._set_lines(name, np.empty((0, 2, 3)), (0, 0, 0))
-            for name in self._label_names - set(labels):
-                self.server.scene.remove_by_name(name)
+            for name in [n for n, (_, spec) in self._drawn.items() if spec[0] == "label" and n not in labels]:
+                self._remove_node(name)
             for name, (text, pos) in labels.items():
-                self.server.scene.add_label(name, text, position=tuple(pos), anchor="bottom-left", font_screen_scale=0.8)
-            self._label_names = set(labels)
+                self._set_label(name, text, pos)
             self._draw_overlays(picks)
 
     def _ring_radius(self, slot: ImageSlot) -> float:

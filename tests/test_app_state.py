@@ -541,3 +541,58 @@ def test_app_column_window_clicks_markers_and_zoom_on_the_sample(tmp_path):
         assert app._dd_ba_window.value == "Custom"
     finally:
         app.stop()
+
+
+def test_a_click_updates_only_what_it_changed_in_place(tmp_path):
+    import socket
+    from pathlib import Path
+
+    from app.server import CalibrationApp
+
+    sample = Path(__file__).resolve().parents[1] / "sample_data"
+    session = tmp_path / "session.yaml"
+    session.write_text(yaml.safe_dump({"format": "ba-calib-session", "version": 1, "pairs": [],
+                                       "view": {"panorama": False}}))
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        port = sock.getsockname()[1]
+    app = CalibrationApp(sample / "scan.npz", sample / "image.png", sample / "camera.yaml", session_path=session,
+                         port=port)
+    try:
+        ids = app.state.import_pairs(load_pairs_yaml(sample / "pairs.yaml")[:5])
+        assert app.wait_idle(60) and app.result is not None
+        node = lambda name: app._drawn[name][0]  # noqa: E731
+        ba_ring, cam_ring = node("/annot/markers/horizontal/ring"), node("/annot/markers/raw/ring")
+        ba_points, cam_points = ba_ring.points.copy(), cam_ring.points.copy()
+        label = node(f"/annot/labels/raw/{ids[1]}")
+        label_pos = np.array(label.position)
+        residuals = node("/annot/overlay/residuals")
+        old_residuals = residuals.points.copy()
+
+        u, v = app.state.get(ids[1]).pixel
+        app.state.move_pixel(ids[1], u + 3.0, v)
+        assert app.wait_idle(60)
+        # The same scene nodes, updated in place, not re-created.
+        assert node("/annot/markers/horizontal/ring") is ba_ring and node("/annot/markers/raw/ring") is cam_ring
+        assert node(f"/annot/labels/raw/{ids[1]}") is label and node("/annot/overlay/residuals") is residuals
+        np.testing.assert_array_equal(ba_ring.points, ba_points)  # BA ends did not move
+        # The camera image is 8 units over 640 px: 3 px = 0.0375 units along x, for pair 2's ring only.
+        per_pick = len(cam_points) // 5
+        moved = cam_ring.points - cam_points
+        np.testing.assert_allclose(moved[per_pick:2 * per_pick, :, 0], 0.0375, atol=1e-5)
+        np.testing.assert_allclose(moved[per_pick:2 * per_pick, :, 1:], 0.0, atol=1e-6)
+        assert np.all(moved[:per_pick] == 0) and np.all(moved[2 * per_pick:] == 0)
+        np.testing.assert_allclose(np.array(label.position) - label_pos, [0.0375, 0.0, 0.0], atol=1e-6)
+        assert not np.array_equal(residuals.points, old_residuals)  # a new solve, new residual lines
+
+        # A new pick changes the number of rings: that node is re-created, with one more ring.
+        app.state.add_pixel(100.0, 100.0)
+        assert app.wait_idle(60)
+        assert len(node("/annot/markers/raw/ring").points) == 6 * per_pick
+        assert f"/annot/labels/raw/{ids[-1] + 1}" in app._drawn
+        app.state.undo()
+        assert app.wait_idle(60)
+        assert len(node("/annot/markers/raw/ring").points) == 5 * per_pick
+        assert f"/annot/labels/raw/{ids[-1] + 1}" not in app._drawn
+    finally:
+        app.stop()
