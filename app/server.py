@@ -24,6 +24,7 @@ from __future__ import annotations
 import math
 import os
 import queue
+import signal
 import tempfile
 import threading
 import time
@@ -83,6 +84,9 @@ ZOOM_STEP = 2.0
 EDGE_MIN_SIZE = 0.012  # world units
 BA_WINDOW_MODES = {"all": "All columns", "camera": "Facing the camera", "custom": "Custom"}
 SNAP_RADIUS_PX = 4.0
+#: The session file is written this long after a change (plus ~20 ms for the write): after the
+#: click's solve and redraw, which its YAML dump would otherwise slow down (it holds the GIL).
+SESSION_SAVE_DELAY_S = 0.1
 UP_AXES = {"+z": (0.0, 0.0, 1.0), "+y": (0.0, 1.0, 0.0), "-y": (0.0, -1.0, 0.0), "camera up (-y of camera)": None}
 
 
@@ -247,7 +251,11 @@ class CalibrationApp:
         self.cloud_points_lidar = self.all_points_lidar[::stride]
 
         # -- state ------------------------------------------------------------------
-        self.state = AnnotationState(self.depth.valid, (self.camera.width, self.camera.height), self.session_path)
+        # The session file is written by a background thread, off the click path, shortly after the
+        # click's update is drawn (flushed by stop()).
+        self.state = AnnotationState(self.depth.valid, (self.camera.width, self.camera.height), self.session_path,
+                                     background_save=True, on_save_error=self._on_save_error,
+                                     save_delay_s=SESSION_SAVE_DELAY_S)
         view = self.state.view_settings()
         self._use_panorama = bool(view.get("panorama", True)) and self.panorama is not None
         self._show_reprojection = bool(view.get("show_reprojection", True))
@@ -308,6 +316,7 @@ class CalibrationApp:
         except BaseException:
             self._actions.put(None)
             self.server.stop()
+            self.state.close()
             raise
 
     # ======================================================================= scene
@@ -544,6 +553,11 @@ class CalibrationApp:
                     self._notify(action.client, "Internal error", f"{type(exc).__name__}: {exc}")
             finally:
                 self._actions.task_done()
+
+    def _on_save_error(self, message: str) -> None:
+        # On the session writer's thread; the write is retried.
+        if hasattr(self, "server") and not getattr(self, "_stopped", True):
+            self._notify(None, "Session not saved (retrying)", message)
 
     def _notify(self, client: Any, title: str, body: str, color: str = "red") -> None:
         body = " ".join(str(body).split())
@@ -1364,12 +1378,21 @@ class CalibrationApp:
                 return True
 
     def stop(self) -> None:
-        """Stop the solver thread and the server."""
+        """Stop the solver thread and the server; returns once the session file holds every change.
+
+        Raises
+        ------
+        CalibError
+            The session file cannot be written (the server is stopped anyway).
+        """
         self._stopped = True
         self._actions.put(None)
         self._action_thread.join(timeout=5.0)
         self._solver.stop()
-        self.server.stop()
+        try:
+            self.state.close()
+        finally:
+            self.server.stop()
 
 
 def serve(
@@ -1396,6 +1419,9 @@ def serve(
     print(f"ba-calib: session file {app.session_path}", flush=True)
     if host not in ("127.0.0.1", "localhost", "::1"):
         print(f"ba-calib: listening on {host}: anyone who can reach this address can use the app", flush=True)
+    if threading.current_thread() is threading.main_thread():
+        # `kill` (SIGTERM) stops like Ctrl+C: stop() writes the last changes to the session file.
+        signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
     try:
         while True:
             time.sleep(3600)
@@ -1403,3 +1429,7 @@ def serve(
         pass
     finally:
         app.stop()
+
+
+def _raise_keyboard_interrupt(signum: int, frame: Any) -> None:
+    raise KeyboardInterrupt

@@ -14,7 +14,12 @@ Every change goes through :class:`AnnotationState`, which
   including *clear all* and *import*),
 * saves the session atomically after every change (temporary file, then
   ``os.replace``), so that closing the tab or killing the server loses no
-  click, and restores it on start,
+  click, and restores it on start; with ``background_save`` (what the app
+  uses) a :class:`SessionWriter` thread does the write, off the click path,
+  always writing the newest state (a change is on disk a bounded time later:
+  the writer's delay, 0.1 s in the app, plus one write;
+  :meth:`AnnotationState.flush_session` and :meth:`AnnotationState.close`
+  write at once),
 * is thread-safe: viser runs callbacks on a thread pool, and two browser tabs
   share one state.
 
@@ -24,9 +29,13 @@ about viser.
 
 from __future__ import annotations
 
+import atexit
 import colorsys
 import os
+import sys
 import threading
+import time
+import weakref
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Callable, Sequence
@@ -41,6 +50,8 @@ from calib_core.pairs import Pair, load_pairs_yaml, save_pairs_yaml
 SESSION_FORMAT = "ba-calib-session"
 SESSION_VERSION = 1
 MAX_HISTORY = 500
+#: After a failed session write the writer retries this often (seconds) until it succeeds.
+SAVE_RETRY_S = 1.0
 
 
 def pair_color(pick_id: int) -> tuple[int, int, int]:
@@ -107,6 +118,130 @@ class Snapshot:
 
 Listener = Callable[["AnnotationState"], None]
 
+_OPEN_WRITERS: "weakref.WeakSet[SessionWriter]" = weakref.WeakSet()
+
+
+@atexit.register
+def _flush_open_writers() -> None:
+    """At interpreter exit, write what the writers still hold (their threads are daemons)."""
+    for writer in list(_OPEN_WRITERS):
+        try:
+            writer.flush()
+        except Exception as exc:  # exiting anyway: say so, do not hide it
+            print(f"ba-calib: {exc}", file=sys.stderr)
+
+
+class SessionWriter:
+    """A background thread that keeps a session file equal to the newest submitted data.
+
+    :meth:`submit` only stores the data and wakes the thread, which writes it
+    atomically (:func:`calib_core.io.atomic.write_yaml_atomic`: temporary
+    file, fsync, ``os.replace``).  Data submitted while a write is running
+    replaces older unwritten data, so the file always ends at the newest
+    state and the thread never falls behind.  A failed write is kept and
+    retried every :data:`SAVE_RETRY_S` seconds (or at once when newer data
+    comes); ``on_error(message)`` is called on the writer thread.
+    Pending data is written by :meth:`flush`, :meth:`close` and at
+    interpreter exit.
+
+    Parameters
+    ----------
+    path : path-like
+        The session file.
+    on_error : callable, optional
+        ``on_error(message)`` after a failed write (one line).
+    delay_s : float
+        Wait this long after the first unwritten submission before writing
+        (submissions meanwhile are merged), so that the write (YAML dump,
+        fsync) does not compete with the work a change triggers.  Data is
+        on disk at most ``delay_s`` + one write after it was submitted.
+    """
+
+    def __init__(self, path: str | os.PathLike, on_error: Callable[[str], None] | None = None,
+                 delay_s: float = 0.0) -> None:
+        self.path = Path(path)
+        self._on_error = on_error
+        self._delay_s = max(0.0, float(delay_s))
+        self._due = 0.0  # monotonic time the pending data is to be written
+        self._cond = threading.Condition()
+        self._write_lock = threading.Lock()  # one write at a time, in submission order
+        self._pending: Any = None
+        self._has_pending = False
+        self._closed = False
+        self._thread = threading.Thread(target=self._run, name="ba-calib-session-writer", daemon=True)
+        self._thread.start()
+        _OPEN_WRITERS.add(self)
+
+    def submit(self, data: Any) -> None:
+        """Queue ``data`` (plain YAML-able, not changed afterwards) to be written; never blocks for a write."""
+        with self._cond:
+            if self._closed:
+                raise RuntimeError("the session writer is closed")
+            if not self._has_pending:
+                self._due = time.monotonic() + self._delay_s
+            self._pending, self._has_pending = data, True
+            self._cond.notify_all()
+
+    def flush(self) -> None:
+        """Write pending data now, in the calling thread, and wait for a write in progress.
+
+        Raises
+        ------
+        CalibError
+            The session file cannot be written (the data stays pending).
+        """
+        self._write_pending()
+
+    def close(self) -> None:
+        """:meth:`flush`, then stop the thread (it is stopped even if the flush raises)."""
+        try:
+            self.flush()
+        finally:
+            with self._cond:
+                self._closed = True
+                self._cond.notify_all()
+            self._thread.join(timeout=5.0)
+            _OPEN_WRITERS.discard(self)
+
+    def _write_pending(self) -> bool:
+        # Taking the data under the write lock keeps writes in submission order:
+        # an older snapshot can never land after a newer one.
+        with self._write_lock:
+            with self._cond:
+                if not self._has_pending:
+                    return False
+                data, self._has_pending = self._pending, False
+                self._pending = None
+            try:
+                write_yaml_atomic(self.path, data)
+            except Exception as exc:
+                with self._cond:
+                    if not self._has_pending:  # nothing newer: keep this one for the retry
+                        self._pending, self._has_pending = data, True
+                raise CalibError(f"{self.path}: cannot save the session: {' '.join(str(exc).split())}") from None
+            return True
+
+    def _run(self) -> None:
+        while True:
+            with self._cond:
+                self._cond.wait_for(lambda: self._has_pending or self._closed)
+                while self._has_pending and not self._closed and time.monotonic() < self._due:
+                    self._cond.wait(self._due - time.monotonic())
+                if self._closed:
+                    return  # close() flushed in its own thread
+            try:
+                self._write_pending()
+            except CalibError as exc:
+                if self._on_error is not None:
+                    try:
+                        self._on_error(str(exc))
+                    except Exception:
+                        pass
+                else:
+                    print(f"ba-calib: {exc}", file=sys.stderr)
+                with self._cond:  # retry later, or at once when newer data or close() comes
+                    self._cond.wait(SAVE_RETRY_S)
+
 
 class AnnotationState:
     """Thread-safe pairs under construction, with undo/redo and a session file.
@@ -121,6 +256,18 @@ class AnnotationState:
     session_path : path-like, optional
         Session file, written after every change and read on start.  If it
         exists it is restored (a plain pairs YAML is accepted too).
+    background_save : bool
+        Write the session file in a :class:`SessionWriter` thread instead of
+        inside every change (which then costs no disk time; the write starts
+        at once).  Call :meth:`close` (or :meth:`flush_session`) before
+        reading the file or exiting; interpreter exit also flushes.
+    on_save_error : callable, optional
+        With ``background_save``: ``on_save_error(message)`` after a failed
+        background write (it is retried).  Without, a failed write raises
+        from the change.
+    save_delay_s : float
+        With ``background_save``: the writer's ``delay_s`` (see
+        :class:`SessionWriter`).
     """
 
     def __init__(
@@ -128,6 +275,10 @@ class AnnotationState:
         depth_valid: np.ndarray,
         image_size: tuple[int, int],
         session_path: str | os.PathLike | None = None,
+        *,
+        background_save: bool = False,
+        on_save_error: Callable[[str], None] | None = None,
+        save_delay_s: float = 0.0,
     ) -> None:
         self._valid = np.asarray(depth_valid, dtype=bool)
         if self._valid.ndim != 2:
@@ -144,6 +295,9 @@ class AnnotationState:
         self.session_path = None if session_path is None else Path(session_path)
         if self.session_path is not None and self.session_path.exists():
             self._restore(self.session_path)
+        self._writer: SessionWriter | None = None
+        if background_save and self.session_path is not None:
+            self._writer = SessionWriter(self.session_path, on_error=on_save_error, delay_s=save_delay_s)
 
     # ------------------------------------------------------------------ queries
     @property
@@ -408,12 +562,36 @@ class AnnotationState:
             }
 
     def save_session(self, path: str | os.PathLike | None = None) -> None:
-        """Write the session file atomically (to ``path`` or the session path)."""
+        """Write the session file atomically (to ``path`` or the session path); returns when it is on disk."""
         with self._lock:
             target = Path(path) if path is not None else self.session_path
             if target is None:
                 return
-            write_yaml_atomic(target, self.session_dict())
+            writer = self._writer
+            if writer is None or target != self.session_path:
+                write_yaml_atomic(target, self.session_dict())
+                return
+            writer.submit(self.session_dict())
+        writer.flush()
+
+    def flush_session(self) -> None:
+        """Return once every change so far is in the session file (no-op without a session file).
+
+        Raises
+        ------
+        CalibError
+            The session file cannot be written.
+        """
+        writer = self._writer
+        if writer is not None:
+            writer.flush()
+
+    def close(self) -> None:
+        """Flush the session file and stop the background writer; later changes are saved synchronously."""
+        with self._lock:  # held, so that no change is saved synchronously before the writer's last write
+            writer, self._writer = self._writer, None
+            if writer is not None:
+                writer.close()
 
     # -------------------------------------------------------------- internals
     def _pending_locked(self) -> Pick | None:
@@ -458,7 +636,12 @@ class AnnotationState:
         self._save_locked()
 
     def _save_locked(self) -> None:
-        if self.session_path is not None:
+        if self.session_path is None:
+            return
+        if self._writer is not None:
+            # Submitted under the lock: the writer sees the changes in order.
+            self._writer.submit(self.session_dict())
+        else:
             write_yaml_atomic(self.session_path, self.session_dict())
 
     def _notify(self) -> None:

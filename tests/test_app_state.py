@@ -22,9 +22,9 @@ def make_valid() -> np.ndarray:
     return valid
 
 
-def make_state(tmp_path=None, name="session.yaml") -> AnnotationState:
+def make_state(tmp_path=None, name="session.yaml", **kwargs) -> AnnotationState:
     path = None if tmp_path is None else tmp_path / name
-    return AnnotationState(make_valid(), IMG, session_path=path)
+    return AnnotationState(make_valid(), IMG, session_path=path, **kwargs)
 
 
 def ends(state):
@@ -168,10 +168,12 @@ def test_export_writes_complete_pairs_readable_by_core(tmp_path):
     assert load_pairs_yaml(out) == [Pair((3, 4), None, (10.5, 20.0))]
 
 
-def test_session_is_saved_after_every_change_and_restored(tmp_path):
-    s = make_state(tmp_path)
+@pytest.mark.parametrize("background", [False, True], ids=["in-the-change", "background-writer"])
+def test_session_is_saved_after_every_change_and_restored(tmp_path, background):
+    s = make_state(tmp_path, background_save=background)
     path = tmp_path / "session.yaml"
     s.add_laser(3, 4)
+    s.flush_session()  # a no-op without the background writer
     # Written already, with the incomplete pick: no click is lost.
     data = yaml.safe_load(path.read_text())
     assert data["pairs"] == [{"id": 1, "laser_rc": [3, 4], "laser_xyz": None, "pixel": None}]
@@ -180,6 +182,7 @@ def test_session_is_saved_after_every_change_and_restored(tmp_path):
     s.delete(1)
     s.add_laser(7, 8)
     s.set_view(panorama=False, show_edges=True)
+    s.close()  # what the app's stop() does; flushes the background writer
     assert not list(tmp_path.glob("*.tmp"))  # atomic write left no temporary file
 
     # "Restart": a new state on the same session file.
@@ -207,6 +210,57 @@ def test_session_accepts_a_plain_pairs_file_and_rejects_other_scenes(tmp_path):
         make_state(tmp_path)
 
 
+def test_background_writer_file_is_always_whole_and_ends_at_the_newest_state(tmp_path):
+    path = tmp_path / "session.yaml"
+    s = make_state(tmp_path, background_save=True)
+    seen, stop = [], threading.Event()
+
+    def reader() -> None:  # a crash can happen at any moment: the file must always be a whole session
+        while not stop.is_set():
+            if path.exists():
+                seen.append(yaml.safe_load(path.read_text()))
+
+    t = threading.Thread(target=reader)
+    t.start()
+    try:
+        for k in range(60):
+            s.add_laser(1 + k % 19, k % 40)
+            s.add_pixel(float(k), 2.0)
+            if k % 6 == 5:
+                s.flush_session()  # let some writes overlap the reader
+    finally:
+        stop.set()
+        t.join()
+    s.flush_session()
+    final = yaml.safe_load(path.read_text())
+    assert final == s.session_dict() and len(final["pairs"]) == 60
+    seen.append(final)
+    assert all(d["format"] == "ba-calib-session" for d in seen)
+    # Never an older state after a newer one.
+    counts = [len(d["pairs"]) + (d["pairs"][-1]["pixel"] is not None if d["pairs"] else 0) for d in seen]
+    assert counts == sorted(counts)
+    s.close()
+    s.add_laser(5, 5)  # after close: saved in the change itself
+    assert len(yaml.safe_load(path.read_text())["pairs"]) == 61
+
+
+def test_background_writer_reports_a_failed_save_and_retries(tmp_path):
+    errors, failed = [], threading.Event()
+    s = make_state(tmp_path, background_save=True, on_save_error=lambda msg: (errors.append(msg), failed.set()))
+    path = tmp_path / "session.yaml"
+    path.mkdir()  # the session file cannot be replaced: writes fail
+    s.add_laser(3, 4)
+    assert failed.wait(10.0)
+    assert str(path) in errors[0] and "cannot save the session" in errors[0] and "\n" not in errors[0]
+    with pytest.raises(CalibError, match="cannot save the session"):
+        s.flush_session()
+    path.rmdir()  # the disk is fixed: the kept change is written, nothing was lost
+    s.flush_session()
+    assert yaml.safe_load(path.read_text())["pairs"] == [{"id": 1, "laser_rc": [3, 4], "laser_xyz": None,
+                                                          "pixel": None}]
+    s.close()
+
+
 def test_listeners_hear_every_change():
     s = make_state()
     seen = []
@@ -220,9 +274,10 @@ def test_listeners_hear_every_change():
     assert len(seen) == 6 and seen == sorted(seen)
 
 
-def test_concurrent_changes_from_threads_lose_nothing(tmp_path):
+@pytest.mark.parametrize("background", [False, True], ids=["in-the-change", "background-writer"])
+def test_concurrent_changes_from_threads_lose_nothing(tmp_path, background):
     # Two tabs = several viser callback threads changing one state.
-    s = make_state(tmp_path)
+    s = make_state(tmp_path, background_save=background)
     n_threads, per_thread = 6, 8
     barrier = threading.Barrier(n_threads)
 
@@ -242,6 +297,7 @@ def test_concurrent_changes_from_threads_lose_nothing(tmp_path):
     assert {(p.laser_rc, p.pixel) for p in picks} == {
         ((1 + k, i), (float(k), float(i))) for k in range(n_threads) for i in range(per_thread)
     }
+    s.flush_session()
     assert ends(make_state(tmp_path)) == ends(s)  # the last saved session has them all
     n_undo = 0
     while s.undo():
