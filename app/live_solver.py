@@ -24,9 +24,12 @@ class LiveSolver:
     on_done : callable
         ``on_done(version, result, error)``: ``error`` is None on success,
         else the exception (``result`` is then None).
+    name : str
+        Name of the worker thread.
     """
 
-    def __init__(self, solve: Callable[[Any], Any], on_done: Callable[[int, Any, BaseException | None], None]) -> None:
+    def __init__(self, solve: Callable[[Any], Any], on_done: Callable[[int, Any, BaseException | None], None],
+                 name: str = "ba-calib-solver") -> None:
         self._solve = solve
         self._on_done = on_done
         self._cond = threading.Condition()
@@ -34,7 +37,7 @@ class LiveSolver:
         self._busy = False
         self._stopped = False
         self._done_version = -1
-        self._thread = threading.Thread(target=self._run, name="ba-calib-solver", daemon=True)
+        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
         self._thread.start()
 
     def submit(self, version: int, payload: Any) -> None:
@@ -48,6 +51,12 @@ class LiveSolver:
         """Version of the last finished job (-1 before the first)."""
         with self._cond:
             return self._done_version
+
+    @property
+    def idle(self) -> bool:
+        """True when no job is queued or running."""
+        with self._cond:
+            return self._job is None and not self._busy
 
     def wait_idle(self, timeout: float | None = None) -> bool:
         """Block until no job is queued or running; False on timeout."""

@@ -113,7 +113,7 @@ def _fmt(x: float, digits: int = 3) -> str:
 
 @dataclass
 class SolveBundle:
-    """One finished solve and what the overlays need from it (computed off the UI thread)."""
+    """One finished solve and what the error display and 2-D overlays need from it (computed off the UI thread)."""
 
     pick_ids: list[int]
     pairs: list[Pair]
@@ -121,8 +121,17 @@ class SolveBundle:
     pixels: np.ndarray  # (N, 2) clicked, original image
     points_camera: np.ndarray  # (N, 3) laser points moved by the solved pose
     edges_camera: np.ndarray  # (M, 3) BA-edge points moved by the solved pose
-    cloud_colors: np.ndarray  # (K, 3) uint8 display-cloud colours
-    facing_window: ColumnWindow | None  # scan columns whose points project into the camera image
+    seconds: float  # time of the solve job (resolve, solve, move the points)
+
+
+@dataclass
+class CloudUpdate:
+    """What the 3-D pane and the camera-facing BA window need from a solve; computed after it is shown."""
+
+    bundle: SolveBundle
+    colors: np.ndarray | None  # (K, 3) uint8 display-cloud colours; None: not asked for
+    facing_done: bool  # whether ``facing`` was computed
+    facing: ColumnWindow | None  # scan columns whose points project into the camera image
     seconds: float
 
 
@@ -274,7 +283,8 @@ class CalibrationApp:
         except (TypeError, ValueError):
             start, width = 0, n_cols
         self._ba_custom = ColumnWindow.make(start, width, n_cols, self._wrap_cols)
-        self._ba_facing: ColumnWindow | None = None  # from the last good solve
+        self._ba_facing: ColumnWindow | None = None  # from the last good solve it was computed for
+        self._facing_of: SolveBundle | None = None  # the solve ``_ba_facing`` was computed for
         self._ba_window = self._wanted_ba_window()
         self._camera_sizes = {"raw": (self.camera.width, self.camera.height)}
         if self.panorama is not None:
@@ -294,6 +304,9 @@ class CalibrationApp:
         # What the scene shows now, per node name: (handle, data sent).  Redraws diff against it, so a
         # click only sends the nodes it changed, mostly as in-place property updates.
         self._drawn: dict[str, tuple[Any, tuple]] = {}
+        self._cloud_shows: SolveBundle | None = None  # the solve whose colours the 3-D cloud shows (None: grey)
+        self._change_time: tuple[int, float] = (0, 0.0)  # (job, perf_counter) of the last change of the pairs
+        self._last_update: tuple[float, float] | None = None  # (click-to-update seconds, perf_counter published)
         self._stopped = False
 
         # -- server -------------------------------------------------------------------
@@ -311,6 +324,8 @@ class CalibrationApp:
             self.server.on_client_connect(self._on_connect)
             self.server.on_client_disconnect(self._on_disconnect)
             self._solver = LiveSolver(self._solve_job, self._on_solved)
+            # Cloud colours and the camera-facing window: after the solve is shown, in their own thread.
+            self._cloud_worker = LiveSolver(self._cloud_job, self._on_cloud_done, name="ba-calib-cloud")
             self.state.subscribe(self._on_state_change)
             self._on_state_change(self.state)
         except BaseException:
@@ -762,6 +777,8 @@ class CalibrationApp:
 
     def _set_ba_mode(self, mode: str) -> None:
         self._ba_mode = mode
+        if mode == "camera":
+            self._ensure_facing()
         self._apply_ba_window()
         self._sync_window_widgets()
         w = self._ba_custom
@@ -837,41 +854,33 @@ class CalibrationApp:
                 if len(picks) >= MIN_PAIRS:
                     self._solving = True
                     self._solver.submit(self._job, ([p.id for p in picks], [p.to_pair() for p in picks]))
+                    self._change_time = (self._job, time.perf_counter())
                 else:
                     # Too few pairs: results of older jobs no longer describe these pairs.
                     self._result_floor = self._job
                     self._bundle = None
                     self._solve_error = None
                     self._solving = False
-                    self._refresh_cloud()
+                    self._show_solved_camera()
         self._refresh_scene()
         self._refresh_panel()
 
     def _solve_job(self, payload: tuple[list[int], list[Pair]]) -> SolveBundle:
+        """The solve and what the error display and the 2-D overlays need (the cloud comes later)."""
         ids, pairs = payload
         t0 = time.perf_counter()
         points, bearings, pixels = resolve_pairs(pairs, self.depth, self.camera)
         result = solve_extrinsics(points, bearings, camera=self.camera, pixels=pixels)
         T = result.T_camera_lidar
-        colors, has_color = colorize_points(self.cloud_points_lidar, self.image, self.camera, T, occlusion=True)
-        # Pure black is the unlit border of a fisheye image, not scene colour: show it grey too.
-        has_color &= colors.any(axis=1)
-        colors = np.where(has_color[:, None], colors, np.uint8(110)).astype(np.uint8)
-        _, in_image = self.camera.project(transform_points(T, self.all_points_lidar))
-        n_cols = self.depth.shape[1]
-        seen = np.zeros(n_cols, bool)
-        seen[self.all_rows_cols[in_image, 1]] = True
-        # A margin and coarse ends, so that the next solve usually keeps the same window.
-        step = max(1, round(n_cols / 225))
-        facing = covering_window(seen, self._wrap_cols, margin=step, quantum=step)
         return SolveBundle(
             pick_ids=ids, pairs=pairs, result=result, pixels=pixels,
             points_camera=transform_points(T, points),
             edges_camera=transform_points(T, self.edge_points_lidar) if len(self.edge_points_lidar) else np.empty((0, 3)),
-            cloud_colors=colors, facing_window=facing, seconds=time.perf_counter() - t0,
+            seconds=time.perf_counter() - t0,
         )
 
     def _on_solved(self, job: int, bundle: SolveBundle | None, error: BaseException | None) -> None:
+        """Show a finished solve: errors, table, 2-D overlays first; then queue the cloud work."""
         with self._ui_lock:
             if job < self._result_floor or self._stopped:
                 return
@@ -884,14 +893,85 @@ class CalibrationApp:
             else:
                 self._bundle = bundle
                 self._solve_error = None
-                self._refresh_cloud()
-                if bundle.facing_window is not None:
-                    self._ba_facing = bundle.facing_window
-        if self._ba_mode == "camera" and not self._stopped:
+                self._show_solved_camera()
+            self._refresh_scene()
+            self._refresh_panel()
+            change_job, change_time = self._change_time
+            if job == change_job:
+                now = time.perf_counter()
+                self._last_update = (now - change_time, now)
+        self._request_cloud()
+
+    # ============================================================ 3-D cloud
+    def _cloud_shown(self) -> bool:
+        """True while some tab shows the 3-D view."""
+        return any(m == "3d" for m in list(self._client_mode.values()))
+
+    def _request_cloud(self) -> None:
+        """Queue what the current solve still owes: cloud colours if a tab shows 3-D, the facing window in camera mode."""
+        bundle = self._bundle
+        if bundle is None or self._stopped:
+            return
+        if (self._cloud_shown() and self._cloud_shows is not bundle) or (
+                self._ba_mode == "camera" and self._facing_of is not bundle):
+            self._cloud_worker.submit(0, bundle)
+
+    def _cloud_colors(self, T_camera_lidar: np.ndarray) -> np.ndarray:
+        """Display-cloud colours ``(K, 3)`` uint8 from the camera image; grey where the camera does not see."""
+        colors, has_color = colorize_points(self.cloud_points_lidar, self.image, self.camera, T_camera_lidar,
+                                            occlusion=True)
+        # Pure black is the unlit border of a fisheye image, not scene colour: show it grey too.
+        has_color &= colors.any(axis=1)
+        return np.where(has_color[:, None], colors, np.uint8(110)).astype(np.uint8)
+
+    def _facing_window(self, T_camera_lidar: np.ndarray) -> ColumnWindow | None:
+        """The scan columns whose points project into the camera image, or None."""
+        _, in_image = self.camera.project(transform_points(T_camera_lidar, self.all_points_lidar))
+        n_cols = self.depth.shape[1]
+        seen = np.zeros(n_cols, bool)
+        seen[self.all_rows_cols[in_image, 1]] = True
+        # A margin and coarse ends, so that the next solve usually keeps the same window.
+        step = max(1, round(n_cols / 225))
+        return covering_window(seen, self._wrap_cols, margin=step, quantum=step)
+
+    def _set_facing(self, bundle: SolveBundle, facing: ColumnWindow | None) -> None:
+        with self._ui_lock:
+            if bundle is not self._bundle:
+                return  # a newer solve is shown; its own window comes with it
+            self._facing_of = bundle
+            if facing is not None:  # the camera sees no column: keep the last window
+                self._ba_facing = facing
+
+    def _ensure_facing(self) -> None:
+        """Compute the camera-facing window of the current solve now, if not done yet (switch to camera mode)."""
+        bundle = self._bundle
+        if bundle is not None and self._facing_of is not bundle:
+            self._set_facing(bundle, self._facing_window(bundle.result.T_camera_lidar))
+
+    def _cloud_job(self, bundle: SolveBundle) -> CloudUpdate:
+        # Decided when the job runs: a tab may have left or entered the 3-D view meanwhile.
+        t0 = time.perf_counter()
+        T = bundle.result.T_camera_lidar
+        colors = self._cloud_colors(T) if self._cloud_shown() and self._cloud_shows is not bundle else None
+        facing_done = self._ba_mode == "camera" and self._facing_of is not bundle
+        facing = self._facing_window(T) if facing_done else None
+        return CloudUpdate(bundle, colors, facing_done, facing, time.perf_counter() - t0)
+
+    def _on_cloud_done(self, job: int, update: CloudUpdate | None, error: BaseException | None) -> None:
+        if error is not None:
+            traceback.print_exception(error)
+            return
+        with self._ui_lock:
+            if self._stopped or update.bundle is not self._bundle:
+                return  # superseded: the newer solve queued its own
+            if update.colors is not None:
+                self._cloud.colors = update.colors
+                self._cloud_shows = update.bundle
+            if update.facing_done:
+                self._set_facing(update.bundle, update.facing)
+        if update.facing_done and self._ba_mode == "camera" and not self._stopped:
             # In the action worker, so a click is never mapped through a window that changed under it.
             self._actions.put((lambda action: self._apply_ba_window(), _Action(None, None)))
-        self._refresh_scene()
-        self._refresh_panel()
 
     # ================================================================== drawing
     def _display_from_pixels(self, pixels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -1082,17 +1162,19 @@ class CalibrationApp:
                 out.append((p.id, uv[0]))
         return out
 
-    def _refresh_cloud(self) -> None:
+    def _show_solved_camera(self) -> None:
+        """The solved camera's frame in the 3-D pane; without a solve no frame and a grey cloud."""
         bundle = self._bundle
         if bundle is None:
             self._camera_frame.visible = False
-            self._cloud.colors = np.full((len(self.cloud_points_lidar), 3), 150, np.uint8)
+            if self._cloud_shows is not None:
+                self._cloud.colors = np.full((len(self.cloud_points_lidar), 3), 150, np.uint8)
+                self._cloud_shows = None
             return
         T_lidar_camera = invert_T(bundle.result.T_camera_lidar)
         self._camera_frame.wxyz = vtf.SO3.from_matrix(T_lidar_camera[:3, :3]).wxyz
         self._camera_frame.position = T_lidar_camera[:3, 3]
         self._camera_frame.visible = True
-        self._cloud.colors = bundle.cloud_colors
 
     def _refresh_panel(self) -> None:
         with self._ui_lock:
@@ -1177,7 +1259,8 @@ class CalibrationApp:
         self._update_cloud_visibility()
 
     def _update_cloud_visibility(self) -> None:
-        self._cloud_root.visible = any(m == "3d" for m in self._client_mode.values())
+        self._cloud_root.visible = self._cloud_shown()
+        self._request_cloud()  # a tab that switches to 3-D gets the current solve's colours
 
     def _set_view(self, client: Any, mode: str) -> None:
         """Point one client's camera at the annotation images (``all``, ``camera``, ``ba``) or the 3-D cloud."""
@@ -1365,17 +1448,36 @@ class CalibrationApp:
         return None if bundle is None else bundle.result
 
     def wait_idle(self, timeout: float = 30.0) -> bool:
-        """Block until queued user actions are applied and the live solver is idle."""
+        """Block until queued user actions are applied and the live solver and the cloud worker are idle."""
         deadline = time.monotonic() + timeout
         while True:
             while self._actions.unfinished_tasks:
                 if time.monotonic() > deadline:
                     return False
                 time.sleep(0.01)
-            if not self._solver.wait_idle(max(0.0, deadline - time.monotonic())):
-                return False
-            if not self._actions.unfinished_tasks:  # a finished solve may have queued a view update
+            for worker in (self._solver, self._cloud_worker):
+                if not worker.wait_idle(max(0.0, deadline - time.monotonic())):
+                    return False
+            # A finished solve queues cloud work, finished cloud work may queue a view update.
+            if not self._actions.unfinished_tasks and self._solver.idle and self._cloud_worker.idle:
                 return True
+
+    def last_click_to_update(self) -> float | None:
+        """Seconds from the last change of the pairs to its solve shown: error display, table, 2-D overlays.
+
+        Measured from the moment the change reached the app (the state's
+        listener) to the moment the result was handed to viser (sending it to
+        the browsers is not counted, nor is the 3-D cloud recolouring that
+        follows).  None before the first solve of a change.
+        """
+        last = self._last_update
+        return None if last is None else last[0]
+
+    @property
+    def last_update_time(self) -> float | None:
+        """``time.perf_counter()`` when the newest change's solve was shown (see :meth:`last_click_to_update`)."""
+        last = self._last_update
+        return None if last is None else last[1]
 
     def stop(self) -> None:
         """Stop the solver thread and the server; returns once the session file holds every change.
@@ -1389,6 +1491,7 @@ class CalibrationApp:
         self._actions.put(None)
         self._action_thread.join(timeout=5.0)
         self._solver.stop()
+        self._cloud_worker.stop()
         try:
             self.state.close()
         finally:

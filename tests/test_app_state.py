@@ -652,3 +652,52 @@ def test_a_click_updates_only_what_it_changed_in_place(tmp_path):
         assert f"/annot/labels/raw/{ids[-1] + 1}" not in app._drawn
     finally:
         app.stop()
+
+
+def test_cloud_is_recoloured_only_while_a_tab_shows_3d(tmp_path):
+    import socket
+    from pathlib import Path
+
+    from app.server import CalibrationApp
+    from calib_core.io.extrinsics import load_extrinsics_yaml
+    from calib_core.transforms import transform_points
+
+    sample = Path(__file__).resolve().parents[1] / "sample_data"
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        port = sock.getsockname()[1]
+    app = CalibrationApp(sample / "scan.npz", sample / "image.png", sample / "camera.yaml",
+                         session_path=tmp_path / "session.yaml", port=port)
+    client = FakeClient()
+    try:
+        ids = app.state.import_pairs(load_pairs_yaml(sample / "pairs.yaml"))
+        assert app.wait_idle(60) and app.result is not None
+        # No tab shows the 3-D view: the error display is up, the cloud is not recoloured.
+        assert np.all(app._cloud.colors == 150)
+
+        app._set_view(client, "3d")  # a tab switches to 3-D: the current solve's colours follow
+        assert app.wait_idle(60)
+        colors = np.asarray(app._cloud.colors)
+        # Truth: the image colour where the ground-truth pose projects each point (points the camera sees).
+        truth = load_extrinsics_yaml(sample / "ground_truth.yaml")["T_camera_lidar"]
+        uv, ok = app.camera.project(transform_points(truth, app.cloud_points_lidar))
+        coloured = np.any(colors != 110, axis=1)
+        assert coloured.sum() > 1000 and not np.any(coloured & ~ok)
+        px = np.round(uv[coloured]).astype(int)
+        expected = app.image[px[:, 1], px[:, 0]].astype(float)
+        # Most points get the colour under them (the solved pose is close to the truth; edges and occlusion aside).
+        assert np.median(np.abs(colors[coloured] - expected).max(axis=1)) < 10
+
+        u, v = app.state.get(ids[0]).pixel
+        app.state.move_pixel(ids[0], u + 2.0, v)  # still in 3-D: each new solve recolours
+        assert app.wait_idle(60)
+        assert app._cloud_shows is app._bundle
+        app._set_view(client, "all")
+        app.state.move_pixel(ids[0], u, v)  # back in 2-D: the cloud keeps the old colours
+        assert app.wait_idle(60)
+        assert app._cloud_shows is not app._bundle
+        app.state.clear()  # fewer than 4 pairs: grey again
+        assert app.wait_idle(60)
+        assert np.all(app._cloud.colors == 150)
+    finally:
+        app.stop()
