@@ -33,6 +33,8 @@ from .io import param_image_size, param_matrix, param_vector, require_keys
 #: Accepted lengths of an OpenCV distortion vector.
 OPENCV_DIST_LENGTHS = (0, 4, 5, 8, 12, 14)
 
+_PROJECT_BLOCK = 1 << 15  # points per block in project()
+
 # Undistorted radii searched for the end of monotonicity: fine up to r = 10
 # (84 deg off-axis), coarse beyond.
 _R_SEARCH = np.concatenate([np.linspace(0.0, 10.0, 50001), np.geomspace(10.0, 1e4, 4001)[1:]])
@@ -94,6 +96,26 @@ def distort_normalized(
     j_yx = y * d_radial * gx + 2.0 * p1 * x + 2.0 * p2 * y + (s3 + 2.0 * s4 * r2) * gx
     j_yy = radial + y * d_radial * gy + 6.0 * p1 * y + 2.0 * p2 * x + (s3 + 2.0 * s4 * r2) * gy
     return xd, yd, j_xx, j_xy, j_yx, j_yy
+
+
+def _distort_nonzero(x: np.ndarray, y: np.ndarray, r2: np.ndarray, k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`distort_normalized` (no Jacobian) with the terms of zero coefficients
+    left out (most models use 4 or 5 of the 12), given ``r2 = x^2 + y^2``."""
+    k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4 = (float(c) for c in k[:12])
+    radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    if k4 or k5 or k6:
+        radial /= 1.0 + r2 * (k4 + r2 * (k5 + r2 * k6))
+    xd = x * radial
+    yd = y * radial
+    if p1 or p2:
+        xy2 = 2.0 * x * y
+        xd += p1 * xy2 + p2 * (r2 + 2.0 * x * x)
+        yd += p1 * (r2 + 2.0 * y * y) + p2 * xy2
+    if s1 or s2 or s3 or s4:
+        r4 = r2 * r2
+        xd += s1 * r2 + s2 * r4
+        yd += s3 * r2 + s4 * r4
+    return xd, yd
 
 
 def monotonic_radius(k: np.ndarray) -> float:
@@ -162,23 +184,45 @@ class PinholeCamera:
 
         Returns ``(pixels (N, 2), valid (N,))``.  Pixels are NaN for points with
         ``Z <= 0`` or beyond ``r_max``; ``valid`` also requires the pixel to lie
-        inside the image.
+        inside the image.  float32 points are projected in float32 (for bulk
+        colouring); anything else in float64.
         """
-        P = as_points(points, "points", 3)
-        pixels = np.full((P.shape[0], 2), np.nan)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            z = P[:, 2]
-            ok = np.isfinite(P).all(axis=1) & (z > 0)
-            x = P[ok, 0] / z[ok]
-            y = P[ok, 1] / z[ok]
-            in_range = np.hypot(x, y) <= self.r_max
-            ok[ok] = in_range
-            xd, yd = distort_normalized(x[in_range], y[in_range], self._k)
-            xd, yd = self._apply_tilt(xd, yd)
-            pixels[ok, 0] = self.K[0, 0] * xd + self.K[0, 2]
-            pixels[ok, 1] = self.K[1, 1] * yd + self.K[1, 2]
-        valid = ok & in_image(pixels, self.width, self.height)
+        P = np.asarray(points)
+        if P.dtype != np.float32:
+            P = as_points(P, "points", 3)
+        elif P.ndim != 2 or P.shape[1] != 3:
+            P = as_points(P, "points", 3).astype(np.float32)  # (3,) -> (1, 3), or the shape error
+        pixels = np.empty((P.shape[0], 2), P.dtype)
+        valid = np.empty(P.shape[0], bool)
+        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+            # Blocks of points: full-size temporaries would cost more in
+            # allocation and cache misses than the arithmetic.
+            for start in range(0, P.shape[0], _PROJECT_BLOCK):
+                block = slice(start, start + _PROJECT_BLOCK)
+                self._project_block(P[block], pixels[block], valid[block])
         return pixels, valid
+
+    def _project_block(self, P: np.ndarray, pixels: np.ndarray, valid: np.ndarray) -> None:
+        """:meth:`project` of one block, in the dtype of ``P``, into ``pixels`` and ``valid``."""
+        X, Y, Z = P[:, 0], P[:, 1], P[:, 2]
+        ok = (Z > 0) & (Z < np.inf) & np.isfinite(X) & np.isfinite(Y)
+        x = X / Z
+        y = Y / Z
+        r2 = x * x
+        r2 += y * y
+        ok &= np.sqrt(r2) <= self.r_max
+        xd, yd = self._apply_tilt(*_distort_nonzero(x, y, r2, self._k))
+        u = self.K[0, 0] * xd
+        u += self.K[0, 2]
+        v = self.K[1, 1] * yd
+        v += self.K[1, 2]
+        np.copyto(valid, ok)
+        valid &= (u >= -0.5) & (u <= self.width - 0.5) & (v >= -0.5) & (v <= self.height - 0.5)
+        # 0 / ok is 0 where ok and NaN elsewhere: adding it blanks the pixels
+        # that cannot be projected, cheaper than np.where.
+        blank = np.divide(0.0, ok, dtype=P.dtype)
+        pixels[:, 0] = u + blank
+        pixels[:, 1] = v + blank
 
     # -- F^-1: image -> camera ------------------------------------------------
     def bearing(self, pixels: Any) -> np.ndarray:
