@@ -42,7 +42,7 @@ from numpy.polynomial import polynomial as npoly
 
 from ..errors import CalibError
 from ..io.atomic import write_bytes_atomic
-from .base import as_points, in_image, register_camera_model
+from .base import as_points, register_camera_model
 from .io import param_float, param_image_size, param_vector, require_keys
 
 #: Rotation taking OCam-frame vectors to the OpenCV camera frame (det +1).

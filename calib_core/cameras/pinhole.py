@@ -27,7 +27,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from ..errors import CalibError
-from .base import as_points, in_image, register_camera_model
+from .base import as_points, register_camera_model
 from .io import param_image_size, param_matrix, param_vector, require_keys
 
 #: Accepted lengths of an OpenCV distortion vector.

@@ -63,12 +63,6 @@ PARAMETER_NAMES = (
 _UNPROJECTABLE_PX = 1e4
 
 
-def _skew(v: np.ndarray) -> np.ndarray:
-    """``[v]_x`` of one 3-vector (one small array, no stacking)."""
-    x, y, z = float(v[0]), float(v[1]), float(v[2])
-    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
-
-
 def _so3_matrix(phi: np.ndarray, a: float, b: float, d: float) -> np.ndarray:
     """``d I + a [phi]_x + b phi phi^T`` built from Python floats in one array call
     (numpy's per-call overhead dominates for one 3x3 matrix)."""
