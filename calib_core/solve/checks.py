@@ -92,9 +92,10 @@ def _largest_angle_deg(bearings: np.ndarray) -> float:
     total = bearings.sum(axis=0)
     norm = float(np.sqrt(total @ total))
     if norm > 0:
-        alpha = _angle_rad(bearings, np.broadcast_to(total / norm, bearings.shape))
-        if np.degrees(alpha.max()) >= CONE_WARNING_DEG:
-            return float(np.degrees(alpha.max()))
+        # arccos is precise enough here: the bound only matters when it is large.
+        alpha_deg = float(np.degrees(np.arccos(np.clip((bearings @ total).min() / norm, -1.0, 1.0))))
+        if alpha_deg >= CONE_WARNING_DEG:
+            return alpha_deg
     cos = bearings @ bearings.T
     i, j = np.unravel_index(np.argmin(cos), cos.shape)
     return float(np.degrees(_angle_rad(bearings[i : i + 1], bearings[j : j + 1])[0]))
