@@ -15,6 +15,14 @@ the last click.
 Every number shown comes from :mod:`calib_core`; this module only routes
 clicks, draws, and moves data between the state, the solver and the page.
 
+A click is answered in this order: the changed pick markers at once (only
+the scene nodes that changed are sent, mostly as in-place updates), then,
+from the solver thread, the errors, the residual table and the 2-D overlays;
+the 3-D cloud is recoloured after that in its own thread, and only while a
+tab shows the 3-D view.  The session file is written by a background thread
+(:class:`app.state.SessionWriter`).  :meth:`CalibrationApp.last_click_to_update`
+reports the time to the second step.
+
 Use :func:`serve` (what ``ba-calib`` runs), or :class:`CalibrationApp` to
 start and stop the server from Python (tests).
 """

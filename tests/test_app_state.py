@@ -605,6 +605,8 @@ def test_a_click_updates_only_what_it_changed_in_place(tmp_path):
 
     from app.server import CalibrationApp
 
+    import time
+
     sample = Path(__file__).resolve().parents[1] / "sample_data"
     session = tmp_path / "session.yaml"
     session.write_text(yaml.safe_dump({"format": "ba-calib-session", "version": 1, "pairs": [],
@@ -615,6 +617,7 @@ def test_a_click_updates_only_what_it_changed_in_place(tmp_path):
     app = CalibrationApp(sample / "scan.npz", sample / "image.png", sample / "camera.yaml", session_path=session,
                          port=port)
     try:
+        assert app.last_click_to_update() is None and app.last_update_time is None  # nothing solved yet
         ids = app.state.import_pairs(load_pairs_yaml(sample / "pairs.yaml")[:5])
         assert app.wait_idle(60) and app.result is not None
         node = lambda name: app._drawn[name][0]  # noqa: E731
@@ -626,8 +629,12 @@ def test_a_click_updates_only_what_it_changed_in_place(tmp_path):
         old_residuals = residuals.points.copy()
 
         u, v = app.state.get(ids[1]).pixel
+        t0 = time.perf_counter()
         app.state.move_pixel(ids[1], u + 3.0, v)
         assert app.wait_idle(60)
+        # The timing hook: this click's solve was shown after the click, and the duration counts from the change.
+        assert t0 < app.last_update_time <= time.perf_counter()
+        assert 0.0 < app.last_click_to_update() <= app.last_update_time - t0
         # The same scene nodes, updated in place, not re-created.
         assert node("/annot/markers/horizontal/ring") is ba_ring and node("/annot/markers/raw/ring") is cam_ring
         assert node(f"/annot/labels/raw/{ids[1]}") is label and node("/annot/overlay/residuals") is residuals
