@@ -272,9 +272,10 @@ def colorize_points(
             np.add(pixels[:, 0], 0.5, out=u[b], casting="unsafe")
             np.add(pixels[:, 1], 0.5, out=v[b], casting="unsafe")
         if occlusion:
-            d = xyz[0] * xyz[0]
-            d += xyz[1] * xyz[1]
-            d += xyz[2] * xyz[2]
+            with np.errstate(over="ignore"):  # absurd coordinates (1e30) give inf: never projectable
+                d = xyz[0] * xyz[0]
+                d += xyz[1] * xyz[1]
+                d += xyz[2] * xyz[2]
             np.sqrt(d, out=d)
             d[~ok] = np.inf
             dist[b] = d
