@@ -361,9 +361,8 @@ def test_ros_camera_info_rational_and_equidistant(tmp_path):
 
 
 @pytest.mark.realdata
+@pytest.mark.skipif(not PJLAB.exists(), reason=f"real data not found at {PJLAB}")
 def test_pjlab_intrinsic_json():
-    if not PJLAB.exists():
-        pytest.skip(f"real data not found at {PJLAB}")
     auto = load_camera(PJLAB / "auto_calib" / "center_camera-intrinsic.json")
     assert isinstance(auto, PinholeCamera) and (auto.width, auto.height) == (1920, 1200)
     np.testing.assert_array_equal(auto.K, [[2117.31, 0, 924.681], [0, 2113.29, 656.457], [0, 0, 1]])

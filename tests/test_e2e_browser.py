@@ -66,9 +66,8 @@ def page_text(page) -> str:
     return " ".join(page.inner_text("body").split())
 
 
+@pytest.mark.skipif(not CHROMIUM.exists(), reason="/usr/bin/chromium is missing (apt-get install chromium); CI installs it")
 def test_annotate_sample_in_headless_chromium(tmp_path):
-    if not CHROMIUM.exists():
-        pytest.skip("/usr/bin/chromium is missing (apt-get install chromium); CI installs it")
     sync_api = pytest.importorskip("playwright.sync_api", reason="the playwright package is not installed")
     from app.server import CalibrationApp
 

@@ -27,7 +27,6 @@ from calib_core.io.scan_readers import load_scan
 from calib_core.pairs import load_pairs_yaml, resolve_pairs
 from calib_core.solve import solve_extrinsics
 
-pytestmark = pytest.mark.realdata
 
 REPO = Path(__file__).resolve().parents[1]
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "pjlab_opencalib_lidar2camera"
@@ -40,16 +39,20 @@ SCENES = {
     # claims 1920x1080 but the image is 1920x1200.
     "manual_calib": ("0.pcd", {"beams": 64}, (1920, 1200), ["--beams", "64", "--image-size", "1920", "1200"]),
 }
+pytestmark = [
+    pytest.mark.realdata,
+    pytest.mark.skipif(
+        not all((DATA / scene / files[0]).is_file() for scene, files in SCENES.items()),
+        reason=f"real data not found at {DATA} (the PJLab OpenCalib scenes of ../shared/data)",
+    ),
+]
 
 MAX_ROTATION_DEG = 0.5
 MAX_TRANSLATION_M = 0.05
 
 
 def _scene_dir(scene: str) -> Path:
-    path = DATA / scene
-    if not (path / SCENES[scene][0]).is_file():
-        pytest.skip(f"real data not found at {path} (the PJLab OpenCalib scenes of ../shared/data)")
-    return path
+    return DATA / scene
 
 
 def published_T(scene_dir: Path) -> np.ndarray:
