@@ -132,8 +132,9 @@ def cmd_solve(args: argparse.Namespace) -> int:
     depth = load_scan_from_args(args) if args.scan is not None else None
     points, bearings, pixels = resolve_pairs(pairs, depth, camera)
     result = solve_extrinsics(points, bearings, camera=camera, pixels=pixels, cost=args.cost)
-    print(format_summary(result, len(pairs)))
+    # Save before printing: a closed pipe (| head) must not lose the result.
     save_extrinsics_yaml(args.output, result.T_camera_lidar, result=result, camera=camera, pairs=pairs)
+    print(format_summary(result, len(pairs)))
     print(f"\nwrote {args.output}")
     return 0
 
@@ -295,6 +296,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:
+        # The reader of our output went away (e.g. `| head`): not an error of ours.
+        # Point stdout at /dev/null so the interpreter's final flush stays quiet.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
     except Exception as exc:  # noqa: BLE001 - last resort: one line unless --debug
         if args.debug:
             raise

@@ -132,3 +132,16 @@ def test_version_is_the_package_version():
 
     proc = run_cli("--version")
     assert proc.returncode == 0 and proc.stdout.strip() == f"ba-calib {__version__}"
+
+
+def test_closed_pipe_loses_no_result(tmp_path):
+    out = tmp_path / "e.yaml"
+    cmd = [sys.executable, "-m", "app.cli", "solve", "--scan", str(SAMPLE / "scan.npz"),
+           "--camera", str(SAMPLE / "camera.yaml"), "--pairs", str(SAMPLE / "pairs.yaml"), "-o", str(out)]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=SAMPLE.parent)
+    proc.stdout.readline()  # read one line, then hang up like `| head -1`
+    proc.stdout.close()
+    assert proc.wait(timeout=300) == 0
+    stderr = proc.stderr.read().decode()
+    assert "Traceback" not in stderr and "internal error" not in stderr
+    assert load_extrinsics_yaml(out)["T_camera_lidar"].shape == (4, 4)

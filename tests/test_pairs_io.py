@@ -98,3 +98,13 @@ def test_resolve_rejects_bad_picks(pair, fragment):
 def test_cells_without_scan_are_an_error():
     with pytest.raises(CalibError, match="no scan"):
         resolve_pairs([Pair((0, 0), None, (1.0, 1.0))], None, _IdentityCamera())
+
+
+def test_saved_files_get_ordinary_permissions(tmp_path):
+    import os
+
+    path = tmp_path / "p.yaml"
+    save_pairs_yaml(path, [Pair((0, 0), None, (1.0, 2.0))])
+    umask = os.umask(0)
+    os.umask(umask)
+    assert (path.stat().st_mode & 0o777) == (0o666 & ~umask)
