@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import io
 import json
-import socket
 import time
 from pathlib import Path
 
@@ -22,43 +21,17 @@ import pytest
 from calib_core.pairs import load_pairs_yaml, save_pairs_yaml
 from calib_core.transforms import transform_points
 
+from browser_helpers import CHROMIUM, CHROMIUM_ARGS, TIMEOUT_S, free_port, wait_for
+
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "data" / "pjlab_opencalib_lidar2camera" / "auto_calib"
+
 pytestmark = [
     pytest.mark.realdata,
     pytest.mark.skipif(not (DATA / "calib.pcd").is_file(), reason=f"real data not found at {DATA} (../shared/data)"),
 ]
 PAIRS = ROOT / "real_data" / "pairs" / "auto_calib_pairs.yaml"
-CHROMIUM = Path("/usr/bin/chromium")
-CHROMIUM_ARGS = [
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-quic",
-    "--no-first-run",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-]
-TIMEOUT_S = 30.0
 N_PRELOADED = 6  # pairs imported before the browser test clicks more
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def wait_for(condition, what: str, timeout: float = TIMEOUT_S, interval: float = 0.05):
-    """Poll ``condition()`` until it returns something truthy; fail naming ``what``."""
-    deadline = time.monotonic() + timeout
-    while True:
-        value = condition()
-        if value:
-            return value
-        if time.monotonic() > deadline:
-            pytest.fail(f"timed out after {timeout:.0f} s waiting for {what}")
-        time.sleep(interval)
 
 
 def scene_files() -> tuple[Path, Path, Path]:

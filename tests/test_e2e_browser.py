@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import io
 import re
-import socket
 import time
 from pathlib import Path
 
@@ -25,41 +24,14 @@ from calib_core.io.extrinsics import load_extrinsics_yaml
 from calib_core.synthetic import load_sample, simulate_pairs
 from calib_core.transforms import rotation_angle_deg
 
+from browser_helpers import CHROMIUM, CHROMIUM_ARGS, TIMEOUT_S, free_port, wait_for
+
 pytestmark = pytest.mark.browser
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE = ROOT / "sample_data"
 SCREENSHOT = ROOT / "docs" / "screenshot.png"
-CHROMIUM = Path("/usr/bin/chromium")
-CHROMIUM_ARGS = [
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-quic",
-    "--no-first-run",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-]
 N_PAIRS = 8
-TIMEOUT_S = 30.0
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def wait_for(condition, what: str, timeout: float = TIMEOUT_S, interval: float = 0.05):
-    """Poll ``condition()`` until it returns something truthy; fail naming ``what``."""
-    deadline = time.monotonic() + timeout
-    while True:
-        value = condition()
-        if value:
-            return value
-        if time.monotonic() > deadline:
-            pytest.fail(f"timed out after {timeout:.0f} s waiting for {what}")
-        time.sleep(interval)
 
 
 def page_text(page) -> str:
