@@ -96,6 +96,23 @@ def in_image(pixels: np.ndarray, width: int, height: int) -> np.ndarray:
         return (u >= -0.5) & (u <= width - 0.5) & (v >= -0.5) & (v <= height - 0.5)
 
 
+def store_projection(
+    pixels: np.ndarray, valid: np.ndarray, u: np.ndarray, v: np.ndarray, ok: np.ndarray, width: int, height: int
+) -> None:
+    """Write projected ``u, v`` into ``pixels`` and the validity into ``valid``, in place.
+
+    ``valid`` becomes ``ok`` and inside the image; pixels where not ``ok``
+    become NaN.  Shared by the models' blockwise ``project``.
+    """
+    np.copyto(valid, ok)
+    valid &= (u >= -0.5) & (u <= width - 0.5) & (v >= -0.5) & (v <= height - 0.5)
+    # 0 / ok is 0 where ok and NaN elsewhere: adding it blanks the pixels
+    # that cannot be projected, cheaper than np.where.
+    blank = np.divide(0.0, ok, dtype=pixels.dtype)
+    pixels[:, 0] = u + blank
+    pixels[:, 1] = v + blank
+
+
 def as_points(arr: Any, name: str, dim: int) -> np.ndarray:
     """``arr`` as a float64 ``(N, dim)`` array, or a :class:`CalibError`."""
     a = np.asarray(arr, dtype=np.float64)

@@ -42,7 +42,7 @@ from numpy.polynomial import polynomial as npoly
 
 from ..errors import CalibError
 from ..io.atomic import write_bytes_atomic
-from .base import as_points, register_camera_model
+from .base import as_points, register_camera_model, store_projection
 from .io import param_float, param_image_size, param_vector, require_keys
 
 #: Rotation taking OCam-frame vectors to the OpenCV camera frame (det +1).
@@ -281,13 +281,7 @@ class OCamCamera:
         col += X
         col *= scale
         col += self.yc
-        np.copyto(valid, ok)
-        valid &= (col >= -0.5) & (col <= self.width - 0.5) & (row >= -0.5) & (row <= self.height - 0.5)
-        # 0 / ok is 0 where ok and NaN elsewhere: adding it blanks the pixels
-        # that cannot be projected, cheaper than np.where.
-        blank = np.divide(0.0, ok, dtype=P.dtype)
-        pixels[:, 0] = col + blank
-        pixels[:, 1] = row + blank
+        store_projection(pixels, valid, col, row, ok, self.width, self.height)
 
     # -- F^-1: image -> camera ------------------------------------------------------
     def bearing(self, pixels: Any) -> np.ndarray:

@@ -27,7 +27,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from ..errors import CalibError
-from .base import as_points, register_camera_model
+from .base import as_points, register_camera_model, store_projection
 from .io import param_image_size, param_matrix, param_vector, require_keys
 
 #: Accepted lengths of an OpenCV distortion vector.
@@ -216,13 +216,7 @@ class PinholeCamera:
         u += self.K[0, 2]
         v = self.K[1, 1] * yd
         v += self.K[1, 2]
-        np.copyto(valid, ok)
-        valid &= (u >= -0.5) & (u <= self.width - 0.5) & (v >= -0.5) & (v <= self.height - 0.5)
-        # 0 / ok is 0 where ok and NaN elsewhere: adding it blanks the pixels
-        # that cannot be projected, cheaper than np.where.
-        blank = np.divide(0.0, ok, dtype=P.dtype)
-        pixels[:, 0] = u + blank
-        pixels[:, 1] = v + blank
+        store_projection(pixels, valid, u, v, ok, self.width, self.height)
 
     # -- F^-1: image -> camera ------------------------------------------------
     def bearing(self, pixels: Any) -> np.ndarray:
@@ -243,16 +237,15 @@ class PinholeCamera:
         return rays
 
     def _apply_tilt(self, xd: np.ndarray, yd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        if self._k[12] == 0 and self._k[13] == 0:
-            return xd, yd
-        t = self._tilt
-        w = t[2, 0] * xd + t[2, 1] * yd + t[2, 2]
-        return (t[0, 0] * xd + t[0, 1] * yd + t[0, 2]) / w, (t[1, 0] * xd + t[1, 1] * yd + t[1, 2]) / w
+        return self._homography(self._tilt, xd, yd)
 
     def _remove_tilt(self, xd: np.ndarray, yd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return self._homography(self._tilt_inv, xd, yd)
+
+    def _homography(self, t: np.ndarray, xd: np.ndarray, yd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Apply the 3x3 sensor-tilt matrix ``t`` (or skip it when there is no tilt)."""
         if self._k[12] == 0 and self._k[13] == 0:
             return xd, yd
-        t = self._tilt_inv
         w = t[2, 0] * xd + t[2, 1] * yd + t[2, 2]
         return (t[0, 0] * xd + t[0, 1] * yd + t[0, 2]) / w, (t[1, 0] * xd + t[1, 1] * yd + t[1, 2]) / w
 
