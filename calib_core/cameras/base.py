@@ -121,3 +121,16 @@ def as_points(arr: Any, name: str, dim: int) -> np.ndarray:
     if a.ndim != 2 or a.shape[1] != dim:
         raise CalibError(f"{name} must be an (N, {dim}) array, got shape {a.shape}")
     return a
+
+
+def as_points_keep_float32(points: Any) -> np.ndarray:
+    """``as_points(points, "points", 3)``, but float32 input stays float32.
+
+    Bulk colouring passes float32 points and is projected in float32.
+    """
+    P = np.asarray(points)
+    if P.dtype != np.float32:
+        return as_points(P, "points", 3)
+    if P.ndim != 2 or P.shape[1] != 3:
+        return as_points(P, "points", 3).astype(np.float32)  # (3,) -> (1, 3), or the shape error
+    return P

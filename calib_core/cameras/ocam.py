@@ -42,7 +42,7 @@ from numpy.polynomial import polynomial as npoly
 
 from ..errors import CalibError
 from ..io.atomic import write_bytes_atomic
-from .base import as_points, register_camera_model, store_projection
+from .base import as_points, as_points_keep_float32, register_camera_model, store_projection
 from .io import param_float, param_image_size, param_vector, require_keys
 
 #: Rotation taking OCam-frame vectors to the OpenCV camera frame (det +1).
@@ -224,11 +224,7 @@ class OCamCamera:
         float32 points are projected in float32 (pixels within about 5e-4 px
         of the float64 result, for bulk colouring); anything else in float64.
         """
-        P = np.asarray(points)
-        if P.dtype != np.float32:
-            P = as_points(P, "points", 3)
-        elif P.ndim != 2 or P.shape[1] != 3:
-            P = as_points(P, "points", 3).astype(np.float32)  # (3,) -> (1, 3), or the shape error
+        P = as_points_keep_float32(points)
         pixels = np.empty((P.shape[0], 2), P.dtype)
         valid = np.empty(P.shape[0], bool)
         tables = self._fast_tables[P.dtype == np.float32]

@@ -27,7 +27,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from ..errors import CalibError
-from .base import as_points, register_camera_model, store_projection
+from .base import as_points, as_points_keep_float32, register_camera_model, store_projection
 from .io import param_image_size, param_matrix, param_vector, require_keys
 
 #: Accepted lengths of an OpenCV distortion vector.
@@ -187,11 +187,7 @@ class PinholeCamera:
         inside the image.  float32 points are projected in float32 (for bulk
         colouring); anything else in float64.
         """
-        P = np.asarray(points)
-        if P.dtype != np.float32:
-            P = as_points(P, "points", 3)
-        elif P.ndim != 2 or P.shape[1] != 3:
-            P = as_points(P, "points", 3).astype(np.float32)  # (3,) -> (1, 3), or the shape error
+        P = as_points_keep_float32(points)
         pixels = np.empty((P.shape[0], 2), P.dtype)
         valid = np.empty(P.shape[0], bool)
         with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
