@@ -7,6 +7,10 @@ File format (YAML)::
         pixel: [u, v]               # original camera image, (column, row)
       - laser_xyz: [x, y, z]        # lidar frame, metres
         pixel: [u, v]
+        id: 7                       # optional: the pair's id, shown in the UI, warnings and results
+        source: guided              # optional: clicked (default) | guided | auto
+        precision_px: 0.3           # optional: 1-sigma of the pixel, px (weights the solve)
+        check: true                 # optional: a check pair, left out of the fit and reported apart
 
 Pixels use the package convention: the centre of the top-left pixel is (0, 0).
 """
@@ -38,11 +42,23 @@ class Pair:
         Laser point in the lidar frame, metres.
     pixel : (u, v)
         Camera pixel in the original image (column, row).
+    id : int or None
+        The pair's id: one number for the pair in the UI, warnings, results and files.
+    source : {"clicked", "guided", "auto"}
+        How the pair was made: an unguided click, a click on a proposal, or accepted without a click.
+    precision_px : float or None
+        1-sigma of the pixel in px, when known; None means the solve's default.
+    check : bool
+        A check pair: left out of the fit, its error reported separately.
     """
 
     laser_rc: tuple[int, int] | None
     laser_xyz: tuple[float, float, float] | None
     pixel: tuple[float, float]
+    id: int | None = None
+    source: str = "clicked"
+    precision_px: float | None = None
+    check: bool = False
 
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {}
@@ -51,6 +67,14 @@ class Pair:
         if self.laser_xyz is not None:
             out["laser_xyz"] = [float(x) for x in self.laser_xyz]
         out["pixel"] = [float(self.pixel[0]), float(self.pixel[1])]
+        if self.id is not None:
+            out["id"] = int(self.id)
+        if self.source != "clicked":
+            out["source"] = self.source
+        if self.precision_px is not None:
+            out["precision_px"] = float(self.precision_px)
+        if self.check:
+            out["check"] = True
         return out
 
     @staticmethod
@@ -58,7 +82,7 @@ class Pair:
         """Parse one entry of a pairs file; ``where`` names it in errors."""
         if not isinstance(entry, dict):
             raise CalibError(f"{where}: expected a mapping with laser_rc or laser_xyz and pixel")
-        unknown = set(entry) - {"laser_rc", "laser_xyz", "pixel", "id", "label"}
+        unknown = set(entry) - {"laser_rc", "laser_xyz", "pixel", "id", "label", "source", "precision_px", "check"}
         if unknown:
             raise CalibError(f"{where}: unknown key(s) {sorted(unknown)}")
         has_rc, has_xyz = "laser_rc" in entry, "laser_xyz" in entry
@@ -67,13 +91,41 @@ class Pair:
         if "pixel" not in entry:
             raise CalibError(f"{where}: missing pixel: [u, v]")
         pixel = tuple(finite_vector(entry["pixel"], 2, f"{where} pixel"))
+        extra = _optional_fields(entry, where)
         if has_rc:
             rc = finite_vector(entry["laser_rc"], 2, f"{where} laser_rc")
             if any(v != int(v) or v < 0 for v in rc):
                 raise CalibError(f"{where} laser_rc: expected two non-negative whole numbers, got {rc}")
-            return Pair((int(rc[0]), int(rc[1])), None, pixel)  # type: ignore[arg-type]
+            return Pair((int(rc[0]), int(rc[1])), None, pixel, **extra)  # type: ignore[arg-type]
         xyz = tuple(finite_vector(entry["laser_xyz"], 3, f"{where} laser_xyz"))
-        return Pair(None, xyz, pixel)  # type: ignore[arg-type]
+        return Pair(None, xyz, pixel, **extra)  # type: ignore[arg-type]
+
+
+PAIR_SOURCES = ("clicked", "guided", "auto")
+
+
+def _optional_fields(entry: dict, where: str) -> dict[str, Any]:
+    """The optional ``id``, ``source``, ``precision_px`` and ``check`` of a pairs-file entry, checked."""
+    out: dict[str, Any] = {}
+    if entry.get("id") is not None:
+        pid = entry["id"]
+        if isinstance(pid, bool) or not isinstance(pid, int) or not 0 <= pid < 2**31:
+            raise CalibError(f"{where} id: expected a whole number from 0 to 2^31-1, got {pid!r}")
+        out["id"] = pid
+    if "source" in entry:
+        if entry["source"] not in PAIR_SOURCES:
+            raise CalibError(f"{where} source: expected one of {', '.join(PAIR_SOURCES)}, got {entry['source']!r}")
+        out["source"] = entry["source"]
+    if entry.get("precision_px") is not None:
+        (sigma,) = finite_vector([entry["precision_px"]], 1, f"{where} precision_px")
+        if not 0.0 < sigma <= 1000.0:
+            raise CalibError(f"{where} precision_px: expected a positive number of pixels (at most 1000), got {sigma}")
+        out["precision_px"] = sigma
+    if "check" in entry:
+        if not isinstance(entry["check"], bool):
+            raise CalibError(f"{where} check: expected true or false, got {entry['check']!r}")
+        out["check"] = entry["check"]
+    return out
 
 
 def load_pairs_yaml(path: str | os.PathLike) -> list[Pair]:
