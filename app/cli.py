@@ -212,6 +212,29 @@ def cmd_serve(args: argparse.Namespace) -> int:
     return 0
 
 
+def _check_output_file(path: Path) -> None:
+    """Refuse to replace anything but a regular file (a folder, a device, a fifo)."""
+    from calib_core.errors import CalibError
+
+    if os.path.lexists(path) and not path.is_file():
+        raise CalibError(f"{path}: exists and is not a regular file; not replacing it")
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    from calib_core.io.atomic import write_bytes_atomic
+    from calib_core.io.extrinsic_formats import export_extrinsics, read_extrinsics_any
+
+    T = read_extrinsics_any(args.extrinsics).T_camera_lidar
+    text = export_extrinsics(T, args.format, args.parent_frame, args.child_frame, lidar_frame=args.lidar_frame)
+    if args.output is None:
+        sys.stdout.write(text)
+        return 0
+    _check_output_file(args.output)
+    write_bytes_atomic(args.output, text.encode("utf-8"))
+    print(f"wrote {args.output} ({args.format})", file=sys.stderr)
+    return 0
+
+
 def _version() -> str:
     from calib_core import __version__
 
@@ -273,6 +296,26 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", required=True, type=Path)
     p.add_argument("--seed", type=int, default=0, help="changes the layout and the ground truth")
     p.set_defaults(func=cmd_sample)
+
+    from calib_core.io.extrinsic_formats import FORMATS
+
+    p = sub.add_parser(
+        "export",
+        help="write the extrinsics for ROS/URDF/Autoware/OpenCalib/KITTI/... (direction stated in the file)",
+        description="Convert an extrinsics file (ba-calib YAML or any supported format) to FORMAT. "
+        "--parent-frame and --child-frame name the two sensors' frames, in either order: TF, URDF, Autoware "
+        "and matrix hold T_parent_child, which maps child points into the parent frame (the default, "
+        "parent lidar / child camera, gives the inverse of T_camera_lidar). KITTI's Tr_velo_to_cam and "
+        "OpenCalib's matrix are T_camera_lidar; dvlc's T_lidar_camera its inverse. Formats: "
+        + "; ".join(f"{f.name}: {f.description}" for f in FORMATS.values()),
+    )
+    p.add_argument("extrinsics", type=Path, help="extrinsics file (ba-calib YAML, or any --format below)")
+    p.add_argument("--format", required=True, choices=list(FORMATS), help="output format")
+    p.add_argument("--parent-frame", default="lidar", help="parent frame name (default: lidar)")
+    p.add_argument("--child-frame", default="camera", help="child frame name (default: camera)")
+    p.add_argument("--lidar-frame", default=None, help="which of the two frames is the lidar, when their names do not tell")
+    p.add_argument("-o", "--output", type=Path, default=None, help="output file (default: standard output)")
+    p.set_defaults(func=cmd_export)
     return parser
 
 
