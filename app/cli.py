@@ -235,6 +235,45 @@ def cmd_export(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_bag_info(args: argparse.Namespace) -> int:
+    import math
+
+    from calib_core.io.bags import bag_info
+
+    info = bag_info(args.bag)
+    print(f"{info.path}: {info.kind}, {info.duration_s:.3f} s, {sum(t.count for t in info.topics)} messages")
+    width = max([len(t.name) for t in info.topics] + [5])
+    print(f"{'topic':{width}}  {'type':34} {'count':>7} {'rate [Hz]':>10}")
+    for t in info.topics:
+        rate = f"{t.rate_hz:10.2f}" if math.isfinite(t.rate_hz) else f"{'-':>10}"
+        print(f"{t.name:{width}}  {t.msgtype:34} {t.count:7d} {rate}")
+    return 0
+
+
+def cmd_bag_extract(args: argparse.Namespace) -> int:
+    from calib_core.io.bags import read_bag_scene, write_bag_scene
+
+    scene = read_bag_scene(
+        args.bag, args.cloud_topic, args.image_topic, args.camera_info_topic, time_s=args.time, index=args.index
+    )
+    paths = write_bag_scene(scene, args.output)
+    for note in scene.notes:
+        print(note)
+    print(
+        f"cloud {scene.cloud_topic} #{scene.cloud_index} ({len(scene.cloud.xyz)} points, frame {scene.lidar_frame or '?'}) "
+        f"at {scene.cloud_time_s:.6f} s"
+    )
+    print(
+        f"image {scene.image_topic} at {scene.image_time_s:.6f} s (frame {scene.camera_frame or '?'}): "
+        f"gap {1000 * scene.gap_s:+.3f} ms"
+    )
+    if scene.camera is None:
+        print("no camera info: give the camera file yourself (--camera)")
+    for what, path in paths.items():
+        print(f"wrote {path} ({what})")
+    return 0
+
+
 def _version() -> str:
     from calib_core import __version__
 
@@ -316,6 +355,28 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--lidar-frame", default=None, help="which of the two frames is the lidar, when their names do not tell")
     p.add_argument("-o", "--output", type=Path, default=None, help="output file (default: standard output)")
     p.set_defaults(func=cmd_export)
+
+    p = sub.add_parser("bag", help="read ROS 1 .bag / ROS 2 .db3 or .mcap bags (no ROS needed)")
+    bag_sub = p.add_subparsers(dest="bag_command", required=True)
+    q = bag_sub.add_parser("info", help="topics, types, counts and rates")
+    q.add_argument("bag", type=Path, help="a .bag file, or a ROS 2 bag folder (or a file in it)")
+    q.set_defaults(func=cmd_bag_info)
+    q = bag_sub.add_parser(
+        "extract",
+        help="write one scan (scan.pcd), the image nearest in time (image.png) and camera.yaml",
+        description="Writes scan.pcd, image.png, camera.yaml (from CameraInfo) and initial_extrinsics.yaml "
+        "(when /tf_static links the cloud's and the image's frames). A topic may be left out when the bag "
+        "has only one of its type.",
+    )
+    q.add_argument("bag", type=Path, help="a .bag file, or a ROS 2 bag folder (or a file in it)")
+    q.add_argument("--cloud-topic", default=None, help="sensor_msgs/PointCloud2 topic")
+    q.add_argument("--image-topic", default=None, help="sensor_msgs/Image or CompressedImage topic")
+    q.add_argument("--camera-info-topic", default=None, help="sensor_msgs/CameraInfo topic")
+    which = q.add_mutually_exclusive_group()
+    which.add_argument("--time", type=float, default=None, help="the cloud nearest to this many seconds after the bag's start")
+    which.add_argument("--index", type=int, default=None, help="the cloud with this 0-based index on its topic (default 0)")
+    q.add_argument("-o", "--output", required=True, type=Path, help="output folder")
+    q.set_defaults(func=cmd_bag_extract)
     return parser
 
 
