@@ -131,7 +131,12 @@ def cmd_solve(args: argparse.Namespace) -> int:
         raise CalibError(f"{args.pairs}: pairs name depth-matrix cells (laser_rc); give the scan with --scan")
     depth = load_scan_from_args(args) if args.scan is not None else None
     points, bearings, pixels = resolve_pairs(pairs, depth, camera)
-    result = solve_extrinsics(points, bearings, camera=camera, pixels=pixels, cost=args.cost)
+    initial = None
+    if args.initial_extrinsics is not None:
+        from calib_core.io.extrinsic_formats import load_extrinsics_any
+
+        initial = load_extrinsics_any(args.initial_extrinsics)
+    result = solve_extrinsics(points, bearings, camera=camera, pixels=pixels, cost=args.cost, initial_T_camera_lidar=initial)
     # Save before printing: a closed pipe (| head) must not lose the result.
     save_extrinsics_yaml(args.output, result.T_camera_lidar, result=result, camera=camera, pairs=pairs)
     print(format_summary(result, len(pairs)))
@@ -314,6 +319,10 @@ def build_parser() -> argparse.ArgumentParser:
     _add_camera_arg(p)
     p.add_argument("--pairs", required=True, type=Path, help="pairs YAML")
     p.add_argument("--cost", choices=["angular", "pixel"], default="angular", help="angular = paper eq. 7 (default), pixel = eq. 6")
+    p.add_argument(
+        "--initial-extrinsics", type=Path, default=None,
+        help="start from this extrinsic (ba-calib YAML, TF, URDF, Autoware, OpenCalib, dvlc, KITTI or a 4x4 with its direction)",
+    )  # fmt: skip
     p.add_argument("-o", "--output", required=True, type=Path, help="extrinsics YAML to write")
     p.set_defaults(func=cmd_solve)
 

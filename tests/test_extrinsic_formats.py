@@ -245,3 +245,25 @@ def test_cli_export_errors(tmp_path):
     assert proc.returncode == 2 and "--lidar-frame" in proc.stderr
     proc = _cli("export", str(src), "--format", "urdf", "-o", str(tmp_path))
     assert proc.returncode == 2 and "not a regular file" in proc.stderr
+
+
+def test_cli_solve_starts_from_an_imported_extrinsic(tmp_path):
+    sample = REPO / "sample_data"
+    truth = yaml.safe_load((sample / "ground_truth.yaml").read_text())["T_camera_lidar"]["matrix"]
+    init = tmp_path / "init.urdf"
+    # A start 2 deg and 10 cm off, written as a URDF joint (camera -> lidar direction).
+    off = np.array(truth)
+    off[:3, :3] = Rotation.from_euler("z", 2.0, degrees=True).as_matrix() @ off[:3, :3]
+    off[:3, 3] += [0.1, 0.0, 0.0]
+    init.write_text(export_extrinsics(off, "urdf", "lidar", "camera"))
+    base = ["solve", "--scan", str(sample / "scan.npz"), "--camera", str(sample / "camera.yaml"), "--pairs", str(sample / "pairs.yaml")]
+    plain = _cli(*base, "-o", str(tmp_path / "a.yaml"))
+    started = _cli(*base, "--initial-extrinsics", str(init), "-o", str(tmp_path / "b.yaml"))
+    assert plain.returncode == 0 and started.returncode == 0, started.stderr
+    a = np.array(yaml.safe_load((tmp_path / "a.yaml").read_text())["T_camera_lidar"]["matrix"])
+    b = np.array(yaml.safe_load((tmp_path / "b.yaml").read_text())["T_camera_lidar"]["matrix"])
+    assert np.abs(a - b).max() < 1e-6, "the same optimum from the imported start"
+    bad = tmp_path / "bad.txt"
+    bad.write_text("1 0 0 0\n0 1 0 0\n0 0 1 0\n0 0 0 1\n")
+    proc = _cli(*base, "--initial-extrinsics", str(bad), "-o", str(tmp_path / "c.yaml"))
+    assert proc.returncode == 2 and "direction" in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
