@@ -246,14 +246,26 @@ def bag_info(path: str | os.PathLike) -> BagInfo:
     """Topics, types, message counts and rates of a bag."""
     with _Bag(path) as bag:
         r = bag.reader
+        first: dict[str, int] = {}
+        last: dict[str, int] = {}
+        count: dict[str, int] = {}
+        try:
+            for conn, t_ns, _ in r.messages():  # one pass, nothing deserialized
+                name = conn.topic
+                count[name] = count.get(name, 0) + 1
+                first[name] = min(first.get(name, t_ns), t_ns)
+                last[name] = max(last.get(name, t_ns), t_ns)
+        except Exception as exc:
+            raise CalibError(f"{bag.given}: unreadable bag ({_one_line(exc)})") from None
         topics = []
         for name, info in sorted(r.topics.items()):
-            times = bag.raw_times(info.connections)
-            rate = (len(times) - 1) / ((times.max() - times.min()) * 1e-9) if len(times) > 1 and times.max() > times.min() else float("nan")
-            topics.append(TopicInfo(name, info.msgtype or "(mixed types)", len(times), float(rate)))
-        count = r.message_count
-        start = r.start_time * 1e-9 if count else float("nan")
-        duration = r.duration * 1e-9 if count else 0.0
+            n = count.get(name, 0)
+            span = (last.get(name, 0) - first.get(name, 0)) * 1e-9
+            rate = (n - 1) / span if n > 1 and span > 0 else float("nan")
+            topics.append(TopicInfo(name, info.msgtype or "(mixed types)", n, float(rate)))
+        n_all = sum(count.values())
+        start = r.start_time * 1e-9 if n_all else float("nan")
+        duration = r.duration * 1e-9 if n_all else 0.0
         return BagInfo(bag.path, bag.kind(), start, duration, topics)
 
 
@@ -434,6 +446,22 @@ def _pick_topic(bag: _Bag, given: str | None, msgtypes: tuple[str, ...], what: s
     raise CalibError(f"{bag.given}: several {what} topics ({', '.join(names)}); choose one with {option}")
 
 
+
+def _nearest(bag: _Bag, conns, target_s: float, topic: str) -> tuple[float, Any]:
+    """The message of ``conns`` whose stamp is nearest to ``target_s``, one message held at a time."""
+    best: tuple[float, float, Any] | None = None
+    for t_ns, msg in bag.messages(conns):
+        stamp = _stamp_s(msg, t_ns)
+        gap = abs(stamp - target_s)
+        if best is None or gap < best[0]:
+            best = (gap, stamp, msg)
+        elif stamp - target_s > best[0] + 1.0:
+            break  # stamps grow with the recording: nothing nearer follows
+    if best is None:
+        raise CalibError(f"{bag.given}: topic {topic} holds no messages")
+    return best[1], best[2]
+
+
 def read_bag_scene(
     path: str | os.PathLike,
     cloud_topic: str | None = None,
@@ -452,8 +480,9 @@ def read_bag_scene(
         Default: the only topic of the right type (an error when there are
         several); no camera info when there is none.
     time_s : float, optional
-        Choose the cloud nearest to this time, in seconds after the bag's
-        first message.
+        Choose the cloud received nearest to this time, in seconds after the
+        bag's first message (the bag's timeline, as ``bag info`` shows it).
+        The image is then paired by ``header.stamp``.
     index : int, optional
         Choose the cloud by its 0-based index on its topic (default 0).
         ``time_s`` and ``index`` exclude each other.
@@ -471,35 +500,32 @@ def read_bag_scene(
         info_topic = _pick_topic(bag, camera_info_topic, (CAMERA_INFO,), "camera info", "--camera-info-topic", notes)
 
         cloud_conns = bag.connections(cloud_topic)
-        stamps = [(t, _stamp_s(m, t)) for t, m in bag.messages(cloud_conns)]
-        if not stamps:
-            raise CalibError(f"{bag.given}: topic {cloud_topic} holds no messages")
-        cloud_times = np.array([s for _, s in stamps])
+        n_clouds = sum(max(int(c.msgcount), 0) for c in cloud_conns)
         if time_s is not None:
-            t0 = bag.reader.start_time * 1e-9
-            chosen = int(np.argmin(np.abs(cloud_times - (t0 + time_s))))
+            # The bag's own timeline (receive times), as `bag info` and bag players show it.
+            times = bag.raw_times(cloud_conns)
+            if not times.size:
+                raise CalibError(f"{bag.given}: topic {cloud_topic} holds no messages")
+            chosen = int(np.argmin(np.abs(times - (bag.reader.start_time + time_s * 1e9))))
         else:
             chosen = 0 if index is None else index
-            if chosen >= len(stamps):
-                raise CalibError(f"{bag.given}: index {chosen} but {cloud_topic} has {len(stamps)} clouds (0..{len(stamps) - 1})")
-        cloud_msg = next(m for i, (_, m) in enumerate(bag.messages(cloud_conns)) if i == chosen)
-        cloud_time = float(cloud_times[chosen])
+        cloud_msg = None
+        for i, (t_ns, msg) in enumerate(bag.messages(cloud_conns)):  # stops at the chosen cloud
+            if i == chosen:
+                cloud_msg, cloud_time = msg, _stamp_s(msg, t_ns)
+                break
+        if cloud_msg is None:
+            if n_clouds == 0:
+                raise CalibError(f"{bag.given}: topic {cloud_topic} holds no messages")
+            raise CalibError(f"{bag.given}: index {chosen} but {cloud_topic} has {n_clouds} clouds (0..{n_clouds - 1})")
         cloud = pointcloud2_to_cloud(cloud_msg, f"{bag.given}: {cloud_topic} #{chosen}")
 
-        image_msgs = [(_stamp_s(m, t), m) for t, m in bag.messages(bag.connections(image_topic))]
-        if not image_msgs:
-            raise CalibError(f"{bag.given}: topic {image_topic} holds no messages")
-        gaps = np.array([s for s, _ in image_msgs]) - cloud_time
-        best = int(np.argmin(np.abs(gaps)))
-        image_time, image_msg = image_msgs[best]
+        image_time, image_msg = _nearest(bag, bag.connections(image_topic), cloud_time, image_topic)
         image = image_to_rgb(image_msg, f"{bag.given}: {image_topic}")
 
         camera = None
         if info_topic is not None:
-            infos = [(_stamp_s(m, t), m) for t, m in bag.messages(bag.connections(info_topic))]
-            if not infos:
-                raise CalibError(f"{bag.given}: topic {info_topic} holds no messages")
-            info = min(infos, key=lambda sm: abs(sm[0] - image_time))[1]
+            _, info = _nearest(bag, bag.connections(info_topic), image_time, info_topic)
             camera = camera_info_to_camera(info, (image.shape[1], image.shape[0]), f"{bag.given}: {info_topic}")
 
         lidar_frame, camera_frame = _frame(cloud_msg), _frame(image_msg)
@@ -508,6 +534,12 @@ def read_bag_scene(
             T_tf = _compose(_tf_edges(bag), camera_frame, lidar_frame)
             if T_tf is not None:
                 notes.append(f"/tf_static gives {camera_frame} <- {lidar_frame}: offered as the initial extrinsic")
+                if "optical" not in camera_frame:
+                    # ROS images live in an optical frame (z forward, x right, y down), as this package's camera frame.
+                    notes.append(
+                        f"warning: the image frame {camera_frame!r} is not named *optical*; if it is a body frame "
+                        "(x forward) the initial extrinsic misses the optical rotation"
+                    )
         scene = BagScene(
             cloud=dataclasses.replace(cloud, meta={**cloud.meta, "source": f"{bag.given}:{cloud_topic}#{chosen}"}),
             image=image,
