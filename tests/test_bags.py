@@ -285,3 +285,48 @@ def test_sample_scene_through_a_bag_calibrates_to_the_same_pose(kind, tmp_path):
     diff = np.abs(T_bag - T_loose).max()
     print(f"\nsample via {kind} bag: max |T_bag - T_loose| = {diff:.3g}")
     assert diff <= 1e-9
+
+
+def _cloud_msg(fields, point_step, row_step, data, height=1, width=2):
+    from rosbags.typesys import Stores, get_typestore
+
+    ts = get_typestore(Stores.LATEST)
+    PF, Msg = ts.types["sensor_msgs/msg/PointField"], ts.types["sensor_msgs/msg/PointCloud2"]
+    Header, Time = ts.types["std_msgs/msg/Header"], ts.types["builtin_interfaces/msg/Time"]
+    return Msg(
+        header=Header(stamp=Time(sec=1, nanosec=0), frame_id="lidar"), height=height, width=width,
+        fields=[PF(name=n, offset=o, datatype=d, count=c) for n, o, d, c in fields],
+        is_bigendian=False, point_step=point_step, row_step=row_step, data=np.frombuffer(data, np.uint8), is_dense=True,
+    )  # fmt: skip
+
+
+XYZ = [("x", 0, 7, 1), ("y", 4, 7, 1), ("z", 8, 7, 1)]
+
+
+@pytest.mark.parametrize(
+    "fields,point_step,row_step,nbytes,fragment",
+    [
+        (XYZ[:2], 12, 24, 24, "no z field"),
+        (XYZ + [("i", 10, 7, 1)], 12, 24, 24, "overruns point_step"),
+        (XYZ + [("i", 12, 9, 1)], 16, 32, 32, "unknown PointField datatype 9"),
+        (XYZ + [("x", 0, 7, 1)], 12, 24, 24, "repeated field name"),
+        (XYZ, 12, 20, 24, "row_step 20"),
+        (XYZ, 12, 24, 23, "23 data bytes"),
+    ],
+)
+def test_malformed_pointcloud2(fields, point_step, row_step, nbytes, fragment):
+    from calib_core.io.bags import pointcloud2_to_cloud
+
+    with pytest.raises(CalibError, match=fragment):
+        pointcloud2_to_cloud(_cloud_msg(fields, point_step, row_step, bytes(nbytes)))
+
+
+def test_organized_pointcloud2_with_row_padding():
+    from calib_core.io.bags import pointcloud2_to_cloud
+
+    # 2 rows x 2 points of 12 bytes, each row padded to 30 bytes; float32 little-endian by hand.
+    values = np.arange(12, dtype="<f4").reshape(2, 2, 3)
+    raw = b"".join(values[r].tobytes() + b"\xee" * 6 for r in range(2))
+    cloud = pointcloud2_to_cloud(_cloud_msg(XYZ, 12, 30, raw, height=2, width=2))
+    assert cloud.organized_shape == (2, 2)
+    assert np.array_equal(cloud.xyz, values.reshape(4, 3).astype(np.float64))
