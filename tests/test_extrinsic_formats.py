@@ -267,3 +267,33 @@ def test_cli_solve_starts_from_an_imported_extrinsic(tmp_path):
     bad.write_text("1 0 0 0\n0 1 0 0\n0 0 1 0\n0 0 0 1\n")
     proc = _cli(*base, "--initial-extrinsics", str(bad), "-o", str(tmp_path / "c.yaml"))
     assert proc.returncode == 2 and "direction" in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+
+
+def test_several_sensors_compose_the_chain_between_lidar_and_camera():
+    from calib_core.io.extrinsic_formats import parse_extrinsics
+
+    # base_link -> lidar_top and base_link -> cam_front_optical, as a real sensor kit file lists them.
+    T_base_lidar = _T(Rotation.from_euler("xyz", [0.01, -0.02, 0.3]).as_matrix(), [1.1, 0.0, 1.9])
+    T_base_cam = _T(Rotation.from_euler("xyz", [-1.57, 0.02, -1.6]).as_matrix(), [1.6, 0.1, 1.5])
+    expected = _inv(T_base_cam) @ T_base_lidar  # X_cam = inv(T_base_cam) T_base_lidar X_lidar
+
+    def entry(T):
+        r, p, y = Rotation.from_matrix(T[:3, :3]).as_euler("xyz")
+        return {"x": float(T[0, 3]), "y": float(T[1, 3]), "z": float(T[2, 3]), "roll": float(r), "pitch": float(p), "yaw": float(y)}
+
+    autoware = yaml.safe_dump({"base_link": {"lidar_top": entry(T_base_lidar), "cam_front_optical": entry(T_base_cam)}})
+    got = parse_extrinsics(autoware, lidar_frame="lidar_top", camera_frame="cam_front_optical")
+    assert np.abs(got.T_camera_lidar - expected).max() < 1e-12 and got.format == "autoware"
+    with pytest.raises(CalibError, match="name the lidar and the camera frame"):
+        parse_extrinsics(autoware)
+
+    def joint(child, T):
+        r, p, y = (float(a) for a in Rotation.from_matrix(T[:3, :3]).as_euler("xyz"))
+        xyz = " ".join(repr(float(v)) for v in T[:3, 3])
+        return f'<joint name="j_{child}" type="fixed"><parent link="base_link"/><child link="{child}"/><origin xyz="{xyz}" rpy="{r!r} {p!r} {y!r}"/></joint>'
+
+    urdf = f'<robot name="car"><link name="base_link"/>{joint("lidar_top", T_base_lidar)}{joint("cam_front_optical", T_base_cam)}</robot>'
+    got = parse_extrinsics(urdf, lidar_frame="lidar_top", camera_frame="cam_front_optical")
+    assert np.abs(got.T_camera_lidar - expected).max() < 1e-12 and got.format == "urdf"
+    with pytest.raises(CalibError, match="no chain"):
+        parse_extrinsics(urdf, lidar_frame="lidar_top", camera_frame="cam_rear")

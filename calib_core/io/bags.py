@@ -29,7 +29,6 @@ from __future__ import annotations
 import dataclasses
 import io
 import os
-from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterator
@@ -37,6 +36,7 @@ from typing import Any, Iterator
 import numpy as np
 
 from ..errors import CalibError
+from .extrinsic_formats import compose_tree
 from .scan_readers import PointCloud
 
 __all__ = [
@@ -398,32 +398,10 @@ def _tf_edges(bag: _Bag) -> dict[tuple[str, str], np.ndarray]:
     return edges
 
 
-def _compose(edges: dict[tuple[str, str], np.ndarray], target: str, source: str) -> np.ndarray | None:
-    """``T_target_source`` along the static tree (breadth-first), or None when unconnected."""
-    from ..transforms import invert_T
-
-    graph: dict[str, list[tuple[str, np.ndarray]]] = {}
-    for (parent, child), T in edges.items():
-        # T_parent_child maps child points into the parent frame.
-        graph.setdefault(child, []).append((parent, T))
-        graph.setdefault(parent, []).append((child, invert_T(T)))
-    best = {source: np.eye(4)}  # frame -> T_frame_source
-    queue = deque([source])
-    while queue:
-        frame = queue.popleft()
-        if frame == target:
-            return best[frame]
-        for other, T_other_frame in graph.get(frame, ()):
-            if other not in best:
-                best[other] = T_other_frame @ best[frame]
-                queue.append(other)
-    return None
-
-
 def static_transform(path: str | os.PathLike, target_frame: str, source_frame: str) -> np.ndarray | None:
     """``T_target_source`` from the bag's ``/tf_static`` (maps source points into target), or None."""
     with _Bag(path) as bag:
-        return _compose(_tf_edges(bag), target_frame.lstrip("/"), source_frame.lstrip("/"))
+        return compose_tree(_tf_edges(bag), target_frame.lstrip("/"), source_frame.lstrip("/"))
 
 
 # --------------------------------------------------------------------------------------
@@ -531,7 +509,7 @@ def read_bag_scene(
         lidar_frame, camera_frame = _frame(cloud_msg), _frame(image_msg)
         T_tf = None
         if lidar_frame and camera_frame and lidar_frame != camera_frame:
-            T_tf = _compose(_tf_edges(bag), camera_frame, lidar_frame)
+            T_tf = compose_tree(_tf_edges(bag), camera_frame, lidar_frame)
             if T_tf is not None:
                 notes.append(f"/tf_static gives {camera_frame} <- {lidar_frame}: offered as the initial extrinsic")
                 if "optical" not in camera_frame:

@@ -37,9 +37,10 @@ import json
 import os
 import re
 import xml.etree.ElementTree as ET
+from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
+from typing import Callable, NamedTuple
 
 import numpy as np
 import yaml
@@ -56,6 +57,8 @@ __all__ = [
     "read_extrinsics_any",
     "load_extrinsics_any",
     "lidar_and_camera",
+    "compose_tree",
+    "FrameHint",
 ]
 
 MARKER = "ba-calib-frames"
@@ -88,19 +91,26 @@ class ParsedExtrinsics:
     camera_frame: str | None = None
 
 
+class FrameHint(NamedTuple):
+    """Frame names a caller knows: which frame is the lidar's, which the camera's (None: unknown)."""
+
+    lidar: str | None = None
+    camera: str | None = None
+
+
 @dataclass(frozen=True)
 class ExtrinsicFormat:
     """One entry of :data:`FORMATS`.
 
     ``write(T_camera_lidar, parent, child, lidar)`` returns the file text;
-    ``read(text, lidar_frame)`` returns a :class:`ParsedExtrinsics`.
+    ``read(text, hint)`` returns a :class:`ParsedExtrinsics` (``hint``: a :class:`FrameHint`).
     """
 
     name: str
     suffix: str
     description: str
     write: Callable[[np.ndarray, str, str, str], str]
-    read: Callable[[str, "str | None"], ParsedExtrinsics]
+    read: Callable[[str, "FrameHint"], ParsedExtrinsics]
 
 
 # --------------------------------------------------------------------------------------
@@ -203,6 +213,45 @@ def _frames_for_reading(text: str, parent: str, child: str, lidar_frame: str | N
     return lidar_and_camera(parent, child, lidar_frame)
 
 
+def compose_tree(edges: dict[tuple[str, str], np.ndarray], target: str, source: str) -> np.ndarray | None:
+    """``T_target_source`` along a tree of ``{(parent, child): T_parent_child}`` (TF/URDF
+    convention: ``T_parent_child`` maps child points into the parent frame), or None
+    when no chain links the two frames.  Breadth-first: the shortest chain."""
+    graph: dict[str, list[tuple[str, np.ndarray]]] = {}
+    for (parent, child), T in edges.items():
+        graph.setdefault(child, []).append((parent, T))
+        graph.setdefault(parent, []).append((child, invert_T(T)))
+    found = {source: np.eye(4)}  # frame -> T_frame_source
+    queue = deque([source])
+    while queue:
+        frame = queue.popleft()
+        if frame == target:
+            return found[frame]
+        for other, T_other_frame in graph.get(frame, ()):
+            if other not in found:
+                found[other] = T_other_frame @ found[frame]
+                queue.append(other)
+    return None
+
+
+def _from_edges(edges: list[tuple[str, str, np.ndarray]], hint: "FrameHint", text: str, fmt: str) -> ParsedExtrinsics:
+    """One transform, or the chain between the lidar and the camera frame of several."""
+    if len(edges) == 1:
+        parent, child, T = edges[0]
+        lidar, camera = _frames_for_reading(text, parent, child, hint.lidar)
+        return ParsedExtrinsics(_T_camera_lidar_from_parent_child(T, parent, lidar), fmt, lidar, camera)
+    lidar, camera = hint.lidar, hint.camera
+    marker = _find_marker(text)
+    if (lidar is None or camera is None) and marker is not None:
+        lidar, camera = lidar or marker[0], camera or marker[1]
+    if lidar is None or camera is None:
+        raise CalibError(f"{fmt}: {len(edges)} transforms; name the lidar and the camera frame to choose the chain between them")
+    T = compose_tree({(p, c): T for p, c, T in edges}, camera, lidar)
+    if T is None:
+        raise CalibError(f"{fmt}: no chain of transforms links {lidar!r} and {camera!r}")
+    return ParsedExtrinsics(T, fmt, lidar, camera)
+
+
 # --------------------------------------------------------------------------------------
 # ros1-tf / ros2-tf
 # --------------------------------------------------------------------------------------
@@ -247,7 +296,8 @@ def _command_tokens(text: str) -> list[str]:
     raise CalibError("no static_transform_publisher command found")
 
 
-def _read_ros1(text: str, lidar_frame: str | None) -> ParsedExtrinsics:
+def _read_ros1(text: str, hint: FrameHint) -> ParsedExtrinsics:
+    lidar_frame = hint.lidar
     tokens = _command_tokens(text)
     # x y z qx qy qz qw parent child [period_ms]  or  x y z yaw pitch roll parent child [period_ms]
     if len(tokens) in (9, 10) and not _is_number(tokens[7]):
@@ -276,7 +326,8 @@ def _is_number(token: str) -> bool:
     return True
 
 
-def _read_ros2(text: str, lidar_frame: str | None) -> ParsedExtrinsics:
+def _read_ros2(text: str, hint: FrameHint) -> ParsedExtrinsics:
+    lidar_frame = hint.lidar
     tokens = _command_tokens(text)
     opts: dict[str, str] = {}
     i = 0
@@ -324,7 +375,7 @@ def _write_urdf(T_camera_lidar, parent, child, lidar) -> str:
     )
 
 
-def _read_urdf(text: str, lidar_frame: str | None) -> ParsedExtrinsics:
+def _read_urdf(text: str, hint: "FrameHint") -> ParsedExtrinsics:
     if "<!DOCTYPE" in text or "<!ENTITY" in text:
         raise CalibError("urdf: DOCTYPE/ENTITY declarations are not accepted")
     try:
@@ -334,20 +385,13 @@ def _read_urdf(text: str, lidar_frame: str | None) -> ParsedExtrinsics:
     joints = [root] if root.tag == "joint" else root.findall(".//joint")
     if not joints:
         raise CalibError("urdf: no <joint> element")
-    found = _find_marker(text)
-    if len(joints) > 1:
-        names = {lidar_frame} if lidar_frame else set(found or ())
-        joints = [j for j in joints if names and {_link(j, "parent"), _link(j, "child")} & names]
-        if len(joints) != 1:
-            raise CalibError("urdf: several joints; name the lidar frame to choose the one between lidar and camera")
-    joint = joints[0]
-    parent, child = _link(joint, "parent"), _link(joint, "child")
-    origin = joint.find("origin")
-    xyz = _numbers((origin.get("xyz", "0 0 0") if origin is not None else "0 0 0").split(), 3, "urdf origin xyz")
-    rpy = _numbers((origin.get("rpy", "0 0 0") if origin is not None else "0 0 0").split(), 3, "urdf origin rpy")
-    lidar, camera = _frames_for_reading(text, parent, child, lidar_frame)
-    T = _rpy_rad_T(xyz, rpy)
-    return ParsedExtrinsics(_T_camera_lidar_from_parent_child(T, parent, lidar), "urdf", lidar, camera)
+    edges = []
+    for joint in joints:
+        origin = joint.find("origin")
+        xyz = _numbers((origin.get("xyz", "0 0 0") if origin is not None else "0 0 0").split(), 3, "urdf origin xyz")
+        rpy = _numbers((origin.get("rpy", "0 0 0") if origin is not None else "0 0 0").split(), 3, "urdf origin rpy")
+        edges.append((_link(joint, "parent"), _link(joint, "child"), _rpy_rad_T(xyz, rpy)))
+    return _from_edges(edges, hint, text, "urdf")
 
 
 def _link(joint: ET.Element, which: str) -> str:
@@ -383,24 +427,20 @@ def _is_autoware(data) -> bool:
     )
 
 
-def _read_autoware(text: str, lidar_frame: str | None) -> ParsedExtrinsics:
+def _read_autoware(text: str, hint: "FrameHint") -> ParsedExtrinsics:
     data = _safe_yaml(text, "autoware")
     if not _is_autoware(data):
         raise CalibError("autoware: expected 'parent: {child: {x, y, z, roll, pitch, yaw}}'")
-    entries = [(p, c, v) for p, children in data.items() for c, v in children.items() if isinstance(v, dict)]
-    if len(entries) > 1:
-        found = _find_marker(text)
-        names = {lidar_frame} if lidar_frame else set(found or ())
-        entries = [e for e in entries if names and {str(e[0]), str(e[1])} & names]
-        if len(entries) != 1:
-            raise CalibError("autoware: several sensors; name the lidar frame to choose one")
-    parent, child, v = entries[0]
-    parent, child = str(parent), str(child)
-    xyz = _numbers([v.get(k) for k in ("x", "y", "z")], 3, f"autoware {parent}.{child} x y z")
-    rpy = _numbers([v.get(k) for k in ("roll", "pitch", "yaw")], 3, f"autoware {parent}.{child} roll pitch yaw")
-    lidar, camera = _frames_for_reading(text, parent, child, lidar_frame)
-    T = _rpy_rad_T(xyz, rpy)
-    return ParsedExtrinsics(_T_camera_lidar_from_parent_child(T, parent, lidar), "autoware", lidar, camera)
+    edges = []
+    for parent, children in data.items():
+        for child, v in children.items():
+            if not isinstance(v, dict):
+                continue
+            where = f"autoware {parent}.{child}"
+            xyz = _numbers([v.get(k) for k in ("x", "y", "z")], 3, f"{where} x y z")
+            rpy = _numbers([v.get(k) for k in ("roll", "pitch", "yaw")], 3, f"{where} roll pitch yaw")
+            edges.append((str(parent), str(child), _rpy_rad_T(xyz, rpy)))
+    return _from_edges(edges, hint, text, "autoware")
 
 
 def _safe_yaml(text: str, what: str):
@@ -438,7 +478,8 @@ def _write_opencalib(T_camera_lidar, parent, child, lidar) -> str:
     return json.dumps(doc, indent=2) + "\n"
 
 
-def _read_opencalib(text: str, lidar_frame: str | None) -> ParsedExtrinsics:
+def _read_opencalib(text: str, hint: FrameHint) -> ParsedExtrinsics:
+    lidar_frame = hint.lidar
     data = _safe_yaml(text, "opencalib")
     blocks = [(k, v) for k, v in data.items() if isinstance(v, dict) and "param" in v] if isinstance(data, dict) else []
     blocks = [(k, v) for k, v in blocks if isinstance(v["param"], dict) and "sensor_calib" in v["param"]]
@@ -488,7 +529,7 @@ def _dvlc_values(data):
     return data.get("T_lidar_camera")
 
 
-def _read_dvlc(text: str, lidar_frame: str | None) -> ParsedExtrinsics:
+def _read_dvlc(text: str, hint: FrameHint) -> ParsedExtrinsics:
     data = _safe_yaml(text, "dvlc")
     values = _dvlc_values(data)
     if values is None:
@@ -518,7 +559,7 @@ def _write_kitti(T_camera_lidar, parent, child, lidar) -> str:
     )
 
 
-def _read_kitti(text: str, lidar_frame: str | None) -> ParsedExtrinsics:
+def _read_kitti(text: str, hint: FrameHint) -> ParsedExtrinsics:
     for line in text.splitlines():
         if line.strip().startswith("Tr_velo_to_cam"):
             values = line.split(":", 1)[1].split() if ":" in line else line.split()[1:]
@@ -539,7 +580,8 @@ def _write_matrix(T_camera_lidar, parent, child, lidar) -> str:
 _MATRIX_DIRECTION = re.compile(r"X_(\S+?)\s*=\s*\S*\s*@\s*X_(\S+)")
 
 
-def _read_matrix(text: str, lidar_frame: str | None) -> ParsedExtrinsics:
+def _read_matrix(text: str, hint: FrameHint) -> ParsedExtrinsics:
+    lidar_frame = hint.lidar
     rows = [ln.split("#", 1)[0].replace(",", " ").replace("[", " ").replace("]", " ").split() for ln in text.splitlines()]
     rows = [r for r in rows if r]
     if len(rows) != 4:
@@ -637,8 +679,15 @@ def detect_format(text: str) -> str:
     raise CalibError(f"unrecognised extrinsics format (known: ba-calib YAML, {', '.join(FORMATS)})")
 
 
-def parse_extrinsics(text: str, fmt: str | None = None, lidar_frame: str | None = None) -> ParsedExtrinsics:
+def parse_extrinsics(
+    text: str, fmt: str | None = None, lidar_frame: str | None = None, camera_frame: str | None = None
+) -> ParsedExtrinsics:
     """Parse extrinsics text in any format of :data:`FORMATS` (detected when ``fmt`` is None).
+
+    ``lidar_frame``/``camera_frame`` name the frames when the file does not
+    tell (a URDF or Autoware file with several sensors: the chain between the
+    two is composed).  The camera frame must be the optical frame (z forward,
+    x right, y down), as this package's camera frame.
 
     Raises
     ------
@@ -656,10 +705,12 @@ def parse_extrinsics(text: str, fmt: str | None = None, lidar_frame: str | None 
         return ParsedExtrinsics(parse_transform(data["T_camera_lidar"], "T_camera_lidar"), "ba-calib")
     if fmt not in FORMATS:
         raise CalibError(f"unknown extrinsics format {fmt!r} (one of {', '.join(FORMATS)})")
-    return FORMATS[fmt].read(text, lidar_frame)
+    return FORMATS[fmt].read(text, FrameHint(lidar_frame, camera_frame))
 
 
-def read_extrinsics_any(path: str | os.PathLike, fmt: str | None = None, lidar_frame: str | None = None) -> ParsedExtrinsics:
+def read_extrinsics_any(
+    path: str | os.PathLike, fmt: str | None = None, lidar_frame: str | None = None, camera_frame: str | None = None
+) -> ParsedExtrinsics:
     """Read an extrinsics file of any supported format; errors name the file and the format."""
     path = Path(path)
     try:
@@ -671,11 +722,13 @@ def read_extrinsics_any(path: str | os.PathLike, fmt: str | None = None, lidar_f
     except (OSError, UnicodeDecodeError) as exc:
         raise CalibError(f"{path}: cannot read extrinsics file: {exc}") from None
     try:
-        return parse_extrinsics(text, fmt, lidar_frame)
+        return parse_extrinsics(text, fmt, lidar_frame, camera_frame)
     except CalibError as exc:
         raise CalibError(f"{path}: {exc}") from None
 
 
-def load_extrinsics_any(path: str | os.PathLike, fmt: str | None = None, lidar_frame: str | None = None) -> np.ndarray:
+def load_extrinsics_any(
+    path: str | os.PathLike, fmt: str | None = None, lidar_frame: str | None = None, camera_frame: str | None = None
+) -> np.ndarray:
     """``T_camera_lidar`` (4, 4) from an extrinsics file of any supported format."""
-    return read_extrinsics_any(path, fmt, lidar_frame).T_camera_lidar
+    return read_extrinsics_any(path, fmt, lidar_frame, camera_frame).T_camera_lidar
