@@ -330,3 +330,46 @@ def test_organized_pointcloud2_with_row_padding():
     cloud = pointcloud2_to_cloud(_cloud_msg(XYZ, 12, 30, raw, height=2, width=2))
     assert cloud.organized_shape == (2, 2)
     assert np.array_equal(cloud.xyz, values.reshape(4, 3).astype(np.float64))
+
+
+@pytest.mark.parametrize("encoding", ["rgb8", "bgr8", "mono8", "bgra8", "mono16"])
+def test_image_encodings_decode_to_rgb(encoding):
+    import cv2
+    from rosbags.typesys import Stores, get_typestore
+
+    from calib_core.io.bags import image_to_rgb
+
+    ts = get_typestore(Stores.LATEST)
+    Image, Header, Time = ts.types["sensor_msgs/msg/Image"], ts.types["std_msgs/msg/Header"], ts.types["builtin_interfaces/msg/Time"]
+    rgb = np.zeros((6, 8, 3), np.uint8)
+    rgb[..., 0], rgb[..., 1], rgb[..., 2] = 200, 100, 30  # distinct channels reveal a swap
+    if encoding == "rgb8":
+        raw, expected = rgb, rgb
+    elif encoding == "bgr8":
+        raw, expected = rgb[..., ::-1], rgb
+    elif encoding == "bgra8":
+        raw, expected = np.dstack([rgb[..., ::-1], np.full((6, 8), 255, np.uint8)]), rgb
+    else:
+        grey = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)
+        raw = grey if encoding == "mono8" else grey.astype(np.uint16) * 257
+        expected = np.repeat(grey[..., None], 3, axis=2)
+    raw = np.ascontiguousarray(raw)
+    msg = Image(
+        header=Header(stamp=Time(sec=0, nanosec=0), frame_id="cam"), height=6, width=8, encoding=encoding,
+        is_bigendian=0, step=raw.strides[0], data=raw.view(np.uint8).ravel(),
+    )  # fmt: skip
+    got = image_to_rgb(msg)
+    assert got.shape == (6, 8, 3) and got.dtype == np.uint8
+    assert np.abs(got.astype(int) - expected.astype(int)).max() <= 1
+
+
+def test_undecodable_image_is_one_line():
+    from rosbags.typesys import Stores, get_typestore
+
+    from calib_core.io.bags import image_to_rgb
+
+    ts = get_typestore(Stores.LATEST)
+    Msg, Header, Time = ts.types["sensor_msgs/msg/CompressedImage"], ts.types["std_msgs/msg/Header"], ts.types["builtin_interfaces/msg/Time"]
+    msg = Msg(header=Header(stamp=Time(sec=0, nanosec=0), frame_id="cam"), format="jpeg", data=np.frombuffer(b"not a jpeg", np.uint8))
+    with pytest.raises(CalibError, match="cannot decode image"):
+        image_to_rgb(msg, "bag: /cam")

@@ -184,3 +184,19 @@ def test_too_few_fit_pairs(scene):
     _, (pts, bear, pix) = _pairs(scene, 6, seed=8)
     with pytest.raises(CalibError, match="fit pairs"):
         verify_calibration(pts, bear, pix, scene.camera, check=[True, True, True, False, False, False])
+
+
+def test_verification_block_merges_into_the_extrinsics_yaml(scene, tmp_path):
+    from calib_core.io.atomic import write_yaml_atomic
+    from calib_core.io.extrinsics import extrinsics_to_dict, load_extrinsics_yaml
+
+    pairs, _ = _pairs(scene, 10, seed=9)
+    pairs = [dataclasses.replace(p, check=i == 0) for i, p in enumerate(pairs)]
+    report = verify_pairs(pairs, scene.depth, scene.camera, with_pair_count=False)
+    doc = extrinsics_to_dict(report.result.T_camera_lidar, report.result, scene.camera, pairs, base_dir=tmp_path)
+    doc["verification"] = verification_to_dict(report)
+    write_yaml_atomic(tmp_path / "extrinsics.yaml", doc)
+    back = load_extrinsics_yaml(tmp_path / "extrinsics.yaml")
+    assert np.array_equal(back["T_camera_lidar"], report.result.T_camera_lidar)
+    assert back["verification"]["check_pairs"][0]["px"] == pytest.approx(float(report.check_px[0]))
+    assert "error_vs_pair_count" not in back["verification"]
