@@ -282,6 +282,52 @@ def test_images_agree_with_elementwise_formula_on_a_noisy_cloud():
         np.testing.assert_allclose(images[name], expected, atol=5e-5, equal_nan=True, err_msg=name)
 
 
+@pytest.mark.parametrize("dphi_deg", [0.1, 1.0, 20.0, 60.0, 120.0])
+def test_images_match_eq4_over_the_whole_angle_range(dphi_deg):
+    # The images evaluate the angle with a float32 polynomial; eq. 4 in
+    # float64 (arccos) is the truth.  Log-uniform ranges from 5 cm to 200 m
+    # put the BA all over 0..180 deg.  The ranges are float32 numbers, so
+    # that only the angle evaluation is measured: the documented bound is
+    # 4e-7 rad (2.3e-5 deg).
+    rng = np.random.default_rng(int(dphi_deg * 10))
+    n = 20001
+    azimuth = -np.arange(n) * dphi_deg * DEG
+    rho = np.exp(rng.uniform(math.log(0.05), math.log(200.0), n)).astype(np.float32).astype(np.float64)
+    depth = spherical_depth(rho[None, :], [0.0], azimuth)
+    ba = bearing_angle_images(depth, ("horizontal",))["horizontal"][0, 1:].astype(np.float64)
+    cos_dphi = np.sum(depth.directions[0, 1:] * depth.directions[0, :-1], axis=1)
+    expected = bearing_angle(rho[:-1], rho[1:], cos_dphi)
+    assert np.degrees(expected.min()) < dphi_deg / 10 and np.degrees(expected.max()) > 180.0 - dphi_deg * 1.01
+    assert np.max(np.abs(ba - expected)) < 4e-7
+
+
+def test_separate_origins_match_the_definition_on_random_beams():
+    # Beams in random directions from random origins: the BA is the angle
+    # between the beam and the segment from the previous point, computed here
+    # in float64 with arctan2(|d x s|, d . s).  Inputs are float32 numbers so
+    # that only the evaluation is measured.
+    rng = np.random.default_rng(3)
+    n_rows, n_cols = 40, 60
+    beams = rng.normal(size=(n_rows, n_cols, 3))
+    beams = (beams / np.linalg.norm(beams, axis=2, keepdims=True)).astype(np.float32).astype(np.float64)
+    rho = rng.uniform(0.5, 20.0, (n_rows, n_cols))
+    points = (rng.normal(0, 0.3, (n_rows, n_cols, 3)) + rho[..., None] * beams).astype(np.float32).astype(np.float64)
+    valid = rng.random((n_rows, n_cols)) > 0.05
+    points[~valid] = np.nan
+    depth = DepthMatrix(np.where(valid, rho, np.nan), beams, points, valid, {"wrap_cols": True})
+    images = bearing_angle_images(depth)
+    rows, cols = np.mgrid[0:n_rows, 0:n_cols]
+    for name, (d_row, d_col) in {"horizontal": (0, -1), "vertical": (-1, 0), "diag_pos45": (1, -1), "diag_neg45": (-1, -1)}.items():
+        pr, pc = rows + d_row, (cols + d_col) % n_cols
+        inside = (pr >= 0) & (pr < n_rows)
+        segment = points - points[np.clip(pr, 0, n_rows - 1), pc]
+        with np.errstate(invalid="ignore"):
+            expected = np.arctan2(np.linalg.norm(np.cross(beams, segment), axis=2), np.sum(beams * segment, axis=2))
+        expected[~inside] = np.nan
+        np.testing.assert_array_equal(np.isnan(images[name]), np.isnan(expected), err_msg=name)
+        assert np.nanmax(np.abs(images[name] - expected)) < 4e-7, name
+
+
 def test_sample_layout_full_scan_runs():
     theta = np.deg2rad(np.arange(89.5, -90.0, -1.0))[:, None]
     phi = np.deg2rad(np.arange(720) * 0.5)
