@@ -141,9 +141,12 @@ def sample_bilinear(image: np.ndarray, pixels: np.ndarray) -> np.ndarray:
     """
     uv = np.ascontiguousarray(np.asarray(pixels, dtype=np.float32).reshape(-1, 2))
     colors = np.zeros((uv.shape[0], 3), np.uint8)
-    everywhere = np.zeros(uv.shape[0], np.int32)
-    _colour_visible(uv, everywhere, np.zeros(uv.shape[0], np.float32), np.zeros(1, np.float32),
-                    _packed_rgbx(image), colors)
+    packed = _packed_rgbx(image)
+    # Every pixel in one cell without a depth limit; NaN pixels get no colour.
+    cols, rows, _ = _cell_tables(packed.shape[1], packed.shape[0], 1 << 30)
+    uv = np.clip(uv, -0.5, [packed.shape[1] - 0.5, packed.shape[0] - 0.5])
+    _colour_visible(uv, np.isfinite(uv).all(axis=1), np.zeros(uv.shape[0], np.float32), cols, rows,
+                    np.zeros(1, np.float32), packed, colors)
     return colors
 
 
@@ -158,6 +161,7 @@ def _packed_rgbx(image) -> np.ndarray:
 
 
 _FINE_CELL_PX = 4  # occupancy grid of the automatic z-buffer cell size
+_MIN_CELL_PX = 2  # smallest automatic z-buffer cell
 
 
 def _cell_px_from_occupancy(occupied_cells: int, n_points: int) -> int:
@@ -169,7 +173,7 @@ def _cell_px_from_occupancy(occupied_cells: int, n_points: int) -> int:
     taken as visible.
     """
     spacing = np.sqrt(occupied_cells * _FINE_CELL_PX**2 / max(n_points, 1))
-    return int(np.clip(np.ceil(1.5 * spacing), 2, 32))
+    return int(np.clip(np.ceil(1.5 * spacing), _MIN_CELL_PX, 32))
 
 
 def _cell_tables(width: int, height: int, cell: int) -> tuple[np.ndarray, np.ndarray, tuple[int, int]]:
@@ -187,6 +191,10 @@ def _cell_tables(width: int, height: int, cell: int) -> tuple[np.ndarray, np.nda
     cols = np.minimum(np.arange(width + 1) // cell, grid_w - 1).astype(np.int32)
     rows = (np.minimum(np.arange(height + 1) // cell, grid_h - 1) * grid_w).astype(np.int32)
     return cols, rows, (grid_h, grid_w)
+
+
+#: Empty lookup tables: no second grid in :func:`_zbuffer`.
+_NO_TABLES = (np.zeros(0, np.int32), np.zeros(0, np.int32), (0, 0))
 
 
 # ------------------------------------------------------------------ kernels
@@ -208,33 +216,27 @@ def _to_camera(points, M, xyz, dist):
 
 
 @kernel
-def _count_occupied(pixels, valid, cols, rows, n_cells):
-    """Number of grid cells (see :func:`_cell_tables`) that hold a valid pixel, and the number of valid pixels."""
-    occupied = np.zeros(n_cells, np.bool_)
-    n_valid = 0
-    half = np.float32(0.5)
-    for i in range(pixels.shape[0]):
-        if valid[i]:
-            occupied[rows[int(pixels[i, 1] + half)] + cols[int(pixels[i, 0] + half)]] = True
-            n_valid += 1
-    return np.count_nonzero(occupied), n_valid
+def _zbuffer(pixels, valid, dist, cols, rows, n_cells, fine_cols, fine_rows, fine_occupied):
+    """Z-buffer of the valid pixels: the smallest ``dist`` per grid cell (see :func:`_cell_tables`).
 
-
-@kernel
-def _zbuffer(pixels, valid, dist, cols, rows, n_cells, cell_of):
-    """Z-buffer of the valid pixels: the smallest ``dist`` per grid cell, (n_cells,) float32, inf if empty.
-
-    Also writes ``cell_of[i]``, the cell of valid pixel ``i``, or -1.
+    Also marks in ``fine_occupied`` the cells of a second grid
+    (``fine_cols``, ``fine_rows``; empty tables: none) that hold a valid
+    pixel.  Returns the z-buffer, (n_cells,) float32, inf where empty, and
+    the number of valid pixels.
     """
     zbuf = np.full(n_cells, np.inf, np.float32)
     half = np.float32(0.5)
+    mark = fine_occupied.shape[0] > 0
+    n_valid = 0
     for i in range(pixels.shape[0]):
-        k = -1
         if valid[i]:
-            k = rows[int(pixels[i, 1] + half)] + cols[int(pixels[i, 0] + half)]
+            col, row = int(pixels[i, 0] + half), int(pixels[i, 1] + half)
+            k = rows[row] + cols[col]
             zbuf[k] = min(zbuf[k], dist[i])  # a store every time: a branch here is mispredicted
-        cell_of[i] = k
-    return zbuf
+            if mark:
+                fine_occupied[fine_rows[row] + fine_cols[col]] = True
+            n_valid += 1
+    return zbuf, n_valid
 
 
 #: Points per chunk of :func:`_colour_visible`: its buffers stay in L1 cache.
@@ -256,8 +258,8 @@ def _lerp_channel(top_left, top_right, bottom_left, bottom_right, frac_u, frac_v
 
 
 @kernel
-def _colour_visible(pixels, cell_of, dist, limit, image, colors):
-    """Colour the points in a cell (``cell_of >= 0``) no farther than the cell's depth ``limit``.
+def _colour_visible(pixels, valid, dist, cols, rows, limit, image, colors):
+    """Colour the valid points no farther than the depth ``limit`` of their grid cell (see :func:`_cell_tables`).
 
     Bilinear colours of the packed RGBX ``image`` (H, W) uint32 (channel 0
     in the low byte) at ``pixels`` (N, 2) ``(u, v)`` into ``colors`` (N, 3)
@@ -275,16 +277,19 @@ def _colour_visible(pixels, cell_of, dist, limit, image, colors):
     point = np.empty(_CHUNK, np.int64)
     value = np.empty((3, _CHUNK), np.float32)
     u_max, v_max = np.float32(width - 1), np.float32(height - 1)
+    half = np.float32(0.5)
     for start in range(0, n, _CHUNK):
         m = 0
         for i in range(start, min(start + _CHUNK, n)):
             # Branch-free: every point is sampled into slot m, and only a
             # visible one advances m (a skip would be a mispredicted branch).
-            k = cell_of[i]
-            visible = k >= 0 and dist[i] <= limit[max(k, 0)]
+            ok = valid[i]
+            u = pixels[i, 0] if ok else np.float32(0.0)  # NaN pixels: never an index
+            v = pixels[i, 1] if ok else np.float32(0.0)
+            visible = ok and dist[i] <= limit[rows[int(v + half)] + cols[int(u + half)]]
             coloured[i] = visible
-            u = min(max(pixels[i, 0], np.float32(0.0)), u_max) if visible else np.float32(0.0)
-            v = min(max(pixels[i, 1], np.float32(0.0)), v_max) if visible else np.float32(0.0)
+            u = min(max(u, np.float32(0.0)), u_max)
+            v = min(max(v, np.float32(0.0)), v_max)
             c0, r0 = int(u), int(v)
             top = r0 * width
             bottom = top + width if r0 + 1 < height else top
@@ -375,22 +380,28 @@ def colorize_points(
     pixels, valid = camera.project(xyz.T)
     pixels = np.ascontiguousarray(pixels, dtype=np.float32)
     valid = np.ascontiguousarray(valid, dtype=np.bool_)
-    if not occlusion:  # every projected point in one cell without a depth limit
-        cell_of = np.where(valid, 0, -1).astype(np.int32)
+    if not occlusion:  # one cell over the whole image, without a depth limit
+        cols, rows, _ = _cell_tables(w, h, max(w, h) + 1)
         limit = np.full(1, np.inf, np.float32)
     else:
-        cell = cell_px
-        if cell is None:
-            cols, rows, grid = _cell_tables(w, h, _FINE_CELL_PX)
-            cell = _cell_px_from_occupancy(*_count_occupied(pixels, valid, cols, rows, grid[0] * grid[1]))
-        cols, rows, grid = _cell_tables(w, h, int(cell))
-        cell_of = np.empty(n, np.int32)
-        zbuf = _zbuffer(pixels, valid, dist, cols, rows, grid[0] * grid[1], cell_of).reshape(grid)
+        cell = _MIN_CELL_PX if cell_px is None else int(cell_px)
+        cols, rows, grid = _cell_tables(w, h, cell)
+        fine_cols, fine_rows, fine_grid = _cell_tables(w, h, _FINE_CELL_PX) if cell_px is None else _NO_TABLES
+        occupied = np.zeros(fine_grid[0] * fine_grid[1], np.bool_)
+        zbuf, n_valid = _zbuffer(pixels, valid, dist, cols, rows, grid[0] * grid[1], fine_cols, fine_rows, occupied)
+        if cell_px is None:
+            # The density decides the cell size; the z-buffer was built at the
+            # smallest one, which dense clouds use, and is rebuilt otherwise.
+            cell = _cell_px_from_occupancy(np.count_nonzero(occupied), n_valid)
+            if cell != _MIN_CELL_PX:
+                cols, rows, grid = _cell_tables(w, h, cell)
+                zbuf, _ = _zbuffer(pixels, valid, dist, cols, rows, grid[0] * grid[1], *_NO_TABLES[:2], occupied[:0])
+        zbuf = zbuf.reshape(grid)
         # Min over 3x3 cells: a gap in a sparse foreground must not let the background through.
         limit = cv2.erode(zbuf, np.ones((3, 3), np.uint8), borderType=cv2.BORDER_REPLICATE).ravel()
         limit = limit * np.float32(1.0 + depth_tolerance) + np.float32(0.05)
     colors = np.zeros((n, 3), np.uint8)
-    has_color = _colour_visible(pixels, cell_of, dist, limit, packed, colors)
+    has_color = _colour_visible(pixels, valid, dist, cols, rows, limit, packed, colors)
     return colors, has_color
 
 
