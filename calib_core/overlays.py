@@ -139,12 +139,12 @@ def sample_bilinear(image: np.ndarray, pixels: np.ndarray) -> np.ndarray:
     Pixel centres are at integer ``(u, v)``; outside the image the border
     pixels are repeated.  Rounded to the nearest integer.
     """
-    uv = np.ascontiguousarray(np.asarray(pixels, dtype=np.float32).reshape(-1, 2))
+    uv = np.array(pixels, dtype=np.float32).reshape(-1, 2)  # a copy: clipped in place below
     colors = np.zeros((uv.shape[0], 3), np.uint8)
     packed = _packed_rgbx(image)
     # Every pixel in one cell without a depth limit; NaN pixels get no colour.
     cols, rows, _ = _cell_tables(packed.shape[1], packed.shape[0], 1 << 30)
-    uv = np.clip(uv, -0.5, [packed.shape[1] - 0.5, packed.shape[0] - 0.5])
+    np.clip(uv, -0.5, np.array([packed.shape[1] - 0.5, packed.shape[0] - 0.5], np.float32), out=uv)
     _colour_visible(uv, np.isfinite(uv).all(axis=1), np.zeros(uv.shape[0], np.float32), cols, rows,
                     np.zeros(1, np.float32), packed, colors)
     return colors
