@@ -139,7 +139,7 @@ def sample_bilinear(image: np.ndarray, pixels: np.ndarray) -> np.ndarray:
     Pixel centres are at integer ``(u, v)``; outside the image the border
     pixels are repeated.  Rounded to the nearest integer.
     """
-    uv = np.array(pixels, dtype=np.float32).reshape(-1, 2)  # a copy: clipped in place below
+    uv = np.array(pixels, dtype=np.float32, order="C").reshape(-1, 2)  # a copy: clipped in place below
     colors = np.zeros((uv.shape[0], 3), np.uint8)
     packed = _packed_rgbx(image)
     # Every pixel in one cell without a depth limit; NaN pixels get no colour.
