@@ -23,7 +23,9 @@ from typing import Callable
 
 import numba
 
-#: numba options shared by all kernels.  ``error_model="numpy"``: IEEE
+#: numba options shared by all kernels.  numba keys its disk cache by the
+#: kernel's own source file: after changing these options, delete the
+#: ``*.nbi``/``*.nbc`` files (or touch the kernel modules) to recompile.  ``error_model="numpy"``: IEEE
 #: division (x / 0 is inf or NaN, no exception check, which would also stop
 #: the loops from running on SIMD lanes).  No ``fastmath``: its "no NaN" flag
 #: would let LLVM drop the NaN propagation that marks invalid pixels.
