@@ -8,6 +8,10 @@ geometry in this file, and from PCL's published unit-test values
 from __future__ import annotations
 
 import math
+import os
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -385,3 +389,39 @@ def test_ba_to_display_equalises_valid_pixels_only():
     assert not ba_to_display(np.full((2, 2), np.nan)).any()
     with pytest.raises(CalibError):
         ba_to_display(ba, min_gray=0)
+
+
+# --------------------------------------------------------------------------
+# The compiled kernels' disk cache
+# --------------------------------------------------------------------------
+
+_CACHE_CHECK = """
+import numba, numpy as np
+from calib_core.bearing_angle import bearing_angle_images
+from calib_core.lidar import spherical_depth
+ba = bearing_angle_images(spherical_depth(np.array([[1.0, 2.0, 2.0]]), [0.0], [0.2, 0.0, -0.2]))
+print(numba.config.CACHE_DIR)
+print(float(ba["horizontal"][0, 2]))
+"""
+
+
+def test_kernels_are_cached_where_numba_finds_no_cache_directory(tmp_path):
+    # A read-only install with no writable home: numba finds no cache
+    # directory.  Simulated by letting numba try only locators that give
+    # none here (no IPython, no NUMBA_CACHE_DIR); the kernels must then be
+    # cached in a per-user directory under the temp directory, and give the
+    # right BA: equal ranges 0.2 rad apart make an isosceles triangle.
+    import numba
+
+    if not hasattr(numba.config, "CACHE_LOCATOR_CLASSES"):
+        pytest.skip(f"numba {numba.__version__} cannot restrict its cache locators")
+    repo = Path(__file__).resolve().parents[1]
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    env.update(NUMBA_CACHE_LOCATOR_CLASSES="IPythonCacheLocator,UserProvidedCacheLocator", TMPDIR=str(tmp_path),
+               PYTHONPATH=str(repo) + os.pathsep + env.get("PYTHONPATH", ""))
+    out = subprocess.run([sys.executable, "-c", _CACHE_CHECK], env=env, capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr[-2000:]
+    cache_dir, ba = out.stdout.split()
+    assert Path(cache_dir).parent == tmp_path and Path(cache_dir).name.startswith("ba-calib-numba-cache-")
+    assert any(Path(cache_dir).rglob("*.nbi")), "no kernel was written to the cache"
+    assert float(ba) == pytest.approx((math.pi - 0.2) / 2, abs=F32_TOL)
