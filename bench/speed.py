@@ -11,7 +11,10 @@ from __future__ import annotations
 import copy
 import cProfile
 import io
+import os
 import pstats
+import subprocess
+import sys
 import tempfile
 import time
 from dataclasses import dataclass, field
@@ -135,6 +138,110 @@ def dense_cloud(bs: BenchScene, n: int, rng: np.random.Generator) -> np.ndarray:
     return pts[idx] + rng.normal(0, 0.01, (n, 3))
 
 
+# ------------------------------------------------- BA and colourise sections
+def _load() -> float:
+    """1-minute load average: how many jobs shared the cores while timing."""
+    return os.getloadavg()[0]
+
+
+def ba_section(rep: "SpeedReport", sc, reps: Callable[[int], int], scale: float) -> None:
+    """BA images, all four traces: medians on the sample scan and spherical scans of common sizes."""
+    from calib_core.bearing_angle import bearing_angle_images
+
+    ba_inputs = [
+        ("180x720", sc.depth, "the sample scan: rotating 2-D scanner, beams with offsets (eq. 3)"),
+        ("180x720 spherical", spherical_room_depth(180, 720), "spherical model, common beam origin"),
+        ("64x1800", spherical_room_depth(64, 1800), "spherical model, common beam origin"),
+        ("128x2048", spherical_room_depth(128, 2048), "spherical model, common beam origin"),
+    ]
+    for label, depth, what in ba_inputs:
+        load = _load()
+        # Warm: the beam geometry of this depth matrix is cached (every later call in the app).
+        t = timed(rep, "ba", label, lambda d=depth: bearing_angle_images(d), reps(30),
+                  f"{what}; geometry cached; load {load:.1f}", warmup=2, min_total_s=0.5 * scale, step=f"ba {label}")
+        # Cold: a shallow copy is a new DepthMatrix, so its geometry is computed again (first call on a scan).
+        c = timed(rep, "ba", label + " (first call)", lambda d=depth: bearing_angle_images(copy.copy(d)), reps(10),
+                  f"{what}; geometry computed in the call; load {load:.1f}", warmup=1)
+        log(f"  BA images {label}: {1e3 * t.median_s:.2f} ms (fastest {1e3 * t.min_s:.2f}, first call "
+            f"{1e3 * c.median_s:.2f} ms), load {load:.1f} -> {_load():.1f}")
+
+
+#: What a new process runs: import the modules the app imports at start-up
+#: (numba comes with them), then warm the kernels; prints both times, seconds.
+_WARM_UP_CODE = (
+    "import time; t0 = time.perf_counter(); import calib_core.bearing_angle, calib_core.overlays, "
+    "calib_core.lidar, calib_core.cameras; from calib_core._jit import warm_up; t1 = time.perf_counter(); "
+    "warm_up(); print(t1 - t0, time.perf_counter() - t1)"
+)
+
+
+def jit_startup(rep: "SpeedReport", runs: int = 3) -> None:
+    """Compile time and cached start-up of the compiled kernels, each in a new process.
+
+    ``calib_core._jit.warm_up()`` with an empty numba cache directory (every
+    kernel compiled and written to the cache), then again with that cache
+    (loaded from disk).  The app runs it in a background thread at start-up;
+    importing the package (which imports numba) is on the main thread and is
+    reported apart.  The cache is a temporary ``NUMBA_CACHE_DIR``, so the
+    repository's own cache is left alone.
+    """
+    repo = str(Path(__file__).resolve().parents[1])
+    with tempfile.TemporaryDirectory(prefix="ba-calib-numba-") as cache:
+        env = {**os.environ, "NUMBA_CACHE_DIR": cache, "PYTHONPATH": repo + os.pathsep + os.environ.get("PYTHONPATH", "")}
+
+        def one_run() -> tuple[float, float]:
+            out = subprocess.run([sys.executable, "-c", _WARM_UP_CODE], env=env, cwd=repo, capture_output=True,
+                                 text=True, timeout=600, check=True)
+            imp, warm = out.stdout.split()
+            return float(imp), float(warm)
+
+        load = _load()
+        try:
+            imp_cold, compile_s = one_run()
+            cached = [one_run() for _ in range(runs)]
+        except (subprocess.SubprocessError, ValueError) as exc:
+            rep.timings.append(Timing("jit", "warm_up(), empty cache (compile)", float("nan"), 0,
+                                      f"FAILED: {type(exc).__name__}: {str(exc).strip()[:200]}"))
+            log(f"  JIT warm-up: failed ({type(exc).__name__})")
+            return
+    warm = [w for _, w in cached]
+    imports = [i for i, _ in cached]
+    rep.timings.append(Timing("jit", "warm_up(), empty cache (compile)", compile_s, 1,
+                              f"all kernels compiled and cached, new process; load {load:.1f}", compile_s))
+    rep.timings.append(Timing("jit", "warm_up(), cached (start-up)", float(np.median(warm)), len(warm),
+                              f"kernels loaded from the disk cache, new process; load {load:.1f}", min(warm)))
+    rep.timings.append(Timing("jit", "import the kernel modules (numpy, OpenCV, scipy, numba)",
+                              float(np.median(imports)), len(imports),
+                              "calib_core.bearing_angle and .overlays: on the main thread at start-up", min(imports)))
+    log(f"  JIT warm-up: compile {compile_s:.2f} s, cached {np.median(warm):.3f} s, import {np.median(imports):.3f} s, "
+        f"load {load:.1f} -> {_load():.1f}")
+
+
+def colorize_section(bs: BenchScene, rep: "SpeedReport", rng: np.random.Generator, reps: Callable[[int], int]) -> None:
+    """Colourise with the occlusion test, 100k to 2M points; at 1M also the camera projection alone."""
+    from calib_core.overlays import colorize_points
+
+    sc = bs.scene
+    for n, label in ((100_000, "100k"), (1_000_000, "1M"), (2_000_000, "2M")):
+        cloud = dense_cloud(bs, n, rng)
+        load = _load()
+        f = lambda c=cloud: colorize_points(c, sc.image, sc.camera, sc.T_camera_lidar, occlusion=True)  # noqa: E731
+        t = timed(rep, "colorize", f"{label} points", f, reps(10 if n <= 100_000 else 5 if n <= 1_000_000 else 3),
+                  f"OCam 640x480, occlusion test on, points in random order; load {load:.1f}", step=f"colorize {label}")
+        msg = f"  colorize {label}: {1e3 * t.median_s:.1f} ms (fastest {1e3 * t.min_s:.1f})"
+        if n == 1_000_000:
+            # Where the time goes: colorize_points hands float32 camera-frame points,
+            # one contiguous row per coordinate, to the camera model's project().
+            xyz = np.ascontiguousarray(transform_points(sc.T_camera_lidar, cloud).T, dtype=np.float32)
+            p = timed(rep, "colorize", f"{label} points: of which camera.project", lambda: sc.camera.project(xyz.T),
+                      reps(5), "the OCam model's own vectorised projection (calib_core/cameras), float32; the rest "
+                      "of colorize_points is compiled", warmup=1)
+            msg += f", of which camera.project {1e3 * p.median_s:.1f} ms"
+            del xyz
+        log(f"{msg}, load {load:.1f} -> {_load():.1f}")
+        del cloud
+
+
 # ----------------------------------------------------------------- profile
 def profile_text(fn: Callable[[], Any], runs: int = 5, top: int = 12) -> str:
     """cProfile of ``runs`` calls as Markdown: the package's functions by cumulative time
@@ -177,8 +284,6 @@ def profile_text(fn: Callable[[], Any], runs: int = 5, top: int = 12) -> str:
 # ------------------------------------------------------------------ steps
 def run_speed(bs: BenchScene, quick: bool = False) -> SpeedReport:
     """Time every live step on the sample scene ``bs``."""
-    from calib_core.bearing_angle import bearing_angle_images
-    from calib_core.overlays import colorize_points
     from calib_core.panorama import Panorama
     from calib_core.solve import solve_extrinsics
 
@@ -188,21 +293,9 @@ def run_speed(bs: BenchScene, quick: bool = False) -> SpeedReport:
     scale = 0.3 if quick else 1.0
     reps = lambda n: max(3, int(n * scale))  # noqa: E731
 
-    # --- BA images, 4 directions.
-    ba_inputs = [
-        ("180x720", sc.depth, "the sample scan: rotating 2-D scanner, beams with offsets (eq. 3)"),
-        ("180x720 spherical", spherical_room_depth(180, 720), "spherical model, common beam origin"),
-        ("64x1800", spherical_room_depth(64, 1800), "spherical model, common beam origin"),
-        ("128x2048", spherical_room_depth(128, 2048), "spherical model, common beam origin"),
-    ]
-    for label, depth, what in ba_inputs:
-        # Warm: the beam geometry of this depth matrix is cached (every later call in the app).
-        t = timed(rep, "ba", label, lambda d=depth: bearing_angle_images(d), reps(30), what + "; geometry cached",
-                  warmup=2, min_total_s=0.5 * scale, step=f"ba {label}")
-        # Cold: a shallow copy is a new DepthMatrix, so its geometry is computed again (first call on a scan).
-        c = timed(rep, "ba", label + " (first call)", lambda d=depth: bearing_angle_images(copy.copy(d)), reps(10),
-                  what + "; geometry computed in the call", warmup=1)
-        log(f"  BA images {label}: {1e3 * t.median_s:.2f} ms (first call {1e3 * c.median_s:.2f} ms)")
+    # --- BA images, 4 directions, and the start-up cost of the compiled kernels.
+    ba_section(rep, sc, reps, scale)
+    jit_startup(rep, runs=2 if quick else 3)
 
     # --- solve: initial pose + LM + covariance.
     for n in (10, 100, 1000):
@@ -216,13 +309,7 @@ def run_speed(bs: BenchScene, quick: bool = False) -> SpeedReport:
     solve_parts(bs, rep, reps)
 
     # --- colourise with the occlusion test.
-    for n, label in ((100_000, "100k"), (1_000_000, "1M"), (2_000_000, "2M")):
-        cloud = dense_cloud(bs, n, rng)
-        f = lambda c=cloud: colorize_points(c, sc.image, sc.camera, sc.T_camera_lidar, occlusion=True)  # noqa: E731
-        t = timed(rep, "colorize", f"{label} points", f, reps(10 if n <= 100_000 else 5 if n <= 1_000_000 else 3),
-                  "OCam 640x480, occlusion test on", step=f"colorize {label}")
-        log(f"  colorize {label}: {1e3 * t.median_s:.1f} ms")
-        del cloud
+    colorize_section(bs, rep, rng, reps)
 
     # --- panorama.
     t0 = time.perf_counter()

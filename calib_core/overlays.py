@@ -7,6 +7,7 @@ import os
 import cv2
 import numpy as np
 
+from ._jit import kernel
 from .bearing_angle import PREVIOUS_NEIGHBOUR, ba_to_uint8
 from .errors import CalibError
 from .io.atomic import write_bytes_atomic
@@ -133,36 +134,33 @@ def project_lidar_points(T_camera_lidar: np.ndarray, camera, points_lidar: np.nd
 
 
 def sample_bilinear(image: np.ndarray, pixels: np.ndarray) -> np.ndarray:
-    """Bilinear colours of ``image`` at ``(u, v)`` pixels: ``(N, C)``, same dtype."""
-    pixels = np.asarray(pixels)
-    return _sample_bilinear_uv(image, pixels[:, 0], pixels[:, 1])
+    """Bilinear colours of an RGB(A) ``image`` (H, W, 3 or 4) uint8 at ``(u, v)`` pixels ``(N, 2)``: ``(N, 3)`` uint8.
+
+    Pixel centres are at integer ``(u, v)``; outside the image the border
+    pixels are repeated.  Rounded to the nearest integer.
+    """
+    uv = np.array(pixels, dtype=np.float32, order="C").reshape(-1, 2)  # a copy: clipped in place below
+    colors = np.zeros((uv.shape[0], 3), np.uint8)
+    packed = _packed_rgbx(image)
+    # Every pixel in one cell without a depth limit; NaN pixels get no colour.
+    cols, rows, _ = _cell_tables(packed.shape[1], packed.shape[0], 1 << 30)
+    np.clip(uv, -0.5, np.array([packed.shape[1] - 0.5, packed.shape[0] - 0.5], np.float32), out=uv)
+    _colour_visible(uv, np.isfinite(uv).all(axis=1), np.zeros(uv.shape[0], np.float32), cols, rows,
+                    np.zeros(1, np.float32), packed, colors)
+    return colors
 
 
-def _sample_bilinear_uv(image: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """:func:`sample_bilinear` with the columns ``u`` and rows ``v`` as separate arrays."""
-    n = len(u)
-    # cv2.remap maps are limited to 32767 per side: lay the N samples out as rows.
-    cols = _REMAP_COLS
-    rows = max(1, -(-n // cols))
-    map_u = np.zeros(rows * cols, np.float32)
-    map_v = np.zeros(rows * cols, np.float32)
-    map_u[:n], map_v[:n] = u, v
-    out = cv2.remap(image, map_u.reshape(rows, cols), map_v.reshape(rows, cols), cv2.INTER_LINEAR,
-                    borderMode=cv2.BORDER_REPLICATE)
-    return out.reshape(rows * cols, -1)[:n]
+def _packed_rgbx(image) -> np.ndarray:
+    """``image`` (H, W, 3 or 4) uint8 as (H, W) uint32, one pixel per item: one load per pixel in the sampler."""
+    img = np.asarray(image)
+    if img.ndim != 3 or img.shape[2] not in (3, 4) or img.dtype != np.uint8:
+        raise CalibError(f"camera image must be an (H, W, 3) uint8 array, got {img.shape} {img.dtype}")
+    if img.shape[2] == 3:
+        img = cv2.cvtColor(np.ascontiguousarray(img), cv2.COLOR_RGB2RGBA)
+    return np.ascontiguousarray(img).view(np.uint32)[..., 0]
 
-
-#: Points per block in :func:`colorize_points`: the temporaries of a block stay
-#: in cache, where full-size ones (a dozen arrays of N floats) cost more in
-#: allocation and cache misses than the arithmetic.
-_COLOR_BLOCK = 1 << 16
 
 _FINE_CELL_PX = 4  # occupancy grid of the automatic z-buffer cell size
-_REMAP_COLS = 4096  # samples per row of the cv2.remap maps
-
-
-def _blocks(n: int):
-    return (slice(start, min(start + _COLOR_BLOCK, n)) for start in range(0, n, _COLOR_BLOCK))
 
 
 def _cell_px_from_occupancy(occupied_cells: int, n_points: int) -> int:
@@ -177,23 +175,139 @@ def _cell_px_from_occupancy(occupied_cells: int, n_points: int) -> int:
     return int(np.clip(np.ceil(1.5 * spacing), 2, 32))
 
 
-def _cell_index(u_edge: np.ndarray, v_edge: np.ndarray, cell: int, grid_w: int, grid_h: int) -> np.ndarray:
-    """Row-major int32 index of the ``cell``-pixel cell of each point.
+def _cell_tables(width: int, height: int, cell: int) -> tuple[np.ndarray, np.ndarray, tuple[int, int]]:
+    """Lookup tables of the ``cell``-pixel grid: column and row offset of each pixel edge index.
 
-    ``u_edge, v_edge`` are measured from the image's top-left edge, so that
-    truncation is the floor for every point inside the image; other points
-    (NaN, negative, huge) get some cell of the grid, to be masked by the caller.
+    A pixel ``(u, v)`` (centres at integers, inside the image) lies in cell
+    ``rows[int(v + 0.5)] + cols[int(u + 0.5)]`` of the row-major grid:
+    truncation from the top-left edge is the floor inside the image, and the
+    edge pixels at ``width - 0.5`` join the last cell.  Tables instead of
+    ``// cell``: an integer division per point costs more than the rest of
+    the z-buffer.  Returns ``cols (width + 1,)``, ``rows (height + 1,)``
+    int32 and the grid shape ``(grid_h, grid_w)``.
     """
-    with np.errstate(invalid="ignore"):
-        col = u_edge.astype(np.int32)
-        row = v_edge.astype(np.int32)
-    col //= cell
-    np.clip(col, 0, grid_w - 1, out=col)
-    row //= cell
-    np.clip(row, 0, grid_h - 1, out=row)
-    row *= grid_w
-    row += col
-    return row
+    grid_w, grid_h = -(-width // cell), -(-height // cell)
+    cols = np.minimum(np.arange(width + 1) // cell, grid_w - 1).astype(np.int32)
+    rows = (np.minimum(np.arange(height + 1) // cell, grid_h - 1) * grid_w).astype(np.int32)
+    return cols, rows, (grid_h, grid_w)
+
+
+# ------------------------------------------------------------------ kernels
+@kernel
+def _to_camera(points, M, xyz, dist):
+    """``xyz (3, N) = M[:, :3] @ p + M[:, 3]`` per point ``p`` of ``points (N, 3)``, and ``dist = |xyz|``.
+
+    Arithmetic in float64, stored float32 (the projection of the whole
+    cloud runs in float32).  NaN points give NaN; coordinates beyond float32
+    give inf.
+    """
+    for i in range(points.shape[0]):
+        px, py, pz = points[i, 0], points[i, 1], points[i, 2]
+        x = M[0, 0] * px + M[0, 1] * py + M[0, 2] * pz + M[0, 3]
+        y = M[1, 0] * px + M[1, 1] * py + M[1, 2] * pz + M[1, 3]
+        z = M[2, 0] * px + M[2, 1] * py + M[2, 2] * pz + M[2, 3]
+        xyz[0, i], xyz[1, i], xyz[2, i] = np.float32(x), np.float32(y), np.float32(z)
+        dist[i] = np.float32(np.sqrt(x * x + y * y + z * z))
+
+
+@kernel
+def _count_occupied(pixels, valid, cols, rows, n_cells):
+    """Number of grid cells (see :func:`_cell_tables`) that hold a valid pixel, and the number of valid pixels."""
+    occupied = np.zeros(n_cells, np.bool_)
+    half = np.float32(0.5)
+    n_valid = 0
+    for i in range(pixels.shape[0]):
+        if valid[i]:
+            occupied[rows[int(pixels[i, 1] + half)] + cols[int(pixels[i, 0] + half)]] = True
+            n_valid += 1
+    return np.count_nonzero(occupied), n_valid
+
+
+@kernel
+def _zbuffer(pixels, valid, dist, cols, rows, n_cells):
+    """Z-buffer of the valid pixels: the smallest ``dist`` per grid cell (see :func:`_cell_tables`).
+
+    Returns (n_cells,) float32, inf where empty.  (Marking the density grid
+    in this pass too measured slower than the separate count.)
+    """
+    zbuf = np.full(n_cells, np.inf, np.float32)
+    half = np.float32(0.5)
+    for i in range(pixels.shape[0]):
+        if valid[i]:
+            k = rows[int(pixels[i, 1] + half)] + cols[int(pixels[i, 0] + half)]
+            zbuf[k] = min(zbuf[k], dist[i])  # a store every time: a branch here is mispredicted
+    return zbuf
+
+
+#: Points per chunk of :func:`_colour_visible`: its buffers stay in L1 cache.
+_CHUNK = 512
+
+
+@kernel
+def _lerp_channel(top_left, top_right, bottom_left, bottom_right, frac_u, frac_v, shift, out):
+    """Bilinear value of one 8-bit channel (at bit ``shift``) of packed pixels, + 0.5 for rounding."""
+    mask = np.uint32(255)
+    for j in range(out.shape[0]):  # runs on SIMD lanes
+        a = np.float32((top_left[j] >> shift) & mask)
+        b = np.float32((top_right[j] >> shift) & mask)
+        c = np.float32((bottom_left[j] >> shift) & mask)
+        d = np.float32((bottom_right[j] >> shift) & mask)
+        top = a + frac_u[j] * (b - a)
+        bottom = c + frac_u[j] * (d - c)
+        out[j] = top + frac_v[j] * (bottom - top) + np.float32(0.5)
+
+
+@kernel
+def _colour_visible(pixels, valid, dist, cols, rows, limit, image, colors):
+    """Colour the valid points no farther than the depth ``limit`` of their grid cell (see :func:`_cell_tables`).
+
+    Bilinear colours of the packed RGBX ``image`` (H, W) uint32 (channel 0
+    in the low byte) at ``pixels`` (N, 2) ``(u, v)`` into ``colors`` (N, 3)
+    uint8, rounded to nearest; the border pixels repeat outside the image
+    (OpenCV's BORDER_REPLICATE).  Returns which points were coloured, (N,)
+    bool.  By chunks: the gathers one point at a time, the arithmetic of a
+    whole chunk on SIMD lanes.
+    """
+    height, width = image.shape
+    flat = image.ravel()
+    n = pixels.shape[0]
+    coloured = np.empty(n, np.bool_)
+    corners = np.empty((4, _CHUNK), np.uint32)
+    frac = np.empty((2, _CHUNK), np.float32)
+    point = np.empty(_CHUNK, np.int64)
+    value = np.empty((3, _CHUNK), np.float32)
+    u_max, v_max = np.float32(width - 1), np.float32(height - 1)
+    half = np.float32(0.5)
+    for start in range(0, n, _CHUNK):
+        m = 0
+        for i in range(start, min(start + _CHUNK, n)):
+            # Branch-free: every point is sampled into slot m, and only a
+            # visible one advances m (a skip would be a mispredicted branch).
+            ok = valid[i]
+            u = pixels[i, 0] if ok else np.float32(0.0)  # NaN pixels: never an index
+            v = pixels[i, 1] if ok else np.float32(0.0)
+            visible = ok and dist[i] <= limit[rows[int(v + half)] + cols[int(u + half)]]
+            coloured[i] = visible
+            u = min(max(u, np.float32(0.0)), u_max)
+            v = min(max(v, np.float32(0.0)), v_max)
+            c0, r0 = int(u), int(v)
+            top = r0 * width
+            bottom = top + width if r0 + 1 < height else top
+            right = 1 if c0 + 1 < width else 0
+            corners[0, m], corners[1, m] = flat[top + c0], flat[top + c0 + right]
+            corners[2, m], corners[3, m] = flat[bottom + c0], flat[bottom + c0 + right]
+            frac[0, m], frac[1, m] = u - np.float32(c0), v - np.float32(r0)
+            point[m] = i
+            m += 1 if visible else 0
+        for channel in range(3):
+            _lerp_channel(corners[0, :m], corners[1, :m], corners[2, :m], corners[3, :m], frac[0, :m], frac[1, :m],
+                          np.uint32(8 * channel), value[channel, :m])
+        for j in range(m):
+            i = point[j]
+            colors[i, 0] = np.uint8(value[0, j])
+            colors[i, 1] = np.uint8(value[1, j])
+            colors[i, 2] = np.uint8(value[2, j])
+    return coloured
 
 
 def colorize_points(
@@ -214,9 +328,11 @@ def colorize_points(
     lidar see from different places, so a projection alone would paint
     background points with the colour of the object in front of them.
 
-    The points are transformed and projected in float32: pixels are within
-    about 5e-4 px of the float64 projection, finer than the 1/32 px steps of
-    OpenCV's bilinear weights, and the memory traffic is halved.
+    The points are transformed in float64 and projected in float32
+    (``camera.project`` on float32 points): pixels are within about 5e-4 px
+    of the float64 projection, and the memory traffic is halved.  The
+    transform, the z-buffer, the depth test and the sampling are compiled
+    loops; the projection is the camera model's own.
 
     Parameters
     ----------
@@ -250,75 +366,48 @@ def colorize_points(
         raise CalibError(f"T_camera_lidar must be a 4x4 matrix, got shape {T.shape}")
     if not np.all(np.isfinite(T)):
         raise CalibError("T_camera_lidar contains NaN or infinite values")
-    pts = np.asarray(points_lidar).reshape(-1, 3)
+    packed = _packed_rgbx(img)
+    pts = np.asarray(points_lidar)
+    if pts.dtype not in (np.float32, np.float64):
+        pts = pts.astype(np.float64)
+    pts = np.ascontiguousarray(pts.reshape(-1, 3))
     n = pts.shape[0]
-    M = T[:3].astype(np.float32)
 
-    # Pass 1: project.  u, v from the image's top-left edge (pixel centre + 0.5);
-    # dist = inf where not projectable, so those points never enter the z-buffer.
-    u, v, dist = np.empty(n, np.float32), np.empty(n, np.float32), np.empty(n, np.float32)
-    valid = np.empty(n, bool)
-    fine_w, fine_h = -(-w // _FINE_CELL_PX) + 1, -(-h // _FINE_CELL_PX) + 1  # + the edge pixels' cells
-    occupancy = np.zeros(fine_w * fine_h + 1, np.intp)  # last bin: points outside the image
-    for b in _blocks(n):
-        block = np.ascontiguousarray(pts[b], dtype=np.float32).reshape(-1, 1, 3)
-        # Camera frame, one contiguous row per coordinate (the camera's
-        # element-wise maths then runs on contiguous data); NaN rows stay NaN
-        # and are not projectable.
-        xyz = cv2.transform(block, M).reshape(-1, 3).T.copy()
-        pixels, ok = camera.project(xyz.T)
-        valid[b] = ok
-        with np.errstate(over="ignore"):  # float64 pixels far outside the image may overflow float32
-            np.add(pixels[:, 0], 0.5, out=u[b], casting="unsafe")
-            np.add(pixels[:, 1], 0.5, out=v[b], casting="unsafe")
-        if occlusion:
-            with np.errstate(over="ignore"):  # absurd coordinates (1e30) give inf: never projectable
-                d = xyz[0] * xyz[0]
-                d += xyz[1] * xyz[1]
-                d += xyz[2] * xyz[2]
-            np.sqrt(d, out=d)
-            d[~ok] = np.inf
-            dist[b] = d
-            if cell_px is None:
-                cells = _cell_index(u[b], v[b], _FINE_CELL_PX, fine_w, fine_h)
-                cells[~ok] = occupancy.size - 1
-                occupancy += np.bincount(cells, minlength=occupancy.size)
-    has_color = np.zeros(n, bool)
-    if not valid.any():
-        return np.zeros((n, 3), np.uint8), has_color
-
-    if occlusion:
-        # Pass 2: z-buffer of the nearest distance per cell.
-        cell = cell_px or _cell_px_from_occupancy(np.count_nonzero(occupancy[:-1]), np.count_nonzero(valid))
-        gw, gh = -(-w // cell), -(-h // cell)
-        zbuf = np.full(gw * gh, np.inf, np.float32)
-        flat = np.empty(n, np.int32)
-        for b in _blocks(n):
-            flat[b] = _cell_index(u[b], v[b], cell, gw, gh)  # edge pixels go to the last cell
-            np.minimum.at(zbuf, flat[b], dist[b])
+    # Camera frame as three contiguous float32 rows (the camera's element-wise
+    # maths runs on contiguous data), and the distance of every point.
+    xyz, dist = np.empty((3, n), np.float32), np.empty(n, np.float32)
+    _to_camera(pts, np.ascontiguousarray(T[:3]), xyz, dist)
+    pixels, valid = camera.project(xyz.T)
+    pixels = np.ascontiguousarray(pixels, dtype=np.float32)
+    valid = np.ascontiguousarray(valid, dtype=np.bool_)
+    if not occlusion:  # one cell over the whole image, without a depth limit
+        cols, rows, _ = _cell_tables(w, h, max(w, h) + 1)
+        limit = np.full(1, np.inf, np.float32)
+    else:
+        cell = cell_px
+        if cell is None:
+            cols, rows, grid = _cell_tables(w, h, _FINE_CELL_PX)
+            cell = _cell_px_from_occupancy(*_count_occupied(pixels, valid, cols, rows, grid[0] * grid[1]))
+        cols, rows, grid = _cell_tables(w, h, int(cell))
+        zbuf = _zbuffer(pixels, valid, dist, cols, rows, grid[0] * grid[1]).reshape(grid)
         # Min over 3x3 cells: a gap in a sparse foreground must not let the background through.
-        zmin = cv2.erode(zbuf.reshape(gh, gw), np.ones((3, 3), np.uint8), borderType=cv2.BORDER_REPLICATE).ravel()
-        zmin *= 1.0 + depth_tolerance
-        zmin += 0.05
-
-    # Pass 3: colours of the visible points.  OpenCV's remap has SIMD code
-    # for 4-channel images, twice as fast as for 3; each colour is then
-    # scattered as one 4-byte item, and the 4th channel dropped at the end.
-    rgba = cv2.cvtColor(np.ascontiguousarray(img[..., :3]), cv2.COLOR_RGB2RGBA)
-    colors4 = np.zeros((-(-n // _REMAP_COLS) * _REMAP_COLS, 4), np.uint8)
-    colors32 = colors4.view(np.uint32).ravel()
-    for b in _blocks(n):
-        visible = valid[b]
-        if occlusion:
-            visible = visible & (dist[b] <= zmin.take(flat[b]))
-        has_color[b] = visible
-        ids = np.flatnonzero(visible)
-        if ids.size:
-            sampled = _sample_bilinear_uv(rgba, u[b].take(ids) - 0.5, v[b].take(ids) - 0.5)
-            np.put(colors32, ids + b.start, sampled.view(np.uint32).ravel())
-    # (A wide 2-D layout: cvtColor is slow on a single column.)
-    colors = cv2.cvtColor(colors4.reshape(-1, _REMAP_COLS, 4), cv2.COLOR_RGBA2RGB).reshape(-1, 3)[:n]
+        limit = cv2.erode(zbuf, np.ones((3, 3), np.uint8), borderType=cv2.BORDER_REPLICATE).ravel()
+        limit = limit * np.float32(1.0 + depth_tolerance) + np.float32(0.05)
+    colors = np.zeros((n, 3), np.uint8)
+    has_color = _colour_visible(pixels, valid, dist, cols, rows, limit, packed, colors)
     return colors, has_color
+
+
+def warm_up() -> None:
+    """Compile (or load from numba's disk cache) this module's kernels on a few points."""
+    from .cameras.pinhole import PinholeCamera
+
+    camera = PinholeCamera(np.array([[4.0, 0, 2], [0, 4.0, 2], [0, 0, 1]]), np.zeros(0), 4, 4)
+    image = np.zeros((4, 4, 3), np.uint8)
+    for dtype in (np.float64, np.float32):  # the clouds come in both
+        points = np.array([[0.0, 0.0, 1.0], [0.1, 0.0, 2.0], [np.nan, 0.0, 1.0]], dtype)
+        colorize_points(points, image, camera, np.eye(4))
+    sample_bilinear(image, np.zeros((1, 2)))
 
 
 def export_colored_ply(

@@ -8,6 +8,10 @@ geometry in this file, and from PCL's published unit-test values
 from __future__ import annotations
 
 import math
+import os
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -282,6 +286,52 @@ def test_images_agree_with_elementwise_formula_on_a_noisy_cloud():
         np.testing.assert_allclose(images[name], expected, atol=5e-5, equal_nan=True, err_msg=name)
 
 
+@pytest.mark.parametrize("dphi_deg", [0.1, 1.0, 20.0, 60.0, 120.0])
+def test_images_match_eq4_over_the_whole_angle_range(dphi_deg):
+    # The images evaluate the angle with a float32 polynomial; eq. 4 in
+    # float64 (arccos) is the truth.  Log-uniform ranges from 5 cm to 200 m
+    # put the BA all over 0..180 deg.  The ranges are float32 numbers, so
+    # that only the angle evaluation is measured: the documented bound is
+    # 4e-7 rad (2.3e-5 deg).
+    rng = np.random.default_rng(int(dphi_deg * 10))
+    n = 20001
+    azimuth = -np.arange(n) * dphi_deg * DEG
+    rho = np.exp(rng.uniform(math.log(0.05), math.log(200.0), n)).astype(np.float32).astype(np.float64)
+    depth = spherical_depth(rho[None, :], [0.0], azimuth)
+    ba = bearing_angle_images(depth, ("horizontal",))["horizontal"][0, 1:].astype(np.float64)
+    cos_dphi = np.sum(depth.directions[0, 1:] * depth.directions[0, :-1], axis=1)
+    expected = bearing_angle(rho[:-1], rho[1:], cos_dphi)
+    assert np.degrees(expected.min()) < dphi_deg / 10 and np.degrees(expected.max()) > 180.0 - dphi_deg * 1.01
+    assert np.max(np.abs(ba - expected)) < 4e-7
+
+
+def test_separate_origins_match_the_definition_on_random_beams():
+    # Beams in random directions from random origins: the BA is the angle
+    # between the beam and the segment from the previous point, computed here
+    # in float64 with arctan2(|d x s|, d . s).  Inputs are float32 numbers so
+    # that only the evaluation is measured.
+    rng = np.random.default_rng(3)
+    n_rows, n_cols = 40, 60
+    beams = rng.normal(size=(n_rows, n_cols, 3))
+    beams = (beams / np.linalg.norm(beams, axis=2, keepdims=True)).astype(np.float32).astype(np.float64)
+    rho = rng.uniform(0.5, 20.0, (n_rows, n_cols))
+    points = (rng.normal(0, 0.3, (n_rows, n_cols, 3)) + rho[..., None] * beams).astype(np.float32).astype(np.float64)
+    valid = rng.random((n_rows, n_cols)) > 0.05
+    points[~valid] = np.nan
+    depth = DepthMatrix(np.where(valid, rho, np.nan), beams, points, valid, {"wrap_cols": True})
+    images = bearing_angle_images(depth)
+    rows, cols = np.mgrid[0:n_rows, 0:n_cols]
+    for name, (d_row, d_col) in {"horizontal": (0, -1), "vertical": (-1, 0), "diag_pos45": (1, -1), "diag_neg45": (-1, -1)}.items():
+        pr, pc = rows + d_row, (cols + d_col) % n_cols
+        inside = (pr >= 0) & (pr < n_rows)
+        segment = points - points[np.clip(pr, 0, n_rows - 1), pc]
+        with np.errstate(invalid="ignore"):
+            expected = np.arctan2(np.linalg.norm(np.cross(beams, segment), axis=2), np.sum(beams * segment, axis=2))
+        expected[~inside] = np.nan
+        np.testing.assert_array_equal(np.isnan(images[name]), np.isnan(expected), err_msg=name)
+        assert np.nanmax(np.abs(images[name] - expected)) < 4e-7, name
+
+
 def test_sample_layout_full_scan_runs():
     theta = np.deg2rad(np.arange(89.5, -90.0, -1.0))[:, None]
     phi = np.deg2rad(np.arange(720) * 0.5)
@@ -339,3 +389,39 @@ def test_ba_to_display_equalises_valid_pixels_only():
     assert not ba_to_display(np.full((2, 2), np.nan)).any()
     with pytest.raises(CalibError):
         ba_to_display(ba, min_gray=0)
+
+
+# --------------------------------------------------------------------------
+# The compiled kernels' disk cache
+# --------------------------------------------------------------------------
+
+_CACHE_CHECK = """
+import numba, numpy as np
+from calib_core.bearing_angle import bearing_angle_images
+from calib_core.lidar import spherical_depth
+ba = bearing_angle_images(spherical_depth(np.array([[1.0, 2.0, 2.0]]), [0.0], [0.2, 0.0, -0.2]))
+print(numba.config.CACHE_DIR)
+print(float(ba["horizontal"][0, 2]))
+"""
+
+
+def test_kernels_are_cached_where_numba_finds_no_cache_directory(tmp_path):
+    # A read-only install with no writable home: numba finds no cache
+    # directory.  Simulated by letting numba try only locators that give
+    # none here (no IPython, no NUMBA_CACHE_DIR); the kernels must then be
+    # cached in a per-user directory under the temp directory, and give the
+    # right BA: equal ranges 0.2 rad apart make an isosceles triangle.
+    import numba
+
+    if not hasattr(numba.config, "CACHE_LOCATOR_CLASSES"):
+        pytest.skip(f"numba {numba.__version__} cannot restrict its cache locators")
+    repo = Path(__file__).resolve().parents[1]
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    env.update(NUMBA_CACHE_LOCATOR_CLASSES="IPythonCacheLocator,UserProvidedCacheLocator", TMPDIR=str(tmp_path),
+               PYTHONPATH=str(repo) + os.pathsep + env.get("PYTHONPATH", ""))
+    out = subprocess.run([sys.executable, "-c", _CACHE_CHECK], env=env, capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr[-2000:]
+    cache_dir, ba = out.stdout.split()
+    assert Path(cache_dir).parent == tmp_path and Path(cache_dir).name.startswith("ba-calib-numba-cache-")
+    assert any(Path(cache_dir).rglob("*.nbi")), "no kernel was written to the cache"
+    assert float(ba) == pytest.approx((math.pi - 0.2) / 2, abs=F32_TOL)

@@ -66,6 +66,30 @@ def test_colour_is_sampled_where_the_point_projects(scene):
     np.testing.assert_array_equal(colors, [[130, 60, 7], [100, 100, 7]])
 
 
+def test_colour_is_bilinear_between_pixel_centres(scene):
+    image, _, _ = scene
+    # The image's red is u and green is v, so bilinear sampling returns the
+    # projected position itself, rounded: (130.25, 60.75) -> (130, 61); the
+    # blue channel is 7 everywhere.
+    pts = np.array([[0.3025 * 2, -0.3925 * 2, 2.0]])
+    colors, has = colorize_points(pts, image, _Pinhole(), np.eye(4), occlusion=False)
+    assert has.all()
+    np.testing.assert_array_equal(colors, [[130, 61, 7]])
+
+
+def test_sample_bilinear_by_hand():
+    from calib_core.overlays import sample_bilinear
+
+    image = np.zeros((2, 3, 3), np.uint8)
+    image[..., 0] = [[0, 100, 200], [50, 150, 250]]
+    # Midway between the four top-left pixels: (0 + 100 + 50 + 150) / 4 = 75.
+    # A quarter along u in the bottom row: 150 + 0.25 * 100 = 175.
+    # Outside the image the border repeats: (-3, 5) -> pixel (0, 1) = 50.
+    got = sample_bilinear(image, np.array([[0.5, 0.5], [1.25, 1.0], [-3.0, 5.0]]))
+    np.testing.assert_array_equal(got[:, 0], [75, 175, 50])
+    assert not got[:, 1:].any()
+
+
 def test_points_behind_outside_or_nan_get_no_colour(scene):
     image, _, _ = scene
     pts = np.array([[0, 0, -2.0], [50.0, 0, 1.0], [np.nan, 0, 1.0], [0, 0, 1.0]])

@@ -1,0 +1,74 @@
+"""Compiled kernels: one decorator for every numba kernel of the package, and their warm-up.
+
+numba compiles a kernel on its first call (hundreds of milliseconds each);
+with ``cache=True`` the machine code is written to disk and later processes
+load it in milliseconds.  numba looks for a writable cache directory next to
+the source (``__pycache__``), then in the user's cache directory
+(``~/.cache/numba``), or where ``NUMBA_CACHE_DIR`` says.  A read-only
+install with no writable home finds none, and ``cache=True`` would raise at
+import; :func:`kernel` then falls back to a per-user directory under the
+system temp directory, and as a last resort compiles without a disk cache.
+
+The app calls :func:`warm_up` in a background thread at start-up, so the
+first BA image or colouring does not stall on a compile.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import time
+import warnings
+from typing import Callable
+
+import numba
+
+#: numba options shared by all kernels.  numba keys its disk cache by the
+#: kernel's own source file: after changing these options, delete the
+#: ``*.nbi``/``*.nbc`` files (or touch the kernel modules) to recompile.  ``error_model="numpy"``: IEEE
+#: division (x / 0 is inf or NaN, no exception check, which would also stop
+#: the loops from running on SIMD lanes).  No ``fastmath``: its "no NaN" flag
+#: would let LLVM drop the NaN propagation that marks invalid pixels.
+_OPTIONS = dict(nogil=True, cache=True, boundscheck=False, error_model="numpy")
+
+
+def _temp_cache_dir() -> str:
+    uid = os.getuid() if hasattr(os, "getuid") else "user"
+    return os.path.join(tempfile.gettempdir(), f"ba-calib-numba-cache-{uid}")
+
+
+def kernel(fn: Callable) -> Callable:
+    """``numba.njit`` with the package's options and an on-disk cache wherever one can be written."""
+    try:
+        return numba.njit(**_OPTIONS)(fn)
+    except RuntimeError:  # numba: "cannot cache function ...: no locator available"
+        pass
+    if not os.environ.get("NUMBA_CACHE_DIR"):
+        numba.config.CACHE_DIR = _temp_cache_dir()
+        try:
+            return numba.njit(**_OPTIONS)(fn)
+        except RuntimeError:
+            pass
+    warnings.warn(f"no writable numba cache directory: {fn.__name__} is compiled at every start", stacklevel=2)
+    return numba.njit(**{**_OPTIONS, "cache": False})(fn)
+
+
+def warm_up() -> dict[str, float]:
+    """Compile (or load from the disk cache) every kernel of the package on tiny inputs.
+
+    Safe to call from a background thread; a kernel called meanwhile from
+    another thread waits for its compile instead of compiling twice.
+
+    Returns
+    -------
+    dict[str, float]
+        Seconds spent per module, for the start-up log and the benchmark.
+    """
+    from . import bearing_angle, overlays
+
+    seconds = {}
+    for module in (bearing_angle, overlays):
+        t0 = time.perf_counter()
+        module.warm_up()
+        seconds[module.__name__] = time.perf_counter() - t0
+    return seconds
