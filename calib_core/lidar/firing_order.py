@@ -1,0 +1,282 @@
+"""Rings and columns of a cloud stored laser after laser (scan order).
+
+Many spinning-lidar files have no ring field but keep the sensor's scan
+order: all points of one laser as one 360-degree sweep in azimuth, then the
+next laser's sweep (KITTI's HDL-64E ``.bin`` files).  Every sweep starts at
+a common azimuth, the *cut*, so the ring of a point is the number of times
+the azimuth has come round to the cut before it.
+
+Lidar frame: metres, x forward, y left, z up; azimuth ``atan2(y, x)`` and
+elevation ``asin(z / |p|)`` in radians.  Elevation is used only to find the
+cut and to check the rings: with per-laser origin offsets a beam's elevation
+seen from the lidar origin drifts with range, so it cannot label the points.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.optimize import isotonic_regression
+
+from ..errors import CalibError
+
+TWO_PI = 2.0 * np.pi
+
+#: Share of consecutive points that must be azimuth neighbours for a scan order.
+MIN_NEIGHBOUR_SHARE = 0.9
+#: A scan order needs the points to cover at least this much azimuth (degrees).
+MIN_COVERAGE_DEG = 10.0
+#: Cut search resolution (bins over 360 degrees).
+N_CUT_BINS = 3600
+#: Elevation change credited to one step when scoring a cut (radians).
+ELEVATION_CAP = np.radians(1.0)
+
+
+class NotFiringOrder(CalibError):
+    """The points are not stored laser after laser; the message says why."""
+
+
+def _wrap(angle: np.ndarray) -> np.ndarray:
+    """Angles wrapped to [-pi, pi)."""
+    return np.mod(angle + np.pi, TWO_PI) - np.pi
+
+
+def find_cut(phase: np.ndarray, elevation: np.ndarray, min_jump: float) -> float:
+    """Azimuth (in ``phase`` units, radians) at which every sweep starts.
+
+    Every ring change is a step from the end of one sweep to the start of
+    the next; going forward in the scan direction, its arc contains the
+    cut, and its two points belong to different lasers, so their elevations
+    differ.  Each step's forward arc is credited with its elevation change
+    (capped, so that range edges inside a sweep weigh little), both as an
+    absolute and a signed sum (lasers are usually stored in elevation
+    order, so the changes at the cut add up while edges cancel); the cut is
+    the centre of the best-scored azimuth interval.
+
+    Parameters
+    ----------
+    phase : (N,) float
+        Azimuth times the scan direction (so that it grows along a sweep), radians.
+    elevation : (N,) float
+        Elevation of the points, radians.
+    min_jump : float
+        Backward steps smaller than this (radians) are jitter, not ring changes.
+    """
+    start = np.mod(phase[:-1], TWO_PI)
+    forward = np.mod(np.diff(phase), TWO_PI)
+    delta = np.diff(elevation)
+    use = forward < TWO_PI - min_jump
+    start, forward, delta = start[use], forward[use], delta[use]
+    scale = N_CUT_BINS / TWO_PI
+    first = np.floor(start * scale).astype(np.int64)
+    last = np.floor((start + forward) * scale).astype(np.int64)  # may exceed one turn
+    scores = []
+    for weight in (np.minimum(np.abs(delta), ELEVATION_CAP), np.clip(delta, -ELEVATION_CAP, ELEVATION_CAP)):
+        # Difference array over two turns, folded back onto one.
+        diff = np.bincount(first, weights=weight, minlength=2 * N_CUT_BINS + 2)
+        diff -= np.bincount(last + 1, weights=weight, minlength=2 * N_CUT_BINS + 2)
+        cover = np.cumsum(diff)[: 2 * N_CUT_BINS]
+        scores.append(cover[:N_CUT_BINS] + cover[N_CUT_BINS:])
+    score = scores[0] + np.abs(scores[1])
+    best = score >= score.max() - 1e-9 * max(score.max(), 1.0)
+    # Centre of the longest run of best bins, circularly.
+    doubled = np.r_[best, best].astype(np.int8)
+    edges = np.flatnonzero(np.diff(np.r_[0, doubled, 0]))
+    runs_start, runs_end = edges[0::2], edges[1::2]
+    longest = int(np.argmax(runs_end - runs_start))
+    centre = 0.5 * (runs_start[longest] + runs_end[longest])
+    return float(np.mod(centre / scale, TWO_PI))
+
+
+def azimuth_coverage(azimuth_rad: np.ndarray, bin_deg: float = 1.0) -> float:
+    """Azimuth span (radians) the points cover: one turn minus the widest empty arc (in bins of ``bin_deg``)."""
+    n_bins = int(round(360.0 / bin_deg))
+    occupied = np.bincount((np.mod(azimuth_rad, TWO_PI) * (n_bins / TWO_PI)).astype(np.int64) % n_bins, minlength=n_bins) > 0
+    if occupied.all():
+        return TWO_PI
+    # Widest run of empty bins, circularly: unroll from an occupied bin.
+    rolled = np.roll(~occupied, -int(np.argmax(occupied)))
+    edges = np.flatnonzero(np.diff(np.r_[0, rolled.astype(np.int8), 0]))
+    widest = int((edges[1::2] - edges[0::2]).max())
+    return TWO_PI * (n_bins - widest) / n_bins
+
+
+def _rolling_median_levels(s: np.ndarray, before_end: np.ndarray, after_start: np.ndarray, m: int):
+    """Median of ``s`` over the ``m`` points up to ``before_end`` and from ``after_start``."""
+    n = len(s)
+    offsets = np.arange(m)
+    before = np.clip(before_end[:, None] - offsets[None, :], 0, n - 1)
+    after = np.clip(after_start[:, None] + offsets[None, :], 0, n - 1)
+    return np.median(s[before], axis=1), np.median(s[after], axis=1)
+
+
+def firing_order_rings(
+    xyz: np.ndarray,
+    n_beams: int | None = None,
+    min_jump_deg: float = 1.0,
+    window_deg: float = 2.0,
+    level_points: int = 9,
+    allow_fewer: bool = False,
+) -> np.ndarray:
+    """Ring index of every point of a cloud stored laser after laser.
+
+    Steps: the scan direction is the sign of the median azimuth step; the
+    cut is found by :func:`find_cut`; measured from the cut in the scan
+    direction the azimuth only grows within a sweep, so a ring change is a
+    step back.  Steps back closer together than ``window_deg`` of azimuth
+    are one change (points that motion compensation moved across the cut);
+    a step back counts only when the sweep's level drops: the median over
+    ``level_points`` points after it must lie well below the median before
+    it (by a quarter of the cloud's azimuth extent), so an odd point thrown
+    across the cut and back (a spurious wrap) is not a ring.  Within a
+    group, the change is placed at the largest elevation jump.
+
+    Parameters
+    ----------
+    xyz : (N, 3) float
+        Finite, non-zero points in storage order, lidar frame, metres.
+    n_beams : int, optional
+        Number of beams; when given, the number of sweeps found must equal it.
+    min_jump_deg : float
+        Smallest backward azimuth step (degrees) that may be a ring change.
+    window_deg : float
+        Azimuth span (degrees) within which steps back are one change.
+    level_points : int
+        Points on each side of a change whose median sets the sweep level.
+    allow_fewer : bool
+        Accept fewer sweeps than ``n_beams`` when the cloud covers less than
+        300 degrees of azimuth (cropped: some beams may see nothing in it).
+
+    Returns
+    -------
+    (N,) int64
+        Sweep index in storage order (0 = first stored sweep).
+
+    Raises
+    ------
+    NotFiringOrder
+        If consecutive points are not azimuth neighbours, if fewer than two
+        sweeps (or not ``n_beams``) are found; the message says which.
+    """
+    points = np.asarray(xyz, dtype=np.float64)
+    if n_beams is not None and int(n_beams) < 1:
+        raise CalibError(f"beams must be a positive integer, got {n_beams}")
+    if len(points) < 16:
+        raise NotFiringOrder(f"too few points ({len(points)}) to find sweeps")
+    range_m = np.linalg.norm(points, axis=1)
+    elevation = np.arcsin(np.clip(points[:, 2] / range_m, -1.0, 1.0))
+    azimuth = np.arctan2(points[:, 1], points[:, 0])
+    steps = _wrap(np.diff(azimuth))
+    typical = float(np.median(np.abs(steps)))
+    neighbour = np.abs(steps) <= max(20.0 * typical, np.radians(2.0))
+    share = float(neighbour.mean())
+    if share < MIN_NEIGHBOUR_SHARE:
+        raise NotFiringOrder(
+            f"the cloud does not look like beams stored in firing order: only {100 * share:.0f} % of "
+            f"consecutive points are azimuth neighbours"
+        )
+    coverage = azimuth_coverage(azimuth)
+    if coverage < np.radians(MIN_COVERAGE_DEG):
+        raise NotFiringOrder(
+            f"the cloud does not look like a spinning lidar's scan: seen from the origin it covers only "
+            f"{np.degrees(coverage):.1f} deg of azimuth"
+        )
+    direction = 1.0 if np.median(steps) >= 0.0 else -1.0
+    phase = direction * azimuth
+    min_jump = np.radians(min_jump_deg)
+    cut = find_cut(phase, elevation, min_jump)
+    swept = np.mod(phase - cut, TWO_PI)
+    drops = np.flatnonzero(np.diff(swept) < -min_jump)  # change between drops[k] and drops[k] + 1
+    changes = np.zeros(0, dtype=np.int64)
+    if drops.size:
+        window = max(int(np.ceil(np.radians(window_deg) / max(typical, 1e-9))), 1)
+        opens = np.r_[True, np.diff(drops) > window]
+        group = np.cumsum(opens) - 1
+        first = drops[opens]
+        last = drops[np.r_[opens[1:], True]]
+        level_before, level_after = _rolling_median_levels(swept, first, last + 1, max(int(level_points), 1))
+        extent = coverage
+        real = level_before - level_after > max(min_jump, 0.25 * extent)
+        # The first sweep may start, and the last end, a little across the cut.
+        margin = max(window, int(level_points))
+        real &= (first >= margin) & (last < len(points) - 1 - margin)
+        # Within a group, the step with the largest elevation jump.
+        jump = np.abs(np.diff(elevation))[drops]
+        order = np.lexsort((-jump, group))
+        best_of_group = order[np.r_[True, np.diff(group[order]) > 0]]
+        changes = drops[best_of_group][real] + 1
+    n_found = len(changes) + 1
+    cropped = coverage < np.radians(300.0)
+    fewer_ok = allow_fewer and cropped and n_beams is not None and n_found < int(n_beams)
+    if n_found < 2 or (n_beams is not None and n_found != int(n_beams) and not fewer_ok):
+        expected = f"{int(n_beams)} beams" if n_beams is not None else "several beams"
+        raise NotFiringOrder(f"the cloud does not look like {expected} stored in firing order: found {n_found} azimuth sweeps")
+    starts = np.zeros(len(points), dtype=np.int64)
+    starts[changes] = 1
+    return np.cumsum(starts)
+
+
+def sequence_columns(col_coord: np.ndarray, rows: np.ndarray, n_cols: int) -> tuple[np.ndarray, np.ndarray]:
+    """Columns of points stored in firing order, one cell per firing.
+
+    Binning each point's azimuth alone puts two firings into one cell
+    wherever the firing times are uneven (an HDL-64E alternates steps of
+    0.18 and 0.09 deg).  Along a sweep the firings are in order, so each
+    point gets the next free column: the strictly increasing integers
+    nearest (least squares) to the points' column coordinates, from an
+    isotonic regression of ``coordinate - index``.
+
+    Parameters
+    ----------
+    col_coord : (N,) float
+        Column coordinate of every point in storage order (cell centres at
+        integers), any turn.
+    rows : (N,) int
+        Row of every point; the points of a row must be contiguous.
+    n_cols : int
+        Columns per turn.
+
+    Returns
+    -------
+    cols : (N,) int64
+        Column in ``[0, n_cols)``.
+    displacement : (N,) float
+        Column minus coordinate, in columns (how far a point was moved).
+    """
+    n = len(col_coord)
+    if n == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros(0)
+    new_row = np.r_[True, rows[1:] != rows[:-1]]
+    step = np.mod(np.diff(col_coord) + 0.5 * n_cols, n_cols) - 0.5 * n_cols
+    step = np.r_[0.0, step]
+    step[new_row] = 0.0
+    unwrapped = np.cumsum(step)
+    row_start = np.flatnonzero(new_row)
+    row_id = np.cumsum(new_row) - 1
+    unwrapped += (col_coord[row_start] - unwrapped[row_start])[row_id]
+    inner = step[~new_row]
+    sign = -1.0 if inner.size and np.median(inner) < 0.0 else 1.0
+    value = sign * unwrapped
+    index = np.arange(n, dtype=np.float64)
+    # Rows far apart so that the regression never pools two rows.
+    separation = 4.0 * (n + n_cols + np.ptp(value) + 1.0)
+    fitted = isotonic_regression(value - index + row_id * separation).x - row_id * separation
+    integer = np.floor(fitted + 0.5 + 1e-9) + index
+    cols = np.mod(sign * integer, n_cols).astype(np.int64)
+    return cols, sign * integer - unwrapped
+
+
+def estimate_step(azimuth_rad: np.ndarray, rows: np.ndarray) -> float:
+    """Mean azimuth step (radians) between consecutive firings of a row.
+
+    Steps between consecutive points of the same row in storage order,
+    keeping those between a quarter and 1.5 times the median (no dropped
+    returns, no jitter); their mean, not their median, because firing
+    steps can alternate (an HDL-64E's 0.18 and 0.09 deg average 0.167).
+    """
+    steps = np.abs(_wrap(np.diff(azimuth_rad)))[rows[1:] == rows[:-1]]
+    steps = steps[steps > 1e-7]
+    if steps.size < 8:
+        raise CalibError(f"cannot estimate the azimuth resolution from {steps.size} azimuth steps; pass n_cols")
+    median = float(np.median(steps))
+    regular = steps[(steps >= 0.25 * median) & (steps <= 1.5 * median)]
+    return float(regular.mean())
