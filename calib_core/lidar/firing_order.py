@@ -21,8 +21,12 @@ from ..errors import CalibError
 
 TWO_PI = 2.0 * np.pi
 
-#: Share of consecutive points that must be azimuth neighbours for a scan order.
+#: Share of consecutive points that must be azimuth neighbours for a scan order,
+#: and the largest azimuth step (degrees) between neighbours.
 MIN_NEIGHBOUR_SHARE = 0.9
+NEIGHBOUR_STEP_DEG = 3.0
+#: A sweep's elevation spread (10-90 %) must stay below this share of the cloud's.
+MAX_SWEEP_SPREAD_SHARE = 0.35
 #: A scan order needs the points to cover at least this much azimuth (degrees).
 MIN_COVERAGE_DEG = 10.0
 #: Cut search resolution (bins over 360 degrees).
@@ -167,7 +171,7 @@ def firing_order_rings(
     azimuth = np.arctan2(points[:, 1], points[:, 0])
     steps = _wrap(np.diff(azimuth))
     typical = float(np.median(np.abs(steps)))
-    neighbour = np.abs(steps) <= max(20.0 * typical, np.radians(2.0))
+    neighbour = np.abs(steps) <= np.radians(NEIGHBOUR_STEP_DEG)
     share = float(neighbour.mean())
     if share < MIN_NEIGHBOUR_SHARE:
         raise NotFiringOrder(
@@ -212,7 +216,32 @@ def firing_order_rings(
         raise NotFiringOrder(f"the cloud does not look like {expected} stored in firing order: found {n_found} azimuth sweeps")
     starts = np.zeros(len(points), dtype=np.int64)
     starts[changes] = 1
-    return np.cumsum(starts)
+    sweeps = np.cumsum(starts)
+    _check_sweep_elevations(elevation, sweeps, n_found)
+    return sweeps
+
+
+def _check_sweep_elevations(elevation: np.ndarray, sweeps: np.ndarray, n_sweeps: int) -> None:
+    """Refuse sweeps that are not single lasers: a laser's points span a narrow elevation band.
+
+    The band is wider than one beam spacing when the beams start off the
+    origin, but stays a small part of the sensor's field of view; a sweep
+    holding many lasers (points stored column after column, or sorted by
+    azimuth) spans most of it.
+    """
+    order = np.lexsort((elevation, sweeps))
+    sorted_el = elevation[order]
+    starts = np.searchsorted(sweeps[order], np.arange(n_sweeps), side="left")
+    counts = np.diff(np.r_[starts, len(order)])
+    low = sorted_el[starts + (0.1 * (counts - 1)).astype(np.int64)]
+    high = sorted_el[starts + (0.9 * (counts - 1)).astype(np.int64)]
+    spread = np.percentile(elevation, 90) - np.percentile(elevation, 10)
+    typical = float(np.median(high - low))
+    if spread > 0 and typical > MAX_SWEEP_SPREAD_SHARE * spread:
+        raise NotFiringOrder(
+            f"the cloud does not look like beams stored in firing order: a typical azimuth sweep spans "
+            f"{np.degrees(typical):.1f} deg of elevation, {100 * typical / spread:.0f} % of the cloud's"
+        )
 
 
 def sequence_columns(col_coord: np.ndarray, rows: np.ndarray, n_cols: int) -> tuple[np.ndarray, np.ndarray]:

@@ -366,11 +366,42 @@ def organize_by_ring(xyz: np.ndarray, ring: np.ndarray, n_cols: int | None = Non
     return _organize_labelled(xyz, ring, n_cols, {"organize": "ring", "_n_cols_estimated": n_cols is None})
 
 
-def organize_by_elevation(xyz: np.ndarray, n_beams: int, n_cols: int | None = None) -> DepthMatrix:
+def beam_origin_height(xyz: np.ndarray, max_offset_m: float = 0.5, step_m: float = 0.01, max_points: int = 200_000) -> float:
+    """Common height (m) of the beams' origins above the lidar origin.
+
+    A sensor whose lasers sit above (or below) its origin, like the
+    HDL-64E (about 0.2 m), sees each beam's elevation from the origin drift
+    with range; from the right height ``h`` the elevation
+    ``atan2(z - h, sqrt(x^2 + y^2))`` is constant per beam again.  ``h`` is
+    the one (on a ``step_m`` grid within ``+-max_offset_m``) whose
+    elevation histogram (0.02 deg bins) is the most peaked (largest sum of
+    squared counts).  Uses an even subsample of at most ``max_points``.
+
+    Parameters
+    ----------
+    xyz : (N, 3) float
+        Finite, non-zero points in the lidar frame, metres.
+    """
+    points = np.asarray(xyz, dtype=np.float64)[:: max(1, len(xyz) // max_points)]
+    horizontal = np.hypot(points[:, 0], points[:, 1])
+    bin_rad = np.radians(0.02)
+    best_height, best_score = 0.0, -1.0
+    for height in np.arange(-max_offset_m, max_offset_m + 0.5 * step_m, step_m):
+        elevation = np.arctan2(points[:, 2] - height, horizontal)
+        counts = np.bincount(((elevation - elevation.min()) / bin_rad).astype(np.int64)).astype(np.float64)
+        score = float(np.dot(counts, counts))
+        if score > best_score * (1.0 + 1e-9):  # ties keep the smaller |h| (grid starts at -max)
+            best_height, best_score = float(height), score
+    return best_height
+
+
+def organize_by_elevation(xyz: np.ndarray, n_beams: int, n_cols: int | None = None, range_aware: bool = False) -> DepthMatrix:
     """Depth matrix of a cloud without ring field, beams found by elevation clustering.
 
     Works for sensors whose beams leave from (nearly) the lidar origin, so
-    that every beam has one elevation.  See :func:`cluster_elevations`.
+    that every beam has one elevation, and, with ``range_aware``, for
+    sensors whose beams leave from a common height above it (see
+    :func:`beam_origin_height`).  See :func:`cluster_elevations`.
 
     Parameters
     ----------
@@ -380,26 +411,31 @@ def organize_by_elevation(xyz: np.ndarray, n_beams: int, n_cols: int | None = No
         Number of beams of the sensor.
     n_cols : int, optional
         Azimuth columns over 360 degrees (default: estimated).
+    range_aware : bool
+        Cluster the elevation seen from the beams' estimated common origin
+        height instead of from the lidar origin.
 
     Returns
     -------
     DepthMatrix
         ``(n_beams, n_cols)``; ``meta["organize"] = "elevation"`` and
         ``meta["beam_spread_rad"]`` (largest 1-99 percentile elevation spread
-        of a beam, a check that ``n_beams`` was right).
+        of a beam, a check that ``n_beams`` was right); with ``range_aware``,
+        ``meta["beam_origin_height_m"]``.
     """
     points, keep = _clean_points(xyz)
     _, elevation, _ = _spherical_angles(points[keep])
+    meta = {"organize": "elevation", "n_beams": int(n_beams), "_n_cols_estimated": n_cols is None}
+    if range_aware:
+        height = beam_origin_height(points[keep])
+        kept = points[keep]
+        elevation = np.arctan2(kept[:, 2] - height, np.hypot(kept[:, 0], kept[:, 1]))
+        meta["beam_origin_height_m"] = height
     labels_kept, centres = cluster_elevations(elevation, n_beams)
     labels = np.zeros(len(points), dtype=np.int64)
     labels[keep] = labels_kept
     residual = np.abs(elevation - centres[labels_kept])
-    meta = {
-        "organize": "elevation",
-        "n_beams": int(n_beams),
-        "beam_spread_rad": float(np.percentile(residual, 99)) * 2.0,
-        "_n_cols_estimated": n_cols is None,
-    }
+    meta["beam_spread_rad"] = float(np.percentile(residual, 99)) * 2.0
     return _organize_labelled(points, labels, n_cols, meta)
 
 

@@ -159,8 +159,9 @@ def organize_cloud(
         except NotFiringOrder as err:
             why = str(err).replace("the cloud does not look like", "not").rstrip(".")
             if beams is not None:
-                depth = organize_by_elevation(points, beams, n_cols=n_cols)
-                reason = f"fallback to elevation clustering into {beams} beams: {why}"
+                depth = organize_by_elevation(points, beams, n_cols=n_cols, range_aware=True)
+                height = depth.meta["beam_origin_height_m"]
+                reason = f"fallback to elevation clustering into {beams} beams (seen from {height:+.2f} m): {why}"
             else:
                 depth, note = _spherical(points, v_res_deg, h_res_deg, v_range_deg)
                 reason = f"fallback to spherical binning: {why}; {note or 'resolution as given'}; pass --beams N for one row per beam"
