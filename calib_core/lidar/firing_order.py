@@ -50,7 +50,8 @@ def find_cut(phase: np.ndarray, elevation: np.ndarray, min_jump: float) -> float
     Every ring change is a step from the end of one sweep to the start of
     the next; going forward in the scan direction, its arc contains the
     cut, and its two points belong to different lasers, so their elevations
-    differ.  Each step's forward arc is credited with its elevation change
+    differ.  So does the arc from the last point of the cloud to its first
+    point, which bounds the search.  Each step's forward arc is credited with its elevation change
     (capped, so that range edges inside a sweep weigh little), both as an
     absolute and a signed sum (lasers are usually stored in elevation
     order, so the changes at the cut add up while edges cancel); the cut is
@@ -81,7 +82,20 @@ def find_cut(phase: np.ndarray, elevation: np.ndarray, min_jump: float) -> float
         cover = np.cumsum(diff)[: 2 * N_CUT_BINS]
         scores.append(cover[:N_CUT_BINS] + cover[N_CUT_BINS:])
     score = scores[0] + np.abs(scores[1])
-    best = score >= score.max() - 1e-9 * max(score.max(), 1.0)
+    # The first point starts the first sweep and the last ends the last one:
+    # the cut lies on the forward arc from the last point to the first.
+    arc_start = np.mod(phase[-1], TWO_PI)
+    arc_length = np.mod(phase[0] - phase[-1], TWO_PI)
+    if arc_length > np.pi:
+        # More than half a turn: both points sit at the cut, jittered across
+        # each other; search a few degrees around them.
+        middle = np.angle(np.exp(1j * phase[0]) + np.exp(1j * phase[-1]))
+        arc_start, arc_length = middle - np.radians(2.0), np.radians(4.0)
+    bins = np.floor(arc_start * scale).astype(np.int64) + np.arange(-1, int(np.ceil(arc_length * scale)) + 2)
+    allowed = np.zeros(N_CUT_BINS, dtype=bool)
+    allowed[np.mod(bins, N_CUT_BINS)] = True
+    score = np.where(allowed, score, -np.inf)
+    best = score >= score.max() - 1e-9 * max(abs(score.max()), 1.0)
     # Centre of the longest run of best bins, circularly.
     doubled = np.r_[best, best].astype(np.int8)
     edges = np.flatnonzero(np.diff(np.r_[0, doubled, 0]))
@@ -89,6 +103,60 @@ def find_cut(phase: np.ndarray, elevation: np.ndarray, min_jump: float) -> float
     longest = int(np.argmax(runs_end - runs_start))
     centre = 0.5 * (runs_start[longest] + runs_end[longest])
     return float(np.mod(centre / scale, TWO_PI))
+
+
+def beam_origin_height(xyz: np.ndarray, max_offset_m: float = 0.5, step_m: float = 0.01, max_points: int = 200_000) -> float:
+    """Common height (m) of the beams' origins above the lidar origin.
+
+    A sensor whose lasers sit above (or below) its origin, like the
+    HDL-64E (about 0.2 m), sees each beam's elevation from the origin drift
+    with range; from the right height ``h`` the elevation
+    ``atan2(z - h, sqrt(x^2 + y^2))`` is constant per beam again.  ``h`` is
+    the one (on a ``step_m`` grid within ``+-max_offset_m``) whose
+    elevation histogram (0.02 deg bins) is the most peaked (largest sum of
+    squared counts).  Uses an even subsample of at most ``max_points``.
+
+    Parameters
+    ----------
+    xyz : (N, 3) float
+        Finite, non-zero points in the lidar frame, metres.
+    """
+    points = np.asarray(xyz, dtype=np.float64)[:: max(1, len(xyz) // max_points)]
+    horizontal = np.hypot(points[:, 0], points[:, 1])
+    bin_rad = np.radians(0.02)
+    best_height, best_score = 0.0, -1.0
+    for height in np.arange(-max_offset_m, max_offset_m + 0.5 * step_m, step_m):
+        elevation = np.arctan2(points[:, 2] - height, horizontal)
+        counts = np.bincount(((elevation - elevation.min()) / bin_rad).astype(np.int64)).astype(np.float64)
+        score = float(np.dot(counts, counts))
+        if score > best_score * (1.0 + 1e-9):  # ties keep the smaller |h| (grid starts at -max)
+            best_height, best_score = float(height), score
+    return best_height
+
+
+def sequence_origin_height(xyz: np.ndarray, max_offset_m: float = 0.5, max_pairs: int = 50_000) -> float:
+    """Common height (m) of the beams' origins, for points in scan order.
+
+    Consecutive points are mostly the same laser at neighbouring azimuths;
+    seen from the right height their elevations barely change, even across
+    range edges.  The height minimises the summed (capped at 1 deg)
+    elevation change between consecutive points: a grid of 2.5 cm within
+    ``+-max_offset_m``, then 5 mm around the best, on at most ``max_pairs``
+    evenly spread pairs.
+    """
+    points = np.asarray(xyz, dtype=np.float64)
+    first = np.arange(0, len(points) - 1, max(1, (len(points) - 1) // max_pairs))
+    a, b = points[first], points[first + 1]
+    ha, hb = np.hypot(a[:, 0], a[:, 1]), np.hypot(b[:, 0], b[:, 1])
+
+    def cost(height: float) -> float:
+        change = np.abs(np.arctan2(b[:, 2] - height, hb) - np.arctan2(a[:, 2] - height, ha))
+        return float(np.minimum(change, ELEVATION_CAP).sum())
+
+    coarse = np.arange(-max_offset_m, max_offset_m + 1e-9, 0.025)
+    best = float(coarse[np.argmin([cost(h) for h in coarse])])
+    fine = best + np.arange(-0.025, 0.025 + 1e-9, 0.005)
+    return float(fine[np.argmin([cost(h) for h in fine])])
 
 
 def azimuth_coverage(azimuth_rad: np.ndarray, bin_deg: float = 1.0) -> float:
@@ -166,8 +234,6 @@ def firing_order_rings(
         raise CalibError(f"beams must be a positive integer, got {n_beams}")
     if len(points) < 16:
         raise NotFiringOrder(f"too few points ({len(points)}) to find sweeps")
-    range_m = np.linalg.norm(points, axis=1)
-    elevation = np.arcsin(np.clip(points[:, 2] / range_m, -1.0, 1.0))
     azimuth = np.arctan2(points[:, 1], points[:, 0])
     steps = _wrap(np.diff(azimuth))
     typical = float(np.median(np.abs(steps)))
@@ -184,6 +250,11 @@ def firing_order_rings(
             f"the cloud does not look like a spinning lidar's scan: seen from the origin it covers only "
             f"{np.degrees(coverage):.1f} deg of azimuth"
         )
+    # Elevation seen from the beams' common origin height: a laser's points
+    # then keep one elevation across range edges, so that the elevation
+    # changes left are mostly laser changes.
+    height = sequence_origin_height(points)
+    elevation = np.arctan2(points[:, 2] - height, np.hypot(points[:, 0], points[:, 1]))
     direction = 1.0 if np.median(steps) >= 0.0 else -1.0
     phase = direction * azimuth
     min_jump = np.radians(min_jump_deg)
@@ -194,7 +265,6 @@ def firing_order_rings(
     if drops.size:
         window = max(int(np.ceil(np.radians(window_deg) / max(typical, 1e-9))), 1)
         opens = np.r_[True, np.diff(drops) > window]
-        group = np.cumsum(opens) - 1
         first = drops[opens]
         last = drops[np.r_[opens[1:], True]]
         level_before, level_after = _rolling_median_levels(swept, first, last + 1, max(int(level_points), 1))
@@ -203,11 +273,15 @@ def firing_order_rings(
         # The first sweep may start, and the last end, a little across the cut.
         margin = max(window, int(level_points))
         real &= (first >= margin) & (last < len(points) - 1 - margin)
-        # Within a group, the step with the largest elevation jump.
-        jump = np.abs(np.diff(elevation))[drops]
-        order = np.lexsort((-jump, group))
-        best_of_group = order[np.r_[True, np.diff(group[order]) > 0]]
-        changes = drops[best_of_group][real] + 1
+        # The change: the largest elevation jump within a window around the group.
+        first, last = first[real], last[real]
+        if first.size:
+            jump = np.abs(np.diff(elevation))
+            lo = np.maximum(first - window, 0)
+            hi = np.minimum(last + window, len(jump) - 1)
+            candidates = lo[:, None] + np.arange(int((hi - lo).max()) + 1)[None, :]
+            scores = np.where(candidates <= hi[:, None], jump[np.minimum(candidates, len(jump) - 1)], -np.inf)
+            changes = candidates[np.arange(len(first)), np.argmax(scores, axis=1)] + 1
     n_found = len(changes) + 1
     cropped = coverage < np.radians(300.0)
     fewer_ok = allow_fewer and cropped and n_beams is not None and n_found < int(n_beams)

@@ -39,7 +39,7 @@ import numpy as np
 
 from ..errors import CalibError
 from .depth_matrix import DepthMatrix
-from .firing_order import estimate_step, firing_order_rings, sequence_columns
+from .firing_order import beam_origin_height, estimate_step, firing_order_rings, sequence_columns
 from .organized import organized_cloud_depth
 from .spherical import spherical_directions
 
@@ -274,6 +274,27 @@ def _assemble(
     )
 
 
+def _beam_elevation_at_infinity(points: np.ndarray, beam: np.ndarray, n_beams: int, fallback: np.ndarray) -> np.ndarray:
+    """Each beam's elevation (rad) free of its origin's height above the lidar origin.
+
+    A beam leaving from height ``h`` at elevation ``v`` measures
+    ``z / |p| = sin v + h / |p|`` (to first order): a straight line in
+    ``1 / |p|`` whose intercept is ``sin v``.  Least squares per beam; beams
+    whose ranges hardly vary (no line to fit) keep ``fallback``.
+    """
+    range_m = np.linalg.norm(points, axis=1)
+    x = 1.0 / np.maximum(range_m, 1.0)
+    y = points[:, 2] / range_m
+    n = np.bincount(beam, minlength=n_beams).astype(np.float64)
+    sx, sy = np.bincount(beam, x, n_beams), np.bincount(beam, y, n_beams)
+    sxx, sxy = np.bincount(beam, x * x, n_beams), np.bincount(beam, x * y, n_beams)
+    det = n * sxx - sx * sx
+    ok = (n >= 10) & (det > 1e-6 * np.maximum(n * n, 1.0) * np.maximum(sxx / np.maximum(n, 1.0), 1e-12))
+    slope = np.where(ok, (n * sxy - sx * sy) / np.where(ok, det, 1.0), 0.0)
+    intercept = (sy - slope * sx) / np.maximum(n, 1.0)
+    return np.where(ok, np.arcsin(np.clip(intercept, -1.0, 1.0)), fallback)
+
+
 def _organize_labelled(
     xyz: np.ndarray, beam: np.ndarray, n_cols: int | None, meta: dict, in_sequence: bool = False
 ) -> DepthMatrix:
@@ -291,6 +312,10 @@ def _organize_labelled(
     beam_ids, beam_index = np.unique(beam[keep], return_inverse=True)
     n_rows = len(beam_ids)
     median_elevation = _group_median(elevation, beam_index, n_rows)
+    if in_sequence:
+        # Beams may start off the origin (an HDL-64E's lasers sit 0.1-0.25 m
+        # above it): order them by their elevation far away, not as seen here.
+        median_elevation = _beam_elevation_at_infinity(points[keep], beam_index, n_rows, median_elevation)
     # Row 0 = highest beam.
     beam_order = np.argsort(-median_elevation, kind="stable")
     row_of_beam = np.empty(n_rows, dtype=np.int64)
@@ -364,35 +389,6 @@ def organize_by_ring(xyz: np.ndarray, ring: np.ndarray, n_cols: int | None = Non
     elif ring.dtype.kind not in "iu":
         raise CalibError(f"ring field must be integer, got dtype {ring.dtype}")
     return _organize_labelled(xyz, ring, n_cols, {"organize": "ring", "_n_cols_estimated": n_cols is None})
-
-
-def beam_origin_height(xyz: np.ndarray, max_offset_m: float = 0.5, step_m: float = 0.01, max_points: int = 200_000) -> float:
-    """Common height (m) of the beams' origins above the lidar origin.
-
-    A sensor whose lasers sit above (or below) its origin, like the
-    HDL-64E (about 0.2 m), sees each beam's elevation from the origin drift
-    with range; from the right height ``h`` the elevation
-    ``atan2(z - h, sqrt(x^2 + y^2))`` is constant per beam again.  ``h`` is
-    the one (on a ``step_m`` grid within ``+-max_offset_m``) whose
-    elevation histogram (0.02 deg bins) is the most peaked (largest sum of
-    squared counts).  Uses an even subsample of at most ``max_points``.
-
-    Parameters
-    ----------
-    xyz : (N, 3) float
-        Finite, non-zero points in the lidar frame, metres.
-    """
-    points = np.asarray(xyz, dtype=np.float64)[:: max(1, len(xyz) // max_points)]
-    horizontal = np.hypot(points[:, 0], points[:, 1])
-    bin_rad = np.radians(0.02)
-    best_height, best_score = 0.0, -1.0
-    for height in np.arange(-max_offset_m, max_offset_m + 0.5 * step_m, step_m):
-        elevation = np.arctan2(points[:, 2] - height, horizontal)
-        counts = np.bincount(((elevation - elevation.min()) / bin_rad).astype(np.int64)).astype(np.float64)
-        score = float(np.dot(counts, counts))
-        if score > best_score * (1.0 + 1e-9):  # ties keep the smaller |h| (grid starts at -max)
-            best_height, best_score = float(height), score
-    return best_height
 
 
 def organize_by_elevation(xyz: np.ndarray, n_beams: int, n_cols: int | None = None, range_aware: bool = False) -> DepthMatrix:
