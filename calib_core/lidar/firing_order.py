@@ -134,14 +134,14 @@ def beam_origin_height(xyz: np.ndarray, max_offset_m: float = 0.5, step_m: float
     return best_height
 
 
-def sequence_origin_height(xyz: np.ndarray, max_offset_m: float = 0.5, max_pairs: int = 50_000) -> float:
+def sequence_origin_height(xyz: np.ndarray, max_offset_m: float = 0.5, max_pairs: int = 20_000) -> float:
     """Common height (m) of the beams' origins, for points in scan order.
 
     Consecutive points are mostly the same laser at neighbouring azimuths;
     seen from the right height their elevations barely change, even across
     range edges.  The height minimises the summed (capped at 1 deg)
-    elevation change between consecutive points: a grid of 2.5 cm within
-    ``+-max_offset_m``, then 5 mm around the best, on at most ``max_pairs``
+    elevation change between consecutive points: a grid of 5 cm within
+    ``+-max_offset_m``, then 1 cm around the best, on at most ``max_pairs``
     evenly spread pairs.
     """
     points = np.asarray(xyz, dtype=np.float64)
@@ -149,14 +149,13 @@ def sequence_origin_height(xyz: np.ndarray, max_offset_m: float = 0.5, max_pairs
     a, b = points[first], points[first + 1]
     ha, hb = np.hypot(a[:, 0], a[:, 1]), np.hypot(b[:, 0], b[:, 1])
 
-    def cost(height: float) -> float:
-        change = np.abs(np.arctan2(b[:, 2] - height, hb) - np.arctan2(a[:, 2] - height, ha))
-        return float(np.minimum(change, ELEVATION_CAP).sum())
+    def best_of(heights: np.ndarray) -> float:
+        h = heights[:, None]
+        change = np.abs(np.arctan2(b[:, 2] - h, hb) - np.arctan2(a[:, 2] - h, ha))
+        return float(heights[np.argmin(np.minimum(change, ELEVATION_CAP).sum(axis=1))])
 
-    coarse = np.arange(-max_offset_m, max_offset_m + 1e-9, 0.025)
-    best = float(coarse[np.argmin([cost(h) for h in coarse])])
-    fine = best + np.arange(-0.025, 0.025 + 1e-9, 0.005)
-    return float(fine[np.argmin([cost(h) for h in fine])])
+    coarse = best_of(np.arange(-max_offset_m, max_offset_m + 1e-9, 0.05))
+    return best_of(coarse + np.arange(-0.05, 0.05 + 1e-9, 0.01))
 
 
 def azimuth_coverage(azimuth_rad: np.ndarray, bin_deg: float = 1.0) -> float:
@@ -303,7 +302,8 @@ def _check_sweep_elevations(elevation: np.ndarray, sweeps: np.ndarray, n_sweeps:
     holding many lasers (points stored column after column, or sorted by
     azimuth) spans most of it.
     """
-    order = np.lexsort((elevation, sweeps))
+    low, span = float(elevation.min()), float(np.ptp(elevation)) or 1.0
+    order = np.argsort(sweeps + 0.5 * (elevation - low) / span)  # one float sort, by sweep then elevation
     sorted_el = elevation[order]
     starts = np.searchsorted(sweeps[order], np.arange(n_sweeps), side="left")
     counts = np.diff(np.r_[starts, len(order)])

@@ -18,6 +18,7 @@ from ..errors import CalibError
 from .depth_matrix import DepthMatrix
 from .firing_order import NotFiringOrder
 from .organize import (
+    count_beam_elevations,
     default_spherical_resolution_deg,
     organize_by_elevation,
     organize_by_firing_order,
@@ -93,8 +94,9 @@ def organize_cloud(
     the ring field; the scan order (points stored laser after laser, see
     :func:`~calib_core.lidar.firing_order.firing_order_rings`); and when the
     order is not a firing order, elevation clustering into ``beams`` beams
-    if given, else spherical binning.  The reason for the choice is in the
-    report.
+    if given (seen from the beams' common origin height), else into the
+    beams found as separate elevations (:func:`count_beam_elevations`),
+    else spherical binning.  The reason for the choice is in the report.
 
     Parameters
     ----------
@@ -162,6 +164,9 @@ def organize_cloud(
                 depth = organize_by_elevation(points, beams, n_cols=n_cols, range_aware=True)
                 height = depth.meta["beam_origin_height_m"]
                 reason = f"fallback to elevation clustering into {beams} beams (seen from {height:+.2f} m): {why}"
+            elif (found := count_beam_elevations(points)) is not None:
+                depth = organize_by_elevation(points, found, n_cols=n_cols)
+                reason = f"fallback to elevation clustering: {why}; the elevations fall into {found} separate beams"
             else:
                 depth, note = _spherical(points, v_res_deg, h_res_deg, v_range_deg)
                 reason = f"fallback to spherical binning: {why}; {note or 'resolution as given'}; pass --beams N for one row per beam"
