@@ -22,7 +22,7 @@ from ..errors import CalibError
 TWO_PI = 2.0 * np.pi
 
 #: Share of consecutive points that must be azimuth neighbours for a scan order,
-#: and the largest azimuth step (degrees) between neighbours.
+#: and the largest azimuth step (degrees) between neighbours (more for coarse sensors).
 MIN_NEIGHBOUR_SHARE = 0.9
 NEIGHBOUR_STEP_DEG = 3.0
 #: A sweep's elevation spread (10-90 %) must stay below this share of the cloud's.
@@ -236,7 +236,10 @@ def firing_order_rings(
     azimuth = np.arctan2(points[:, 1], points[:, 0])
     steps = _wrap(np.diff(azimuth))
     typical = float(np.median(np.abs(steps)))
-    neighbour = np.abs(steps) <= np.radians(NEIGHBOUR_STEP_DEG)
+    # Neighbours: within 3 deg, or 3 typical steps for a coarse sensor, but a
+    # typical step over 10 deg is no sensor's resolution (shuffled: ~90 deg).
+    limit = np.radians(NEIGHBOUR_STEP_DEG) if typical > np.radians(10.0) else max(np.radians(NEIGHBOUR_STEP_DEG), 3.0 * typical)
+    neighbour = np.abs(steps) <= limit
     share = float(neighbour.mean())
     if share < MIN_NEIGHBOUR_SHARE:
         raise NotFiringOrder(
@@ -280,7 +283,7 @@ def firing_order_rings(
             hi = np.minimum(last + window, len(jump) - 1)
             candidates = lo[:, None] + np.arange(int((hi - lo).max()) + 1)[None, :]
             scores = np.where(candidates <= hi[:, None], jump[np.minimum(candidates, len(jump) - 1)], -np.inf)
-            changes = candidates[np.arange(len(first)), np.argmax(scores, axis=1)] + 1
+            changes = np.unique(candidates[np.arange(len(first)), np.argmax(scores, axis=1)] + 1)
     n_found = len(changes) + 1
     cropped = coverage < np.radians(300.0)
     fewer_ok = allow_fewer and cropped and n_beams is not None and n_found < int(n_beams)

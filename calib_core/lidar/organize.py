@@ -22,7 +22,8 @@ Grid conventions (shared by every function here)
   elevation and the column's azimuth, so overlays and the UI can reason about
   them.
 * Points that are not finite or sit at the origin (a common no-return code)
-  are dropped and counted in ``meta["n_points_dropped"]``.
+  are dropped and counted in ``meta["n_points_dropped"]``, as are points
+  whose range over- or underflows (beyond 1e150 or below 1e-150 m).
 
 ``DepthMatrix.meta`` records ``organize`` (the method), ``model =
 "organized"`` with ``points`` (so the native file stores the exact points),
@@ -64,8 +65,12 @@ def _clean_points(xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         raise CalibError(f"expected points of shape (N, 3), got {points.shape}")
     keep = np.isfinite(points).all(axis=1)
     keep[keep] = np.any(points[keep] != 0.0, axis=1)
+    # A range that over- or underflows (|coordinates| near 1e308 or 1e-308) is no measurement.
+    with np.errstate(over="ignore", under="ignore"):
+        range_m = np.linalg.norm(points[keep], axis=1)
+    keep[keep] = np.isfinite(range_m) & (range_m > 1e-150) & (range_m < 1e150)
     if not keep.any():
-        raise CalibError(f"no usable points: all {len(points)} points are NaN/inf or at the origin")
+        raise CalibError(f"no usable points: all {len(points)} points are NaN/inf, at the origin or of absurd size")
     return points, keep
 
 
