@@ -45,26 +45,31 @@ def parse_report(stdout: str) -> re.Match:
 # --------------------------------------------------------------------------
 
 
-def hdl64_cloud(seed: int = 0, n_firings: int = 2083):
-    """A 64-laser scan stored laser after laser, each laser a sweep from azimuth 0 upwards.
+def hdl64_cloud(seed: int = 0, n_firings: int = 2083, azimuth_offset_deg: float = 0.0):
+    """A 64-laser scan stored laser after laser, each laser a sweep from encoder angle 0 upwards.
 
     Each laser has its own vertical angle (HDL-64E: upper block +2 to -8.33
     deg, lower block -8.83 to -24.33 deg), and its origin sits off the lidar
-    origin by a vertical offset of 0.10-0.25 m and a horizontal (sideways)
+    origin by a vertical offset (upper block 0.19-0.22 m, lower block
+    0.13-0.16 m, like the HDL-64E's calibration) and a horizontal (sideways)
     offset of up to 3 cm, so that elevation and azimuth seen from the origin
-    drift with range.  Scene: ground 1.73 m below, a wall at 25 m, 12 poles
-    2-12 m away.  5 % of returns are dropped; lasers are stored in a shuffled
-    order.  Returns points (N, 3) and the laser of every point.
+    drift with range.  With ``azimuth_offset_deg``, each laser also fires at
+    its own azimuth offset (uniform within +-that, like the HDL-64E's
+    rotational corrections), so its sweep starts that far off the encoder's
+    zero.  Scene: ground 1.73 m below, a wall at 25 m, 12 poles 2-12 m
+    away.  5 % of returns are dropped; lasers are stored in a shuffled order.
+    Returns points (N, 3) and the laser of every point.
     """
     rng = np.random.default_rng(seed)
     vertical = np.radians(np.r_[np.linspace(2.0, -8.33, 32), np.linspace(-8.83, -24.33, 32)])
-    v_offset = rng.uniform(0.10, 0.25, 64)
+    v_offset = np.r_[rng.uniform(0.19, 0.22, 32), rng.uniform(0.13, 0.16, 32)]
     h_offset = rng.uniform(-0.03, 0.03, 64)
+    rotation = np.radians(rng.uniform(-azimuth_offset_deg, azimuth_offset_deg, 64))
     encoder = np.arange(n_firings) * (2 * np.pi / n_firings) + rng.normal(0, np.radians(0.005), n_firings)
     poles = np.c_[rng.uniform(2, 12, 12) * np.cos(a := rng.uniform(0, 2 * np.pi, 12)), rng.uniform(2, 12, 12) * np.sin(a)]
     points, lasers = [], []
     for laser in rng.permutation(64):
-        az = encoder
+        az = encoder + rotation[laser]
         cos_az, sin_az = np.cos(az), np.sin(az)
         origin = np.stack([-h_offset[laser] * sin_az, h_offset[laser] * cos_az, np.full_like(az, v_offset[laser])], axis=1)
         d = np.stack([np.cos(vertical[laser]) * cos_az, np.cos(vertical[laser]) * sin_az, np.full_like(az, np.sin(vertical[laser]))], axis=1)
@@ -92,8 +97,9 @@ def hdl64_cloud(seed: int = 0, n_firings: int = 2083):
     return np.concatenate(points), np.concatenate(lasers)
 
 
-def test_synthetic_hdl64_organises_into_its_64_lasers():
-    points, lasers = hdl64_cloud()
+@pytest.mark.parametrize("azimuth_offset_deg", [0.0, 4.0])
+def test_synthetic_hdl64_organises_into_its_64_lasers(azimuth_offset_deg):
+    points, lasers = hdl64_cloud(azimuth_offset_deg=azimuth_offset_deg)
     # The offsets really do defeat plain elevation: beams overlap as seen from the origin.
     elevation = np.degrees(np.arcsin(points[:, 2] / np.linalg.norm(points, axis=1)))
     spans = np.array([np.ptp(elevation[lasers == k]) for k in range(64)])
@@ -105,7 +111,7 @@ def test_synthetic_hdl64_organises_into_its_64_lasers():
     r = np.hypot(points[mid, 0], points[mid, 1])
     points[mid, :2] = r * np.cos(np.radians(-0.3)), r * np.sin(np.radians(-0.3))
     # Seam jitter: the last point of some sweeps a little past the cut.
-    ends = np.flatnonzero(np.diff(lasers)) [::5]
+    ends = np.flatnonzero(np.diff(lasers))[::5]
     r = np.hypot(points[ends, 0], points[ends, 1])
     points[ends, 0], points[ends, 1] = r * np.cos(np.radians(0.04)), r * np.sin(np.radians(0.04))
 

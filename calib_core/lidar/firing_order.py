@@ -29,6 +29,8 @@ NEIGHBOUR_STEP_DEG = 3.0
 MAX_SWEEP_SPREAD_SHARE = 0.35
 #: A scan order needs the points to cover at least this much azimuth (degrees).
 MIN_COVERAGE_DEG = 10.0
+#: Points on each side of a candidate ring change whose median elevations are compared.
+STEP_POINTS = 5
 #: Cut search resolution (bins over 360 degrees).
 N_CUT_BINS = 3600
 #: Elevation change credited to one step when scoring a cut (radians).
@@ -184,7 +186,7 @@ def firing_order_rings(
     xyz: np.ndarray,
     n_beams: int | None = None,
     min_jump_deg: float = 1.0,
-    window_deg: float = 2.0,
+    window_deg: float = 10.0,
     level_points: int = 9,
     allow_fewer: bool = False,
 ) -> np.ndarray:
@@ -192,14 +194,19 @@ def firing_order_rings(
 
     Steps: the scan direction is the sign of the median azimuth step; the
     cut is found by :func:`find_cut`; measured from the cut in the scan
-    direction the azimuth only grows within a sweep, so a ring change is a
-    step back.  Steps back closer together than ``window_deg`` of azimuth
-    are one change (points that motion compensation moved across the cut);
-    a step back counts only when the sweep's level drops: the median over
-    ``level_points`` points after it must lie well below the median before
-    it (by a quarter of the cloud's azimuth extent), so an odd point thrown
-    across the cut and back (a spurious wrap) is not a ring.  Within a
-    group, the change is placed at the largest elevation jump.
+    direction the azimuth only grows within a sweep, so a ring change shows
+    as a step back.  Steps back closer together than ``window_deg`` of
+    azimuth are one change: points that motion compensation moved across
+    the cut, and lasers whose sweeps start a few degrees off the cut (an
+    HDL-64E's per-laser azimuth corrections, when a file cuts sweeps by
+    encoder angle) step back twice.  A group counts only when the sweep's
+    level drops: the median over ``level_points`` points after it must lie
+    well below the median before it (by a quarter of the cloud's azimuth
+    extent), so an odd point thrown across the cut and back (a spurious
+    wrap) is not a ring.  Within ``window_deg`` around the group, the change
+    is placed where the elevation (seen from the beams' common origin
+    height, :func:`sequence_origin_height`) steps most between the medians
+    of the 5 points before and after.
 
     Parameters
     ----------
@@ -275,15 +282,38 @@ def firing_order_rings(
         # The first sweep may start, and the last end, a little across the cut.
         margin = max(window, int(level_points))
         real &= (first >= margin) & (last < len(points) - 1 - margin)
-        # The change: the largest elevation jump within a window around the group.
+        # The change: where the elevation level steps most, within a window
+        # around the group (medians of STEP_POINTS on each side, so that one
+        # odd point does not decide).
         first, last = first[real], last[real]
         if first.size:
-            jump = np.abs(np.diff(elevation))
-            lo = np.maximum(first - window, 0)
-            hi = np.minimum(last + window, len(jump) - 1)
-            candidates = lo[:, None] + np.arange(int((hi - lo).max()) + 1)[None, :]
-            scores = np.where(candidates <= hi[:, None], jump[np.minimum(candidates, len(jump) - 1)], -np.inf)
-            changes = np.unique(candidates[np.arange(len(first)), np.argmax(scores, axis=1)] + 1)
+            n = len(points)
+            lo = np.maximum(first - window, 1)
+            hi = np.minimum(last + window + 1, n - 1)
+            starts = lo[:, None] + np.arange(int((hi - lo).max()) + 1)[None, :]  # first point of the new sweep
+            offsets = np.arange(STEP_POINTS)
+            after = np.median(elevation[np.minimum(starts[..., None] + offsets, n - 1)], axis=-1)
+            before = np.median(elevation[np.maximum(starts[..., None] - 1 - offsets, 0)], axis=-1)
+            # Two lasers may look alike in elevation for a while; then the
+            # firing rhythm tells: a change breaks the regular azimuth step.
+            # Elevation in units of 0.1 deg (beams of multi-beam lidars are
+            # 0.3 deg or more apart; seen from the beams' origin a laser's
+            # elevation varies less), azimuth in typical steps, capped at 1:
+            # a dropped return also breaks the rhythm.
+            level = np.abs(after - before)
+            el_scale = np.radians(0.1)
+            az_irregular = np.abs(np.abs(steps) - typical) / max(typical, 1e-9)
+
+            def discontinuity(elevation_step, index):
+                return elevation_step / el_scale + 0.5 * np.minimum(az_irregular[index - 1], 2.0)
+
+            scores = np.where(starts <= hi[:, None], discontinuity(level, starts), -np.inf)
+            coarse = starts[np.arange(len(first)), np.argmax(scores, axis=1)]
+            # Medians blur the step over a few points: settle on the largest
+            # single discontinuity next to it.
+            near = np.clip(coarse[:, None] + np.arange(-STEP_POINTS + 1, STEP_POINTS)[None, :], 1, n - 1)
+            jump = discontinuity(np.abs(elevation[near] - elevation[near - 1]), near)
+            changes = np.unique(near[np.arange(len(first)), np.argmax(jump, axis=1)])
     n_found = len(changes) + 1
     cropped = coverage < np.radians(300.0)
     fewer_ok = allow_fewer and cropped and n_beams is not None and n_found < int(n_beams)
