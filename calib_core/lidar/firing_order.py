@@ -15,7 +15,6 @@ seen from the lidar origin drifts with range, so it cannot label the points.
 from __future__ import annotations
 
 import numpy as np
-from scipy.optimize import isotonic_regression
 
 from ..errors import CalibError
 
@@ -357,9 +356,9 @@ def sequence_columns(col_coord: np.ndarray, rows: np.ndarray, n_cols: int) -> tu
     Binning each point's azimuth alone puts two firings into one cell
     wherever the firing times are uneven (an HDL-64E alternates steps of
     0.18 and 0.09 deg).  Along a sweep the firings are in order, so each
-    point gets the next free column: the strictly increasing integers
-    nearest (least squares) to the points' column coordinates, from an
-    isotonic regression of ``coordinate - index``.
+    point gets a column of its own: strictly increasing integers near the
+    points' column coordinates (the mean of a forward and a backward
+    running push, which spreads a crowd of firings to both sides).
 
     Parameters
     ----------
@@ -393,10 +392,17 @@ def sequence_columns(col_coord: np.ndarray, rows: np.ndarray, n_cols: int) -> tu
     sign = -1.0 if inner.size and np.median(inner) < 0.0 else 1.0
     value = sign * unwrapped
     index = np.arange(n, dtype=np.float64)
-    # Rows far apart so that the regression never pools two rows.
-    separation = 4.0 * (n + n_cols + np.ptp(value) + 1.0)
-    fitted = isotonic_regression(value - index + row_id * separation).x - row_id * separation
-    integer = np.floor(fitted + 0.5 + 1e-9) + index
+    # Strictly increasing integers near the coordinates: pushed forward where
+    # firings crowd (running max of round(value) - index), pushed backward
+    # (running min from the end), and the two averaged, so that a crowd
+    # spreads to both sides as a least-squares (isotonic) fit would.  Their
+    # sum grows by at least 2 per point, so the floored mean still grows by
+    # at least 1: no two points of a row share a column.
+    separation = 4.0 * (n + n_cols + np.ptp(value) + 1.0)  # rows never interact
+    shifted = np.floor(value + 0.5) - index + row_id * separation
+    forward = np.maximum.accumulate(shifted)
+    backward = np.minimum.accumulate(shifted[::-1])[::-1]
+    integer = np.floor(0.5 * (forward + backward)) - row_id * separation + index
     cols = np.mod(sign * integer, n_cols).astype(np.int64)
     return cols, sign * integer - unwrapped
 
