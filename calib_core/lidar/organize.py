@@ -63,12 +63,11 @@ def _clean_points(xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     points = np.asarray(xyz, dtype=np.float64)
     if points.ndim != 2 or points.shape[1] != 3:
         raise CalibError(f"expected points of shape (N, 3), got {points.shape}")
-    keep = np.isfinite(points).all(axis=1)
-    keep[keep] = np.any(points[keep] != 0.0, axis=1)
-    # A range that over- or underflows (|coordinates| near 1e308 or 1e-308) is no measurement.
-    with np.errstate(over="ignore", under="ignore"):
-        range_m = np.linalg.norm(points[keep], axis=1)
-    keep[keep] = np.isfinite(range_m) & (range_m > 1e-150) & (range_m < 1e150)
+    # Squared range in one pass; NaN/inf coordinates, the origin and ranges
+    # that over- or underflow (beyond 1e150 or below 1e-150 m) are no measurement.
+    with np.errstate(over="ignore", under="ignore", invalid="ignore"):
+        squared = np.einsum("ij,ij->i", points, points)
+        keep = (squared > 1e-300) & (squared < 1e300)
     if not keep.any():
         raise CalibError(f"no usable points: all {len(points)} points are NaN/inf, at the origin or of absurd size")
     return points, keep
@@ -134,7 +133,8 @@ def estimate_n_cols(azimuth_rad: np.ndarray, beam: np.ndarray) -> int:
     int
         ``round(2 pi / step)``.
     """
-    order = np.lexsort((azimuth_rad, beam))
+    # One float sort by beam, then azimuth (in [-pi, pi], so beam * 8 separates beams).
+    order = np.argsort(beam * 8.0 + (azimuth_rad + np.pi))
     az = azimuth_rad[order]
     same_beam = beam[order][1:] == beam[order][:-1]
     steps = np.diff(az)[same_beam]
