@@ -195,6 +195,10 @@ def test_kitti_cropped_to_the_camera_view_keeps_64_rows(tmp_path):
     depth = load_scan(cropped, beams=64)
     assert depth.shape[0] == 64 and depth.meta["organize"] == "firing_order"
     assert depth.meta["organize_report"].kept_share >= 0.99
+    # Default options give the same grid (every laser sees into this crop).
+    default = load_scan(cropped)
+    assert default.shape[0] == 64
+    np.testing.assert_array_equal(default.valid, depth.valid)
     # The same laser lands in the same row as in the full scan.
     full = load_scan(KITTI_BIN)
     rows_full = np.full(len(cloud), -1)
@@ -204,6 +208,27 @@ def test_kitti_cropped_to_the_camera_view_keeps_64_rows(tmp_path):
     original = np.flatnonzero(inside)[depth.meta["point_index"][r, c]]
     known = rows_full[original] >= 0
     assert np.mean(rows_full[original][known] == r[known]) >= 0.999
+
+
+MMDET3D_REDUCED = REPO.parent / "shared" / "data" / "other_tools_files" / "bin" / "mmdet3d_kitti_000008.bin"
+
+
+@pytest.mark.skipif(not MMDET3D_REDUCED.is_file(), reason=f"{MMDET3D_REDUCED} not found")
+def test_kitti_velodyne_reduced_from_mmdetection3d_has_64_rows(tmp_path, capsys):
+    # KITTI 000008 as mmdetection3d ships it: only the points in the camera's view.
+    cloud = np.fromfile(MMDET3D_REDUCED, dtype="<f4").reshape(-1, 4)
+    azimuth = np.arctan2(cloud[:, 1], cloud[:, 0])
+    assert np.ptp(np.degrees(azimuth)) < 90.0  # cropped to the camera
+    # Independent count of the sweeps: this file's sweeps all start at azimuth 0.
+    n_sweeps = 1 + int(np.count_nonzero((azimuth[:-1] < 0) & (azimuth[1:] >= 0)))
+    assert cli_main(["ba-images", "--scan", str(MMDET3D_REDUCED), "-o", str(tmp_path / "ba")]) == 0
+    match = parse_report(capsys.readouterr().out)
+    assert match.group(1) == "firing_order" and match.group(2) == "64" and match.group(6) == match.group(7)
+    depth = load_scan(MMDET3D_REDUCED)
+    report = depth.meta["organize_report"]
+    assert report.method == "firing_order" and depth.shape[0] == 64
+    assert depth.meta["n_sweeps"] == n_sweeps and report.points_kept == len(cloud)
+    assert np.all(~depth.valid[n_sweeps:])  # the rows added below hold nothing
 
 
 def test_clouds_that_are_not_one_sensors_view_are_refused(tmp_path):

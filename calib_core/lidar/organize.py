@@ -40,7 +40,7 @@ import numpy as np
 
 from ..errors import CalibError
 from .depth_matrix import DepthMatrix
-from .firing_order import beam_origin_height, estimate_step, firing_order_rings, sequence_columns
+from .firing_order import azimuth_coverage, beam_origin_height, estimate_step, firing_order_rings, sequence_columns
 from .organized import organized_cloud_depth
 from .spherical import spherical_directions
 
@@ -454,7 +454,13 @@ def organize_by_elevation(xyz: np.ndarray, n_beams: int, n_cols: int | None = No
     return _organize_labelled(points, labels, n_cols, meta)
 
 
-def organize_by_firing_order(xyz: np.ndarray, n_beams: int | None = None, n_cols: int | None = None) -> DepthMatrix:
+#: Beam counts of common spinning lidars; a cropped cloud is padded to the next one.
+STANDARD_BEAM_COUNTS = (16, 32, 64, 128)
+
+
+def organize_by_firing_order(
+    xyz: np.ndarray, n_beams: int | None = None, n_cols: int | None = None, pad_cropped: bool = False
+) -> DepthMatrix:
     """Depth matrix of a cloud stored laser after laser (sensor scan order).
 
     Rings are the azimuth sweeps of :func:`firing_order_rings`; rows are
@@ -474,6 +480,12 @@ def organize_by_firing_order(xyz: np.ndarray, n_beams: int | None = None, n_cols
         crop get empty rows (``meta["n_empty_beams_added"]``).
     n_cols : int, optional
         Azimuth columns over 360 degrees (default: 360 deg / mean firing step).
+    pad_cropped : bool
+        Without ``n_beams``, pad a cloud cropped in azimuth (under 300 deg)
+        to the next of :data:`STANDARD_BEAM_COUNTS` beams (KITTI's
+        ``velodyne_reduced``: 46 of the HDL-64E's lasers see into the
+        camera, 64 rows).  The padded rows hold no point, so they change the
+        layout only.
 
     Returns
     -------
@@ -493,8 +505,11 @@ def organize_by_firing_order(xyz: np.ndarray, n_beams: int | None = None, n_cols
     n_sweeps = int(labels[keep].max() + 1)
     meta = {"organize": "firing_order", "n_sweeps": n_sweeps, "_n_cols_estimated": n_cols is None}
     depth = _organize_labelled(points, labels, n_cols, meta, in_sequence=True)
-    if n_beams is not None and n_sweeps < int(n_beams):
-        depth = _pad_missing_beams(depth, int(n_beams) - n_sweeps)
+    target = n_beams
+    if target is None and pad_cropped and azimuth_coverage(np.arctan2(points[keep, 1], points[keep, 0])) < np.radians(300.0):
+        target = next((count for count in STANDARD_BEAM_COUNTS if count >= n_sweeps), None)
+    if target is not None and n_sweeps < int(target):
+        depth = _pad_missing_beams(depth, int(target) - n_sweeps)
     return depth
 
 

@@ -153,11 +153,14 @@ def organize_cloud(
         reason = f"ring field '{ring_name}'" if method == "auto" else ""
     elif method == "auto":
         try:
-            depth = organize_by_firing_order(points, beams, n_cols=n_cols)
+            depth = organize_by_firing_order(points, beams, n_cols=n_cols, pad_cropped=True)
             _check_firing_layout(depth)
             reason = f"no ring field; points stored laser after laser ({depth.meta['n_sweeps']} azimuth sweeps)"
             if depth.meta.get("n_empty_beams_added"):
-                reason += f", {depth.meta['n_empty_beams_added']} empty rows added at the {depth.meta['empty_beams_at']} for beams={beams}"
+                why_rows = f"beams={beams}" if beams is not None else (
+                    f"a cloud cropped in azimuth, taken as a {depth.shape[0]}-beam sensor; pass --beams N to change"
+                )
+                reason += f", {depth.meta['n_empty_beams_added']} empty rows added at the {depth.meta['empty_beams_at']} ({why_rows})"
         except NotFiringOrder as err:
             why = str(err).replace("the cloud does not look like", "not").rstrip(".")
             if beams is not None:
