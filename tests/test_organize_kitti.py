@@ -209,6 +209,26 @@ def test_kitti_cropped_to_the_camera_view_keeps_64_rows(tmp_path):
     known = rows_full[original] >= 0
     assert np.mean(rows_full[original][known] == r[known]) >= 0.999
 
+    # As KITTI's velodyne_reduced is made: the points the published calibration
+    # projects into the 1242 x 375 image.  The lowest lasers see below it.
+    P = kitti_published_T()
+    K = np.array([[721.5377, 0.0, 609.5593], [0.0, 721.5377, 172.854], [0.0, 0.0, 1.0]])  # calib P2[:, :3]
+    camera_points = cloud[:, :3].astype(float) @ P[:3, :3].T + P[:3, 3]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        uv = camera_points @ K.T
+        u, v = uv[:, 0] / uv[:, 2], uv[:, 1] / uv[:, 2]
+    in_view = (camera_points[:, 2] > 0) & (u >= 0) & (u < 1242) & (v >= 0) & (v < 375)
+    reduced = tmp_path / "reduced_by_camera.bin"
+    cloud[in_view].tofile(reduced)
+    depth = load_scan(reduced)
+    report = depth.meta["organize_report"]
+    assert depth.shape[0] == 64 and report.points_kept == in_view.sum()
+    assert depth.meta["n_sweeps"] < 64 and "cropped" in report.reason
+    r, c = np.nonzero(depth.valid)
+    original = np.flatnonzero(in_view)[depth.meta["point_index"][r, c]]
+    known = rows_full[original] >= 0
+    assert np.mean(rows_full[original][known] == r[known]) >= 0.999
+
 
 MMDET3D_REDUCED = REPO.parent / "shared" / "data" / "other_tools_files" / "bin" / "mmdet3d_kitti_000008.bin"
 
