@@ -69,7 +69,7 @@ def load_scan_from_args(args: argparse.Namespace):
     from calib_core.io.scan_readers import load_scan
 
     depth = load_scan(args.scan, **scan_options(args))
-    report = depth.meta.get("organize_report")
+    report = depth.organize_report
     if report is not None:
         print(report.line(), flush=True)
     return depth
