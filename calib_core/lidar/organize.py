@@ -258,16 +258,23 @@ def _assemble(
     winners, cells_with_collision = _nearest_per_cell(cell, kept_range, n_rows * n_cols)
     n_occupied = len(winners)
 
+    target = cell[winners]
+    winner_points, winner_range = kept_points[winners], kept_range[winners]
     range_m = np.full(n_rows * n_cols, np.nan)
     cell_points = np.full((n_rows * n_cols, 3), np.nan)
-    range_m[cell[winners]] = kept_range[winners]
-    cell_points[cell[winners]] = kept_points[winners]
-    directions = spherical_directions(row_elevation[:, None], cell_azimuth).reshape(-1, 3).copy()
-    directions[cell[winners]] = kept_points[winners] / kept_range[winners, None]
+    range_m[target] = winner_range
+    cell_points[target] = winner_points
     valid = np.zeros(n_rows * n_cols, dtype=bool)
-    valid[cell[winners]] = True
+    valid[target] = True
+    # Directions: the measured one where a point is, the grid's elsewhere.
+    directions = np.empty((n_rows * n_cols, 3))
+    directions[target] = winner_points / winner_range[:, None]
+    empty = np.flatnonzero(~valid)
+    empty_row, empty_col = np.divmod(empty, n_cols)
+    empty_azimuth = cell_azimuth[empty_row, empty_col] if cell_azimuth.ndim == 2 else cell_azimuth[empty_col]
+    directions[empty] = spherical_directions(row_elevation[empty_row], empty_azimuth)
     point_index = np.full(n_rows * n_cols, -1, dtype=np.int64)
-    point_index[cell[winners]] = np.flatnonzero(keep)[winners]
+    point_index[target] = np.flatnonzero(keep)[winners]
 
     meta = dict(meta)
     meta.update(
@@ -291,6 +298,18 @@ def _assemble(
         valid=valid.reshape(n_rows, n_cols),
         meta=meta,
     )
+
+
+def _dense_labels(labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``np.unique(labels, return_inverse=True)``, without a sort for small non-negative integers."""
+    labels = np.asarray(labels)
+    if labels.size and labels.dtype.kind in "iu" and labels.min() >= 0 and labels.max() < 1_000_000:
+        present = np.bincount(labels) > 0
+        ids = np.flatnonzero(present)
+        lookup = np.cumsum(present) - 1
+        return ids.astype(labels.dtype), lookup[labels]
+    ids, inverse = np.unique(labels, return_inverse=True)
+    return ids, inverse.reshape(-1)
 
 
 def _beam_elevation_at_infinity(points: np.ndarray, beam: np.ndarray, n_beams: int, fallback: np.ndarray) -> np.ndarray:
@@ -328,7 +347,7 @@ def _organize_labelled(
     if beam.shape != (len(points),):
         raise CalibError(f"beam labels have shape {beam.shape}, expected ({len(points)},)")
     _, elevation, azimuth = _spherical_angles(points[keep])
-    beam_ids, beam_index = np.unique(beam[keep], return_inverse=True)
+    beam_ids, beam_index = _dense_labels(beam[keep])
     n_rows = len(beam_ids)
     median_elevation = _group_median(elevation, beam_index, n_rows)
     if in_sequence:
