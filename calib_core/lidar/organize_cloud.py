@@ -141,6 +141,8 @@ def organize_cloud(
         points = points - origin
 
     reason = ""
+    if method == "auto" and organized_shape is not None and min(organized_shape) < 2:
+        organized_shape = None  # an N x 1 "grid" (PCD WIDTH 1) is a list of points
     if method == "organized" or (method == "auto" and organized_shape is not None):
         if organized_shape is None:
             raise CalibError("the cloud is not organized (it has no WIDTH x HEIGHT grid)")
