@@ -141,19 +141,24 @@ def sequence_origin_height(xyz: np.ndarray, max_offset_m: float = 0.5, max_pairs
     Consecutive points are mostly the same laser at neighbouring azimuths;
     seen from the right height their elevations barely change, even across
     range edges.  The height minimises the summed (capped at 1 deg)
-    elevation change between consecutive points: a grid of 5 cm within
+    elevation change between consecutive points, in tangent terms
+    (``(z - h) / sqrt(x^2 + y^2)``, linear in ``h``): a grid of 5 cm within
     ``+-max_offset_m``, then 1 cm around the best, on at most ``max_pairs``
     evenly spread pairs.
     """
     points = np.asarray(xyz, dtype=np.float64)
     first = np.arange(0, len(points) - 1, max(1, (len(points) - 1) // max_pairs))
     a, b = points[first], points[first + 1]
-    ha, hb = np.hypot(a[:, 0], a[:, 1]), np.hypot(b[:, 0], b[:, 1])
+    ha = np.maximum(np.hypot(a[:, 0], a[:, 1]), 1e-3)
+    hb = np.maximum(np.hypot(b[:, 0], b[:, 1]), 1e-3)
+    # In tangent terms the change is linear in h: (zb - h)/hb - (za - h)/ha.
+    slope_change = b[:, 2] / hb - a[:, 2] / ha
+    inverse_change = 1.0 / hb - 1.0 / ha
+    cap = np.tan(ELEVATION_CAP)
 
     def best_of(heights: np.ndarray) -> float:
-        h = heights[:, None]
-        change = np.abs(np.arctan2(b[:, 2] - h, hb) - np.arctan2(a[:, 2] - h, ha))
-        return float(heights[np.argmin(np.minimum(change, ELEVATION_CAP).sum(axis=1))])
+        change = np.abs(slope_change[None, :] - heights[:, None] * inverse_change[None, :])
+        return float(heights[np.argmin(np.minimum(change, cap).sum(axis=1))])
 
     coarse = best_of(np.arange(-max_offset_m, max_offset_m + 1e-9, 0.05))
     return best_of(coarse + np.arange(-0.05, 0.05 + 1e-9, 0.01))
