@@ -616,11 +616,12 @@ def default_spherical_resolution_deg(xyz: np.ndarray) -> float:
     _, elevation, azimuth = _spherical_angles(points[keep])
     span_deg = max(float(np.degrees(elevation.max() - elevation.min())), 0.01)
     equal_area = float(np.sqrt(360.0 * span_deg / keep.sum()))
-    order = np.argsort(elevation)
-    runs = np.empty(len(order), dtype=np.int64)
-    runs[order] = np.concatenate([[0], np.cumsum(np.diff(elevation[order]) > np.radians(0.01))])
+    ordered = np.sort(elevation)
+    gap = np.flatnonzero(np.diff(ordered) > np.radians(0.01))
+    # Run label of every point: how many gaps lie below its elevation.
+    runs = np.searchsorted(ordered[gap], elevation, side="left")
     resolution = equal_area / np.sqrt(2.0)  # unstructured: two cells per point keep ~80 % of the points
-    if runs.max() >= 1:
+    if gap.size:
         try:
             resolution = 360.0 / estimate_n_cols(azimuth, runs)
         except CalibError:
