@@ -317,3 +317,66 @@ def test_native_file_keeps_the_measured_points(tmp_path):
     np.testing.assert_array_equal(loaded.points[rows, cols], points)
     np.testing.assert_array_equal(loaded.valid, depth.valid)
     assert loaded.meta["wrap_cols"] is True
+
+
+# --------------------------------------------------------------------------
+# Scan-order columns, beam counting, the report
+# --------------------------------------------------------------------------
+
+
+def test_sequence_columns_give_each_firing_its_own_cell():
+    from calib_core.lidar.firing_order import sequence_columns
+
+    # Well separated firings keep their own (nearest) columns, in any row.
+    coords = np.array([0.2, 1.1, 2.0, 3.4, 7.0, 0.0, 2.1, 3.9])
+    rows = np.array([0, 0, 0, 0, 0, 1, 1, 1])
+    cols, moved = sequence_columns(coords, rows, 100)
+    np.testing.assert_array_equal(cols, [0, 1, 2, 3, 7, 0, 2, 4])
+    np.testing.assert_allclose(moved, cols - coords, atol=1e-9)
+    # A crowd of four firings within 1.2 columns spreads to both sides:
+    # by hand, forward push 0 1 2 3, backward push -2 -1 0 1, mean -1 0 1 2.
+    cols, _ = sequence_columns(np.array([0.0, 0.9, 1.1, 1.2, 5.0]), np.zeros(5, int), 100)
+    np.testing.assert_array_equal(cols, [99, 0, 1, 2, 5])
+    # Random sweeps, crowded in places: never two firings of a row in one
+    # cell, and no firing moved further than the worst crowding forces
+    # (the most firings in excess of the columns between any two of them).
+    rng = np.random.default_rng(0)
+    steps = rng.choice([0.5, 1.5], size=(3, 1000))
+    steps[:, 0] = 0.0
+    raw = np.cumsum(steps, axis=1)
+    rows = np.repeat(np.arange(3), 1000)
+    cols, moved = sequence_columns(raw.ravel() % 4000, rows, 4000)
+    for r in range(3):
+        assert len(np.unique(cols[rows == r])) == 1000
+        excess = np.arange(1000) - raw[r]
+        worst = float(np.max(excess - np.minimum.accumulate(excess)))
+        assert np.abs(moved[rows == r]).max() <= worst + 1.0
+
+
+def test_beams_counted_only_when_elevations_are_separate_lines():
+    from calib_core.lidar.organize import count_beam_elevations
+
+    points, _, _, _ = grid_cloud(seed=3)
+    assert count_beam_elevations(points) == 6
+    # Elevations that drift with range (beams off the origin) are no lines.
+    rng = np.random.default_rng(1)
+    r = rng.uniform(2, 40, 20000)
+    beam = rng.integers(0, 16, 20000)
+    az = rng.uniform(-np.pi, np.pi, 20000)
+    z = r * np.tan(np.radians(-15 + 2 * beam)) + 0.2
+    assert count_beam_elevations(np.c_[r * np.cos(az), r * np.sin(az), z]) is None
+
+
+def test_organize_report_counts_and_line():
+    from calib_core.lidar.organize_cloud import organize_cloud
+
+    points, ring, rows, cols = grid_cloud(seed=8)
+    points = np.vstack([points, [[np.nan, 0, 0], [0, 0, 0]]])  # two no-returns
+    ring = np.r_[ring, 0, 0]
+    depth = organize_cloud(points, ring=ring, n_cols=N_COLS)
+    report = depth.organize_report
+    assert (report.method, report.rows, report.cols) == ("ring", 6, N_COLS)
+    assert report.points_in == len(points) and report.points_usable == len(points) - 2
+    assert report.points_kept == len(rows) and report.valid_cells == len(rows)
+    assert report.line().startswith(f"organised by ring: 6 x {N_COLS}, {100 * len(rows) / (6 * N_COLS):.1f} % of cells valid, 100.00 %")
+    assert "ring field" in report.reason

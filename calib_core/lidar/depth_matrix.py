@@ -46,6 +46,13 @@ class DepthMatrix:
     def shape(self) -> tuple[int, int]:
         return self.range_m.shape  # type: ignore[return-value]
 
+    @property
+    def organize_report(self):
+        """What organising the source cloud kept (``meta["organize_report"]``,
+        a :class:`calib_core.lidar.report.OrganizeReport`), or None when the
+        matrix was not made by ``load_scan``/``organize_cloud``."""
+        return self.meta.get("organize_report")
+
     def cell_points(self, rows_cols: np.ndarray) -> np.ndarray:
         """Points of cells ``(N, 2)`` integer ``(row, col)``; NaN rows where invalid."""
         rc = np.asarray(rows_cols, dtype=np.int64).reshape(-1, 2)
