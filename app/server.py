@@ -59,6 +59,7 @@ from calib_core.transforms import invert_T, rpy_deg_from_R, transform_points
 from .ba_view import ColumnWindow, ba_texture, cell_aspect_from_directions, covering_window, texture_factor
 from .layout import ImageSlot, annotation_layout, bounds_of
 from .live_solver import LiveSolver
+from .security import TOKEN_QUERY, AccessPolicy, RefusalLog, is_loopback, start_guarded_viser
 from .state import AnnotationState, Pick
 
 BA_TITLES = {
@@ -211,6 +212,12 @@ class CalibrationApp:
         Overrides the camera file's image size (see :func:`calib_core.cameras.load_camera`).
     max_cloud_points : int
         Points shown in the 3-D pane (the PLY export has all of them).
+    token : str, optional
+        Access token required with a non-loopback ``host`` (default: a random
+        one; :attr:`url` carries it).  Loopback binds need none unless given.
+    allowed_hosts : tuple of str
+        More host names the server may be reached by (``Host`` headers);
+        see :mod:`app.security`.
 
     Raises
     ------
@@ -232,6 +239,8 @@ class CalibrationApp:
         scan_options: dict | None = None,
         image_size: tuple[int, int] | None = None,
         max_cloud_points: int = MAX_CLOUD_POINTS,
+        token: str | None = None,
+        allowed_hosts: tuple[str, ...] = (),
     ) -> None:
         self.scan_path, self.image_path, self.camera_path = Path(scan_path), Path(image_path), Path(camera_path)
         self.output_path = None if output_path is None else Path(output_path)
@@ -323,11 +332,22 @@ class CalibrationApp:
         self._actions: queue.Queue = queue.Queue()
         self._action_thread = threading.Thread(target=self._run_actions, name="ba-calib-actions", daemon=True)
         self._action_thread.start()
-        self.server = viser.ViserServer(host=host, port=port, label=self.title, verbose=False)
+        # Every request must name this server (Host, Origin) and, off loopback, carry the token.
+        self.access = AccessPolicy.for_bind(host, token=token, extra_hosts=tuple(allowed_hosts))
+        self._refusals = RefusalLog()
+        try:
+            self.server = start_guarded_viser(self.access, on_refused=self._refusals, host=host, port=port,
+                                              label=self.title, verbose=False)
+        except BaseException:
+            self._actions.put(None)
+            raise
         self.host = host
         self.port = self.server.get_port()
-        shown_host = "127.0.0.1" if host in ("0.0.0.0", "") else host
-        self.url = f"http://{shown_host}:{self.port}"
+        shown_host = "127.0.0.1" if host in ("0.0.0.0", "", "::") else host
+        if ":" in shown_host:
+            shown_host = f"[{shown_host}]"
+        query = "" if self.access.token is None else f"/?{TOKEN_QUERY}={self.access.token}"
+        self.url = f"http://{shown_host}:{self.port}{query}"
         try:
             self._build_scene()
             self._build_gui()
@@ -1538,18 +1558,21 @@ def serve(
     title: str | None = None,
     scan_options: dict | None = None,
     image_size: tuple[int, int] | None = None,
+    token: str | None = None,
+    allowed_hosts: tuple[str, ...] = (),
 ) -> None:
-    """Serve the annotation app until Ctrl+C; prints the URL.
+    """Serve the annotation app until Ctrl+C; prints the URL (with the access token off loopback).
 
     See :class:`CalibrationApp` for the parameters.  Bad input files raise
     :class:`CalibError` before the server starts.
     """
     app = CalibrationApp(scan_path, image_path, camera_path, session_path=session_path, output_path=output_path,
-                         host=host, port=port, title=title, scan_options=scan_options, image_size=image_size)
+                         host=host, port=port, title=title, scan_options=scan_options, image_size=image_size,
+                         token=token, allowed_hosts=allowed_hosts)
     print(f"ba-calib: open {app.url} in a browser (Ctrl+C to stop)", flush=True)
     print(f"ba-calib: session file {app.session_path}", flush=True)
-    if host not in ("127.0.0.1", "localhost", "::1"):
-        print(f"ba-calib: listening on {host}: anyone who can reach this address can use the app", flush=True)
+    if app.access.token is not None and not is_loopback(host):
+        print(f"ba-calib: listening on {host}: requests without the token in the URL above are refused", flush=True)
     if threading.current_thread() is threading.main_thread():
         # `kill` (SIGTERM) stops like Ctrl+C: stop() writes the last changes to the session file.
         signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
