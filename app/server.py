@@ -19,8 +19,8 @@ A click is answered in this order: the changed pick markers at once (only
 the scene nodes that changed are sent, mostly as in-place updates), then,
 from the solver thread, the errors, the residual table and the 2-D overlays;
 the 3-D cloud is recoloured after that in its own thread, and only while a
-tab shows the 3-D view.  The session file is written by a background thread
-(:class:`app.state.SessionWriter`).  :meth:`CalibrationApp.last_click_to_update`
+tab shows the 3-D view.  A change is on disk before any of this
+(:mod:`app.session_store`), so what the page shows survives a kill -9.  :meth:`CalibrationApp.last_click_to_update`
 reports the time to the second step.
 
 Use :func:`serve` (what ``ba-calib`` runs), or :class:`CalibrationApp` to
@@ -93,9 +93,6 @@ ZOOM_STEP = 2.0
 EDGE_MIN_SIZE = 0.012  # world units
 BA_WINDOW_MODES = {"all": "All columns", "camera": "Facing the camera", "custom": "Custom"}
 SNAP_RADIUS_PX = 4.0
-#: The session file is written this long after a change (plus ~20 ms for the write): after the
-#: click's solve and redraw, which its YAML dump would otherwise slow down (it holds the GIL).
-SESSION_SAVE_DELAY_S = 0.1
 UP_AXES = {"+z": (0.0, 0.0, 1.0), "+y": (0.0, 1.0, 0.0), "-y": (0.0, -1.0, 0.0), "camera up (-y of camera)": None}
 
 
@@ -277,11 +274,10 @@ class CalibrationApp:
         self.cloud_points_lidar = self.all_points_lidar[::stride]
 
         # -- state ------------------------------------------------------------------
-        # The session file is written by a background thread, off the click path, shortly after the
-        # click's update is drawn (flushed by stop()).
+        # Every change is on disk (an fsync'd journal line) before the UI shows it; the journal is
+        # compacted into the session YAML in the background and by stop().
         self.state = AnnotationState(self.depth.valid, (self.camera.width, self.camera.height), self.session_path,
-                                     background_save=True, on_save_error=self._on_save_error,
-                                     save_delay_s=SESSION_SAVE_DELAY_S)
+                                     on_save_error=self._on_save_error)
         view = self.state.view_settings()
         self._use_panorama = bool(view.get("panorama", True)) and self.panorama is not None
         self._show_reprojection = bool(view.get("show_reprojection", True))
@@ -600,9 +596,9 @@ class CalibrationApp:
                 self._actions.task_done()
 
     def _on_save_error(self, message: str) -> None:
-        # On the session writer's thread; the write is retried.
+        # On the compactor's thread; the journal holds every change, the compaction is retried.
         if hasattr(self, "server") and not getattr(self, "_stopped", True):
-            self._notify(None, "Session not saved (retrying)", message)
+            self._notify(None, "Session file not updated (retrying; no change lost)", message)
 
     def _notify(self, client: Any, title: str, body: str, color: str = "red") -> None:
         body = " ".join(str(body).split())
