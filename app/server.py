@@ -39,6 +39,7 @@ import time
 import traceback
 from dataclasses import dataclass
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any, Callable
 
 import numpy as np
@@ -111,6 +112,15 @@ def md_escape(text: str) -> str:
         else:
             out.append(ch)
     return "".join(out)
+
+
+def upload_display_name(name: Any, limit: int = 80) -> str:
+    """A client-sent file name made safe to show: last path part, plain characters only, at most ``limit`` long."""
+    text = str(name or "").replace("\\", "/").rsplit("/", 1)[-1].strip()
+    text = "".join(ch if ch.isalnum() or ch in "._-+() " else "_" for ch in text)
+    if text in ("", ".", ".."):
+        text = "upload"
+    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 def _fmt(x: float, digits: int = 3) -> str:
@@ -305,6 +315,7 @@ class CalibrationApp:
         self.slots = self._layout()
 
         self._ui_lock = threading.RLock()
+        self._upload_lock = threading.Lock()
         self._bundle: SolveBundle | None = None
         self._solve_error: str | None = None
         self._submitted: tuple | None = None
@@ -500,7 +511,8 @@ class CalibrationApp:
             "**Zoom: on last click** centres and magnifies the point you last clicked. "
             "**BA columns** shows only part of a wide scan, e.g. the part facing the camera."
         )
-        with gui.add_folder("Pairs"):
+        self._pairs_folder = gui.add_folder("Pairs")
+        with self._pairs_folder:
             self._md_pairs = gui.add_markdown("")
             self._dd_selected = gui.add_dropdown("Selected pair", ("none",), initial_value="none")
             self._dd_selected.on_update(self._guard(self._on_select_dropdown))
@@ -511,8 +523,8 @@ class CalibrationApp:
             self._cb_snap = gui.add_checkbox("Snap clicks to corners", initial_value=self._snap,
                                              hint="Refine each click to the strongest corner within 4 pixels")
             self._cb_snap.on_update(self._guard(self._on_view_checkbox))
-            self._upload = gui.add_upload_button("Import pairs YAML", icon=viser.Icon.UPLOAD, mime_type="*/*")
-            self._upload.on_upload(self._guard(self._on_upload))
+            # Each tab gets its own upload button (see _on_connect): viser keeps one value per button,
+            # which two tabs uploading at once would overwrite.
             self._btn_pairs = gui.add_button("Download pairs YAML", icon=viser.Icon.DOWNLOAD)
             self._btn_pairs.on_click(self._guard(self._on_download_pairs))
         with gui.add_folder("Calibration"):
@@ -810,18 +822,42 @@ class CalibrationApp:
         w = self._ba_custom
         self.state.set_view(ba_window_mode=mode, ba_window_start=int(w.start), ba_window_width=int(w.width))
 
+    def _add_upload_button(self, client: Any) -> None:
+        """This tab's own "Import pairs YAML" button, in the shared Pairs folder above "Download pairs YAML"."""
+        with self._upload_lock:  # a folder is one GUI context at a time
+            with self._pairs_folder:
+                button = client.gui.add_upload_button("Import pairs YAML", icon=viser.Icon.UPLOAD, mime_type="*/*",
+                                                      order=self._btn_pairs.order - 0.5)
+        button.on_upload(self._guard(self._on_upload))
+
     def _on_upload(self, event: Any) -> None:
-        f = event.value
-        if f is None or not f.content:
-            raise CalibError(f"{f.name or 'upload'}: the file is empty")
+        f = event.value  # this tab's button: no other tab's upload can have replaced it
+        self._import_upload(event.client, getattr(f, "name", ""), getattr(f, "content", b""))
+
+    def receive_upload(self, client: Any, name: str, content: bytes, wait: bool = False) -> list[tuple[str, str]]:
+        """Import an uploaded pairs file as the upload button of ``client`` does (through the action queue).
+
+        With ``wait``, returns once it is applied; returns nothing otherwise (the outcome is notified).
+        """
+        self._actions.put((lambda action: self._import_upload(client, name, content), _Action(SimpleNamespace(
+            client=client), None)))
+        if wait:
+            self._actions.join()
+        return []
+
+    def _import_upload(self, client: Any, name: str, content: bytes) -> None:
+        # The client's file name is only ever shown, never used as a path.
+        shown = upload_display_name(name)
+        if not content:
+            raise CalibError(f"{shown}: the file is empty")
         with tempfile.TemporaryDirectory() as tmp:
-            path = Path(tmp) / (Path(f.name).name or "pairs.yaml")
-            path.write_bytes(f.content)
+            path = Path(tmp) / "upload.yaml"
+            path.write_bytes(content)
             try:
                 ids = self.state.import_pairs_file(path)
             except CalibError as exc:
-                raise CalibError(str(exc).replace(str(path), Path(f.name).name)) from None
-        self._notify(event.client, "Pairs imported", f"{len(ids)} pairs added from {Path(f.name).name} (undo removes them)",
+                raise CalibError(str(exc).replace(str(path), shown)) from None
+        self._notify(client, "Pairs imported", f"{len(ids)} pairs added from {shown} (undo removes them)",
                      color="green")
 
     def _on_download_pairs(self, event: Any) -> None:
@@ -888,8 +924,10 @@ class CalibrationApp:
                     self._solve_error = None
                     self._solving = False
                     self._show_solved_camera()
-        self._refresh_scene()
-        self._refresh_panel()
+        try:
+            self._refresh_scene()
+        finally:
+            self._refresh_panel()  # the panel and the dropdown follow the state even if a drawing failed
 
     def _solve_job(self, payload: tuple[list[int], list[Pair]]) -> SolveBundle:
         """The solve and what the error display and the 2-D overlays need (the cloud comes later)."""
@@ -1135,8 +1173,9 @@ class CalibrationApp:
                         np.full(seg_colors.shape, 25, np.uint8), thickness=4.5)
         self._set_lines(f"/annot/markers/{key}/ring", segs, seg_colors, thickness=2.0)
         sel = [k for k, i in enumerate(ids) if i == selected]
-        self._set_lines(f"/annot/selected/{key}", marker_segments(world[sel] + [0.0, 0.0, 0.003], 1.5 * r),
-                        np.full((RING_SEGMENTS * len(sel), 2, 3), 255, np.uint8), thickness=4.0)
+        # One colour per segment of whatever the ring is made of (ticks included).
+        sel_segs = marker_segments(world[sel] + [0.0, 0.0, 0.003], 1.5 * r)
+        self._set_lines(f"/annot/selected/{key}", sel_segs, np.full(sel_segs.shape, 255, np.uint8), thickness=4.0)
         labels = {f"/annot/labels/{key}/{i}": (str(i), w + np.array([0.75 * r, -0.75 * r, -0.005]))
                   for i, w in zip(ids, world)}
         self._marker_cache[key] = (inputs, labels)
@@ -1292,6 +1331,7 @@ class CalibrationApp:
     # ================================================================== cameras
     def _on_connect(self, client: Any) -> None:
         try:
+            self._add_upload_button(client)
             self._set_view(client, "all")
         except Exception:
             traceback.print_exc()
