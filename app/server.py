@@ -834,16 +834,15 @@ class CalibrationApp:
         f = event.value  # this tab's button: no other tab's upload can have replaced it
         self._import_upload(event.client, getattr(f, "name", ""), getattr(f, "content", b""))
 
-    def receive_upload(self, client: Any, name: str, content: bytes, wait: bool = False) -> list[tuple[str, str]]:
+    def receive_upload(self, client: Any, name: str, content: bytes, wait: bool = False) -> None:
         """Import an uploaded pairs file as the upload button of ``client`` does (through the action queue).
 
-        With ``wait``, returns once it is applied; returns nothing otherwise (the outcome is notified).
+        The outcome is notified to ``client``; with ``wait``, returns once it is applied.
         """
         self._actions.put((lambda action: self._import_upload(client, name, content), _Action(SimpleNamespace(
             client=client), None)))
         if wait:
             self._actions.join()
-        return []
 
     def _import_upload(self, client: Any, name: str, content: bytes) -> None:
         # The client's file name is only ever shown, never used as a path.

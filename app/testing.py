@@ -103,8 +103,10 @@ class AppDriver:
         return self._fire(self.app._guard(self.app._on_edit), SimpleNamespace(client=self.tab, target=bg))
 
     def upload_pairs(self, name: str, content: bytes) -> list[tuple[str, str]]:
-        """Upload a pairs file through this tab's "Import pairs YAML" button."""
-        return self.app.receive_upload(self.tab, name, content, wait=True)
+        """Upload a pairs file through this tab's "Import pairs YAML" button; the notifications it gave."""
+        before = len(self.tab.notifications)
+        self.app.receive_upload(self.tab, name, content, wait=True)
+        return self.tab.notifications[before:]
 
     def wait_idle(self, timeout: float = 60.0) -> bool:
         """Wait for the live solve and cloud work the last actions started."""
