@@ -179,14 +179,17 @@ def _child(session: Path) -> int:
         cmd = line.split()
         if not cmd:
             continue
-        if cmd[0] == "ba":
-            notes = driver.click_cell("horizontal", int(cmd[1]), int(cmd[2]))
-        elif cmd[0] == "cam":
-            notes = driver.click_camera(float(cmd[1]), float(cmd[2]))
-        elif cmd[0] == "undo":
-            notes = driver.press_edit("Undo")
-        else:
-            break
+        try:
+            if cmd[0] == "ba":
+                notes = driver.click_cell("horizontal", int(cmd[1]), int(cmd[2]))
+            elif cmd[0] == "cam":
+                notes = driver.click_camera(float(cmd[1]), float(cmd[2]))
+            elif cmd[0] == "undo":
+                notes = driver.press_edit("Undo")
+            else:
+                break
+        except ValueError as exc:  # not shown on the page: nothing to click
+            notes = [("Not shown", str(exc))]
         status = "nack" if notes else "ack"
         print(f"{status} {_picks_json(app)}", flush=True)
     app.stop()
