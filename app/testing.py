@@ -92,15 +92,15 @@ class AppDriver:
 
     def select_in_dropdown(self, pick_id: int | None) -> list[tuple[str, str]]:
         """Choose a pair (or ``None``) in the "Selected pair" dropdown."""
-        dd = self.app._dd_selected
-        dd.value = "none" if pick_id is None else f"#{pick_id}"  # viser sets the value, then calls back
-        return self._fire(self.app._guard(self.app._on_select_dropdown), SimpleNamespace(client=self.tab, target=dd))
+        # The value the tab sent (setting the handle's value from Python would fire the callback itself).
+        chosen = SimpleNamespace(value="none" if pick_id is None else f"#{pick_id}")
+        return self._fire(self.app._guard(self.app._on_select_dropdown), SimpleNamespace(client=self.tab,
+                                                                                         target=chosen))
 
     def press_edit(self, name: str) -> list[tuple[str, str]]:
         """Press one of the Edit buttons: ``Undo``, ``Redo``, ``Deselect``, ``Delete``."""
-        bg = self.app._bg_edit
-        bg.value = name
-        return self._fire(self.app._guard(self.app._on_edit), SimpleNamespace(client=self.tab, target=bg))
+        return self._fire(self.app._guard(self.app._on_edit), SimpleNamespace(client=self.tab,
+                                                                              target=SimpleNamespace(value=name)))
 
     def upload_pairs(self, name: str, content: bytes) -> list[tuple[str, str]]:
         """Upload a pairs file through this tab's "Import pairs YAML" button; the notifications it gave."""
@@ -190,8 +190,10 @@ def _child(session: Path) -> int:
                 break
         except ValueError as exc:  # not shown on the page: nothing to click
             notes = [("Not shown", str(exc))]
-        status = "nack" if notes else "ack"
-        print(f"{status} {_picks_json(app)}", flush=True)
+        if notes:  # refused: say why (one line), the pairs are unchanged
+            print("nack " + json.dumps(notes), flush=True)
+        else:
+            print(f"ack {_picks_json(app)}", flush=True)
     app.stop()
     return 0
 
