@@ -186,7 +186,10 @@ def guard_process_request(policy: AccessPolicy, inner: Callable | None,
     """A websockets ``process_request`` that applies ``policy`` before ``inner`` (viser's HTTP server)."""
 
     def process_request(connection: Any, request: Any) -> Any:
-        reason = policy.refusal(request.headers, request.path, getattr(connection, "local_address", None))
+        try:
+            reason = policy.refusal(request.headers, request.path, getattr(connection, "local_address", None))
+        except Exception as exc:  # e.g. two Host headers: refuse, never serve on a header we could not read
+            reason = f"malformed request headers ({type(exc).__name__})"
         if reason is not None:
             if on_refused is not None:
                 on_refused(reason)

@@ -33,6 +33,7 @@ import math
 import os
 import queue
 import signal
+import socket
 import tempfile
 import threading
 import time
@@ -1607,6 +1608,9 @@ def serve(
     print(f"ba-calib: open {app.url} in a browser (Ctrl+C to stop)", flush=True)
     print(f"ba-calib: session file {app.session_path}", flush=True)
     if app.access.token is not None and not is_loopback(host):
+        if host in ("0.0.0.0", "", "::"):
+            print(f"ba-calib: from other machines: http://{socket.getfqdn()}:{app.port}/?{TOKEN_QUERY}="
+                  f"{app.access.token}", flush=True)
         print(f"ba-calib: listening on {host}: requests without the token in the URL above are refused", flush=True)
     if threading.current_thread() is threading.main_thread():
         # `kill` (SIGTERM) stops like Ctrl+C: stop() writes the last changes to the session file.

@@ -155,6 +155,14 @@ def test_served_app_refuses_foreign_host_and_origin(app):
         status, body, _ = http_get(port, host, origin)
         assert status == 403 and b"<html" not in body.lower(), (host, origin)
 
+    # Two Host headers (one ours, one foreign): refused, not guessed.
+    import socket
+
+    with socket.create_connection(("127.0.0.1", port), timeout=10) as sock:
+        sock.sendall(f"GET / HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nHost: evil.example:{port}\r\n"
+                     "Connection: close\r\n\r\n".encode())
+        assert sock.recv(64).startswith(b"HTTP/1.1 403")
+
     url = f"ws://127.0.0.1:{port}"
     # A hostile page's websocket: its browser sends its own Origin.
     assert ws_status(url, origin="http://evil.example") == ("refused", 403)
