@@ -212,3 +212,31 @@ def test_the_app_refuses_to_start_without_its_hook(monkeypatch, tmp_path):
     monkeypatch.delattr(_infra, "websockets")
     with pytest.raises(CalibError, match="refusing to start.*viser 1.1.1"):
         start_guarded_viser(AccessPolicy.for_bind("127.0.0.1"), host="127.0.0.1", port=free_port(), verbose=False)
+
+
+@pytest.mark.browser
+def test_the_real_page_connects_with_the_token_and_not_without(tmp_path):
+    """Chromium opens the printed URL: the page loads and its websocket (carrying the cookie) connects."""
+    from browser_helpers import CHROMIUM, CHROMIUM_ARGS, wait_for
+
+    if not CHROMIUM.exists():
+        pytest.skip("/usr/bin/chromium is missing (apt-get install chromium); CI installs it")
+    sync_api = pytest.importorskip("playwright.sync_api", reason="the playwright package is not installed")
+    from app.server import CalibrationApp
+
+    token = "browser-test-token-0123456789"
+    app = CalibrationApp(SAMPLE / "scan.npz", SAMPLE / "image.png", SAMPLE / "camera.yaml",
+                         session_path=tmp_path / "session.yaml", port=free_port(), token=token)
+    try:
+        with sync_api.sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS)
+            page = browser.new_page()
+            response = page.goto(f"http://127.0.0.1:{app.port}/")  # no token: refused
+            assert response.status == 403 and app.client_ids() == []
+            response = page.goto(app.url)
+            assert response.status == 200
+            wait_for(lambda: app.client_ids(), "the tokened page's websocket to connect")
+            page.get_by_text("Import pairs YAML").first.wait_for(timeout=30_000)  # this tab's own button
+            browser.close()
+    finally:
+        app.stop()
