@@ -916,7 +916,8 @@ class CalibrationApp:
                 if len(picks) >= MIN_PAIRS:
                     self._solving = True
                     self._solver.submit(self._job, ([p.id for p in picks], [p.to_pair() for p in picks]))
-                    self._change_time = (self._job, time.perf_counter())
+                    # From the start of the change, its disk write included.
+                    self._change_time = (self._job, state.last_change_started or time.perf_counter())
                 else:
                     # Too few pairs: results of older jobs no longer describe these pairs.
                     self._result_floor = self._job
@@ -1549,8 +1550,8 @@ class CalibrationApp:
     def last_click_to_update(self) -> float | None:
         """Seconds from the last change of the pairs to its solve shown: error display, table, 2-D overlays.
 
-        Measured from the moment the change reached the app (the state's
-        listener) to the moment the result was handed to viser (sending it to
+        Measured from the start of the change in the state (before its
+        journal write) to the moment the result was handed to viser (sending it to
         the browsers is not counted, nor is the 3-D cloud recolouring that
         follows).  None before the first solve of a change.
         """

@@ -33,6 +33,7 @@ import colorsys
 import os
 import sys
 import threading
+import time
 import weakref
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -169,6 +170,7 @@ class AnnotationState:
         self._selected: int | None = None
         self._view: dict[str, Any] = {}
         self._version = 0
+        self._change_started: float | None = None
         self._listeners: list[Listener] = []
         self.session_path = None if session_path is None else Path(session_path)
         self._store: SessionStore | None = None
@@ -229,6 +231,11 @@ class AnnotationState:
         """The newest incomplete pick (the one the next click completes), if any."""
         with self._lock:
             return self._pending_locked()
+
+    @property
+    def last_change_started(self) -> float | None:
+        """``time.perf_counter()`` when the newest saved change began (before its disk write), or None."""
+        return self._change_started
 
     def view_settings(self) -> dict[str, Any]:
         """A copy of the saved view settings (panorama on/off, overlays ...)."""
@@ -508,6 +515,8 @@ class AnnotationState:
         self._after_change_locked(before)
 
     def _checkpoint_locked(self) -> tuple:
+        # Taken at the start of every saved change: also when the change began (for timing hooks).
+        self._change_started = time.perf_counter()
         return self._snap, list(self._undo), list(self._redo), self._selected, dict(self._view), self._version
 
     def _after_change_locked(self, before: tuple) -> None:
