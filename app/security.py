@@ -304,3 +304,12 @@ class RefusalLog:
         if n <= self.limit:
             more = "; further refusals are not shown" if n == self.limit else ""
             print(f"ba-calib: refused a request: {' '.join(reason.split())}{more}", file=sys.stderr, flush=True)
+
+
+def upload_display_name(name: Any, limit: int = 80) -> str:
+    """A client-sent file name made safe to show: last path part, plain characters only, at most ``limit`` long."""
+    text = str(name or "").replace("\\", "/").rsplit("/", 1)[-1].strip()
+    text = "".join(ch if ch.isalnum() or ch in "._-+() " else "_" for ch in text)
+    if text in ("", ".", ".."):
+        text = "upload"
+    return text if len(text) <= limit else text[: limit - 3] + "..."

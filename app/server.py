@@ -61,7 +61,7 @@ from calib_core.transforms import invert_T, rpy_deg_from_R, transform_points
 from .ba_view import ColumnWindow, ba_texture, cell_aspect_from_directions, covering_window, texture_factor
 from .layout import ImageSlot, annotation_layout, bounds_of
 from .live_solver import LiveSolver
-from .security import TOKEN_QUERY, AccessPolicy, RefusalLog, is_loopback, start_guarded_viser
+from .security import TOKEN_QUERY, AccessPolicy, RefusalLog, is_loopback, start_guarded_viser, upload_display_name
 from .state import AnnotationState, Pick
 
 BA_TITLES = {
@@ -113,15 +113,6 @@ def md_escape(text: str) -> str:
         else:
             out.append(ch)
     return "".join(out)
-
-
-def upload_display_name(name: Any, limit: int = 80) -> str:
-    """A client-sent file name made safe to show: last path part, plain characters only, at most ``limit`` long."""
-    text = str(name or "").replace("\\", "/").rsplit("/", 1)[-1].strip()
-    text = "".join(ch if ch.isalnum() or ch in "._-+() " else "_" for ch in text)
-    if text in ("", ".", ".."):
-        text = "upload"
-    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 def _fmt(x: float, digits: int = 3) -> str:

@@ -240,3 +240,14 @@ def test_the_real_page_connects_with_the_token_and_not_without(tmp_path):
             browser.close()
     finally:
         app.stop()
+
+
+def test_client_file_names_are_only_shown_and_made_plain():
+    from app.security import upload_display_name
+
+    assert upload_display_name("..") == "upload" and upload_display_name("") == "upload"
+    assert upload_display_name("../../etc/passwd") == "passwd"
+    assert upload_display_name("C:\\Users\\me\\pairs.yaml") == "pairs.yaml"
+    assert upload_display_name("<img src=x onerror=alert(1)>.yaml") == "_img src_x onerror_alert(1)_.yaml"
+    assert upload_display_name("a\nb\x00.yaml") == "a_b_.yaml"
+    assert len(upload_display_name("x" * 500)) == 80
