@@ -19,8 +19,8 @@ A click is answered in this order: the changed pick markers at once (only
 the scene nodes that changed are sent, mostly as in-place updates), then,
 from the solver thread, the errors, the residual table and the 2-D overlays;
 the 3-D cloud is recoloured after that in its own thread, and only while a
-tab shows the 3-D view.  The session file is written by a background thread
-(:class:`app.state.SessionWriter`).  :meth:`CalibrationApp.last_click_to_update`
+tab shows the 3-D view.  A change is on disk before any of this
+(:mod:`app.session_store`), so what the page shows survives a kill -9.  :meth:`CalibrationApp.last_click_to_update`
 reports the time to the second step.
 
 Use :func:`serve` (what ``ba-calib`` runs), or :class:`CalibrationApp` to
@@ -33,12 +33,14 @@ import math
 import os
 import queue
 import signal
+import socket
 import tempfile
 import threading
 import time
 import traceback
 from dataclasses import dataclass
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any, Callable
 
 import numpy as np
@@ -59,6 +61,7 @@ from calib_core.transforms import invert_T, rpy_deg_from_R, transform_points
 from .ba_view import ColumnWindow, ba_texture, cell_aspect_from_directions, covering_window, texture_factor
 from .layout import ImageSlot, annotation_layout, bounds_of
 from .live_solver import LiveSolver
+from .security import TOKEN_QUERY, AccessPolicy, RefusalLog, is_loopback, start_guarded_viser, upload_display_name
 from .state import AnnotationState, Pick
 
 BA_TITLES = {
@@ -92,9 +95,6 @@ ZOOM_STEP = 2.0
 EDGE_MIN_SIZE = 0.012  # world units
 BA_WINDOW_MODES = {"all": "All columns", "camera": "Facing the camera", "custom": "Custom"}
 SNAP_RADIUS_PX = 4.0
-#: The session file is written this long after a change (plus ~20 ms for the write): after the
-#: click's solve and redraw, which its YAML dump would otherwise slow down (it holds the GIL).
-SESSION_SAVE_DELAY_S = 0.1
 UP_AXES = {"+z": (0.0, 0.0, 1.0), "+y": (0.0, 1.0, 0.0), "-y": (0.0, -1.0, 0.0), "camera up (-y of camera)": None}
 
 
@@ -211,6 +211,12 @@ class CalibrationApp:
         Overrides the camera file's image size (see :func:`calib_core.cameras.load_camera`).
     max_cloud_points : int
         Points shown in the 3-D pane (the PLY export has all of them).
+    token : str, optional
+        Access token required with a non-loopback ``host`` (default: a random
+        one; :attr:`url` carries it).  Loopback binds need none unless given.
+    allowed_hosts : tuple of str
+        More host names the server may be reached by (``Host`` headers);
+        see :mod:`app.security`.
 
     Raises
     ------
@@ -232,6 +238,8 @@ class CalibrationApp:
         scan_options: dict | None = None,
         image_size: tuple[int, int] | None = None,
         max_cloud_points: int = MAX_CLOUD_POINTS,
+        token: str | None = None,
+        allowed_hosts: tuple[str, ...] = (),
     ) -> None:
         self.scan_path, self.image_path, self.camera_path = Path(scan_path), Path(image_path), Path(camera_path)
         self.output_path = None if output_path is None else Path(output_path)
@@ -268,11 +276,10 @@ class CalibrationApp:
         self.cloud_points_lidar = self.all_points_lidar[::stride]
 
         # -- state ------------------------------------------------------------------
-        # The session file is written by a background thread, off the click path, shortly after the
-        # click's update is drawn (flushed by stop()).
+        # Every change is on disk (an fsync'd journal line) before the UI shows it; the journal is
+        # compacted into the session YAML in the background and by stop().
         self.state = AnnotationState(self.depth.valid, (self.camera.width, self.camera.height), self.session_path,
-                                     background_save=True, on_save_error=self._on_save_error,
-                                     save_delay_s=SESSION_SAVE_DELAY_S)
+                                     on_save_error=self._on_save_error)
         view = self.state.view_settings()
         self._use_panorama = bool(view.get("panorama", True)) and self.panorama is not None
         self._show_reprojection = bool(view.get("show_reprojection", True))
@@ -300,6 +307,7 @@ class CalibrationApp:
         self.slots = self._layout()
 
         self._ui_lock = threading.RLock()
+        self._upload_lock = threading.Lock()
         self._bundle: SolveBundle | None = None
         self._solve_error: str | None = None
         self._submitted: tuple | None = None
@@ -323,11 +331,22 @@ class CalibrationApp:
         self._actions: queue.Queue = queue.Queue()
         self._action_thread = threading.Thread(target=self._run_actions, name="ba-calib-actions", daemon=True)
         self._action_thread.start()
-        self.server = viser.ViserServer(host=host, port=port, label=self.title, verbose=False)
+        # Every request must name this server (Host, Origin) and, off loopback, carry the token.
+        self.access = AccessPolicy.for_bind(host, token=token, extra_hosts=tuple(allowed_hosts))
+        self._refusals = RefusalLog()
+        try:
+            self.server = start_guarded_viser(self.access, on_refused=self._refusals, host=host, port=port,
+                                              label=self.title, verbose=False)
+        except BaseException:
+            self._actions.put(None)
+            raise
         self.host = host
         self.port = self.server.get_port()
-        shown_host = "127.0.0.1" if host in ("0.0.0.0", "") else host
-        self.url = f"http://{shown_host}:{self.port}"
+        shown_host = "127.0.0.1" if host in ("0.0.0.0", "", "::") else host
+        if ":" in shown_host:
+            shown_host = f"[{shown_host}]"
+        query = "" if self.access.token is None else f"/?{TOKEN_QUERY}={self.access.token}"
+        self.url = f"http://{shown_host}:{self.port}{query}"
         try:
             self._build_scene()
             self._build_gui()
@@ -484,7 +503,8 @@ class CalibrationApp:
             "**Zoom: on last click** centres and magnifies the point you last clicked. "
             "**BA columns** shows only part of a wide scan, e.g. the part facing the camera."
         )
-        with gui.add_folder("Pairs"):
+        self._pairs_folder = gui.add_folder("Pairs")
+        with self._pairs_folder:
             self._md_pairs = gui.add_markdown("")
             self._dd_selected = gui.add_dropdown("Selected pair", ("none",), initial_value="none")
             self._dd_selected.on_update(self._guard(self._on_select_dropdown))
@@ -495,8 +515,8 @@ class CalibrationApp:
             self._cb_snap = gui.add_checkbox("Snap clicks to corners", initial_value=self._snap,
                                              hint="Refine each click to the strongest corner within 4 pixels")
             self._cb_snap.on_update(self._guard(self._on_view_checkbox))
-            self._upload = gui.add_upload_button("Import pairs YAML", icon=viser.Icon.UPLOAD, mime_type="*/*")
-            self._upload.on_upload(self._guard(self._on_upload))
+            # Each tab gets its own upload button (see _on_connect): viser keeps one value per button,
+            # which two tabs uploading at once would overwrite.
             self._btn_pairs = gui.add_button("Download pairs YAML", icon=viser.Icon.DOWNLOAD)
             self._btn_pairs.on_click(self._guard(self._on_download_pairs))
         with gui.add_folder("Calibration"):
@@ -580,9 +600,9 @@ class CalibrationApp:
                 self._actions.task_done()
 
     def _on_save_error(self, message: str) -> None:
-        # On the session writer's thread; the write is retried.
+        # On the compactor's thread; the journal holds every change, the compaction is retried.
         if hasattr(self, "server") and not getattr(self, "_stopped", True):
-            self._notify(None, "Session not saved (retrying)", message)
+            self._notify(None, "Session file not updated (retrying; no change lost)", message)
 
     def _notify(self, client: Any, title: str, body: str, color: str = "red") -> None:
         body = " ".join(str(body).split())
@@ -794,18 +814,41 @@ class CalibrationApp:
         w = self._ba_custom
         self.state.set_view(ba_window_mode=mode, ba_window_start=int(w.start), ba_window_width=int(w.width))
 
+    def _add_upload_button(self, client: Any) -> None:
+        """This tab's own "Import pairs YAML" button, in the shared Pairs folder above "Download pairs YAML"."""
+        with self._upload_lock:  # a folder is one GUI context at a time
+            with self._pairs_folder:
+                button = client.gui.add_upload_button("Import pairs YAML", icon=viser.Icon.UPLOAD, mime_type="*/*",
+                                                      order=self._btn_pairs.order - 0.5)
+        button.on_upload(self._guard(self._on_upload))
+
     def _on_upload(self, event: Any) -> None:
-        f = event.value
-        if f is None or not f.content:
-            raise CalibError(f"{f.name or 'upload'}: the file is empty")
+        f = event.value  # this tab's button: no other tab's upload can have replaced it
+        self._import_upload(event.client, getattr(f, "name", ""), getattr(f, "content", b""))
+
+    def receive_upload(self, client: Any, name: str, content: bytes, wait: bool = False) -> None:
+        """Import an uploaded pairs file as the upload button of ``client`` does (through the action queue).
+
+        The outcome is notified to ``client``; with ``wait``, returns once it is applied.
+        """
+        self._actions.put((lambda action: self._import_upload(client, name, content), _Action(SimpleNamespace(
+            client=client), None)))
+        if wait:
+            self._actions.join()
+
+    def _import_upload(self, client: Any, name: str, content: bytes) -> None:
+        # The client's file name is only ever shown, never used as a path.
+        shown = upload_display_name(name)
+        if not content:
+            raise CalibError(f"{shown}: the file is empty")
         with tempfile.TemporaryDirectory() as tmp:
-            path = Path(tmp) / (Path(f.name).name or "pairs.yaml")
-            path.write_bytes(f.content)
+            path = Path(tmp) / "upload.yaml"
+            path.write_bytes(content)
             try:
                 ids = self.state.import_pairs_file(path)
             except CalibError as exc:
-                raise CalibError(str(exc).replace(str(path), Path(f.name).name)) from None
-        self._notify(event.client, "Pairs imported", f"{len(ids)} pairs added from {Path(f.name).name} (undo removes them)",
+                raise CalibError(str(exc).replace(str(path), shown)) from None
+        self._notify(client, "Pairs imported", f"{len(ids)} pairs added from {shown} (undo removes them)",
                      color="green")
 
     def _on_download_pairs(self, event: Any) -> None:
@@ -864,7 +907,8 @@ class CalibrationApp:
                 if len(picks) >= MIN_PAIRS:
                     self._solving = True
                     self._solver.submit(self._job, ([p.id for p in picks], [p.to_pair() for p in picks]))
-                    self._change_time = (self._job, time.perf_counter())
+                    # From the start of the change, its disk write included.
+                    self._change_time = (self._job, state.last_change_started or time.perf_counter())
                 else:
                     # Too few pairs: results of older jobs no longer describe these pairs.
                     self._result_floor = self._job
@@ -872,8 +916,10 @@ class CalibrationApp:
                     self._solve_error = None
                     self._solving = False
                     self._show_solved_camera()
-        self._refresh_scene()
-        self._refresh_panel()
+        try:
+            self._refresh_scene()
+        finally:
+            self._refresh_panel()  # the panel and the dropdown follow the state even if a drawing failed
 
     def _solve_job(self, payload: tuple[list[int], list[Pair]]) -> SolveBundle:
         """The solve and what the error display and the 2-D overlays need (the cloud comes later)."""
@@ -1119,8 +1165,9 @@ class CalibrationApp:
                         np.full(seg_colors.shape, 25, np.uint8), thickness=4.5)
         self._set_lines(f"/annot/markers/{key}/ring", segs, seg_colors, thickness=2.0)
         sel = [k for k, i in enumerate(ids) if i == selected]
-        self._set_lines(f"/annot/selected/{key}", marker_segments(world[sel] + [0.0, 0.0, 0.003], 1.5 * r),
-                        np.full((RING_SEGMENTS * len(sel), 2, 3), 255, np.uint8), thickness=4.0)
+        # One colour per segment of whatever the ring is made of (ticks included).
+        sel_segs = marker_segments(world[sel] + [0.0, 0.0, 0.003], 1.5 * r)
+        self._set_lines(f"/annot/selected/{key}", sel_segs, np.full(sel_segs.shape, 255, np.uint8), thickness=4.0)
         labels = {f"/annot/labels/{key}/{i}": (str(i), w + np.array([0.75 * r, -0.75 * r, -0.005]))
                   for i, w in zip(ids, world)}
         self._marker_cache[key] = (inputs, labels)
@@ -1276,6 +1323,7 @@ class CalibrationApp:
     # ================================================================== cameras
     def _on_connect(self, client: Any) -> None:
         try:
+            self._add_upload_button(client)
             self._set_view(client, "all")
         except Exception:
             traceback.print_exc()
@@ -1493,8 +1541,8 @@ class CalibrationApp:
     def last_click_to_update(self) -> float | None:
         """Seconds from the last change of the pairs to its solve shown: error display, table, 2-D overlays.
 
-        Measured from the moment the change reached the app (the state's
-        listener) to the moment the result was handed to viser (sending it to
+        Measured from the start of the change in the state (before its
+        journal write) to the moment the result was handed to viser (sending it to
         the browsers is not counted, nor is the 3-D cloud recolouring that
         follows).  None before the first solve of a change.
         """
@@ -1538,18 +1586,24 @@ def serve(
     title: str | None = None,
     scan_options: dict | None = None,
     image_size: tuple[int, int] | None = None,
+    token: str | None = None,
+    allowed_hosts: tuple[str, ...] = (),
 ) -> None:
-    """Serve the annotation app until Ctrl+C; prints the URL.
+    """Serve the annotation app until Ctrl+C; prints the URL (with the access token off loopback).
 
     See :class:`CalibrationApp` for the parameters.  Bad input files raise
     :class:`CalibError` before the server starts.
     """
     app = CalibrationApp(scan_path, image_path, camera_path, session_path=session_path, output_path=output_path,
-                         host=host, port=port, title=title, scan_options=scan_options, image_size=image_size)
+                         host=host, port=port, title=title, scan_options=scan_options, image_size=image_size,
+                         token=token, allowed_hosts=allowed_hosts)
     print(f"ba-calib: open {app.url} in a browser (Ctrl+C to stop)", flush=True)
     print(f"ba-calib: session file {app.session_path}", flush=True)
-    if host not in ("127.0.0.1", "localhost", "::1"):
-        print(f"ba-calib: listening on {host}: anyone who can reach this address can use the app", flush=True)
+    if app.access.token is not None and not is_loopback(host):
+        if host in ("0.0.0.0", "", "::"):
+            print(f"ba-calib: from other machines: http://{socket.getfqdn()}:{app.port}/?{TOKEN_QUERY}="
+                  f"{app.access.token}", flush=True)
+        print(f"ba-calib: listening on {host}: requests without the token in the URL above are refused", flush=True)
     if threading.current_thread() is threading.main_thread():
         # `kill` (SIGTERM) stops like Ctrl+C: stop() writes the last changes to the session file.
         signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)

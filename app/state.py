@@ -12,14 +12,13 @@ Every change goes through :class:`AnnotationState`, which
   :class:`calib_core.errors.CalibError` with a one-line message),
 * keeps an undo/redo history of whole snapshots (every change is undoable,
   including *clear all* and *import*),
-* saves the session atomically after every change (temporary file, then
-  ``os.replace``), so that closing the tab or killing the server loses no
-  click, and restores it on start; with ``background_save`` (what the app
-  uses) a :class:`SessionWriter` thread does the write, off the click path,
-  always writing the newest state (a change is on disk a bounded time later:
-  the writer's delay, 0.1 s in the app, plus one write;
-  :meth:`AnnotationState.flush_session` and :meth:`AnnotationState.close`
-  write at once),
+* puts every change on disk before it returns (and so before any listener
+  shows it): an fsync'd journal line beside the session file, compacted into
+  the session YAML in the background (:class:`app.session_store.SessionStore`),
+  so that closing the tab or killing the server loses no acknowledged click;
+  a change that cannot be saved is refused and undone.  The session is
+  restored on start; :meth:`AnnotationState.flush_session` and
+  :meth:`AnnotationState.close` bring the YAML itself up to date,
 * is thread-safe: viser runs callbacks on a thread pool, and two browser tabs
   share one state.
 
@@ -43,15 +42,14 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from calib_core.errors import CalibError
-from calib_core.io.atomic import write_yaml_atomic
-from calib_core.io.yaml_files import finite_vector, read_yaml_mapping
+from calib_core.io.yaml_files import finite_vector
 from calib_core.pairs import Pair, load_pairs_yaml, save_pairs_yaml
+
+from .session_store import SessionStore
 
 SESSION_FORMAT = "ba-calib-session"
 SESSION_VERSION = 1
 MAX_HISTORY = 500
-#: After a failed session write the writer retries this often (seconds) until it succeeds.
-SAVE_RETRY_S = 1.0
 
 
 def pair_color(pick_id: int) -> tuple[int, int, int]:
@@ -118,129 +116,17 @@ class Snapshot:
 
 Listener = Callable[["AnnotationState"], None]
 
-_OPEN_WRITERS: "weakref.WeakSet[SessionWriter]" = weakref.WeakSet()
+_OPEN_STORES: "weakref.WeakSet[SessionStore]" = weakref.WeakSet()
 
 
 @atexit.register
-def _flush_open_writers() -> None:
-    """At interpreter exit, write what the writers still hold (their threads are daemons)."""
-    for writer in list(_OPEN_WRITERS):
+def _compact_open_stores() -> None:
+    """At interpreter exit, fold the journals into the session files (the data is safe either way)."""
+    for store in list(_OPEN_STORES):
         try:
-            writer.flush()
+            store.compact()
         except Exception as exc:  # exiting anyway: say so, do not hide it
             print(f"ba-calib: {exc}", file=sys.stderr)
-
-
-class SessionWriter:
-    """A background thread that keeps a session file equal to the newest submitted data.
-
-    :meth:`submit` only stores the data and wakes the thread, which writes it
-    atomically (:func:`calib_core.io.atomic.write_yaml_atomic`: temporary
-    file, fsync, ``os.replace``).  Data submitted while a write is running
-    replaces older unwritten data, so the file always ends at the newest
-    state and the thread never falls behind.  A failed write is kept and
-    retried every :data:`SAVE_RETRY_S` seconds (or at once when newer data
-    comes); ``on_error(message)`` is called on the writer thread.
-    Pending data is written by :meth:`flush`, :meth:`close` and at
-    interpreter exit.
-
-    Parameters
-    ----------
-    path : path-like
-        The session file.
-    on_error : callable, optional
-        ``on_error(message)`` after a failed write (one line).
-    delay_s : float
-        Wait this long after the first unwritten submission before writing
-        (submissions meanwhile are merged), so that the write (YAML dump,
-        fsync) does not compete with the work a change triggers.  Data is
-        on disk at most ``delay_s`` + one write after it was submitted.
-    """
-
-    def __init__(self, path: str | os.PathLike, on_error: Callable[[str], None] | None = None,
-                 delay_s: float = 0.0) -> None:
-        self.path = Path(path)
-        self._on_error = on_error
-        self._delay_s = max(0.0, float(delay_s))
-        self._due = 0.0  # monotonic time the pending data is to be written
-        self._cond = threading.Condition()
-        self._write_lock = threading.Lock()  # one write at a time, in submission order
-        self._pending: Any = None
-        self._has_pending = False
-        self._closed = False
-        self._thread = threading.Thread(target=self._run, name="ba-calib-session-writer", daemon=True)
-        self._thread.start()
-        _OPEN_WRITERS.add(self)
-
-    def submit(self, data: Any) -> None:
-        """Queue ``data`` (plain YAML-able, not changed afterwards) to be written; never blocks for a write."""
-        with self._cond:
-            if self._closed:
-                raise RuntimeError("the session writer is closed")
-            if not self._has_pending:
-                self._due = time.monotonic() + self._delay_s
-            self._pending, self._has_pending = data, True
-            self._cond.notify_all()
-
-    def flush(self) -> None:
-        """Write pending data now, in the calling thread, and wait for a write in progress.
-
-        Raises
-        ------
-        CalibError
-            The session file cannot be written (the data stays pending).
-        """
-        self._write_pending()
-
-    def close(self) -> None:
-        """:meth:`flush`, then stop the thread (it is stopped even if the flush raises)."""
-        try:
-            self.flush()
-        finally:
-            with self._cond:
-                self._closed = True
-                self._cond.notify_all()
-            self._thread.join(timeout=5.0)
-            _OPEN_WRITERS.discard(self)
-
-    def _write_pending(self) -> bool:
-        # Taking the data under the write lock keeps writes in submission order:
-        # an older snapshot can never land after a newer one.
-        with self._write_lock:
-            with self._cond:
-                if not self._has_pending:
-                    return False
-                data, self._has_pending = self._pending, False
-                self._pending = None
-            try:
-                write_yaml_atomic(self.path, data)
-            except Exception as exc:
-                with self._cond:
-                    if not self._has_pending:  # nothing newer: keep this one for the retry
-                        self._pending, self._has_pending = data, True
-                raise CalibError(f"{self.path}: cannot save the session: {' '.join(str(exc).split())}") from None
-            return True
-
-    def _run(self) -> None:
-        while True:
-            with self._cond:
-                self._cond.wait_for(lambda: self._has_pending or self._closed)
-                while self._has_pending and not self._closed and time.monotonic() < self._due:
-                    self._cond.wait(self._due - time.monotonic())
-                if self._closed:
-                    return  # close() flushed in its own thread
-            try:
-                self._write_pending()
-            except CalibError as exc:
-                if self._on_error is not None:
-                    try:
-                        self._on_error(str(exc))
-                    except Exception:
-                        pass
-                else:
-                    print(f"ba-calib: {exc}", file=sys.stderr)
-                with self._cond:  # retry later, or at once when newer data or close() comes
-                    self._cond.wait(SAVE_RETRY_S)
 
 
 class AnnotationState:
@@ -254,20 +140,15 @@ class AnnotationState:
     image_size : (width, height)
         Size of the original camera image in pixels.
     session_path : path-like, optional
-        Session file, written after every change and read on start.  If it
-        exists it is restored (a plain pairs YAML is accepted too).
-    background_save : bool
-        Write the session file in a :class:`SessionWriter` thread instead of
-        inside every change (which then costs no disk time; the write starts
-        at once).  Call :meth:`close` (or :meth:`flush_session`) before
-        reading the file or exiting; interpreter exit also flushes.
+        Session file, saved (journal first) inside every change and read on
+        start, together with its journal.  If it exists it is restored (a
+        plain pairs YAML is accepted too).  Call :meth:`close` (or
+        :meth:`flush_session`) before reading the YAML itself.
     on_save_error : callable, optional
-        With ``background_save``: ``on_save_error(message)`` after a failed
-        background write (it is retried).  Without, a failed write raises
-        from the change.
-    save_delay_s : float
-        With ``background_save``: the writer's ``delay_s`` (see
-        :class:`SessionWriter`).
+        ``on_save_error(message)`` after a failed background compaction of
+        the journal into the YAML (retried; no change is lost meanwhile).
+        A change whose journal line cannot be written raises CalibError and
+        is not made.
     """
 
     def __init__(
@@ -276,9 +157,7 @@ class AnnotationState:
         image_size: tuple[int, int],
         session_path: str | os.PathLike | None = None,
         *,
-        background_save: bool = False,
         on_save_error: Callable[[str], None] | None = None,
-        save_delay_s: float = 0.0,
     ) -> None:
         self._valid = np.asarray(depth_valid, dtype=bool)
         if self._valid.ndim != 2:
@@ -291,13 +170,17 @@ class AnnotationState:
         self._selected: int | None = None
         self._view: dict[str, Any] = {}
         self._version = 0
+        self._change_started: float | None = None
         self._listeners: list[Listener] = []
         self.session_path = None if session_path is None else Path(session_path)
-        if self.session_path is not None and self.session_path.exists():
-            self._restore(self.session_path)
-        self._writer: SessionWriter | None = None
-        if background_save and self.session_path is not None:
-            self._writer = SessionWriter(self.session_path, on_error=on_save_error, delay_s=save_delay_s)
+        self._store: SessionStore | None = None
+        if self.session_path is not None:
+            store = SessionStore(self.session_path, on_error=on_save_error)
+            data, from_yaml = store.load()
+            if data is not None:
+                self._restore(data, self.session_path if from_yaml else store.journal_path)
+            self._store = store
+            _OPEN_STORES.add(store)
 
     # ------------------------------------------------------------------ queries
     @property
@@ -348,6 +231,11 @@ class AnnotationState:
         """The newest incomplete pick (the one the next click completes), if any."""
         with self._lock:
             return self._pending_locked()
+
+    @property
+    def last_change_started(self) -> float | None:
+        """``time.perf_counter()`` when the newest saved change began (before its disk write), or None."""
+        return self._change_started
 
     def view_settings(self) -> dict[str, Any]:
         """A copy of the saved view settings (panorama on/off, overlays ...)."""
@@ -504,9 +392,10 @@ class AnnotationState:
         with self._lock:
             if not self._undo:
                 return False
+            before = self._checkpoint_locked()
             self._redo.append(self._snap)
             self._snap = self._undo.pop()
-            self._after_change_locked()
+            self._after_change_locked(before)
         self._notify()
         return True
 
@@ -515,9 +404,10 @@ class AnnotationState:
         with self._lock:
             if not self._redo:
                 return False
+            before = self._checkpoint_locked()
             self._undo.append(self._snap)
             self._snap = self._redo.pop()
-            self._after_change_locked()
+            self._after_change_locked(before)
         self._notify()
         return True
 
@@ -538,9 +428,10 @@ class AnnotationState:
             changed = {k: v for k, v in settings.items() if self._view.get(k, object()) != v}
             if not changed:
                 return
+            before = self._checkpoint_locked()
             self._view.update(changed)
             self._version += 1
-            self._save_locked()
+            self._save_locked(before)
         self._notify()
 
     # -------------------------------------------------------------- listeners
@@ -561,19 +452,6 @@ class AnnotationState:
                 "view": dict(self._view),
             }
 
-    def save_session(self, path: str | os.PathLike | None = None) -> None:
-        """Write the session file atomically (to ``path`` or the session path); returns when it is on disk."""
-        with self._lock:
-            target = Path(path) if path is not None else self.session_path
-            if target is None:
-                return
-            writer = self._writer
-            if writer is None or target != self.session_path:
-                write_yaml_atomic(target, self.session_dict())
-                return
-            writer.submit(self.session_dict())
-        writer.flush()
-
     def flush_session(self) -> None:
         """Return once every change so far is in the session file (no-op without a session file).
 
@@ -582,16 +460,23 @@ class AnnotationState:
         CalibError
             The session file cannot be written.
         """
-        writer = self._writer
-        if writer is not None:
-            writer.flush()
+        store = self._store
+        if store is not None:
+            store.compact()
 
     def close(self) -> None:
-        """Flush the session file and stop the background writer; later changes are saved synchronously."""
-        with self._lock:  # held, so that no change is saved synchronously before the writer's last write
-            writer, self._writer = self._writer, None
-            if writer is not None:
-                writer.close()
+        """Bring the session YAML up to date and close the journal; later changes are not saved.
+
+        Raises
+        ------
+        CalibError
+            The session YAML cannot be written (the journal keeps every change for the next start).
+        """
+        with self._lock:
+            store, self._store = self._store, None
+        if store is not None:
+            _OPEN_STORES.discard(store)
+            store.close()
 
     # -------------------------------------------------------------- internals
     def _pending_locked(self) -> Pick | None:
@@ -622,34 +507,41 @@ class AnnotationState:
     def _commit_locked(self, snap: Snapshot) -> None:
         if snap == self._snap:
             return
+        before = self._checkpoint_locked()
         self._undo.append(self._snap)
         del self._undo[:-MAX_HISTORY]
-        self._redo.clear()
+        self._redo = []
         self._snap = snap
-        self._after_change_locked()
+        self._after_change_locked(before)
 
-    def _after_change_locked(self) -> None:
+    def _checkpoint_locked(self) -> tuple:
+        # Taken at the start of every saved change: also when the change began (for timing hooks).
+        self._change_started = time.perf_counter()
+        return self._snap, list(self._undo), list(self._redo), self._selected, dict(self._view), self._version
+
+    def _after_change_locked(self, before: tuple) -> None:
         ids = {p.id for p in self._snap.picks}
         if self._selected is not None and self._selected not in ids:
             self._selected = None
         self._version += 1
-        self._save_locked()
+        self._save_locked(before)
 
-    def _save_locked(self) -> None:
-        if self.session_path is None:
+    def _save_locked(self, before: tuple) -> None:
+        """Put the changed state on disk (under the lock: in order); if that fails, undo the change and raise."""
+        if self._store is None:
             return
-        if self._writer is not None:
-            # Submitted under the lock: the writer sees the changes in order.
-            self._writer.submit(self.session_dict())
-        else:
-            write_yaml_atomic(self.session_path, self.session_dict())
+        try:
+            self._store.append(self.session_dict())
+        except CalibError as exc:
+            self._snap, self._undo, self._redo, self._selected, self._view, self._version = before
+            raise CalibError(f"{exc} (the change was not made)") from None
 
     def _notify(self) -> None:
         for listener in list(self._listeners):
             listener(self)
 
-    def _restore(self, path: Path) -> None:
-        data = read_yaml_mapping(path, "session file")
+    def _restore(self, data: dict, path: Path) -> None:
+        """Restore the session ``data`` read from ``path`` (the session YAML or its journal)."""
         if data.get("format") != SESSION_FORMAT:
             # A plain pairs file given as the session: start from its pairs.
             pairs = load_pairs_yaml(path)
@@ -664,6 +556,9 @@ class AnnotationState:
                 picks.append(Pick(i + 1, laser_rc=p.laser_rc, laser_xyz=p.laser_xyz, pixel=p.pixel))
             self._snap = Snapshot(tuple(picks), len(picks) + 1)
             return
+        if data.get("version") != SESSION_VERSION:
+            raise CalibError(f"{path}: session version {data.get('version')!r} is not supported "
+                             f"(this ba-calib reads version {SESSION_VERSION})")
         entries = data.get("pairs") or []
         if not isinstance(entries, list):
             raise CalibError(f"{path}: 'pairs' must be a list")
@@ -674,12 +569,15 @@ class AnnotationState:
                 raise CalibError(f"{where}: expected a mapping with an id")
             try:
                 pick_id = int(e["id"])
-            except (TypeError, ValueError):
+            except (TypeError, ValueError, OverflowError):
                 raise CalibError(f"{where}: id must be an integer") from None
             rc = e.get("laser_rc")
             xyz = e.get("laser_xyz")
             px = e.get("pixel")
-            rc_t = None if rc is None else tuple(int(v) for v in finite_vector(rc, 2, f"{where} laser_rc"))
+            rc_f = None if rc is None else finite_vector(rc, 2, f"{where} laser_rc")
+            if rc_f is not None and any(float(v) != round(float(v)) for v in rc_f):
+                raise CalibError(f"{where}: laser_rc must be two integers (row, column), got {list(rc)}")
+            rc_t = None if rc_f is None else tuple(int(round(float(v))) for v in rc_f)
             xyz_t = None if xyz is None else tuple(finite_vector(xyz, 3, f"{where} laser_xyz"))
             px_t = None if px is None else tuple(finite_vector(px, 2, f"{where} pixel"))
             # A session written for another scene must not inject invalid picks.
@@ -694,7 +592,10 @@ class AnnotationState:
         ids = [p.id for p in picks]
         if len(set(ids)) != len(ids):
             raise CalibError(f"{path}: duplicate pair ids")
-        next_id = max([int(data.get("next_id") or 1)] + [i + 1 for i in ids])
+        try:
+            next_id = max([int(data.get("next_id") or 1)] + [i + 1 for i in ids])
+        except (TypeError, ValueError, OverflowError):
+            raise CalibError(f"{path}: next_id must be an integer, got {data.get('next_id')!r}") from None
         view = data.get("view") or {}
         if not isinstance(view, dict):
             raise CalibError(f"{path}: 'view' must be a mapping")

@@ -168,31 +168,64 @@ def test_export_writes_complete_pairs_readable_by_core(tmp_path):
     assert load_pairs_yaml(out) == [Pair((3, 4), None, (10.5, 20.0))]
 
 
-@pytest.mark.parametrize("background", [False, True], ids=["in-the-change", "background-writer"])
-def test_session_is_saved_after_every_change_and_restored(tmp_path, background):
-    s = make_state(tmp_path, background_save=background)
+def test_every_change_is_on_disk_before_it_returns_and_restored(tmp_path):
+    s = make_state(tmp_path)
     path = tmp_path / "session.yaml"
+    journal = tmp_path / "session.yaml.journal"
     s.add_laser(3, 4)
-    s.flush_session()  # a no-op without the background writer
-    # Written already, with the incomplete pick: no click is lost.
-    data = yaml.safe_load(path.read_text())
-    assert data["pairs"] == [{"id": 1, "laser_rc": [3, 4], "laser_xyz": None, "pixel": None}]
+    # No flush, no close: a new state on the same files (what a restart after kill -9 does) has it.
+    assert ends(make_state(tmp_path)) == [(1, (3, 4), None)]
     s.add_pixel(10.25, 20.5)
     s.add_pixel(33.0, 44.0)
     s.delete(1)
     s.add_laser(7, 8)
     s.set_view(panorama=False, show_edges=True)
-    s.close()  # what the app's stop() does; flushes the background writer
-    assert not list(tmp_path.glob("*.tmp"))  # atomic write left no temporary file
+    crashed = make_state(tmp_path)
+    assert ends(crashed) == [(2, (7, 8), (33.0, 44.0))]
+    assert crashed.view_settings() == {"panorama": False, "show_edges": True}
+    s.close()  # what the app's stop() does: the YAML itself holds everything, the journal is gone
+    assert not journal.exists() and not list(tmp_path.glob("*.tmp"))
+    data = yaml.safe_load(path.read_text())
+    assert data["pairs"] == [{"id": 2, "laser_rc": [7, 8], "laser_xyz": None, "pixel": [33.0, 44.0]}]
 
-    # "Restart": a new state on the same session file.
+    # "Restart": a new state on the session file.
     t = make_state(tmp_path)
     assert ends(t) == [(2, (7, 8), (33.0, 44.0))]
     assert t.view_settings() == {"panorama": False, "show_edges": True}
     assert t.add_laser(9, 9) == 3  # ids continue after the restored ones
     assert t.pending().id == 3
+    t.close()
 
 
+def test_a_torn_journal_line_is_ignored(tmp_path):
+    s = make_state(tmp_path)
+    s.add_laser(3, 4)
+    s.add_pixel(1.0, 2.0)
+    journal = tmp_path / "session.yaml.journal"
+    whole = journal.read_bytes()
+    # Killed in the middle of writing the third change's line: that change was never acknowledged.
+    s.add_laser(5, 5)
+    third = journal.read_bytes()[len(whole):]
+    journal.write_bytes(whole + third[: len(third) // 2])
+    assert ends(make_state(tmp_path)) == [(1, (3, 4), (1.0, 2.0))]
+    # A damaged line (bit flip) fails its checksum and is skipped the same way.
+    journal.write_bytes(whole + third.replace(b"[5,5]", b"[5,6]"))
+    assert ends(make_state(tmp_path)) == [(1, (3, 4), (1.0, 2.0))]
+
+
+def test_a_change_that_cannot_be_saved_is_refused_and_not_made(tmp_path):
+    s = make_state(tmp_path)
+    s.add_laser(3, 4)
+    s.close()
+    s = make_state(tmp_path)
+    (tmp_path / "session.yaml.journal").mkdir()  # the journal cannot be written
+    v0, picks0 = s.version, s.picks
+    with pytest.raises(CalibError, match="cannot save the change.*not made"):
+        s.add_pixel(1.0, 2.0)
+    with pytest.raises(CalibError, match="not made"):
+        s.set_view(panorama=True)
+    assert s.version == v0 and s.picks == picks0 and s.view_settings() == {} and not s.can_redo
+    assert s.undo() is False  # the restored state has no history, and the refused change left none
 def test_session_accepts_a_plain_pairs_file_and_rejects_other_scenes(tmp_path):
     path = tmp_path / "session.yaml"
     save_pairs_yaml(path, [Pair((4, 5), None, (1.0, 2.0))])
@@ -210,12 +243,14 @@ def test_session_accepts_a_plain_pairs_file_and_rejects_other_scenes(tmp_path):
         make_state(tmp_path)
 
 
-def test_background_writer_file_is_always_whole_and_ends_at_the_newest_state(tmp_path):
+def test_session_yaml_is_always_whole_and_ends_at_the_newest_state(tmp_path):
+    from app import session_store
+
     path = tmp_path / "session.yaml"
-    s = make_state(tmp_path, background_save=True)
+    s = make_state(tmp_path)
     seen, stop = [], threading.Event()
 
-    def reader() -> None:  # a crash can happen at any moment: the file must always be a whole session
+    def reader() -> None:  # a crash can happen at any moment: the YAML must always be a whole session
         while not stop.is_set():
             if path.exists():
                 seen.append(yaml.safe_load(path.read_text()))
@@ -223,33 +258,31 @@ def test_background_writer_file_is_always_whole_and_ends_at_the_newest_state(tmp
     t = threading.Thread(target=reader)
     t.start()
     try:
-        for k in range(60):
+        for k in range(2 * session_store.COMPACT_RECORDS // 2 + 10):  # past the compaction threshold
             s.add_laser(1 + k % 19, k % 40)
             s.add_pixel(float(k), 2.0)
-            if k % 6 == 5:
-                s.flush_session()  # let some writes overlap the reader
+            if k % 30 == 29:
+                s.flush_session()  # let some compactions overlap the reader
     finally:
         stop.set()
         t.join()
     s.flush_session()
     final = yaml.safe_load(path.read_text())
-    assert final == s.session_dict() and len(final["pairs"]) == 60
-    seen.append(final)
-    assert all(d["format"] == "ba-calib-session" for d in seen)
+    n = session_store.COMPACT_RECORDS + 10
+    assert {k: final[k] for k in s.session_dict()} == s.session_dict() and len(final["pairs"]) == n
+    assert len(seen) > 1 and all(d["format"] == "ba-calib-session" for d in seen)
     # Never an older state after a newer one.
-    counts = [len(d["pairs"]) + (d["pairs"][-1]["pixel"] is not None if d["pairs"] else 0) for d in seen]
-    assert counts == sorted(counts)
+    assert [d["journal_seq"] for d in seen] == sorted(d["journal_seq"] for d in seen)
     s.close()
-    s.add_laser(5, 5)  # after close: saved in the change itself
-    assert len(yaml.safe_load(path.read_text())["pairs"]) == 61
+    assert ends(make_state(tmp_path)) == ends(s)
 
 
-def test_background_writer_reports_a_failed_save_and_retries(tmp_path):
+def test_a_failed_yaml_update_is_reported_retried_and_loses_nothing(tmp_path):
     errors, failed = [], threading.Event()
-    s = make_state(tmp_path, background_save=True, on_save_error=lambda msg: (errors.append(msg), failed.set()))
+    s = make_state(tmp_path, on_save_error=lambda msg: (errors.append(msg), failed.set()))
     path = tmp_path / "session.yaml"
-    path.mkdir()  # the session file cannot be replaced: writes fail
-    s.add_laser(3, 4)
+    path.mkdir()  # the session YAML cannot be replaced: compactions fail, the journal still works
+    s.add_laser(3, 4)  # accepted: it is in the journal
     assert failed.wait(10.0)
     assert str(path) in errors[0] and "cannot save the session" in errors[0] and "\n" not in errors[0]
     with pytest.raises(CalibError, match="cannot save the session"):
@@ -259,6 +292,18 @@ def test_background_writer_reports_a_failed_save_and_retries(tmp_path):
     assert yaml.safe_load(path.read_text())["pairs"] == [{"id": 1, "laser_rc": [3, 4], "laser_xyz": None,
                                                           "pixel": None}]
     s.close()
+
+
+def test_bad_session_fields_are_one_line_errors(tmp_path):
+    path = tmp_path / "session.yaml"
+    base = {"format": "ba-calib-session", "version": 1, "pairs": [{"id": 1, "laser_rc": [3, 4], "pixel": None}]}
+    for change, message in (({"version": 999}, "version 999 is not supported"),
+                            ({"next_id": "abc"}, "next_id must be an integer"),
+                            ({"pairs": [{"id": 1, "laser_rc": [3.5, 4], "pixel": None}]}, "two integers"),
+                            ({"pairs": [{"id": float("inf"), "laser_rc": [3, 4]}]}, "id must be an integer")):
+        path.write_text(yaml.safe_dump({**base, **change}))
+        with pytest.raises(CalibError, match=message):
+            make_state(tmp_path)
 
 
 def test_listeners_hear_every_change():
@@ -274,10 +319,9 @@ def test_listeners_hear_every_change():
     assert len(seen) == 6 and seen == sorted(seen)
 
 
-@pytest.mark.parametrize("background", [False, True], ids=["in-the-change", "background-writer"])
-def test_concurrent_changes_from_threads_lose_nothing(tmp_path, background):
+def test_concurrent_changes_from_threads_lose_nothing(tmp_path):
     # Two tabs = several viser callback threads changing one state.
-    s = make_state(tmp_path, background_save=background)
+    s = make_state(tmp_path)
     n_threads, per_thread = 6, 8
     barrier = threading.Barrier(n_threads)
 

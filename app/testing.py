@@ -1,0 +1,205 @@
+"""A public test driver for :class:`app.server.CalibrationApp`: act as a browser tab would, read what it shows.
+
+Tests use :class:`AppDriver` instead of the app's private members.  Every
+action goes through the same handler the viser event would reach (a click is
+a ray onto the image, queued on the app's ordered action worker) and returns
+once the app has applied it and redrawn -- that is, once the page would show
+it.  Notifications the app sends to the tab are collected.
+
+``python -m app.testing child --session PATH`` runs the app on the committed
+sample and applies one action per line read from stdin (``ba ROW COL``,
+``cam U V``, ``undo``), printing ``ack <json of the pairs>`` when the page
+would show it: the kill -9 durability test drives it.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import itertools
+import json
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import SimpleNamespace
+from typing import Any
+
+import numpy as np
+
+_CLIENT_IDS = itertools.count(10_000)
+
+
+@dataclass(eq=False)
+class FakeTab:
+    """Stands in for a viser client handle: records what the app sends to this tab."""
+
+    client_id: int = field(default_factory=lambda: next(_CLIENT_IDS))
+    notifications: list[tuple[str, str]] = field(default_factory=list)
+    downloads: list[tuple[str, bytes]] = field(default_factory=list)
+
+    def add_notification(self, title: str, body: str, **kwargs: Any) -> None:
+        self.notifications.append((str(title), str(body)))
+
+    def send_file_download(self, name: str, data: bytes, **kwargs: Any) -> None:
+        self.downloads.append((name, bytes(data)))
+
+    def atomic(self):
+        return contextlib.nullcontext()
+
+
+class AppDriver:
+    """Drive one :class:`app.server.CalibrationApp` as a user in one tab (``tab``) would."""
+
+    def __init__(self, app: Any, tab: FakeTab | None = None) -> None:
+        self.app = app
+        self.tab = tab if tab is not None else FakeTab()
+
+    # ------------------------------------------------------------------ actions
+    def _fire(self, handler: Any, event: Any) -> list[tuple[str, str]]:
+        """Deliver ``event`` to a guarded handler as viser does, wait until applied; new notifications."""
+        before = len(self.tab.notifications)
+        asyncio.run(handler(event))
+        self.app._actions.join()
+        return self.tab.notifications[before:]
+
+    def _ray(self, key: str, uv: tuple[float, float], **extra: Any) -> Any:
+        world = self.app.slots[key].world_from_pixel(np.asarray(uv, dtype=np.float64).reshape(1, 2))[0]
+        return SimpleNamespace(ray_origin=tuple(world - [0.0, 0.0, 1.0]), ray_direction=(0.0, 0.0, 1.0),
+                               client=self.tab, target=None, **extra)
+
+    def click(self, key: str, uv: tuple[float, float]) -> list[tuple[str, str]]:
+        """Click display pixel ``uv`` of image ``key`` (a BA key, ``raw`` or ``panorama``)."""
+        return self._fire(self.app._make_click_handler(key), self._ray(key, uv))
+
+    def click_cell(self, key: str, row: int, col: int) -> list[tuple[str, str]]:
+        """Click the centre of scan cell ``(row, col)`` on BA image ``key`` (it must be in the shown columns)."""
+        u, shown = self.app.ba_window.display_cols(np.array([col]))
+        if not shown[0]:
+            raise ValueError(f"column {col} is not shown")
+        return self.click(key, (float(u[0]), float(row)))
+
+    def click_camera(self, u: float, v: float) -> list[tuple[str, str]]:
+        """Click original camera pixel ``(u, v)`` in the visible camera view."""
+        key = self.camera_key
+        disp, ok = self.app._display_from_pixels(np.array([[u, v]], dtype=np.float64))
+        if not ok[0]:
+            raise ValueError(f"pixel ({u}, {v}) is not shown")
+        return self.click(key, (float(disp[0, 0]), float(disp[0, 1])))
+
+    def shift_click(self, key: str, uv: tuple[float, float]) -> list[tuple[str, str]]:
+        """Shift+click display pixel ``uv`` of image ``key`` (selects the pair whose marker is there)."""
+        return self._fire(self.app._make_select_handler(key), self._ray(key, uv))
+
+    def select_in_dropdown(self, pick_id: int | None) -> list[tuple[str, str]]:
+        """Choose a pair (or ``None``) in the "Selected pair" dropdown."""
+        # The value the tab sent (setting the handle's value from Python would fire the callback itself).
+        chosen = SimpleNamespace(value="none" if pick_id is None else f"#{pick_id}")
+        return self._fire(self.app._guard(self.app._on_select_dropdown), SimpleNamespace(client=self.tab,
+                                                                                         target=chosen))
+
+    def press_edit(self, name: str) -> list[tuple[str, str]]:
+        """Press one of the Edit buttons: ``Undo``, ``Redo``, ``Deselect``, ``Delete``."""
+        return self._fire(self.app._guard(self.app._on_edit), SimpleNamespace(client=self.tab,
+                                                                              target=SimpleNamespace(value=name)))
+
+    def upload_pairs(self, name: str, content: bytes) -> list[tuple[str, str]]:
+        """Upload a pairs file through this tab's "Import pairs YAML" button; the notifications it gave."""
+        before = len(self.tab.notifications)
+        self.app.receive_upload(self.tab, name, content, wait=True)
+        return self.tab.notifications[before:]
+
+    def wait_idle(self, timeout: float = 60.0) -> bool:
+        """Wait for the live solve and cloud work the last actions started."""
+        return self.app.wait_idle(timeout)
+
+    # ------------------------------------------------------------- for real tabs
+    def node_name(self, key: str) -> str:
+        """Scene node of image ``key`` (a BA key, ``raw`` or ``panorama``) that takes the clicks."""
+        return {"raw": "/annot/camera_raw", "panorama": "/annot/camera_pano"}.get(key, f"/annot/ba_{key}")
+
+    def click_ray(self, key: str, uv: tuple[float, float]) -> tuple[str, tuple, tuple]:
+        """``(node, ray_origin, ray_direction)`` of a click on display pixel ``uv`` of image ``key``."""
+        ev = self._ray(key, uv)
+        return self.node_name(key), ev.ray_origin, ev.ray_direction
+
+    def camera_display_pixel(self, u: float, v: float) -> tuple[float, float] | None:
+        """Where original camera pixel ``(u, v)`` is shown in the visible camera view (None: not shown)."""
+        disp, ok = self.app._display_from_pixels(np.array([[u, v]], dtype=np.float64))
+        return (float(disp[0, 0]), float(disp[0, 1])) if ok[0] else None
+
+    # ------------------------------------------------------------------ reading
+    @property
+    def camera_key(self) -> str:
+        """The camera view the page shows (``raw`` or ``panorama``)."""
+        return self.app._camera_slot().key
+
+    def marker_ids(self, key: str) -> list[int]:
+        """Pair ids whose markers are drawn on image ``key``."""
+        return list(self.app._pick_ends(key)[0])
+
+    def marker_display_pixel(self, key: str, pick_id: int) -> tuple[float, float]:
+        """Display pixel of pair ``pick_id``'s marker on image ``key``."""
+        ids, uv = self.app._pick_ends(key)
+        return tuple(float(x) for x in uv[ids.index(pick_id)])
+
+    def selection_drawn(self, key: str) -> int:
+        """Number of selection-ring line segments drawn on image ``key`` (0: no selection shown there)."""
+        entry = self.app._drawn.get(f"/annot/selected/{key}")
+        return 0 if entry is None else len(entry[1][1])
+
+    @property
+    def dropdown_value(self) -> str:
+        """What the "Selected pair" dropdown shows."""
+        return str(self.app._dd_selected.value)
+
+    @property
+    def pairs_panel(self) -> str:
+        """The text of the Pairs panel."""
+        return str(self.app._md_pairs.content)
+
+    @property
+    def result_panel(self) -> str:
+        """The text of the Calibration panel (errors, solve failures)."""
+        return str(self.app._md_result.content)
+
+
+def _picks_json(app: Any) -> str:
+    return json.dumps([p.to_dict() for p in app.state.picks], separators=(",", ":"))
+
+
+def _child(session: Path) -> int:
+    from .server import CalibrationApp
+
+    sample = Path(__file__).resolve().parents[1] / "sample_data"
+    app = CalibrationApp(sample / "scan.npz", sample / "image.png", sample / "camera.yaml", session_path=session,
+                         port=0)
+    driver = AppDriver(app)
+    print("ready " + _picks_json(app), flush=True)
+    for line in sys.stdin:
+        cmd = line.split()
+        if not cmd:
+            continue
+        try:
+            if cmd[0] == "ba":
+                notes = driver.click_cell("horizontal", int(cmd[1]), int(cmd[2]))
+            elif cmd[0] == "cam":
+                notes = driver.click_camera(float(cmd[1]), float(cmd[2]))
+            elif cmd[0] == "undo":
+                notes = driver.press_edit("Undo")
+            else:
+                break
+        except ValueError as exc:  # not shown on the page: nothing to click
+            notes = [("Not shown", str(exc))]
+        if notes:  # refused: say why (one line), the pairs are unchanged
+            print("nack " + json.dumps(notes), flush=True)
+        else:
+            print(f"ack {_picks_json(app)}", flush=True)
+    app.stop()
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover - run by the durability test as a child process
+    if len(sys.argv) == 4 and sys.argv[1] == "child" and sys.argv[2] == "--session":
+        sys.exit(_child(Path(sys.argv[3])))
+    print("usage: python -m app.testing child --session PATH", file=sys.stderr)
+    sys.exit(2)

@@ -1,0 +1,89 @@
+"""Select a pair (Shift+click or dropdown), move it, re-solve: no error (issue 11, "Broken")."""
+
+from __future__ import annotations
+
+import socket
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from app.testing import AppDriver
+from calib_core.pairs import load_pairs_yaml, save_pairs_yaml
+
+SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
+
+
+def free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+@pytest.fixture
+def driver(tmp_path):
+    from app.server import CalibrationApp
+
+    app = CalibrationApp(SAMPLE / "scan.npz", SAMPLE / "image.png", SAMPLE / "camera.yaml",
+                         session_path=tmp_path / "session.yaml", port=free_port())
+    d = AppDriver(app)
+    try:
+        pairs_file = tmp_path / "pairs.yaml"
+        save_pairs_yaml(pairs_file, load_pairs_yaml(SAMPLE / "pairs.yaml")[:6])
+        notes = d.upload_pairs("pairs.yaml", pairs_file.read_bytes())
+        assert [t for t, _ in notes] == ["Pairs imported"], notes
+        assert d.wait_idle() and app.result is not None
+        yield d
+    finally:
+        app.stop()
+
+
+def no_errors(notes):
+    return [n for n in notes if n[0] in ("Internal error", "Not accepted")] == []
+
+
+def test_shift_click_selects_shows_in_dropdown_then_move_and_resolve(driver):
+    app = driver.app
+    pid = app.state.picks[2].id
+    key = driver.camera_key
+    uv = driver.marker_display_pixel(key, pid)
+    notes = driver.shift_click(key, uv)
+    assert no_errors(notes), notes
+    assert app.state.selected == pid
+    assert driver.dropdown_value == f"#{pid}"  # the selection shows in the dropdown
+    assert f"Pair {pid} selected" in driver.pairs_panel
+    assert driver.selection_drawn(key) > 0 and driver.selection_drawn("horizontal") > 0
+    # Move its camera end 3 px right with a plain click: the pair moves, the solve reruns without error.
+    u, v = app.state.get(pid).pixel
+    before = app.result
+    notes = driver.click_camera(u + 3.0, v)
+    assert no_errors(notes), notes
+    assert driver.wait_idle()
+    assert app.state.get(pid).pixel[0] == pytest.approx(u + 3.0, abs=0.05)
+    assert len(app.state.picks) == 6  # moved, not added
+    assert app.result is not None and app.result is not before
+    assert "Solve failed" not in driver.result_panel
+    # Deselect: the ring goes, the dropdown follows.
+    assert no_errors(driver.press_edit("Deselect"))
+    assert driver.dropdown_value == "none" and driver.selection_drawn(key) == 0
+
+
+def test_dropdown_selects_and_a_ba_click_moves_the_laser_end(driver):
+    app = driver.app
+    pid = app.state.picks[4].id
+    notes = driver.select_in_dropdown(pid)
+    assert no_errors(notes), notes
+    assert app.state.selected == pid and driver.selection_drawn("vertical") > 0
+    row, col = app.state.get(pid).laser_rc
+    valid = app.depth.valid
+    new = next((r, c) for r, c in ((row, col + 1), (row + 1, col), (row, col - 1)) if valid[r, c])
+    notes = driver.click_cell("horizontal", *new)
+    assert no_errors(notes), notes
+    assert driver.wait_idle()
+    assert app.state.get(pid).laser_rc == new and len(app.state.picks) == 6
+    assert app.result is not None and "Solve failed" not in driver.result_panel
+    assert np.isfinite(app.result.mean_px)
+    # Selecting another pair by Shift+click on a BA image switches the selection.
+    other = app.state.picks[0].id
+    notes = driver.shift_click("horizontal", driver.marker_display_pixel("horizontal", other))
+    assert no_errors(notes) and app.state.selected == other and driver.dropdown_value == f"#{other}"
