@@ -180,6 +180,10 @@ def cmd_sample(args: argparse.Namespace) -> int:
 
     from calib_core.synthetic import write_sample
 
+    if args.output.exists() and not args.output.is_dir():
+        from calib_core.errors import CalibError
+
+        raise CalibError(f"{args.output}: exists and is not a folder; -o names the folder for the sample scene")
     t0 = time.perf_counter()
     print(f"Generating the synthetic scene (seed {args.seed}) into {args.output} ...", flush=True)
     write_sample(args.output, seed=args.seed)
@@ -255,7 +259,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--v-res-deg", type=float, default=None)
     _add_camera_arg(p)
     p.add_argument("--pairs", required=True, type=Path, help="pairs YAML")
-    p.add_argument("--max-pairs", type=int, default=10_000, help="refuse pairs files with more pairs than this (default 10000)")
+    p.add_argument("--max-pairs", type=int, default=2_000, help="refuse pairs files with more pairs than this (default 2000)")
     p.add_argument("--cost", choices=["angular", "pixel"], default="angular", help="angular = paper eq. 7 (default), pixel = eq. 6")
     p.add_argument("-o", "--output", required=True, type=Path, help="extrinsics YAML to write")
     p.set_defaults(func=cmd_solve)

@@ -102,7 +102,9 @@ class Pair:
 PAIR_SOURCES = ("clicked", "guided", "auto")
 
 #: Default cap on the pairs in one file (a calibration needs tens; raise with ``max_pairs``).
-MAX_PAIRS = 10_000
+MAX_PAIRS = 2_000
+#: Values (YAML scalars and collections) one pairs-file entry holds at most, with every optional field.
+VALUES_PER_PAIR = 20
 #: Largest depth-matrix row or column index accepted in ``laser_rc``.
 MAX_CELL_INDEX = 10_000_000
 #: Largest laser coordinate (metres) and pixel coordinate accepted; beyond them a value is absurd.
@@ -157,7 +159,7 @@ def load_pairs_yaml(path: str | os.PathLike, max_pairs: int = MAX_PAIRS) -> list
     path = Path(path)
     hint = f"the cap is {max_pairs:,} pairs (raise it with --max-pairs)"
     data = read_yaml_mapping(
-        path, "pairs file", max_bytes=(1 << 20) + 1024 * max_pairs, max_values=1000 + 40 * max_pairs, limit_hint=hint
+        path, "pairs file", max_bytes=(1 << 20) + 512 * max_pairs, max_values=1000 + VALUES_PER_PAIR * max_pairs, limit_hint=hint
     )
     entries = data.get("pairs")
     if entries is None:

@@ -325,7 +325,7 @@ class OCamCamera:
 
         def take_count(what: str) -> int:
             (n,) = take(1, f"the length of {what}")
-            if not (n == int(n) and 1 <= n <= 100):
+            if not (1 <= n <= 100 and n == int(n)):  # NaN fails the range test first
                 raise CalibError(f"{path}: bad length {n!r} of {what}")
             return int(n)
 

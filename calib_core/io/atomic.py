@@ -151,8 +151,13 @@ def _unlink_quietly(path: str | os.PathLike) -> None:
 def _process_start_time() -> float:
     """Wall-clock start of this process (Linux ``/proc``), else the import time of this module."""
     try:
-        return os.stat(f"/proc/{os.getpid()}").st_ctime
-    except OSError:
+        with open("/proc/self/stat", "rb") as f:
+            # Field 22, after the ")" that ends the command name: start time in clock ticks since boot.
+            ticks = int(f.read().rsplit(b")", 1)[1].split()[19])
+        with open("/proc/stat", "rb") as f:
+            boot = next(int(line.split()[1]) for line in f if line.startswith(b"btime "))
+        return boot + ticks / os.sysconf("SC_CLK_TCK")
+    except (OSError, ValueError, IndexError, StopIteration):
         return _IMPORT_TIME
 
 

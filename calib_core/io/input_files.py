@@ -16,9 +16,8 @@ from ..errors import CalibError
 
 #: Size limits in bytes, per kind of file (far above any real file of that kind).
 MAX_CAMERA_BYTES = 1 << 20
-MAX_PAIRS_BYTES = 16 << 20
-MAX_EXTRINSICS_BYTES = 32 << 20
-MAX_SESSION_BYTES = 16 << 20
+MAX_EXTRINSICS_BYTES = 16 << 20
+MAX_SESSION_BYTES = 8 << 20
 
 
 def _kind(mode: int) -> str:

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..errors import CalibError
-from ..pairs import MAX_COORDINATE_M, MAX_PAIRS, MAX_PIXEL, parse_laser_rc
+from ..pairs import MAX_COORDINATE_M, MAX_PAIRS, MAX_PIXEL, VALUES_PER_PAIR, parse_laser_rc
 from .input_files import MAX_SESSION_BYTES
 from .yaml_files import finite_vector, read_yaml_mapping
 
@@ -127,4 +127,4 @@ def parse_session(data: dict[str, Any], where: str, max_pairs: int = MAX_PAIRS) 
 
 def read_session_mapping(path: str | os.PathLike) -> dict[str, Any]:
     """The mapping in a session file, read within the session size limits (see :mod:`calib_core.io.yaml_files`)."""
-    return read_yaml_mapping(path, "session file", max_bytes=MAX_SESSION_BYTES, max_values=1000 + 40 * MAX_PAIRS)
+    return read_yaml_mapping(path, "session file", max_bytes=MAX_SESSION_BYTES, max_values=1000 + VALUES_PER_PAIR * MAX_PAIRS)
