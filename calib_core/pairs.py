@@ -114,7 +114,7 @@ MAX_PIXEL = 1e7
 
 def parse_laser_rc(value: Any, where: str) -> tuple[int, int]:
     """A ``laser_rc`` value: two whole numbers in [0, MAX_CELL_INDEX] (fractions refused, not truncated)."""
-    rc = finite_vector(value, 2, where)
+    rc = finite_vector(value, 2, where, max_abs=float("inf"))
     if any(v != int(v) or not 0 <= v <= MAX_CELL_INDEX for v in rc):
         raise CalibError(f"{where}: expected two whole numbers from 0 to {MAX_CELL_INDEX:,}, got {value!r}")
     return int(rc[0]), int(rc[1])

@@ -59,7 +59,7 @@ def _short(value: Any) -> str:
 
 
 # -- checking numbers from user files ---------------------------------------------
-def _numeric_array(value: Any, name: str) -> np.ndarray:
+def _numeric_array(value: Any, name: str, max_abs: float = MAX_PARAM) -> np.ndarray:
     try:
         arr = np.asarray(value)
     except (ValueError, TypeError, OverflowError, RecursionError):
@@ -69,8 +69,8 @@ def _numeric_array(value: Any, name: str) -> np.ndarray:
     arr = arr.astype(np.float64)
     if not np.all(np.isfinite(arr)):
         raise CalibError(f"{name}: numbers must be finite, got {_short(arr.tolist())}")
-    if np.any(np.abs(arr) > MAX_PARAM):
-        raise CalibError(f"{name}: numbers must be at most {MAX_PARAM:g} in size, got {_short(arr.tolist())}")
+    if np.any(np.abs(arr) > max_abs):
+        raise CalibError(f"{name}: numbers must be at most {max_abs:g} in size, got {_short(arr.tolist())}")
     return arr
 
 
@@ -109,7 +109,10 @@ def param_image_size(width: Any, height: Any) -> tuple[int, int]:
     for name, value in (("width", width), ("height", height)):
         if isinstance(value, bool):
             raise CalibError(f"{name} must be a positive integer, got {value!r}")
-        v = param_float(value, name)
+        arr = _numeric_array(value, name, max_abs=float("inf"))
+        if arr.ndim != 0:
+            raise CalibError(f"{name} must be a positive integer, got {_short(value)}")
+        v = float(arr)
         if v <= 0 or v != int(v):
             raise CalibError(f"{name} must be a positive integer, got {_short(value)}")
         if v > MAX_IMAGE_SIDE:
