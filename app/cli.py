@@ -164,10 +164,11 @@ def cmd_colorize(args: argparse.Namespace) -> int:
     from calib_core.io.images import load_image_rgb
     from calib_core.overlays import colorize_points, export_colored_ply
 
-    depth = load_scan_from_args(args)
+    # Small files first: a mistake in one of them is reported before the scan is loaded.
+    T = load_extrinsics_yaml(args.extrinsics)["T_camera_lidar"]
     camera = load_camera_from_args(args)
     image = load_image_rgb(args.image)
-    T = load_extrinsics_yaml(args.extrinsics)["T_camera_lidar"]
+    depth = load_scan_from_args(args)
     points, _ = depth.valid_points()
     colors, has_color = colorize_points(points, image, camera, T, occlusion=not args.no_occlusion)
     export_colored_ply(args.output, points, colors, has_color)

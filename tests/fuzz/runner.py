@@ -34,6 +34,7 @@ PRELOAD = (
     "numpy", "scipy.optimize", "scipy.spatial", "cv2", "yaml", "trimesh", "PIL.Image",
     "app.cli", "calib_core.cameras", "calib_core.pairs", "calib_core.io.extrinsics", "calib_core.io.images",
     "calib_core.io.scan_readers", "calib_core.solve", "calib_core.bearing_angle", "calib_core.overlays",
+    "app.server",  # viser: serve cases (sessions) would otherwise spend seconds importing it
 )
 
 #: Text kept of a child's stdout / stderr.
