@@ -322,6 +322,21 @@ def check_args(args: argparse.Namespace) -> None:
         bad("--max-pairs", max_pairs, "a number of pairs from 1 to 10,000,000")
 
 
+def _check_serve_files(args: argparse.Namespace) -> None:
+    """``serve`` runs until stopped: a session it cannot restore, or an output it may not replace,
+    is reported now, in one line, rather than after the scene has loaded or at the first Export."""
+    if args.command != "serve":
+        return
+    from calib_core.io.atomic import output_target
+    from calib_core.io.session_file import check_session_file
+
+    if args.session is not None:
+        check_session_file(args.session)
+        output_target(args.session)
+    if args.output is not None:
+        output_target(args.output)
+
+
 def _remove_stale_temp_files(args: argparse.Namespace) -> None:
     """Temporary files of interrupted writes, next to this command's outputs, from an earlier run."""
     from calib_core.io.atomic import remove_stale_temp_files
@@ -418,6 +433,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     noise = _Noise()
     try:
         check_args(args)
+        _check_serve_files(args)
         _remove_stale_temp_files(args)
         if args.command == "serve":  # long-running: its warnings and logs go out live
             return int(args.func(args) or 0)

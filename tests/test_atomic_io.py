@@ -1,6 +1,7 @@
 """Outputs never destroy what they replace: devices, FIFOs, folders and links (calib_core.io.atomic).
 
-These tests run as root on CI, where /dev/full is a real device node that a rename would replace.
+Device cases use a private node of /dev/full's device (made with mknod, as root): a regression must not
+replace the machine's own /dev/full, as the code before this test did.
 """
 
 from __future__ import annotations
@@ -25,14 +26,25 @@ def _no_temp_files(folder: Path) -> bool:
     return not [p for p in folder.iterdir() if p.name.startswith(TEMP_PREFIX)]
 
 
-@pytest.mark.skipif(not Path("/dev/full").exists(), reason="no /dev/full on this system")
+def _full_device(folder: Path) -> Path:
+    """A private node of /dev/full's device (1, 7): a regression here must not replace the machine's own."""
+    node = folder / "full"
+    try:
+        os.mknod(node, 0o666 | stat.S_IFCHR, os.makedev(1, 7))
+    except OSError as exc:
+        pytest.skip(f"cannot make a device node here ({exc.strerror}); needs root")
+    return node
+
+
 def test_a_device_is_refused_and_left_a_device(tmp_path):
-    before = os.stat("/dev/full")
+    full = _full_device(tmp_path)
+    before = os.stat(full)
     with pytest.raises(CalibError) as err:
-        write_bytes_atomic("/dev/full", b"x")
-    assert str(err.value).startswith("/dev/full: is a device")
-    after = os.stat("/dev/full")
+        write_bytes_atomic(full, b"x")
+    assert str(err.value).startswith(f"{full}: is a device")
+    after = os.stat(full)
     assert stat.S_ISCHR(after.st_mode) and after.st_rdev == before.st_rdev and after.st_ino == before.st_ino
+    assert _no_temp_files(tmp_path)
 
 
 def test_a_fifo_is_refused_without_blocking(tmp_path):
@@ -77,12 +89,13 @@ def test_a_chain_of_links_and_a_dangling_link(tmp_path):
 
 
 def test_a_link_to_a_device_is_refused_and_names_both(tmp_path):
+    full = _full_device(tmp_path)
     link = tmp_path / "out.yaml"
-    link.symlink_to("/dev/null")
+    link.symlink_to(full)
     with pytest.raises(CalibError) as err:
         write_bytes_atomic(link, b"x")
-    assert str(err.value).startswith(f"{link}: is a device (via the link to /dev/null)")
-    assert link.is_symlink()
+    assert str(err.value).startswith(f"{link}: is a device (via the link to {full})")
+    assert link.is_symlink() and stat.S_ISCHR(os.stat(full).st_mode)
 
 
 def test_a_link_loop_is_a_one_line_error(tmp_path):
@@ -159,16 +172,16 @@ def test_the_cli_removes_stale_temp_files_next_to_its_output(tmp_path):
     assert (tmp_path / "e.yaml").is_file()
 
 
-@pytest.mark.skipif(not Path("/dev/full").exists(), reason="no /dev/full on this system")
-def test_the_cli_refuses_dev_full_in_one_line():
+def test_the_cli_refuses_a_device_in_one_line(tmp_path):
+    full = _full_device(tmp_path)
     proc = subprocess.run(
         [sys.executable, "-m", "app.cli", "solve", "--scan", str(SAMPLE / "scan.npz"), "--camera", str(SAMPLE / "camera.yaml"),
-         "--pairs", str(SAMPLE / "pairs.yaml"), "-o", "/dev/full"],
+         "--pairs", str(SAMPLE / "pairs.yaml"), "-o", str(full)],
         capture_output=True, text=True, timeout=300, cwd=REPO,
     )
     assert proc.returncode == 2
-    assert proc.stderr.splitlines() == ["error: /dev/full: is a device; refusing to write over anything but a regular file"]
-    assert stat.S_ISCHR(os.stat("/dev/full").st_mode)
+    assert proc.stderr.splitlines() == [f"error: {full}: is a device; refusing to write over anything but a regular file"]
+    assert stat.S_ISCHR(os.stat(full).st_mode)
 
 
 def test_ba_images_into_an_existing_file_is_one_line(tmp_path):

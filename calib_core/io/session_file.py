@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from ..errors import CalibError
@@ -128,3 +129,27 @@ def parse_session(data: dict[str, Any], where: str, max_pairs: int = MAX_PAIRS) 
 def read_session_mapping(path: str | os.PathLike) -> dict[str, Any]:
     """The mapping in a session file, read within the session size limits (see :mod:`calib_core.io.yaml_files`)."""
     return read_yaml_mapping(path, "session file", max_bytes=MAX_SESSION_BYTES, max_values=1000 + VALUES_PER_PAIR * MAX_PAIRS)
+
+
+def check_session_file(path: str | os.PathLike) -> None:
+    """Check what the app would restore from ``path``, before it starts.
+
+    Nothing to check when ``path`` does not exist (a new session).  A file
+    saying ``format: ba-calib-session`` must pass :func:`parse_session`; any
+    other file is read as a plain pairs file (the app starts from its pairs).
+
+    Raises
+    ------
+    CalibError
+        The file cannot be restored; one line naming it.
+    """
+    from ..pairs import load_pairs_yaml
+
+    path = Path(path)
+    if not path.exists():
+        return
+    data = read_session_mapping(path)
+    if is_session(data):
+        parse_session(data, str(path))
+    else:
+        load_pairs_yaml(path)

@@ -18,6 +18,7 @@ from __future__ import annotations
 import json
 import os
 import random
+import stat
 from pathlib import Path
 
 import numpy as np
@@ -579,22 +580,36 @@ def make_cases(folder: Path) -> list[FuzzCase]:
     fifo = out_dir / "fifo.yaml"
     if not fifo.exists():
         os.mkfifo(fifo)
-    for name, target in (("link_to_dev_full.yaml", "/dev/full"), ("link_to_folder.yaml", str(out_dir)),
+    # Private device nodes (same numbers as /dev/full and /dev/null): code that wrongly replaces
+    # its output must not replace the machine's own devices.  mknod needs root; else no device cases.
+    devices = {}
+    for name, (major, minor) in (("full", (1, 7)), ("null", (1, 3))):
+        node = out_dir / f"dev_{name}"
+        try:
+            if not node.exists():
+                os.mknod(node, 0o666 | stat.S_IFCHR, os.makedev(major, minor))
+            devices[name] = str(node)
+        except OSError:
+            pass
+    for name, target in (("link_to_dev_full.yaml", devices.get("full", "/nonexistent")), ("link_to_folder.yaml", str(out_dir)),
                          ("link_loop_a.yaml", "link_loop_b.yaml"), ("link_loop_b.yaml", "link_loop_a.yaml")):
         if not (out_dir / name).is_symlink():
             (out_dir / name).symlink_to(target)
     ok_solve = (cam_path["ocam_yaml"], pairs_path["ocam_yaml"])
+    outputs = {f"dev_{name}": node for name, node in devices.items()}
+    if "full" in devices:
+        outputs["link_to_dev_full"] = str(out_dir / "link_to_dev_full.yaml")
     for label, out in {
-        "dev_full": "/dev/full", "dev_null": "/dev/null", "folder": str(out_dir), "fifo": str(fifo),
-        "link_to_dev_full": str(out_dir / "link_to_dev_full.yaml"), "link_to_folder": str(out_dir / "link_to_folder.yaml"),
+        **outputs, "folder": str(out_dir), "fifo": str(fifo), "link_to_folder": str(out_dir / "link_to_folder.yaml"),
         "link_loop": str(out_dir / "link_loop_a.yaml"), "parent_is_file": str(a_file / "x.yaml"),
         "name_too_long": "x" * 300 + ".yaml", "empty_path": "", "new_nested_folders": "a/b/c/out.yaml",
         "undecodable_name": "out-\udcff\udcfe.yaml", "proc_file": "/proc/self/status", "root_folder": "/",
     }.items():
         add(f"output/solve/{label}", solve(*ok_solve, out=out))
     add("output/ba_images/existing_file", ["ba-images", "--scan", scan, "-o", str(a_file)])
-    add("output/ba_images/dev_null", ["ba-images", "--scan", scan, "-o", "/dev/null"])
-    add("output/colorize/dev_full", colorize(gt, out="/dev/full"))
+    if devices:
+        add("output/ba_images/dev_null", ["ba-images", "--scan", scan, "-o", devices.get("null", devices.get("full"))])
+        add("output/colorize/dev_full", colorize(gt, out=devices.get("full", devices.get("null"))))
     add("output/colorize/folder", colorize(gt, out=str(out_dir)))
     add("output/sample/existing_file", ["sample", "-o", str(a_file)])
 
