@@ -263,3 +263,35 @@ def test_bad_sessions_are_one_line_errors(changes, fragment):
     with pytest.raises(CalibError, match=fragment) as err:
         parse_session(_session(**changes), "s.yaml")
     assert str(err.value).startswith("s.yaml") and "\n" not in str(err.value)
+
+
+def test_serve_refuses_a_session_it_cannot_restore_before_loading_the_scene(tmp_path):
+    import subprocess
+    import sys
+
+    session = tmp_path / "s.yaml"
+    session.write_text(yaml.safe_dump(_session(version=999)))
+    proc = subprocess.run(
+        [sys.executable, "-m", "app.cli", "serve", "--scan", str(tmp_path / "no-scan.npz"), "--image", str(tmp_path / "no.png"),
+         "--camera", str(tmp_path / "no.yaml"), "--session", str(session), "--port", "0"],
+        capture_output=True, text=True, timeout=120, cwd=REPO,
+    )
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr.splitlines() == [f"error: {session}: session version 999 is newer than this ba-calib reads (1); update ba-calib"]
+
+
+def test_check_session_file_reads_sessions_and_plain_pairs_files(tmp_path):
+    from calib_core.io.session_file import check_session_file
+
+    check_session_file(tmp_path / "new.yaml")  # a new session: nothing to check
+    good = tmp_path / "good.yaml"
+    good.write_text(yaml.safe_dump(_session()))
+    check_session_file(good)
+    pairs = tmp_path / "pairs.yaml"
+    pairs.write_text(yaml.safe_dump({"pairs": [{"laser_rc": [True, False], "pixel": [1.0, 2.0]}]}))
+    with pytest.raises(CalibError, match="laser_rc"):
+        check_session_file(pairs)
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(yaml.safe_dump(_session(next_id="abc")))
+    with pytest.raises(CalibError, match="next_id"):
+        check_session_file(bad)
