@@ -260,7 +260,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--v-res-deg", type=float, default=None)
     _add_camera_arg(p)
     p.add_argument("--pairs", required=True, type=Path, help="pairs YAML")
-    p.add_argument("--max-pairs", type=int, default=2_000, help="refuse pairs files with more pairs than this (default 2000)")
+    p.add_argument("--max-pairs", type=int, default=1_000, help="refuse pairs files with more pairs than this (default 1000)")
     p.add_argument("--cost", choices=["angular", "pixel"], default="angular", help="angular = paper eq. 7 (default), pixel = eq. 6")
     p.add_argument("-o", "--output", required=True, type=Path, help="extrinsics YAML to write")
     p.set_defaults(func=cmd_solve)

@@ -102,7 +102,7 @@ class Pair:
 PAIR_SOURCES = ("clicked", "guided", "auto")
 
 #: Default cap on the pairs in one file (a calibration needs tens; raise with ``max_pairs``).
-MAX_PAIRS = 2_000
+MAX_PAIRS = 1_000
 #: Values (YAML scalars and collections) one pairs-file entry holds at most, with every optional field.
 VALUES_PER_PAIR = 20
 #: Largest depth-matrix row or column index accepted in ``laser_rc``.

@@ -27,7 +27,6 @@ import numpy as np
 
 from .. import __version__
 from ..errors import CalibError
-from ..pairs import MAX_PAIRS
 from ..transforms import R_from_quat_xyzw, R_from_rpy_deg, make_T, quat_xyzw_from_R, rpy_deg_from_R
 from .atomic import write_yaml_atomic
 from .input_files import MAX_EXTRINSICS_BYTES
@@ -191,8 +190,9 @@ def load_extrinsics_yaml(path: str | os.PathLike) -> dict[str, Any]:
         The original block is kept under ``"T_camera_lidar_block"``.
     """
     path = Path(path)
-    # The file repeats the solved pairs and their residuals: about 25 values per pair.
-    doc = read_yaml_mapping(path, "extrinsics file", max_bytes=MAX_EXTRINSICS_BYTES, max_values=1000 + 25 * MAX_PAIRS)
+    # The file repeats the solved pairs and their residuals (about 25 values per pair): the default
+    # 100,000 values hold about 4,000 pairs.
+    doc = read_yaml_mapping(path, "extrinsics file", max_bytes=MAX_EXTRINSICS_BYTES)
     if "T_camera_lidar" not in doc:
         raise CalibError(f"{path}: missing top-level key 'T_camera_lidar'")
     block = doc["T_camera_lidar"]

@@ -310,13 +310,13 @@ def _pairs_texts(good: list[dict], many_good: list[dict]) -> dict[str, str]:
 
     # Big files written as text: yaml.safe_dump of 100,000 entries takes seconds.
     many = "pairs:\n" + "".join(f"- laser_xyz: [{1.0 + i * 1e-3}, 2.0, 3.0]\n  pixel: [100.0, 100.0]\n" for i in range(100_000))
-    same = "pairs:\n" + f"- laser_xyz: {xyz}\n  pixel: {px}\n" * 2_000
+    same = "pairs:\n" + f"- laser_xyz: {xyz}\n  pixel: {px}\n" * 1_000
     over_cap = same + f"- laser_xyz: {xyz}\n  pixel: {px}\n"
     # 200 distinct pairs spread over the image with no pose behind them: all wrong, none repeated.
     random_200 = "pairs:\n" + "".join(
         f"- laser_xyz: [{5 + (i % 7)}.0, {(i % 20) * 0.5 - 5:.1f}, {(i // 20) * 0.5 - 2.5:.1f}]\n  pixel: [{20 + (i * 37) % 600}.5, {20 + (i * 53) % 440}.25]\n"
         for i in range(200))
-    # The cap: 2,000 exact pairs (as many as automatic proposals could make).
+    # The cap: 1,000 exact pairs (as many as automatic proposals could make).
     at_cap = "pairs:\n" + "".join(f"- laser_xyz: {p['laser_xyz']}\n  pixel: {p['pixel']}\n" for p in many_good)
     return {
         "laser_rc_bools": with_first(laser_xyz=None, laser_rc=[True, False]),
@@ -358,10 +358,10 @@ def _pairs_texts(good: list[dict], many_good: list[dict]) -> dict[str, str]:
         "collinear_points": _dump({"pairs": [dict(p, laser_xyz=[1.0 + i, 2.0 + i, 3.0 + i]) for i, p in enumerate(good)]}),
         "coplanar_4": _dump({"pairs": [dict(p, laser_xyz=[x, y, 0.0]) for p, (x, y) in zip(good, [(5, 1), (5, -1), (6, 1), (6, -1)])]}),
         "swapped_pixels": _dump({"pairs": [dict(p, pixel=q["pixel"]) for p, q in zip(good, good[::-1])]}),
-        "pairs_2000_at_cap": at_cap,
+        "pairs_1000_at_cap": at_cap,
         "pairs_200_random": random_200,
-        "pairs_2000_identical": same,
-        "pairs_2001_over_cap": over_cap,
+        "pairs_1000_identical": same,
+        "pairs_1001_over_cap": over_cap,
         "pairs_100k": many,
         "pairs_100k_flow": "pairs: [" + ", ".join("{laser_xyz: [1, 2, 3], pixel: [1, 2]}" for _ in range(100_000)) + "]\n",
         "pairs_alias_bomb": "p: &p {laser_xyz: [1, 2, 3], pixel: [100, 100]}\nq: &q [" + ", ".join(["*p"] * 900) + "]\npairs: " + "[" + ", ".join(["*p"] * 900) + "]\n",
@@ -550,7 +550,7 @@ def make_cases(folder: Path) -> list[FuzzCase]:
         add(f"camera_json/{label}", solve(p, pairs_path["pjlab_json"]))
     pairs_dir = folder / "pairs"
     pairs_dir.mkdir(exist_ok=True)
-    many_good = _pairs_for(cam_path["ocam_yaml"], rng, 2_000)
+    many_good = _pairs_for(cam_path["ocam_yaml"], rng, 1_000)
     for label, text in _pairs_texts(good_pairs, many_good).items():
         p = pairs_dir / f"{label}.yaml"
         p.write_text(text)
