@@ -32,6 +32,11 @@ def _kind(mode: int) -> str:
     return "not a regular file"
 
 
+def with_article(what: str) -> str:
+    """``what`` with its indefinite article ("a camera file", "an extrinsics file")."""
+    return f"{'an' if what[:1].lower() in 'aeiou' else 'a'} {what}"
+
+
 def _size_text(n: int) -> str:
     return f"{n / (1 << 20):.3g} MiB" if n >= 1 << 20 else f"{n} bytes"
 
@@ -68,11 +73,11 @@ def check_input_file(path: str | os.PathLike, what: str, max_bytes: int, hint: s
 
 def _check_stat(path: Path, st: os.stat_result, what: str, max_bytes: int, hint: str = "") -> None:
     if stat.S_ISDIR(st.st_mode):
-        raise CalibError(f"{path}: is a folder, expected a {what}")
+        raise CalibError(f"{path}: is a folder, expected {with_article(what)}")
     if not stat.S_ISREG(st.st_mode):
-        raise CalibError(f"{path}: is {_kind(st.st_mode)}, expected a {what} (a regular file)")
+        raise CalibError(f"{path}: is {_kind(st.st_mode)}, expected {with_article(what)} (a regular file)")
     if st.st_size > max_bytes:
-        raise CalibError(f"{path}: {_size_text(st.st_size)} is too large for a {what} (at most {_size_text(max_bytes)}){'; ' + hint if hint else ''}")
+        raise CalibError(f"{path}: {_size_text(st.st_size)} is too large for {with_article(what)} (at most {_size_text(max_bytes)}){'; ' + hint if hint else ''}")
 
 
 def read_input_bytes(path: str | os.PathLike, what: str, max_bytes: int, hint: str = "") -> bytes:
@@ -103,7 +108,7 @@ def read_input_bytes(path: str | os.PathLike, what: str, max_bytes: int, hint: s
     finally:
         os.close(fd)
     if total > max_bytes:
-        raise CalibError(f"{path}: grew beyond {_size_text(max_bytes)} while being read; too large for a {what}")
+        raise CalibError(f"{path}: grew beyond {_size_text(max_bytes)} while being read; too large for {with_article(what)}")
     return b"".join(chunks)
 
 
@@ -113,4 +118,4 @@ def read_input_text(path: str | os.PathLike, what: str, max_bytes: int, hint: st
     try:
         return data.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
-        raise CalibError(f"{Path(path)}: not a UTF-8 text {what} (byte {exc.start} is 0x{data[exc.start]:02x})") from None
+        raise CalibError(f"{Path(path)}: not UTF-8 text, expected {with_article(what)} (byte {exc.start} is 0x{data[exc.start]:02x})") from None

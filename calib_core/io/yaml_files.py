@@ -21,7 +21,7 @@ import numpy as np
 import yaml
 
 from ..errors import CalibError
-from .input_files import read_input_text
+from .input_files import read_input_text, with_article
 
 #: Deepest nesting of lists/mappings accepted (real files nest fewer than 10 levels).
 MAX_DEPTH = 64
@@ -140,7 +140,7 @@ def read_yaml_mapping(
     text = read_input_text(path, what, max_bytes, limit_hint)
     data = parse_yaml_text(text, str(path), max_values, limit_hint)
     if not isinstance(data, dict):
-        raise CalibError(f"{path}: expected a YAML mapping for a {what}, got {type(data).__name__}")
+        raise CalibError(f"{path}: expected a YAML mapping for {with_article(what)}, got {type(data).__name__}")
     return data
 
 
