@@ -69,3 +69,50 @@ def test_an_output_name_with_undecodable_bytes_is_written_and_printed(tmp_path):
 def test_a_clean_run_prints_nothing_on_stderr(tmp_path):
     proc = run_cli("ba-images", "--scan", str(SAMPLE / "scan.npz"), "-o", str(tmp_path / "ba"))
     assert proc.returncode == 0 and proc.stderr == b""
+
+
+# main() itself, with a stand-in command: what it does with library noise and with the errors that
+# input can provoke deep inside a library (RecursionError, MemoryError).
+import warnings  # noqa: E402
+
+import pytest  # noqa: E402
+
+import app.cli as cli  # noqa: E402
+from calib_core.errors import CalibError  # noqa: E402
+
+
+def _noisy_command(outcome):
+    def command(args):
+        warnings.warn("a library is unhappy", UserWarning)
+        os.write(2, b"libfoo warning: written straight to fd 2\n")  # as libpng does, past sys.stderr
+        if isinstance(outcome, BaseException):
+            raise outcome
+        print("result")
+        return 0
+
+    return command
+
+
+def test_noise_is_folded_into_the_error_line(monkeypatch, capfd):
+    monkeypatch.setattr(cli, "cmd_ba_images", _noisy_command(CalibError("x.pcd: no valid point")))
+    assert cli.main(["ba-images", "--scan", "x.pcd", "-o", "out"]) == 2
+    out, err = capfd.readouterr()
+    assert err == ("error: x.pcd: no valid point [libraries said: UserWarning: a library is unhappy; "
+                   "libfoo warning: written straight to fd 2]\n")
+
+
+def test_noise_of_a_successful_command_follows_as_warnings(monkeypatch, capfd):
+    monkeypatch.setattr(cli, "cmd_ba_images", _noisy_command(None))
+    assert cli.main(["ba-images", "--scan", "x.pcd", "-o", "out"]) == 0
+    out, err = capfd.readouterr()
+    assert out == "result\n"
+    assert err == "warning: UserWarning: a library is unhappy\nwarning: libfoo warning: written straight to fd 2\n"
+
+
+@pytest.mark.parametrize("exc, text", [(RecursionError("maximum recursion depth exceeded"), "nested too deeply"),
+                                       (MemoryError(), "out of memory")])
+def test_recursion_and_memory_errors_are_one_line(monkeypatch, capfd, exc, text):
+    monkeypatch.setattr(cli, "cmd_ba_images", _noisy_command(exc))
+    assert cli.main(["ba-images", "--scan", "x.pcd", "-o", "out"]) == 2
+    err = capfd.readouterr().err
+    assert len(err.splitlines()) == 1 and err.startswith("error: ") and text in err
