@@ -1,7 +1,8 @@
 """The fuzz corpus: every case of every ``tests/fuzz/cases_*.py`` module keeps the rules.
 
 Each case runs as ``python -m app.cli ARGV`` in a process forked from a worker that has imported the
-package (tests/fuzz/runner.py), two workers at a time.  A case must end in exit 0 (or 3 from solve: a
+package (tests/fuzz/runner.py), three workers at a time (two cores, plus one to fill the waits on
+fsync and on the polling of the others).  A case must end in exit 0 (or 3 from solve: a
 result marked unreliable), or exit 2 with exactly one ``error:`` line on stderr; never a traceback;
 within 10 s and 1 GiB peak RSS.  ``python -m tests.fuzz.generate OUT --run`` does the same by hand.
 """
@@ -25,7 +26,7 @@ def test_every_fuzz_case_ends_cleanly(tmp_path):
     kinds = Counter("mutation" if "/mutation/" in f"/{c.name}" else "hostile" for c in cases)
     modules = [m.__name__.rsplit(".", 1)[1] for m in case_modules()]
     assert "cases_config" in modules
-    results = run_cases(cases, tmp_path / "runs", workers=2, timeout=TIME_LIMIT_S, rss_limit_mb=RSS_LIMIT_MB)
+    results = run_cases(cases, tmp_path / "runs", workers=3, timeout=TIME_LIMIT_S, rss_limit_mb=RSS_LIMIT_MB)
     failures = [f"{r.name}: {why}" for r in results if (why := check_result(r))]
     codes = Counter(r.returncode for r in results)
     slowest = max(results, key=lambda r: r.seconds)

@@ -94,7 +94,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m tests.fuzz.generate", description=__doc__.splitlines()[0])
     ap.add_argument("folder", type=Path, help="where the corpus is written")
     ap.add_argument("--run", action="store_true", help="run every case and report the failures")
-    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--workers", type=int, default=3)
     ap.add_argument("--only", default="", help="run only cases whose name contains this")
     args = ap.parse_args(argv)
     cases = build_corpus(args.folder)
