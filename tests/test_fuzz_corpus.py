@@ -9,6 +9,8 @@ within 10 s and 1 GiB peak RSS.  ``python -m tests.fuzz.generate OUT --run`` doe
 
 from __future__ import annotations
 
+import os
+import subprocess
 import sys
 from collections import Counter
 from pathlib import Path
@@ -40,3 +42,20 @@ def test_every_fuzz_case_ends_cleanly(tmp_path):
     # The config cases alone: the rest of the target (300 hostile, 50 mutations) comes with the scan cases.
     config = Counter("mutation" if "/mutation/" in c.name else "hostile" for c in cases if c.name.startswith("config/"))
     assert config["hostile"] >= 300 and config["mutation"] >= 50, config
+
+
+def test_forked_cases_end_as_real_processes_do(tmp_path):
+    """The fork server is a shortcut: a few cases run both ways must end the same."""
+    wanted = ("config/valid/pinhole_yaml", "config/camera_yaml/generic/fifo", "config/pairs/generic/dev_zero",
+              "config/camera_json/generic/json_deep_100k", "config/pairs/generic/billion_laughs",
+              "config/args/solve/image_size_1e9", "config/output/solve/folder")
+    cases = [c for c in build_corpus(tmp_path / "corpus") if c.name in wanted]
+    assert len(cases) == len(wanted)
+    forked = run_cases(cases, tmp_path / "runs", workers=2, timeout=60.0, rss_limit_mb=RSS_LIMIT_MB)
+    for case, result in zip(cases, forked):
+        work = tmp_path / "real" / case.name.replace("/", "_")
+        work.mkdir(parents=True)
+        real = subprocess.run([sys.executable, "-m", "app.cli", *case.argv], capture_output=True, timeout=120, cwd=work,
+                              env={**os.environ, "PYTHONPATH": str(REPO)})
+        assert result.returncode == real.returncode, case.name
+        assert result.stderr == real.stderr.decode("utf-8", "replace"), case.name
