@@ -346,8 +346,10 @@ def _remove_stale_temp_files(args: argparse.Namespace) -> None:
         if path is None:
             continue
         path = Path(path)
-        folder = path if path.is_dir() else path.parent
-        remove_stale_temp_files(folder)
+        if path.is_dir():
+            remove_stale_temp_files(path)
+        else:  # also what older versions left: .NAME.XXXXXXXX.tmp
+            remove_stale_temp_files(path.parent, legacy_for=[path.name])
 
 
 class _Noise:

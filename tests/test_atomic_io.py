@@ -148,12 +148,15 @@ def test_stale_temp_files_of_dead_processes_are_removed(tmp_path):
     os.utime(in_flight, (old, old))
     young = tmp_path / f"{TEMP_PREFIX}{dead_pid}-new"
     young.write_text("written after this process started")
-    unrelated = tmp_path / ".session.yaml.abc.tmp"
-    unrelated.write_text("not ours")
+    unrelated = tmp_path / ".notes.txt.abcd1234.tmp"
+    unrelated.write_text("another program's temporary file")
     os.utime(unrelated, (old, old))
+    legacy = tmp_path / ".session.yaml.k3j_9xq2.tmp"  # what the code before this left behind
+    legacy.write_text("half a session")
+    os.utime(legacy, (old, old))
     alive = os.path.exists(f"/proc/{dead_pid}")
-    removed = remove_stale_temp_files(tmp_path)
-    assert removed == ([] if alive else [stale])
+    removed = remove_stale_temp_files(tmp_path, legacy_for=["session.yaml"])
+    assert sorted(removed) == sorted([legacy] + ([] if alive else [stale]))
     assert in_flight.exists() and young.exists() and unrelated.exists()
 
 

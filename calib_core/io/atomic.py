@@ -15,11 +15,12 @@
 from __future__ import annotations
 
 import os
+import re
 import stat
 import tempfile
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterable
 
 import yaml
 
@@ -174,13 +175,18 @@ def _pid_alive(pid: int) -> bool:
     return True
 
 
-def remove_stale_temp_files(folder: str | os.PathLike) -> list[Path]:
+def remove_stale_temp_files(folder: str | os.PathLike, legacy_for: Iterable[str] = ()) -> list[Path]:
     """Remove temporary files of interrupted writes from ``folder``.
 
     A file is stale when its name has :data:`TEMP_PREFIX`, it is a regular
     file (not a link), it is older than the current process and the process
     that wrote it (its pid is in the name) no longer runs.  Files of writes in
     flight in other processes are left alone.
+
+    ``legacy_for`` names output files (e.g. ``session.yaml``) whose temporary
+    files from versions before this prefix, ``.session.yaml.XXXXXXXX.tmp``
+    (``tempfile.mkstemp``'s pattern), are removed too when older than the
+    current process.
 
     Returns
     -------
@@ -193,8 +199,10 @@ def remove_stale_temp_files(folder: str | os.PathLike) -> list[Path]:
         entries = list(os.scandir(folder))
     except OSError:
         return removed
+    legacy = [re.compile(rf"\.{re.escape(name)}\.[a-z0-9_]{{8}}\.tmp") for name in legacy_for]
     for entry in entries:
-        if not entry.name.startswith(TEMP_PREFIX):
+        is_legacy = any(p.fullmatch(entry.name) for p in legacy)
+        if not (entry.name.startswith(TEMP_PREFIX) or is_legacy):
             continue
         try:
             st = entry.stat(follow_symlinks=False)
@@ -202,7 +210,7 @@ def remove_stale_temp_files(folder: str | os.PathLike) -> list[Path]:
             continue
         if not stat.S_ISREG(st.st_mode) or st.st_mtime >= start:
             continue
-        pid_text = entry.name[len(TEMP_PREFIX):].split("-", 1)[0]
+        pid_text = "" if is_legacy else entry.name[len(TEMP_PREFIX):].split("-", 1)[0]
         if pid_text.isdigit() and int(pid_text) != os.getpid() and _pid_alive(int(pid_text)):
             continue
         try:
