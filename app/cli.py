@@ -132,7 +132,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
     from calib_core.pairs import load_pairs_yaml, resolve_pairs
     from calib_core.solve import solve_extrinsics
 
-    pairs = load_pairs_yaml(args.pairs)
+    pairs = load_pairs_yaml(args.pairs, max_pairs=args.max_pairs)
     camera = load_camera_from_args(args)
     needs_scan = any(p.laser_rc is not None for p in pairs)
     if needs_scan and args.scan is None:
@@ -160,6 +160,10 @@ def cmd_ba_images(args: argparse.Namespace) -> int:
 
     depth = load_scan_from_args(args)
     images = bearing_angle_images(depth)
+    if args.output.exists() and not args.output.is_dir():
+        from calib_core.errors import CalibError
+
+        raise CalibError(f"{args.output}: exists and is not a folder; -o names the folder for the four PNGs")
     args.output.mkdir(parents=True, exist_ok=True)
     for name in BA_DIRECTIONS:
         out = args.output / f"ba_{name}.png"
@@ -175,10 +179,11 @@ def cmd_colorize(args: argparse.Namespace) -> int:
     from calib_core.io.images import load_image_rgb
     from calib_core.overlays import colorize_points, export_colored_ply
 
-    depth = load_scan_from_args(args)
+    # Small files first: a mistake in one of them is reported before the scan is loaded.
+    T = load_extrinsics_yaml(args.extrinsics)["T_camera_lidar"]
     camera = load_camera_from_args(args)
     image = load_image_rgb(args.image)
-    T = load_extrinsics_yaml(args.extrinsics)["T_camera_lidar"]
+    depth = load_scan_from_args(args)
     points, _ = depth.valid_points()
     colors, has_color = colorize_points(points, image, camera, T, occlusion=not args.no_occlusion)
     export_colored_ply(args.output, points, colors, has_color)
@@ -191,6 +196,10 @@ def cmd_sample(args: argparse.Namespace) -> int:
 
     from calib_core.synthetic import write_sample
 
+    if args.output.exists() and not args.output.is_dir():
+        from calib_core.errors import CalibError
+
+        raise CalibError(f"{args.output}: exists and is not a folder; -o names the folder for the sample scene")
     t0 = time.perf_counter()
     print(f"Generating the synthetic scene (seed {args.seed}) into {args.output} ...", flush=True)
     write_sample(args.output, seed=args.seed)
@@ -296,7 +305,7 @@ def _version() -> str:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="ba-calib",
         description="Targetless camera / 3D-lidar extrinsic calibration with Bearing Angle images. "
         "With no command, serves the bundled sample scene at http://127.0.0.1:8080.",
@@ -328,6 +337,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--v-res-deg", type=float, default=None)
     _add_camera_arg(p)
     p.add_argument("--pairs", required=True, type=Path, help="pairs YAML")
+    p.add_argument("--max-pairs", type=int, default=1_000, help="refuse pairs files with more pairs than this (default 1000)")
     p.add_argument("--cost", choices=["angular", "pixel"], default="angular", help="angular = paper eq. 7 (default), pixel = eq. 6")
     p.add_argument(
         "--initial-extrinsics", type=Path, default=None,
@@ -399,23 +409,164 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors: ``error: <problem> (see ba-calib ... --help)``, exit 2."""
+
+    def error(self, message: str):  # type: ignore[override]
+        print(f"error: {' '.join(message.split())} (see {self.prog} --help)", file=sys.stderr)
+        raise SystemExit(EXIT_USAGE)
+
+
+def check_args(args: argparse.Namespace) -> None:
+    """Numeric options that argparse's types let through but no command can use."""
     from calib_core.errors import CalibError
 
+    def bad(option: str, value, want: str) -> None:
+        raise CalibError(f"{option}: expected {want}, got {value!r}")
+
+    beams = getattr(args, "beams", None)
+    if beams is not None and not 1 <= beams <= 4096:
+        bad("--beams", beams, "a number of beams from 1 to 4096")
+    for key in ("h_res_deg", "v_res_deg"):
+        v = getattr(args, key, None)
+        if v is not None and not 1e-4 <= v <= 90.0:  # also refuses nan
+            bad("--" + key.replace("_", "-"), v, "an angle in degrees from 0.0001 to 90")
+    size = getattr(args, "image_size", None)
+    if size is not None:
+        from calib_core.cameras.io import MAX_IMAGE_SIDE
+
+        if not all(1 <= v <= MAX_IMAGE_SIDE for v in size):
+            bad("--image-size", list(size), f"a width and a height from 1 to {MAX_IMAGE_SIDE} pixels")
+    port = getattr(args, "port", None)
+    if port is not None and not 0 <= port <= 65535:
+        bad("--port", port, "a port number from 0 to 65535")
+    max_pairs = getattr(args, "max_pairs", None)
+    if max_pairs is not None and not 1 <= max_pairs <= 10_000_000:
+        bad("--max-pairs", max_pairs, "a number of pairs from 1 to 10,000,000")
+
+
+def _check_serve_files(args: argparse.Namespace) -> None:
+    """``serve`` runs until stopped: a session it cannot restore, or an output it may not replace,
+    is reported now, in one line, rather than after the scene has loaded or at the first Export."""
+    if args.command != "serve":
+        return
+    from calib_core.io.atomic import output_target
+    from calib_core.io.session_file import check_session_file
+
+    if args.session is not None:
+        check_session_file(args.session)
+        output_target(args.session)
+    if args.output is not None:
+        output_target(args.output)
+
+
+def _remove_stale_temp_files(args: argparse.Namespace) -> None:
+    """Temporary files of interrupted writes, next to this command's outputs, from an earlier run."""
+    from calib_core.io.atomic import remove_stale_temp_files
+
+    for key in ("output", "session"):
+        path = getattr(args, key, None)
+        if path is None:
+            continue
+        path = Path(path)
+        if path.is_dir():
+            remove_stale_temp_files(path)
+        else:  # also what older versions left: .NAME.XXXXXXXX.tmp
+            remove_stale_temp_files(path.parent, legacy_for=[path.name])
+
+
+class _Noise:
+    """Collects what libraries say while a command runs: Python warnings and text written to fd 2.
+
+    C libraries (libpng inside OpenCV, for one) write straight to file descriptor 2, past
+    ``sys.stderr``; so fd 2 is pointed at a temporary file and read back afterwards.
+    """
+
+    def __init__(self) -> None:
+        self.lines: list[str] = []
+
+    def __enter__(self) -> "_Noise":
+        import tempfile
+        import warnings
+
+        self._warnings = warnings.catch_warnings(record=True)
+        self._records = self._warnings.__enter__()
+        warnings.simplefilter("default")
+        sys.stderr.flush()
+        self._saved_fd = os.dup(2)
+        self._file = tempfile.TemporaryFile()
+        os.dup2(self._file.fileno(), 2)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        try:
+            sys.stderr.flush()
+        except (OSError, ValueError):
+            pass
+        os.dup2(self._saved_fd, 2)
+        os.close(self._saved_fd)
+        self._file.seek(0)
+        text = self._file.read(1 << 20).decode("utf-8", "backslashreplace")
+        self._file.close()
+        self._warnings.__exit__(*exc)
+        seen: set[str] = set()
+        for line in [f"{w.category.__name__}: {w.message}" for w in self._records] + text.splitlines():
+            line = " ".join(line.split())
+            if line and line not in seen:
+                seen.add(line)
+                self.lines.append(line)
+
+    def folded(self, limit: int = 300) -> str:
+        """The collected lines as a suffix of one error line (empty when nothing was said)."""
+        if not self.lines:
+            return ""
+        text = "; ".join(self.lines)
+        return f" [libraries said: {text if len(text) <= limit else text[: limit - 3] + '...'}]"
+
+
+def _error_line(exc: BaseException) -> tuple[str, int]:
+    """The one ``error:`` line and exit code for an exception a command raised."""
+    from calib_core.errors import CalibError
+
+    if isinstance(exc, CalibError):
+        return " ".join(str(exc).split()), EXIT_USAGE
+    if isinstance(exc, OSError):
+        where = exc.filename if exc.filename is not None else ""
+        return f"{where}: {exc.strerror or exc}" if where != "" else f"{exc.strerror or exc}", EXIT_USAGE
+    if isinstance(exc, RecursionError):
+        return "the input is nested too deeply to process", EXIT_USAGE
+    if isinstance(exc, MemoryError):
+        return "out of memory: the input is too large for this machine", EXIT_USAGE
+    return "", 1
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    for stream in (sys.stdout, sys.stderr):
+        try:  # paths with undecodable bytes must not crash a print
+            stream.reconfigure(errors="backslashreplace")  # type: ignore[union-attr]
+        except (AttributeError, ValueError):
+            pass
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:
+        return int(exc.code or 0) if isinstance(exc.code, int) else EXIT_USAGE
     if args.command is None:
         debug = args.debug
         args = parser.parse_args(["serve"])
         args.debug = debug
+    noise = _Noise()
     try:
-        return int(args.func(args) or 0)
-    except CalibError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return EXIT_USAGE
-    except (FileNotFoundError, IsADirectoryError, PermissionError) as exc:
-        print(f"error: {exc.filename or ''}: {exc.strerror}", file=sys.stderr)
-        return EXIT_USAGE
+        check_args(args)
+        _check_serve_files(args)
+        _remove_stale_temp_files(args)
+        if args.command == "serve":  # long-running: its warnings and logs go out live
+            return int(args.func(args) or 0)
+        with noise:
+            code = int(args.func(args) or 0)
+        for line in noise.lines:
+            print(f"warning: {line}", file=sys.stderr)
+        return code
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
@@ -424,10 +575,17 @@ def main(argv: Sequence[str] | None = None) -> int:
         # Point stdout at /dev/null so the interpreter's final flush stays quiet.
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
-    except Exception as exc:  # noqa: BLE001 - last resort: one line unless --debug
+    except SystemExit:
+        raise
+    except BaseException as exc:  # noqa: BLE001 - one line unless --debug (lazrs panics are BaseExceptions)
+        message, code = _error_line(exc)
+        if code == EXIT_USAGE:
+            print(f"error: {message}{noise.folded()}", file=sys.stderr)
+            return code
         if args.debug:
             raise
-        print(f"internal error: {type(exc).__name__}: {exc} (run with --debug for the traceback)", file=sys.stderr)
+        text = " ".join(f"{type(exc).__name__}: {exc}".split())[:300]
+        print(f"internal error: {text} (run with --debug for the traceback){noise.folded()}", file=sys.stderr)
         return 1
 
 

@@ -90,18 +90,34 @@ class Pair:
             raise CalibError(f"{where}: give exactly one of laser_rc or laser_xyz")
         if "pixel" not in entry:
             raise CalibError(f"{where}: missing pixel: [u, v]")
-        pixel = tuple(finite_vector(entry["pixel"], 2, f"{where} pixel"))
+        pixel = tuple(finite_vector(entry["pixel"], 2, f"{where} pixel", max_abs=MAX_PIXEL))
         extra = _optional_fields(entry, where)
         if has_rc:
-            rc = finite_vector(entry["laser_rc"], 2, f"{where} laser_rc")
-            if any(v != int(v) or v < 0 for v in rc):
-                raise CalibError(f"{where} laser_rc: expected two non-negative whole numbers, got {rc}")
+            rc = parse_laser_rc(entry["laser_rc"], f"{where} laser_rc")
             return Pair((int(rc[0]), int(rc[1])), None, pixel, **extra)  # type: ignore[arg-type]
-        xyz = tuple(finite_vector(entry["laser_xyz"], 3, f"{where} laser_xyz"))
+        xyz = tuple(finite_vector(entry["laser_xyz"], 3, f"{where} laser_xyz", max_abs=MAX_COORDINATE_M))
         return Pair(None, xyz, pixel, **extra)  # type: ignore[arg-type]
 
 
 PAIR_SOURCES = ("clicked", "guided", "auto")
+
+#: Default cap on the pairs in one file (a calibration needs tens; raise with ``max_pairs``).
+MAX_PAIRS = 1_000
+#: Values (YAML scalars and collections) one pairs-file entry holds at most, with every optional field.
+VALUES_PER_PAIR = 20
+#: Largest depth-matrix row or column index accepted in ``laser_rc``.
+MAX_CELL_INDEX = 10_000_000
+#: Largest laser coordinate (metres) and pixel coordinate accepted; beyond them a value is absurd.
+MAX_COORDINATE_M = 1e6
+MAX_PIXEL = 1e7
+
+
+def parse_laser_rc(value: Any, where: str) -> tuple[int, int]:
+    """A ``laser_rc`` value: two whole numbers in [0, MAX_CELL_INDEX] (fractions refused, not truncated)."""
+    rc = finite_vector(value, 2, where, max_abs=float("inf"))
+    if any(v != int(v) or not 0 <= v <= MAX_CELL_INDEX for v in rc):
+        raise CalibError(f"{where}: expected two whole numbers from 0 to {MAX_CELL_INDEX:,}, got {value!r}")
+    return int(rc[0]), int(rc[1])
 
 
 def _optional_fields(entry: dict, where: str) -> dict[str, Any]:
@@ -128,15 +144,30 @@ def _optional_fields(entry: dict, where: str) -> dict[str, Any]:
     return out
 
 
-def load_pairs_yaml(path: str | os.PathLike) -> list[Pair]:
-    """Read a pairs file.  Malformed content raises a one-line :class:`CalibError`."""
+def load_pairs_yaml(path: str | os.PathLike, max_pairs: int = MAX_PAIRS) -> list[Pair]:
+    """Read a pairs file.  Malformed content raises a one-line :class:`CalibError`.
+
+    Parameters
+    ----------
+    path : path-like
+        The pairs YAML.
+    max_pairs : int
+        Most pairs accepted (the CLI's ``--max-pairs``); the file's size and
+        number of values are bounded in proportion, so a huge file is refused
+        before it is parsed in full.
+    """
     path = Path(path)
-    data = read_yaml_mapping(path, "pairs file")
+    hint = f"the cap is {max_pairs:,} pairs (raise it with --max-pairs)"
+    data = read_yaml_mapping(
+        path, "pairs file", max_bytes=(1 << 20) + 512 * max_pairs, max_values=1000 + VALUES_PER_PAIR * max_pairs, limit_hint=hint
+    )
     entries = data.get("pairs")
     if entries is None:
         raise CalibError(f"{path}: missing top-level key 'pairs'")
     if not isinstance(entries, list):
         raise CalibError(f"{path}: 'pairs' must be a list")
+    if len(entries) > max_pairs:
+        raise CalibError(f"{path}: {len(entries):,} pairs; {hint}")
     return [Pair.from_dict(e, f"{path}: pair {i}") for i, e in enumerate(entries)]
 
 

@@ -23,7 +23,6 @@ Accepted inputs (:func:`load_camera`):
 
 from __future__ import annotations
 
-import json
 import os
 from pathlib import Path
 from typing import Any, Iterable
@@ -32,7 +31,8 @@ import numpy as np
 
 from ..errors import CalibError
 from ..io.atomic import write_yaml_atomic
-from ..io.yaml_files import read_yaml_mapping
+from ..io.input_files import MAX_CAMERA_BYTES, check_input_file, read_input_text
+from ..io.yaml_files import parse_json_text, read_yaml_mapping
 from .base import CAMERA_MODELS, CameraModel
 
 #: ROS ``distortion_model`` names -> our model names.
@@ -47,17 +47,30 @@ ROS_DISTORTION_MODELS = {
 OCAM_SIDECAR_NAME = "calib_results.txt"
 
 
+#: Largest magnitude of any camera parameter (pixels, coefficients); beyond it a value is absurd.
+MAX_PARAM = 1e8
+#: Largest image width or height in pixels.
+MAX_IMAGE_SIDE = 65_536
+
+
+def _short(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 80 else text[:77] + "..."
+
+
 # -- checking numbers from user files ---------------------------------------------
-def _numeric_array(value: Any, name: str) -> np.ndarray:
+def _numeric_array(value: Any, name: str, max_abs: float = MAX_PARAM) -> np.ndarray:
     try:
         arr = np.asarray(value)
-    except (ValueError, TypeError):
-        raise CalibError(f"{name}: expected numbers, got {value!r}") from None
+    except (ValueError, TypeError, OverflowError, RecursionError):
+        raise CalibError(f"{name}: expected numbers, got {_short(value)}") from None
     if arr.dtype == object or arr.dtype.kind not in "iuf":
-        raise CalibError(f"{name}: expected numbers, got {value!r}")
+        raise CalibError(f"{name}: expected numbers, got {_short(value)}")
     arr = arr.astype(np.float64)
     if not np.all(np.isfinite(arr)):
-        raise CalibError(f"{name}: numbers must be finite, got {arr.tolist()}")
+        raise CalibError(f"{name}: numbers must be finite, got {_short(arr.tolist())}")
+    if np.any(np.abs(arr) > max_abs):
+        raise CalibError(f"{name}: numbers must be at most {max_abs:g} in size, got {_short(arr.tolist())}")
     return arr
 
 
@@ -96,9 +109,14 @@ def param_image_size(width: Any, height: Any) -> tuple[int, int]:
     for name, value in (("width", width), ("height", height)):
         if isinstance(value, bool):
             raise CalibError(f"{name} must be a positive integer, got {value!r}")
-        v = param_float(value, name)
+        arr = _numeric_array(value, name, max_abs=float("inf"))
+        if arr.ndim != 0:
+            raise CalibError(f"{name} must be a positive integer, got {_short(value)}")
+        v = float(arr)
         if v <= 0 or v != int(v):
-            raise CalibError(f"{name} must be a positive integer, got {value!r}")
+            raise CalibError(f"{name} must be a positive integer, got {_short(value)}")
+        if v > MAX_IMAGE_SIDE:
+            raise CalibError(f"{name} must be at most {MAX_IMAGE_SIDE} pixels, got {int(v)}")
         out.append(int(v))
     return out[0], out[1]
 
@@ -164,6 +182,16 @@ def pjlab_intrinsic_to_dict(data: dict[str, Any]) -> dict[str, Any]:
     if "cam_dist" in param:
         require_keys(param["cam_dist"], ("data",), "cam_dist")
         dist = _numeric_array(param["cam_dist"]["data"], "cam_dist.data").ravel().tolist()
+    K = K.reshape(3, 3)
+    if (abs(K[0, 0]) < 10 and abs(K[1, 1]) < 10) or len(dist) > 14:
+        # PJLab's surround-view tools store an OCam (Scaramuzza) model in this layout: affine
+        # c, d, e near 1 in place of fx, fy, and a long polynomial (first term hundreds of px) as
+        # the distortion.  Which polynomial it is (pol or invpol) is not stated, so no guess.
+        raise CalibError(
+            f"looks like an OCam (Scaramuzza) model in PJLab's intrinsic JSON layout (cam_K diagonal "
+            f"{K[0, 0]:.3g}, {K[1, 1]:.3g}; {len(dist)} cam_dist terms), which is not supported; "
+            f"give the OCamCalib calib_results.txt instead"
+        )
     return {
         "model": "pinhole",
         "width": param["img_dist_w"],
@@ -204,14 +232,7 @@ def camera_from_dict(data: dict[str, Any], base_dir: str | os.PathLike | None = 
 
 
 def _read_json(path: Path) -> Any:
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise CalibError(f"{path}: cannot read camera file: {exc}") from None
-    try:
-        return json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise CalibError(f"{path}: malformed JSON at line {exc.lineno}: {exc.msg}") from None
+    return parse_json_text(read_input_text(path, "camera file", MAX_CAMERA_BYTES), str(path))
 
 
 def load_camera(path: str | os.PathLike, image_size: tuple[int, int] | None = None) -> CameraModel:
@@ -233,10 +254,7 @@ def load_camera(path: str | os.PathLike, image_size: tuple[int, int] | None = No
         non-finite numbers; the message names the file.
     """
     path = Path(path)
-    if not path.exists():
-        raise CalibError(f"{path}: camera file not found")
-    if path.is_dir():
-        raise CalibError(f"{path}: is a folder, expected a camera file")
+    check_input_file(path, "camera file", MAX_CAMERA_BYTES)
     suffix = path.suffix.lower()
     try:
         if image_size is not None:
@@ -251,7 +269,7 @@ def load_camera(path: str | os.PathLike, image_size: tuple[int, int] | None = No
                 camera = camera_from_dict(data, path.parent)
             return camera
         if suffix in (".yaml", ".yml"):
-            data = _normalise(read_yaml_mapping(path, "camera file"))
+            data = _normalise(read_yaml_mapping(path, "camera file", max_bytes=MAX_CAMERA_BYTES))
         elif suffix == ".json":
             raw = _read_json(path)
             if not isinstance(raw, dict):

@@ -42,6 +42,7 @@ from numpy.polynomial import polynomial as npoly
 
 from ..errors import CalibError
 from ..io.atomic import write_bytes_atomic
+from ..io.input_files import MAX_CAMERA_BYTES, read_input_text
 from .base import as_points, as_points_keep_float32, register_camera_model, store_projection
 from .io import param_float, param_image_size, param_vector, require_keys
 
@@ -306,12 +307,7 @@ class OCamCamera:
         ``height width``.
         """
         path = Path(path)
-        try:
-            text = path.read_text(encoding="utf-8")
-        except FileNotFoundError:
-            raise CalibError(f"{path}: calib_results file not found") from None
-        except (OSError, UnicodeDecodeError) as exc:
-            raise CalibError(f"{path}: cannot read calib_results file: {exc}") from None
+        text = read_input_text(path, "calib_results file", MAX_CAMERA_BYTES)  # regular file, bounded
         tokens = [t for line in text.splitlines() if not line.lstrip().startswith("#") for t in line.split()]
         try:
             values = [float(t) for t in tokens]
@@ -329,7 +325,7 @@ class OCamCamera:
 
         def take_count(what: str) -> int:
             (n,) = take(1, f"the length of {what}")
-            if not (n == int(n) and 1 <= n <= 100):
+            if not (1 <= n <= 100 and n == int(n)):  # NaN fails the range test first
                 raise CalibError(f"{path}: bad length {n!r} of {what}")
             return int(n)
 

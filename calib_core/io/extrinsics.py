@@ -29,7 +29,11 @@ from .. import __version__
 from ..errors import CalibError
 from ..transforms import R_from_quat_xyzw, R_from_rpy_deg, make_T, quat_xyzw_from_R, rpy_deg_from_R
 from .atomic import write_yaml_atomic
+from .input_files import MAX_EXTRINSICS_BYTES
 from .yaml_files import finite_vector, read_yaml_mapping
+
+#: Largest lidar-to-camera translation accepted (metres); beyond it a value is absurd.
+MAX_TRANSLATION_M = 1e4
 
 CONVENTION = "X_camera = matrix @ X_lidar (metres); rpy: R = Rz(yaw) @ Ry(pitch) @ Rx(roll)"
 
@@ -150,20 +154,20 @@ def parse_transform(block: Any, where: str) -> np.ndarray:
         rows = block["matrix"]
         if not isinstance(rows, list) or len(rows) != 4:
             raise CalibError(f"{where}.matrix: expected a 4x4 nested list")
-        T = np.array([finite_vector(r, 4, f"{where}.matrix row {i}") for i, r in enumerate(rows)])
+        T = np.array([finite_vector(r, 4, f"{where}.matrix row {i}", MAX_TRANSLATION_M) for i, r in enumerate(rows)])
         if not np.allclose(T[3], [0, 0, 0, 1], atol=1e-9):
             raise CalibError(f"{where}.matrix: last row must be [0, 0, 0, 1], got {T[3].tolist()}")
         _check_rotation(T[:3, :3], f"{where}.matrix")
         candidates.append(("matrix", T))
     if "translation_m" in block:
-        t = np.array(finite_vector(block["translation_m"], 3, f"{where}.translation_m"))
+        t = np.array(finite_vector(block["translation_m"], 3, f"{where}.translation_m", MAX_TRANSLATION_M))
         if "quaternion_xyzw" in block:
             q = np.array(finite_vector(block["quaternion_xyzw"], 4, f"{where}.quaternion_xyzw"))
             if not 0.99 < np.linalg.norm(q) < 1.01:
                 raise CalibError(f"{where}.quaternion_xyzw: must have unit norm, got {np.linalg.norm(q):.4f}")
             candidates.append(("quaternion_xyzw", make_T(R_from_quat_xyzw(q), t)))
         if "rpy_deg" in block:
-            rpy = np.array(finite_vector(block["rpy_deg"], 3, f"{where}.rpy_deg"))
+            rpy = np.array(finite_vector(block["rpy_deg"], 3, f"{where}.rpy_deg", 1e4))
             candidates.append(("rpy_deg", make_T(R_from_rpy_deg(rpy), t)))
     if not candidates:
         raise CalibError(f"{where}: needs 'matrix', or 'translation_m' with 'quaternion_xyzw' or 'rpy_deg'")
@@ -186,7 +190,9 @@ def load_extrinsics_yaml(path: str | os.PathLike) -> dict[str, Any]:
         The original block is kept under ``"T_camera_lidar_block"``.
     """
     path = Path(path)
-    doc = read_yaml_mapping(path, "extrinsics file")
+    # The file repeats the solved pairs and their residuals (about 25 values per pair): the default
+    # 100,000 values hold about 4,000 pairs.
+    doc = read_yaml_mapping(path, "extrinsics file", max_bytes=MAX_EXTRINSICS_BYTES)
     if "T_camera_lidar" not in doc:
         raise CalibError(f"{path}: missing top-level key 'T_camera_lidar'")
     block = doc["T_camera_lidar"]

@@ -1,0 +1,61 @@
+"""The fuzz corpus: every case of every ``tests/fuzz/cases_*.py`` module keeps the rules.
+
+Each case runs as ``python -m app.cli ARGV`` in a process forked from a worker that has imported the
+package (tests/fuzz/runner.py), three workers at a time (two cores, plus one to fill the waits on
+fsync and on the polling of the others).  A case must end in exit 0 (or 3 from solve: a
+result marked unreliable), or exit 2 with exactly one ``error:`` line on stderr; never a traceback;
+within 10 s and 1 GiB peak RSS.  ``python -m tests.fuzz.generate OUT --run`` does the same by hand.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from collections import Counter
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+if str(REPO) not in sys.path:  # tests/ is not a package: make ``tests.fuzz`` importable
+    sys.path.insert(0, str(REPO))
+
+from tests.fuzz.generate import RSS_LIMIT_MB, TIME_LIMIT_S, build_corpus, case_modules, check_result  # noqa: E402
+from tests.fuzz.runner import run_cases  # noqa: E402
+
+
+def test_every_fuzz_case_ends_cleanly(tmp_path):
+    cases = build_corpus(tmp_path / "corpus")
+    kinds = Counter("mutation" if "/mutation/" in f"/{c.name}" else "hostile" for c in cases)
+    modules = [m.__name__.rsplit(".", 1)[1] for m in case_modules()]
+    assert "cases_config" in modules
+    results = run_cases(cases, tmp_path / "runs", workers=3, timeout=TIME_LIMIT_S, rss_limit_mb=RSS_LIMIT_MB)
+    failures = [f"{r.name}: {why}" for r in results if (why := check_result(r))]
+    codes = Counter(r.returncode for r in results)
+    slowest = max(results, key=lambda r: r.seconds)
+    biggest = max(results, key=lambda r: r.peak_rss_mb)
+    print(
+        f"fuzz corpus from {', '.join(modules)}: {len(cases)} cases ({kinds['hostile']} hostile, {kinds['mutation']} mutations); "
+        f"exit codes {dict(sorted(codes.items()))}; slowest {slowest.seconds:.2f} s ({slowest.name}); "
+        f"largest {biggest.peak_rss_mb:.0f} MiB ({biggest.name})"
+    )
+    assert not failures, f"{len(failures)} of {len(cases)} cases broke the rules:\n" + "\n".join(failures)
+    # The config cases alone: the rest of the target (300 hostile, 50 mutations) comes with the scan cases.
+    config = Counter("mutation" if "/mutation/" in c.name else "hostile" for c in cases if c.name.startswith("config/"))
+    assert config["hostile"] >= 300 and config["mutation"] >= 50, config
+
+
+def test_forked_cases_end_as_real_processes_do(tmp_path):
+    """The fork server is a shortcut: a few cases run both ways must end the same."""
+    wanted = ("config/valid/pinhole_yaml", "config/camera_yaml/generic/fifo", "config/pairs/generic/dev_zero",
+              "config/camera_json/generic/json_deep_100k", "config/pairs/generic/billion_laughs",
+              "config/args/solve/image_size_1e9", "config/output/solve/folder")
+    cases = [c for c in build_corpus(tmp_path / "corpus") if c.name in wanted]
+    assert len(cases) == len(wanted)
+    forked = run_cases(cases, tmp_path / "runs", workers=2, timeout=60.0, rss_limit_mb=RSS_LIMIT_MB)
+    for case, result in zip(cases, forked):
+        work = tmp_path / "real" / case.name.replace("/", "_")
+        work.mkdir(parents=True)
+        real = subprocess.run([sys.executable, "-m", "app.cli", *case.argv], capture_output=True, timeout=120, cwd=work,
+                              env={**os.environ, "PYTHONPATH": str(REPO)})
+        assert result.returncode == real.returncode, case.name
+        assert result.stderr == real.stderr.decode("utf-8", "replace"), case.name
