@@ -19,7 +19,6 @@ __all__ = [
     "validate_pixels",
     "validate_initial_T",
     "conditioning_warning",
-    "outlier_indices",
 ]
 
 MIN_PAIRS = 4
@@ -225,23 +224,3 @@ def conditioning_warning(JtJ: np.ndarray) -> str | None:
         f"the pairs barely constrain {' + '.join(weak)} (condition number {cond:.1e}); "
         "add pairs at other depths and directions"
     )
-
-
-def outlier_indices(
-    residual_deg: np.ndarray, reference_deg: np.ndarray | None = None, min_deg: float = 1.0, k: float = 3.0
-) -> list[int]:
-    """Pairs whose angular residual is an outlier.
-
-    Rule: ``r_i > median(ref) + k * 1.4826 * MAD(ref)`` *and* ``r_i > min_deg``,
-    where ``ref`` are the reference residuals (default: all of them) and MAD is
-    the median absolute deviation (1.4826 MAD estimates the standard deviation
-    of Gaussian data without being dragged by the outliers themselves).  The
-    absolute floor keeps sub-degree clicks from being flagged when all
-    residuals are tiny.
-    """
-    r = np.asarray(residual_deg, dtype=np.float64)
-    ref = r if reference_deg is None else np.asarray(reference_deg, dtype=np.float64)
-    med = median(ref)
-    mad = median(np.abs(ref - med))
-    flagged = (r > med + k * 1.4826 * mad) & (r > min_deg)
-    return np.nonzero(flagged)[0].tolist()
