@@ -29,8 +29,16 @@ import numpy as np
 
 from ..errors import CalibError
 from .bearing_pnp import initial_pose
-from .checks import MIN_PAIRS, conditioning_warning, validate_initial_T, validate_pairs, validate_pixels
-from .kernels import dlt_pose, normal_equations, whitened_residuals
+from . import kernels
+from .checks import (
+    CONDITION_WARNING,
+    MIN_PAIRS,
+    conditioning_warning,
+    validate_initial_T,
+    validate_pairs,
+    validate_pixels,
+)
+from .kernels import dlt_pose
 from .quality import Quality, geometry_reasons
 from .refine import (
     PARAMETER_NAMES,
@@ -38,13 +46,14 @@ from .refine import (
     bearing_frames,
     covariance_from_jacobian,
     covariance_from_normal,
+    uncertainty_from_covariance,
     pixel_jacobian,
     pixel_residuals,
     pose_covariance,
     refine_angular,
     refine_pose,
 )
-from .robust import INLIER_K, inlier_scale, robust_fit, robust_scale
+from .robust import inlier_k, robust_fit, robust_scale
 from .whiten import check_pixel_sigma, laser_tangent_covariance, whitening
 
 __all__ = [
@@ -297,25 +306,20 @@ def solve_extrinsics(
         raise CalibError(f"noise_rad must be a positive number, got {noise_rad!r}")
     if pixels is not None:
         pixels = validate_pixels(pixels, n)
-    elif camera is not None:
-        projected, valid = camera.project(bearings)
-        pixels = np.where(np.asarray(valid, dtype=bool)[:, None], np.asarray(projected, dtype=np.float64), np.nan)
-    if cost == "pixel" and (camera is None or pixels is None):
-        raise CalibError("cost='pixel' needs a camera and the clicked pixels")
-    if cost == "pixel" and not np.all(np.isfinite(pixels)):
-        bad = np.nonzero(~np.all(np.isfinite(pixels), axis=1))[0]
-        raise CalibError(f"cost='pixel': the bearings of pairs {bad.tolist()} do not map to pixels of this camera")
+    if cost == "pixel":
+        if camera is None or pixels is None:
+            raise CalibError("cost='pixel' needs a camera and the clicked pixels")
 
     # 1. Whitening, computed once per solve (and once more at the pose for the laser term).
-    frames = bearing_frames(bearings)
+    frames = kernels.bearing_frames(bearings)
     whiten_camera = camera if cost != "geodesic" else None
 
     def whiten(T_at: np.ndarray | None) -> tuple[np.ndarray, str]:
         lt = None
         if laser_cov is not None and T_at is not None and whiten_camera is not None:
             lt = laser_tangent_covariance(T_at, points, frames, laser_cov)
-        return whitening(n, camera=whiten_camera, pixels=pixels, frames=frames, pixel_sigma=sigmas,
-                         noise_rad=noise_rad, laser_tangent_cov=lt)
+        return whitening(n, camera=whiten_camera, frames=frames, pixel_sigma=sigmas, noise_rad=noise_rad,
+                         laser_tangent_cov=lt)
 
     W, unit = whiten(None)
     # Expected scale of the whitened residuals, for the outlier test: the known noise, or the
@@ -334,10 +338,10 @@ def solve_extrinsics(
         if not robust:
             raise
         T, iterations = T_init, 0
-    if laser_cov is not None:
+    if laser_cov is not None and whiten_camera is not None:
         W, unit = whiten(T)
-    z, _ = whitened_residuals(np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3]), points, frames, W)
-    r2 = np.einsum("ij,ij->i", z, z)
+    z, _ = kernels.whitened_residuals(T[:3, :3].copy(), T[:3, 3].copy(), points, frames, W)
+    r2 = z[:, 0] ** 2 + z[:, 1] ** 2
 
     # 3. Outliers: only searched for when some residual is far above the noise scale.
     # With a prior (expected click noise), any pair beyond it is suspect; without one, the
@@ -345,7 +349,7 @@ def solve_extrinsics(
     inliers = np.ones(n, dtype=bool)
     hypotheses = 0
     scale_ref = max(prior, floor) if prior is not None else max(robust_scale(r2), floor)
-    if robust and not np.all(r2 < (INLIER_K * scale_ref) ** 2):
+    if robust and r2.max() >= (inlier_k(n) * scale_ref) ** 2:
         fit = robust_fit(points, bearings, frames, W, prior, T[:3, :3], T[:3, 3], min_scale=floor)
         hypotheses = fit.hypotheses
         iterations += fit.iterations
@@ -353,16 +357,19 @@ def solve_extrinsics(
             inliers = fit.inliers
             T = np.eye(4)
             T[:3, :3], T[:3, 3] = fit.R, fit.t
-    if laser_cov is not None:
-        # The laser term depends on the pose: whiten at the final pose and refine once more.
-        W, unit = whiten(T)
-        keep = np.flatnonzero(inliers)
-        if keep.size >= 3:
-            T, more = refine_angular(T, points[keep], frames[keep], W[keep])
-            iterations += more
+        if laser_cov is not None and whiten_camera is not None:
+            # The laser term depends on the pose: whiten at the robust pose and refine once more.
+            W, unit = whiten(T)
+            keep = np.flatnonzero(inliers)
+            if keep.size >= 3:
+                T, more = refine_angular(T, points[keep], frames[keep], W[keep])
+                iterations += more
     idx = np.flatnonzero(inliers)
     n_in = idx.size
     if cost == "pixel" and n_in >= 3:
+        bad = np.nonzero(~np.all(np.isfinite(pixels[idx]), axis=1))[0]
+        if bad.size:
+            raise CalibError(f"cost='pixel': pairs {bad.tolist()} have no finite pixel")
         T, more = refine_pose(
             T, points[idx], bearings[idx], cost="pixel", camera=camera, pixels=pixels[idx],
             pixel_sigma=None if sigmas is None else sigmas[idx],
@@ -370,23 +377,19 @@ def solve_extrinsics(
         iterations += more
 
     # 4. Covariance on the inliers: Student-t sigma from the residuals, or the known noise.
-    R_hat, t_hat = np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3])
+    R_hat, t_hat = T[:3, :3].copy(), T[:3, 3].copy()
     dof = 2 * n_in - 6
-    z, theta = whitened_residuals(R_hat, t_hat, points, frames, W)
-    r2 = np.einsum("ij,ij->i", z, z)
+    z, theta, H, ssr = kernels.finish(R_hat, t_hat, points, frames, W, inliers)
     if cost == "pixel":
         x_opt = np.concatenate([np.zeros(3), t_hat])
         inv_s = 1.0 if sigmas is None else np.repeat(1.0 / sigmas[idx], 2)[:, None]
         J = pixel_jacobian(x_opt, R_hat, points[idx], pixels[idx], camera) * inv_s
         rp = pixel_residuals(x_opt, R_hat, points[idx], pixels[idx], camera).ravel() * np.ravel(inv_s)
-        H = np.where(np.isfinite(J), J, 0.0)
-        H = H.T @ H
+        J = np.where(np.isfinite(J), J, 0.0)
+        H = J.T @ J
         ssr = float(np.nansum(rp**2))
         if noise_rad is not None:
             warnings.append("noise_rad is ignored with cost='pixel'; sigma comes from the pixel residuals")
-    else:
-        H, _, _ = normal_equations(R_hat, t_hat, points[idx], frames[idx], W[idx])
-        ssr = float(r2[idx].sum())
     noise_scale = math.sqrt(ssr / dof) if dof > 0 else float("nan")
     if noise_rad is not None and cost != "pixel":
         sigma = 1.0  # residuals are in units of the known noise
@@ -394,13 +397,17 @@ def solve_extrinsics(
         sigma = noise_scale * student_t_factor(dof)
     else:
         sigma = float(prior) if prior is not None else float("inf")  # no redundancy: the expected noise
-    uncertainty = covariance_from_normal(H, sigma, T[:3, :3])
+    cov, condition = kernels.covariance(H, sigma)
+    uncertainty = uncertainty_from_covariance(cov, H, R_hat)
 
     # 5. Report.
     residual_deg = np.degrees(theta)
-    if camera is not None and pixels is not None:
+    if camera is not None:
+        if pixels is None:
+            projected, valid = camera.project(bearings)
+            pixels = np.where(np.asarray(valid, dtype=bool)[:, None], np.asarray(projected, dtype=np.float64), np.nan)
         residual_px = _pixel_errors(camera, T, points, pixels)
-        off = np.nonzero(~np.isfinite(residual_px[idx]))[0]
+        off = np.flatnonzero(~np.isfinite(residual_px[idx]))
         if off.size:
             warnings.append(
                 f"pairs {_ids_text([ids[idx[i]] for i in off])} do not reproject into the image; their pixel error is NaN"
@@ -429,12 +436,14 @@ def solve_extrinsics(
             0,
             f"pairs {_ids_text(outlier_ids)} left out as outliers (largest errors {sizes}); check these clicks",
         )
-    weak = conditioning_warning(uncertainty.JtJ)
-    if weak:
-        warnings.append(weak)
-    ranges = np.linalg.norm(points[idx] @ R_hat.T + t_hat, axis=1)
+    if not condition <= CONDITION_WARNING:
+        weak = conditioning_warning(H)
+        if weak:
+            warnings.append(weak)
+    P_in = points[idx]
+    ranges = np.sqrt(np.einsum("ij,ij->i", P_in @ R_hat.T + t_hat, P_in @ R_hat.T + t_hat))
     bad_geo, weak_geo = geometry_reasons(
-        points[idx], uncertainty.sigma_rpy_deg, uncertainty.sigma_translation_m, float(np.median(ranges))
+        P_in, uncertainty.sigma_rpy_deg, uncertainty.sigma_translation_m, float(np.median(ranges))
     )
     unreliable += bad_geo
     warnings += weak_geo
@@ -443,8 +452,7 @@ def solve_extrinsics(
             f"the pairs fit to {noise_scale:.1f} px (1 sigma per axis), over {NOISY_FACTOR:g}x the {PRIOR_PX:g} px "
             "expected of clicks and laser picks: check the camera model and the picks"
         )
-    pitch_deg = np.degrees(np.arcsin(np.clip(-T[2, 0], -1.0, 1.0)))
-    if abs(pitch_deg) > 89.0:
+    if abs(T[2, 0]) > math.sin(math.radians(89.0)):
         warnings.append(
             "pitch is within 1 deg of +-90 deg (gimbal lock): roll, yaw and their sigmas are ill-defined; "
             "use the matrix or quaternion"

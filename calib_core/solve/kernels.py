@@ -246,6 +246,13 @@ def lm_refine(R0, t0, P, F, W, max_iter):
                 return R, t, it, -1
             lam *= 10.0
             continue
+        # Predicted decrease -g.dx: at the noise floor of the cost nothing is left to gain
+        # (comparing costs there only measures rounding).
+        gd = 0.0
+        for a in range(6):
+            gd -= g[a] * dx[a]
+        if gd <= 1e-13 * cost or cost <= 1e-300:
+            return R, t, it, 1
         R_new = so3_exp(dx[:3]) @ R
         t_new = t + dx[3:]
         cost_new = _cost(R_new, t_new, P, F, W)
@@ -256,14 +263,14 @@ def lm_refine(R0, t0, P, F, W, max_iter):
         for a in range(3, 6):
             step += dx[a] * dx[a]
             scale += t[a - 3] * t[a - 3]
-        small_step = math.sqrt(step) <= 1e-12 * (1.0 + math.sqrt(scale))
+        small_step = math.sqrt(step) <= 1e-11 * (1.0 + math.sqrt(scale))
         if np.isfinite(cost_new) and cost_new <= cost:
             decrease = cost - cost_new
             R, t = R_new, t_new
             lam = max(lam / 10.0, 1e-12)
             H, g, cost = normal_equations(R, t, P, F, W)
             it += 1
-            if small_step or decrease <= 1e-12 * cost or cost <= 1e-300:
+            if small_step or decrease <= 1e-11 * cost or cost <= 1e-300:
                 return R, t, it, 1
         else:
             if small_step:
@@ -321,7 +328,7 @@ def dlt_pose(P, B):
     if not spread > 0.0:
         return R, t, False
     M = np.zeros((12, 12))
-    row = np.empty(12)
+    row = np.empty(8)
     for i in range(n):
         q0 = (P[i, 0] - mu[0]) / spread
         q1 = (P[i, 1] - mu[1]) / spread
@@ -330,25 +337,21 @@ def dlt_pose(P, B):
         # x = (r00 r01 r02 t0 | r10 r11 r12 t1 | r20 r21 r22 t2); X_c = M q.
         # rows of [b]_x X_c = 0: (b1 X2 - b2 X1), (b2 X0 - b0 X2), (b0 X1 - b1 X0).
         for eq in range(3):
-            for k in range(12):
-                row[k] = 0.0
+            # The row has 8 non-zeros: blocks ia and ib of the unknowns, (q, 1) scaled by ca and cb.
             if eq == 0:
                 ca, ia, cb, ib = b1, 2, -b2, 1
             elif eq == 1:
                 ca, ia, cb, ib = b2, 0, -b0, 2
             else:
                 ca, ia, cb, ib = b0, 1, -b1, 0
-            row[4 * ia + 0] += ca * q0
-            row[4 * ia + 1] += ca * q1
-            row[4 * ia + 2] += ca * q2
-            row[4 * ia + 3] += ca
-            row[4 * ib + 0] += cb * q0
-            row[4 * ib + 1] += cb * q1
-            row[4 * ib + 2] += cb * q2
-            row[4 * ib + 3] += cb
-            for a in range(12):
-                for b in range(12):
-                    M[a, b] += row[a] * row[b]
+            row[0], row[1], row[2], row[3] = ca * q0, ca * q1, ca * q2, ca
+            row[4], row[5], row[6], row[7] = cb * q0, cb * q1, cb * q2, cb
+            for a in range(8):
+                ga = 4 * ia + a if a < 4 else 4 * ib + a - 4
+                ra = row[a]
+                for b in range(8):
+                    gb = 4 * ia + b if b < 4 else 4 * ib + b - 4
+                    M[ga, gb] += ra * row[b]
     w, V = np.linalg.eigh(M)
     if not (w[1] > 1e-10 * w[11]):
         return R, t, False  # a second null vector: degenerate configuration
@@ -387,3 +390,187 @@ def dlt_pose(P, B):
     for r in range(3):
         t[r] = spread * tt[r] - (Rn[r, 0] * mu[0] + Rn[r, 1] * mu[1] + Rn[r, 2] * mu[2])
     return R, t, True
+
+
+@njit(**_JIT)
+def bearing_frames(B):
+    """Rows ``e1, e2, b`` of an orthonormal right-handed frame per unit bearing, ``(N, 3, 3)``.
+
+    ``e1 = b x a / |b x a|`` with ``a`` the coordinate axis least aligned with
+    ``b`` (never parallel), ``e2 = b x e1``.
+    """
+    n = B.shape[0]
+    F = np.empty((n, 3, 3))
+    for i in range(n):
+        b0, b1, b2 = B[i, 0], B[i, 1], B[i, 2]
+        ab0, ab1, ab2 = abs(b0), abs(b1), abs(b2)
+        if ab0 <= ab1 and ab0 <= ab2:
+            e0, e1_, e2_ = 0.0, b2, -b1  # b x (1, 0, 0)
+        elif ab1 <= ab2:
+            e0, e1_, e2_ = -b2, 0.0, b0  # b x (0, 1, 0)
+        else:
+            e0, e1_, e2_ = b1, -b0, 0.0  # b x (0, 0, 1)
+        inv = 1.0 / math.sqrt(e0 * e0 + e1_ * e1_ + e2_ * e2_)
+        e0, e1_, e2_ = e0 * inv, e1_ * inv, e2_ * inv
+        F[i, 0, 0], F[i, 0, 1], F[i, 0, 2] = e0, e1_, e2_
+        F[i, 1, 0] = b1 * e2_ - b2 * e1_
+        F[i, 1, 1] = b2 * e0 - b0 * e2_
+        F[i, 1, 2] = b0 * e1_ - b1 * e0
+        F[i, 2, 0], F[i, 2, 1], F[i, 2, 2] = b0, b1, b2
+    return F
+
+
+@njit(**_JIT)
+def finish(R, t, P, F, W, inliers):
+    """Everything the report needs at the final pose, in one pass.
+
+    Returns
+    -------
+    z : (N, 2) whitened residuals of every pair
+    theta : (N,) geodesic angles, radians
+    H : (6, 6) normal matrix of the inliers
+    ssr : float, sum of the inliers' squared whitened residuals
+    """
+    n = P.shape[0]
+    z = np.empty((n, 2))
+    theta = np.empty(n)
+    H = np.zeros((6, 6))
+    ssr = 0.0
+    Ji = np.empty((2, 6))
+    for i in range(n):
+        theta[i] = _pair(R, t, P[i], F[i], W[i], z[i], Ji, inliers[i])
+        if inliers[i]:
+            ssr += z[i, 0] * z[i, 0] + z[i, 1] * z[i, 1]
+            for a in range(6):
+                for b in range(a, 6):
+                    H[a, b] += Ji[0, a] * Ji[0, b] + Ji[1, a] * Ji[1, b]
+    for a in range(6):
+        for b in range(a):
+            H[a, b] = H[b, a]
+    return z, theta, H, ssr
+
+
+@njit(**_JIT)
+def covariance(H, sigma):
+    """``sigma^2 H^-1`` via the Jacobi-scaled eigen-decomposition; ``(cov, condition)``.
+
+    ``cov`` is all inf when ``H`` is singular (smallest scaled eigenvalue
+    below 1e-14 of the largest); ``condition`` is the scaled condition number.
+    """
+    cov = np.full((6, 6), np.inf)
+    d = np.empty(6)
+    for a in range(6):
+        if not (H[a, a] > 0.0) or not np.isfinite(H[a, a]):
+            return cov, np.inf
+        d[a] = math.sqrt(H[a, a])
+    S = np.empty((6, 6))
+    for a in range(6):
+        for b in range(6):
+            S[a, b] = H[a, b] / (d[a] * d[b])
+    w, V = np.linalg.eigh(S)
+    cond = w[5] / w[0] if w[0] > 0.0 else np.inf
+    if not (w[0] > 1e-14 * w[5]) or not np.isfinite(sigma):
+        return cov, cond
+    s2 = sigma * sigma
+    for a in range(6):
+        for b in range(6):
+            acc = 0.0
+            for k in range(6):
+                acc += V[a, k] * V[b, k] / w[k]
+            cov[a, b] = s2 * acc / (d[a] * d[b])
+    return cov, cond
+
+
+@njit(**_JIT)
+def _first_close(X, radius, angular):
+    """First pair ``(i, j)`` (i < j in sorted-by-x scan order) closer than ``radius``; (-1, -1) if none.
+
+    A sweep along x: only points within ``radius`` in x are compared, so
+    spread-out data costs O(n log n).  ``angular``: the distance is the angle
+    between unit vectors (never below their chord, so the sweep stays exact).
+    """
+    n = X.shape[0]
+    order = np.argsort(X[:, 0])
+    for a in range(n):
+        i = order[a]
+        for c in range(a + 1, n):
+            j = order[c]
+            if X[j, 0] - X[i, 0] > radius:
+                break
+            if angular:
+                c0 = X[i, 1] * X[j, 2] - X[i, 2] * X[j, 1]
+                c1 = X[i, 2] * X[j, 0] - X[i, 0] * X[j, 2]
+                c2 = X[i, 0] * X[j, 1] - X[i, 1] * X[j, 0]
+                dot = X[i, 0] * X[j, 0] + X[i, 1] * X[j, 1] + X[i, 2] * X[j, 2]
+                dist = math.atan2(math.sqrt(c0 * c0 + c1 * c1 + c2 * c2), dot)
+            else:
+                dist = math.sqrt((X[i, 0] - X[j, 0]) ** 2 + (X[i, 1] - X[j, 1]) ** 2 + (X[i, 2] - X[j, 2]) ** 2)
+            if dist <= radius:
+                return min(i, j), max(i, j)
+    return -1, -1
+
+
+@njit(**_JIT)
+def pair_checks(P, B, same_point_m, same_bearing_rad):
+    """The degeneracy figures of :func:`calib_core.solve.checks.validate_pairs` in one pass.
+
+    Returns
+    -------
+    bad_point, bad_bearing : int
+        First pair with a non-finite laser point / bearing, or -1.
+    bad_norm : int
+        First pair whose bearing norm is off 1 (checked by the caller's tolerance), -1 if all finite.
+    norms : (N,) bearing norms
+    same_point, same_bearing : (2,) int
+        A pair of pairs with the same laser point / bearing, or (-1, -1).
+    singular : (3,) singular values of the centred laser points, descending
+    cos_min_to_mean : float
+        Smallest cosine between a unit bearing and the normalised bearing sum
+        (NaN if the sum vanishes).
+    """
+    n = P.shape[0]
+    bad_point = -1
+    bad_bearing = -1
+    norms = np.empty(n)
+    for i in range(n):
+        if bad_point < 0 and not (np.isfinite(P[i, 0]) and np.isfinite(P[i, 1]) and np.isfinite(P[i, 2])):
+            bad_point = i
+        if bad_bearing < 0 and not (np.isfinite(B[i, 0]) and np.isfinite(B[i, 1]) and np.isfinite(B[i, 2])):
+            bad_bearing = i
+        norms[i] = math.sqrt(B[i, 0] ** 2 + B[i, 1] ** 2 + B[i, 2] ** 2)
+    same_p = np.full(2, -1)
+    same_b = np.full(2, -1)
+    sv = np.zeros(3)
+    cos_min = np.nan
+    if bad_point >= 0 or bad_bearing >= 0:
+        return bad_point, bad_bearing, norms, same_p, same_b, sv, cos_min
+    U = np.empty((n, 3))
+    for i in range(n):
+        inv = 1.0 / norms[i] if norms[i] > 0.0 else 0.0
+        for k in range(3):
+            U[i, k] = B[i, k] * inv
+    same_p[0], same_p[1] = _first_close(P, same_point_m, False)
+    same_b[0], same_b[1] = _first_close(U, same_bearing_rad, True)
+    mu = np.zeros(3)
+    for i in range(n):
+        mu += P[i]
+    mu /= n
+    C = np.zeros((3, 3))
+    for i in range(n):
+        for a in range(3):
+            for b in range(3):
+                C[a, b] += (P[i, a] - mu[a]) * (P[i, b] - mu[b])
+    w = np.linalg.eigvalsh(C)
+    for k in range(3):
+        sv[k] = math.sqrt(max(w[2 - k], 0.0))
+    s = np.zeros(3)
+    for i in range(n):
+        s += U[i]
+    sn = math.sqrt(s[0] ** 2 + s[1] ** 2 + s[2] ** 2)
+    if sn > 0.0:
+        cos_min = 1.0
+        for i in range(n):
+            c = (U[i, 0] * s[0] + U[i, 1] * s[1] + U[i, 2] * s[2]) / sn
+            if c < cos_min:
+                cos_min = c
+    return bad_point, bad_bearing, norms, same_p, same_b, sv, cos_min

@@ -49,6 +49,7 @@ __all__ = [
     "pose_covariance",
     "covariance_from_jacobian",
     "covariance_from_normal",
+    "uncertainty_from_covariance",
     "LM_MAX_ITER",
 ]
 
@@ -137,17 +138,11 @@ def tangent_basis(bearings_camera: np.ndarray) -> np.ndarray:
     (N, 2, 3) ndarray
         Rows ``e1, e2`` with ``(e1, e2, b)`` a right-handed orthonormal frame.
     """
-    b = np.asarray(bearings_camera, dtype=np.float64)
-    # Cross with the coordinate axis least aligned with b (never parallel).
-    axis = np.eye(3)[np.argmin(np.abs(b), axis=1)]
-    e1 = cross3(b, axis)
-    e1 /= np.sqrt(np.einsum("ij,ij->i", e1, e1))[:, None]
-    e2 = cross3(b, e1)
-    return np.stack([e1, e2], axis=1)
+    return bearing_frames(bearings_camera)[:, :2, :].copy()
 
 
 def bearing_frames(bearings_camera: np.ndarray, E: np.ndarray | None = None) -> np.ndarray:
-    """Per-bearing orthonormal frames, rows ``e1, e2, b``.
+    """Per-bearing orthonormal frames, rows ``e1, e2, b`` (:func:`calib_core.solve.kernels.bearing_frames`).
 
     Parameters
     ----------
@@ -162,9 +157,9 @@ def bearing_frames(bearings_camera: np.ndarray, E: np.ndarray | None = None) -> 
         One product ``frames @ P`` gives a point's two tangent components and
         its component along the bearing (metres, like ``P``).
     """
-    b = np.asarray(bearings_camera, dtype=np.float64)
+    b = np.ascontiguousarray(bearings_camera, dtype=np.float64)
     if E is None:
-        E = tangent_basis(b)
+        return kernels.bearing_frames(b)
     return np.concatenate([E, b[:, None, :]], axis=1)
 
 
@@ -425,6 +420,16 @@ class PoseUncertainty(NamedTuple):
     JtJ: np.ndarray
 
 
+def uncertainty_from_covariance(cov: np.ndarray, JtJ: np.ndarray, R: np.ndarray) -> PoseUncertainty:
+    """Sigmas of ``t`` and of roll/pitch/yaw from the 6x6 covariance of ``(delta, t)`` at rotation ``R``."""
+    sigma_t = np.sqrt(np.diag(cov)[3:])
+    G = rpy_jacobian(R)
+    finite = np.all(np.isfinite(cov)) and np.all(np.isfinite(G))
+    cov_rpy = G @ cov[:3, :3] @ G.T if finite else np.full((3, 3), np.inf)
+    sigma_rpy = np.degrees(np.sqrt(np.abs(np.diag(cov_rpy))))
+    return PoseUncertainty(cov, sigma_t, sigma_rpy, JtJ)
+
+
 def covariance_from_normal(JtJ: np.ndarray, sigma: float, R: np.ndarray) -> PoseUncertainty:
     """``sigma^2 (J^T J)^-1`` and the sigmas of ``t`` and of roll/pitch/yaw.
 
@@ -437,23 +442,9 @@ def covariance_from_normal(JtJ: np.ndarray, sigma: float, R: np.ndarray) -> Pose
     R : (3, 3) ndarray
         Estimated rotation (for the roll/pitch/yaw Jacobian).
     """
-    JtJ = np.asarray(JtJ, dtype=np.float64)
-    # Inverse of the Jacobi-scaled matrix: rotations (rad) and translations (m)
-    # differ in scale by orders of magnitude.
-    d = np.sqrt(np.diag(JtJ))
-    cov = np.full((6, 6), np.inf)
-    if np.all(d > 0) and np.all(np.isfinite(JtJ)) and np.isfinite(sigma):
-        scaled = JtJ / d[:, None] / d[None, :]
-        eigval, eigvec = np.linalg.eigh(scaled)
-        if eigval[0] > 1e-14 * eigval[-1]:
-            inv_scaled = (eigvec / eigval) @ eigvec.T
-            cov = sigma**2 * inv_scaled / d[:, None] / d[None, :]
-    sigma_t = np.sqrt(np.diag(cov)[3:])
-    G = rpy_jacobian(R)
-    finite = np.all(np.isfinite(cov)) and np.all(np.isfinite(G))
-    cov_rpy = G @ cov[:3, :3] @ G.T if finite else np.full((3, 3), np.inf)
-    sigma_rpy = np.degrees(np.sqrt(np.abs(np.diag(cov_rpy))))
-    return PoseUncertainty(cov, sigma_t, sigma_rpy, JtJ)
+    JtJ = np.ascontiguousarray(JtJ, dtype=np.float64)
+    cov, _ = kernels.covariance(JtJ, float(sigma))
+    return uncertainty_from_covariance(cov, JtJ, np.asarray(R, dtype=np.float64))
 
 
 def covariance_from_jacobian(J: np.ndarray, sigma: float, R: np.ndarray) -> PoseUncertainty:

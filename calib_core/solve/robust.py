@@ -18,9 +18,11 @@ Scheme (LO-MSAC with a least-median start, on bearings):
    inliers, new residuals for every pair, a new scale from the inliers
    (never below the prior), new inliers; repeated until the set is stable.
 
-A pair is an outlier when its whitened residual exceeds ``tau``
-(:data:`INLIER_K` sigmas; for a 2-D Gaussian residual a good pair exceeds
-3.5 sigma with probability exp(-3.5^2 / 2) = 0.2 %).
+A pair is an outlier when its whitened residual exceeds ``tau = k(n) * scale``,
+with ``k(n)`` (:func:`inlier_k`) chosen so that n good pairs with Gaussian
+noise have a :data:`FAMILY_ALPHA` chance that *any* of them exceeds it (a 2-D
+Gaussian residual exceeds ``k`` sigma with probability ``exp(-k^2 / 2)``):
+3.7 sigma for 10 pairs, 4.8 for 1000, never below :data:`INLIER_K`.
 """
 
 from __future__ import annotations
@@ -33,12 +35,20 @@ import numpy as np
 from .bearing_pnp import _triples, p3p_grunert
 from .kernels import lm_refine, score_poses, whitened_residuals
 
-__all__ = ["RobustFit", "INLIER_K", "robust_fit", "robust_scale", "inlier_scale"]
+__all__ = ["RobustFit", "INLIER_K", "inlier_k", "robust_fit", "robust_scale", "inlier_scale"]
 
-#: Inlier threshold in sigmas of the whitened residual.
+#: Smallest inlier threshold, in sigmas of the whitened residual.
 INLIER_K = 3.5
+#: Chance that a set of good pairs loses one of them to the outlier test.
+FAMILY_ALPHA = 0.01
+#: Triples per batch of hypotheses (the search stops once enough were tried).
+BATCH = 32
+#: Confidence of having drawn at least one all-inlier triple (adaptive RANSAC stopping).
+CONFIDENCE = 0.999
 #: Up to this many pairs every triple is a hypothesis (C(12, 3) = 220).
 ALL_TRIPLES_MAX_N = 12
+#: Most triples tried (the bound of the adaptive stopping rule at about 20 % inliers).
+MAX_TRIPLES = 1024
 #: LM iterations per local optimisation.
 LM_MAX_ITER = 100
 #: median(|z|^2) = 2 ln 2 sigma^2 for a 2-D Gaussian of sigma per axis.
@@ -69,6 +79,11 @@ class RobustFit(NamedTuple):
     hypotheses: int
 
 
+def inlier_k(n: int) -> float:
+    """Inlier threshold in sigmas for n pairs: ``sqrt(-2 ln(alpha / n))``, at least :data:`INLIER_K`."""
+    return max(INLIER_K, math.sqrt(-2.0 * math.log(FAMILY_ALPHA / max(n, 1))))
+
+
 def robust_scale(sq: np.ndarray, n_params: int = 6) -> float:
     """Noise sigma per axis from squared 2-D residual norms ``sq``, by their median (LMedS).
 
@@ -86,16 +101,21 @@ def inlier_scale(sq_inliers: np.ndarray) -> float:
     return math.sqrt(float(sq_inliers.sum()) / dof) if dof > 0 else float("nan")
 
 
-def _hypotheses(points, bearings, extra_R, extra_t, rng):
-    n = len(points)
+def _triple_batches(bearings: np.ndarray, rng: np.random.Generator):
+    """Triples of pair indices in batches: every triple for few pairs, else well-spread then random ones."""
+    n = len(bearings)
     if n <= ALL_TRIPLES_MAX_N:
         tri = np.array([(i, j, k) for i in range(n) for j in range(i + 1, n) for k in range(j + 1, n)])
-    else:
-        tri = _triples(bearings, rng)
+        yield tri
+        return
+    yield _triples(bearings, rng, max_random=0)  # the well-spread ones first
+    while True:
+        yield np.sort(np.argsort(rng.random((BATCH, n)), axis=1)[:, :3], axis=1)
+
+
+def _poses(points, bearings, tri):
     T, _ = p3p_grunert(points[tri], bearings[tri])
-    Rs = np.concatenate([np.asarray(extra_R).reshape(-1, 3, 3), T[:, :3, :3]])
-    ts = np.concatenate([np.asarray(extra_t).reshape(-1, 3), T[:, :3, 3]])
-    return np.ascontiguousarray(Rs), np.ascontiguousarray(ts)
+    return np.ascontiguousarray(T[:, :3, :3]), np.ascontiguousarray(T[:, :3, 3])
 
 
 def robust_fit(
@@ -133,22 +153,39 @@ def robust_fit(
         Seed of the random triples (deterministic output).
     """
     n = len(points)
-    Rs, ts = _hypotheses(points, bearings, start_R, start_t, np.random.default_rng(seed))
-    sq = score_poses(Rs, ts, points, frames, W)  # (K, N)
-    sq = np.where(np.isfinite(sq), sq, np.inf)
+    k = inlier_k(n)
     floor = max(min_scale, prior_scale or 0.0)
-    if prior_scale is None:
-        h = n // 2 + 1
-        kth = np.partition(sq, h - 1, axis=1)[:, h - 1]
-        best = int(np.argmin(kth))
-        scale = max(robust_scale(sq[best]), floor)
-    else:
-        scale = floor
-    tau2 = (INLIER_K * scale) ** 2
-    msac = np.minimum(sq, tau2).sum(axis=1)
-    best = int(np.argmin(msac))
-    R, t = Rs[best], ts[best]
-    inliers = sq[best] < tau2
+    rng = np.random.default_rng(seed)
+    Rs = np.ascontiguousarray(np.asarray(start_R, dtype=np.float64).reshape(1, 3, 3))
+    ts = np.ascontiguousarray(np.asarray(start_t, dtype=np.float64).reshape(1, 3))
+    best_R, best_t, best_sq, best_cost = Rs[0], ts[0], None, np.inf
+    scale = floor
+    tried = 0
+    hypotheses = 0
+    for tri in _triple_batches(bearings, rng):
+        R_new, t_new = _poses(points, bearings, tri)
+        Rs = np.concatenate([Rs, R_new]) if hypotheses == 0 else R_new
+        ts = np.concatenate([ts, t_new]) if hypotheses == 0 else t_new
+        sq = score_poses(Rs, ts, points, frames, W)  # (K, N)
+        sq = np.where(np.isfinite(sq), sq, np.inf)
+        hypotheses += len(Rs)
+        tried += len(tri)
+        if best_sq is None and prior_scale is None:
+            # No prior: least median of squares over the first batch sets the scale.
+            h = n // 2 + 1
+            kth = np.partition(sq, h - 1, axis=1)[:, h - 1]
+            scale = max(robust_scale(sq[int(np.argmin(kth))]), floor)
+        tau2 = (k * scale) ** 2
+        msac = np.minimum(sq, tau2).sum(axis=1)
+        j = int(np.argmin(msac))
+        if msac[j] < best_cost:
+            best_cost, best_R, best_t, best_sq = msac[j], Rs[j], ts[j], sq[j]
+        w = float(np.mean(best_sq < tau2))
+        needed = math.log(1 - CONFIDENCE) / math.log(max(1 - w**3, 1e-12)) if w < 1 else 1
+        if n <= ALL_TRIPLES_MAX_N or tried >= needed or tried >= MAX_TRIPLES:
+            break
+    R, t = best_R, best_t
+    inliers = best_sq < (k * scale) ** 2
     iterations = 0
     for _ in range(10):  # LO: usually stable after 1-3 rounds
         if inliers.sum() < 3:
@@ -160,8 +197,8 @@ def robust_fit(
         r2 = np.einsum("ij,ij->i", z, z)
         s_in = inlier_scale(r2[inliers])
         scale = max(s_in, floor) if np.isfinite(s_in) else scale
-        new = r2 < (INLIER_K * scale) ** 2
+        new = r2 < (k * scale) ** 2
         if np.array_equal(new, inliers):
             break
         inliers = new
-    return RobustFit(R, t, inliers, scale, iterations, len(Rs))
+    return RobustFit(R, t, inliers, scale, iterations, hypotheses)

@@ -2,11 +2,11 @@
 
 The log-map residual ``r_i`` of pair i lives in the tangent plane of the
 clicked bearing (radians).  A pixel error ``dm`` moves the bearing by
-``J_i dm`` in that plane, with ``J_i`` (2x2, rad/px) the derivative of the
-camera's pixel-to-ray map.  With click noise ``sigma_i`` px per axis the
-residual's covariance is ``sigma_i^2 J_i J_i^T``, so
+``A_i^-1 dm`` in that plane, with ``A_i`` (2x2, px/rad) the derivative of the
+camera's projection along the tangent plane.  With click noise ``sigma_i`` px
+per axis the residual's covariance is ``sigma_i^2 A_i^-1 A_i^-T``, so
 
-    z_i = W_i r_i,   W_i = J_i^-1 / sigma_i
+    z_i = W_i r_i,   W_i = A_i / sigma_i
 
 has unit covariance (when ``sigma_i`` is the true noise) and eq. 7 with
 ``z_i`` weighs each pair as the pixel cost (eq. 6) would, at the angular
@@ -16,7 +16,7 @@ The laser side has its own error: a pick lands on a whole depth-matrix cell
 (:func:`cell_pick_covariance`, metres^2 in the lidar frame).  Seen from the
 camera it moves the bearing by ``Sigma_L,i`` (:func:`laser_tangent_covariance`,
 which needs the pose), added to the click's covariance:
-``C_i = sigma_i^2 J_i J_i^T + Sigma_L,i`` and ``W_i = chol(C_i)^-1``.
+``C_i = sigma_i^2 A_i^-1 A_i^-T + Sigma_L,i`` and ``W_i = chol(C_i)^-1``.
 """
 
 from __future__ import annotations
@@ -27,11 +27,11 @@ import numpy as np
 
 from ..errors import CalibError
 
-__all__ = ["pixel_to_tangent", "whitening", "check_pixel_sigma", "cell_pick_covariance",
+__all__ = ["tangent_to_pixel", "whitening", "check_pixel_sigma", "cell_pick_covariance",
            "laser_tangent_covariance"]
 
-#: Central-difference step on the image, px.
-STEP_PX = 0.25
+#: Central-difference step on the sphere, radians (a fraction of a pixel for any real camera).
+STEP_RAD = 1e-4
 
 
 def check_pixel_sigma(pixel_sigma: object, n: int) -> np.ndarray | None:
@@ -107,40 +107,36 @@ def laser_tangent_covariance(T_camera_lidar: np.ndarray, points_lidar: np.ndarra
     return S / np.einsum("ij,ij->i", P, P)[:, None, None]
 
 
-def pixel_to_tangent(camera: Any, pixels: np.ndarray, frames: np.ndarray) -> np.ndarray:
-    """``d(tangent coordinates of the bearing) / d(pixel)`` at each pixel, ``(N, 2, 2)`` rad/px.
+def tangent_to_pixel(camera: Any, frames: np.ndarray) -> np.ndarray:
+    """``d pixel / d(tangent coordinates of the bearing)`` at each bearing, ``(N, 2, 2)`` px/rad.
+
+    Central differences of ``camera.project`` at ``b +- h e1`` and
+    ``b +- h e2`` (one call; projecting is cheaper than un-distorting pixels).
 
     Parameters
     ----------
     camera : CameraModel
-        Has ``bearing(pixels) -> (N, 3)`` unit rays, OpenCV camera frame.
-    pixels : (N, 2) ndarray
-        ``(u, v)`` pixels.
     frames : (N, 3, 3) ndarray
-        Rows ``e1, e2, b`` of each bearing (:func:`calib_core.solve.refine.bearing_frames`).
+        Rows ``e1, e2, b`` of each clicked bearing.
 
     Returns
     -------
     (N, 2, 2) ndarray
-        Columns: derivative along u, along v.  NaN where the camera gives no
-        ray one step away (image edge of a fisheye, for example).
+        Columns: along ``e1``, along ``e2``.  NaN where the camera cannot
+        project one of the probes.
     """
-    n = len(pixels)
-    h = STEP_PX
-    offsets = np.array([[h, 0.0], [-h, 0.0], [0.0, h], [0.0, -h]])
-    probe = (pixels[None, :, :] + offsets[:, None, :]).reshape(-1, 2)
-    rays = np.asarray(camera.bearing(probe), dtype=np.float64).reshape(4, n, 3)
-    du = (rays[0] - rays[1]) / (2 * h)
-    dv = (rays[2] - rays[3]) / (2 * h)
-    E = frames[:, :2, :]
-    return np.stack([np.einsum("nij,nj->ni", E, du), np.einsum("nij,nj->ni", E, dv)], axis=2)
+    n = len(frames)
+    h = STEP_RAD
+    b, e1, e2 = frames[:, 2, :], frames[:, 0, :], frames[:, 1, :]
+    probe = np.concatenate([b + h * e1, b - h * e1, b + h * e2, b - h * e2])
+    uv = np.asarray(camera.project(probe)[0], dtype=np.float64).reshape(4, n, 2)
+    return np.stack([uv[0] - uv[1], uv[2] - uv[3]], axis=2) / (2 * h)
 
 
 def whitening(
     n: int,
     *,
     camera: Any = None,
-    pixels: np.ndarray | None = None,
     frames: np.ndarray | None = None,
     pixel_sigma: np.ndarray | None = None,
     noise_rad: float | None = None,
@@ -150,7 +146,8 @@ def whitening(
 
     * ``noise_rad`` given: ``W = I / noise_rad`` (known isotropic angular
       noise; the whitened residuals are in units of that noise).
-    * a camera and pixels: ``W_i = chol(sigma_i^2 J_i J_i^T + Sigma_L,i)^-1``
+    * a camera: ``W_i = A_i / sigma_i``, or with a laser term
+      ``W_i = chol(sigma_i^2 A_i^-1 A_i^-T + Sigma_L,i)^-1``
       (``sigma_i`` from ``pixel_sigma``, default 1 px; ``Sigma_L,i`` =
       ``laser_tangent_cov``, default 0): residuals in px of click noise (or
       in sigmas when ``pixel_sigma`` is given).
@@ -166,21 +163,26 @@ def whitening(
     if noise_rad is not None:
         return np.broadcast_to(np.eye(2) / noise_rad, (n, 2, 2)).copy(), "noise"
     eye = np.broadcast_to(np.eye(2), (n, 2, 2))
-    if camera is None or pixels is None or not np.all(np.isfinite(pixels)):
+    if camera is None:
         return eye / s[:, None, None], "rad"
-    J = pixel_to_tangent(camera, pixels, frames)
-    det = J[:, 0, 0] * J[:, 1, 1] - J[:, 0, 1] * J[:, 1, 0]
+    A = tangent_to_pixel(camera, frames)  # px/rad: the whitened residual is the linearised pixel error
+    det = A[:, 0, 0] * A[:, 1, 1] - A[:, 0, 1] * A[:, 1, 0]
     ok = np.isfinite(det) & (np.abs(det) > 0)
     if not ok.any():
         return eye / s[:, None, None], "rad"
     if not ok.all():
-        # No ray one step away: the median isotropic radians-per-pixel of the other pairs.
-        J[~ok] = np.eye(2) * float(np.median(np.sqrt(np.abs(det[ok]))))
-    Js = J * s[:, None, None]
-    C = Js @ np.swapaxes(Js, 1, 2)
-    if laser_tangent_cov is not None:
-        C = C + laser_tangent_cov
-    # C = L L^T (2x2 Cholesky, closed form); W = L^-1, so W^T W = C^-1.
+        # A probe the camera cannot project: the median isotropic px-per-radian of the other pairs.
+        A[~ok] = np.eye(2) * float(np.median(np.sqrt(np.abs(det[ok]))))
+        det = np.where(ok, det, A[:, 0, 0] * A[:, 1, 1])
+    unit = "px" if pixel_sigma is None else "sigma"
+    if laser_tangent_cov is None:
+        return A / s[:, None, None], unit
+    # C = s^2 A^-1 A^-T + Sigma_L (rad^2) = L L^T (2x2 Cholesky, closed form); W = L^-1, W^T W = C^-1.
+    Ainv = np.empty_like(A)
+    Ainv[:, 0, 0], Ainv[:, 1, 1] = A[:, 1, 1] / det, A[:, 0, 0] / det
+    Ainv[:, 0, 1], Ainv[:, 1, 0] = -A[:, 0, 1] / det, -A[:, 1, 0] / det
+    Js = Ainv * s[:, None, None]
+    C = Js @ np.swapaxes(Js, 1, 2) + laser_tangent_cov
     l00 = np.sqrt(C[:, 0, 0])
     l10 = C[:, 1, 0] / l00
     l11 = np.sqrt(np.maximum(C[:, 1, 1] - l10**2, 1e-300))
