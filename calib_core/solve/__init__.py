@@ -339,7 +339,14 @@ def solve_extrinsics(
             raise
         T, iterations = T_init, 0
     if laser_cov is not None and whiten_camera is not None:
+        # The laser term depends on the pose: whiten at the first optimum and refine once more.
         W, unit = whiten(T)
+        try:
+            T, more = refine_angular(T, points, frames, W)
+            iterations += more
+        except CalibError:
+            if not robust:
+                raise
     z, _ = kernels.whitened_residuals(T[:3, :3].copy(), T[:3, 3].copy(), points, frames, W)
     r2 = z[:, 0] ** 2 + z[:, 1] ** 2
 
