@@ -508,8 +508,10 @@ def warm_up() -> float:
     points = d * rng.uniform(2, 8, (8, 1))
     bearings = d.copy()
     bearings[0] = -bearings[0]  # one outlier: runs the robust path too
-    solve_extrinsics(points, bearings)
+    solve_extrinsics(points, bearings)  # DLT start, LM, robust search (P3P), report
+    solve_extrinsics(points[1:6], d[1:6])  # 5 pairs: Quan & Lan start (rigid fit)
     pose_covariance(np.eye(4), points, 1e-3)
+    kernels.pose_core(points[1:], d[1:], np.broadcast_to(np.eye(2), (7, 2, 2)).copy(), 5)
     return time.perf_counter() - t0
 
 

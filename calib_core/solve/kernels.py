@@ -574,3 +574,161 @@ def pair_checks(P, B, same_point_m, same_bearing_rad):
             if c < cos_min:
                 cos_min = c
     return bad_point, bad_bearing, norms, same_p, same_b, sv, cos_min
+
+
+@njit(**_JIT)
+def pose_core(P, B, W, max_iter):
+    """The compiled solve alone: frames, linear DLT start, LM and covariance scale, one call.
+
+    No input checks, no outlier search, no report: what
+    :func:`calib_core.solve.solve_extrinsics` runs inside, exposed for the
+    benchmark against OpenCV's SQPnP + ``solvePnPRefineLM`` (which do neither).
+
+    Returns
+    -------
+    R, t, cov (6, 6) with the residual-variance scale ``SSR / (2N - 6)``, iterations, status
+    (as :func:`lm_refine`; -3 when the DLT start fails).
+    """
+    F = bearing_frames(B)
+    R0, t0, ok = dlt_pose(P, B)
+    if not ok:
+        return R0, t0, np.full((6, 6), np.inf), 0, -3
+    R, t, it, status = lm_refine(R0, t0, P, F, W, max_iter)
+    H, g, cost = normal_equations(R, t, P, F, W)
+    dof = 2 * P.shape[0] - 6
+    sigma = math.sqrt(cost / dof) if dof > 0 else np.inf
+    cov, cond = covariance(H, sigma)
+    return R, t, cov, it, status
+
+
+@njit(**_JIT)
+def _rigid_fit_one(src, dst, out):
+    """Least-squares rigid ``T_dst_src`` of (N, 3) point sets into ``out`` (4, 4): Arun's SVD with
+    Umeyama's reflection fix (see :mod:`calib_core.solve.rigid`)."""
+    n = src.shape[0]
+    ms = np.zeros(3)
+    md = np.zeros(3)
+    for i in range(n):
+        for k in range(3):
+            ms[k] += src[i, k]
+            md[k] += dst[i, k]
+    ms /= n
+    md /= n
+    H = np.zeros((3, 3))
+    for i in range(n):
+        for a in range(3):
+            for b in range(3):
+                H[a, b] += (src[i, a] - ms[a]) * (dst[i, b] - md[b])
+    U, _, Vt = np.linalg.svd(H)
+    V = Vt.T
+    Ut = U.T
+    R = V @ Ut
+    if np.linalg.det(R) < 0.0:
+        for a in range(3):
+            V[a, 2] = -V[a, 2]
+        R = V @ Ut
+    for a in range(3):
+        for b in range(3):
+            out[a, b] = R[a, b]
+        out[a, 3] = md[a] - (R[a, 0] * ms[0] + R[a, 1] * ms[1] + R[a, 2] * ms[2])
+        out[3, a] = 0.0
+    out[3, 3] = 1.0
+
+
+@njit(**_JIT)
+def rigid_fit_batch(src, dst):
+    """:func:`_rigid_fit_one` over a batch: ``src, dst (M, N, 3)`` -> ``(M, 4, 4)``."""
+    M = src.shape[0]
+    out = np.empty((M, 4, 4))
+    for m in range(M):
+        _rigid_fit_one(src[m], dst[m], out[m])
+    return out
+
+
+@njit(**_JIT)
+def p3p_grunert(P, B):
+    """All P3P poses of M triples (Grunert, in the notation of Haralick et al. 1994).
+
+    ``P, B (M, 3, 3)``: laser points and unit bearings of each triple.  With
+    ``s2 = u s1`` and ``s3 = v s1`` the law of cosines gives a quartic in
+    ``v`` (their eq. 9), solved by the eigenvalues of its companion matrix;
+    ``s2`` is taken from whichever of the c-equation roots and Grunert's ``u``
+    (eq. 8) best satisfies the a-equation.  Only positive depths are kept.
+
+    Returns
+    -------
+    T : (K, 4, 4) poses ``T_camera_lidar``; tri : (K,) the triple of each.
+    """
+    M = P.shape[0]
+    Ts = np.empty((4 * M, 4, 4))
+    tri = np.empty(4 * M, dtype=np.int64)
+    K = 0
+    comp = np.zeros((4, 4))
+    pc = np.empty((3, 3))
+    for m in range(M):
+        p = P[m]
+        b = B[m]
+        a2 = (p[1, 0] - p[2, 0]) ** 2 + (p[1, 1] - p[2, 1]) ** 2 + (p[1, 2] - p[2, 2]) ** 2
+        b2 = (p[0, 0] - p[2, 0]) ** 2 + (p[0, 1] - p[2, 1]) ** 2 + (p[0, 2] - p[2, 2]) ** 2
+        c2 = (p[0, 0] - p[1, 0]) ** 2 + (p[0, 1] - p[1, 1]) ** 2 + (p[0, 2] - p[1, 2]) ** 2
+        if not (a2 > 0.0 and b2 > 0.0 and c2 > 0.0):
+            continue
+        ca = b[1, 0] * b[2, 0] + b[1, 1] * b[2, 1] + b[1, 2] * b[2, 2]
+        cb = b[0, 0] * b[2, 0] + b[0, 1] * b[2, 1] + b[0, 2] * b[2, 2]
+        cg = b[0, 0] * b[1, 0] + b[0, 1] * b[1, 1] + b[0, 2] * b[1, 2]
+        q = (a2 - c2) / b2
+        pp = (a2 + c2) / b2
+        A4 = (q - 1) ** 2 - 4 * c2 / b2 * ca**2
+        A3 = 4 * (q * (1 - q) * cb - (1 - pp) * ca * cg + 2 * c2 / b2 * ca**2 * cb)
+        A2 = 2 * (q**2 - 1 + 2 * q**2 * cb**2 + 2 * (b2 - c2) / b2 * ca**2 - 4 * pp * ca * cb * cg
+                  + 2 * (b2 - a2) / b2 * cg**2)
+        A1 = 4 * (-q * (1 + q) * cb + 2 * a2 / b2 * cg**2 * cb - (1 - pp) * ca * cg)
+        A0 = (1 + q) ** 2 - 4 * a2 / b2 * cg**2
+        big = max(abs(A4), abs(A3), abs(A2), abs(A1), abs(A0))
+        if not (abs(A4) > 1e-12 * big):
+            continue  # a vanishing leading coefficient sends a root to infinity
+        comp[0, 0], comp[0, 1], comp[0, 2], comp[0, 3] = -A3 / A4, -A2 / A4, -A1 / A4, -A0 / A4
+        comp[1, 0] = comp[2, 1] = comp[3, 2] = 1.0
+        roots = np.linalg.eigvals(comp.astype(np.complex128))
+        for r in roots:
+            # Noise can turn a double root into a close complex pair: keep its real part.
+            if abs(r.imag) > 1e-2 * (1.0 + abs(r.real)):
+                continue
+            v = r.real
+            if not v > 0.0:
+                continue
+            s1 = math.sqrt(b2 / max(1.0 + v * v - 2.0 * v * cb, 1e-300))
+            s3 = v * s1
+            disc = math.sqrt(max(c2 - s1 * s1 * (1.0 - cg * cg), 0.0))
+            den = 2.0 * (cg - v * ca)
+            best, best_res = -1.0, np.inf
+            for cand_k in range(3):
+                if cand_k == 0:
+                    s2 = s1 * cg + disc
+                elif cand_k == 1:
+                    s2 = s1 * cg - disc
+                else:
+                    if den == 0.0:
+                        continue
+                    s2 = ((-1.0 + q) * v * v - 2.0 * q * cb * v + 1.0 + q) / den * s1
+                if not (s2 > 0.0 and np.isfinite(s2)):
+                    continue
+                res = abs(s2 * s2 + s3 * s3 - 2.0 * s2 * s3 * ca - a2)
+                if res < best_res:
+                    best, best_res = s2, res
+            if best < 0.0 or not (s1 > 0.0 and np.isfinite(s1)):
+                continue
+            for k in range(3):
+                pc[0, k] = s1 * b[0, k]
+                pc[1, k] = best * b[1, k]
+                pc[2, k] = s3 * b[2, k]
+            _rigid_fit_one(p, pc, Ts[K])
+            ok = True
+            for a in range(3):
+                for c in range(4):
+                    if not np.isfinite(Ts[K, a, c]):
+                        ok = False
+            if ok:
+                tri[K] = m
+                K += 1
+    return Ts[:K], tri[:K]

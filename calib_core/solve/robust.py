@@ -27,12 +27,13 @@ Gaussian residual exceeds ``k`` sigma with probability ``exp(-k^2 / 2)``):
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import NamedTuple
 
 import numpy as np
 
-from .bearing_pnp import _triples, p3p_grunert
+from .bearing_pnp import _spread_order, p3p_grunert
 from .kernels import lm_refine, score_poses, whitened_residuals
 
 __all__ = ["RobustFit", "INLIER_K", "inlier_k", "robust_fit", "robust_scale", "inlier_scale"]
@@ -43,6 +44,11 @@ INLIER_K = 3.5
 FAMILY_ALPHA = 0.01
 #: Triples per batch of hypotheses (the search stops once enough were tried).
 BATCH = 32
+#: Well-spread pairs (farthest-point order of the bearings) whose triples are tried first.
+SPREAD = 6
+#: Hypotheses are first scored on this many pairs; only the best :data:`SHORTLIST` on all of them.
+PREVIEW = 24
+SHORTLIST = 6
 #: Confidence of having drawn at least one all-inlier triple (adaptive RANSAC stopping).
 CONFIDENCE = 0.999
 #: Up to this many pairs every triple is a hypothesis (C(12, 3) = 220).
@@ -105,12 +111,23 @@ def _triple_batches(bearings: np.ndarray, rng: np.random.Generator):
     """Triples of pair indices in batches: every triple for few pairs, else well-spread then random ones."""
     n = len(bearings)
     if n <= ALL_TRIPLES_MAX_N:
-        tri = np.array([(i, j, k) for i in range(n) for j in range(i + 1, n) for k in range(j + 1, n)])
-        yield tri
+        yield _all_triples(n)
         return
-    yield _triples(bearings, rng, max_random=0)  # the well-spread ones first
+    yield _spread_order(bearings, SPREAD)[_all_triples(SPREAD)]  # the well-spread ones first
     while True:
-        yield np.sort(np.argsort(rng.random((BATCH, n)), axis=1)[:, :3], axis=1)
+        # Three distinct indices per row: draw, then redraw the few rows with a repeat.
+        t = rng.integers(0, n, (BATCH, 3))
+        rep = (t[:, 0] == t[:, 1]) | (t[:, 0] == t[:, 2]) | (t[:, 1] == t[:, 2])
+        yield t[~rep]
+
+
+@functools.lru_cache(maxsize=32)
+def _all_triples(n: int) -> np.ndarray:
+    i, j, k = np.meshgrid(np.arange(n), np.arange(n), np.arange(n), indexing="ij")
+    keep = (i < j) & (j < k)
+    out = np.stack([i[keep], j[keep], k[keep]], axis=1)
+    out.flags.writeable = False
+    return out
 
 
 def _poses(points, bearings, tri):
@@ -162,13 +179,23 @@ def robust_fit(
     scale = floor
     tried = 0
     hypotheses = 0
+    preview = np.sort(rng.choice(n, min(n, PREVIEW), replace=False))
     for tri in _triple_batches(bearings, rng):
         R_new, t_new = _poses(points, bearings, tri)
         Rs = np.concatenate([Rs, R_new]) if hypotheses == 0 else R_new
         ts = np.concatenate([ts, t_new]) if hypotheses == 0 else t_new
+        hypotheses += len(Rs)
+        if n > PREVIEW and len(Rs) > SHORTLIST:
+            # Preview on a few pairs (Matas & Chum's pre-test idea), full score for the best few.
+            sub = preview if best_sq is not None or prior_scale is not None else None
+            if sub is not None:
+                sq_sub = score_poses(Rs, ts, points[sub], frames[sub], W[sub])
+                tau2_sub = (k * scale) ** 2
+                keep = np.argsort(np.minimum(np.where(np.isfinite(sq_sub), sq_sub, np.inf), tau2_sub).sum(axis=1))
+                keep = keep[:SHORTLIST]
+                Rs, ts = np.ascontiguousarray(Rs[keep]), np.ascontiguousarray(ts[keep])
         sq = score_poses(Rs, ts, points, frames, W)  # (K, N)
         sq = np.where(np.isfinite(sq), sq, np.inf)
-        hypotheses += len(Rs)
         tried += len(tri)
         if best_sq is None and prior_scale is None:
             # No prior: least median of squares over the first batch sets the scale.
