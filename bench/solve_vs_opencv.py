@@ -153,23 +153,6 @@ def speed(quick: bool) -> list[dict]:
 
 
 # ------------------------------------------------------------------ accuracy
-def _mean_error_of_bound(cov6: np.ndarray, rpy_true_deg: np.ndarray, rng: np.random.Generator,
-                         draws: int = 4000) -> tuple[float, float]:
-    """Mean rotation angle (deg) and translation norm (m) of Gaussian errors with covariance ``cov6``.
-
-    ``cov6`` is over (roll, pitch, yaw [rad], tx, ty, tz [m]); the rotation error of each draw is the
-    angle between ``R(rpy_true + d)`` and ``R(rpy_true)`` (R = Rz(yaw) Ry(pitch) Rx(roll)).
-    """
-    from scipy.spatial.transform import Rotation
-
-    e = rng.multivariate_normal(np.zeros(6), cov6, draws)
-    zyx = np.radians(np.asarray(rpy_true_deg, dtype=np.float64)[::-1])
-    R0 = Rotation.from_euler("ZYX", zyx)
-    R = Rotation.from_euler("ZYX", zyx[None, :] + e[:, 2::-1])
-    angle = (R0.inv() * R).magnitude()
-    return float(np.degrees(angle).mean()), float(np.linalg.norm(e[:, 3:], axis=1).mean())
-
-
 def accuracy(quick: bool) -> tuple[list[dict], list[dict]]:
     from calib_core.errors import CalibError
     from calib_core.pairs import resolve_pairs
@@ -178,7 +161,7 @@ def accuracy(quick: bool) -> tuple[list[dict], list[dict]]:
 
     from .common import load_scenes, pose_error
     from .compare import pinhole_variant
-    from .crb import cell_rounding_covariance, cramer_rao
+    from .crb import cell_rounding_covariance, cramer_rao, mean_error_of_bound
 
     trials = 20 if quick else 100
     scenes = load_scenes(())
@@ -199,24 +182,24 @@ def accuracy(quick: bool) -> tuple[list[dict], list[dict]]:
                 try:
                     res = calibrate(pairs, pin.scene.depth, pin.scene.camera)
                     e = pose_error(res.T_camera_lidar, pin.scene.T_camera_lidar)
-                    errs["ours"].append((e.rotation_deg, e.translation_m))
+                    errs["ours"].append((e.rotation_deg, e.translation_norm_m))
                 except CalibError:
                     errs["ours"].append((np.nan, np.nan))
                 ok, rvec, tvec = _opencv(pin.scene.camera, np.ascontiguousarray(pts), np.ascontiguousarray(px))
                 T = np.eye(4)
                 T[:3, :3], T[:3, 3] = cv2.Rodrigues(rvec)[0], tvec.ravel()
                 e = pose_error(T, pin.scene.T_camera_lidar)
-                errs["opencv"].append((e.rotation_deg, e.translation_m) if ok else (np.nan, np.nan))
+                errs["opencv"].append((e.rotation_deg, e.translation_norm_m) if ok else (np.nan, np.nan))
             # OCam: ours against the realistic Cramer-Rao bound of the same pairs.
             pairs = simulate_pairs(omni.scene, n, np.random.default_rng([BENCH_SEED, 78, n, k]), pixel_noise_px=1.0)
             res = calibrate(pairs, omni.scene.depth, omni.scene.camera)
             e = pose_error(res.T_camera_lidar, omni.scene.T_camera_lidar)
-            errs["ours_omni"].append((e.rotation_deg, e.translation_m))
+            errs["ours_omni"].append((e.rotation_deg, e.translation_norm_m))
             rc = np.array([p.laser_rc for p in pairs])
             pts = omni.scene.depth.points[rc[:, 0], rc[:, 1]]
             bound = cramer_rao(omni.scene.camera, omni.scene.T_camera_lidar, pts, 1.0,
                                cell_rounding_covariance(omni.scene.depth, rc, 0.01))
-            errs["bound"].append(_mean_error_of_bound(bound.covariance, rpy_true, rng_b, 1000 if quick else 4000))
+            errs["bound"].append(mean_error_of_bound(bound.covariance, rpy_true, rng_b, 1000 if quick else 4000))
         m = {k: np.nanmean(np.array(v), axis=0) if v else np.array([np.nan, np.nan]) for k, v in errs.items()}
         pin_rows.append({"n": n, "trials": len(errs["ours"]), "ours": m["ours"], "opencv": m["opencv"]})
         omni_rows.append({"n": n, "trials": trials, "ours": m["ours_omni"], "bound": m["bound"]})

@@ -646,6 +646,113 @@ def rigid_fit_batch(src, dst):
 
 
 @njit(**_JIT)
+def _cubic_largest_root(A, B, C):
+    """Largest real root of ``m^3 + A m^2 + B m + C`` (Cardano / trigonometric form, Newton-polished)."""
+    P = B - A * A / 3.0
+    Q = 2.0 * A * A * A / 27.0 - A * B / 3.0 + C
+    D = (Q / 2.0) ** 2 + (P / 3.0) ** 3
+    if D > 0.0:
+        sq = math.sqrt(D)
+        u = -Q / 2.0 + sq
+        v = -Q / 2.0 - sq
+        z = math.copysign(abs(u) ** (1.0 / 3.0), u) + math.copysign(abs(v) ** (1.0 / 3.0), v)
+    else:
+        rr = math.sqrt(max(-P / 3.0, 0.0))
+        arg = (-Q / 2.0) / (rr**3) if rr > 0.0 else 0.0
+        z = 2.0 * rr * math.cos(math.acos(min(max(arg, -1.0), 1.0)) / 3.0)
+    m = z - A / 3.0
+    for _ in range(2):
+        f = ((m + A) * m + B) * m + C
+        df = (3.0 * m + 2.0 * A) * m + B
+        if df != 0.0:
+            m -= f / df
+    return m
+
+
+@njit(**_JIT)
+def _quartic_real_roots(c4, c3, c2, c1, c0, out):
+    """Real roots of ``c4 x^4 + ... + c0`` by Ferrari's method, Newton-polished; returns their count.
+
+    A close complex pair (noise can split a double root) counts as one real root at its real part,
+    when its imaginary part is below 1e-2 (1 + |real part|).
+    """
+    a, b, c, d = c3 / c4, c2 / c4, c1 / c4, c0 / c4
+    p = b - 3.0 * a * a / 8.0
+    q = c - a * b / 2.0 + a * a * a / 8.0
+    r = d - a * c / 4.0 + a * a * b / 16.0 - 3.0 * a**4 / 256.0
+    k = 0
+    quad = np.empty((2, 2))  # y^2 + B y + C
+    if abs(q) < 1e-14 * (1.0 + abs(p) ** 1.5 + abs(r) ** 0.75):
+        disc = p * p - 4.0 * r
+        sq = math.sqrt(max(disc, 0.0))
+        for y2 in ((-p + sq) / 2.0, (-p - sq) / 2.0):
+            if y2 >= 0.0:
+                out[k] = math.sqrt(y2) - a / 4.0
+                out[k + 1] = -math.sqrt(y2) - a / 4.0
+                k += 2
+    else:
+        m = _cubic_largest_root(p, p * p / 4.0 - r, -q * q / 8.0)
+        if not m > 0.0:
+            return 0
+        s = math.sqrt(2.0 * m)
+        quad[0, 0], quad[0, 1] = s, p / 2.0 + m - q / (2.0 * s)
+        quad[1, 0], quad[1, 1] = -s, p / 2.0 + m + q / (2.0 * s)
+        for j in range(2):
+            Bq, Cq = quad[j, 0], quad[j, 1]
+            disc = Bq * Bq - 4.0 * Cq
+            if disc >= 0.0:
+                sq = math.sqrt(disc)
+                out[k] = (-Bq + sq) / 2.0 - a / 4.0
+                out[k + 1] = (-Bq - sq) / 2.0 - a / 4.0
+                k += 2
+            else:
+                re = -Bq / 2.0 - a / 4.0
+                if math.sqrt(-disc) / 2.0 <= 1e-2 * (1.0 + abs(re)):
+                    out[k] = re
+                    k += 1
+    for i in range(k):
+        x = out[i]
+        for _ in range(2):
+            f = (((c4 * x + c3) * x + c2) * x + c1) * x + c0
+            df = ((4.0 * c4 * x + 3.0 * c3) * x + 2.0 * c2) * x + c1
+            if df == 0.0:
+                break
+            step = f / df
+            if not np.isfinite(step) or abs(step) > 1e-2 * (1.0 + abs(x)):
+                break  # Newton leaving the root's basin (a near-double root): keep the closed form
+            x -= step
+        out[i] = x
+    return k
+
+
+@njit(**_JIT)
+def _triangle_pose(p, pc, out):
+    """Rigid ``T`` with ``pc = R p + t`` for two congruent triangles (3, 3), from their edge frames."""
+    Fl = np.empty((3, 3))
+    Fc = np.empty((3, 3))
+    for X, Fr in ((p, Fl), (pc, Fc)):
+        e1 = X[1] - X[0]
+        e1 = e1 / math.sqrt(e1[0] ** 2 + e1[1] ** 2 + e1[2] ** 2)
+        w = X[2] - X[0]
+        e3 = np.array([e1[1] * w[2] - e1[2] * w[1], e1[2] * w[0] - e1[0] * w[2], e1[0] * w[1] - e1[1] * w[0]])
+        e3 = e3 / math.sqrt(e3[0] ** 2 + e3[1] ** 2 + e3[2] ** 2)
+        e2 = np.array([e3[1] * e1[2] - e3[2] * e1[1], e3[2] * e1[0] - e3[0] * e1[2], e3[0] * e1[1] - e3[1] * e1[0]])
+        for k in range(3):
+            Fr[k, 0], Fr[k, 1], Fr[k, 2] = e1[k], e2[k], e3[k]
+    R = Fc @ Fl.T
+    for a in range(3):
+        for b in range(3):
+            out[a, b] = R[a, b]
+        cp = (pc[0, a] + pc[1, a] + pc[2, a]) / 3.0
+        cl = 0.0
+        for b in range(3):
+            cl += R[a, b] * (p[0, b] + p[1, b] + p[2, b]) / 3.0
+        out[a, 3] = cp - cl
+        out[3, a] = 0.0
+    out[3, 3] = 1.0
+
+
+@njit(**_JIT)
 def p3p_grunert(P, B):
     """All P3P poses of M triples (Grunert, in the notation of Haralick et al. 1994).
 
@@ -653,7 +760,9 @@ def p3p_grunert(P, B):
     ``s2 = u s1`` and ``s3 = v s1`` the law of cosines gives a quartic in
     ``v`` (their eq. 9), solved by the eigenvalues of its companion matrix;
     ``s2`` is taken from whichever of the c-equation roots and Grunert's ``u``
-    (eq. 8) best satisfies the a-equation.  Only positive depths are kept.
+    (eq. 8) best satisfies the a-equation.  Only positive depths are kept.  The
+    quartic is solved in closed form (Ferrari, :func:`_quartic_real_roots`) and
+    the pose from the two triangles' edge frames (:func:`_triangle_pose`).
 
     Returns
     -------
@@ -663,7 +772,7 @@ def p3p_grunert(P, B):
     Ts = np.empty((4 * M, 4, 4))
     tri = np.empty(4 * M, dtype=np.int64)
     K = 0
-    comp = np.zeros((4, 4))
+    roots = np.empty(4)
     pc = np.empty((3, 3))
     for m in range(M):
         p = P[m]
@@ -687,14 +796,9 @@ def p3p_grunert(P, B):
         big = max(abs(A4), abs(A3), abs(A2), abs(A1), abs(A0))
         if not (abs(A4) > 1e-12 * big):
             continue  # a vanishing leading coefficient sends a root to infinity
-        comp[0, 0], comp[0, 1], comp[0, 2], comp[0, 3] = -A3 / A4, -A2 / A4, -A1 / A4, -A0 / A4
-        comp[1, 0] = comp[2, 1] = comp[3, 2] = 1.0
-        roots = np.linalg.eigvals(comp.astype(np.complex128))
-        for r in roots:
-            # Noise can turn a double root into a close complex pair: keep its real part.
-            if abs(r.imag) > 1e-2 * (1.0 + abs(r.real)):
-                continue
-            v = r.real
+        nroots = _quartic_real_roots(A4, A3, A2, A1, A0, roots)
+        for ri in range(nroots):
+            v = roots[ri]
             if not v > 0.0:
                 continue
             s1 = math.sqrt(b2 / max(1.0 + v * v - 2.0 * v * cb, 1e-300))
@@ -722,7 +826,7 @@ def p3p_grunert(P, B):
                 pc[0, k] = s1 * b[0, k]
                 pc[1, k] = best * b[1, k]
                 pc[2, k] = s3 * b[2, k]
-            _rigid_fit_one(p, pc, Ts[K])
+            _triangle_pose(p, pc, Ts[K])  # the depths reproduce the triangle: its frame gives R exactly
             ok = True
             for a in range(3):
                 for c in range(4):
