@@ -188,7 +188,8 @@ def accuracy(quick: bool) -> tuple[list[dict], list[dict]]:
         errs: dict = {"ours": [], "opencv": [], "ours_omni": [], "bound": []}
         for k in range(trials):
             # Pinhole: the same pairs to both.
-            n_pin = min(n, len(pin.scene.corners_lidar))  # the 90 deg pinhole view holds 40 corners of the sample
+            # The 90 deg pinhole view holds 40 corners of the sample, some sharing a depth cell: at most 30 pairs.
+            n_pin = min(n, 30)
             if n_pin >= 6:
                 pairs = simulate_pairs(pin.scene, n_pin, np.random.default_rng([BENCH_SEED, 77, n, k]),
                                        pixel_noise_px=1.0)
@@ -215,7 +216,8 @@ def accuracy(quick: bool) -> tuple[list[dict], list[dict]]:
                                cell_rounding_covariance(omni.scene.depth, rc, 0.01))
             errs["bound"].append(mean_error_of_bound(bound.covariance, rpy_true, rng_b, 1000 if quick else 4000))
         m = {k: np.nanmean(np.array(v), axis=0) if v else np.array([np.nan, np.nan]) for k, v in errs.items()}
-        pin_rows.append({"n": min(n, len(pin.scene.corners_lidar)), "trials": len(errs["ours"]), "ours": m["ours"],
+        fails = int(np.sum(np.isnan(np.array(errs["ours"])[:, 0]))) if errs["ours"] else 0
+        pin_rows.append({"n": min(n, 30), "trials": len(errs["ours"]), "fails": fails, "ours": m["ours"],
                          "opencv": m["opencv"]})
         omni_rows.append({"n": n, "trials": trials, "ours": m["ours_omni"], "bound": m["bound"]})
         log(f"  accuracy n={n}: pinhole ours {m['ours'][0]:.4f} deg {100 * m['ours'][1]:.3f} cm vs opencv "
@@ -226,30 +228,50 @@ def accuracy(quick: bool) -> tuple[list[dict], list[dict]]:
 
 # ------------------------------------------------------------------ coverage
 def coverage(quick: bool, n: int = 10) -> dict:
-    """Share of trials within the reported 1 and 2 sigma, per parameter, on the sample (OCam)."""
-    from calib_core.solve import calibrate
+    """Share of trials within the reported 1 and 2 sigma, per parameter, on the sample (OCam).
+
+    Two noise models, each with its own trials: *realistic* (``simulate_pairs``: 1 px clicks and
+    whole-cell laser picks, solved with ``calibrate``) and *clicks only* (the picked cells' points
+    taken as exact, clicks = their true projections + 1 px noise, solved with ``solve_extrinsics``).
+    """
+    from calib_core.pairs import resolve_pairs
+    from calib_core.solve import calibrate, solve_extrinsics
     from calib_core.synthetic import simulate_pairs
-    from calib_core.transforms import rpy_deg_from_R
+    from calib_core.transforms import rpy_deg_from_R, transform_points
 
     from .common import load_scenes, wrap_deg
 
     trials = 60 if quick else 300
     sc = load_scenes(())[0].scene
-    true_rpy = rpy_deg_from_R(sc.T_camera_lidar[:3, :3])
-    within = np.zeros((2, 6))
-    used = 0
-    for k in range(trials):
-        pairs = simulate_pairs(sc, n, np.random.default_rng([BENCH_SEED, 79, n, k]), pixel_noise_px=1.0)
-        res = calibrate(pairs, sc.depth, sc.camera)
-        if res.quality.status == "unreliable":
-            continue
-        err = np.concatenate([wrap_deg(rpy_deg_from_R(res.T_camera_lidar[:3, :3]) - true_rpy),
-                              res.T_camera_lidar[:3, 3] - sc.T_camera_lidar[:3, 3]])
-        sig = np.concatenate([res.sigma_rpy_deg, res.sigma_translation_m])
-        within[0] += np.abs(err) <= sig
-        within[1] += np.abs(err) <= 2 * sig
-        used += 1
-    return {"n": n, "trials": used, "one": within[0] / used, "two": within[1] / used}
+    T_true = sc.T_camera_lidar
+    true_rpy = rpy_deg_from_R(T_true[:3, :3])
+    out = {"n": n}
+    for model in ("realistic", "clicks only"):
+        within = np.zeros((2, 6))
+        used = 0
+        for k in range(trials):
+            rng = np.random.default_rng([BENCH_SEED, 79 if model == "realistic" else 80, n, k])
+            pairs = simulate_pairs(sc, n, rng, pixel_noise_px=1.0)
+            if model == "realistic":
+                res = calibrate(pairs, sc.depth, sc.camera)
+            else:
+                pts, _, _ = resolve_pairs(pairs, sc.depth, sc.camera)
+                uv, ok = sc.camera.project(transform_points(T_true, pts))
+                clicked = uv + rng.normal(0.0, 1.0, uv.shape)
+                b = sc.camera.bearing(clicked)
+                if not (ok.all() and np.isfinite(b).all()):
+                    continue
+                res = solve_extrinsics(pts, b, camera=sc.camera, pixels=clicked)
+            if res.quality.status == "unreliable":
+                continue
+            err = np.concatenate([wrap_deg(rpy_deg_from_R(res.T_camera_lidar[:3, :3]) - true_rpy),
+                                  res.T_camera_lidar[:3, 3] - T_true[:3, 3]])
+            sig = np.concatenate([res.sigma_rpy_deg, res.sigma_translation_m])
+            within[0] += np.abs(err) <= sig
+            within[1] += np.abs(err) <= 2 * sig
+            used += 1
+        out[model] = {"trials": used, "one": within[0] / used, "two": within[1] / used}
+    return out
 
 
 # ------------------------------------------------------------------ report
@@ -285,11 +307,13 @@ def markdown(jit, sp, pin_rows, omni_rows, cov, load, quick, cmd) -> str:
     L.append("Mean rotation error (deg) and translation error (cm) against the ground truth; ours = `calibrate` "
              "(whitened angular cost with the laser-pick term, robust). Pairs: `simulate_pairs` on the sample's pinhole "
              "variant (`bench.compare.pinhole_variant`: 1280x960, f = 640 px, at the true pose); its view holds 40 "
-             "corners, so the largest n is 40.\n")
-    L.append("| n | trials | ours rot | OpenCV rot | ratio | ours trans | OpenCV trans | ratio |\n|---:|---:|---:|---:|---:|---:|---:|---:|")
+             "corners, some of which share a depth cell, so the largest n is 30. *fails*: trials our solve refused "
+             "(CalibError).\n")
+    L.append("| n | trials | fails | ours rot | OpenCV rot | ratio | ours trans | OpenCV trans | ratio |\n"
+             "|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for r in pin_rows:
         o, c = r["ours"], r["opencv"]
-        L.append(f"| {r['n']} | {r['trials']} | {o[0]:.4f} | {c[0]:.4f} | {o[0] / c[0]:.3f} | {100 * o[1]:.3f} | "
+        L.append(f"| {r['n']} | {r['trials']} | {r['fails']} | {o[0]:.4f} | {c[0]:.4f} | {o[0] / c[0]:.3f} | {100 * o[1]:.3f} | "
                  f"{100 * c[1]:.3f} | {o[1] / c[1]:.3f} |")
     L.append("\n## Accuracy on the OCam sample: ours vs the Cramer-Rao bound\n")
     L.append("Bound: `bench.crb.cramer_rao` at the true pose for each trial's pairs, 1 px clicks plus the whole-cell "
@@ -300,12 +324,18 @@ def markdown(jit, sp, pin_rows, omni_rows, cov, load, quick, cmd) -> str:
         o, b = r["ours"], r["bound"]
         L.append(f"| {r['n']} | {r['trials']} | {o[0]:.4f} | {b[0]:.4f} | {o[0] / b[0]:.3f} | {100 * o[1]:.3f} | "
                  f"{100 * b[1]:.3f} | {o[1] / b[1]:.3f} |")
-    L.append(f"\n## Sigma coverage (OCam sample, n = {cov['n']}, {cov['trials']} trials)\n")
+    L.append(f"\n## Sigma coverage (OCam sample, n = {cov['n']})\n")
     L.append("Share of trials whose error is within the reported sigma (Student-t widened, see "
-             "`CalibrationResult.sigma_rpy_deg`). Nominal: 68.3 % and 95.4 %.\n")
-    L.append("| | " + " | ".join(PARAMS) + " |\n|---|" + "---:|" * 6)
-    L.append("| within 1 sigma | " + " | ".join(f"{100 * v:.1f} %" for v in cov["one"]) + " |")
-    L.append("| within 2 sigma | " + " | ".join(f"{100 * v:.1f} %" for v in cov["two"]) + " |")
+             "`CalibrationResult.sigma_rpy_deg`). Nominal: 68.3 % and 95.4 %. *realistic*: `simulate_pairs` "
+             "(1 px clicks, whole-cell laser picks), solved with `calibrate`; *clicks only*: the picked cells' points "
+             "as exact laser points, clicks = their true projections + 1 px noise.\n")
+    L.append("| noise | trials | | " + " | ".join(PARAMS) + " |\n|---|---:|---|" + "---:|" * 6)
+    for model in ("realistic", "clicks only"):
+        c = cov.get(model)
+        if not c:
+            continue
+        L.append(f"| {model} | {c['trials']} | within 1 sigma | " + " | ".join(f"{100 * v:.1f} %" for v in c["one"]) + " |")
+        L.append(f"| {model} | {c['trials']} | within 2 sigma | " + " | ".join(f"{100 * v:.1f} %" for v in c["two"]) + " |")
     return "\n".join(L) + "\n"
 
 
@@ -325,9 +355,11 @@ def main(argv=None) -> int:
     log(f"jit: {jit}")
     sp = [] if "speed" in args.skip else speed(args.quick)
     pin_rows, omni_rows = ([], []) if "accuracy" in args.skip else accuracy(args.quick)
-    cov = {"n": 10, "trials": 0, "one": np.full(6, np.nan), "two": np.full(6, np.nan)} if "coverage" in args.skip \
-        else coverage(args.quick)
-    log(f"coverage: 1 sigma {np.round(100 * cov['one'], 1)}, 2 sigma {np.round(100 * cov['two'], 1)}")
+    cov = {"n": 10} if "coverage" in args.skip else coverage(args.quick)
+    for model in ("realistic", "clicks only"):
+        if model in cov:
+            log(f"coverage {model}: 1 sigma {np.round(100 * cov[model]['one'], 1)}, "
+                f"2 sigma {np.round(100 * cov[model]['two'], 1)}")
     cmd = "python -m bench.solve_vs_opencv" + (" --quick" if args.quick else "")
     md = markdown(jit, sp, pin_rows, omni_rows, cov, (load0[0], os.getloadavg()[0]), args.quick, cmd)
     out.parent.mkdir(parents=True, exist_ok=True)
