@@ -210,29 +210,14 @@ def _cholesky_solve(A, b):
 
 
 @njit(**_JIT)
-def lm_refine(R0, t0, P, F, W, max_iter):
-    """Levenberg-Marquardt on the whitened angular cost.
-
-    Each iteration solves ``(H + lam diag(H)) dx = -g`` (Marquardt's scaling,
-    so radians and metres need no common unit), accepts the step if the cost
-    drops and then lowers ``lam``, else raises it.  Stops when the step or
-    the relative cost decrease is below 1e-12 or after ``max_iter``
-    iterations.
-
-    Returns
-    -------
-    R : (3, 3), t : (3,)
-    iterations : int
-        Normal-equation evaluations.
-    status : int
-        1 converged, 0 iteration limit, -1 singular normal equations, -2 non-finite cost.
-    """
+def _lm(R0, t0, P, F, W, max_iter):
+    """:func:`lm_refine`, also returning the normal matrix ``H`` and the cost at the returned pose."""
     R = R0.copy()
     t = t0.copy()
     lam = 1e-4
     H, g, cost = normal_equations(R, t, P, F, W)
     if not np.isfinite(cost):
-        return R, t, 1, -2
+        return R, t, 1, -2, H, cost
     it = 1
     A = np.empty((6, 6))
     while it < max_iter:
@@ -243,7 +228,7 @@ def lm_refine(R0, t0, P, F, W, max_iter):
         dx, ok = _cholesky_solve(A, -g)
         if not ok:
             if lam > 1e12:
-                return R, t, it, -1
+                return R, t, it, -1, H, cost
             lam *= 10.0
             continue
         # Predicted decrease -g.dx: at the noise floor of the cost nothing is left to gain
@@ -252,10 +237,12 @@ def lm_refine(R0, t0, P, F, W, max_iter):
         for a in range(6):
             gd -= g[a] * dx[a]
         if gd <= 1e-13 * cost or cost <= 1e-300:
-            return R, t, it, 1
+            return R, t, it, 1, H, cost
         R_new = so3_exp(dx[:3]) @ R
         t_new = t + dx[3:]
-        cost_new = _cost(R_new, t_new, P, F, W)
+        # One pass gives the new cost and, if the step is taken, the next normal equations.
+        H_new, g_new, cost_new = normal_equations(R_new, t_new, P, F, W)
+        it += 1
         step = 0.0
         scale = 0.0
         for a in range(3):
@@ -266,19 +253,39 @@ def lm_refine(R0, t0, P, F, W, max_iter):
         small_step = math.sqrt(step) <= 1e-11 * (1.0 + math.sqrt(scale))
         if np.isfinite(cost_new) and cost_new <= cost:
             decrease = cost - cost_new
-            R, t = R_new, t_new
+            R, t, H, g, cost = R_new, t_new, H_new, g_new, cost_new
             lam = max(lam / 10.0, 1e-12)
-            H, g, cost = normal_equations(R, t, P, F, W)
-            it += 1
             if small_step or decrease <= 1e-11 * cost or cost <= 1e-300:
-                return R, t, it, 1
+                return R, t, it, 1, H, cost
         else:
             if small_step:
-                return R, t, it, 1
+                return R, t, it, 1, H, cost
             lam *= 10.0
             if lam > 1e16:
-                return R, t, it, 1  # no descent direction left: a minimum to rounding
-    return R, t, it, 0
+                return R, t, it, 1, H, cost  # no descent direction left: a minimum to rounding
+    return R, t, it, 0, H, cost
+
+
+@njit(**_JIT)
+def lm_refine(R0, t0, P, F, W, max_iter):
+    """Levenberg-Marquardt on the whitened angular cost.
+
+    Each iteration solves ``(H + lam diag(H)) dx = -g`` (Marquardt's scaling,
+    so radians and metres need no common unit), accepts the step if the cost
+    drops and then lowers ``lam``, else raises it.  Stops when the predicted
+    or actual decrease is at the cost's rounding level, the step is
+    negligible, or after ``max_iter`` normal-equation evaluations.
+
+    Returns
+    -------
+    R : (3, 3), t : (3,)
+    iterations : int
+        Normal-equation evaluations.
+    status : int
+        1 converged, 0 iteration limit, -1 singular normal equations, -2 non-finite cost.
+    """
+    R, t, it, status, _, _ = _lm(R0, t0, P, F, W, max_iter)
+    return R, t, it, status
 
 
 @njit(**_JIT)
@@ -336,7 +343,16 @@ def dlt_pose(P, B):
         b0, b1, b2 = B[i, 0], B[i, 1], B[i, 2]
         # x = (r00 r01 r02 t0 | r10 r11 r12 t1 | r20 r21 r22 t2); X_c = M q.
         # rows of [b]_x X_c = 0: (b1 X2 - b2 X1), (b2 X0 - b0 X2), (b0 X1 - b1 X0).
+        # The three rows of b x X are dependent (sum_k b_k row_k = 0): keep the two that
+        # do not belong to the largest component of b.
+        skip = 0
+        if abs(b1) >= abs(b0) and abs(b1) >= abs(b2):
+            skip = 1
+        elif abs(b2) >= abs(b0) and abs(b2) >= abs(b1):
+            skip = 2
         for eq in range(3):
+            if eq == skip:
+                continue
             # The row has 8 non-zeros: blocks ia and ib of the unknowns, (q, 1) scaled by ca and cb.
             if eq == 0:
                 ca, ia, cb, ib = b1, 2, -b2, 1
@@ -593,8 +609,7 @@ def pose_core(P, B, W, max_iter):
     R0, t0, ok = dlt_pose(P, B)
     if not ok:
         return R0, t0, np.full((6, 6), np.inf), 0, -3
-    R, t, it, status = lm_refine(R0, t0, P, F, W, max_iter)
-    H, g, cost = normal_equations(R, t, P, F, W)
+    R, t, it, status, H, cost = _lm(R0, t0, P, F, W, max_iter)
     dof = 2 * P.shape[0] - 6
     sigma = math.sqrt(cost / dof) if dof > 0 else np.inf
     cov, cond = covariance(H, sigma)
