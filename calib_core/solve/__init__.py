@@ -210,7 +210,7 @@ def _ids_text(ids: list[int]) -> str:
 def _initial(points: np.ndarray, bearings: np.ndarray) -> tuple[np.ndarray, str]:
     """Linear DLT on the bearings when it applies (n >= 6, not coplanar), else Quan & Lan / P3P."""
     R, t, ok = dlt_pose(points, bearings)
-    if ok and np.all(np.isfinite(R)) and np.all(np.isfinite(t)):
+    if ok:  # (finite by construction: ok needs a proper SVD and points in front)
         T = np.eye(4)
         T[:3, :3], T[:3, 3] = R, t
         return T, "dlt"
@@ -386,7 +386,7 @@ def solve_extrinsics(
     # 4. Covariance on the inliers: Student-t sigma from the residuals, or the known noise.
     R_hat, t_hat = T[:3, :3].copy(), T[:3, 3].copy()
     dof = 2 * n_in - 6
-    z, theta, H, ssr = kernels.finish(R_hat, t_hat, points, frames, W, inliers)
+    z, theta, H, ssr, stats = kernels.finish(R_hat, t_hat, points, frames, W, inliers)
     if cost == "pixel":
         x_opt = np.concatenate([np.zeros(3), t_hat])
         inv_s = 1.0 if sigmas is None else np.repeat(1.0 / sigmas[idx], 2)[:, None]
@@ -421,7 +421,7 @@ def solve_extrinsics(
             )
     else:
         residual_px = np.full(n, np.nan)
-    mean_deg, std_deg = _mean_std(residual_deg[idx])
+    mean_deg, std_deg = math.degrees(stats[0]), math.degrees(stats[1])
     mean_px, std_px = _mean_std(residual_px[idx])
     outliers = np.flatnonzero(~inliers).tolist()
     outlier_ids = [ids[i] for i in outliers]
@@ -447,10 +447,8 @@ def solve_extrinsics(
         weak = conditioning_warning(H)
         if weak:
             warnings.append(weak)
-    P_in = points[idx]
-    ranges = np.sqrt(np.einsum("ij,ij->i", P_in @ R_hat.T + t_hat, P_in @ R_hat.T + t_hat))
     bad_geo, weak_geo = geometry_reasons(
-        P_in, uncertainty.sigma_rpy_deg, uncertainty.sigma_translation_m, float(np.median(ranges))
+        stats[3:6], n_in, uncertainty.sigma_rpy_deg, uncertainty.sigma_translation_m, float(stats[2])
     )
     unreliable += bad_geo
     warnings += weak_geo
@@ -510,6 +508,13 @@ def warm_up() -> float:
     bearings[0] = -bearings[0]  # one outlier: runs the robust path too
     solve_extrinsics(points, bearings)  # DLT start, LM, robust search (P3P), report
     solve_extrinsics(points[1:6], d[1:6])  # 5 pairs: Quan & Lan start (rigid fit)
+    from ..cameras import PinholeCamera  # whitening through a camera
+
+    cam = PinholeCamera(np.array([[300.0, 0, 320], [0, 300, 240], [0, 0, 1]]), np.zeros(5), 640, 480)
+    front = d.copy()
+    front[:, 2] = np.abs(front[:, 2]) + 1.0
+    front /= np.linalg.norm(front, axis=1, keepdims=True)
+    solve_extrinsics(front * 4.0, front, camera=cam, laser_cov_m2=np.broadcast_to(1e-4 * np.eye(3), (8, 3, 3)))
     pose_covariance(np.eye(4), points, 1e-3)
     kernels.pose_core(points[1:], d[1:], np.broadcast_to(np.eye(2), (7, 2, 2)).copy(), 5)
     return time.perf_counter() - t0

@@ -382,7 +382,7 @@ def dlt_pose(P, B):
     scale = (S[0] + S[1] + S[2]) / 3.0
     if not scale > 0.0:
         return R, t, False
-    Rn = U @ Vt
+    Rn = np.ascontiguousarray(U) @ np.ascontiguousarray(Vt)
     sgn = 1.0
     if np.linalg.det(Rn) < 0.0:
         sgn = -1.0
@@ -446,6 +446,9 @@ def finish(R, t, P, F, W, inliers):
     theta : (N,) geodesic angles, radians
     H : (6, 6) normal matrix of the inliers
     ssr : float, sum of the inliers' squared whitened residuals
+    stats : (7,) over the inliers: mean and std of theta (rad), median distance of the points
+        from the camera (m), and the singular values of the centred laser points (descending),
+        then their count
     """
     n = P.shape[0]
     z = np.empty((n, 2))
@@ -453,6 +456,13 @@ def finish(R, t, P, F, W, inliers):
     H = np.zeros((6, 6))
     ssr = 0.0
     Ji = np.empty((2, 6))
+    m = 0
+    for i in range(n):
+        if inliers[i]:
+            m += 1
+    ranges = np.empty(m)
+    mu = np.zeros(3)
+    k = 0
     for i in range(n):
         theta[i] = _pair(R, t, P[i], F[i], W[i], z[i], Ji, inliers[i])
         if inliers[i]:
@@ -460,10 +470,71 @@ def finish(R, t, P, F, W, inliers):
             for a in range(6):
                 for b in range(a, 6):
                     H[a, b] += Ji[0, a] * Ji[0, b] + Ji[1, a] * Ji[1, b]
+            d2 = 0.0
+            for r in range(3):
+                c = R[r, 0] * P[i, 0] + R[r, 1] * P[i, 1] + R[r, 2] * P[i, 2] + t[r]
+                d2 += c * c
+                mu[r] += P[i, r]
+            ranges[k] = math.sqrt(d2)
+            k += 1
     for a in range(6):
         for b in range(a):
             H[a, b] = H[b, a]
-    return z, theta, H, ssr
+    stats = np.full(7, np.nan)
+    stats[6] = m
+    if m == 0:
+        return z, theta, H, ssr, stats
+    mu /= m
+    mean = 0.0
+    C = np.zeros((3, 3))
+    for i in range(n):
+        if inliers[i]:
+            mean += theta[i]
+            for a in range(3):
+                for b in range(3):
+                    C[a, b] += (P[i, a] - mu[a]) * (P[i, b] - mu[b])
+    mean /= m
+    var = 0.0
+    for i in range(n):
+        if inliers[i]:
+            var += (theta[i] - mean) ** 2
+    stats[0] = mean
+    stats[1] = math.sqrt(var / m)
+    stats[2] = np.median(ranges)
+    w = np.linalg.eigvalsh(C)
+    for a in range(3):
+        stats[3 + a] = math.sqrt(max(w[2 - a], 0.0))
+    return z, theta, H, ssr, stats
+
+
+@njit(**_JIT)
+def rpy_sigmas(R, cov):
+    """1-sigma of ``t`` (m) and of roll, pitch, yaw (deg) from the covariance of ``(delta, t)`` at ``R``.
+
+    ``d(rpy)/d(delta)`` is the inverse of ``M = [R e_x-ish columns]`` (see
+    :func:`calib_core.solve.refine.rpy_jacobian`); inf at gimbal lock or for an infinite covariance.
+    """
+    st = np.empty(3)
+    sr = np.full(3, np.inf)
+    for a in range(3):
+        st[a] = math.sqrt(cov[3 + a, 3 + a]) if cov[3 + a, 3 + a] >= 0.0 else np.nan
+    cp = math.hypot(R[0, 0], R[1, 0])
+    if cp < 1e-9:
+        return st, sr
+    for a in range(3):
+        for b in range(3):
+            if not np.isfinite(cov[a, b]):
+                return st, sr
+    cy, sy = R[0, 0] / cp, R[1, 0] / cp
+    M = np.array([[R[0, 0], -sy, 0.0], [R[1, 0], cy, 0.0], [R[2, 0], 0.0, 1.0]])
+    G = np.linalg.inv(M)
+    for a in range(3):  # diag(G C G^T), written out (tiny, and no layout warnings)
+        acc = 0.0
+        for b in range(3):
+            for c in range(3):
+                acc += G[a, b] * cov[b, c] * G[a, c]
+        sr[a] = math.degrees(math.sqrt(abs(acc)))
+    return st, sr
 
 
 @njit(**_JIT)
@@ -635,8 +706,8 @@ def _rigid_fit_one(src, dst, out):
             for b in range(3):
                 H[a, b] += (src[i, a] - ms[a]) * (dst[i, b] - md[b])
     U, _, Vt = np.linalg.svd(H)
-    V = Vt.T
-    Ut = U.T
+    V = np.ascontiguousarray(Vt.T)
+    Ut = np.ascontiguousarray(U.T)
     R = V @ Ut
     if np.linalg.det(R) < 0.0:
         for a in range(3):
@@ -754,7 +825,7 @@ def _triangle_pose(p, pc, out):
         e2 = np.array([e3[1] * e1[2] - e3[2] * e1[1], e3[2] * e1[0] - e3[0] * e1[2], e3[0] * e1[1] - e3[1] * e1[0]])
         for k in range(3):
             Fr[k, 0], Fr[k, 1], Fr[k, 2] = e1[k], e2[k], e3[k]
-    R = Fc @ Fl.T
+    R = Fc @ np.ascontiguousarray(Fl.T)
     for a in range(3):
         for b in range(3):
             out[a, b] = R[a, b]
@@ -851,3 +922,33 @@ def p3p_grunert(P, B):
                 tri[K] = m
                 K += 1
     return Ts[:K], tri[:K]
+
+
+@njit(**_JIT)
+def tangent_probes(F, h):
+    """Directions ``b +- h e1``, ``b +- h e2`` of every bearing frame, stacked ``(4N, 3)`` in that order."""
+    n = F.shape[0]
+    out = np.empty((4 * n, 3))
+    for i in range(n):
+        for k in range(3):
+            out[i, k] = F[i, 2, k] + h * F[i, 0, k]
+            out[n + i, k] = F[i, 2, k] - h * F[i, 0, k]
+            out[2 * n + i, k] = F[i, 2, k] + h * F[i, 1, k]
+            out[3 * n + i, k] = F[i, 2, k] - h * F[i, 1, k]
+    return out
+
+
+@njit(**_JIT)
+def probe_jacobians(uv, h):
+    """``d pixel / d tangent`` ``(N, 2, 2)`` from the pixels of :func:`tangent_probes`, and ``ok (N,)``:
+    finite with a non-zero determinant."""
+    n = uv.shape[0] // 4
+    A = np.empty((n, 2, 2))
+    ok = np.empty(n, dtype=np.bool_)
+    for i in range(n):
+        for r in range(2):
+            A[i, r, 0] = (uv[i, r] - uv[n + i, r]) / (2.0 * h)
+            A[i, r, 1] = (uv[2 * n + i, r] - uv[3 * n + i, r]) / (2.0 * h)
+        det = A[i, 0, 0] * A[i, 1, 1] - A[i, 0, 1] * A[i, 1, 0]
+        ok[i] = np.isfinite(det) and det != 0.0
+    return A, ok

@@ -65,7 +65,8 @@ class Quality:
 
 
 def geometry_reasons(
-    points_inliers: np.ndarray,
+    singular_values: np.ndarray,
+    n_inliers: int,
     sigma_rpy_deg: np.ndarray,
     sigma_translation_m: np.ndarray,
     median_range_m: float,
@@ -74,8 +75,10 @@ def geometry_reasons(
 
     Parameters
     ----------
-    points_inliers : (M, 3) ndarray
-        Laser points of the pairs in the fit, lidar frame, metres.
+    singular_values : (3,) ndarray
+        Singular values of the centred laser points of the pairs in the fit, descending.
+    n_inliers : int
+        Pairs in the fit.
     sigma_rpy_deg, sigma_translation_m : (3,) ndarray
         1-sigma of the estimate.
     median_range_m : float
@@ -83,7 +86,7 @@ def geometry_reasons(
     """
     bad: list[str] = []
     weak: list[str] = []
-    m = len(points_inliers)
+    m = int(n_inliers)
     s_rot = float(np.max(sigma_rpy_deg)) if np.all(np.isfinite(sigma_rpy_deg)) else np.inf
     s_t = float(np.max(sigma_translation_m)) if np.all(np.isfinite(sigma_translation_m)) else np.inf
     if not (np.isfinite(s_rot) and np.isfinite(s_t)):
@@ -101,13 +104,12 @@ def geometry_reasons(
             )
         elif frac > WARNING_TRANSLATION_FRACTION:
             weak.append(f"the translation is uncertain by {100 * s_t:.1f} cm (1 sigma); add pairs at other depths")
-    if m >= 4:
-        s = np.linalg.svd(points_inliers - points_inliers.mean(axis=0), compute_uv=False)
-        if s[2] < COPLANAR_RATIO * s[0] and m < 2 * FEW_INLIERS:
-            weak.append(
-                f"the {m} laser points in the fit lie near one plane: few coplanar pairs can fit a wrong pose; "
-                "add pairs off that plane"
-            )
+    sv = np.asarray(singular_values, dtype=np.float64)
+    if m >= 4 and sv[2] < COPLANAR_RATIO * sv[0] and m < 2 * FEW_INLIERS:
+        weak.append(
+            f"the {m} laser points in the fit lie near one plane: few coplanar pairs can fit a wrong pose; "
+            "add pairs off that plane"
+        )
     if m < FEW_INLIERS:
         weak.append(f"only {m} pairs in the fit: too few to find a wrong pair among them; add pairs")
     return bad, weak

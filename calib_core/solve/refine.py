@@ -422,11 +422,7 @@ class PoseUncertainty(NamedTuple):
 
 def uncertainty_from_covariance(cov: np.ndarray, JtJ: np.ndarray, R: np.ndarray) -> PoseUncertainty:
     """Sigmas of ``t`` and of roll/pitch/yaw from the 6x6 covariance of ``(delta, t)`` at rotation ``R``."""
-    sigma_t = np.sqrt(np.diag(cov)[3:])
-    G = rpy_jacobian(R)
-    finite = np.all(np.isfinite(cov)) and np.all(np.isfinite(G))
-    cov_rpy = G @ cov[:3, :3] @ G.T if finite else np.full((3, 3), np.inf)
-    sigma_rpy = np.degrees(np.sqrt(np.abs(np.diag(cov_rpy))))
+    sigma_t, sigma_rpy = kernels.rpy_sigmas(np.ascontiguousarray(R, dtype=np.float64), cov)
     return PoseUncertainty(cov, sigma_t, sigma_rpy, JtJ)
 
 

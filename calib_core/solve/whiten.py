@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import CalibError
+from . import kernels
 
 __all__ = ["tangent_to_pixel", "whitening", "check_pixel_sigma", "cell_pick_covariance",
            "laser_tangent_covariance"]
@@ -121,16 +122,15 @@ def tangent_to_pixel(camera: Any, frames: np.ndarray) -> np.ndarray:
 
     Returns
     -------
-    (N, 2, 2) ndarray
+    A : (N, 2, 2) ndarray
         Columns: along ``e1``, along ``e2``.  NaN where the camera cannot
         project one of the probes.
+    ok : (N,) bool ndarray
+        ``A`` is finite and invertible.
     """
-    n = len(frames)
-    h = STEP_RAD
-    b, e1, e2 = frames[:, 2, :], frames[:, 0, :], frames[:, 1, :]
-    probe = np.concatenate([b + h * e1, b - h * e1, b + h * e2, b - h * e2])
-    uv = np.asarray(camera.project(probe)[0], dtype=np.float64).reshape(4, n, 2)
-    return np.stack([uv[0] - uv[1], uv[2] - uv[3]], axis=2) / (2 * h)
+    probe = kernels.tangent_probes(np.ascontiguousarray(frames, dtype=np.float64), STEP_RAD)
+    uv = np.ascontiguousarray(camera.project(probe)[0], dtype=np.float64)
+    return kernels.probe_jacobians(uv, STEP_RAD)
 
 
 def whitening(
@@ -165,16 +165,17 @@ def whitening(
     eye = np.broadcast_to(np.eye(2), (n, 2, 2))
     if camera is None:
         return eye / s[:, None, None], "rad"
-    A = tangent_to_pixel(camera, frames)  # px/rad: the whitened residual is the linearised pixel error
+    A, ok = tangent_to_pixel(camera, frames)  # px/rad: the whitened residual is the linearised pixel error
+    unit = "px" if pixel_sigma is None else "sigma"
+    if laser_tangent_cov is None and ok.all():
+        return (A if pixel_sigma is None else A / s[:, None, None]), unit
     det = A[:, 0, 0] * A[:, 1, 1] - A[:, 0, 1] * A[:, 1, 0]
-    ok = np.isfinite(det) & (np.abs(det) > 0)
     if not ok.any():
         return eye / s[:, None, None], "rad"
     if not ok.all():
         # A probe the camera cannot project: the median isotropic px-per-radian of the other pairs.
         A[~ok] = np.eye(2) * float(np.median(np.sqrt(np.abs(det[ok]))))
         det = np.where(ok, det, A[:, 0, 0] * A[:, 1, 1])
-    unit = "px" if pixel_sigma is None else "sigma"
     if laser_tangent_cov is None:
         return A / s[:, None, None], unit
     # C = s^2 A^-1 A^-T + Sigma_L (rad^2) = L L^T (2x2 Cholesky, closed form); W = L^-1, W^T W = C^-1.
