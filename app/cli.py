@@ -103,6 +103,8 @@ def format_summary(result, pairs_count: int, pair_ids: Sequence[int] | None = No
     ]
     if quality is not None:
         lines.extend(f"  - {r}" for r in quality.reasons)
+    reasons = set(quality.reasons) if quality is not None else set()
+    lines.extend(f"note: {w}" for w in result.warnings if w not in reasons)
     lines += ["", f"{'':14}{'value':>12}{'sigma':>10}"]
     for name, v, s in zip(("tx [m]", "ty [m]", "tz [m]"), T[:3, 3], result.sigma_translation_m):
         lines.append(f"{name:14}{v:12.4f}{s:10.4f}")

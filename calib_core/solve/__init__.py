@@ -115,7 +115,8 @@ class CalibrationResult:
     n_pairs : int
         Pairs given (inliers and outliers).
     warnings : list of str
-        Same lines as ``quality.reasons`` (kept for older callers).
+        The lines of ``quality.reasons``, then notes on the output's form that do not
+        lower the quality (gimbal lock of roll/pitch/yaw).
     outliers : list of int
         Positions (0-based, in the input arrays) of the pairs left out of the
         fit and the covariance as gross outliers.
@@ -448,7 +449,8 @@ def solve_extrinsics(
         if weak:
             warnings.append(weak)
     bad_geo, weak_geo = geometry_reasons(
-        stats[3:6], n_in, uncertainty.sigma_rpy_deg, uncertainty.sigma_translation_m, float(stats[2])
+        stats[3:6], n_in, kernels.rotation_sigma_deg(uncertainty.covariance_6x6), uncertainty.sigma_translation_m,
+        float(stats[2]),
     )
     unreliable += bad_geo
     warnings += weak_geo
@@ -457,8 +459,9 @@ def solve_extrinsics(
             f"the pairs fit to {noise_scale:.1f} px (1 sigma per axis), over {NOISY_FACTOR:g}x the {PRIOR_PX:g} px "
             "expected of clicks and laser picks: check the camera model and the picks"
         )
+    notes: list[str] = []  # about the output's form, not the calibration's quality
     if abs(T[2, 0]) > math.sin(math.radians(89.0)):
-        warnings.append(
+        notes.append(
             "pitch is within 1 deg of +-90 deg (gimbal lock): roll, yaw and their sigmas are ill-defined; "
             "use the matrix or quaternion"
         )
@@ -476,7 +479,7 @@ def solve_extrinsics(
         mean_deg=mean_deg,
         std_deg=std_deg,
         n_pairs=n,
-        warnings=list(quality.reasons),
+        warnings=list(quality.reasons) + notes,
         outliers=outliers,
         outlier_ids=outlier_ids,
         inliers=inliers,

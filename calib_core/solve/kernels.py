@@ -508,6 +508,23 @@ def finish(R, t, P, F, W, inliers):
 
 
 @njit(**_JIT)
+def rotation_sigma_deg(cov):
+    """1-sigma of the rotation along its worst axis, degrees: ``sqrt(max eig(cov[:3, :3]))``.
+
+    Independent of how the rotation is written (roll/pitch/yaw sigmas blow up near gimbal lock
+    even when the rotation itself is well determined).
+    """
+    C = np.empty((3, 3))
+    for a in range(3):
+        for b in range(3):
+            if not np.isfinite(cov[a, b]):
+                return np.inf
+            C[a, b] = cov[a, b]
+    w = np.linalg.eigvalsh(C)
+    return math.degrees(math.sqrt(max(w[2], 0.0)))
+
+
+@njit(**_JIT)
 def rpy_sigmas(R, cov):
     """1-sigma of ``t`` (m) and of roll, pitch, yaw (deg) from the covariance of ``(delta, t)`` at ``R``.
 

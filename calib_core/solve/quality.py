@@ -25,7 +25,7 @@ __all__ = [
 ]
 
 STATUSES = ("ok", "warning", "unreliable")
-#: 1-sigma of roll, pitch or yaw (deg) above which the pose is unreliable / deserves a warning.
+#: 1-sigma of the rotation along its worst axis (deg) above which the pose is unreliable / gets a warning.
 UNRELIABLE_ROTATION_DEG = 3.0
 WARNING_ROTATION_DEG = 1.0
 #: 1-sigma of the translation as a fraction of the median laser range: unreliable / warning.
@@ -67,7 +67,7 @@ class Quality:
 def geometry_reasons(
     singular_values: np.ndarray,
     n_inliers: int,
-    sigma_rpy_deg: np.ndarray,
+    rotation_sigma_deg: float,
     sigma_translation_m: np.ndarray,
     median_range_m: float,
 ) -> tuple[list[str], list[str]]:
@@ -79,15 +79,18 @@ def geometry_reasons(
         Singular values of the centred laser points of the pairs in the fit, descending.
     n_inliers : int
         Pairs in the fit.
-    sigma_rpy_deg, sigma_translation_m : (3,) ndarray
-        1-sigma of the estimate.
+    rotation_sigma_deg : float
+        1-sigma of the rotation along its worst axis, degrees (not roll/pitch/yaw: those
+        blow up near gimbal lock although the rotation is fine).
+    sigma_translation_m : (3,) ndarray
+        1-sigma of the translation, metres.
     median_range_m : float
         Median distance of the inlier points from the camera, metres.
     """
     bad: list[str] = []
     weak: list[str] = []
     m = int(n_inliers)
-    s_rot = float(np.max(sigma_rpy_deg)) if np.all(np.isfinite(sigma_rpy_deg)) else np.inf
+    s_rot = float(rotation_sigma_deg)
     s_t = float(np.max(sigma_translation_m)) if np.all(np.isfinite(sigma_translation_m)) else np.inf
     if not (np.isfinite(s_rot) and np.isfinite(s_t)):
         bad.append("the uncertainty of the pose is undefined (the pairs in the fit do not determine it)")
