@@ -95,9 +95,11 @@ def format_summary(result, pairs_count: int, pair_ids: Sequence[int] | None = No
     n_out = len(result.outliers)
     quality = getattr(result, "quality", None)
     status = quality.status if quality is not None else "ok"
+    n_check = len(getattr(result, "check_positions", []))
+    extra = [f"{n_out} left out as outliers"] * bool(n_out) + [f"{n_check} check pairs not fitted"] * bool(n_check)
     lines = [
-        f"Calibrated from {pairs_count - n_out} of {pairs_count} pairs (cost: {result.cost_name})"
-        if n_out
+        f"Calibrated from {result.n_pairs - n_out} of {pairs_count} pairs ({', '.join(extra)}; cost: {result.cost_name})"
+        if extra
         else f"Calibrated from {pairs_count} pairs (cost: {result.cost_name})",
         f"quality: {status.upper()}",
     ]
@@ -120,10 +122,15 @@ def format_summary(result, pairs_count: int, pair_ids: Sequence[int] | None = No
     lines.append(f"{'pair':>4}{'error [px]':>12}{'error [deg]':>13}")
     outliers = set(result.outliers)
     ids = list(pair_ids) if pair_ids is not None else list(range(len(result.residual_deg)))
+    rows = getattr(result, "pair_positions", None) or list(range(len(result.residual_deg)))
     for i, (px, deg) in enumerate(zip(result.residual_px, result.residual_deg)):
         flag = "  <- outlier, left out of the fit" if i in outliers else ""
         px_s = f"{px:12.3f}" if np.isfinite(px) else f"{'-':>12}"
-        lines.append(f"{ids[i]:4d}{px_s}{deg:13.4f}{flag}")
+        lines.append(f"{ids[rows[i]]:4d}{px_s}{deg:13.4f}{flag}")
+    for pos, px, deg in zip(getattr(result, "check_positions", []), getattr(result, "check_residual_px", []),
+                            getattr(result, "check_residual_deg", [])):
+        px_s = f"{px:12.3f}" if np.isfinite(px) else f"{'-':>12}"
+        lines.append(f"{ids[pos]:4d}{px_s}{deg:13.4f}  <- check pair (not in the fit)")
     lines.append("")
     lines.append("T_camera_lidar (X_camera = T @ X_lidar):")
     lines.extend("  " + " ".join(f"{x:12.6f}" for x in row) for row in T)

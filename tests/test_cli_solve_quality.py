@@ -78,3 +78,35 @@ def test_half_wrong_exits_3_and_still_writes(tmp_path):
     doc = yaml.safe_load(out.read_text())
     assert doc["quality"]["status"] == "unreliable" and doc["quality"]["reasons"]
     assert "quality: UNRELIABLE" in proc.stdout
+
+
+def test_check_pairs_are_not_fitted_and_reported_apart(tmp_path):
+    from calib_core.pairs import Pair, load_pairs_yaml
+    from calib_core.solve import calibrate
+    from calib_core.synthetic import load_sample
+
+    scene = load_sample(SAMPLE)
+    pairs = load_pairs_yaml(SAMPLE / "pairs.yaml")
+    marked = [Pair(p.laser_rc, p.laser_xyz, p.pixel, id=60 + k, check=k in (2, 7)) for k, p in enumerate(pairs)]
+    res = calibrate(marked, scene.depth, scene.camera)
+    without = calibrate([p for k, p in enumerate(marked) if k not in (2, 7)], scene.depth, scene.camera)
+    # Not fitted: the pose is the one of the other 8 pairs; reported apart with their ids.
+    np.testing.assert_allclose(res.T_camera_lidar, without.T_camera_lidar, atol=1e-12)
+    assert res.n_pairs == 8 and res.check_ids == [62, 67] and res.check_positions == [2, 7]
+    # Their errors at the pose, checked against an independent projection.
+    T = res.T_camera_lidar
+    p = scene.depth.points[pairs[2].laser_rc[0], pairs[2].laser_rc[1]]
+    uv, _ = scene.camera.project((T[:3, :3] @ p + T[:3, 3])[None])
+    assert abs(res.check_residual_px[0] - np.linalg.norm(uv[0] - np.asarray(pairs[2].pixel))) < 1e-9
+    # In the YAML: per-pair rows keep the file's positions, check pairs in their own block.
+    entries = _sample_pairs()
+    for k in (2, 7):
+        entries[k]["check"] = True
+    f = tmp_path / "pairs.yaml"
+    f.write_text(yaml.safe_dump({"pairs": entries}))
+    proc = _run(f, tmp_path / "e.yaml")
+    assert proc.returncode == 0, proc.stderr
+    doc = yaml.safe_load((tmp_path / "e.yaml").read_text())
+    assert [c["index"] for c in doc["check_pairs"]] == [2, 7] and [c["id"] for c in doc["check_pairs"]] == [42, 47]
+    assert [r["index"] for r in doc["residuals"]["per_pair"]] == [0, 1, 3, 4, 5, 6, 8, 9]
+    assert "check pair (not in the fit)" in proc.stdout

@@ -10,6 +10,7 @@ Layout::
       rpy_deg: [roll, pitch, yaw]                           # R = Rz(yaw) Ry(pitch) Rx(roll)
     quality: {status: ok | warning | unreliable, reasons: [...]}
     outliers: [{index, id, deg, px}, ...]                   # pairs left out of the fit (kept in pairs)
+    check_pairs: [{index, id, deg, px}, ...]                # pairs marked check: not fitted, their errors
     sigma: {translation_m: [...], rpy_deg: [...]}            # 1-sigma at the optimum
     residuals: {n_pairs, n_inliers, mean_px, std_px, mean_deg, std_deg, per_pair: [...], warnings: [...]}
     camera: {...}                                           # the camera description
@@ -72,18 +73,29 @@ def result_to_dict(result) -> dict[str, Any]:
     out_set = set(outliers)
     res_px = np.asarray(result.residual_px, dtype=np.float64)
     res_deg = np.asarray(result.residual_deg, dtype=np.float64)
+    # Rows of the result -> positions in the pairs block (check pairs are not in the fit).
+    positions = getattr(result, "pair_positions", None) or list(range(len(res_deg)))
 
     def px_at(i: int):
         return None if i >= len(res_px) or not np.isfinite(res_px[i]) else float(res_px[i])
 
     for i, deg in enumerate(res_deg):
-        per_pair.append({"index": i, "deg": float(deg), "px": px_at(i), "outlier": i in out_set})
+        per_pair.append({"index": int(positions[i]), "deg": float(deg), "px": px_at(i), "outlier": i in out_set})
     quality = getattr(result, "quality", None)
+    check_px = np.asarray(getattr(result, "check_residual_px", np.zeros(0)), dtype=np.float64)
+    check_deg = np.asarray(getattr(result, "check_residual_deg", np.zeros(0)), dtype=np.float64)
+    checks = [
+        {"index": int(pos), "id": int(pid), "deg": float(d), "px": None if not np.isfinite(p) else float(p)}
+        for pos, pid, d, p in zip(getattr(result, "check_positions", []), getattr(result, "check_ids", []),
+                                  check_deg, check_px)
+    ]
     return {
         "quality": quality.to_dict() if quality is not None else {"status": "ok", "reasons": []},
         "outliers": [
-            {"index": i, "id": int(pid), "deg": float(res_deg[i]), "px": px_at(i)} for i, pid in zip(outliers, ids)
+            {"index": int(positions[i]), "id": int(pid), "deg": float(res_deg[i]), "px": px_at(i)}
+            for i, pid in zip(outliers, ids)
         ],
+        "check_pairs": checks,
         "sigma": {
             "translation_m": _floats(result.sigma_translation_m),
             "rpy_deg": _floats(result.sigma_rpy_deg),

@@ -140,6 +140,13 @@ class CalibrationResult:
         ``pixel_sigma``), ``"noise"`` (divided by ``noise_rad``) or ``"rad"``.
     hypotheses : int
         Candidate poses scored by the robust search (0 when it was not needed).
+    pair_positions : list of int or None
+        Set by :func:`calibrate`: the position in the caller's pair list of each row
+        above (check pairs are not in the fit); None: rows are the caller's positions.
+    check_positions, check_ids : list of int
+        Check pairs (left out of the fit; :func:`calibrate`): positions and ids.
+    check_residual_px, check_residual_deg : (M,) ndarray
+        Their errors at the estimated pose (px NaN where not projectable).
     """
 
     T_camera_lidar: np.ndarray
@@ -165,6 +172,11 @@ class CalibrationResult:
     noise_scale: float = float("nan")
     residual_unit: str = "rad"
     hypotheses: int = 0
+    pair_positions: list[int] | None = None
+    check_positions: list[int] = field(default_factory=list)
+    check_ids: list[int] = field(default_factory=list)
+    check_residual_px: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    check_residual_deg: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 def _mean_std(values: np.ndarray) -> tuple[float, float]:

@@ -50,21 +50,39 @@ def calibrate(pairs: Sequence[Any], depth: Any, camera: Any, *, cost: str = "ang
     Returns
     -------
     CalibrationResult
-        ``outliers`` are positions in ``pairs``; ``outlier_ids`` their ids.
+        Pairs marked ``check`` are left out of the fit; their errors at the pose are in
+        ``check_residual_px`` / ``check_residual_deg``, and ``pair_positions`` maps the
+        result's rows (and ``outliers``) to positions in ``pairs``.  ``outlier_ids`` are ids.
     """
     from ..pairs import resolve_pairs
     from . import solve_extrinsics
+    from .bearing_pnp import angular_errors_rad
     from .whiten import cell_pick_covariance
 
-    points, bearings, pixels = resolve_pairs(pairs, depth, camera)
-    ids, sigmas = pair_ids_and_sigmas(pairs)
+    all_ids, _ = pair_ids_and_sigmas(pairs)
+    fit = [i for i, p in enumerate(pairs) if not getattr(p, "check", False)]
+    checks = [i for i, p in enumerate(pairs) if getattr(p, "check", False)]
+    fit_pairs = [pairs[i] for i in fit]
+    points, bearings, pixels = resolve_pairs(fit_pairs, depth, camera)
+    _, sigmas = pair_ids_and_sigmas(fit_pairs)
     laser_cov = None
-    cells = [i for i, p in enumerate(pairs) if p.laser_rc is not None]
+    cells = [k for k, p in enumerate(fit_pairs) if p.laser_rc is not None]
     if cells and depth is not None:
-        laser_cov = np.zeros((len(pairs), 3, 3))
-        rc = np.array([pairs[i].laser_rc for i in cells], dtype=np.int64)
+        laser_cov = np.zeros((len(fit_pairs), 3, 3))
+        rc = np.array([fit_pairs[k].laser_rc for k in cells], dtype=np.int64)
         laser_cov[cells] = cell_pick_covariance(depth, rc, RANGE_SIGMA_M)
-    return solve_extrinsics(
-        points, bearings, camera=camera, pixels=pixels, cost=cost, pair_ids=ids, pixel_sigma=sigmas,
-        laser_cov_m2=laser_cov, **options,
+    result = solve_extrinsics(
+        points, bearings, camera=camera, pixels=pixels, cost=cost, pair_ids=[all_ids[i] for i in fit],
+        pixel_sigma=sigmas, laser_cov_m2=laser_cov, **options,
     )
+    if checks:
+        T = result.T_camera_lidar
+        cp, cb, cpx = resolve_pairs([pairs[i] for i in checks], depth, camera)
+        uv, ok = camera.project(cp @ T[:3, :3].T + T[:3, 3])
+        err = np.linalg.norm(np.asarray(uv, dtype=np.float64) - cpx, axis=1)
+        result.check_residual_px = np.where(np.asarray(ok, dtype=bool) & np.isfinite(err), err, np.nan)
+        result.check_residual_deg = np.degrees(angular_errors_rad(T, cp, cb))
+        result.pair_positions = fit
+        result.check_positions = checks
+        result.check_ids = [all_ids[i] for i in checks]
+    return result
