@@ -43,9 +43,6 @@ from .quality import Quality, geometry_reasons
 from .refine import (
     PARAMETER_NAMES,
     PoseUncertainty,
-    bearing_frames,
-    covariance_from_jacobian,
-    covariance_from_normal,
     uncertainty_from_covariance,
     pixel_jacobian,
     pixel_residuals,
