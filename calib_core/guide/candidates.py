@@ -6,11 +6,14 @@ the ranges (range noise of a centimetre is tens of degrees of BA or normal on
 neighbouring cells):
 
 * ``depth_jump``: corners of depth discontinuities, on the log-range image;
-  the cell is moved to the near side of the jump (a person pairs the
-  object's corner, not the background behind it);
 * ``junction``: corners of the surface-normal image (the 3-channel image whose
   Bearing Angle images are projections), where planes meet: box and shelf
   corners, room corners.
+
+Each corner is then moved onto the vertex of the near side of any depth
+step around it (:func:`localize_corners`): a person pairs the object's
+corner, not the background behind it, and the structure-tensor peak sits a
+cell or two inside the corner.
 
 Gradients are clipped to a fixed magnitude before the structure tensor, so a
 small step corners as well as a large one and the thresholds are absolute
@@ -152,7 +155,48 @@ def cell_spacing_m(depth) -> np.ndarray:
     return np.where(depth.valid, depth.range_m, 0.0) * step
 
 
-def find_candidates(depth, threshold: float = 1.0, min_distance: int = 2, min_spacing_m: float = 0.025) -> Candidates:
+def localize_corners(depth, rows_cols: np.ndarray, half: int = 3, min_step: float = 0.005) -> np.ndarray:
+    """Move corner cells onto the vertex of the near-side region around them.
+
+    The structure-tensor peak of a corner sits a cell or two inside it.  In
+    the ``(2 half + 1)^2`` window the cells split into near and far at the
+    middle of the log-range span; the vertex of the near region is the near
+    cell farthest toward the far region's centroid (from the near centroid),
+    ties going to the cell nearest the start.  Windows with a log-range span
+    under ``min_step`` (no depth step) keep their cell.
+    """
+    rc = np.asarray(rows_cols, dtype=np.int64).reshape(-1, 2)
+    if len(rc) == 0:
+        return rc
+    H, W = depth.shape
+    off = np.arange(-half, half + 1)
+    rows = np.clip(rc[:, 0, None, None] + off[None, :, None], 0, H - 1)
+    cols = np.clip(rc[:, 1, None, None] + off[None, None, :], 0, W - 1)
+    rows, cols = np.broadcast_arrays(rows, cols)
+    lr = np.log(np.where(depth.valid[rows, cols], depth.range_m[rows, cols], np.nan))
+    lo, hi = np.nanmin(lr, axis=(1, 2)), np.nanmax(lr, axis=(1, 2))
+    with np.errstate(invalid="ignore"):
+        near = lr < (0.5 * (lo + hi))[:, None, None]
+    far = np.isfinite(lr) & ~near
+    dr, dc = np.broadcast_arrays(off[:, None].astype(np.float64), off[None, :].astype(np.float64))
+
+    def centroid(mask: np.ndarray) -> np.ndarray:
+        w = mask.sum(axis=(1, 2)).astype(np.float64)
+        return np.stack([(mask * dr).sum(axis=(1, 2)), (mask * dc).sum(axis=(1, 2))], axis=1) / np.maximum(w, 1)[:, None]
+
+    c_near, c_far = centroid(near), centroid(far)
+    direction = c_far - c_near
+    score = (dr[None] - c_near[:, 0, None, None]) * direction[:, 0, None, None] + (dc[None] - c_near[:, 1, None, None]) * direction[:, 1, None, None]
+    score = score - 1e-3 * (dr**2 + dc**2)[None]  # ties: nearest the start
+    score = np.where(near, score, -np.inf).reshape(len(rc), -1)
+    best = np.argmax(score, axis=1)
+    k = np.arange(len(rc))
+    moved = np.stack([rows.reshape(len(rc), -1)[k, best], cols.reshape(len(rc), -1)[k, best]], axis=1)
+    ok = (hi - lo >= min_step) & near.any(axis=(1, 2)) & far.any(axis=(1, 2)) & np.isfinite(score[k, best])
+    return np.where(ok[:, None], moved, rc)
+
+
+def find_candidates(depth, threshold: float = 1.0, min_distance: int = 2, min_spacing_m: float = 0.01) -> Candidates:
     """Corner cells of a depth matrix (module docstring).
 
     Parameters
@@ -186,8 +230,7 @@ def find_candidates(depth, threshold: float = 1.0, min_distance: int = 2, min_sp
         unit = g * g * (2.0 if name == "junction" else 1.0)
         rc = _peaks(resp, threshold * unit, min_distance + (name == "junction"))
         s = resp[rc[:, 0], rc[:, 1]] / unit
-        if name == "depth_jump":
-            rc = near_side(depth, rc)
+        rc = localize_corners(depth, rc)
         keep = ~taken[rc[:, 0], rc[:, 1]] & sound[rc[:, 0], rc[:, 1]]
         rc, s = rc[keep], s[keep]
         mark = np.zeros(depth.shape, np.uint8)
@@ -197,4 +240,8 @@ def find_candidates(depth, threshold: float = 1.0, min_distance: int = 2, min_sp
         kinds.append(np.full(len(rc), i, np.int8))
         strengths.append(s)
     rc = np.concatenate(rcs).astype(np.int64)
-    return Candidates(rc, depth.points[rc[:, 0], rc[:, 1]], np.concatenate(kinds), np.concatenate(strengths).astype(np.float64))
+    _, first = np.unique(rc, axis=0, return_index=True)  # localisation can land two corners on one cell
+    first = np.sort(first)
+    rc = rc[first]
+    return Candidates(rc, depth.points[rc[:, 0], rc[:, 1]], np.concatenate(kinds)[first],
+                      np.concatenate(strengths).astype(np.float64)[first])

@@ -27,7 +27,7 @@ from ..io.atomic import write_yaml_atomic
 from .candidates import KINDS, Candidates, find_candidates
 from .image_corners import CornerImage, strongest_near
 from .information import d_optimal_gain, pair_noise, pixel_jacobians, pose_pixel_covariance
-from .laser_noise import DEFAULT_RANGE_SIGMA_M, cell_covariance
+from .laser_noise import DEFAULT_CELL_SIGMA, DEFAULT_RANGE_SIGMA_M, cell_covariance
 from .pose_state import PoseState
 from .visibility import visible_in_camera
 
@@ -106,7 +106,8 @@ def propose(
     min_image_corner: float = DEFAULT_MIN_IMAGE_CORNER,
     max_cell_m: float = DEFAULT_MAX_CELL_M,
     range_sigma_m: float = DEFAULT_RANGE_SIGMA_M,
-    cell_sigma: float = 0.5,
+    cell_sigma: float = DEFAULT_CELL_SIGMA,
+    visible: np.ndarray | None = None,
 ) -> list[Proposal]:
     """The ``n`` best next pairs, best first (module docstring).
 
@@ -130,6 +131,9 @@ def propose(
         (2..12 px) are proposed.
     max_cell_m, range_sigma_m, cell_sigma : float
         Laser pick model (:mod:`.laser_noise`).
+    visible : (len(candidates),) bool, optional
+        Which candidates the camera sees, if already known (a session
+        computes it once; it barely changes as the pose is refined).
 
     Returns
     -------
@@ -148,8 +152,9 @@ def propose(
         ex = np.asarray(exclude_rc, dtype=np.int64).reshape(-1, 2)
         near = np.abs(cand.rows_cols[:, None, :] - ex[None, :, :]).max(axis=2) <= 2
         keep &= ~near.any(axis=1)
-    scan_points, _ = depth.valid_points()
-    _, visible = visible_in_camera(camera, state.T_camera_lidar, scan_points, cand.points_lidar)
+    if visible is None:
+        scan_points, _ = depth.valid_points()
+        _, visible = visible_in_camera(camera, state.T_camera_lidar, scan_points, cand.points_lidar)
     keep &= visible
     cand = cand.subset(keep)
     if len(cand) == 0:

@@ -6,7 +6,6 @@ into the image may be hidden behind something nearer to the camera.
 
 from __future__ import annotations
 
-import cv2
 import numpy as np
 
 __all__ = ["visible_in_camera"]
@@ -24,8 +23,8 @@ def visible_in_camera(
 
     A query point is visible when it projects into the image and is no
     farther from the camera than ``(1 + tolerance)`` times (plus 5 cm) the
-    nearest scan point projected into the surrounding 3x3 z-buffer cells of
-    ``cell_px`` pixels.
+    nearest scan point projected into its z-buffer cell of ``cell_px``
+    pixels.
 
     Parameters
     ----------
@@ -49,7 +48,7 @@ def visible_in_camera(
     if ok.any():
         cell = _cell(pix[ok], cell_px, gw, gh)
         np.minimum.at(zbuf, cell, np.linalg.norm(P[ok], axis=1))
-    zmin = cv2.erode(zbuf.reshape(gh, gw).astype(np.float32), np.ones((3, 3), np.uint8)).ravel()
+    zmin = zbuf
     Q = np.asarray(query_points_lidar, dtype=np.float64).reshape(-1, 3) @ T[:3, :3].T + T[:3, 3]
     qpix, qok = camera.project(Q)
     qpix = np.asarray(qpix, dtype=np.float64)
