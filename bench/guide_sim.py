@@ -6,7 +6,8 @@ whole-cell pick (:func:`calib_core.synthetic.picks.laser_picks`: the cell a
 careful person picks, the laser model of the Cramer-Rao bound) the person
 moves the cell there in the BA loupe when it differs (1 action) and clicks
 the corner's true projection plus Gaussian noise (1 action), making a
-``guided`` pair; otherwise they press "Not a corner" (1 action, no pair).
+``guided`` pair; otherwise they press "Not a corner" (1 action, no pair).  A proposal to re-click a
+rough starting pair is a click at its corner's true projection (1 action).
 """
 
 from __future__ import annotations
@@ -48,6 +49,7 @@ class GuidedRun:
     errors: dict = field(default_factory=dict)  # n guided -> (rotation deg, translation m)
     actions: int = 0
     accepted: int = 0
+    reclicks: int = 0  # guided re-clicks of the rough starting pairs (counted in accepted)
     inside_3sigma: list = field(default_factory=list)  # per accepted proposal: true pixel inside the 3-sigma ellipse
     mahalanobis2: list = field(default_factory=list)
 
@@ -60,7 +62,8 @@ def guided_run(scene, rng: np.random.Generator, checkpoints=(10, 20, 30, 50), cl
     session = GuidedSession(scene.depth, scene.camera, starters, image=scene.image if image else None,
                             click_sigma_px=click_sigma_px)
     truth_idx, pick_rc = true_corner_of_cells(scene, session.candidates.rows_cols)
-    paired: set[int] = set()
+    pick_lookup = {tuple(rc): i for i, rc in reversed(list(enumerate(pick_rc.tolist())))}
+    paired = {pick_lookup[p.laser_rc] for p in starters if p.laser_rc in pick_lookup}
     lookup = {tuple(rc): int(i) for rc, i in zip(session.candidates.rows_cols.tolist(), truth_idx)}
     tpix = true_pixels(scene)
     run = GuidedRun()
@@ -71,8 +74,12 @@ def guided_run(scene, rng: np.random.Generator, checkpoints=(10, 20, 30, 50), cl
             break
         p = props[0]
         run.actions += 1
-        corner = lookup.get(tuple(p.laser_rc), -1)
-        if corner < 0 or corner in paired:
+        if p.replaces is not None:  # re-click of a rough pair: its cell is a corner's pick
+            corner = pick_lookup.get(tuple(p.laser_rc), -1)
+        else:
+            corner = lookup.get(tuple(p.laser_rc), -1)
+            corner = -1 if corner in paired else corner
+        if corner < 0:
             session.not_a_corner(p)
             continue
         d = tpix[corner] - p.pixel
@@ -85,6 +92,7 @@ def guided_run(scene, rng: np.random.Generator, checkpoints=(10, 20, 30, 50), cl
             run.actions += 1
         session.accept(p, click, laser_rc=cell)
         paired.add(corner)
+        run.reclicks += p.replaces is not None
         run.accepted += 1
         if run.accepted in checkpoints:
             T = session.solve().T_camera_lidar

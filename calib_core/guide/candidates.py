@@ -10,10 +10,12 @@ neighbouring cells):
   Bearing Angle images are projections), where planes meet: box and shelf
   corners, room corners.
 
-Each corner is then moved onto the vertex of the near side of any depth
-step around it (:func:`localize_corners`): a person pairs the object's
-corner, not the background behind it, and the structure-tensor peak sits a
-cell or two inside the corner.
+A depth-jump peak is kept only where the near side of the step covers
+clearly less or more than half of the 7x7 window around it
+(:func:`near_fraction`): a corner of the near region, not a straight stretch
+of a depth edge, where range noise alone makes structure-tensor peaks.
+The peak may sit a cell or two off the corner itself (the person moves the
+cell in the BA loupe; :mod:`.laser_noise` models the offset).
 
 Gradients are clipped to a fixed magnitude before the structure tensor, so a
 small step corners as well as a large one and the thresholds are absolute
@@ -35,6 +37,8 @@ KINDS = ("depth_jump", "junction")
 
 #: Clipped gradient magnitude per cell and kind: log range (1.5 % of the range), unit normal (about 11 deg).
 _GRADIENT_CLIP = {"depth_jump": 0.015, "junction": 0.2}
+#: Near-side share of a 7x7 window below / above which a depth-jump peak is a corner (1/2 = straight edge).
+_MAX_CONVEX_SHARE, _MIN_CONCAVE_SHARE = 0.4, 0.7
 #: Structure-tensor window per kind, cells.
 _WINDOW = {"depth_jump": 3, "junction": 5}
 
@@ -124,25 +128,12 @@ def surface_normals(depth, ksize: int = 5) -> np.ndarray:
     return np.where(flip[:, :, None], -n, n)
 
 
-def near_side(depth, rows_cols: np.ndarray) -> np.ndarray:
-    """Each cell moved to the nearest-range valid cell of its 3x3 neighbourhood."""
-    rc = np.asarray(rows_cols, dtype=np.int64).reshape(-1, 2)
-    H, W = depth.shape
-    dr, dc = np.meshgrid([-1, 0, 1], [-1, 0, 1], indexing="ij")
-    rows = np.clip(rc[:, 0, None] + dr.ravel(), 0, H - 1)
-    cols = np.clip(rc[:, 1, None] + dc.ravel(), 0, W - 1)
-    rng = np.where(depth.valid[rows, cols], depth.range_m[rows, cols], np.inf)
-    best = np.argmin(rng, axis=1)
-    k = np.arange(len(rc))
-    return np.stack([rows[k, best], cols[k, best]], axis=1)
-
-
 def cell_spacing_m(depth) -> np.ndarray:
     """Smaller of the distances (m) from each cell's point to its row and column neighbours' beams.
 
     ``range * |d direction|`` per axis (central differences; wrapping columns of a 360 deg scan).
-    Where it is below the range noise the normals and the BA are noise (near
-    the poles of a rotating scanner).
+    Where it is below the range noise the normals are noise (near the poles
+    of a rotating scanner).
     """
     d = np.nan_to_num(depth.directions)
     wrap = bool(depth.meta.get("wrap_cols", False))
@@ -155,48 +146,28 @@ def cell_spacing_m(depth) -> np.ndarray:
     return np.where(depth.valid, depth.range_m, 0.0) * step
 
 
-def localize_corners(depth, rows_cols: np.ndarray, half: int = 3, min_step: float = 0.005) -> np.ndarray:
-    """Move corner cells onto the vertex of the near-side region around them.
+def near_fraction(depth, rows_cols: np.ndarray, half: int = 3) -> np.ndarray:
+    """Share of the window's cells on the near side of the depth step through each cell (no return = far).
 
-    The structure-tensor peak of a corner sits a cell or two inside it.  In
-    the ``(2 half + 1)^2`` window the cells split into near and far at the
-    middle of the log-range span; the vertex of the near region is the near
-    cell farthest toward the far region's centroid (from the near centroid),
-    ties going to the cell nearest the start.  Windows with a log-range span
-    under ``min_step`` (no depth step) keep their cell.
+    About 1/4 at a convex corner of the near region, 3/4 at a concave one and
+    1/2 on a straight depth edge; NaN where the window has no depth step.
     """
     rc = np.asarray(rows_cols, dtype=np.int64).reshape(-1, 2)
-    if len(rc) == 0:
-        return rc
     H, W = depth.shape
     off = np.arange(-half, half + 1)
     rows = np.clip(rc[:, 0, None, None] + off[None, :, None], 0, H - 1)
     cols = np.clip(rc[:, 1, None, None] + off[None, None, :], 0, W - 1)
-    rows, cols = np.broadcast_arrays(rows, cols)
-    lr = np.log(np.where(depth.valid[rows, cols], depth.range_m[rows, cols], np.nan))
-    lo, hi = np.nanmin(lr, axis=(1, 2)), np.nanmax(lr, axis=(1, 2))
-    with np.errstate(invalid="ignore"):
-        near = lr < (0.5 * (lo + hi))[:, None, None]
-    far = np.isfinite(lr) & ~near
-    dr, dc = np.broadcast_arrays(off[:, None].astype(np.float64), off[None, :].astype(np.float64))
-
-    def centroid(mask: np.ndarray) -> np.ndarray:
-        w = mask.sum(axis=(1, 2)).astype(np.float64)
-        return np.stack([(mask * dr).sum(axis=(1, 2)), (mask * dc).sum(axis=(1, 2))], axis=1) / np.maximum(w, 1)[:, None]
-
-    c_near, c_far = centroid(near), centroid(far)
-    direction = c_far - c_near
-    score = (dr[None] - c_near[:, 0, None, None]) * direction[:, 0, None, None] + (dc[None] - c_near[:, 1, None, None]) * direction[:, 1, None, None]
-    score = score - 1e-3 * (dr**2 + dc**2)[None]  # ties: nearest the start
-    score = np.where(near, score, -np.inf).reshape(len(rc), -1)
-    best = np.argmax(score, axis=1)
-    k = np.arange(len(rc))
-    moved = np.stack([rows.reshape(len(rc), -1)[k, best], cols.reshape(len(rc), -1)[k, best]], axis=1)
-    ok = (hi - lo >= min_step) & near.any(axis=(1, 2)) & far.any(axis=(1, 2)) & np.isfinite(score[k, best])
-    return np.where(ok[:, None], moved, rc)
+    ok_cell = depth.valid[rows, cols]
+    lr = np.where(ok_cell, np.log(np.where(ok_cell, depth.range_m[rows, cols], 1.0)), np.inf)
+    lo = lr.min(axis=(1, 2))
+    hi = np.where(np.isfinite(lr), lr, -np.inf).max(axis=(1, 2))
+    hi = np.where(~ok_cell.all(axis=(1, 2)), np.maximum(hi, lo + 1.0), hi)
+    near = lr < (0.5 * (lo + hi))[:, None, None]
+    frac = near.mean(axis=(1, 2))
+    return np.where(hi - lo >= 0.005, frac, np.nan)
 
 
-def find_candidates(depth, threshold: float = 1.0, min_distance: int = 2, min_spacing_m: float = 0.01) -> Candidates:
+def find_candidates(depth, threshold: float = 0.5, min_distance: int = 1, min_spacing_m: float = 0.01) -> Candidates:
     """Corner cells of a depth matrix (module docstring).
 
     Parameters
@@ -217,20 +188,28 @@ def find_candidates(depth, threshold: float = 1.0, min_distance: int = 2, min_sp
     """
     valid = np.asarray(depth.valid, dtype=bool)
     sound = valid & (cell_spacing_m(depth) >= min_spacing_m)
+    # No return reads as far away (sky, glass, beyond range): its border is a depth jump.
+    log_range = np.log(np.maximum(_median_ranges(depth, 3), 1e-3))
+    far = float(log_range[valid].max()) + 1.0 if valid.any() else 0.0
     images = {
-        "depth_jump": np.log(np.maximum(_median_ranges(depth, 3), 1e-3)),
+        "depth_jump": np.where(valid, log_range, far),
         "junction": surface_normals(depth),
     }
+    masks = {"depth_jump": np.ones_like(valid), "junction": valid}
     taken = np.zeros(depth.shape, dtype=bool)
     k = 2 * min_distance + 1
     rcs, kinds, strengths = [], [], []
     for i, name in enumerate(KINDS):
         g = _GRADIENT_CLIP[name]
-        resp = corner_response(images[name], valid, _WINDOW[name], g)
+        resp = corner_response(images[name], masks[name], _WINDOW[name], g)
         unit = g * g * (2.0 if name == "junction" else 1.0)
         rc = _peaks(resp, threshold * unit, min_distance + (name == "junction"))
         s = resp[rc[:, 0], rc[:, 1]] / unit
-        rc = localize_corners(depth, rc)
+        if name == "depth_jump":
+            # A corner of the near region, not a straight stretch of a depth edge.
+            f = near_fraction(depth, rc)
+            corner = (f <= _MAX_CONVEX_SHARE) | (f >= _MIN_CONCAVE_SHARE)
+            rc, s = rc[corner], s[corner]
         keep = ~taken[rc[:, 0], rc[:, 1]] & sound[rc[:, 0], rc[:, 1]]
         rc, s = rc[keep], s[keep]
         mark = np.zeros(depth.shape, np.uint8)

@@ -4,14 +4,16 @@ Ranking is sequential D-optimal design: each proposal is the candidate that
 most increases ``log det F`` (:func:`.information.d_optimal_gain`) given the
 current pose covariance *and the proposals ranked before it*, so the list
 does not repeat one region.  A candidate's noise is the click noise of a
-guided pair plus its laser pick error (:mod:`.laser_noise`): near features
+guided pair plus the error of a whole-cell laser pick (:mod:`.laser_noise`): near features
 carry more translation information and, on sparse lidars, smaller cells,
 which the gain accounts for; cells wider than ``max_cell_m`` are dropped
 (no corner can be placed within them).
 
 Each proposal's ``pixel_cov`` is the covariance of the true feature's pixel
 about the predicted one: the pose covariance propagated to the pixel plus the
-laser pick error, ``J_pose C J_pose^T + J_X Sigma_L J_X^T`` (px^2).
+offset of the proposed cell from the feature (``cell_sigma`` cells, default
+one: a detected corner cell may sit a cell or two off), ``J_pose C J_pose^T +
+J_X Sigma_L J_X^T`` (px^2).
 """
 
 from __future__ import annotations
@@ -27,7 +29,7 @@ from ..io.atomic import write_yaml_atomic
 from .candidates import KINDS, Candidates, find_candidates
 from .image_corners import CornerImage, strongest_near
 from .information import d_optimal_gain, pair_noise, pixel_jacobians, pose_pixel_covariance
-from .laser_noise import DEFAULT_CELL_SIGMA, DEFAULT_RANGE_SIGMA_M, cell_covariance
+from .laser_noise import DEFAULT_CELL_SIGMA, DEFAULT_RANGE_SIGMA_M, WHOLE_CELL_SIGMA, cell_covariance
 from .pose_state import PoseState
 from .visibility import visible_in_camera
 
@@ -59,9 +61,13 @@ class Proposal:
         Increase of ``log det`` of the pose information if this pair is
         added after the proposals ranked before it (nats).
     kind : str
-        Feature kind (:data:`calib_core.guide.candidates.KINDS`).
+        Feature kind (:data:`calib_core.guide.candidates.KINDS`), or
+        ``"reclick"`` for re-clicking an existing rough pair in the loupe.
     image_corner : float
         Strongest image-corner measure near ``pixel`` (NaN without an image).
+    replaces : int or None
+        For ``"reclick"``: index of the pair (in the list given to
+        :func:`propose`) that the new click replaces.
     """
 
     laser_rc: tuple[int, int]
@@ -71,6 +77,7 @@ class Proposal:
     gain: float
     kind: str
     image_corner: float = float("nan")
+    replaces: int | None = None
 
     def ellipse_sigma_px(self) -> np.ndarray:
         """1-sigma half-axes (major, minor) of the pixel ellipse, px."""
@@ -84,6 +91,7 @@ class Proposal:
             "pixel_cov": [[float(x) for x in row] for row in self.pixel_cov],
             "gain": float(self.gain),
             "kind": self.kind,
+            **({"replaces": int(self.replaces)} if self.replaces is not None else {}),
         }
 
 
@@ -108,6 +116,7 @@ def propose(
     range_sigma_m: float = DEFAULT_RANGE_SIGMA_M,
     cell_sigma: float = DEFAULT_CELL_SIGMA,
     visible: np.ndarray | None = None,
+    reclick: Sequence[tuple[int, tuple[int, int], float]] = (),
 ) -> list[Proposal]:
     """The ``n`` best next pairs, best first (module docstring).
 
@@ -134,6 +143,11 @@ def propose(
     visible : (len(candidates),) bool, optional
         Which candidates the camera sees, if already known (a session
         computes it once; it barely changes as the pose is refined).
+    reclick : sequence of (pair index, (row, col), sigma_px)
+        Existing pairs clicked with noise ``sigma_px`` (> ``click_sigma_px``)
+        that a re-click in the loupe may make precise.  Such a proposal is
+        ranked by the information it adds over the rough pair: its noise
+        ``S`` satisfies ``S^-1 = S_new^-1 - S_old^-1``.
 
     Returns
     -------
@@ -145,8 +159,6 @@ def propose(
     if not (np.isfinite(click_sigma_px) and click_sigma_px > 0):
         raise CalibError(f"click noise must be a positive number of pixels, got {click_sigma_px}")
     cand = find_candidates(depth) if candidates is None else candidates
-    if len(cand) == 0:
-        return []
     keep = np.ones(len(cand), dtype=bool)
     if len(exclude_rc):
         ex = np.asarray(exclude_rc, dtype=np.int64).reshape(-1, 2)
@@ -157,8 +169,6 @@ def propose(
         _, visible = visible_in_camera(camera, state.T_camera_lidar, scan_points, cand.points_lidar)
     keep &= visible
     cand = cand.subset(keep)
-    if len(cand) == 0:
-        return []
     pixels, J_pose, J_point = pixel_jacobians(camera, state.T_camera_lidar, cand.points_lidar)
     laser_cov = cell_covariance(depth, cand.rows_cols, cell_sigma, range_sigma_m)
     laser_px = J_point @ laser_cov @ np.swapaxes(J_point, 1, 2)
@@ -174,15 +184,35 @@ def propose(
             strength[sel] = strongest_near(corner_image, pixels[sel], float(r))[1]
         ok &= strength >= min_image_corner
     idx = np.flatnonzero(ok)
-    if idx.size == 0:
-        return []
-    S = pair_noise(click_sigma_px, J_point[idx], laser_cov[idx])
+    # The pair's own noise: a guided pair ends on the corner's cell (whole-cell pick).
+    whole = cell_covariance(depth, cand.rows_cols[idx], WHOLE_CELL_SIGMA, range_sigma_m)
+    S = pair_noise(click_sigma_px, J_point[idx], whole)
     J = J_pose[idx]
+    entries = [("candidate", int(i)) for i in idx]
+    rows_re = [(int(i), (int(rc[0]), int(rc[1])), float(sg)) for i, rc, sg in reclick if sg > click_sigma_px]
+    extra: dict = {}
+    if rows_re:
+        rc_re = np.array([r[1] for r in rows_re], dtype=np.int64)
+        pts_re = depth.points[rc_re[:, 0], rc_re[:, 1]]
+        pix_re, Jp_re, Jx_re = pixel_jacobians(camera, state.T_camera_lidar, pts_re)
+        whole_re = cell_covariance(depth, rc_re, WHOLE_CELL_SIGMA, range_sigma_m)
+        S_new = pair_noise(click_sigma_px, Jx_re, whole_re)
+        S_old = pair_noise(np.array([r[2] for r in rows_re]), Jx_re, whole_re)
+        S_eff = np.linalg.inv(np.linalg.inv(S_new) - np.linalg.inv(S_old))
+        cov_re = pose_pixel_covariance(Jp_re, state.covariance) + Jx_re @ whole_re @ np.swapaxes(Jx_re, 1, 2)
+        fine = np.all(np.isfinite(Jp_re), axis=(1, 2)) & np.all(np.isfinite(S_eff), axis=(1, 2))
+        for k in np.flatnonzero(fine):
+            extra[len(entries)] = (rows_re[k], rc_re[k], pts_re[k], pix_re[k], cov_re[k])
+            entries.append(("reclick", int(k)))
+        S = np.concatenate([S, S_eff[fine]])
+        J = np.concatenate([J, Jp_re[fine]])
+    if not entries:
+        return []
     C = state.covariance.copy()
     chosen: list[int] = []
     gains: list[float] = []
-    alive = np.ones(len(idx), dtype=bool)
-    for _ in range(min(n, len(idx))):  # n is a few tens; each step is vectorised over the candidates
+    alive = np.ones(len(entries), dtype=bool)
+    for _ in range(min(n, len(entries))):  # n is a few tens; each step is vectorised over the candidates
         g = d_optimal_gain(J, S, C)
         g = np.where(alive & np.isfinite(g), g, -np.inf)
         k = int(np.argmax(g))
@@ -198,7 +228,12 @@ def propose(
         C = 0.5 * (C + C.T)
     out = []
     for k, gain in zip(chosen, gains):
-        i = idx[k]
+        if entries[k][0] == "reclick":
+            (pair_index, _, _), rc, pt, pix, cov = extra[k]
+            out.append(Proposal((int(rc[0]), int(rc[1])), pt.copy(), pix.copy(), cov.copy(), gain, "reclick",
+                                replaces=pair_index))
+            continue
+        i = entries[k][1]
         out.append(Proposal(
             laser_rc=(int(cand.rows_cols[i, 0]), int(cand.rows_cols[i, 1])),
             laser_xyz=cand.points_lidar[i].copy(),

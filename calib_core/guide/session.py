@@ -2,7 +2,9 @@
 
 What the app's "next pair" action and the benchmark's simulated person
 drive: after every accepted pair the pose, its covariance and the proposals
-are recomputed.  The candidates of the scan, and which of them the camera
+are recomputed.  Rough pairs (clicked without guidance) are proposed for a
+re-click in the loupe when that adds more information than a new pair; the
+re-click replaces them.  The candidates of the scan, and which of them the camera
 sees, are computed once.
 """
 
@@ -16,7 +18,7 @@ from ..pairs import Pair, resolve_pairs
 from ..solve import CalibrationResult, solve_extrinsics
 from .candidates import find_candidates
 from .image_corners import CornerImage, corner_image
-from .pose_state import PoseState, current_pose
+from .pose_state import DEFAULT_CLICK_SIGMA_PX, PoseState, current_pose
 from .propose import GUIDED_CLICK_SIGMA_PX, Proposal, propose
 from .visibility import visible_in_camera
 
@@ -66,9 +68,11 @@ class GuidedSession:
     def proposals(self, n: int = 20) -> list[Proposal]:
         """The ``n`` best next pairs under the current state (skipped ones go last)."""
         used = [p.laser_rc for p in self.pairs if p.laser_rc is not None] + self.dropped
+        rough = [(i, p.laser_rc, DEFAULT_CLICK_SIGMA_PX if p.precision_px is None else p.precision_px)
+                 for i, p in enumerate(self.pairs) if p.laser_rc is not None and not p.check]
         props = propose(self.depth, self.camera, self.state, n + len(self.skipped), candidates=self.candidates,
                         exclude_rc=used, click_sigma_px=self.click_sigma_px, corner_image=self.corners,
-                        visible=self._visible, **self.propose_options)
+                        visible=self._visible, reclick=rough, **self.propose_options)
         skipped = set(self.skipped)
         return ([p for p in props if p.laser_rc not in skipped] + [p for p in props if p.laser_rc in skipped])[:n]
 
@@ -79,7 +83,10 @@ class GuidedSession:
         rc = proposal.laser_rc if laser_rc is None else (int(laser_rc[0]), int(laser_rc[1]))
         pair = Pair(rc, None, (float(pixel[0]), float(pixel[1])), source=source,
                     precision_px=self.click_sigma_px if precision_px is None else float(precision_px))
-        self.pairs.append(pair)
+        if proposal.replaces is not None:  # a re-click of a rough pair replaces it
+            self.pairs[proposal.replaces] = pair
+        else:
+            self.pairs.append(pair)
         self._update_state()
         return pair
 
