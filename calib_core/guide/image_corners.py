@@ -16,7 +16,7 @@ from typing import NamedTuple
 import cv2
 import numpy as np
 
-__all__ = ["CornerImage", "corner_image", "strongest_near", "clean_corner", "refine_subpixel", "CornerGate"]
+__all__ = ["CornerImage", "corner_image", "content_mask", "strongest_near", "clean_corner", "refine_subpixel", "CornerGate"]
 
 
 class CornerImage(NamedTuple):
@@ -58,17 +58,35 @@ class CornerGate(NamedTuple):
     isolation_radius_px: float = 6.0
 
 
+def content_mask(gray_u8: np.ndarray, margin_px: int = 6) -> np.ndarray:
+    """Pixels of the picture proper: not in a black region touching the image border
+    (the outside of a fisheye's image circle), and at least ``margin_px`` from it."""
+    dark = (gray_u8 <= 2).astype(np.uint8)
+    n, labels = cv2.connectedComponents(dark, connectivity=8)
+    border = np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]]))
+    outside = np.isin(labels, border[border > 0]) & (dark > 0)
+    content = (~outside).astype(np.uint8)
+    if margin_px > 0:
+        content = cv2.erode(content, np.ones((2 * margin_px + 1, 2 * margin_px + 1), np.uint8), borderValue=1)
+    return content > 0
+
+
 def corner_image(image: np.ndarray, window: int = 5) -> CornerImage:
-    """Structure tensor eigenvalues of an RGB or grey uint8 image."""
+    """Structure tensor eigenvalues of an RGB or grey uint8 image.
+
+    Corners are zeroed outside :func:`content_mask`: the rim of a fisheye's
+    image circle is a strong but meaningless corner.
+    """
     img = np.asarray(image)
-    gray = cv2.cvtColor(img, cv2.COLOR_RGB2GRAY) if img.ndim == 3 else img
-    gray = gray.astype(np.float32) / 255.0
+    gray8 = cv2.cvtColor(img, cv2.COLOR_RGB2GRAY) if img.ndim == 3 else img
+    gray = gray8.astype(np.float32) / 255.0
     gx = cv2.Sobel(gray, cv2.CV_32F, 1, 0, ksize=3) / 8.0
     gy = cv2.Sobel(gray, cv2.CV_32F, 0, 1, ksize=3) / 8.0
     box = lambda a: cv2.boxFilter(a, -1, (window, window), normalize=False)  # noqa: E731
     a, b, c = box(gx * gx), box(gx * gy), box(gy * gy)
     half, root = 0.5 * (a + c), np.sqrt(np.maximum(0.25 * (a - c) ** 2 + b * b, 0.0))
-    return CornerImage(gray, half - root, half + root, window)
+    inside = content_mask(np.asarray(gray8, dtype=np.uint8))
+    return CornerImage(gray, np.where(inside, half - root, 0.0).astype(np.float32), half + root, window)
 
 
 def _windows(ci: CornerImage, pixels: np.ndarray, radius: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
