@@ -16,12 +16,17 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from calib_core.guide.auto_accept import auto_accept
 from calib_core.guide.session import GuidedSession
 from calib_core.pairs import Pair
 from calib_core.synthetic.picks import MAX_LASER_PICK_ERROR_M, laser_picks, simulate_pairs
 from calib_core.transforms import transform_points
 
 from .common import pose_error
+
+
+#: An auto-accepted pixel farther than this from the true projection is a wrong match, px.
+AUTO_WRONG_PX = 2.0
 
 
 def true_corner_of_cells(scene, rows_cols: np.ndarray, max_cells: int = 2) -> tuple[np.ndarray, np.ndarray]:
@@ -34,6 +39,18 @@ def true_corner_of_cells(scene, rows_cols: np.ndarray, max_cells: int = 2) -> tu
     d = np.where(ok, cheb + 1e-3 * np.linalg.norm(scene.depth.points[rc[:, 0], rc[:, 1]][:, None, :] - corners[None], axis=2), np.inf)
     best = np.argmin(d, axis=1)
     return np.where(np.isfinite(d[np.arange(len(rc)), best]), best, -1), pick_rc
+
+
+def _judge_auto(run, session, scene, gate, lookup, paired, tpix) -> None:
+    props = session.proposals(200)
+    passed, auto_px = auto_accept(session.corners, props, gate, image=scene.image, depth=scene.depth,
+                                  camera=scene.camera, T_camera_lidar=session.state.T_camera_lidar)
+    for p, ok, px in zip(props, passed, auto_px):
+        if not ok:
+            continue
+        corner = lookup.get(tuple(p.laser_rc), -1)
+        err = float(np.linalg.norm(px - tpix[corner])) if corner >= 0 and corner not in paired else float("inf")
+        run.auto.append((err > AUTO_WRONG_PX, err))
 
 
 def true_pixels(scene) -> np.ndarray:
@@ -52,15 +69,26 @@ class GuidedRun:
     reclicks: int = 0  # guided re-clicks of the rough starting pairs (counted in accepted)
     inside_3sigma: list = field(default_factory=list)  # per accepted proposal: true pixel inside the 3-sigma ellipse
     mahalanobis2: list = field(default_factory=list)
+    auto: list = field(default_factory=list)  # per shown proposal passing the auto gate: (wrong, px error or inf)
 
 
 def guided_run(scene, rng: np.random.Generator, checkpoints=(10, 20, 30, 50), click_sigma_px: float = 0.3,
-               starters: list[Pair] | None = None, image: bool = True, max_actions: int = 2000) -> GuidedRun:
-    """Start from ``starters`` (default: 4 farthest-point clicks at 1 px) and add guided pairs."""
+               starters: list[Pair] | None = None, image: bool = True, max_actions: int = 2000,
+               order: str = "d_optimal", auto_gate=None) -> GuidedRun:
+    """Start from ``starters`` (default: 4 farthest-point clicks at 1 px) and add guided pairs.
+
+    ``order`` is the proposal order (:func:`calib_core.guide.propose`).  With
+    ``auto_gate``, at every checkpoint all current proposals (up to 200) are
+    judged by :func:`calib_core.guide.auto_accept.auto_accept`; a pass is
+    wrong when the cell is on no true corner (or one already paired) or the
+    found pixel is more than :data:`AUTO_WRONG_PX` from the corner's true
+    projection.  (The person's loop is unchanged, so runs stay comparable.)
+    """
     if starters is None:
         starters = simulate_pairs(scene, 4, rng, pixel_noise_px=1.0)
+    options = {"order": order, "rng": rng} if order == "random" else {"order": order}
     session = GuidedSession(scene.depth, scene.camera, starters, image=scene.image if image else None,
-                            click_sigma_px=click_sigma_px)
+                            click_sigma_px=click_sigma_px, **options)
     truth_idx, pick_rc = true_corner_of_cells(scene, session.candidates.rows_cols)
     pick_lookup = {tuple(rc): i for i, rc in reversed(list(enumerate(pick_rc.tolist())))}
     paired = {pick_lookup[p.laser_rc] for p in starters if p.laser_rc in pick_lookup}
@@ -94,6 +122,8 @@ def guided_run(scene, rng: np.random.Generator, checkpoints=(10, 20, 30, 50), cl
         paired.add(corner)
         run.reclicks += p.replaces is not None
         run.accepted += 1
+        if run.accepted in checkpoints and auto_gate is not None and session.corners is not None:
+            _judge_auto(run, session, scene, auto_gate, lookup, paired, tpix)
         if run.accepted in checkpoints:
             T = session.solve().T_camera_lidar
             e = pose_error(T, scene.T_camera_lidar)

@@ -65,6 +65,8 @@ class Proposal:
         ``"reclick"`` for re-clicking an existing rough pair in the loupe.
     image_corner : float
         Strongest image-corner measure near ``pixel`` (NaN without an image).
+    strength : float
+        The laser candidate's corner measure (:attr:`Candidates.strength`; NaN for a re-click).
     replaces : int or None
         For ``"reclick"``: index of the pair (in the list given to
         :func:`propose`) that the new click replaces.
@@ -77,6 +79,7 @@ class Proposal:
     gain: float
     kind: str
     image_corner: float = float("nan")
+    strength: float = float("nan")
     replaces: int | None = None
 
     def ellipse_sigma_px(self) -> np.ndarray:
@@ -117,6 +120,9 @@ def propose(
     cell_sigma: float = DEFAULT_CELL_SIGMA,
     visible: np.ndarray | None = None,
     reclick: Sequence[tuple[int, tuple[int, int], float]] = (),
+    order: str = "d_optimal",
+    paired_points_lidar: np.ndarray | None = None,
+    rng: np.random.Generator | None = None,
 ) -> list[Proposal]:
     """The ``n`` best next pairs, best first (module docstring).
 
@@ -148,6 +154,12 @@ def propose(
         that a re-click in the loupe may make precise.  Such a proposal is
         ranked by the information it adds over the rough pair: its noise
         ``S`` satisfies ``S^-1 = S_new^-1 - S_old^-1``.
+    order : {"d_optimal", "farthest", "random"}
+        ``"d_optimal"`` (the method); for comparisons, ``"farthest"``: the
+        candidate whose camera bearing is farthest from those of
+        ``paired_points_lidar`` and of the proposals before it (what a
+        person spreading clicks does), or ``"random"`` (needs ``rng``).
+        Gains are reported under every order.
 
     Returns
     -------
@@ -208,6 +220,20 @@ def propose(
         J = np.concatenate([J, Jp_re[fine]])
     if not entries:
         return []
+    if order not in ("d_optimal", "farthest", "random"):
+        raise CalibError(f"unknown proposal order {order!r}; use d_optimal, farthest or random")
+    if order == "random" and rng is None:
+        raise CalibError("order='random' needs a random generator")
+    if order == "farthest":
+        pts = np.concatenate([cand.points_lidar[idx]] + ([depth.points[rc_re[fine, 0], rc_re[fine, 1]]] if rows_re else []))
+        R, t = state.T_camera_lidar[:3, :3], state.T_camera_lidar[:3, 3]
+        bear = pts @ R.T + t
+        bear /= np.linalg.norm(bear, axis=1, keepdims=True)
+        max_cos = np.full(len(bear), -1.0)
+        if paired_points_lidar is not None and len(paired_points_lidar):
+            pb = np.asarray(paired_points_lidar, dtype=np.float64) @ R.T + t
+            pb /= np.linalg.norm(pb, axis=1, keepdims=True)
+            max_cos = (bear @ pb.T).max(axis=1)
     C = state.covariance.copy()
     chosen: list[int] = []
     gains: list[float] = []
@@ -215,7 +241,14 @@ def propose(
     for _ in range(min(n, len(entries))):  # n is a few tens; each step is vectorised over the candidates
         g = d_optimal_gain(J, S, C)
         g = np.where(alive & np.isfinite(g), g, -np.inf)
-        k = int(np.argmax(g))
+        if order == "d_optimal":
+            k = int(np.argmax(g))
+        elif order == "farthest":
+            k = int(np.argmin(np.where(np.isfinite(g), max_cos, np.inf)))
+            max_cos = np.maximum(max_cos, bear @ bear[k])
+        else:
+            live = np.flatnonzero(np.isfinite(g))
+            k = int(rng.choice(live)) if live.size else 0
         if not np.isfinite(g[k]):
             break
         chosen.append(k)
@@ -242,6 +275,7 @@ def propose(
             gain=gain,
             kind=KINDS[int(cand.kind[i])],
             image_corner=float(strength[i]),
+            strength=float(cand.strength[i]),
         ))
     return out
 

@@ -70,9 +70,12 @@ class GuidedSession:
         used = [p.laser_rc for p in self.pairs if p.laser_rc is not None] + self.dropped
         rough = [(i, p.laser_rc, DEFAULT_CLICK_SIGMA_PX if p.precision_px is None else p.precision_px)
                  for i, p in enumerate(self.pairs) if p.laser_rc is not None and not p.check]
+        fit = [p for p in self.pairs if not p.check]
+        paired_points = resolve_pairs(fit, self.depth, self.camera)[0] if fit else None
         props = propose(self.depth, self.camera, self.state, n + len(self.skipped), candidates=self.candidates,
                         exclude_rc=used, click_sigma_px=self.click_sigma_px, corner_image=self.corners,
-                        visible=self._visible, reclick=rough, **self.propose_options)
+                        visible=self._visible, reclick=rough, paired_points_lidar=paired_points,
+                        **self.propose_options)
         skipped = set(self.skipped)
         return ([p for p in props if p.laser_rc not in skipped] + [p for p in props if p.laser_rc in skipped])[:n]
 
