@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -29,8 +30,7 @@ from calib_core.guide.auto_accept import AutoGate
 from calib_core.guide.image_corners import corner_image
 from calib_core.guide.junction import fit_junctions
 from calib_core.guide.snap import SNAP_MIN_CLICK_SIGMA_PX, snap_clicks
-from calib_core.pairs import resolve_pairs
-from calib_core.solve import solve_extrinsics
+from calib_core.solve import calibrate
 from calib_core.synthetic.picks import MAX_LASER_PICK_ERROR_M, laser_picks, simulate_pairs
 
 from . import guide_real
@@ -41,9 +41,8 @@ N_VALUES = (10, 20, 30, 50)
 
 
 def _unguided(scene, rng, n: int, sigma_px: float) -> tuple[float, float]:
-    pairs = simulate_pairs(scene, n, rng, pixel_noise_px=sigma_px)
-    pts, b, px = resolve_pairs(pairs, scene.depth, scene.camera)
-    e = pose_error(solve_extrinsics(pts, b, camera=scene.camera, pixels=px).T_camera_lidar, scene.T_camera_lidar)
+    pairs = [replace(p, precision_px=sigma_px) for p in simulate_pairs(scene, n, rng, pixel_noise_px=sigma_px)]
+    e = pose_error(calibrate(pairs, scene.depth, scene.camera).T_camera_lidar, scene.T_camera_lidar)
     return e.rotation_deg, e.translation_norm_m
 
 
@@ -171,8 +170,8 @@ def markdown(res: dict, scenes, cmd: str) -> str:
     a("Guided: 4 farthest-point clicks at 1 px to start, then n guided pairs (proposal clicked at the true "
       "corner's projection + 0.3 px noise; the person moves the laser cell to the corner's whole-cell pick in "
       "the BA loupe when the proposal is a cell or two off). Unguided: n farthest-point corners clicked with "
-      "1 px (and, for reference, 0.3 px) noise, whole-cell laser. The solve is unweighted "
-      "(`solve_extrinsics` has no per-pair weights yet), so the four 1 px starters count as much as a guided pair. "
+      "1 px (and, for reference, 0.3 px) noise, whole-cell laser. Both solve with "
+      "`calib_core.solve.calibrate` (each pair weighted by its precision_px and whole-cell laser pick). "
       "Mean (p95) over trials; a guided run stops early when the scene has no proposal left on a true corner.\n")
     a("| n | guided rotation | guided translation | runs reaching n | unguided 1 px rotation | unguided 1 px translation | unguided 0.3 px rotation | unguided 0.3 px translation |")
     a("|---:|---|---|---:|---|---|---|---|")

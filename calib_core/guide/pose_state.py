@@ -17,7 +17,7 @@ import numpy as np
 
 from ..errors import CalibError
 from ..pairs import Pair, resolve_pairs
-from ..solve import MIN_PAIRS, solve_extrinsics
+from ..solve import MIN_PAIRS, calibrate
 from .information import fisher_information, information_inverse, pair_noise, pixel_jacobians
 from .laser_noise import WHOLE_CELL_SIGMA, cell_covariance
 
@@ -92,9 +92,9 @@ def current_pose(
         s_rot, s_t = np.radians(prior_sigma[0]), prior_sigma[1]
         cov = np.diag([s_rot**2] * 3 + [s_t**2] * 3)
         return PoseState(np.asarray(T_initial, dtype=np.float64), cov, 1.0, len(fit), "extrinsics")
-    points, bearings, pixels = resolve_pairs(fit, depth, camera)
-    T = solve_extrinsics(points, bearings, camera=camera, pixels=pixels,
-                         initial_T_camera_lidar=T_initial).T_camera_lidar
+    points, _, pixels = resolve_pairs(fit, depth, camera)
+    # Weighted by each pair's precision_px and whole-cell laser pick (robust: gross outliers left out).
+    T = calibrate(fit, depth, camera, initial_T_camera_lidar=T_initial).T_camera_lidar
     predicted, J_pose, J_point = pixel_jacobians(camera, T, points)
     laser = np.zeros((len(fit), 3, 3))
     rc_idx = [i for i, p in enumerate(fit) if p.laser_rc is not None]

@@ -15,7 +15,7 @@ from typing import Sequence
 import numpy as np
 
 from ..pairs import Pair, resolve_pairs
-from ..solve import CalibrationResult, solve_extrinsics
+from ..solve import CalibrationResult, calibrate
 from .candidates import find_candidates
 from .image_corners import CornerImage, corner_image
 from .pose_state import DEFAULT_CLICK_SIGMA_PX, PoseState, current_pose
@@ -102,12 +102,7 @@ class GuidedSession:
         self.dropped.append(proposal.laser_rc)
 
     def solve(self) -> CalibrationResult:
-        """The calibration from the pairs so far (check pairs left out).
-
-        Unweighted: every pair counts the same (the per-pair weighting of
-        ``solve_extrinsics`` is not available yet).
-        """
+        """The calibration from the pairs so far (check pairs left out), each pair weighted by
+        its ``precision_px`` and whole-cell laser pick (:func:`calib_core.solve.calibrate`)."""
         fit = [p for p in self.pairs if not p.check]
-        points, bearings, pixels = resolve_pairs(fit, self.depth, self.camera)
-        return solve_extrinsics(points, bearings, camera=self.camera, pixels=pixels,
-                                initial_T_camera_lidar=self.state.T_camera_lidar)
+        return calibrate(fit, self.depth, self.camera, initial_T_camera_lidar=self.state.T_camera_lidar)
