@@ -48,25 +48,35 @@ def _add_scan_args(p: argparse.ArgumentParser) -> None:
         "--organize",
         choices=["auto", "ring", "elevation", "firing", "spherical"],
         default="auto",
-        help="how an unorganized cloud becomes a depth matrix (default: ring field if present, else --beams, else spherical)",
+        help="how an unorganized cloud becomes a depth matrix (default: ring field if present, else the scan order "
+        "if points are stored laser after laser, else --beams, else spherical)",
     )
     p.add_argument("--beams", type=int, default=None, help="number of beams, for clouds without a ring field")
     p.add_argument("--h-res-deg", type=float, default=None, help="azimuth resolution of the spherical fallback")
     p.add_argument("--v-res-deg", type=float, default=None, help="elevation resolution of the spherical fallback")
+    p.add_argument(
+        "--sensor-origin", type=float, nargs=3, metavar=("X", "Y", "Z"), default=None,
+        help="scanner position in the file's frame (metres), for scans stored in a world frame",
+    )
 
 
 def scan_options(args: argparse.Namespace) -> dict:
     opts: dict = {"organize": args.organize}
-    for key in ("beams", "h_res_deg", "v_res_deg"):
+    for key in ("beams", "h_res_deg", "v_res_deg", "sensor_origin"):
         if getattr(args, key, None) is not None:
             opts[key] = getattr(args, key)
     return opts
 
 
 def load_scan_from_args(args: argparse.Namespace):
+    """The scan as a depth matrix; prints the one-line organisation report."""
     from calib_core.io.scan_readers import load_scan
 
-    return load_scan(args.scan, **scan_options(args))
+    depth = load_scan(args.scan, **scan_options(args))
+    report = depth.meta.get("organize_report")
+    if report is not None:
+        print(report.line(), flush=True)
+    return depth
 
 
 def _add_camera_arg(p: argparse.ArgumentParser) -> None:

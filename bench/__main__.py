@@ -61,7 +61,7 @@ def main(argv=None) -> int:
 
     import cv2
 
-    from . import accuracy, compare, report, speed
+    from . import accuracy, compare, organize, report, speed
     from .common import load_scenes
 
     t_start = time.perf_counter()
@@ -111,6 +111,8 @@ def main(argv=None) -> int:
     # ---------------------------------------------------------- speed
     log("speed ...")
     sp = speed.run_speed(scenes[0], quick=quick)
+    log("organising clouds (KITTI, 2 M points) ...")
+    org = organize.run(quick=quick)
 
     # ---------------------------------------------------------- targets
     s10 = report.pooled(omni_res, [0], 10, "angular")
@@ -178,6 +180,7 @@ def main(argv=None) -> int:
         profiles=profiles, have_plots=have_plots, run_s=run_s, cv2_version=cv2.__version__, cores=os.cpu_count(),
         load=(load_start, os.getloadavg()[0]),
     )
+    md += "\n" + organize.markdown(org)
     (out / "performance.md").write_text(md)
     log(f"wrote {out / 'performance.md'} and {perf}/*.png in {run_s:.0f} s")
 

@@ -41,20 +41,12 @@ import numpy as np
 from ..errors import CalibError
 from ..lidar.depth_matrix import DepthMatrix
 from ..lidar.npz_format import load_depth_npz
-from ..lidar.organize import (
-    RING_FIELD_NAMES,
-    default_spherical_resolution_deg,
-    organize_by_elevation,
-    organize_by_firing_order,
-    organize_by_ring,
-    organize_grid,
-    organize_spherical,
-)
+from ..lidar.organize import RING_FIELD_NAMES
+from ..lidar.organize_cloud import ORGANIZE_METHODS, organize_cloud  # noqa: F401  (ORGANIZE_METHODS: public choices)
+from ..lidar.report import organize_report
 
 SUPPORTED_EXTENSIONS = (".npz", ".pcd", ".ply", ".las", ".laz", ".bin", ".npy")
 
-#: ``load_scan(organize=...)`` choices; "firing" is a short alias of "firing_order".
-ORGANIZE_METHODS = ("auto", "organized", "ring", "elevation", "firing_order", "firing", "spherical")
 
 
 @dataclass(frozen=True)
@@ -490,6 +482,7 @@ def load_scan(
     h_res_deg: float | None = None,
     v_range_deg: tuple[float, float] | None = None,
     wrap_cols: bool | None = None,
+    sensor_origin=None,
 ) -> DepthMatrix:
     """Read a scan file as a depth matrix.
 
@@ -500,12 +493,14 @@ def load_scan(
         ``model`` key) is loaded with :func:`load_depth_npz` and the other
         options are ignored.
     organize : str
-        How the cloud becomes a grid:
+        How the cloud becomes a grid (see
+        :func:`calib_core.lidar.organize_cloud.organize_cloud`):
 
         * ``"auto"`` -- an organized cloud keeps its grid; else the ring
-          field if present; else elevation clustering when ``beams`` is
-          given; else a spherical projection (default resolution:
-          :func:`default_spherical_resolution_deg`, recorded in meta);
+          field if present; else the scan order when the points are stored
+          laser after laser (KITTI); else elevation clustering when
+          ``beams`` is given; else a spherical projection.  The report says
+          which and why;
         * ``"organized"`` -- the file's own grid (error if it has none);
         * ``"ring"``, ``"elevation"``, ``"firing_order"`` (alias
           ``"firing"``), ``"spherical"`` -- force that method (an organized
@@ -519,70 +514,58 @@ def load_scan(
     wrap_cols : bool, optional
         For organized clouds: whether the columns close 360 degrees
         (default: detected from the azimuths).
+    sensor_origin : (3,) float, optional
+        Scanner position in the file's frame (metres), for scans stored in a
+        world frame: the points are shifted so that it is the lidar origin.
 
     Returns
     -------
     DepthMatrix
         Lidar frame, metres.  ``meta`` holds ``source``, ``format``,
-        ``organize`` (the method used) and the method's parameters and
-        counts; for clouds, ``point_index`` ((H, W) index of each cell's
-        point in the file, -1 where empty) and ``field_images`` (per-cell
-        images of the 1-D fields, e.g. intensity, NaN where empty).
+        ``organize`` (the method used), ``organize_report`` (an
+        :class:`~calib_core.lidar.report.OrganizeReport`: method, reason,
+        rows x columns, cells valid, points kept; ``.line()`` is the one
+        line the CLI prints) and the method's parameters and counts; for
+        clouds, ``point_index`` ((H, W) index of each cell's point in the
+        file, -1 where empty) and ``field_images`` (per-cell images of the
+        1-D fields, e.g. intensity, NaN where empty).
 
     Raises
     ------
     CalibError
-        Bad file or options; see :func:`read_point_cloud`.
+        Bad file or options (see :func:`read_point_cloud`), or a cloud of
+        which organising keeps too few points to be one sensor's view.
     """
     if organize not in ORGANIZE_METHODS:
         raise CalibError(f"unknown organize method '{organize}' (one of {', '.join(ORGANIZE_METHODS)})")
-    method = "firing_order" if organize == "firing" else organize
     path = _check_path(path)
     if _is_native_npz(path):
         depth = load_depth_npz(path)
-        return dataclasses.replace(depth, meta={**depth.meta, "source": str(path), "format": "native_npz", "organize": "native"})
+        meta = {**depth.meta, "source": str(path), "format": "native_npz", "organize": "native"}
+        meta["organize_report"] = organize_report(dataclasses.replace(depth, meta=meta), "native scan file")
+        return dataclasses.replace(depth, meta=meta)
 
     cloud = read_point_cloud(path)
-    if beams is not None and (isinstance(beams, bool) or not isinstance(beams, (int, np.integer)) or beams < 1):
-        raise CalibError(f"beams must be a positive integer, got {beams!r}")
     ring = cloud.ring_field()
-    if method == "auto":
-        if cloud.organized_shape is not None:
-            method = "organized"
-        elif ring is not None:
-            method = "ring"
-        elif beams is not None:
-            method = "elevation"
-        else:
-            method = "spherical"
-
-    extra: dict[str, Any] = {}
+    ring_name = next((name for name in RING_FIELD_NAMES if cloud.fields.get(name) is ring), "ring")
     try:
-        if method == "organized":
-            if cloud.organized_shape is None:
-                raise CalibError("the cloud is not organized (it has no WIDTH x HEIGHT grid)")
-            depth = organize_grid(cloud.xyz.reshape(*cloud.organized_shape, 3), wrap_cols=wrap_cols)
-        elif method == "ring":
-            if ring is None:
-                raise CalibError(f"no ring field (fields: {', '.join(cloud.fields) or 'none'}); try beams=...")
-            depth = organize_by_ring(cloud.xyz, ring, n_cols=n_cols)
-        elif method in ("elevation", "firing_order"):
-            if beams is None:
-                raise CalibError(f"organize='{method}' needs the number of beams (beams=...)")
-            organizer = organize_by_elevation if method == "elevation" else organize_by_firing_order
-            depth = organizer(cloud.xyz, beams, n_cols=n_cols)
-        else:
-            if v_res_deg is None or h_res_deg is None:
-                default = default_spherical_resolution_deg(cloud.xyz)
-                extra["spherical_resolution"] = (
-                    f"default {default} deg: the typical azimuth step; pass beams=... for one row per beam"
-                )
-                v_res_deg = default if v_res_deg is None else v_res_deg
-                h_res_deg = default if h_res_deg is None else h_res_deg
-            depth = organize_spherical(cloud.xyz, v_res_deg, h_res_deg, v_range_deg)
+        depth = organize_cloud(
+            cloud.xyz,
+            ring=ring,
+            ring_name=ring_name,
+            organized_shape=cloud.organized_shape,
+            organize=organize,
+            beams=beams,
+            n_cols=n_cols,
+            v_res_deg=v_res_deg,
+            h_res_deg=h_res_deg,
+            v_range_deg=v_range_deg,
+            wrap_cols=wrap_cols,
+            sensor_origin=sensor_origin,
+        )
     except CalibError as err:
         raise CalibError(f"{path}: {err}") from None
 
-    meta = {**depth.meta, **extra, "source": str(path), "format": cloud.meta.get("format")}
+    meta = {**depth.meta, "source": str(path), "format": cloud.meta.get("format")}
     meta["field_images"] = _field_images(cloud, meta["point_index"])
     return dataclasses.replace(depth, meta=meta)

@@ -22,7 +22,8 @@ Grid conventions (shared by every function here)
   elevation and the column's azimuth, so overlays and the UI can reason about
   them.
 * Points that are not finite or sit at the origin (a common no-return code)
-  are dropped and counted in ``meta["n_points_dropped"]``.
+  are dropped and counted in ``meta["n_points_dropped"]``, as are points
+  whose range over- or underflows (beyond 1e150 or below 1e-150 m).
 
 ``DepthMatrix.meta`` records ``organize`` (the method), ``model =
 "organized"`` with ``points`` (so the native file stores the exact points),
@@ -39,10 +40,14 @@ import numpy as np
 
 from ..errors import CalibError
 from .depth_matrix import DepthMatrix
+from .firing_order import beam_origin_height, estimate_step, firing_order_rings, sequence_columns
 from .organized import organized_cloud_depth
 from .spherical import spherical_directions
 
 TWO_PI = 2.0 * np.pi
+
+#: Upper bound of the spherical fallback's default grid, in cells per point.
+MAX_SPHERICAL_CELLS_PER_POINT = 4.0
 
 #: Field names that carry a spinning lidar's beam index.
 RING_FIELD_NAMES = ("ring", "laser_id", "channel")
@@ -60,8 +65,12 @@ def _clean_points(xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         raise CalibError(f"expected points of shape (N, 3), got {points.shape}")
     keep = np.isfinite(points).all(axis=1)
     keep[keep] = np.any(points[keep] != 0.0, axis=1)
+    # A range that over- or underflows (|coordinates| near 1e308 or 1e-308) is no measurement.
+    with np.errstate(over="ignore", under="ignore"):
+        range_m = np.linalg.norm(points[keep], axis=1)
+    keep[keep] = np.isfinite(range_m) & (range_m > 1e-150) & (range_m < 1e150)
     if not keep.any():
-        raise CalibError(f"no usable points: all {len(points)} points are NaN/inf or at the origin")
+        raise CalibError(f"no usable points: all {len(points)} points are NaN/inf, at the origin or of absurd size")
     return points, keep
 
 
@@ -75,7 +84,9 @@ def _spherical_angles(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.nd
 
 def _group_median(values: np.ndarray, labels: np.ndarray, n_groups: int) -> np.ndarray:
     """Median of ``values`` per integer label ``0..n_groups-1`` (NaN for empty groups)."""
-    order = np.lexsort((values, labels))
+    # One float sort on label + value scaled into [0, 0.5): faster than lexsort.
+    low, span = float(values.min()), float(np.ptp(values)) or 1.0
+    order = np.argsort(labels + 0.5 * (values - low) / span)
     sorted_labels = labels[order]
     sorted_values = values[order]
     ids = np.arange(n_groups)
@@ -203,106 +214,26 @@ def cluster_elevations(elevation_rad: np.ndarray, n_beams: int, max_iter: int = 
     return labels.astype(np.int64), _group_median(el, labels, n_beams)
 
 
-def firing_order_rings(xyz: np.ndarray, n_beams: int, min_jump_deg: float = 1.0, window_deg: float = 2.0) -> np.ndarray:
-    """Ring index of every point of a cloud stored ring after ring.
-
-    Supports the layout in which the points of one beam are stored as one
-    360-degree sweep in azimuth, then the next beam's sweep (e.g. KITTI raw
-    scans).  All sweeps start at a common azimuth, the *cut*.  Measured in
-    the scan direction from the cut, the azimuth only grows within a sweep,
-    so every step back by more than ``min_jump_deg`` is a ring change, even
-    when a sweep has long gaps (sky).
-
-    The cut is found from the ring changes themselves: consecutive points of
-    different beams differ in elevation, so the ``n_beams - 1`` largest
-    elevation jumps of the sequence mark (mostly) ring changes, and the cut is
-    the azimuth inside most of their arcs (from the last point of one sweep
-    forward to the first point of the next).  Each detected change is then
-    placed at the largest elevation jump within ``window_deg`` of azimuth,
-    which settles which sweep owns the points around the cut (sweeps may
-    start a little before or after it, e.g. by per-laser azimuth offsets).
-
-    Parameters
-    ----------
-    xyz : (N, 3) float
-        Finite, non-zero points in storage order, lidar frame, metres.
-    n_beams : int
-        Number of beams; the number of sweeps found must equal it.
-    min_jump_deg : float
-        Smallest backward azimuth step (degrees) taken as a ring change.
-    window_deg : float
-        Azimuth half-width (degrees) of the search for the exact change.
-
-    Returns
-    -------
-    (N,) int64
-        Sweep index in storage order (0 = first stored sweep).
-
-    Raises
-    ------
-    CalibError
-        If the number of sweeps found is not ``n_beams``.
-    """
-    points = np.asarray(xyz, dtype=np.float64)
-    n_beams = int(n_beams)
-    if n_beams < 1:
-        raise CalibError(f"beams must be a positive integer, got {n_beams}")
-    if len(points) < 2 * n_beams:
-        raise CalibError(f"cannot find {n_beams} sweeps in {len(points)} points")
-    _, elevation, azimuth = _spherical_angles(points)
-    steps = np.angle(np.exp(1j * np.diff(azimuth)))  # wrapped to (-pi, pi]
-    direction = 1.0 if np.median(steps) >= 0.0 else -1.0
-    phase = direction * azimuth
-    elevation_jump = np.abs(np.diff(elevation))
-
-    if n_beams > 1:
-        # The cut lies inside the forward arc from the last point of one sweep
-        # to the first point of the next, for every ring change: take the
-        # angle inside most of the arcs of the largest elevation jumps.
-        top = np.argpartition(elevation_jump, -(n_beams - 1))[-(n_beams - 1):]
-        arc_start = phase[top]
-        arc_length = np.mod(phase[top + 1] - phase[top], TWO_PI)
-        arc_end = arc_start + arc_length
-        # depth[i, j]: arc j contains the end of arc i.
-        contains = np.mod(arc_end[:, None] - arc_start[None, :], TWO_PI) <= arc_length[None, :]
-        deepest = int(np.argmax(contains.sum(axis=1)))
-        # The deepest region runs from the latest start among the containing arcs to that end.
-        back = np.mod(arc_end[deepest] - arc_start[contains[deepest]], TWO_PI)
-        cut = float(arc_end[deepest] - 0.5 * back.min())
-    else:
-        cut = float(phase[0])
-    swept = np.mod(phase - cut, TWO_PI)
-    drops = np.flatnonzero(np.diff(swept) < -np.radians(min_jump_deg)) + 1  # first index after a step back
-    # A sweep that starts a little before the cut steps back twice (to its
-    # start, then across the cut): drops closer than the window are one
-    # change, placed at the largest elevation jump around them.
-    typical_step = max(float(np.median(np.abs(steps))), 1e-9)
-    window = max(int(np.ceil(np.radians(window_deg) / typical_step)), 1)
-    # The first sweep may start, and the last end, across the cut.
-    drops = drops[(drops > window) & (drops < len(points) - window)]
-    changes = np.zeros(0, dtype=np.int64)
-    if drops.size:
-        opens = np.r_[True, np.diff(drops) > window]
-        first = drops[opens]
-        last = drops[np.r_[opens[1:], True]]
-        lo = np.maximum(first - window, np.r_[1, last[:-1] + 1])
-        hi = np.minimum(last + window, np.r_[first[1:] - 1, len(points) - 1])
-        candidates = lo[:, None] + np.arange(int((hi - lo).max()) + 1)[None, :]
-        jump = np.where(candidates <= hi[:, None], elevation_jump[np.minimum(candidates, len(points) - 1) - 1], -np.inf)
-        changes = candidates[np.arange(len(first)), np.argmax(jump, axis=1)]
-    n_found = len(changes) + 1
-    if n_found != n_beams:
-        raise CalibError(
-            f"the cloud does not look like {n_beams} beams stored in firing order: found {n_found} azimuth sweeps"
-        )
-    starts = np.zeros(len(points), dtype=np.int64)
-    starts[changes] = 1
-    return np.cumsum(starts)
-
-
 # --------------------------------------------------------------------------
 # Building the depth matrix
 # --------------------------------------------------------------------------
+
+
+def _nearest_per_cell(cell: np.ndarray, range_m: np.ndarray, n_cells: int) -> tuple[np.ndarray, int]:
+    """Indices of the nearest point of every occupied cell, and the number of cells holding several points.
+
+    Only the points of shared cells are sorted (usually few).
+    """
+    counts = np.bincount(cell, minlength=n_cells)
+    shared = counts[cell] > 1
+    alone = np.flatnonzero(~shared)
+    if alone.size == len(cell):
+        return alone, 0
+    contested = np.flatnonzero(shared)
+    order = contested[np.lexsort((range_m[contested], cell[contested]))]
+    first = np.r_[True, cell[order][1:] != cell[order][:-1]]
+    winners = np.sort(np.r_[alone, order[first]])
+    return winners, int(first.sum())
 
 
 def _assemble(
@@ -324,13 +255,8 @@ def _assemble(
     kept_points = points[keep]
     kept_range = np.linalg.norm(kept_points, axis=1)
     cell = rows * n_cols + cols
-    order = np.lexsort((kept_range, cell))
-    sorted_cell = cell[order]
-    first = np.ones(len(order), dtype=bool)
-    first[1:] = sorted_cell[1:] != sorted_cell[:-1]
-    winners = order[first]
-    n_occupied = int(first.sum())
-    cells_with_collision = int(np.count_nonzero(np.diff(np.flatnonzero(np.r_[first, True])) > 1))
+    winners, cells_with_collision = _nearest_per_cell(cell, kept_range, n_rows * n_cols)
+    n_occupied = len(winners)
 
     range_m = np.full(n_rows * n_cols, np.nan)
     cell_points = np.full((n_rows * n_cols, 3), np.nan)
@@ -367,8 +293,36 @@ def _assemble(
     )
 
 
-def _organize_labelled(xyz: np.ndarray, beam: np.ndarray, n_cols: int | None, meta: dict) -> DepthMatrix:
-    """Shared core: one row per distinct beam label, columns by azimuth."""
+def _beam_elevation_at_infinity(points: np.ndarray, beam: np.ndarray, n_beams: int, fallback: np.ndarray) -> np.ndarray:
+    """Each beam's elevation (rad) free of its origin's height above the lidar origin.
+
+    A beam leaving from height ``h`` at elevation ``v`` measures
+    ``z / |p| = sin v + h / |p|`` (to first order): a straight line in
+    ``1 / |p|`` whose intercept is ``sin v``.  Least squares per beam; beams
+    whose ranges hardly vary (no line to fit) keep ``fallback``.
+    """
+    range_m = np.linalg.norm(points, axis=1)
+    x = 1.0 / np.maximum(range_m, 1.0)
+    y = points[:, 2] / range_m
+    n = np.bincount(beam, minlength=n_beams).astype(np.float64)
+    sx, sy = np.bincount(beam, x, n_beams), np.bincount(beam, y, n_beams)
+    sxx, sxy = np.bincount(beam, x * x, n_beams), np.bincount(beam, x * y, n_beams)
+    det = n * sxx - sx * sx
+    ok = (n >= 10) & (det > 1e-6 * np.maximum(n * n, 1.0) * np.maximum(sxx / np.maximum(n, 1.0), 1e-12))
+    slope = np.where(ok, (n * sxy - sx * sy) / np.where(ok, det, 1.0), 0.0)
+    intercept = (sy - slope * sx) / np.maximum(n, 1.0)
+    return np.where(ok, np.arcsin(np.clip(intercept, -1.0, 1.0)), fallback)
+
+
+def _organize_labelled(
+    xyz: np.ndarray, beam: np.ndarray, n_cols: int | None, meta: dict, in_sequence: bool = False
+) -> DepthMatrix:
+    """Shared core: one row per distinct beam label, columns by azimuth.
+
+    ``in_sequence``: the points of each beam are stored in firing order, so
+    columns come from :func:`sequence_columns` (one cell per firing) and the
+    resolution from the mean firing step.
+    """
     points, keep = _clean_points(xyz)
     beam = np.asarray(beam)
     if beam.shape != (len(points),):
@@ -377,6 +331,10 @@ def _organize_labelled(xyz: np.ndarray, beam: np.ndarray, n_cols: int | None, me
     beam_ids, beam_index = np.unique(beam[keep], return_inverse=True)
     n_rows = len(beam_ids)
     median_elevation = _group_median(elevation, beam_index, n_rows)
+    if in_sequence:
+        # Beams may start off the origin (an HDL-64E's lasers sit 0.1-0.25 m
+        # above it): order them by their elevation far away, not as seen here.
+        median_elevation = _beam_elevation_at_infinity(points[keep], beam_index, n_rows, median_elevation)
     # Row 0 = highest beam.
     beam_order = np.argsort(-median_elevation, kind="stable")
     row_of_beam = np.empty(n_rows, dtype=np.int64)
@@ -384,7 +342,7 @@ def _organize_labelled(xyz: np.ndarray, beam: np.ndarray, n_cols: int | None, me
     rows = row_of_beam[beam_index]
 
     if n_cols is None:
-        n_cols = estimate_n_cols(azimuth, beam_index)
+        n_cols = round(TWO_PI / estimate_step(azimuth, rows)) if in_sequence else estimate_n_cols(azimuth, beam_index)
     n_cols = int(n_cols)
     if n_cols < 1:
         raise CalibError(f"n_cols must be positive, got {n_cols}")
@@ -398,7 +356,11 @@ def _organize_labelled(xyz: np.ndarray, beam: np.ndarray, n_cols: int | None, me
     mean_sin = np.bincount(rows, weights=np.sin(frac_angle), minlength=n_rows)
     row_shift = np.angle(mean_cos + 1j * mean_sin) / TWO_PI - 0.5
     row_shift = row_shift - np.round(row_shift)  # in [-0.5, 0.5] columns
-    cols = np.mod(np.floor(col_coord - row_shift[rows]).astype(np.int64), n_cols)
+    if in_sequence:
+        cols, displacement = sequence_columns(col_coord - row_shift[rows] - 0.5, rows, n_cols)
+        meta = {**meta, "column_displacement_p99": float(np.percentile(np.abs(displacement), 99)) if len(cols) else 0.0}
+    else:
+        cols = np.mod(np.floor(col_coord - row_shift[rows]).astype(np.int64), n_cols)
     cell_azimuth = np.pi - (np.arange(n_cols)[None, :] + 0.5 + row_shift[:, None]) * step
 
     meta = dict(meta)
@@ -448,11 +410,13 @@ def organize_by_ring(xyz: np.ndarray, ring: np.ndarray, n_cols: int | None = Non
     return _organize_labelled(xyz, ring, n_cols, {"organize": "ring", "_n_cols_estimated": n_cols is None})
 
 
-def organize_by_elevation(xyz: np.ndarray, n_beams: int, n_cols: int | None = None) -> DepthMatrix:
+def organize_by_elevation(xyz: np.ndarray, n_beams: int, n_cols: int | None = None, range_aware: bool = False) -> DepthMatrix:
     """Depth matrix of a cloud without ring field, beams found by elevation clustering.
 
     Works for sensors whose beams leave from (nearly) the lidar origin, so
-    that every beam has one elevation.  See :func:`cluster_elevations`.
+    that every beam has one elevation, and, with ``range_aware``, for
+    sensors whose beams leave from a common height above it (see
+    :func:`beam_origin_height`).  See :func:`cluster_elevations`.
 
     Parameters
     ----------
@@ -462,49 +426,142 @@ def organize_by_elevation(xyz: np.ndarray, n_beams: int, n_cols: int | None = No
         Number of beams of the sensor.
     n_cols : int, optional
         Azimuth columns over 360 degrees (default: estimated).
+    range_aware : bool
+        Cluster the elevation seen from the beams' estimated common origin
+        height instead of from the lidar origin.
 
     Returns
     -------
     DepthMatrix
         ``(n_beams, n_cols)``; ``meta["organize"] = "elevation"`` and
         ``meta["beam_spread_rad"]`` (largest 1-99 percentile elevation spread
-        of a beam, a check that ``n_beams`` was right).
+        of a beam, a check that ``n_beams`` was right); with ``range_aware``,
+        ``meta["beam_origin_height_m"]``.
     """
     points, keep = _clean_points(xyz)
     _, elevation, _ = _spherical_angles(points[keep])
+    meta = {"organize": "elevation", "n_beams": int(n_beams), "_n_cols_estimated": n_cols is None}
+    if range_aware:
+        height = beam_origin_height(points[keep])
+        kept = points[keep]
+        elevation = np.arctan2(kept[:, 2] - height, np.hypot(kept[:, 0], kept[:, 1]))
+        meta["beam_origin_height_m"] = height
     labels_kept, centres = cluster_elevations(elevation, n_beams)
     labels = np.zeros(len(points), dtype=np.int64)
     labels[keep] = labels_kept
     residual = np.abs(elevation - centres[labels_kept])
-    meta = {
-        "organize": "elevation",
-        "n_beams": int(n_beams),
-        "beam_spread_rad": float(np.percentile(residual, 99)) * 2.0,
-        "_n_cols_estimated": n_cols is None,
-    }
+    meta["beam_spread_rad"] = float(np.percentile(residual, 99)) * 2.0
     return _organize_labelled(points, labels, n_cols, meta)
 
 
-def organize_by_firing_order(xyz: np.ndarray, n_beams: int, n_cols: int | None = None) -> DepthMatrix:
-    """Depth matrix of a cloud stored ring after ring (sensor firing order).
+def organize_by_firing_order(xyz: np.ndarray, n_beams: int | None = None, n_cols: int | None = None) -> DepthMatrix:
+    """Depth matrix of a cloud stored laser after laser (sensor scan order).
 
-    Rings are found from the azimuth wrap between sweeps (see
-    :func:`firing_order_rings`), then laid out as in :func:`organize_by_ring`.
+    Rings are the azimuth sweeps of :func:`firing_order_rings`; rows are
+    ordered by the rings' median elevation (highest first); columns follow
+    the firings along each sweep (:func:`sequence_columns`) at the mean
+    firing step, so that uneven firing times do not put two points in one
+    cell.
 
     Parameters
     ----------
     xyz : (N, 3) float
         Points in storage order, lidar frame, metres.
-    n_beams : int
-        Number of beams; must match the number of sweeps found.
+    n_beams : int, optional
+        Number of beams; when given, must match the number of sweeps found,
+        except in a cloud cropped in azimuth (e.g. to a camera's view,
+        KITTI's ``velodyne_reduced``), where beams that saw nothing in the
+        crop get empty rows (``meta["n_empty_beams_added"]``).
     n_cols : int, optional
-        Azimuth columns over 360 degrees (default: estimated).
+        Azimuth columns over 360 degrees (default: 360 deg / mean firing step).
+
+    Returns
+    -------
+    DepthMatrix
+        ``(n_sweeps, n_cols)``; ``meta["organize"] = "firing_order"``,
+        ``meta["column_displacement_p99"]`` (99th percentile of how far, in
+        columns, a point sits from its azimuth's cell).
+
+    Raises
+    ------
+    NotFiringOrder
+        When the points are not stored laser after laser (the message says why).
     """
     points, keep = _clean_points(xyz)
     labels = np.zeros(len(points), dtype=np.int64)
-    labels[keep] = firing_order_rings(points[keep], n_beams)
-    meta = {"organize": "firing_order", "n_beams": int(n_beams), "_n_cols_estimated": n_cols is None}
-    return _organize_labelled(points, labels, n_cols, meta)
+    labels[keep] = firing_order_rings(points[keep], n_beams, allow_fewer=True)
+    n_sweeps = int(labels[keep].max() + 1)
+    meta = {"organize": "firing_order", "n_sweeps": n_sweeps, "_n_cols_estimated": n_cols is None}
+    depth = _organize_labelled(points, labels, n_cols, meta, in_sequence=True)
+    if n_beams is not None and n_sweeps < int(n_beams):
+        depth = _pad_missing_beams(depth, int(n_beams) - n_sweeps)
+    return depth
+
+
+def _pad_missing_beams(depth: DepthMatrix, n_missing: int) -> DepthMatrix:
+    """Add empty rows for beams without points (a cloud cropped to a camera's view).
+
+    The rows go on the side whose edge row holds fewer points (the crop cut
+    through it), spaced by the median gap of the five nearest rows'
+    elevations.
+    """
+    counts = depth.valid.sum(axis=1)
+    at_bottom = counts[-1] <= counts[0]
+    elevation = depth.meta["row_elevation_rad"]
+    edge = elevation[-6:] if at_bottom else elevation[:6]
+    gap = float(np.median(np.abs(np.diff(edge)))) if len(edge) > 1 else np.radians(0.4)
+    extra = (elevation[-1] - gap * np.arange(1, n_missing + 1)) if at_bottom else (elevation[0] + gap * np.arange(n_missing, 0, -1))
+    n_cols = depth.shape[1]
+    cell_azimuth = np.arctan2(depth.directions[..., 1], depth.directions[..., 0])
+    col_azimuth = np.angle(np.nanmean(np.exp(1j * cell_azimuth), axis=0))
+    new_dirs = spherical_directions(extra[:, None], col_azimuth[None, :])
+
+    def stack(block, new):
+        return np.concatenate([block, new] if at_bottom else [new, block], axis=0)
+
+    meta = dict(depth.meta)
+    points = stack(depth.points, np.full((n_missing, n_cols, 3), np.nan))
+    meta.update(
+        points=points,
+        row_elevation_rad=stack(elevation, extra),
+        point_index=stack(meta["point_index"], np.full((n_missing, n_cols), -1, dtype=np.int64)),
+        n_empty_beams_added=n_missing,
+        empty_beams_at="bottom" if at_bottom else "top",
+    )
+    return DepthMatrix(
+        range_m=stack(depth.range_m, np.full((n_missing, n_cols), np.nan)),
+        directions=stack(depth.directions, new_dirs),
+        points=points,
+        valid=stack(depth.valid, np.zeros((n_missing, n_cols), dtype=bool)),
+        meta=meta,
+    )
+
+
+def count_beam_elevations(xyz: np.ndarray, gap_deg: float = 0.01, min_share: float = 0.99, max_beams: int = 256) -> int | None:
+    """Number of beams when the points' elevations fall into clearly separate values.
+
+    A sensor whose beams all leave from the origin (or a simulator) gives
+    every beam one elevation: the sorted elevations form runs separated by
+    gaps wider than ``gap_deg``.  Runs holding at least 0.05 % of the
+    points count as beams; they must hold ``min_share`` of the points,
+    number 2..``max_beams`` and be narrow (median width under a quarter of
+    their median spacing), else None (e.g. an HDL-64E, whose beams'
+    elevations drift with range and overlap).
+    """
+    points, keep = _clean_points(xyz)
+    _, elevation, _ = _spherical_angles(points[keep])
+    ordered = np.sort(elevation)
+    breaks = np.flatnonzero(np.diff(ordered) > np.radians(gap_deg))
+    starts, ends = np.r_[0, breaks + 1], np.r_[breaks, len(ordered) - 1]
+    sizes = ends - starts + 1
+    beams = sizes >= max(10, 0.0005 * len(ordered))
+    n_beams = int(beams.sum())
+    if not (2 <= n_beams <= max_beams and sizes[beams].sum() >= min_share * len(ordered)):
+        return None
+    # Beams are lines, not bands: a run much narrower than the spacing of runs.
+    width = np.median(ordered[ends[beams]] - ordered[starts[beams]])
+    spacing = np.median(np.diff(ordered[starts[beams]]))
+    return n_beams if width < 0.25 * spacing else None
 
 
 def default_spherical_resolution_deg(xyz: np.ndarray) -> float:
@@ -514,9 +571,12 @@ def default_spherical_resolution_deg(xyz: np.ndarray) -> float:
     so that consecutive points of a beam get their own columns: points are
     grouped into runs of sorted elevations without a gap wider than 0.01
     degree (for a multi-beam lidar, its beams).  Without such structure (one
-    run, or too few steps) -- and never finer than a quarter of it -- about
-    one cell per point over the cloud's field of view,
-    ``sqrt(360 * elevation_span / N)``.  Rounded to 0.01 degree, at least 0.01.
+    run, or too few steps), about two cells per point over the cloud's field
+    of view, ``sqrt(360 * elevation_span / N / 2)``.  Never finer than
+    ``sqrt(360 * elevation_span / N) / 2``, so that the grid has at most about
+    :data:`MAX_SPHERICAL_CELLS_PER_POINT` cells per point (a finer grid is
+    mostly empty and costs memory: 36 M cells for a 2 M-point cloud).
+    Rounded up to 0.01 degree, at least 0.01.
     """
     points, keep = _clean_points(xyz)
     _, elevation, azimuth = _spherical_angles(points[keep])
@@ -525,13 +585,14 @@ def default_spherical_resolution_deg(xyz: np.ndarray) -> float:
     order = np.argsort(elevation)
     runs = np.empty(len(order), dtype=np.int64)
     runs[order] = np.concatenate([[0], np.cumsum(np.diff(elevation[order]) > np.radians(0.01))])
-    resolution = equal_area
+    resolution = equal_area / np.sqrt(2.0)  # unstructured: two cells per point keep ~80 % of the points
     if runs.max() >= 1:
         try:
-            resolution = max(360.0 / estimate_n_cols(azimuth, runs), 0.25 * equal_area)
+            resolution = 360.0 / estimate_n_cols(azimuth, runs)
         except CalibError:
             pass
-    return max(round(resolution, 2), 0.01)
+    resolution = max(resolution, equal_area / np.sqrt(MAX_SPHERICAL_CELLS_PER_POINT))
+    return max(float(np.ceil(resolution * 100.0 - 1e-6) / 100.0), 0.01)
 
 
 def organize_spherical(

@@ -1,0 +1,186 @@
+"""Choose how a point cloud becomes a depth matrix, and say what it kept.
+
+:func:`organize_cloud` is the dispatch behind ``load_scan(organize=...)``:
+it picks the method (``auto``) or runs the one asked for, records an
+:class:`~calib_core.lidar.report.OrganizeReport` in
+``meta["organize_report"]`` and refuses clouds that do not look like one
+sensor's view.  Lidar frame: metres; with ``sensor_origin`` the cloud's
+frame shifted to that point (axes unchanged).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from ..errors import CalibError
+from .depth_matrix import DepthMatrix
+from .firing_order import NotFiringOrder
+from .organize import (
+    count_beam_elevations,
+    default_spherical_resolution_deg,
+    organize_by_elevation,
+    organize_by_firing_order,
+    organize_by_ring,
+    organize_grid,
+    organize_spherical,
+)
+from .report import check_points_kept, organize_report
+
+#: ``organize=`` choices; "firing" is a short alias of "firing_order".
+ORGANIZE_METHODS = ("auto", "organized", "ring", "elevation", "firing_order", "firing", "spherical")
+
+
+def parse_sensor_origin(value) -> np.ndarray | None:
+    """``(3,)`` float64 scanner position in the cloud's frame (metres), or None."""
+    if value is None:
+        return None
+    try:
+        origin = np.asarray(value, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        raise CalibError(f"sensor origin must be three numbers X Y Z (metres), got {value!r}") from None
+    if origin.shape != (3,) or not np.isfinite(origin).all() or np.abs(origin).max() > 1e7:
+        raise CalibError(f"sensor origin must be three finite numbers X Y Z (metres), got {value!r}")
+    return origin
+
+
+def _spherical(xyz, v_res_deg, h_res_deg, v_range_deg) -> tuple[DepthMatrix, str]:
+    note = ""
+    if v_res_deg is None or h_res_deg is None:
+        default = default_spherical_resolution_deg(xyz)
+        note = f"spherical cells of {default} deg (default; --h-res-deg/--v-res-deg to change)"
+        v_res_deg = default if v_res_deg is None else v_res_deg
+        h_res_deg = default if h_res_deg is None else h_res_deg
+    depth = organize_spherical(xyz, v_res_deg, h_res_deg, v_range_deg)
+    if note:
+        depth = dataclasses.replace(depth, meta={**depth.meta, "spherical_resolution": note})
+    return depth, note
+
+
+#: A firing order that loses more points than this to shared cells is not one.
+MAX_FIRING_ORDER_LOSS = 0.05
+
+
+def _check_firing_layout(depth: DepthMatrix) -> None:
+    """Refuse sweeps that are not a sensor's lasers: too many points share cells."""
+    report = organize_report(depth)
+    if 1.0 - report.kept_share > MAX_FIRING_ORDER_LOSS:
+        raise NotFiringOrder(
+            f"the cloud does not look like beams stored in firing order: the {report.rows} azimuth sweeps "
+            f"found would lose {100 * (1.0 - report.kept_share):.0f} % of the points to shared cells"
+        )
+
+
+def organize_cloud(
+    xyz: np.ndarray,
+    *,
+    ring: np.ndarray | None = None,
+    ring_name: str = "ring",
+    organized_shape: tuple[int, int] | None = None,
+    organize: str = "auto",
+    beams: int | None = None,
+    n_cols: int | None = None,
+    v_res_deg: float | None = None,
+    h_res_deg: float | None = None,
+    v_range_deg: tuple[float, float] | None = None,
+    wrap_cols: bool | None = None,
+    sensor_origin=None,
+    min_kept_share: float | None = None,
+) -> DepthMatrix:
+    """Organise a cloud into a depth matrix.
+
+    ``auto`` takes, in this order: the file's own grid (``organized_shape``);
+    the ring field; the scan order (points stored laser after laser, see
+    :func:`~calib_core.lidar.firing_order.firing_order_rings`); and when the
+    order is not a firing order, elevation clustering into ``beams`` beams
+    if given (seen from the beams' common origin height), else into the
+    beams found as separate elevations (:func:`count_beam_elevations`),
+    else spherical binning.  The reason for the choice is in the report.
+
+    Parameters
+    ----------
+    xyz : (N, 3) float
+        Points in storage order, metres.
+    ring : (N,) int, optional
+        Per-point beam index (a ring field), named ``ring_name``.
+    organized_shape : (H, W), optional
+        The file's own grid, when the cloud is organized.
+    organize : str
+        One of :data:`ORGANIZE_METHODS`.
+    beams, n_cols, v_res_deg, h_res_deg, v_range_deg, wrap_cols :
+        See :mod:`calib_core.lidar.organize`.
+    sensor_origin : (3,) float, optional
+        Scanner position in the cloud's frame (metres), for scans stored in
+        a world frame; the points are shifted so that it is the origin.
+    min_kept_share : float, optional
+        Refuse when fewer usable points are kept (default
+        :data:`~calib_core.lidar.report.MIN_POINTS_KEPT_SHARE`); not applied
+        to organized grids.
+
+    Returns
+    -------
+    DepthMatrix
+        ``meta["organize_report"]`` holds the :class:`OrganizeReport`;
+        ``meta["sensor_origin"]`` the shift applied, if any.
+
+    Raises
+    ------
+    CalibError
+        Bad options, or a cloud that does not look like a scan seen from
+        the lidar origin.
+    """
+    if organize not in ORGANIZE_METHODS:
+        raise CalibError(f"unknown organize method '{organize}' (one of {', '.join(ORGANIZE_METHODS)})")
+    if beams is not None and (isinstance(beams, bool) or not isinstance(beams, (int, np.integer)) or beams < 1):
+        raise CalibError(f"beams must be a positive integer, got {beams!r}")
+    method = "firing_order" if organize == "firing" else organize
+    origin = parse_sensor_origin(sensor_origin)
+    points = np.asarray(xyz, dtype=np.float64)
+    if origin is not None:
+        points = points - origin
+
+    reason = ""
+    if method == "organized" or (method == "auto" and organized_shape is not None):
+        if organized_shape is None:
+            raise CalibError("the cloud is not organized (it has no WIDTH x HEIGHT grid)")
+        depth = organize_grid(points.reshape(*organized_shape, 3), wrap_cols=wrap_cols)
+        reason = f"the file's own {organized_shape[0]} x {organized_shape[1]} grid" if method == "auto" else ""
+    elif method == "ring" or (method == "auto" and ring is not None):
+        if ring is None:
+            raise CalibError("no ring field; try beams=...")
+        depth = organize_by_ring(points, ring, n_cols=n_cols)
+        reason = f"ring field '{ring_name}'" if method == "auto" else ""
+    elif method == "auto":
+        try:
+            depth = organize_by_firing_order(points, beams, n_cols=n_cols)
+            _check_firing_layout(depth)
+            reason = f"no ring field; points stored laser after laser ({depth.meta['n_sweeps']} azimuth sweeps)"
+            if depth.meta.get("n_empty_beams_added"):
+                reason += f", {depth.meta['n_empty_beams_added']} empty rows added at the {depth.meta['empty_beams_at']} for beams={beams}"
+        except NotFiringOrder as err:
+            why = str(err).replace("the cloud does not look like", "not").rstrip(".")
+            if beams is not None:
+                depth = organize_by_elevation(points, beams, n_cols=n_cols, range_aware=True)
+                height = depth.meta["beam_origin_height_m"]
+                reason = f"fallback to elevation clustering into {beams} beams (seen from {height:+.2f} m): {why}"
+            elif (found := count_beam_elevations(points)) is not None:
+                depth = organize_by_elevation(points, found, n_cols=n_cols)
+                reason = f"fallback to elevation clustering: {why}; the elevations fall into {found} separate beams"
+            else:
+                depth, note = _spherical(points, v_res_deg, h_res_deg, v_range_deg)
+                reason = f"fallback to spherical binning: {why}; {note or 'resolution as given'}; pass --beams N for one row per beam"
+    elif method in ("elevation", "firing_order"):
+        if beams is None and method == "elevation":
+            raise CalibError(f"organize='{method}' needs the number of beams (beams=...)")
+        depth = organize_by_elevation(points, beams, n_cols=n_cols) if method == "elevation" else organize_by_firing_order(points, beams, n_cols=n_cols)
+    else:
+        depth, reason = _spherical(points, v_res_deg, h_res_deg, v_range_deg)
+
+    report = organize_report(depth, reason)
+    if report.method != "organized":
+        check_points_kept(report, *(() if min_kept_share is None else (min_kept_share,)))
+    meta = {**depth.meta, "organize_report": report}
+    if origin is not None:
+        meta["sensor_origin"] = origin
+    return dataclasses.replace(depth, meta=meta)
