@@ -1,4 +1,4 @@
-"""Guided picking on a real scene (PJLab OpenCalib auto_calib), against its published calibration.
+"""Guided picking on real scenes (PJLab OpenCalib auto_calib, KITTI object 000002), against their published calibrations.
 
 A trial: 5 rough pairs (the committed real_data pairs' cells, pixels = their
 projection under the published extrinsic + 3 px Gaussian noise), then 20
@@ -27,6 +27,9 @@ from .common import REPO
 
 DATA = REPO.parent / "shared" / "data" / "pjlab_opencalib_lidar2camera" / "auto_calib"
 PAIRS = REPO / "real_data" / "pairs" / "auto_calib_pairs.yaml"
+KITTI = REPO.parent / "shared" / "data" / "kitti_object_000002"
+KITTI_PAIRS = REPO / "real_data" / "pairs" / "kitti_000002_pairs.yaml"
+KITTI_CAMERA = REPO / "real_data" / "kitti_000002_camera.yaml"
 
 
 @dataclass
@@ -40,6 +43,29 @@ class RealScene:
 
 def available() -> bool:
     return (DATA / "calib.pcd").is_file() and PAIRS.is_file()
+
+
+def kitti_available() -> bool:
+    return (KITTI / "velodyne" / "000002.bin").is_file() and KITTI_PAIRS.is_file() and KITTI_CAMERA.is_file()
+
+
+def load_kitti() -> RealScene:
+    """KITTI object 000002: the rectified left colour camera; the published pose is
+    ``[I | K^-1 P2[:, 3]] @ R0_rect @ Tr_velo_to_cam`` parsed from calib/000002.txt."""
+    values = {}
+    for line in (KITTI / "calib" / "000002.txt").read_text().splitlines():
+        if ":" in line:
+            key, rest = line.split(":", 1)
+            values[key] = np.array(rest.split(), dtype=float)
+    P2 = values["P2"].reshape(3, 4)
+    T = np.eye(4)
+    T[:3, :] = values["Tr_velo_to_cam"].reshape(3, 4)
+    R0 = np.eye(4)
+    R0[:3, :3] = values["R0_rect"].reshape(3, 3)
+    shift = np.eye(4)
+    shift[:3, 3] = np.linalg.inv(P2[:, :3]) @ P2[:, 3]
+    return RealScene(load_scan(KITTI / "velodyne" / "000002.bin"), load_camera(KITTI_CAMERA),
+                     load_image_rgb(KITTI / "image_2" / "000002.png"), shift @ R0 @ T, load_pairs_yaml(KITTI_PAIRS))
 
 
 def load_pjlab() -> RealScene:

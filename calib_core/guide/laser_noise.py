@@ -10,8 +10,9 @@ Modelled as a zero-mean error of covariance (metres^2)
 with ``g_row``, ``g_col`` the change of the beam direction over one row and
 one column, ``rho`` the range, ``b`` the beam and ``s^2`` the variance of the
 offset in cells: 1/12 for a uniform offset within the cell (a careful whole-cell
-pick); a proposed cell found by a detector may sit a cell or two off the
-corner, hence the default of one cell.
+pick); a proposed cell found by a detector may sit up to two cells off the
+corner, hence the default: the standard deviation of a uniform offset over
+-2..2 cells, sqrt((5^2 - 1) / 12) = 1.41.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ __all__ = ["cell_covariance", "DEFAULT_CELL_SIGMA", "WHOLE_CELL_SIGMA", "DEFAULT
 #: Offset (cells, 1-sigma) of a careful whole-cell pick: uniform within the cell.
 WHOLE_CELL_SIGMA = 12.0**-0.5
 #: Standard deviation of the picked cell's offset from the feature, in cells.
-DEFAULT_CELL_SIGMA = 1.0
+DEFAULT_CELL_SIGMA = 1.41
 #: Range noise of the scanner along the beam, metres (1 cm: the sample; spinning lidars 1-3 cm).
 DEFAULT_RANGE_SIGMA_M = 0.01
 
