@@ -39,7 +39,6 @@ KINDS = ("depth_jump", "junction")
 _GRADIENT_CLIP = {"depth_jump": 0.015, "junction": 0.2}
 #: Near-side share of a 7x7 window below / above which a depth-jump peak is a corner (1/2 = straight edge).
 _MAX_CONVEX_SHARE, _MIN_CONCAVE_SHARE = 0.4, 0.7
-_NEAR_SIDE = False
 #: Structure-tensor window per kind, cells.
 _WINDOW = {"depth_jump": 3, "junction": 5}
 
@@ -130,19 +129,6 @@ def surface_normals(depth, ksize: int = 5) -> np.ndarray:
     return np.where(flip[:, :, None], -n, n)
 
 
-def near_side(depth, rows_cols: np.ndarray) -> np.ndarray:
-    """Each cell moved to the nearest-range valid cell of its 3x3 neighbourhood (the object, not the background)."""
-    rc = np.asarray(rows_cols, dtype=np.int64).reshape(-1, 2)
-    H, W = depth.shape
-    dr, dc = np.meshgrid([-1, 0, 1], [-1, 0, 1], indexing="ij")
-    rows = np.clip(rc[:, 0, None] + dr.ravel(), 0, H - 1)
-    cols = np.clip(rc[:, 1, None] + dc.ravel(), 0, W - 1)
-    rng = np.where(depth.valid[rows, cols], depth.range_m[rows, cols], np.inf)
-    best = np.argmin(rng, axis=1)
-    k = np.arange(len(rc))
-    return np.stack([rows[k, best], cols[k, best]], axis=1)
-
-
 def cell_spacing_m(depth) -> np.ndarray:
     """Smaller of the distances (m) from each cell's point to its row and column neighbours' beams.
 
@@ -225,8 +211,6 @@ def find_candidates(depth, threshold: float = 0.5, min_distance: int = 1, min_sp
             f = near_fraction(depth, rc)
             corner = (f <= _MAX_CONVEX_SHARE) | (f >= _MIN_CONCAVE_SHARE)
             rc, s = rc[corner], s[corner]
-            if _NEAR_SIDE:
-                rc = near_side(depth, rc)
         keep = ~taken[rc[:, 0], rc[:, 1]] & sound[rc[:, 0], rc[:, 1]]
         rc, s = rc[keep], s[keep]
         mark = np.zeros(depth.shape, np.uint8)
