@@ -19,14 +19,18 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..solve.calibrate import RANGE_SIGMA_M
+
 __all__ = ["cell_covariance", "DEFAULT_CELL_SIGMA", "WHOLE_CELL_SIGMA", "DEFAULT_RANGE_SIGMA_M"]
 
 #: Offset (cells, 1-sigma) of a careful whole-cell pick: uniform within the cell.
 WHOLE_CELL_SIGMA = 12.0**-0.5
 #: Standard deviation of the picked cell's offset from the feature, in cells.
 DEFAULT_CELL_SIGMA = 1.41
-#: Range noise of the scanner along the beam, metres (1 cm: the sample; spinning lidars 1-3 cm).
-DEFAULT_RANGE_SIGMA_M = 0.01
+#: Range noise along the beam, metres: the solve's own laser model
+#: (:data:`calib_core.solve.calibrate.RANGE_SIGMA_M`), so proposals are ranked
+#: by the information the solve will draw from them.
+DEFAULT_RANGE_SIGMA_M = RANGE_SIGMA_M
 
 
 def cell_covariance(
