@@ -41,16 +41,17 @@ def true_corner_of_cells(scene, rows_cols: np.ndarray, max_cells: int = 2) -> tu
     return np.where(np.isfinite(d[np.arange(len(rc)), best]), best, -1), pick_rc
 
 
-def _judge_auto(run, session, scene, gate, lookup, paired, tpix) -> None:
+def _judge_auto(run, session, scene, gates: dict, lookup, paired, tpix) -> None:
     props = session.proposals(200)
-    passed, auto_px = auto_accept(session.corners, props, gate, image=scene.image, depth=scene.depth,
-                                  camera=scene.camera, T_camera_lidar=session.state.T_camera_lidar)
-    for p, ok, px in zip(props, passed, auto_px):
-        if not ok:
-            continue
-        corner = lookup.get(tuple(p.laser_rc), -1)
-        err = float(np.linalg.norm(px - tpix[corner])) if corner >= 0 and corner not in paired else float("inf")
-        run.auto.append((err > AUTO_WRONG_PX, err))
+    for name, gate in gates.items():
+        passed, auto_px = auto_accept(session.corners, props, gate, image=scene.image, depth=scene.depth,
+                                      camera=scene.camera, T_camera_lidar=session.state.T_camera_lidar)
+        for p, ok, px in zip(props, passed, auto_px):
+            if not ok:
+                continue
+            corner = lookup.get(tuple(p.laser_rc), -1)
+            err = float(np.linalg.norm(px - tpix[corner])) if corner >= 0 and corner not in paired else float("inf")
+            run.auto.setdefault(name, []).append((err > AUTO_WRONG_PX, err))
 
 
 def true_pixels(scene) -> np.ndarray:
@@ -69,17 +70,17 @@ class GuidedRun:
     reclicks: int = 0  # guided re-clicks of the rough starting pairs (counted in accepted)
     inside_3sigma: list = field(default_factory=list)  # per accepted proposal: true pixel inside the 3-sigma ellipse
     mahalanobis2: list = field(default_factory=list)
-    auto: list = field(default_factory=list)  # per shown proposal passing the auto gate: (wrong, px error or inf)
+    auto: dict = field(default_factory=dict)  # gate name -> per accepted proposal: (wrong, px error or inf)
 
 
 def guided_run(scene, rng: np.random.Generator, checkpoints=(10, 20, 30, 50), click_sigma_px: float = 0.3,
                starters: list[Pair] | None = None, image: bool = True, max_actions: int = 2000,
-               order: str = "d_optimal", auto_gate=None) -> GuidedRun:
+               order: str = "d_optimal", auto_gates: dict | None = None) -> GuidedRun:
     """Start from ``starters`` (default: 4 farthest-point clicks at 1 px) and add guided pairs.
 
     ``order`` is the proposal order (:func:`calib_core.guide.propose`).  With
-    ``auto_gate``, at every checkpoint all current proposals (up to 200) are
-    judged by :func:`calib_core.guide.auto_accept.auto_accept`; a pass is
+    ``auto_gates`` (name -> AutoGate), at every checkpoint all current proposals (up to 200) are
+    judged by :func:`calib_core.guide.auto_accept.auto_accept` under each gate; a pass is
     wrong when the cell is on no true corner (or one already paired) or the
     found pixel is more than :data:`AUTO_WRONG_PX` from the corner's true
     projection.  (The person's loop is unchanged, so runs stay comparable.)
@@ -122,8 +123,8 @@ def guided_run(scene, rng: np.random.Generator, checkpoints=(10, 20, 30, 50), cl
         paired.add(corner)
         run.reclicks += p.replaces is not None
         run.accepted += 1
-        if run.accepted in checkpoints and auto_gate is not None and session.corners is not None:
-            _judge_auto(run, session, scene, auto_gate, lookup, paired, tpix)
+        if run.accepted in checkpoints and auto_gates and session.corners is not None:
+            _judge_auto(run, session, scene, auto_gates, lookup, paired, tpix)
         if run.accepted in checkpoints:
             T = session.solve().T_camera_lidar
             e = pose_error(T, scene.T_camera_lidar)
