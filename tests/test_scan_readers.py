@@ -130,13 +130,13 @@ def test_organized_pcd_has_its_grid(tmp_path):
 def test_pcd_count_field_and_padding(tmp_path):
     head = (
         "VERSION 0.7\nFIELDS x y z normal _\nSIZE 4 4 4 4 1\nTYPE F F F F U\nCOUNT 1 1 1 3 2\n"
-        "WIDTH 2\nHEIGHT 1\nPOINTS 2\nDATA ascii\n"
+        "WIDTH 3\nHEIGHT 1\nPOINTS 3\nDATA ascii\n"
     )
-    body = "1 2 3 0.1 0.2 0.3 0 0\n4 5 6 0.4 0.5 0.6 0 0\n"
+    body = "1 2 3 0.1 0.2 0.3 0 0\n4 5 6 0.4 0.5 0.6 0 0\n7 8 9 0.7 0.8 0.9 1 1\n"
     cloud = read_point_cloud(write(tmp_path / "n.pcd", (head + body).encode()))
-    np.testing.assert_array_equal(cloud.xyz, [[1, 2, 3], [4, 5, 6]])
+    np.testing.assert_array_equal(cloud.xyz, [[1, 2, 3], [4, 5, 6], [7, 8, 9]])
     assert set(cloud.fields) == {"normal"}
-    np.testing.assert_array_equal(cloud.fields["normal"], np.float32([[0.1, 0.2, 0.3], [0.4, 0.5, 0.6]]))
+    np.testing.assert_array_equal(cloud.fields["normal"], np.float32([[0.1, 0.2, 0.3], [0.4, 0.5, 0.6], [0.7, 0.8, 0.9]]))
 
 
 def test_bad_pcds_raise_one_line_errors(tmp_path):
@@ -297,16 +297,26 @@ def test_truncated_las_and_laz(tmp_path):
 # --------------------------------------------------------------------------
 
 
-def test_kitti_bin(tmp_path):
-    data = np.float32([[1, 2, 3, 0.5], [4, 5, 6, 0.25]])
-    cloud = read_point_cloud(write(tmp_path / "000000.bin", data.tobytes()))
+def test_kitti_bin_with_given_columns(tmp_path):
+    data = np.float32([[1, 2, 3, 0.5], [4, 5, 6, 0.25], [7, 8, 9, 0.0]])
+    cloud = read_point_cloud(write(tmp_path / "000000.bin", data.tobytes()), bin_columns=4)
     np.testing.assert_array_equal(cloud.xyz, data[:, :3])
     np.testing.assert_array_equal(cloud.fields["intensity"], data[:, 3])
-    for name, raw, word in [("odd.bin", data.tobytes()[:-4], "multiple of 16"), ("empty.bin", b"", "empty")]:
+    assert cloud.meta["bin_columns"] == 4 and cloud.meta["bin_columns_how"] == "given"
+    cases = [
+        ("odd.bin", data.tobytes()[:-2], {}, "float32"),
+        ("cut.bin", data.tobytes()[:-4], {"bin_columns": 4}, "--bin-columns 4"),
+        ("empty.bin", b"", {}, "empty"),
+        # Three points are too few to see a period in: refused, naming the option.
+        ("short.bin", data.tobytes(), {}, "--bin-columns"),
+    ]
+    for name, raw, options, word in cases:
         path = write(tmp_path / name, raw)
         with pytest.raises(CalibError) as excinfo:
-            read_point_cloud(path)
+            read_point_cloud(path, **options)
         assert_one_line_error(excinfo, path, word)
+    with pytest.raises(CalibError, match="bin_columns must be"):
+        read_point_cloud(tmp_path / "000000.bin", bin_columns=2)
 
 
 def test_npy_shapes(tmp_path):
@@ -341,14 +351,14 @@ def test_npy_shapes(tmp_path):
 
 def test_npz_variants(tmp_path):
     x, y, z = np.float32([1, 2]), np.float32([3, 4]), np.float32([5, 6])
-    np.savez(tmp_path / "xyz.npz", x=x, y=y, z=z, ring=np.uint16([1, 0]), note=np.zeros(7))
+    np.savez(tmp_path / "xyz.npz", x=np.r_[x, 7], y=np.r_[y, 8], z=np.r_[z, 9], ring=np.uint16([1, 0, 2]), note=np.zeros(7))
     cloud = read_point_cloud(tmp_path / "xyz.npz")
-    np.testing.assert_array_equal(cloud.xyz, [[1, 3, 5], [2, 4, 6]])
+    np.testing.assert_array_equal(cloud.xyz, [[1, 3, 5], [2, 4, 6], [7, 8, 9]])
     assert set(cloud.fields) == {"ring"}
-    np.savez(tmp_path / "points.npz", points=np.float32([[1, 2, 3]]), intensity=np.float32([0.5]))
+    np.savez(tmp_path / "points.npz", points=np.float32([[1, 2, 3], [4, 5, 6], [7, 8, 9]]), intensity=np.float32([0.5, 1, 2]))
     cloud = read_point_cloud(tmp_path / "points.npz")
-    np.testing.assert_array_equal(cloud.xyz, [[1, 2, 3]])
-    np.testing.assert_array_equal(cloud.fields["intensity"], [0.5])
+    np.testing.assert_array_equal(cloud.xyz, [[1, 2, 3], [4, 5, 6], [7, 8, 9]])
+    np.testing.assert_array_equal(cloud.fields["intensity"], [0.5, 1, 2])
     np.savez(tmp_path / "bad.npz", a=np.zeros(3), b=np.zeros(3))
     write(tmp_path / "zip.npz", b"PK\x03\x04 broken zip")
     for name, word in [("bad", "keys: a, b"), ("zip", "unreadable")]:
@@ -381,7 +391,7 @@ def test_unknown_and_missing_files(tmp_path):
     with pytest.raises(CalibError, match="not found"):
         load_scan(tmp_path / "nope.pcd")
     (tmp_path / "dir.pcd").mkdir()
-    with pytest.raises(CalibError, match="not a file"):
+    with pytest.raises(CalibError, match="is a folder"):
         read_point_cloud(tmp_path / "dir.pcd")
 
 
