@@ -49,11 +49,13 @@ def _add_scan_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--beams", type=int, default=None, help="number of beams, for clouds without a ring field")
     p.add_argument("--h-res-deg", type=float, default=None, help="azimuth resolution of the spherical fallback")
     p.add_argument("--v-res-deg", type=float, default=None, help="elevation resolution of the spherical fallback")
+    p.add_argument("--bin-columns", type=int, default=None, metavar="N", help="float32 values per point of a .bin scan (KITTI 4, nuScenes 5; default: detected)")
+    p.add_argument("--max-points", type=int, default=None, metavar="N", help="largest cloud (points or grid cells) a scan file may hold (default 5,000,000)")
 
 
 def scan_options(args: argparse.Namespace) -> dict:
     opts: dict = {"organize": args.organize}
-    for key in ("beams", "h_res_deg", "v_res_deg"):
+    for key in ("beams", "h_res_deg", "v_res_deg", "bin_columns", "max_points"):
         if getattr(args, key, None) is not None:
             opts[key] = getattr(args, key)
     return opts

@@ -190,7 +190,7 @@ def npz_members(path, keys=None, max_bytes: int | None = None) -> dict[str, tupl
         raise
     except Exception as err:  # BadZipFile, ValueError (bad .npy header), OSError, EOFError, NotImplementedError
         text = " ".join(str(err).split())[:120] or type(err).__name__
-        raise CalibError(f"{path}: not a readable .npz ({text})") from None
+        raise CalibError(f"{path}: unreadable .npz ({text})") from None
     return members
 
 
