@@ -151,9 +151,33 @@ def _xyz_names(path: Path, names, what: str) -> tuple[str, str, str]:
 
 
 def _ends_mid_line(data: bytes) -> bool:
-    """Text data whose last line has no newline: cut off, maybe in the middle of a number."""
+    """Text data that may have been cut in the middle of its last number.
+
+    A final line without an end of line is accepted only when its last
+    number has the same width as the last number of every line before it
+    (fixed-width writers such as ``%f``), so a cut number cannot pass.
+    """
     stripped = data.rstrip(b" \t\r\x00")
-    return bool(stripped) and not stripped.endswith(b"\n")
+    if not stripped or stripped.endswith(b"\n"):
+        return False
+    lines = [line.split() for line in stripped[-65536:].split(b"\n")[1:]]
+    lines = [words for words in lines if words]
+    if len(lines) < 2:
+        return True
+    widths = {len(words[-1].lstrip(b"+-")) for words in lines[:-1]}
+    return widths != {len(lines[-1][-1].lstrip(b"+-"))}
+
+
+def _normalise_text(data: bytes) -> bytes:
+    """ASCII records with single spaces between values and one point per line.
+
+    PCL splits on blanks and tabs, PDAL also on commas; pypcd4 and trimesh
+    split on single spaces.  Empty lines are dropped.
+    """
+    data = data.translate(bytes.maketrans(b",\t\r\x00", b"    "))
+    if b"  " in data or b" \n" in data or b"\n " in data or data.startswith(b" ") or b"\n\n" in data:
+        data = b"\n".join(b" ".join(words) for line in data.split(b"\n") if (words := line.split()))
+    return data.strip(b" \n") + b"\n"
 
 
 # --------------------------------------------------------------------------
@@ -253,11 +277,8 @@ def _check_pcd_header(path: Path, header: dict[str, list[str]]) -> dict[str, Any
 
 def _pcd_ascii_check(path: Path, data: bytes, n_points: int, values_per_point: int) -> None:
     """Every data line holds one point's values; the last line is complete."""
-    if _ends_mid_line(data):
-        tail = data.rstrip()[-30:].decode("ascii", "replace").split("\n")[-1]
-        raise CalibError(f"{path}: truncated ascii PCD: the last line '{tail}' has no end of line (cut off mid-number?)")
     codes = np.frombuffer(data, dtype=np.uint8)
-    space = (codes == 32) | (codes == 9) | (codes == 13) | (codes == 10) | (codes == 0)
+    space = (codes == 32) | (codes == 10)
     starts = ~space & np.concatenate(([True], space[:-1]))
     line_of_token = np.cumsum(codes == 10)[starts]
     lines, per_line = np.unique(line_of_token, return_counts=True)
@@ -314,6 +335,13 @@ def _read_pcd(path: Path, max_points: int, **_) -> PointCloud:
                     f"{path}: truncated ascii PCD: {data_bytes} data bytes cannot hold the {n_points} points the header declares"
                 )
             data = handle.read()
+            if _ends_mid_line(data):
+                tail = data.rstrip()[-30:].decode("ascii", "replace").split("\n")[-1]
+                raise CalibError(
+                    f"{path}: truncated ascii PCD: the last line '{tail}' has no end of line and its last number "
+                    f"is narrower than those above it (cut off mid-number?)"
+                )
+            data = _normalise_text(data)
             _pcd_ascii_check(path, data, n_points, values_per_point)
     # pypcd4 only takes VERSION 0.7 headers: hand it a normalised one (the data layout is the same).
     normalised = "\n".join(
@@ -331,9 +359,6 @@ def _read_pcd(path: Path, max_points: int, **_) -> PointCloud:
             "",
         ]
     ).encode()
-    if encoding == "ascii":
-        # pypcd4 splits on single spaces; PCL also accepts tabs and runs of blanks.
-        data = b"\n".join(b" ".join(line.split()) for line in data.splitlines() if line.strip()) + b"\n"
     try:
         cloud = pypcd4.PointCloud.from_fileobj(io.BytesIO(normalised + data))
     except Exception as err:  # pypcd4, lzf and numpy raise many types; all mean "bad file"
@@ -438,7 +463,10 @@ def _read_ply(path: Path, max_points: int, **_) -> PointCloud:
         counts = ", ".join(f"{count:,} {name}" for name, count, _ in elements)
         raise CalibError(f"{path}: truncated PLY: {data_bytes:,} data bytes cannot hold the declared {counts}")
     if fmt == "ascii" and _ends_mid_line(path.read_bytes()[data_offset:]):
-        raise CalibError(f"{path}: truncated ascii PLY: the last line has no end of line (cut off mid-number?)")
+        raise CalibError(
+            f"{path}: truncated ascii PLY: the last line has no end of line and its last number is narrower "
+            f"than those above it (cut off mid-number?)"
+        )
     try:
         # Vertices as stored: no texture re-indexing (which duplicates vertices), no texture file lookup.
         geometry = trimesh.load(str(path), file_type="ply", process=False, fix_texture=False, skip_materials=True)
