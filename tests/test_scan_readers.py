@@ -477,3 +477,243 @@ def test_load_scan_organized_pcd_is_turned_upright(tmp_path):
     np.testing.assert_array_equal(depth.meta["point_index"], [[3, 4, 5], [0, -1, 2]])
     # The missing cell still has a direction: lower row's elevation, middle column's azimuth.
     np.testing.assert_allclose(depth.directions[1, 1], [np.cos(np.radians(5.0)), 0.0, -np.sin(np.radians(5.0))], atol=1e-6)
+
+
+# --------------------------------------------------------------------------
+# Hostile files: bounded before reading, refused in one line, quietly
+# --------------------------------------------------------------------------
+
+
+def refuse(path: Path, *words: str, capfd=None, **options) -> str:
+    """Read ``path``, expect a one-line CalibError containing ``words`` and (with capfd) nothing printed."""
+    if capfd is not None:
+        capfd.readouterr()
+    with pytest.raises(CalibError) as excinfo:
+        read_point_cloud(path, **options)
+    assert_one_line_error(excinfo, path, *words)
+    if capfd is not None:
+        out, err = capfd.readouterr()
+        assert out == "" and err == "", (out + err)[:300]
+    return str(excinfo.value)
+
+
+def test_non_regular_files_are_refused_without_blocking(tmp_path):
+    import os
+
+    fifo = tmp_path / "scan.pcd"
+    os.mkfifo(fifo)  # opening a FIFO for reading would block until a writer comes
+    refuse(fifo, "not a regular file")
+    with pytest.raises(CalibError, match="not a regular file"):
+        load_scan("/dev/zero")
+
+
+def test_ascii_pcd_cut_mid_number_is_refused(tmp_path):
+    rec = sample_records(10)
+    good = pcd_bytes(rec, "ascii")
+    # Cut one character before the end: the last number loses its last digit and the line its newline.
+    path = write(tmp_path / "cut.pcd", good[:-2])
+    refuse(path, "truncated", "cut off")
+    # A whole file still reads, with the last number intact.
+    cloud = read_point_cloud(write(tmp_path / "whole.pcd", good))
+    np.testing.assert_array_equal(cloud.fields["time"], rec["time"])
+
+
+def test_pcd_count_on_xyz_and_declared_counts(tmp_path):
+    head = "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 3 1 1\nWIDTH 3\nHEIGHT 1\nPOINTS 3\nDATA ascii\n"
+    refuse(write(tmp_path / "count3.pcd", (head + "1 2 3 4 5\n" * 3).encode()), "COUNT 3")
+    rec = sample_records(10)
+    ascii_data = pcd_bytes(rec, "ascii")
+    # More lines than POINTS declares.
+    refuse(write(tmp_path / "extra.pcd", ascii_data + ascii_data.splitlines(keepends=True)[-1]), "10 points", "11 lines")
+    # 10^12 points declared, one held: refused from the sizes, before anything is allocated.
+    huge = pcd_bytes(rec[:1], "binary").replace(b"WIDTH 1\n", b"WIDTH 1000000000000\n").replace(b"POINTS 1\n", b"POINTS 1000000000000\n")
+    refuse(write(tmp_path / "huge.pcd", huge), "1,000,000,000,000 points", "--max-points")
+    small_cap = pcd_bytes(rec, "binary")
+    refuse(write(tmp_path / "cap.pcd", small_cap), "--max-points", max_points=5)
+
+
+def test_pcd_headers_written_by_other_software(tmp_path):
+    rec = sample_records(12)
+    # VERSION .6 (PCL before 1.0) and upper-case X Y Z (PDAL).
+    data = pcd_bytes(rec, "binary").replace(b"VERSION 0.7", b"VERSION .6").replace(b"FIELDS x y z", b"FIELDS X Y Z")
+    cloud = read_point_cloud(write(tmp_path / "v6.pcd", data))
+    np.testing.assert_array_equal(cloud.xyz[:, 2], rec["z"])
+    assert cloud.meta["version"] == ".6"
+    # An unorganised list written as WIDTH 1 HEIGHT N is flat, not an N x 1 grid.
+    flat = pcd_bytes(rec, "binary").replace(b"WIDTH 12\nHEIGHT 1\n", b"WIDTH 1\nHEIGHT 12\n")
+    assert read_point_cloud(write(tmp_path / "tall.pcd", flat)).organized_shape is None
+    refuse(write(tmp_path / "v9.pcd", data.replace(b"VERSION .6", b"VERSION 9.1")), "VERSION 9.1")
+
+
+def test_too_few_points_and_absurd_coordinates(tmp_path):
+    np.save(tmp_path / "two.npy", np.float32([[1, 2, 3], [4, 5, 6]]))
+    refuse(tmp_path / "two.npy", "only 2 finite point")
+    one = np.full((5, 3), np.nan)
+    one[2] = [1, 2, 3]
+    np.save(tmp_path / "one.npy", one)
+    refuse(tmp_path / "one.npy", "only 1 finite point")
+    big = np.float64([[1, 2, 3], [4, 5, 6], [1e300, 0, 0]])
+    np.save(tmp_path / "big.npy", big)
+    refuse(tmp_path / "big.npy", "1e+300")
+    rec = sample_records(6)
+    rec["y"][3] = np.inf
+    refuse(write(tmp_path / "inf.pcd", pcd_bytes(rec, "binary")), "1 of 6 points have an infinite coordinate")
+    # 1e300 written into a float32 PCD field overflows to inf: refused, and numpy's overflow warning is not printed.
+    head = "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 3\nHEIGHT 1\nPOINTS 3\nDATA ascii\n"
+    refuse(write(tmp_path / "e300.pcd", (head + "1 2 3\n4 5 6\n1e300 0 0\n").encode()), "infinite")
+
+
+def test_ply_declared_counts_must_match_the_data(tmp_path, capfd):
+    xyz = np.float32([[1, 2, 3], [4, 5, 6], [7, 8, 9]])
+    header = ply_header("binary_little_endian", 10**12, "x y z")
+    refuse(write(tmp_path / "huge.ply", header + xyz[:1].tobytes()), "1,000,000,000,000", capfd=capfd)
+    refuse(write(tmp_path / "huge_ascii.ply", ply_header("ascii", 10**12, "x y z") + b"1 2 3\n"), "1,000,000,000,000", capfd=capfd)
+    faces = ply_header("binary_little_endian", 3, "x y z").replace(
+        b"end_header", b"element face 1000000000\nproperty list uchar int vertex_indices\nend_header"
+    )
+    refuse(write(tmp_path / "faces.ply", faces + xyz.tobytes()), "1,000,000,000 face", capfd=capfd)
+    body = b"1.5 2 3\n4 5 6.25\n7 8 9.125"  # cut: '9.125' is wider than nothing above it is sure of
+    refuse(write(tmp_path / "cut.ply", ply_header("ascii", 3, "x y z") + body), "truncated", capfd=capfd)
+
+
+def test_textured_ply_keeps_vertices_as_stored_quietly(tmp_path, capfd):
+    # Two triangles sharing an edge, with per-corner texture coordinates and a texture file that does not exist.
+    vertices = np.float32([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]])
+    header = (
+        "ply\nformat ascii 1.0\ncomment TextureFile missing.png\nelement vertex 4\nproperty float x\nproperty float y\n"
+        "property float z\nelement face 2\nproperty list uchar int vertex_indices\nproperty list uchar float texcoord\nend_header\n"
+    )
+    body = "".join(f"{x} {y} {z}\n" for x, y, z in vertices.tolist())
+    body += "3 0 1 2 6 0 0 1 0 0 1\n3 1 3 2 6 0.5 0 0.5 0.5 0 0.5\n"
+    capfd.readouterr()
+    cloud = read_point_cloud(write(tmp_path / "tex.ply", (header + body).encode()))
+    assert capfd.readouterr() == ("", "")
+    np.testing.assert_array_equal(cloud.xyz, vertices)
+
+
+def test_las_declaring_more_points_than_it_holds(tmp_path):
+    good = tmp_path / "good.las"
+    write_las(good, np.arange(30, dtype=float).reshape(10, 3), np.zeros(10, np.uint16), np.zeros(10, np.uint16), np.zeros(10))
+    data = bytearray(good.read_bytes())
+    struct.pack_into("<I", data, 107, 4_000_000_000)  # legacy point count (LAS 1.2 header, byte 107)
+    refuse(write(tmp_path / "huge.las", bytes(data)), "4,000,000,000", "--max-points")
+    struct.pack_into("<I", data, 107, 11)
+    refuse(write(tmp_path / "eleven.las", bytes(data)), "truncated")
+
+
+def _zip_bomb(path: Path, name: str, header: bytes, zero_bytes: int, **small) -> None:
+    """An .npz member of ``zero_bytes`` zeros after ``header``, deflated (a few kB on disk), plus ``small`` arrays."""
+    import io
+    import zipfile
+
+    with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED) as archive:
+        for key, value in small.items():
+            buffer = io.BytesIO()
+            np.save(buffer, value)
+            archive.writestr(f"{key}.npy", buffer.getvalue())
+        with archive.open(name, "w", force_zip64=True) as member:
+            member.write(header)
+            chunk = bytes(1 << 20)
+            for start in range(0, zero_bytes, len(chunk)):
+                member.write(chunk[: min(len(chunk), zero_bytes - start)])
+
+
+def _npy_header(shape, dtype="<f8") -> bytes:
+    import io
+
+    buffer = io.BytesIO()
+    np.lib.format.write_array_header_1_0(buffer, {"descr": dtype, "fortran_order": False, "shape": shape})
+    return buffer.getvalue()
+
+
+def test_npz_zip_bomb_is_refused_from_the_central_directory(tmp_path):
+    n = 6_000_000  # 6 M points of float64 x 3: 144 MB once decompressed, about 150 kB on disk
+    path = tmp_path / "bomb.npz"
+    _zip_bomb(path, "points.npy", _npy_header((n, 3)), n * 24)
+    assert path.stat().st_size < 300_000
+    refuse(path, "6,000,000 points", "--max-points")
+    native = tmp_path / "native_bomb.npz"
+    _zip_bomb(
+        native, "range_m.npy", _npy_header((3000, 2000)), 3000 * 2000 * 8,
+        model=np.array("spherical"), elevation_rad=np.zeros(3000), azimuth_rad=np.zeros(2000),
+    )
+    with pytest.raises(CalibError, match="6,000,000 cells.*--max-points"):
+        load_scan(native)
+    single = tmp_path / "single_bomb.npz"
+    _zip_bomb(single, "grid.npy", _npy_header((8000, 5000)), 8000 * 5000 * 8)
+    refuse(single, "shape (8000, 5000)")
+
+
+def test_npz_member_header_must_match_its_size(tmp_path):
+    import zipfile
+
+    path = tmp_path / "liar.npz"
+    with zipfile.ZipFile(path, "w") as archive:
+        archive.writestr("points.npy", _npy_header((10**9, 3)) + np.zeros((3, 3)).tobytes())
+    refuse(path, "declares shape (1000000000, 3)")
+
+
+def test_native_npz_without_a_valid_cell_is_refused(tmp_path):
+    path = tmp_path / "blank.npz"
+    np.savez(path, model=np.array("organized"), points=np.full((4, 5, 3), np.nan))
+    with pytest.raises(CalibError) as excinfo:
+        load_scan(path)
+    assert_one_line_error(excinfo, path, "no valid cell")
+    far = tmp_path / "far.npz"
+    points = np.ones((2, 2, 3))
+    points[0, 0] = [1e300, 0, 0]
+    np.savez(far, model=np.array("organized"), points=points)
+    with pytest.raises(CalibError, match="key 'points' holds 1 value.*1e\\+300"):
+        load_scan(far)
+
+
+def test_max_points_is_validated():
+    with pytest.raises(CalibError, match="max_points"):
+        read_point_cloud("x.pcd", max_points=0)
+
+
+# --------------------------------------------------------------------------
+# Images
+# --------------------------------------------------------------------------
+
+
+def _png(width: int, height: int, rows: int) -> bytes:
+    """An 8-bit RGB PNG declaring width x height but holding ``rows`` rows of pixels."""
+    import zlib
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
+
+    pixels = zlib.compress(b"".join(b"\0" + bytes(3 * width) for _ in range(rows)))
+    ihdr = struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)
+    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", pixels) + chunk(b"IEND", b"")
+
+
+def test_images_checked_from_the_header_and_quiet(tmp_path, capfd):
+    import os
+
+    from calib_core.io.images import image_header_size, load_image_rgb
+
+    good = write(tmp_path / "good.png", _png(40, 30, 30))
+    assert image_header_size(good) == (40, 30)
+    image = load_image_rgb(good)
+    assert image.shape == (30, 40, 3) and image.dtype == np.uint8
+    cases = {
+        "huge.png": (_png(30000, 30000, 1), "pixels"),  # 900 MP declared: refused before decoding
+        "short.png": (_png(100, 100, 10), "cannot decode"),  # libpng complains: folded into the line
+        "empty.png": (b"", "empty"),
+        "text.png": (b"hello, not an image\n", "not a readable image"),
+    }
+    for name, (data, word) in cases.items():
+        path = write(tmp_path / name, data)
+        capfd.readouterr()
+        with pytest.raises(CalibError) as excinfo:
+            load_image_rgb(path)
+        assert_one_line_error(excinfo, path, word)
+        assert capfd.readouterr() == ("", ""), name
+    with pytest.raises(CalibError, match="more than the 1,000 allowed"):
+        load_image_rgb(good, max_pixels=1000)
+    fifo = tmp_path / "fifo.png"
+    os.mkfifo(fifo)
+    with pytest.raises(CalibError, match="not a regular file"):
+        load_image_rgb(fifo)

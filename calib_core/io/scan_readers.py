@@ -669,6 +669,17 @@ def _cloud_from_array(array: np.ndarray, path: Path, what: str) -> PointCloud:
     raise CalibError(f"{path}: {what} has shape {array.shape}; expected (N, 3), (N, 4), (H, W, 3) or (H, W, 4)")
 
 
+def _check_array_shape(path: Path, shape: tuple[int, ...], dtype: np.dtype, what: str) -> None:
+    """The shapes :func:`_cloud_from_array` takes, checked from a header before loading."""
+    if dtype.names:
+        _xyz_names(path, dtype.names, what)
+        return
+    if dtype.kind not in "biuf":
+        raise CalibError(f"{path}: {what} must be numeric, got dtype {dtype}")
+    if not (len(shape) in (2, 3) and shape[-1] in (3, 4)):
+        raise CalibError(f"{path}: {what} has shape {shape}; expected (N, 3), (N, 4), (H, W, 3) or (H, W, 4)")
+
+
 def _array_points(shape: tuple[int, ...], dtype: np.dtype) -> int:
     """Points an array of this shape would give (its cells without the x/y/z axis)."""
     if dtype.names or len(shape) < 2:
@@ -684,6 +695,7 @@ def _read_npy(path: Path, max_points: int, **_) -> PointCloud:
         raise CalibError(f"{path}: unreadable .npy ({_one_line(err)})") from None
     if not isinstance(mapped, np.ndarray):
         raise CalibError(f"{path}: holds several arrays; name it .npz")
+    _check_array_shape(path, mapped.shape, mapped.dtype, "the array")
     count = _array_points(mapped.shape, mapped.dtype)
     if count > max_points:
         raise _too_many(path, "holds", count, max_points)
@@ -721,6 +733,7 @@ def _read_npz(path: Path, max_points: int, **_) -> PointCloud:
                 )
             main = next(iter(members))
         shape, dtype = members[main]
+        _check_array_shape(path, shape, dtype, f"array '{main}'")
         n = _array_points(shape, dtype)
         main_keys = [main]
     if n > max_points:

@@ -264,6 +264,13 @@ def load_depth_npz(path, max_cells: int = DEFAULT_MAX_CELLS) -> DepthMatrix:
             raise CalibError(f"{path}: key 'model' is '{model}', expected one of {', '.join(MODEL_KEYS)}")
 
         parameters = [_read_key(data, path, key, model) for key in MODEL_KEYS[model]]
+        for key, value in zip(MODEL_KEYS[model], parameters):
+            # NaN marks a missing return; infinities and huge numbers are corruption, not measurements.
+            with np.errstate(all="ignore"):
+                bad = np.isinf(value) | (np.abs(np.nan_to_num(value)) > MAX_ABS_COORDINATE_M)
+            if bad.any():
+                worst = value[bad].flat[0]
+                raise CalibError(f"{path}: key '{key}' holds {int(bad.sum())} value(s) like {worst:.3g}: not a measurement")
         wrap_cols = False
         if "wrap_cols" in data.files:
             wrap_array = _read_key(data, path, "wrap_cols", model)
