@@ -422,7 +422,9 @@ def _ply_header(path: Path) -> tuple[str, list[tuple[str, int, int]], int]:
                 continue
             if words[0] == "format" and len(words) >= 2:
                 fmt = words[1]
-            elif words[0] == "element" and len(words) == 3:
+            elif words[0] == "element" and len(words) != 3:
+                raise CalibError(f"{path}: PLY header line '{' '.join(words)[:60]}' is not 'element NAME COUNT'")
+            elif words[0] == "element":
                 try:
                     count = int(words[2])
                 except ValueError:
@@ -446,8 +448,6 @@ def _ply_header(path: Path) -> tuple[str, list[tuple[str, int, int]], int]:
 
 
 def _read_ply(path: Path, max_points: int, **_) -> PointCloud:
-    import trimesh
-
     fmt, elements, data_offset = _ply_header(path)
     vertex = [e for e in elements if e[0] == "vertex"]
     if not vertex or vertex[0][1] == 0:
@@ -467,6 +467,8 @@ def _read_ply(path: Path, max_points: int, **_) -> PointCloud:
             f"{path}: truncated ascii PLY: the last line has no end of line and its last number is narrower "
             f"than those above it (cut off mid-number?)"
         )
+    import trimesh  # after the checks: it takes a second to import
+
     try:
         # Vertices as stored: no texture re-indexing (which duplicates vertices), no texture file lookup.
         geometry = trimesh.load(str(path), file_type="ply", process=False, fix_texture=False, skip_materials=True)
