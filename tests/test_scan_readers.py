@@ -523,6 +523,9 @@ def test_pcd_count_on_xyz_and_declared_counts(tmp_path):
     refuse(write(tmp_path / "count3.pcd", (head + "1 2 3 4 5\n" * 3).encode()), "COUNT 3")
     rec = sample_records(10)
     ascii_data = pcd_bytes(rec, "ascii")
+    # More records than POINTS declares (binary; binary_compressed files from PCL carry slack after their block).
+    refuse(write(tmp_path / "more.pcd", pcd_bytes(rec, "binary") + rec[:3].tobytes()), "after the 10 points")
+    assert len(read_point_cloud(write(tmp_path / "newline.pcd", pcd_bytes(rec, "binary") + b"\n"))) == 10
     # More lines than POINTS declares.
     refuse(write(tmp_path / "extra.pcd", ascii_data + ascii_data.splitlines(keepends=True)[-1]), "10 points", "11 lines")
     # 10^12 points declared, one held: refused from the sizes, before anything is allocated.

@@ -275,6 +275,15 @@ def _check_pcd_header(path: Path, header: dict[str, list[str]]) -> dict[str, Any
     }
 
 
+def _refuse_trailing(path: Path, extra: int, row_bytes: int, n_points: int) -> None:
+    """More data after the declared points than a padding byte or two: the counts are wrong."""
+    if extra >= max(row_bytes, 16):
+        raise CalibError(
+            f"{path}: the PCD holds {extra:,} bytes after the {n_points:,} points its header declares "
+            f"(at least {extra // max(row_bytes, 1):,} more points?)"
+        )
+
+
 def _pcd_ascii_check(path: Path, data: bytes, n_points: int, values_per_point: int) -> None:
     """Every data line holds one point's values; the last line is complete."""
     codes = np.frombuffer(data, dtype=np.uint8)
@@ -313,6 +322,7 @@ def _read_pcd(path: Path, max_points: int, **_) -> PointCloud:
                     f"{path}: truncated binary PCD: {data_bytes} data bytes for {n_points} points of {info['row_bytes']} bytes"
                 )
             data = handle.read(needed)
+            _refuse_trailing(path, data_bytes - needed, info["row_bytes"], n_points)
         elif encoding == "binary_compressed":
             sizes = handle.read(8) if n_points else b"\0" * 8
             if len(sizes) < 8:
@@ -327,6 +337,7 @@ def _read_pcd(path: Path, max_points: int, **_) -> PointCloud:
                 raise CalibError(
                     f"{path}: truncated binary_compressed PCD: {max(data_bytes - 8, 0)} of {compressed} compressed bytes"
                 )
+            # No check of what follows: PCL's own writer leaves a few kB after the compressed block.
             data = sizes + handle.read(compressed)
         else:
             # The shortest point is one digit and a separator per value.
