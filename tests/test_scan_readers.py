@@ -720,3 +720,24 @@ def test_images_checked_from_the_header_and_quiet(tmp_path, capfd):
     os.mkfifo(fifo)
     with pytest.raises(CalibError, match="not a regular file"):
         load_image_rgb(fifo)
+
+
+def test_fuzz_corpus_of_scans_is_complete(tmp_path):
+    """The scan/image fuzz corpus: >= 200 hostile files over every format, >= 25 mutants, unique names."""
+    from tests.fuzz.cases_scans import make_cases
+
+    cases = make_cases(tmp_path)
+    names = [case.name for case in cases]
+    assert len(names) == len(set(names))
+    mutants = [c for c in cases if c.name.startswith("mutant/")]
+    hostile = [c for c in cases if not c.name.startswith("mutant/")]
+    assert len(hostile) >= 200 and len(mutants) >= 25
+    suffixes = {Path(c.argv[c.argv.index("--scan") + 1]).suffix for c in hostile if c.argv[0] == "ba-images"}
+    assert {".pcd", ".ply", ".las", ".laz", ".bin", ".npy", ".npz"} <= suffixes
+    images = {Path(c.argv[c.argv.index("--image") + 1]).suffix for c in hostile if c.argv[0] == "colorize"}
+    assert {".png", ".jpg"} <= images
+    for case in cases:
+        for flag in ("--scan", "--image"):
+            if flag in case.argv:
+                target = Path(case.argv[case.argv.index(flag) + 1])
+                assert target.exists() or target.is_symlink() or "missing" in case.name, case.name

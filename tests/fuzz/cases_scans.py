@@ -534,7 +534,7 @@ def _set_encrypted(data: bytes) -> bytes:
 
 def _image_files() -> dict[str, bytes]:
     rng = np.random.default_rng(7)
-    picture = rng.integers(0, 255, (120, 160, 3), dtype=np.uint8)
+    picture = rng.integers(0, 255, (480, 640, 3), dtype=np.uint8)  # the sample camera's size
     jpeg = encoded(picture, ".jpg")
     png = encoded(picture, ".png")
     files = {
