@@ -299,7 +299,7 @@ def _pcd_files(rec: np.ndarray) -> dict[str, bytes]:
 def _ply_files(xyz: np.ndarray) -> dict[str, bytes]:
     files: dict[str, bytes] = {}
     for fmt in ("ascii", "binary_little_endian", "binary_big_endian"):
-        short = fmt.split("_")[-1] if fmt != "ascii" else "ascii"
+        short = {"ascii": "ascii", "binary_little_endian": "le", "binary_big_endian": "be"}[fmt]
         good = ply_file(xyz, fmt)
         files[f"ply_{short}_valid.ply"] = good
         files[f"ply_{short}_count_1e12.ply"] = ply_file(xyz[:1], fmt, count=10**12)
