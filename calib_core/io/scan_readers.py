@@ -519,29 +519,25 @@ def _read_las(path: Path, max_points: int, **_) -> PointCloud:
     import laspy
 
     try:
-        try:
-            with laspy.open(str(path)) as reader:
-                header = reader.header
-                expected = int(header.point_count)
-                if expected > max_points:
-                    raise _too_many(path, "LAS header declares", expected, max_points)
-                compressed = header.point_format.id >= 128 or path.suffix.lower() == ".laz" or reader.laz_backend is not None
-                if not compressed:
-                    needed = header.offset_to_point_data + expected * header.point_format.size
-                    if path.stat().st_size < needed:
-                        raise CalibError(
-                            f"{path}: truncated LAS: header declares {expected} points of {header.point_format.size} bytes "
-                            f"after byte {header.offset_to_point_data}, the file has {path.stat().st_size} bytes"
-                        )
-                las = reader.read()
-            xyz = np.stack([np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)], axis=1).astype(np.float64)
-        except (KeyboardInterrupt, SystemExit, GeneratorExit, CalibError):
-            raise
-        except BaseException as err:  # noqa: BLE001 - lazrs panics raise pyo3's PanicException, a BaseException
-            kind = "LAZ decoder failure" if type(err).__name__ == "PanicException" else None
-            raise CalibError(f"{path}: unreadable LAS/LAZ ({kind + ': ' if kind else ''}{_one_line(err)})") from None
-    except CalibError:
+        with laspy.open(str(path)) as reader:
+            header = reader.header
+            expected = int(header.point_count)
+            if expected > max_points:
+                raise _too_many(path, "LAS header declares", expected, max_points)
+            if not header.are_points_compressed:
+                needed = header.offset_to_point_data + expected * header.point_format.size
+                if path.stat().st_size < needed:
+                    raise CalibError(
+                        f"{path}: truncated LAS: header declares {expected} points of {header.point_format.size} bytes "
+                        f"after byte {header.offset_to_point_data}, the file has {path.stat().st_size} bytes"
+                    )
+            las = reader.read()
+        xyz = np.stack([np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)], axis=1).astype(np.float64)
+    except (KeyboardInterrupt, SystemExit, GeneratorExit, CalibError):
         raise
+    except BaseException as err:  # noqa: BLE001 - lazrs panics raise pyo3's PanicException, a BaseException
+        kind = "LAZ decoder failure: " if type(err).__name__ == "PanicException" else ""
+        raise CalibError(f"{path}: unreadable LAS/LAZ ({kind}{_one_line(err)})") from None
     if len(xyz) != expected:
         raise CalibError(f"{path}: truncated LAS/LAZ: header says {expected} points, file holds {len(xyz)}")
     fields: dict[str, np.ndarray] = {}
