@@ -374,6 +374,25 @@ def test_ambiguous_bin_is_refused_naming_the_option(tmp_path):
     assert read_point_cloud(path, bin_columns=5).meta["bin_columns"] == 5
 
 
+def test_bin_that_is_not_float_metres_is_refused(tmp_path):
+    # Text saved as .bin repeats every 4 values, but as float32 its "points" are 1e-19 m from the sensor.
+    path = tmp_path / "text.bin"
+    path.write_bytes(b"1.0 2.0 3.0 4.0\n" * 64)
+    with pytest.raises(CalibError) as excinfo:
+        read_point_cloud(path)
+    assert "not points in metres" in assert_one_line(excinfo, path)
+
+
+def test_given_bin_columns_that_contradict_the_data_are_refused(tmp_path):
+    xyz, ring = sweep(8000)
+    path = tmp_path / "kitti.bin"
+    np.column_stack([xyz, np.full(len(xyz), 0.5)]).astype("<f4").tofile(path)
+    with pytest.raises(CalibError) as excinfo:
+        read_point_cloud(path, bin_columns=5)
+    assert "pass --bin-columns 4" in assert_one_line(excinfo, path)
+    assert read_point_cloud(path, bin_columns=8).meta["bin_columns"] == 8  # a multiple of the period is the user's call
+
+
 def test_five_column_bin_is_never_read_as_four(tmp_path):
     # The nuScenes failure: 43,360 "points" of 4 floats from 34,688 of 5.
     xyz, ring = sweep(8000)  # 8000 * 5 floats divide by 4 as well

@@ -337,6 +337,8 @@ def test_npy_shapes(tmp_path):
     np.testing.assert_array_equal(cloud.xyz[:, 0], [1, 2, 3])
     np.testing.assert_array_equal(cloud.ring_field(), [4, 5, 6])
 
+    np.save(tmp_path / "bool.npy", np.ones((4, 3), bool))
+    refuse(tmp_path / "bool.npy", "integer or float coordinates")
     np.save(tmp_path / "n5.npy", np.zeros((4, 5)))
     np.save(tmp_path / "obj.npy", np.array([{"a": 1}], dtype=object), allow_pickle=True)
     write(tmp_path / "trunc.npy", (tmp_path / "n3.npy").read_bytes()[:-8])
@@ -577,6 +579,13 @@ def test_ply_declared_counts_must_match_the_data(tmp_path, capfd):
     refuse(write(tmp_path / "faces.ply", faces + xyz.tobytes()), "1,000,000,000 face", capfd=capfd)
     body = b"1.5 2 3\n4 5 6.25\n7 8 9.125"  # cut: '9.125' is wider than nothing above it is sure of
     refuse(write(tmp_path / "cut.ply", ply_header("ascii", 3, "x y z") + body), "truncated", capfd=capfd)
+
+
+def test_ply_rows_beyond_the_declared_counts_are_refused(tmp_path):
+    xyz = np.float32([[1, 2, 3], [4, 5, 6], [7, 8, 9], [1, 1, 1]])
+    ascii_body = b"".join(b"%r %r %r\n" % tuple(map(float, r)) for r in xyz)
+    refuse(write(tmp_path / "fewer.ply", ply_header("ascii", 3, "x y z") + ascii_body), "3 vertex rows but holds 4 lines")
+    refuse(write(tmp_path / "fewer_bin.ply", ply_header("binary_little_endian", 3, "x y z") + xyz.tobytes()), "12 bytes more")
 
 
 def test_textured_ply_keeps_vertices_as_stored_quietly(tmp_path, capfd):

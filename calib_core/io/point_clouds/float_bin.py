@@ -18,6 +18,8 @@ from .cloud import PointCloud, too_many_points
 
 #: Float32 values per point the ``.bin`` layout detection considers.
 BIN_COLUMNS_DETECTED = (3, 4, 5, 6, 7, 8)
+#: A lidar's median point is metres away; under a millimetre the bytes are not float32 metres (e.g. text).
+_SMALLEST_MEDIAN_RANGE_M = 1e-3
 
 
 def _lag_spread(values: np.ndarray, lag: int) -> float:
@@ -70,6 +72,9 @@ def read_bin(path: Path, max_points: int, bin_columns: int | None = None, **_) -
     if size % 4:
         raise CalibError(f"{path}: size {size} bytes is not a whole number of float32 values (a .bin holds float32 records)")
     n_values = size // 4
+    with open(path, "rb") as handle:
+        head = np.frombuffer(handle.read(4 * 240_000), dtype="<f4")
+    detected, _ = detect_bin_columns(head)
     if bin_columns is not None:
         if isinstance(bin_columns, bool) or not isinstance(bin_columns, (int, np.integer)) or not 3 <= bin_columns <= 64:
             raise CalibError(f"bin_columns must be an integer from 3 to 64, got {bin_columns!r}")
@@ -78,11 +83,14 @@ def read_bin(path: Path, max_points: int, bin_columns: int | None = None, **_) -
             raise CalibError(
                 f"{path}: {n_values} float32 values do not split into records of {columns} (--bin-columns {columns})"
             )
+        if detected is not None and columns % detected:
+            # The data say otherwise, clearly: a wrong option would misread every point.
+            raise CalibError(
+                f"{path}: --bin-columns {columns} does not fit the data, whose values repeat every {detected} "
+                f"(pass --bin-columns {detected})"
+            )
     else:
-        with open(path, "rb") as handle:
-            head = np.frombuffer(handle.read(4 * 240_000), dtype="<f4")
-        columns, spreads = detect_bin_columns(head)
-        how = "detected"
+        columns, how = detected, "detected"
         if columns is None:
             raise CalibError(
                 f"{path}: cannot tell how many float32 values make one point (KITTI 4, nuScenes 5, Waymo/SUN RGB-D 6); "
@@ -97,6 +105,13 @@ def read_bin(path: Path, max_points: int, bin_columns: int | None = None, **_) -
     if n_points > max_points:
         raise too_many_points(path, "holds", n_points, max_points)
     data = np.fromfile(path, dtype="<f4").reshape(n_points, columns)
+    distance = np.linalg.norm(data[:, :3].astype(np.float64), axis=1)
+    distance = distance[np.isfinite(distance)]
+    if len(distance) and np.median(distance) < _SMALLEST_MEDIAN_RANGE_M:
+        raise CalibError(
+            f"{path}: read as {columns} float32 values per point, the median point is {np.median(distance):.3g} m "
+            f"from the sensor: not points in metres (another layout? pass --bin-columns N)"
+        )
     fields: dict[str, np.ndarray] = {}
     names = {3: "intensity"} if columns in (4, 5) else {}
     if columns == 5:

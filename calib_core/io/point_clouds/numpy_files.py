@@ -18,14 +18,14 @@ def _cloud_from_array(array: np.ndarray, path: Path, what: str) -> PointCloud:
     if array.dtype.names:
         axes = xyz_field_names(path, array.dtype.names, what)
         flat = array.reshape(-1)
-        if any(flat[axis].ndim != 1 or flat.dtype[axis].kind not in "biuf" for axis in axes):
+        if any(flat[axis].ndim != 1 or flat.dtype[axis].kind not in "iuf" for axis in axes):
             raise CalibError(f"{path}: {what}'s x, y, z fields must be single numbers")
         xyz = np.stack([flat[axis].astype(np.float64) for axis in axes], axis=1)
         fields = {n: flat[n].copy() for n in array.dtype.names if n not in axes and flat[n].ndim == 1}
         organized = tuple(array.shape) if array.ndim == 2 and min(array.shape) > 1 else None
         return PointCloud(xyz=xyz, fields=fields, organized_shape=organized)
-    if array.dtype.kind not in "biuf":
-        raise CalibError(f"{path}: {what} must be numeric, got dtype {array.dtype}")
+    if array.dtype.kind not in "iuf":
+        raise CalibError(f"{path}: {what} must hold integer or float coordinates, got dtype {array.dtype}")
     if array.ndim == 2 and array.shape[1] in (3, 4):
         fields = {"intensity": array[:, 3].copy()} if array.shape[1] == 4 else {}
         return PointCloud(xyz=array[:, :3].astype(np.float64), fields=fields)
@@ -43,8 +43,8 @@ def _check_array_shape(path: Path, shape: tuple[int, ...], dtype: np.dtype, what
     if dtype.names:
         xyz_field_names(path, dtype.names, what)
         return
-    if dtype.kind not in "biuf":
-        raise CalibError(f"{path}: {what} must be numeric, got dtype {dtype}")
+    if dtype.kind not in "iuf":
+        raise CalibError(f"{path}: {what} must hold integer or float coordinates, got dtype {dtype}")
     if not (len(shape) in (2, 3) and shape[-1] in (3, 4)):
         raise CalibError(f"{path}: {what} has shape {shape}; expected (N, 3), (N, 4), (H, W, 3) or (H, W, 4)")
 
@@ -90,7 +90,7 @@ def read_npz(path: Path, max_points: int, **_) -> PointCloud:
     if all(axis in lower for axis in "xyz"):
         keys = [lower[axis] for axis in "xyz"]
         shapes = [members[k][0] for k in keys]
-        if any(len(s) != 1 for s in shapes) or len(set(shapes)) != 1 or any(members[k][1].kind not in "biuf" for k in keys):
+        if any(len(s) != 1 for s in shapes) or len(set(shapes)) != 1 or any(members[k][1].kind not in "iuf" for k in keys):
             raise CalibError(f"{path}: arrays x, y, z must be numeric and 1-D of one length")
         n = shapes[0][0]
         main_keys = keys

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import CalibError
-from .cloud import PointCloud, ends_mid_line, one_line, too_many_points
+from .cloud import PointCloud, ends_mid_line, normalise_text, one_line, too_many_points
 
 
 _PLY_SCALAR_BYTES = {
@@ -20,8 +20,8 @@ _PLY_SCALAR_BYTES = {
 }
 
 
-def _ply_header(path: Path) -> tuple[str, list[tuple[str, int, int]], int]:
-    """The PLY format, its elements as (name, count, smallest bytes per row) and the data offset."""
+def _ply_header(path: Path) -> tuple[str, list[tuple[str, int, int, bool]], int]:
+    """The PLY format, its elements as (name, count, smallest bytes per row, has a list) and the data offset."""
     elements: list[list] = []
     fmt = None
     offset = 0
@@ -51,10 +51,11 @@ def _ply_header(path: Path) -> tuple[str, list[tuple[str, int, int]], int]:
                     raise CalibError(f"{path}: PLY element '{words[1]}' has a non-integer count '{words[2][:20]}'") from None
                 if count < 0:
                     raise CalibError(f"{path}: PLY element '{words[1]}' has a negative count")
-                elements.append([words[1], count, 0])
+                elements.append([words[1], count, 0, False])
             elif words[0] == "property" and elements:
                 if len(words) >= 5 and words[1] == "list":
                     size = _PLY_SCALAR_BYTES.get(words[2])  # an empty list still stores its length
+                    elements[-1][3] = True
                 else:
                     size = _PLY_SCALAR_BYTES.get(words[1]) if len(words) >= 3 else None
                 if size is None:
@@ -70,6 +71,8 @@ def _ply_header(path: Path) -> tuple[str, list[tuple[str, int, int]], int]:
 def read_ply(path: Path, max_points: int, **_) -> PointCloud:
     """A PLY file's vertices as stored, with their numeric properties as fields."""
     fmt, elements, data_offset = _ply_header(path)
+    has_lists = any(listed for *_, listed in elements)
+    elements = [(name, count, row) for name, count, row, _ in elements]
     vertex = [e for e in elements if e[0] == "vertex"]
     if not vertex or vertex[0][1] == 0:
         raise CalibError(f"{path}: the point cloud is empty (PLY without vertices)")
@@ -83,11 +86,19 @@ def read_ply(path: Path, max_points: int, **_) -> PointCloud:
     if data_bytes < smallest:
         counts = ", ".join(f"{count:,} {name}" for name, count, _ in elements)
         raise CalibError(f"{path}: truncated PLY: {data_bytes:,} data bytes cannot hold the declared {counts}")
-    if fmt == "ascii" and ends_mid_line(path.read_bytes()[data_offset:]):
-        raise CalibError(
-            f"{path}: truncated ascii PLY: the last line has no end of line and its last number is narrower "
-            f"than those above it (cut off mid-number?)"
-        )
+    counts = ", ".join(f"{count:,} {name}" for name, count, _ in elements)
+    if fmt == "ascii":
+        text = path.read_bytes()[data_offset:]
+        if ends_mid_line(text):
+            raise CalibError(
+                f"{path}: truncated ascii PLY: the last line has no end of line and its last number is narrower "
+                f"than those above it (cut off mid-number?)"
+            )
+        lines = normalise_text(text).count(b"\n") if text.strip() else 0
+        if lines != sum(count for _, count, _ in elements):
+            raise CalibError(f"{path}: ascii PLY declares {counts} rows but holds {lines:,} lines")
+    elif not has_lists and data_bytes - smallest >= max(1, min(row for _, _, row in elements)):
+        raise CalibError(f"{path}: binary PLY holds {data_bytes - smallest:,} bytes more than its declared {counts}")
     import trimesh  # after the checks: it takes a second to import
 
     try:
