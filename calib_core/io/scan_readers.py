@@ -133,14 +133,13 @@ def _check_path(path, max_points: int = DEFAULT_MAX_POINTS) -> Path:
 def _check_points(path: Path, cloud: PointCloud) -> None:
     """Refuse clouds too small to use and coordinates that are not measurements."""
     xyz = cloud.xyz
-    finite = np.isfinite(xyz)
+    if len(xyz) == 0:
+        raise CalibError(f"{path}: the point cloud is empty")
     infinite = np.isinf(xyz).any(axis=1)
     if infinite.any():
         raise CalibError(f"{path}: {int(infinite.sum())} of {len(xyz)} points have an infinite coordinate")
-    good = finite.all(axis=1)
+    good = np.isfinite(xyz).all(axis=1)
     n_good = int(good.sum())
-    if len(xyz) == 0:
-        raise CalibError(f"{path}: the point cloud is empty")
     if n_good == 0:
         raise CalibError(f"{path}: all {len(xyz)} points are NaN or inf")
     if n_good < MIN_POINTS:
@@ -195,8 +194,6 @@ def read_point_cloud(path, bin_columns: int | None = None, max_points: int = DEF
     _check_points(path, cloud)
     return dataclasses.replace(cloud, meta={**cloud.meta, "source": str(path)})
 
-
-# --------------------------------------------------------------------------
 
 # --------------------------------------------------------------------------
 # Scans as depth matrices
