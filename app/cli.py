@@ -58,11 +58,13 @@ def _add_scan_args(p: argparse.ArgumentParser) -> None:
         "--sensor-origin", type=float, nargs=3, metavar=("X", "Y", "Z"), default=None,
         help="scanner position in the file's frame (metres), for scans stored in a world frame",
     )
+    p.add_argument("--bin-columns", type=int, default=None, metavar="N", help="float32 values per point of a .bin scan (KITTI 4, nuScenes 5; default: detected)")
+    p.add_argument("--max-points", type=int, default=None, metavar="N", help="largest cloud (points or grid cells) a scan file may hold (default 5,000,000)")
 
 
 def scan_options(args: argparse.Namespace) -> dict:
     opts: dict = {"organize": args.organize}
-    for key in ("beams", "h_res_deg", "v_res_deg", "sensor_origin"):
+    for key in ("beams", "h_res_deg", "v_res_deg", "sensor_origin", "bin_columns", "max_points"):
         if getattr(args, key, None) is not None:
             opts[key] = getattr(args, key)
     return opts

@@ -130,13 +130,13 @@ def test_organized_pcd_has_its_grid(tmp_path):
 def test_pcd_count_field_and_padding(tmp_path):
     head = (
         "VERSION 0.7\nFIELDS x y z normal _\nSIZE 4 4 4 4 1\nTYPE F F F F U\nCOUNT 1 1 1 3 2\n"
-        "WIDTH 2\nHEIGHT 1\nPOINTS 2\nDATA ascii\n"
+        "WIDTH 3\nHEIGHT 1\nPOINTS 3\nDATA ascii\n"
     )
-    body = "1 2 3 0.1 0.2 0.3 0 0\n4 5 6 0.4 0.5 0.6 0 0\n"
+    body = "1 2 3 0.1 0.2 0.3 0 0\n4 5 6 0.4 0.5 0.6 0 0\n7 8 9 0.7 0.8 0.9 1 1\n"
     cloud = read_point_cloud(write(tmp_path / "n.pcd", (head + body).encode()))
-    np.testing.assert_array_equal(cloud.xyz, [[1, 2, 3], [4, 5, 6]])
+    np.testing.assert_array_equal(cloud.xyz, [[1, 2, 3], [4, 5, 6], [7, 8, 9]])
     assert set(cloud.fields) == {"normal"}
-    np.testing.assert_array_equal(cloud.fields["normal"], np.float32([[0.1, 0.2, 0.3], [0.4, 0.5, 0.6]]))
+    np.testing.assert_array_equal(cloud.fields["normal"], np.float32([[0.1, 0.2, 0.3], [0.4, 0.5, 0.6], [0.7, 0.8, 0.9]]))
 
 
 def test_bad_pcds_raise_one_line_errors(tmp_path):
@@ -297,16 +297,26 @@ def test_truncated_las_and_laz(tmp_path):
 # --------------------------------------------------------------------------
 
 
-def test_kitti_bin(tmp_path):
-    data = np.float32([[1, 2, 3, 0.5], [4, 5, 6, 0.25]])
-    cloud = read_point_cloud(write(tmp_path / "000000.bin", data.tobytes()))
+def test_kitti_bin_with_given_columns(tmp_path):
+    data = np.float32([[1, 2, 3, 0.5], [4, 5, 6, 0.25], [7, 8, 9, 0.0]])
+    cloud = read_point_cloud(write(tmp_path / "000000.bin", data.tobytes()), bin_columns=4)
     np.testing.assert_array_equal(cloud.xyz, data[:, :3])
     np.testing.assert_array_equal(cloud.fields["intensity"], data[:, 3])
-    for name, raw, word in [("odd.bin", data.tobytes()[:-4], "multiple of 16"), ("empty.bin", b"", "empty")]:
+    assert cloud.meta["bin_columns"] == 4 and cloud.meta["bin_columns_how"] == "given"
+    cases = [
+        ("odd.bin", data.tobytes()[:-2], {}, "float32"),
+        ("cut.bin", data.tobytes()[:-4], {"bin_columns": 4}, "--bin-columns 4"),
+        ("empty.bin", b"", {}, "empty"),
+        # Three points are too few to see a period in: refused, naming the option.
+        ("short.bin", data.tobytes(), {}, "--bin-columns"),
+    ]
+    for name, raw, options, word in cases:
         path = write(tmp_path / name, raw)
         with pytest.raises(CalibError) as excinfo:
-            read_point_cloud(path)
+            read_point_cloud(path, **options)
         assert_one_line_error(excinfo, path, word)
+    with pytest.raises(CalibError, match="bin_columns must be"):
+        read_point_cloud(tmp_path / "000000.bin", bin_columns=2)
 
 
 def test_npy_shapes(tmp_path):
@@ -327,6 +337,8 @@ def test_npy_shapes(tmp_path):
     np.testing.assert_array_equal(cloud.xyz[:, 0], [1, 2, 3])
     np.testing.assert_array_equal(cloud.ring_field(), [4, 5, 6])
 
+    np.save(tmp_path / "bool.npy", np.ones((4, 3), bool))
+    refuse(tmp_path / "bool.npy", "integer or float coordinates")
     np.save(tmp_path / "n5.npy", np.zeros((4, 5)))
     np.save(tmp_path / "obj.npy", np.array([{"a": 1}], dtype=object), allow_pickle=True)
     write(tmp_path / "trunc.npy", (tmp_path / "n3.npy").read_bytes()[:-8])
@@ -341,14 +353,14 @@ def test_npy_shapes(tmp_path):
 
 def test_npz_variants(tmp_path):
     x, y, z = np.float32([1, 2]), np.float32([3, 4]), np.float32([5, 6])
-    np.savez(tmp_path / "xyz.npz", x=x, y=y, z=z, ring=np.uint16([1, 0]), note=np.zeros(7))
+    np.savez(tmp_path / "xyz.npz", x=np.r_[x, 7], y=np.r_[y, 8], z=np.r_[z, 9], ring=np.uint16([1, 0, 2]), note=np.zeros(7))
     cloud = read_point_cloud(tmp_path / "xyz.npz")
-    np.testing.assert_array_equal(cloud.xyz, [[1, 3, 5], [2, 4, 6]])
+    np.testing.assert_array_equal(cloud.xyz, [[1, 3, 5], [2, 4, 6], [7, 8, 9]])
     assert set(cloud.fields) == {"ring"}
-    np.savez(tmp_path / "points.npz", points=np.float32([[1, 2, 3]]), intensity=np.float32([0.5]))
+    np.savez(tmp_path / "points.npz", points=np.float32([[1, 2, 3], [4, 5, 6], [7, 8, 9]]), intensity=np.float32([0.5, 1, 2]))
     cloud = read_point_cloud(tmp_path / "points.npz")
-    np.testing.assert_array_equal(cloud.xyz, [[1, 2, 3]])
-    np.testing.assert_array_equal(cloud.fields["intensity"], [0.5])
+    np.testing.assert_array_equal(cloud.xyz, [[1, 2, 3], [4, 5, 6], [7, 8, 9]])
+    np.testing.assert_array_equal(cloud.fields["intensity"], [0.5, 1, 2])
     np.savez(tmp_path / "bad.npz", a=np.zeros(3), b=np.zeros(3))
     write(tmp_path / "zip.npz", b"PK\x03\x04 broken zip")
     for name, word in [("bad", "keys: a, b"), ("zip", "unreadable")]:
@@ -381,7 +393,7 @@ def test_unknown_and_missing_files(tmp_path):
     with pytest.raises(CalibError, match="not found"):
         load_scan(tmp_path / "nope.pcd")
     (tmp_path / "dir.pcd").mkdir()
-    with pytest.raises(CalibError, match="not a file"):
+    with pytest.raises(CalibError, match="is a folder"):
         read_point_cloud(tmp_path / "dir.pcd")
 
 
@@ -408,7 +420,7 @@ def ring_cloud(n_rings: int = 4, n_cols: int = 90, drop_every: int | None = 7) -
     return rec
 
 
-def test_load_scan_picks_ring_then_beams_then_spherical(tmp_path):
+def test_load_scan_picks_ring_then_scan_order_then_elevation(tmp_path):
     rec = ring_cloud()
     with_ring = write(tmp_path / "ring.pcd", pcd_bytes(rec, "binary"))
     depth = load_scan(with_ring)
@@ -419,15 +431,32 @@ def test_load_scan_picks_ring_then_beams_then_spherical(tmp_path):
     np.testing.assert_array_equal(depth.meta["field_images"]["intensity"][rows, cols], rows * 1000 + cols)
     assert depth.valid.sum() == len(rec)
 
+    # Without a ring field, points stored ring after ring are a firing order (issue 10).
     no_ring = tmp_path / "noring.npy"
-    np.save(no_ring, np.stack([rec["x"], rec["y"], rec["z"]], axis=1))
-    by_beams = load_scan(no_ring, beams=4)
-    assert by_beams.meta["organize"] == "elevation" and by_beams.shape == (4, 90)
-    np.testing.assert_array_equal(by_beams.valid, depth.valid)
-    fallback = load_scan(no_ring)
-    assert fallback.meta["organize"] == "spherical"
-    assert "spherical_resolution" in fallback.meta
-    assert fallback.meta["h_res_deg"] == pytest.approx(4.0)  # the 90-column azimuth step
+    xyz = np.stack([rec["x"], rec["y"], rec["z"]], axis=1)
+    np.save(no_ring, xyz)
+    def rows_of_points(d, order=None):
+        """Each row's set of file points (as indices into ``rec``): the recovered lasers."""
+        index = d.meta["point_index"]
+        return [sorted((index[r][index[r] >= 0] if order is None else order[index[r][index[r] >= 0]]).tolist()) for r in range(d.shape[0])]
+
+    in_order = load_scan(no_ring)
+    assert in_order.meta["organize"] == "firing_order" and in_order.shape == (4, 90)
+    assert in_order.valid.sum() == len(rec)
+    assert rows_of_points(in_order) == rows_of_points(depth)
+    # Shuffled, the order says nothing: elevation clustering, with or without --beams, says why.
+    shuffled = tmp_path / "shuffled.npy"
+    perm = np.random.default_rng(0).permutation(len(xyz))
+    np.save(shuffled, xyz[perm])
+    for kwargs in ({}, {"beams": 4}):
+        by_elevation = load_scan(shuffled, **kwargs)
+        assert by_elevation.meta["organize"] == "elevation" and by_elevation.shape == (4, 90)
+        assert by_elevation.valid.sum() == len(rec)
+        assert rows_of_points(by_elevation, perm) == rows_of_points(depth)
+        assert "not beams stored in firing order" in by_elevation.meta["organize_report"].line()
+    spherical = load_scan(shuffled, organize="spherical")
+    assert spherical.meta["organize"] == "spherical"
+    assert spherical.meta["h_res_deg"] == pytest.approx(4.0)  # the 90-column azimuth step
 
     with pytest.raises(CalibError) as excinfo:
         load_scan(no_ring, organize="ring")
@@ -467,3 +496,274 @@ def test_load_scan_organized_pcd_is_turned_upright(tmp_path):
     np.testing.assert_array_equal(depth.meta["point_index"], [[3, 4, 5], [0, -1, 2]])
     # The missing cell still has a direction: lower row's elevation, middle column's azimuth.
     np.testing.assert_allclose(depth.directions[1, 1], [np.cos(np.radians(5.0)), 0.0, -np.sin(np.radians(5.0))], atol=1e-6)
+
+
+# --------------------------------------------------------------------------
+# Hostile files: bounded before reading, refused in one line, quietly
+# --------------------------------------------------------------------------
+
+
+def refuse(path: Path, *words: str, capfd=None, **options) -> str:
+    """Read ``path``, expect a one-line CalibError containing ``words`` and (with capfd) nothing printed."""
+    if capfd is not None:
+        capfd.readouterr()
+    with pytest.raises(CalibError) as excinfo:
+        read_point_cloud(path, **options)
+    assert_one_line_error(excinfo, path, *words)
+    if capfd is not None:
+        out, err = capfd.readouterr()
+        assert out == "" and err == "", (out + err)[:300]
+    return str(excinfo.value)
+
+
+def test_non_regular_files_are_refused_without_blocking(tmp_path):
+    import os
+
+    fifo = tmp_path / "scan.pcd"
+    os.mkfifo(fifo)  # opening a FIFO for reading would block until a writer comes
+    refuse(fifo, "not a regular file")
+    with pytest.raises(CalibError, match="not a regular file"):
+        load_scan("/dev/zero")
+
+
+def test_ascii_pcd_cut_mid_number_is_refused(tmp_path):
+    rec = sample_records(10)
+    good = pcd_bytes(rec, "ascii")
+    # Cut one character before the end: the last number loses its last digit and the line its newline.
+    path = write(tmp_path / "cut.pcd", good[:-2])
+    refuse(path, "truncated", "cut off")
+    # A whole file still reads, with the last number intact.
+    cloud = read_point_cloud(write(tmp_path / "whole.pcd", good))
+    np.testing.assert_array_equal(cloud.fields["time"], rec["time"])
+
+
+def test_pcd_count_on_xyz_and_declared_counts(tmp_path):
+    head = "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 3 1 1\nWIDTH 3\nHEIGHT 1\nPOINTS 3\nDATA ascii\n"
+    refuse(write(tmp_path / "count3.pcd", (head + "1 2 3 4 5\n" * 3).encode()), "COUNT 3")
+    rec = sample_records(10)
+    ascii_data = pcd_bytes(rec, "ascii")
+    # More records than POINTS declares (binary; binary_compressed files from PCL carry slack after their block).
+    refuse(write(tmp_path / "more.pcd", pcd_bytes(rec, "binary") + rec[:3].tobytes()), "after the 10 points")
+    assert len(read_point_cloud(write(tmp_path / "newline.pcd", pcd_bytes(rec, "binary") + b"\n"))) == 10
+    # More lines than POINTS declares.
+    refuse(write(tmp_path / "extra.pcd", ascii_data + ascii_data.splitlines(keepends=True)[-1]), "10 points", "11 lines")
+    # 10^12 points declared, one held: refused from the sizes, before anything is allocated.
+    huge = pcd_bytes(rec[:1], "binary").replace(b"WIDTH 1\n", b"WIDTH 1000000000000\n").replace(b"POINTS 1\n", b"POINTS 1000000000000\n")
+    refuse(write(tmp_path / "huge.pcd", huge), "1,000,000,000,000 points", "--max-points")
+    small_cap = pcd_bytes(rec, "binary")
+    refuse(write(tmp_path / "cap.pcd", small_cap), "--max-points", max_points=5)
+
+
+def test_pcd_headers_written_by_other_software(tmp_path):
+    rec = sample_records(12)
+    # VERSION .6 (PCL before 1.0) and upper-case X Y Z (PDAL).
+    data = pcd_bytes(rec, "binary").replace(b"VERSION 0.7", b"VERSION .6").replace(b"FIELDS x y z", b"FIELDS X Y Z")
+    cloud = read_point_cloud(write(tmp_path / "v6.pcd", data))
+    np.testing.assert_array_equal(cloud.xyz[:, 2], rec["z"])
+    assert cloud.meta["version"] == ".6"
+    # An unorganised list written as WIDTH 1 HEIGHT N is flat, not an N x 1 grid.
+    flat = pcd_bytes(rec, "binary").replace(b"WIDTH 12\nHEIGHT 1\n", b"WIDTH 1\nHEIGHT 12\n")
+    assert read_point_cloud(write(tmp_path / "tall.pcd", flat)).organized_shape is None
+    refuse(write(tmp_path / "v9.pcd", data.replace(b"VERSION .6", b"VERSION 9.1")), "VERSION 9.1")
+
+
+def test_too_few_points_and_absurd_coordinates(tmp_path):
+    np.save(tmp_path / "two.npy", np.float32([[1, 2, 3], [4, 5, 6]]))
+    refuse(tmp_path / "two.npy", "only 2 finite point")
+    one = np.full((5, 3), np.nan)
+    one[2] = [1, 2, 3]
+    np.save(tmp_path / "one.npy", one)
+    refuse(tmp_path / "one.npy", "only 1 finite point")
+    big = np.float64([[1, 2, 3], [4, 5, 6], [1e300, 0, 0]])
+    np.save(tmp_path / "big.npy", big)
+    refuse(tmp_path / "big.npy", "1e+300")
+    rec = sample_records(6)
+    rec["y"][3] = np.inf
+    refuse(write(tmp_path / "inf.pcd", pcd_bytes(rec, "binary")), "1 of 6 points have an infinite coordinate")
+    # 1e300 written into a float32 PCD field overflows to inf: refused, and numpy's overflow warning is not printed.
+    head = "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 3\nHEIGHT 1\nPOINTS 3\nDATA ascii\n"
+    refuse(write(tmp_path / "e300.pcd", (head + "1 2 3\n4 5 6\n1e300 0 0\n").encode()), "infinite")
+
+
+def test_ply_declared_counts_must_match_the_data(tmp_path, capfd):
+    xyz = np.float32([[1, 2, 3], [4, 5, 6], [7, 8, 9]])
+    header = ply_header("binary_little_endian", 10**12, "x y z")
+    refuse(write(tmp_path / "huge.ply", header + xyz[:1].tobytes()), "1,000,000,000,000", capfd=capfd)
+    refuse(write(tmp_path / "huge_ascii.ply", ply_header("ascii", 10**12, "x y z") + b"1 2 3\n"), "1,000,000,000,000", capfd=capfd)
+    faces = ply_header("binary_little_endian", 3, "x y z").replace(
+        b"end_header", b"element face 1000000000\nproperty list uchar int vertex_indices\nend_header"
+    )
+    refuse(write(tmp_path / "faces.ply", faces + xyz.tobytes()), "1,000,000,000 face", capfd=capfd)
+    body = b"1.5 2 3\n4 5 6.25\n7 8 9.125"  # cut: '9.125' is wider than nothing above it is sure of
+    refuse(write(tmp_path / "cut.ply", ply_header("ascii", 3, "x y z") + body), "truncated", capfd=capfd)
+
+
+def test_ply_rows_beyond_the_declared_counts_are_refused(tmp_path):
+    xyz = np.float32([[1, 2, 3], [4, 5, 6], [7, 8, 9], [1, 1, 1]])
+    ascii_body = b"".join(b"%r %r %r\n" % tuple(map(float, r)) for r in xyz)
+    refuse(write(tmp_path / "fewer.ply", ply_header("ascii", 3, "x y z") + ascii_body), "3 vertex rows but holds 4 lines")
+    refuse(write(tmp_path / "fewer_bin.ply", ply_header("binary_little_endian", 3, "x y z") + xyz.tobytes()), "12 bytes more")
+
+
+def test_textured_ply_keeps_vertices_as_stored_quietly(tmp_path, capfd):
+    # Two triangles sharing an edge, with per-corner texture coordinates and a texture file that does not exist.
+    vertices = np.float32([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]])
+    header = (
+        "ply\nformat ascii 1.0\ncomment TextureFile missing.png\nelement vertex 4\nproperty float x\nproperty float y\n"
+        "property float z\nelement face 2\nproperty list uchar int vertex_indices\nproperty list uchar float texcoord\nend_header\n"
+    )
+    body = "".join(f"{x} {y} {z}\n" for x, y, z in vertices.tolist())
+    body += "3 0 1 2 6 0 0 1 0 0 1\n3 1 3 2 6 0.5 0 0.5 0.5 0 0.5\n"
+    capfd.readouterr()
+    cloud = read_point_cloud(write(tmp_path / "tex.ply", (header + body).encode()))
+    assert capfd.readouterr() == ("", "")
+    np.testing.assert_array_equal(cloud.xyz, vertices)
+
+
+def test_las_declaring_more_points_than_it_holds(tmp_path):
+    good = tmp_path / "good.las"
+    write_las(good, np.arange(30, dtype=float).reshape(10, 3), np.zeros(10, np.uint16), np.zeros(10, np.uint16), np.zeros(10))
+    data = bytearray(good.read_bytes())
+    struct.pack_into("<I", data, 107, 4_000_000_000)  # legacy point count (LAS 1.2 header, byte 107)
+    refuse(write(tmp_path / "huge.las", bytes(data)), "4,000,000,000", "--max-points")
+    struct.pack_into("<I", data, 107, 11)
+    refuse(write(tmp_path / "eleven.las", bytes(data)), "truncated")
+
+
+def _zip_bomb(path: Path, name: str, header: bytes, zero_bytes: int, **small) -> None:
+    """An .npz member of ``zero_bytes`` zeros after ``header``, deflated (a few kB on disk), plus ``small`` arrays."""
+    import io
+    import zipfile
+
+    with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED, compresslevel=1) as archive:
+        for key, value in small.items():
+            buffer = io.BytesIO()
+            np.save(buffer, value)
+            archive.writestr(f"{key}.npy", buffer.getvalue())
+        with archive.open(name, "w", force_zip64=True) as member:
+            member.write(header)
+            chunk = bytes(1 << 20)
+            for start in range(0, zero_bytes, len(chunk)):
+                member.write(chunk[: min(len(chunk), zero_bytes - start)])
+
+
+def _npy_header(shape, dtype="<f8") -> bytes:
+    import io
+
+    buffer = io.BytesIO()
+    np.lib.format.write_array_header_1_0(buffer, {"descr": dtype, "fortran_order": False, "shape": shape})
+    return buffer.getvalue()
+
+
+def test_npz_zip_bomb_is_refused_from_the_central_directory(tmp_path):
+    n = 6_000_000  # 6 M points of float64 x 3: 144 MB once decompressed, under 1 MB on disk
+    path = tmp_path / "bomb.npz"
+    _zip_bomb(path, "points.npy", _npy_header((n, 3)), n * 24)
+    assert path.stat().st_size < 1_000_000
+    refuse(path, "6,000,000 points", "--max-points")
+    native = tmp_path / "native_bomb.npz"
+    _zip_bomb(
+        native, "range_m.npy", _npy_header((3000, 2000)), 3000 * 2000 * 8,
+        model=np.array("spherical"), elevation_rad=np.zeros(3000), azimuth_rad=np.zeros(2000),
+    )
+    with pytest.raises(CalibError, match="6,000,000 cells.*--max-points"):
+        load_scan(native)
+    single = tmp_path / "single_bomb.npz"
+    _zip_bomb(single, "grid.npy", _npy_header((3000, 2000)), 3000 * 2000 * 8)
+    refuse(single, "shape (3000, 2000)")
+
+
+def test_npz_member_header_must_match_its_size(tmp_path):
+    import zipfile
+
+    path = tmp_path / "liar.npz"
+    with zipfile.ZipFile(path, "w") as archive:
+        archive.writestr("points.npy", _npy_header((10**9, 3)) + np.zeros((3, 3)).tobytes())
+    refuse(path, "declares shape (1000000000, 3)")
+
+
+def test_native_npz_without_a_valid_cell_is_refused(tmp_path):
+    path = tmp_path / "blank.npz"
+    np.savez(path, model=np.array("organized"), points=np.full((4, 5, 3), np.nan))
+    with pytest.raises(CalibError) as excinfo:
+        load_scan(path)
+    assert_one_line_error(excinfo, path, "no valid cell")
+    far = tmp_path / "far.npz"
+    points = np.ones((2, 2, 3))
+    points[0, 0] = [1e300, 0, 0]
+    np.savez(far, model=np.array("organized"), points=points)
+    with pytest.raises(CalibError, match="key 'points' holds 1 value.*1e\\+300"):
+        load_scan(far)
+
+
+def test_max_points_is_validated():
+    with pytest.raises(CalibError, match="max_points"):
+        read_point_cloud("x.pcd", max_points=0)
+
+
+# --------------------------------------------------------------------------
+# Images
+# --------------------------------------------------------------------------
+
+
+def _png(width: int, height: int, rows: int) -> bytes:
+    """An 8-bit RGB PNG declaring width x height but holding ``rows`` rows of pixels."""
+    import zlib
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
+
+    pixels = zlib.compress(b"".join(b"\0" + bytes(3 * width) for _ in range(rows)))
+    ihdr = struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)
+    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", pixels) + chunk(b"IEND", b"")
+
+
+def test_images_checked_from_the_header_and_quiet(tmp_path, capfd):
+    import os
+
+    from calib_core.io.images import image_header_size, load_image_rgb
+
+    good = write(tmp_path / "good.png", _png(40, 30, 30))
+    assert image_header_size(good) == (40, 30)
+    image = load_image_rgb(good)
+    assert image.shape == (30, 40, 3) and image.dtype == np.uint8
+    cases = {
+        "huge.png": (_png(30000, 30000, 1), "pixels"),  # 900 MP declared: refused before decoding
+        "short.png": (_png(100, 100, 10), "cannot decode"),  # libpng complains: folded into the line
+        "empty.png": (b"", "empty"),
+        "text.png": (b"hello, not an image\n", "not a readable image"),
+    }
+    for name, (data, word) in cases.items():
+        path = write(tmp_path / name, data)
+        capfd.readouterr()
+        with pytest.raises(CalibError) as excinfo:
+            load_image_rgb(path)
+        assert_one_line_error(excinfo, path, word)
+        assert capfd.readouterr() == ("", ""), name
+    with pytest.raises(CalibError, match="more than the 1,000 allowed"):
+        load_image_rgb(good, max_pixels=1000)
+    fifo = tmp_path / "fifo.png"
+    os.mkfifo(fifo)
+    with pytest.raises(CalibError, match="not a regular file"):
+        load_image_rgb(fifo)
+
+
+def test_fuzz_corpus_of_scans_is_complete(tmp_path):
+    """The scan/image fuzz corpus: >= 200 hostile files over every format, >= 25 mutants, unique names."""
+    from tests.fuzz.cases_scans import make_cases
+
+    cases = make_cases(tmp_path)
+    names = [case.name for case in cases]
+    assert len(names) == len(set(names))
+    mutants = [c for c in cases if c.name.startswith("mutant/")]
+    hostile = [c for c in cases if not c.name.startswith("mutant/")]
+    assert len(hostile) >= 200 and len(mutants) >= 25
+    suffixes = {Path(c.argv[c.argv.index("--scan") + 1]).suffix for c in hostile if c.argv[0] == "ba-images"}
+    assert {".pcd", ".ply", ".las", ".laz", ".bin", ".npy", ".npz"} <= suffixes
+    images = {Path(c.argv[c.argv.index("--image") + 1]).suffix for c in hostile if c.argv[0] == "colorize"}
+    assert {".png", ".jpg"} <= images
+    for case in cases:
+        for flag in ("--scan", "--image"):
+            if flag in case.argv:
+                target = Path(case.argv[case.argv.index(flag) + 1])
+                assert target.exists() or target.is_symlink() or "missing" in case.name, case.name

@@ -17,11 +17,17 @@ organized     ``points`` (H, W, 3) metres in the lidar frame, NaN = no return
 ============  =================================================================
 
 Other keys are ignored, so files may carry extra data (e.g. intensities).
+
+Every member is checked from the zip central directory and its ``.npy``
+header before anything is decompressed, so a small hostile file (a zip
+bomb, a header declaring 10^12 cells) is refused without allocating.
 """
 
 from __future__ import annotations
 
+import math
 import os
+import stat
 import zipfile
 from pathlib import Path
 
@@ -39,6 +45,15 @@ MODEL_KEYS: dict[str, tuple[str, ...]] = {
     "spherical": ("range_m", "elevation_rad", "azimuth_rad"),
     "organized": ("points",),
 }
+
+#: Default cap on the cells of a depth matrix and the points of a cloud read from a file.
+DEFAULT_MAX_CELLS = 5_000_000
+#: How the cap is raised, for messages.
+MAX_CELLS_OPTION = "--max-points"
+#: Bytes a member may hold per allowed cell: float64 x, y, z and a few float64 fields.
+_BYTES_PER_CELL = 64
+#: Coordinates (metres) beyond this are not a sensor's measurement (the Earth is 1.3e7 m across).
+MAX_ABS_COORDINATE_M = 1e8
 
 _MODEL_FUNCTIONS = {
     "rotating_2d": rotating_scanner_depth,
@@ -94,6 +109,91 @@ def save_depth_npz(path, depth: DepthMatrix) -> None:
         raise CalibError(f"cannot write scan file {path}: {err.strerror or err}") from None
 
 
+def check_regular_file(path: Path, what: str = "scan file") -> os.stat_result:
+    """Stat ``path`` and refuse anything but an existing regular file (FIFOs, devices, folders)."""
+    try:
+        info = os.stat(path)
+    except FileNotFoundError:
+        raise CalibError(f"{what} not found: {path}") from None
+    except OSError as err:
+        raise CalibError(f"{path}: cannot read ({err.strerror or err})") from None
+    if stat.S_ISDIR(info.st_mode):
+        raise CalibError(f"{path}: is a folder, not a file")
+    if not stat.S_ISREG(info.st_mode):
+        raise CalibError(f"{path}: is not a regular file (a device, FIFO or socket)")
+    return info
+
+
+def npz_members(path, keys=None, max_bytes: int | None = None) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
+    """Shapes and dtypes of the arrays in an ``.npz``, read without decompressing them.
+
+    The uncompressed sizes come from the zip central directory and the
+    shapes from each member's ``.npy`` header; the two must agree.
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``.npz`` file.
+    keys : iterable of str, optional
+        Only these keys (missing ones are left out); default: every ``.npy`` member.
+    max_bytes : int, optional
+        Refuse when the inspected members hold more than this many bytes in total.
+
+    Returns
+    -------
+    dict
+        key -> (shape, dtype).
+
+    Raises
+    ------
+    CalibError
+        Not a zip; a member that is a pickle, has a broken header, or whose
+        size does not match its header; more than ``max_bytes``.
+    """
+    path = Path(path)
+    wanted = None if keys is None else set(keys)
+    members: dict[str, tuple[tuple[int, ...], np.dtype]] = {}
+    total = 0
+    try:
+        with zipfile.ZipFile(path) as archive:
+            for info in archive.infolist():
+                if not info.filename.endswith(".npy"):
+                    continue
+                key = info.filename[:-4]
+                if wanted is not None and key not in wanted:
+                    continue
+                total += info.file_size
+                if max_bytes is not None and total > max_bytes:
+                    raise CalibError(
+                        f"{path}: the arrays decompress to more than {max_bytes:,} bytes "
+                        f"(member '{key}' alone declares {info.file_size:,}); raise the limit with {MAX_CELLS_OPTION}"
+                    )
+                with archive.open(info) as member:
+                    version = np.lib.format.read_magic(member)
+                    if version == (1, 0):
+                        shape, _, dtype = np.lib.format.read_array_header_1_0(member)
+                    elif version == (2, 0):
+                        shape, _, dtype = np.lib.format.read_array_header_2_0(member)
+                    else:
+                        raise CalibError(f"{path}: array '{key}' uses .npy format {version}, not 1.0 or 2.0")
+                    header_bytes = member.tell()
+                if dtype.hasobject:
+                    raise CalibError(f"{path}: array '{key}' holds Python objects (a pickle), which is not loaded")
+                expected = header_bytes + math.prod(shape) * dtype.itemsize
+                if expected != info.file_size:
+                    raise CalibError(
+                        f"{path}: array '{key}' declares shape {shape} of {dtype} ({expected:,} bytes) "
+                        f"but holds {info.file_size:,} bytes"
+                    )
+                members[key] = (tuple(int(n) for n in shape), dtype)
+    except CalibError:
+        raise
+    except Exception as err:  # BadZipFile, ValueError (bad .npy header), OSError, EOFError, NotImplementedError
+        text = " ".join(str(err).split())[:120] or type(err).__name__
+        raise CalibError(f"{path}: unreadable .npz ({text})") from None
+    return members
+
+
 def _read_key(data, path: Path, key: str, model: str) -> np.ndarray:
     if key not in data.files:
         raise CalibError(f"{path}: missing key '{key}' (needed by model '{model}')")
@@ -106,7 +206,7 @@ def _read_key(data, path: Path, key: str, model: str) -> np.ndarray:
     return value
 
 
-def load_depth_npz(path) -> DepthMatrix:
+def load_depth_npz(path, max_cells: int = DEFAULT_MAX_CELLS) -> DepthMatrix:
     """Read a native scan file and re-derive its :class:`DepthMatrix`.
 
     Parameters
@@ -114,6 +214,9 @@ def load_depth_npz(path) -> DepthMatrix:
     path : str or Path
         An ``.npz`` written by :func:`save_depth_npz` or by hand with the
         keys listed in this module's docstring.
+    max_cells : int
+        Refuse depth matrices with more cells (and members holding more
+        than 64 bytes per allowed cell) before decompressing them.
 
     Returns
     -------
@@ -124,13 +227,23 @@ def load_depth_npz(path) -> DepthMatrix:
     Raises
     ------
     CalibError
-        The file is missing or not an ``.npz``; a key is missing, not numeric
-        or has the wrong shape; the model is unknown.  The message names the
-        file and the key.
+        The file is missing, not a regular file or not an ``.npz``; a key is
+        missing, not numeric or has the wrong shape; the model is unknown;
+        the matrix is larger than ``max_cells``, has no valid cell or holds
+        absurd coordinates.  The message names the file and the key.
     """
     path = Path(path)
-    if not path.is_file():
-        raise CalibError(f"scan file not found: {path}")
+    check_regular_file(path)
+    members = npz_members(path, ("model", "wrap_cols", *{k for keys in MODEL_KEYS.values() for k in keys}), max_cells * _BYTES_PER_CELL)
+    for key in ("range_m", "points"):
+        if key in members:
+            shape = members[key][0]
+            cells = math.prod(shape[:-1] if key == "points" and len(shape) > 1 else shape)
+            if cells > max_cells:
+                raise CalibError(
+                    f"{path}: key '{key}' has shape {shape}: {cells:,} cells, above the limit of {max_cells:,} "
+                    f"(raise it with {MAX_CELLS_OPTION})"
+                )
     try:
         data = np.load(path, allow_pickle=False)
     except (ValueError, OSError, zipfile.BadZipFile, EOFError) as err:
@@ -151,6 +264,13 @@ def load_depth_npz(path) -> DepthMatrix:
             raise CalibError(f"{path}: key 'model' is '{model}', expected one of {', '.join(MODEL_KEYS)}")
 
         parameters = [_read_key(data, path, key, model) for key in MODEL_KEYS[model]]
+        for key, value in zip(MODEL_KEYS[model], parameters):
+            # NaN marks a missing return; infinities and huge numbers are corruption, not measurements.
+            with np.errstate(all="ignore"):
+                bad = np.isinf(value) | (np.abs(np.nan_to_num(value)) > MAX_ABS_COORDINATE_M)
+            if bad.any():
+                worst = value[bad].flat[0]
+                raise CalibError(f"{path}: key '{key}' holds {int(bad.sum())} value(s) like {worst:.3g}: not a measurement")
         wrap_cols = False
         if "wrap_cols" in data.files:
             wrap_array = _read_key(data, path, "wrap_cols", model)
@@ -159,7 +279,15 @@ def load_depth_npz(path) -> DepthMatrix:
             wrap_cols = bool(wrap_array.reshape(()))
 
     try:
-        return _MODEL_FUNCTIONS[model](*parameters, wrap_cols=wrap_cols)
+        with np.errstate(all="ignore"):  # absurd values are refused below, not warned about
+            depth = _MODEL_FUNCTIONS[model](*parameters, wrap_cols=wrap_cols)
     except CalibError as err:
         # The model functions name their arguments, which are the file's keys.
         raise CalibError(f"{path}: {err}") from None
+    if not depth.valid.any():
+        raise CalibError(f"{path}: the scan has no valid cell (all {depth.valid.size} ranges are missing or not positive)")
+    with np.errstate(all="ignore"):
+        largest = float(np.max(np.abs(depth.points[depth.valid])))
+    if not np.isfinite(largest) or largest > MAX_ABS_COORDINATE_M:
+        raise CalibError(f"{path}: a valid cell lies {largest:.3g} m away: not a measurement in metres")
+    return depth
