@@ -249,6 +249,10 @@ def fisheye_bearing(uv, p, table_theta_d, table_theta, rays):
 
 
 # ------------------------------------------------------------------ OCam
+#: Points per chunk of :func:`ocam_project`: its buffers stay in L1 cache.
+_CHUNK = 256
+
+
 @kernel
 def ocam_project(points, p, table, pixels, valid):
     """OCamCalib: ``points (N, 3)`` (OpenCV frame) -> ``pixels (N, 2)``, ``valid (N,)``, in place.
@@ -258,27 +262,62 @@ def ocam_project(points, p, table, pixels, valid):
     ``_half_angle_s``: ``n / (r + |Z|)`` in front, ``2 - n / (r + |Z|)``
     behind; no arctan).  Not projectable: the zero vector, a non-finite
     coordinate, or ``s`` beyond the field of view.
+
+    By chunks, in branch-free loops: the table position of every point
+    (SIMD lanes), the table reads alone (random reads into a table larger
+    than L2: a loop of nothing else keeps many of them in flight), the
+    pixels into chunk buffers (SIMD lanes), then the stores.
     """
     s_max, inv_step = p[_O_SMAX], p[_O_INVSTEP]
     c, d, e, xc, yc = p[_O_C], p[_O_D], p[_O_E], p[_O_XC], p[_O_YC]
-    width, height = p[_O_W], p[_O_H]
-    last = table.shape[0] - 1
-    for i in range(points.shape[0]):
-        X, Y, Z = np.float64(points[i, 0]), np.float64(points[i, 1]), np.float64(points[i, 2])
-        n2 = X * X + Y * Y
-        n = math.sqrt(n2)  # distance from the optical axis
-        r = math.sqrt(Z * Z + n2)
-        # tan(alpha / 2) in front (Z >= 0), tan((pi - alpha) / 2) behind: free of cancellation.
-        v = n / (abs(Z) + r)
-        s = 1.0 - math.copysign(1.0 - v, Z)
-        if not (s <= s_max and r < np.inf):  # NaN (zero vector, NaN input) fails too
-            _blank(pixels, valid, i)
-            continue
-        pos = min(s * inv_step, np.float64(last))
-        j = int(pos)
-        rho = table[j, 0] + (pos - j) * table[j, 1]
-        scale = rho / n if n > 0.0 else 0.0  # on the axis rho = n = 0: the centre
-        _store(pixels, valid, i, (e * Y + X) * scale + yc, (c * Y + d * X) * scale + xc, width, height)
+    u_hi, v_hi = p[_O_W] - 0.5, p[_O_H] - 0.5
+    last = np.float64(table.shape[0] - 1)
+    n_points = points.shape[0]
+    m = min(n_points, _CHUNK)
+    index = np.empty(m, np.int64)
+    frac = np.empty(m, np.float64)
+    dist = np.empty(m, np.float64)
+    ok = np.empty(m, np.bool_)
+    rho = np.empty(m, np.float64)
+    u_buf = np.empty(m, np.float64)
+    v_buf = np.empty(m, np.float64)
+    for start in range(0, n_points, _CHUNK):
+        count = min(_CHUNK, n_points - start)
+        for k in range(count):
+            i = start + k
+            X, Y, Z = np.float64(points[i, 0]), np.float64(points[i, 1]), np.float64(points[i, 2])
+            n2 = X * X + Y * Y
+            n = math.sqrt(n2)  # distance from the optical axis
+            r = math.sqrt(Z * Z + n2)
+            # tan(alpha / 2) in front (Z >= 0), tan((pi - alpha) / 2) behind: free of cancellation.
+            s = 1.0 - math.copysign(1.0 - n / (abs(Z) + r), Z)
+            good = (s <= s_max) & (r < np.inf)  # NaN (zero vector, NaN input) fails
+            pos = s * inv_step
+            pos = pos if pos < last else last  # NaN -> the last entry (masked by ok)
+            j = np.int64(pos)
+            index[k] = j
+            frac[k] = pos - np.float64(j)
+            dist[k] = n
+            ok[k] = good
+        for k in range(count):
+            j = index[k]
+            rho[k] = table[j, 0] + frac[k] * table[j, 1]
+        for k in range(count):
+            i = start + k
+            X, Y = np.float64(points[i, 0]), np.float64(points[i, 1])
+            n = dist[k]
+            scale = rho[k] / n if n > 0.0 else 0.0  # on the axis rho = n = 0: the centre
+            u = (e * Y + X) * scale + yc
+            v = (c * Y + d * X) * scale + xc
+            u_buf[k] = u if ok[k] else np.nan
+            v_buf[k] = v if ok[k] else np.nan
+        for k in range(count):
+            i = start + k
+            u, v = u_buf[k], v_buf[k]
+            pixels[i, 0] = u
+            pixels[i, 1] = v
+            # In float64: as strict as the test on a float32 pixel (the bounds are exact in float32).
+            valid[i] = (u >= -0.5) & (u <= u_hi) & (v >= -0.5) & (v <= v_hi)
 
 
 @kernel
