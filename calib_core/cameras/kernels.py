@@ -104,26 +104,66 @@ def _homography(p, x, y):
 
 
 @kernel
+def _store_chunk(pixels, valid, start, count, u_buf, v_buf, u_hi, v_hi):
+    """Store a chunk's pixels and their in-image test (in float64: as strict as the test on a
+    float32 pixel, the bounds being exact in float32)."""
+    for k in range(count):
+        i = start + k
+        u, v = u_buf[k], v_buf[k]
+        pixels[i, 0] = u
+        pixels[i, 1] = v
+        valid[i] = (u >= -0.5) & (u <= u_hi) & (v >= -0.5) & (v <= v_hi)
+
+
+#: Points per chunk of the chunked ``project`` kernels: their buffers stay in L1 cache.
+_CHUNK = 256
+
+
+@kernel
 def pinhole_project(points, p, pixels, valid):
     """Pinhole + OpenCV distortion: ``points (N, 3)`` -> ``pixels (N, 2)``, ``valid (N,)``, in place.
 
     Not projectable: ``Z <= 0``, a non-finite coordinate, or an undistorted
-    radius beyond ``r_max``.
+    radius beyond ``r_max``.  By chunks: a branch-free loop (SIMD lanes)
+    into chunk buffers, then the stores.  (The distortion is written out
+    here as in :func:`_pinhole_distort`, which ``bearing`` uses.)
     """
-    tilt = p[_P_TILT] != 0.0
-    width, height = p[_P_W], p[_P_H]
-    for i in range(points.shape[0]):
-        X, Y, Z = np.float64(points[i, 0]), np.float64(points[i, 1]), np.float64(points[i, 2])
-        x = X / Z
-        y = Y / Z
-        if not ((Z > 0.0) and (Z < np.inf) and np.isfinite(X) and np.isfinite(Y)
-                and math.sqrt(x * x + y * y) <= p[_P_RMAX]):
-            _blank(pixels, valid, i)
-            continue
-        xd, yd = _pinhole_distort(x, y, p)
-        if tilt:
-            xd, yd = _homography(p, xd, yd)
-        _store(pixels, valid, i, p[_P_FX] * xd + p[_P_CX], p[_P_FY] * yd + p[_P_CY], width, height)
+    fx, fy, cx, cy, r_max = p[_P_FX], p[_P_FY], p[_P_CX], p[_P_CY], p[_P_RMAX]
+    u_hi, v_hi = p[_P_W] - 0.5, p[_P_H] - 0.5
+    # Coefficients in locals (loads from p inside the loop would keep it off SIMD lanes).
+    k1, k2, p1, p2, k3 = p[_P_K], p[_P_K + 1], p[_P_K + 2], p[_P_K + 3], p[_P_K + 4]
+    k4, k5, k6 = p[_P_K + 5], p[_P_K + 6], p[_P_K + 7]
+    s1, s2, s3, s4 = p[_P_K + 8], p[_P_K + 9], p[_P_K + 10], p[_P_K + 11]
+    # The tilt homography is applied always: without tilt it is the identity, exact on finite values.
+    t = _P_T
+    t00, t01, t02, t10, t11, t12 = p[t], p[t + 1], p[t + 2], p[t + 3], p[t + 4], p[t + 5]
+    t20, t21, t22 = p[t + 6], p[t + 7], p[t + 8]
+    n_points = points.shape[0]
+    m = min(n_points, _CHUNK)
+    u_buf = np.empty(m, np.float64)
+    v_buf = np.empty(m, np.float64)
+    for start in range(0, n_points, _CHUNK):
+        count = min(_CHUNK, n_points - start)
+        for k in range(count):
+            i = start + k
+            X, Y, Z = np.float64(points[i, 0]), np.float64(points[i, 1]), np.float64(points[i, 2])
+            x = X / Z
+            y = Y / Z
+            r2 = x * x + y * y
+            ok = (Z > 0.0) & (Z < np.inf) & np.isfinite(X) & np.isfinite(Y) & (math.sqrt(r2) <= r_max)
+            radial = (1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1.0 + r2 * (k4 + r2 * (k5 + r2 * k6)))
+            xy2 = 2.0 * x * y
+            r4 = r2 * r2
+            xd = x * radial + (p1 * xy2 + p2 * (r2 + 2.0 * x * x)) + (s1 * r2 + s2 * r4)
+            yd = y * radial + (p1 * (r2 + 2.0 * y * y) + p2 * xy2) + (s3 * r2 + s4 * r4)
+            w = t20 * xd + t21 * yd + t22
+            xt = (t00 * xd + t01 * yd + t02) / w
+            yt = (t10 * xd + t11 * yd + t12) / w
+            u = fx * xt + cx
+            v = fy * yt + cy
+            u_buf[k] = u if ok else np.nan
+            v_buf[k] = v if ok else np.nan
+        _store_chunk(pixels, valid, start, count, u_buf, v_buf, u_hi, v_hi)
 
 
 @kernel
@@ -249,10 +289,6 @@ def fisheye_bearing(uv, p, table_theta_d, table_theta, rays):
 
 
 # ------------------------------------------------------------------ OCam
-#: Points per chunk of :func:`ocam_project`: its buffers stay in L1 cache.
-_CHUNK = 256
-
-
 @kernel
 def ocam_project(points, p, table, pixels, valid):
     """OCamCalib: ``points (N, 3)`` (OpenCV frame) -> ``pixels (N, 2)``, ``valid (N,)``, in place.
@@ -311,13 +347,7 @@ def ocam_project(points, p, table, pixels, valid):
             v = (c * Y + d * X) * scale + xc
             u_buf[k] = u if ok[k] else np.nan
             v_buf[k] = v if ok[k] else np.nan
-        for k in range(count):
-            i = start + k
-            u, v = u_buf[k], v_buf[k]
-            pixels[i, 0] = u
-            pixels[i, 1] = v
-            # In float64: as strict as the test on a float32 pixel (the bounds are exact in float32).
-            valid[i] = (u >= -0.5) & (u <= u_hi) & (v >= -0.5) & (v <= v_hi)
+        _store_chunk(pixels, valid, start, count, u_buf, v_buf, u_hi, v_hi)
 
 
 @kernel
