@@ -374,11 +374,11 @@ def ocam_bearing(uv, p, pol, rays):
 
 
 def warm_up() -> None:
-    """Compile (or load from numba's disk cache) the camera kernels for the inputs they get.
+    """Compile (or load from numba's disk cache) the camera kernels for the inputs the package gives them.
 
-    Points come as float64 C arrays (the solve) and as float32 C or
-    column-major arrays (colouring: ``xyz.T`` of a (3, N) array); pixels as
-    float64 C arrays.
+    Points come as float64 C arrays (the solve) and as column-major float32
+    arrays (colouring: ``xyz.T`` of a (3, N) array); pixels as float64 C
+    arrays.  Other layouts compile (or load) on first use.
     """
     from .fisheye import FisheyeCamera
     from .ocam import OCamCamera
@@ -392,6 +392,5 @@ def warm_up() -> None:
     points = np.array([[0.0, 0.0, 1.0], [0.1, 0.0, 2.0], [np.nan, 0.0, 1.0]])
     for cam in cams:
         cam.project(points)
-        cam.project(points.astype(np.float32))
         cam.project(np.asfortranarray(points, dtype=np.float32))
         cam.bearing(np.array([[1.5, 1.5], [0.0, 2.0]]))
