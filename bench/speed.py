@@ -234,8 +234,8 @@ def colorize_section(bs: BenchScene, rep: "SpeedReport", rng: np.random.Generato
             # one contiguous row per coordinate, to the camera model's project().
             xyz = np.ascontiguousarray(transform_points(sc.T_camera_lidar, cloud).T, dtype=np.float32)
             p = timed(rep, "colorize", f"{label} points: of which camera.project", lambda: sc.camera.project(xyz.T),
-                      reps(5), "the OCam model's own vectorised projection (calib_core/cameras), float32; the rest "
-                      "of colorize_points is compiled", warmup=1)
+                      reps(5), "the OCam model's own compiled projection (calib_core/cameras/kernels.py), float32 "
+                      "points", warmup=1)
             msg += f", of which camera.project {1e3 * p.median_s:.1f} ms"
             del xyz
         log(f"{msg}, load {load:.1f} -> {_load():.1f}")

@@ -65,9 +65,10 @@ def warm_up() -> dict[str, float]:
         Seconds spent per module, for the start-up log and the benchmark.
     """
     from . import bearing_angle, overlays
+    from .cameras import kernels as camera_kernels
 
     seconds = {}
-    for module in (bearing_angle, overlays):
+    for module in (camera_kernels, bearing_angle, overlays):
         t0 = time.perf_counter()
         module.warm_up()
         seconds[module.__name__] = time.perf_counter() - t0

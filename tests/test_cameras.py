@@ -450,3 +450,45 @@ def test_other_bad_inputs(tmp_path):
         PinholeCamera([[100, 1, 50], [0, 100, 40], [0, 0, 1]], [], 100, 80)
     with pytest.raises(CalibError, match="points must be an"):
         PinholeCamera(K_PIN, [], 1280, 720).project(np.zeros((3, 2)))
+
+
+# -- bulk float32 points (the colouring path) ---------------------------------------------
+def _bulk_points(rng: np.random.Generator, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` points in front of the camera, with unprojectable rows (NaN, inf, behind, zero)
+    at and around the 256-point chunk boundaries; returns the points and the bad rows."""
+    points = rng.uniform([-0.8, -0.5, 1.0], [0.8, 0.5, 2.0], (n, 3))
+    bad = np.array([0, 255, 256, 257, 511, 512, n - 1])
+    points[bad] = [[np.nan, 0, 1], [0.1, 0.1, -1.0], [0, 0, 0], [np.inf, 0, 1], [0.2, 0.0, -3.0], [0, np.nan, 1],
+                   [0.0, 0.0, -1.0]]
+    return points, bad
+
+
+@pytest.mark.parametrize("n_dist", [5, 14])
+def test_pinhole_bulk_float32_matches_cv2(n_dist):
+    dist = np.array(DISTS[n_dist])
+    cam = PinholeCamera(K_PIN, dist, 1280, 720)
+    points, bad = _bulk_points(np.random.default_rng(7), 1000)
+    p32 = np.asfortranarray(points, dtype=np.float32)  # column-major, as colorize_points passes them
+    pixels, valid = cam.project(p32)
+    assert pixels.dtype == np.float32 and pixels.shape == (1000, 2)
+    good = np.setdiff1d(np.arange(1000), bad)
+    expected, _ = cv2.projectPoints(p32[good].astype(np.float64), np.zeros(3), np.zeros(3), K_PIN, dist)
+    np.testing.assert_allclose(pixels[good], expected[:, 0], atol=5e-4)  # float32 storage of ~1000 px
+    assert np.isnan(pixels[bad]).all() and not valid[bad].any()
+    inside = (expected[:, 0, 0] >= -0.5) & (expected[:, 0, 0] <= 1279.5)
+    inside &= (expected[:, 0, 1] >= -0.5) & (expected[:, 0, 1] <= 719.5)
+    np.testing.assert_array_equal(valid[good], inside)
+
+
+def test_fisheye_bulk_float32_matches_cv2_fisheye():
+    cam = FisheyeCamera(K_FISH, D_FISH, 1280, 960)
+    points, bad = _bulk_points(np.random.default_rng(8), 1000)
+    p32 = np.asfortranarray(points, dtype=np.float32)
+    pixels, valid = cam.project(p32)
+    assert pixels.dtype == np.float32
+    good = np.setdiff1d(np.arange(1000), bad)
+    expected, _ = cv2.fisheye.projectPoints(p32[good].astype(np.float64)[:, None], np.zeros(3), np.zeros(3), K_FISH,
+                                            np.array(D_FISH))
+    np.testing.assert_allclose(pixels[good], expected[:, 0], atol=5e-4)
+    assert valid[good].all()
+    assert np.isnan(pixels[bad]).all() and not valid[bad].any()

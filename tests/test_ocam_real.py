@@ -153,3 +153,18 @@ def test_example_file_write_round_trip(tmp_path):
     assert (again.xc, again.yc, again.c, again.d, again.e, again.width, again.height) == (
         camera.xc, camera.yc, camera.c, camera.d, camera.e, camera.width, camera.height,
     )
+
+
+def test_bulk_float32_rays_land_on_their_pixels():
+    # The colouring path: many float32 points, column-major, with unprojectable rows among them.
+    camera = OCamCamera.from_calib_results(EXAMPLE)
+    u, v = np.meshgrid(np.linspace(0, 747, 60), np.linspace(0, 479, 40))
+    pixels = np.column_stack([u.ravel(), v.ravel()])
+    points = camera.bearing(pixels) * np.linspace(0.5, 30.0, len(pixels))[:, None]
+    points[[0, 255, 256, 1000]] = [[np.nan, 0.0, 1.0], [0.0, 0.0, 0.0], [np.inf, 0.0, 1.0], [0.0, np.nan, 0.0]]
+    projected, valid = camera.project(np.asfortranarray(points, dtype=np.float32))
+    assert projected.dtype == np.float32
+    good = np.ones(len(points), bool)
+    good[[0, 255, 256, 1000]] = False
+    assert valid[good].all() and not valid[~good].any() and np.isnan(projected[~good]).all()
+    assert np.max(np.abs(projected[good] - pixels[good])) < 5e-4  # float32 points and pixels

@@ -96,23 +96,6 @@ def in_image(pixels: np.ndarray, width: int, height: int) -> np.ndarray:
         return (u >= -0.5) & (u <= width - 0.5) & (v >= -0.5) & (v <= height - 0.5)
 
 
-def store_projection(
-    pixels: np.ndarray, valid: np.ndarray, u: np.ndarray, v: np.ndarray, ok: np.ndarray, width: int, height: int
-) -> None:
-    """Write projected ``u, v`` into ``pixels`` and the validity into ``valid``, in place.
-
-    ``valid`` becomes ``ok`` and inside the image; pixels where not ``ok``
-    become NaN.  Shared by the models' blockwise ``project``.
-    """
-    np.copyto(valid, ok)
-    valid &= (u >= -0.5) & (u <= width - 0.5) & (v >= -0.5) & (v <= height - 0.5)
-    # 0 / ok is 0 where ok and NaN elsewhere: adding it blanks the pixels
-    # that cannot be projected, cheaper than np.where.
-    blank = np.divide(0.0, ok, dtype=pixels.dtype)
-    pixels[:, 0] = u + blank
-    pixels[:, 1] = v + blank
-
-
 def as_points(arr: Any, name: str, dim: int) -> np.ndarray:
     """``arr`` as a float64 ``(N, dim)`` array, or a :class:`CalibError`."""
     a = np.asarray(arr, dtype=np.float64)
@@ -126,11 +109,25 @@ def as_points(arr: Any, name: str, dim: int) -> np.ndarray:
 def as_points_keep_float32(points: Any) -> np.ndarray:
     """``as_points(points, "points", 3)``, but float32 input stays float32.
 
-    Bulk colouring passes float32 points and is projected in float32.
+    Bulk colouring passes float32 points and is projected in float32.  The
+    result is C-contiguous, or a column-major float32 array as it came (the
+    compiled kernels take both without a copy).
     """
     P = np.asarray(points)
     if P.dtype != np.float32:
-        return as_points(P, "points", 3)
+        return np.ascontiguousarray(as_points(P, "points", 3))
     if P.ndim != 2 or P.shape[1] != 3:
         return as_points(P, "points", 3).astype(np.float32)  # (3,) -> (1, 3), or the shape error
-    return P
+    if P.flags.c_contiguous or P.flags.f_contiguous:
+        return P
+    return np.ascontiguousarray(P)
+
+
+def as_pixels(pixels: Any) -> np.ndarray:
+    """``as_points(pixels, "pixels", 2)``, C-contiguous (for the compiled kernels)."""
+    return np.ascontiguousarray(as_points(pixels, "pixels", 2))
+
+
+def empty_projection(P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Output arrays of a ``project`` of ``P``: pixels ``(N, 2)`` of ``P``'s dtype and ``valid (N,)``."""
+    return np.empty((P.shape[0], 2), P.dtype), np.empty(P.shape[0], np.bool_)

@@ -21,7 +21,8 @@ from typing import Any, ClassVar
 import numpy as np
 
 from ..errors import CalibError
-from .base import as_points, in_image, register_camera_model
+from . import kernels
+from .base import as_pixels, as_points_keep_float32, empty_projection, register_camera_model
 from .io import param_image_size, param_matrix, param_vector, require_keys
 
 _THETA_SEARCH = np.linspace(0.0, np.pi / 2, 20001)
@@ -78,26 +79,24 @@ class FisheyeCamera:
         self._table_theta = theta[: last + 1]
         self._table_theta_d = _theta_d(self._table_theta, self.D)
         self.theta_d_max = float(self._table_theta_d[-1])
+        # The compiled kernels' parameter vector (layout: calib_core.cameras.kernels).
+        self._prm = np.zeros(kernels.FISHEYE_PARAMS)
+        self._prm[: kernels._F_D] = (K[0, 0], K[0, 1], K[0, 2], K[1, 1], K[1, 2], self.theta_max, self.theta_d_max,
+                                     self.width, self.height)
+        self._prm[kernels._F_D :] = self.D
 
     def project(self, points: Any) -> tuple[np.ndarray, np.ndarray]:
         """Pixels of points in the OpenCV camera frame (metres).
 
         Returns ``(pixels (N, 2), valid (N,))``; pixels are NaN for ``Z <= 0``
         or ``theta > theta_max``; ``valid`` also requires the pixel inside the
-        image.
+        image.  float32 points give float32 pixels, anything else float64;
+        the arithmetic is float64.
         """
-        P = as_points(points, "points", 3)
-        pixels = np.full((P.shape[0], 2), np.nan)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            r = np.hypot(P[:, 0], P[:, 1])
-            theta = np.arctan2(r, P[:, 2])
-            ok = np.isfinite(P).all(axis=1) & (P[:, 2] > 0) & (theta <= self.theta_max)
-            td = _theta_d(theta[ok], self.D)
-            scale = np.where(r[ok] > 0, td / np.where(r[ok] > 0, r[ok], 1.0), 0.0)
-            xp, yp = P[ok, 0] * scale, P[ok, 1] * scale
-            pixels[ok, 0] = self.K[0, 0] * xp + self.K[0, 1] * yp + self.K[0, 2]
-            pixels[ok, 1] = self.K[1, 1] * yp + self.K[1, 2]
-        return pixels, ok & in_image(pixels, self.width, self.height)
+        P = as_points_keep_float32(points)
+        pixels, valid = empty_projection(P)
+        kernels.fisheye_project(P, self._prm, pixels, valid)
+        return pixels, valid
 
     def bearing(self, pixels: Any) -> np.ndarray:
         """Unit rays (OpenCV camera frame) for ``(u, v)`` pixels.
@@ -105,21 +104,9 @@ class FisheyeCamera:
         Inverts ``theta_d(theta)`` with a lookup table and Newton steps; NaN
         rows beyond ``theta_d(theta_max)``.
         """
-        uv = as_points(pixels, "pixels", 2)
-        yp = (uv[:, 1] - self.K[1, 2]) / self.K[1, 1]
-        xp = (uv[:, 0] - self.K[0, 2] - self.K[0, 1] * yp) / self.K[0, 0]
-        with np.errstate(invalid="ignore", divide="ignore"):
-            td = np.hypot(xp, yp)
-            ok = np.isfinite(td) & (td <= self.theta_d_max)
-            theta = np.interp(td, self._table_theta_d, self._table_theta)
-            for _ in range(8):
-                step = (_theta_d(theta, self.D) - td) / _dtheta_d(theta, self.D)
-                theta = np.clip(theta - np.where(np.isfinite(step), step, 0.0), 0.0, self.theta_max)
-                if not np.any(np.abs(step[ok]) > 1e-15):
-                    break
-            s = np.where(td > 0, np.sin(theta) / np.where(td > 0, td, 1.0), 0.0)
-            rays = np.stack([xp * s, yp * s, np.cos(theta)], axis=1)
-        rays[~ok] = np.nan
+        uv = as_pixels(pixels)
+        rays = np.empty((uv.shape[0], 3))
+        kernels.fisheye_bearing(uv, self._prm, self._table_theta_d, self._table_theta, rays)
         return rays
 
     def to_dict(self, base_dir: Path | None = None) -> dict[str, Any]:

@@ -43,7 +43,8 @@ from numpy.polynomial import polynomial as npoly
 from ..errors import CalibError
 from ..io.atomic import write_bytes_atomic
 from ..io.input_files import MAX_CAMERA_BYTES, read_input_text
-from .base import as_points, as_points_keep_float32, register_camera_model, store_projection
+from . import kernels
+from .base import as_pixels, as_points_keep_float32, empty_projection, register_camera_model
 from .io import param_float, param_image_size, param_vector, require_keys
 
 #: Rotation taking OCam-frame vectors to the OpenCV camera frame (det +1).
@@ -51,7 +52,6 @@ R_CV_OCAM = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 
 _TABLE_SIZE = 4097
 _FAST_TABLE_SIZE = 1 << 17
-_PROJECT_BLOCK = 1 << 15  # points per block in project()
 _INVPOL_MAX_ERR_PX = 0.01  # the toolbox's own stopping criterion
 _INVPOL_MAX_DEGREE = 30
 
@@ -129,6 +129,7 @@ class OCamCamera:
         self._invdet = 1.0 / det
         self.width, self.height = param_image_size(width, height)
         self._dpol = npoly.polyder(self.pol) if self.pol.size > 1 else np.zeros(1)
+        self._pol_c = np.ascontiguousarray(self.pol)
         self.source_path: Path | None = None
         self._build_table()
         if invpol is None:
@@ -170,13 +171,14 @@ class OCamCamera:
         self._s_step = self._s_max / (_FAST_TABLE_SIZE - 1)
         s = np.linspace(0.0, self._s_max, _FAST_TABLE_SIZE)
         self._fast_rho = self.rho_from_angle(np.clip(_angle_from_s(s), 0.0, self.max_angle_rad))
-        # Slope of each interval, so that an interpolation is two gathers; the
-        # tables also in float32, for float32 points.
-        self._fast_drho = np.append(np.diff(self._fast_rho), 0.0)
-        self._fast_tables = (
-            (self._fast_rho, self._fast_drho),
-            (self._fast_rho.astype(np.float32), self._fast_drho.astype(np.float32)),
-        )
+        # rho and the slope of each interval side by side: an interpolation
+        # reads one cache line.  Also in float32, for float32 points (half the
+        # cache footprint; rho within 3e-5 px).
+        table = np.column_stack([self._fast_rho, np.append(np.diff(self._fast_rho), 0.0)])
+        self._fast_tables = {np.dtype(np.float64): table, np.dtype(np.float32): table.astype(np.float32)}
+        # The compiled kernels' parameter vector (layout: calib_core.cameras.kernels).
+        self._prm = np.array([self._s_max, 1.0 / self._s_step, self.c, self.d, self.e, self.xc, self.yc,
+                              self.width, self.height, self._invdet, self.rho_max])
 
     def rho_from_angle(self, alpha: np.ndarray) -> np.ndarray:
         """Radius (pixels) at which rays at ``alpha`` rad from the axis land.
@@ -222,63 +224,13 @@ class OCamCamera:
         vector and for rays beyond :attr:`max_angle_rad`; ``valid`` also
         requires the pixel inside the image.  Rays behind the image plane
         (``Z <= 0``) are fine as long as they are within the field of view.
-        float32 points are projected in float32 (pixels within about 5e-4 px
-        of the float64 result, for bulk colouring); anything else in float64.
+        float32 points give float32 pixels (within about 1e-4 px of the
+        float64 result, for bulk colouring); anything else float64.
         """
         P = as_points_keep_float32(points)
-        pixels = np.empty((P.shape[0], 2), P.dtype)
-        valid = np.empty(P.shape[0], bool)
-        tables = self._fast_tables[P.dtype == np.float32]
-        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-            # Blocks of points: full-size temporaries (a dozen of them) would
-            # cost more in allocation and cache misses than the arithmetic.
-            for start in range(0, P.shape[0], _PROJECT_BLOCK):
-                block = slice(start, start + _PROJECT_BLOCK)
-                self._project_block(P[block], tables, pixels[block], valid[block])
+        pixels, valid = empty_projection(P)
+        kernels.ocam_project(P, self._prm, self._fast_tables[P.dtype], pixels, valid)
         return pixels, valid
-
-    def _project_block(
-        self, P: np.ndarray, tables: tuple[np.ndarray, np.ndarray], pixels: np.ndarray, valid: np.ndarray
-    ) -> None:
-        """:meth:`project` of one block, in the dtype of ``P``, into ``pixels`` and ``valid``."""
-        X, Y, Z = P[:, 0], P[:, 1], P[:, 2]  # OpenCV frame: x_oc = Y, y_oc = X, z_oc = -Z
-        n2 = X * X
-        n2 += Y * Y
-        n = np.sqrt(n2)  # distance from the optical axis
-        r = Z * Z
-        r += n2
-        np.sqrt(r, out=r)  # distance from the centre; inf if a coordinate is, NaN if one is NaN
-        # The angle from the axis through s (_half_angle_s), not arctan2 (5x
-        # slower than all the rest): n / (r + |Z|) is tan(alpha / 2) in front
-        # (Z >= 0) and tan((pi - alpha) / 2) behind, free of cancellation.
-        v = np.abs(Z)
-        v += r
-        np.divide(n, v, out=v)  # in [0, 1]
-        # s = v in front, 2 - v behind (arithmetic: np.where on a mixed mask is slow).
-        s = np.copysign(1.0 - v, Z)
-        np.subtract(1.0, s, out=s)
-        # NaN (the zero vector, NaN input) fails the comparison: not projectable.
-        ok = s <= self._s_max
-        ok &= r < np.inf
-        pos = s * (1.0 / self._s_step)
-        np.fmin(pos, _FAST_TABLE_SIZE - 1, out=pos)  # NaN -> last entry (masked by ok)
-        floor = np.floor(pos)
-        pos -= floor  # fraction within the table interval
-        i = floor.astype(np.intp)
-        rho = tables[0].take(i, mode="clip")
-        rho += pos * tables[1].take(i, mode="clip")
-        # Pixel = affine map of (x_oc, y_oc) * rho / n.  On the axis rho = n = 0: the centre.
-        n += np.finfo(P.dtype).tiny  # no change unless n = 0
-        scale = np.divide(rho, n, out=rho)
-        row = self.c * Y
-        row += self.d * X
-        row *= scale
-        row += self.xc
-        col = self.e * Y
-        col += X
-        col *= scale
-        col += self.yc
-        store_projection(pixels, valid, col, row, ok, self.width, self.height)
 
     # -- F^-1: image -> camera ------------------------------------------------------
     def bearing(self, pixels: Any) -> np.ndarray:
@@ -287,14 +239,9 @@ class OCamCamera:
         NaN rows where the radius exceeds :attr:`rho_max` (outside the
         calibrated, monotonic part of the model).
         """
-        uv = as_points(pixels, "pixels", 2)
-        xp, yp = self._image_plane(uv[:, 1], uv[:, 0])
-        rho = np.hypot(xp, yp)
-        zp = npoly.polyval(rho, self.pol)
-        with np.errstate(invalid="ignore"):
-            rays = np.stack([yp, xp, -zp], axis=1)  # OCam (xp, yp, zp) -> OpenCV
-            rays /= np.linalg.norm(rays, axis=1, keepdims=True)
-            rays[~(rho <= self.rho_max * (1.0 + 1e-12))] = np.nan
+        uv = as_pixels(pixels)
+        rays = np.empty((uv.shape[0], 3))
+        kernels.ocam_bearing(uv, self._prm, self._pol_c, rays)
         return rays
 
     # -- files ----------------------------------------------------------------------

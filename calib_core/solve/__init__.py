@@ -180,12 +180,16 @@ def _mean_std(values: np.ndarray) -> tuple[float, float]:
     finite = values[np.isfinite(values)]
     if finite.size == 0:
         return float("nan"), float("nan")
-    return float(finite.mean()), float(finite.std())
+    # sum and dot instead of .mean() / .std(): the same figures, a quarter of the call overhead.
+    mean = float(finite.sum()) / finite.size
+    dev = finite - mean
+    return mean, math.sqrt(float(dev @ dev) / finite.size)
 
 
 def _pixel_errors(camera: Any, T: np.ndarray, points_lidar: np.ndarray, pixels: np.ndarray) -> np.ndarray:
     projected, valid = camera.project(points_lidar @ T[:3, :3].T + T[:3, 3])
-    err = np.linalg.norm(np.asarray(projected, dtype=np.float64) - pixels, axis=1)
+    diff = np.asarray(projected, dtype=np.float64) - pixels
+    err = np.hypot(diff[:, 0], diff[:, 1])
     return np.where(np.asarray(valid, dtype=bool) & np.isfinite(err), err, np.nan)
 
 
