@@ -12,12 +12,21 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
 EXIT_USAGE = 2
 #: ``solve`` wrote the file but the calibration's quality status is ``unreliable``.
 EXIT_UNRELIABLE = 3
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """A command's exit code with one line for stderr, printed after any library warnings were collected."""
+
+    code: int
+    stderr_line: str
 
 
 def default_sample_dir() -> Path:
@@ -149,7 +158,7 @@ def format_summary(result, pairs_count: int, pair_ids: Sequence[int] | None = No
     return "\n".join(lines)
 
 
-def cmd_solve(args: argparse.Namespace) -> int:
+def cmd_solve(args: argparse.Namespace) -> int | Outcome:
     from calib_core.io.extrinsics import save_extrinsics_yaml
     from calib_core.pairs import load_pairs_yaml
     from calib_core.solve.calibrate import calibrate, pair_ids_and_sigmas
@@ -174,8 +183,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
     print(format_summary(result, len(pairs), ids))
     print(f"\nwrote {args.output}")
     if result.quality.status == "unreliable":
-        print(f"unreliable: {result.quality.reasons[0]} (exit code {EXIT_UNRELIABLE})", file=sys.stderr)
-        return EXIT_UNRELIABLE
+        return Outcome(EXIT_UNRELIABLE, f"unreliable: {result.quality.reasons[0]} (exit code {EXIT_UNRELIABLE})")
     return 0
 
 
@@ -634,10 +642,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.command == "serve":  # long-running: its warnings and logs go out live
             return int(args.func(args) or 0)
         with noise:
-            code = int(args.func(args) or 0)
+            outcome = args.func(args)
         for line in noise.lines:
             print(f"warning: {line}", file=sys.stderr)
-        return code
+        if isinstance(outcome, Outcome):
+            print(outcome.stderr_line, file=sys.stderr)
+            return outcome.code
+        return int(outcome or 0)
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130

@@ -32,7 +32,7 @@ def test_libpng_messages_are_folded_into_the_one_error_line(tmp_path):
     proc = run_cli("colorize", "--scan", str(SAMPLE / "scan.npz"), "--image", str(cut), "--camera", str(SAMPLE / "camera.yaml"),
                    "--extrinsics", str(SAMPLE / "ground_truth.yaml"), "-o", str(tmp_path / "c.ply"))
     line = one_error_line(proc)
-    assert "cut.png" in line and "[libraries said: libpng" in line
+    assert "cut.png" in line and "libpng error" in line
 
 
 def test_argument_errors_are_one_line():
