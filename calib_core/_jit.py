@@ -11,6 +11,14 @@ system temp directory, and as a last resort compiles without a disk cache.
 
 The app calls :func:`warm_up` in a background thread at start-up, so the
 first BA image or colouring does not stall on a compile.
+
+What a fresh process pays before the first kernel runs, even with every
+kernel cached (bench/organize.py measures it): ``import numba`` and, once
+per process, numba's set-up of its compiler registries, which imports all of
+numba's array and math implementations and, for its BLAS check,
+``scipy.linalg``.  Profilers put that set-up inside the first disk-cache
+load (``load_overload``); loading a cached kernel itself takes milliseconds,
+so fusing or dropping kernels hardly changes start-up.
 """
 
 from __future__ import annotations

@@ -244,16 +244,19 @@ def _assemble(
     row_elevation: np.ndarray,
     cell_azimuth: np.ndarray,
     meta: dict,
+    kept_points: np.ndarray | None = None,
+    kept_range: np.ndarray | None = None,
 ) -> DepthMatrix:
     """Scatter kept points into cells, nearer point wins.
 
     ``rows``/``cols`` are given for the kept points only; ``cell_azimuth`` is
     ``(W,)`` or ``(H, W)`` and, with ``row_elevation (H,)``, gives the
-    direction of empty cells.
+    direction of empty cells.  ``kept_points``/``kept_range``: ``points[keep]``
+    and its ranges when the caller has them already.
     """
     n_rows, n_cols = len(row_elevation), cell_azimuth.shape[-1]
-    kept_points = points[keep]
-    kept_range = np.linalg.norm(kept_points, axis=1)
+    kept_points = points[keep] if kept_points is None else kept_points
+    kept_range = np.linalg.norm(kept_points, axis=1) if kept_range is None else kept_range
     cell = rows * n_cols + cols
     winners, cells_with_collision = _nearest_per_cell(cell, kept_range, n_rows * n_cols)
     n_occupied = len(winners)
@@ -312,15 +315,18 @@ def _dense_labels(labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return ids, inverse.reshape(-1)
 
 
-def _beam_elevation_at_infinity(points: np.ndarray, beam: np.ndarray, n_beams: int, fallback: np.ndarray) -> np.ndarray:
+def _beam_elevation_at_infinity(
+    points: np.ndarray, beam: np.ndarray, n_beams: int, fallback: np.ndarray, range_m: np.ndarray | None = None
+) -> np.ndarray:
     """Each beam's elevation (rad) free of its origin's height above the lidar origin.
 
     A beam leaving from height ``h`` at elevation ``v`` measures
     ``z / |p| = sin v + h / |p|`` (to first order): a straight line in
     ``1 / |p|`` whose intercept is ``sin v``.  Least squares per beam; beams
-    whose ranges hardly vary (no line to fit) keep ``fallback``.
+    whose ranges hardly vary (no line to fit) keep ``fallback``.  ``range_m``:
+    the points' ranges, when the caller has them.
     """
-    range_m = np.linalg.norm(points, axis=1)
+    range_m = np.linalg.norm(points, axis=1) if range_m is None else range_m
     x = 1.0 / np.maximum(range_m, 1.0)
     y = points[:, 2] / range_m
     n = np.bincount(beam, minlength=n_beams).astype(np.float64)
@@ -346,14 +352,15 @@ def _organize_labelled(
     beam = np.asarray(beam)
     if beam.shape != (len(points),):
         raise CalibError(f"beam labels have shape {beam.shape}, expected ({len(points)},)")
-    _, elevation, azimuth = _spherical_angles(points[keep])
+    kept_points = points[keep]
+    kept_range, elevation, azimuth = _spherical_angles(kept_points)
     beam_ids, beam_index = _dense_labels(beam[keep])
     n_rows = len(beam_ids)
     median_elevation = _group_median(elevation, beam_index, n_rows)
     if in_sequence:
         # Beams may start off the origin (an HDL-64E's lasers sit 0.1-0.25 m
         # above it): order them by their elevation far away, not as seen here.
-        median_elevation = _beam_elevation_at_infinity(points[keep], beam_index, n_rows, median_elevation)
+        median_elevation = _beam_elevation_at_infinity(kept_points, beam_index, n_rows, median_elevation, kept_range)
     # Row 0 = highest beam.
     beam_order = np.argsort(-median_elevation, kind="stable")
     row_of_beam = np.empty(n_rows, dtype=np.int64)
@@ -388,7 +395,7 @@ def _organize_labelled(
         column_shift=row_shift,
         n_cols_estimated=bool(meta.pop("_n_cols_estimated", False)),
     )
-    return _assemble(points, keep, rows, cols, median_elevation[beam_order], cell_azimuth, meta)
+    return _assemble(points, keep, rows, cols, median_elevation[beam_order], cell_azimuth, meta, kept_points, kept_range)
 
 
 # --------------------------------------------------------------------------

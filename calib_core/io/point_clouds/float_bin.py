@@ -22,11 +22,10 @@ BIN_COLUMNS_DETECTED = (3, 4, 5, 6, 7, 8)
 _SMALLEST_MEDIAN_RANGE_M = 1e-3
 
 
-def _lag_spread(values: np.ndarray, lag: int) -> float:
-    """Median change between values ``lag`` apart, on a log-like scale (asinh)."""
-    if len(values) <= lag:
+def _lag_spread(squashed: np.ndarray, lag: int) -> float:
+    """Median change between values ``lag`` apart; ``squashed`` is ``asinh`` of the values (a log-like scale)."""
+    if len(squashed) <= lag:
         return float("nan")
-    squashed = np.arcsinh(values)
     return float(np.median(np.abs(squashed[lag:] - squashed[:-lag])))
 
 
@@ -51,7 +50,8 @@ def detect_bin_columns(values: np.ndarray) -> tuple[int | None, str]:
         and the spreads it was decided on, for messages.
     """
     finite = np.where(np.isfinite(values), values, 0.0).astype(np.float64)
-    spreads = {lag: _lag_spread(finite, lag) for lag in range(1, max(BIN_COLUMNS_DETECTED) + 1)}
+    squashed = np.arcsinh(finite)  # once, not per lag: the asinh is most of the cost
+    spreads = {lag: _lag_spread(squashed, lag) for lag in range(1, max(BIN_COLUMNS_DETECTED) + 1)}
     summary = ", ".join(f"{lag}: {s:.3g}" for lag, s in spreads.items() if np.isfinite(s))
     candidates = {lag: s for lag, s in spreads.items() if lag in BIN_COLUMNS_DETECTED and np.isfinite(s)}
     if not candidates:
