@@ -2,7 +2,9 @@
 
 ``ba-calib`` alone serves the bundled sample scene in the browser app; the
 sub-commands run the same calibration headless.  Every user error prints one
-line, ``error: <what is wrong>``, and exits with code 2.
+line, ``error: <what is wrong>``, and exits with code 2.  ``solve`` exits with
+code 3 when the calibration's quality status is ``unreliable`` (the file is
+still written, and the reasons are printed).
 """
 
 from __future__ import annotations
@@ -14,6 +16,8 @@ from pathlib import Path
 from typing import Sequence
 
 EXIT_USAGE = 2
+#: ``solve`` wrote the file but the calibration's quality status is ``unreliable``.
+EXIT_UNRELIABLE = 3
 
 
 def default_sample_dir() -> Path:
@@ -90,37 +94,46 @@ def load_camera_from_args(args: argparse.Namespace):
 # --- commands ----------------------------------------------------------------
 
 
-def format_summary(result, pairs_count: int) -> str:
-    """The solve summary table (paper Table I layout), as text."""
+def format_summary(result, pairs_count: int, pair_ids: Sequence[int] | None = None) -> str:
+    """The solve summary table (paper Table I layout) with the quality verdict, as text."""
     import numpy as np
 
     from calib_core.transforms import rpy_deg_from_R
 
     T = result.T_camera_lidar
     rpy = rpy_deg_from_R(T[:3, :3])
+    n_out = len(result.outliers)
+    quality = getattr(result, "quality", None)
+    status = quality.status if quality is not None else "ok"
     lines = [
-        f"Calibrated from {pairs_count} pairs (cost: {result.cost_name})",
-        "",
-        f"{'':14}{'value':>12}{'sigma':>10}",
+        f"Calibrated from {pairs_count - n_out} of {pairs_count} pairs (cost: {result.cost_name})"
+        if n_out
+        else f"Calibrated from {pairs_count} pairs (cost: {result.cost_name})",
+        f"quality: {status.upper()}",
     ]
+    if quality is not None:
+        lines.extend(f"  - {r}" for r in quality.reasons)
+    reasons = set(quality.reasons) if quality is not None else set()
+    lines.extend(f"note: {w}" for w in result.warnings if w not in reasons)
+    lines += ["", f"{'':14}{'value':>12}{'sigma':>10}"]
     for name, v, s in zip(("tx [m]", "ty [m]", "tz [m]"), T[:3, 3], result.sigma_translation_m):
         lines.append(f"{name:14}{v:12.4f}{s:10.4f}")
     for name, v, s in zip(("roll [deg]", "pitch [deg]", "yaw [deg]"), rpy, result.sigma_rpy_deg):
         lines.append(f"{name:14}{v:12.3f}{s:10.3f}")
     lines.append("")
+    fit = "" if not n_out else " (pairs in the fit)"
     if np.isfinite(result.mean_px):
-        lines.append(f"reprojection error: {result.mean_px:.3f} +/- {result.std_px:.3f} px, {result.mean_deg:.4f} +/- {result.std_deg:.4f} deg")
+        lines.append(f"reprojection error{fit}: {result.mean_px:.3f} +/- {result.std_px:.3f} px, {result.mean_deg:.4f} +/- {result.std_deg:.4f} deg")
     else:
-        lines.append(f"reprojection error: {result.mean_deg:.4f} +/- {result.std_deg:.4f} deg")
+        lines.append(f"reprojection error{fit}: {result.mean_deg:.4f} +/- {result.std_deg:.4f} deg")
     lines.append("")
     lines.append(f"{'pair':>4}{'error [px]':>12}{'error [deg]':>13}")
     outliers = set(result.outliers)
+    ids = list(pair_ids) if pair_ids is not None else list(range(len(result.residual_deg)))
     for i, (px, deg) in enumerate(zip(result.residual_px, result.residual_deg)):
-        flag = "  <- outlier" if i in outliers else ""
+        flag = "  <- outlier, left out of the fit" if i in outliers else ""
         px_s = f"{px:12.3f}" if np.isfinite(px) else f"{'-':>12}"
-        lines.append(f"{i:4d}{px_s}{deg:13.4f}{flag}")
-    for w in result.warnings:
-        lines.append(f"warning: {w}")
+        lines.append(f"{ids[i]:4d}{px_s}{deg:13.4f}{flag}")
     lines.append("")
     lines.append("T_camera_lidar (X_camera = T @ X_lidar):")
     lines.extend("  " + " ".join(f"{x:12.6f}" for x in row) for row in T)
@@ -129,8 +142,8 @@ def format_summary(result, pairs_count: int) -> str:
 
 def cmd_solve(args: argparse.Namespace) -> int:
     from calib_core.io.extrinsics import save_extrinsics_yaml
-    from calib_core.pairs import load_pairs_yaml, resolve_pairs
-    from calib_core.solve import solve_extrinsics
+    from calib_core.pairs import load_pairs_yaml
+    from calib_core.solve.calibrate import calibrate, pair_ids_and_sigmas
 
     pairs = load_pairs_yaml(args.pairs)
     camera = load_camera_from_args(args)
@@ -140,17 +153,20 @@ def cmd_solve(args: argparse.Namespace) -> int:
 
         raise CalibError(f"{args.pairs}: pairs name depth-matrix cells (laser_rc); give the scan with --scan")
     depth = load_scan_from_args(args) if args.scan is not None else None
-    points, bearings, pixels = resolve_pairs(pairs, depth, camera)
     initial = None
     if args.initial_extrinsics is not None:
         from calib_core.io.extrinsic_formats import load_extrinsics_any
 
         initial = load_extrinsics_any(args.initial_extrinsics)
-    result = solve_extrinsics(points, bearings, camera=camera, pixels=pixels, cost=args.cost, initial_T_camera_lidar=initial)
-    # Save before printing: a closed pipe (| head) must not lose the result.
+    result = calibrate(pairs, depth, camera, cost=args.cost, initial_T_camera_lidar=initial)
+    ids, _ = pair_ids_and_sigmas(pairs)
+    # Save before printing: a closed pipe (| head) must not lose the result.  Outliers stay in the pairs block.
     save_extrinsics_yaml(args.output, result.T_camera_lidar, result=result, camera=camera, pairs=pairs)
-    print(format_summary(result, len(pairs)))
+    print(format_summary(result, len(pairs), ids))
     print(f"\nwrote {args.output}")
+    if result.quality.status == "unreliable":
+        print(f"unreliable: {result.quality.reasons[0]} (exit code {EXIT_UNRELIABLE})", file=sys.stderr)
+        return EXIT_UNRELIABLE
     return 0
 
 
@@ -320,7 +336,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--port", type=int, default=8080)
     p.set_defaults(func=cmd_serve)
 
-    p = sub.add_parser("solve", help="calibrate from a pairs file and print the summary")
+    p = sub.add_parser(
+        "solve",
+        help="calibrate from a pairs file and print the summary",
+        description="Calibrate from a pairs file.  Exit codes: 0 solved (quality ok or warning), 2 bad input "
+        "(one 'error:' line), 3 solved but the quality status is unreliable (the file is still written).",
+    )
     p.add_argument("--scan", type=Path, default=None, help="scan file (needed when pairs use laser_rc)")
     p.add_argument("--organize", choices=["auto", "ring", "elevation", "firing", "spherical"], default="auto")
     p.add_argument("--beams", type=int, default=None)
@@ -328,7 +349,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--v-res-deg", type=float, default=None)
     _add_camera_arg(p)
     p.add_argument("--pairs", required=True, type=Path, help="pairs YAML")
-    p.add_argument("--cost", choices=["angular", "pixel"], default="angular", help="angular = paper eq. 7 (default), pixel = eq. 6")
+    p.add_argument(
+        "--cost",
+        choices=["angular", "geodesic", "pixel"],
+        default="angular",
+        help="angular = paper eq. 7 whitened by the camera (default), geodesic = eq. 7 as printed, pixel = eq. 6",
+    )
     p.add_argument(
         "--initial-extrinsics", type=Path, default=None,
         help="start from this extrinsic (ba-calib YAML, TF, URDF, Autoware, OpenCalib, dvlc, KITTI or a 4x4 with its direction)",

@@ -136,3 +136,73 @@ def radians_per_pixel(camera, pixels: np.ndarray) -> np.ndarray:
         a, b = camera.bearing(px - d), camera.bearing(px + d)
         out[:, k] = np.arccos(np.clip(np.sum(a * b, axis=1), -1.0, 1.0))
     return out
+
+
+def mean_error_of_bound(cov6: np.ndarray, rpy_true_deg: np.ndarray, rng: np.random.Generator,
+                         draws: int = 4000) -> tuple[float, float]:
+    """Mean rotation angle (deg) and translation norm (m) of Gaussian errors with covariance ``cov6``.
+
+    ``cov6`` is over (roll, pitch, yaw [rad], tx, ty, tz [m]); the rotation error of each draw is the
+    angle between ``R(rpy_true + d)`` and ``R(rpy_true)`` (R = Rz(yaw) Ry(pitch) Rx(roll)).
+    """
+    from scipy.spatial.transform import Rotation
+
+    e = rng.multivariate_normal(np.zeros(6), cov6, draws)
+    zyx = np.radians(np.asarray(rpy_true_deg, dtype=np.float64)[::-1])
+    R0 = Rotation.from_euler("ZYX", zyx)
+    R = Rotation.from_euler("ZYX", zyx[None, :] + e[:, 2::-1])
+    angle = (R0.inv() * R).magnitude()
+    return float(np.degrees(angle).mean()), float(np.linalg.norm(e[:, 3:], axis=1).mean())
+
+
+def bound_table(ns=(10, 30, 50, 125), starts: int = 20, seed: int = 0) -> list[dict]:
+    """Mean errors allowed by the bound on the sample, for n corners spread by farthest-point sampling.
+
+    For each n, ``starts`` sets (farthest-point order from a random first corner, as
+    ``simulate_pairs`` picks them); 1 px clicks; three laser models: exact corners, the
+    whole-cell pick (``cell_rounding_covariance`` with 1 cm range noise, at the picked
+    cells' points) and the laser term alone (clicks without noise).
+    """
+    from calib_core.synthetic.picks import MAX_LASER_PICK_ERROR_M, laser_picks
+    from calib_core.transforms import transform_points
+
+    from .common import load_scenes
+
+    sc = load_scenes(())[0].scene
+    corners = np.asarray(sc.corners_lidar, dtype=np.float64).reshape(-1, 3)
+    rc_all, err = laser_picks(sc.depth, corners)
+    usable = np.flatnonzero(err <= MAX_LASER_PICK_ERROR_M)
+    pc = transform_points(sc.T_camera_lidar, corners[usable])
+    b = pc / np.linalg.norm(pc, axis=1, keepdims=True)
+    rpy = rpy_deg_from_R(sc.T_camera_lidar[:3, :3])
+    rng = np.random.default_rng(seed)
+    rows = []
+    for n in ns:
+        n = min(n, len(usable))
+        acc = {"exact": [], "cell": [], "laser only": []}
+        for _ in range(starts if n < len(usable) else 1):
+            chosen = [int(rng.integers(len(usable)))]
+            min_cos = b @ b[chosen[0]]
+            for _ in range(n - 1):
+                nxt = int(np.argmin(min_cos))
+                chosen.append(nxt)
+                min_cos = np.maximum(min_cos, b @ b[nxt])
+            idx = usable[chosen]
+            rc = rc_all[idx]
+            cell_pts = sc.depth.points[rc[:, 0], rc[:, 1]]
+            cov_l = cell_rounding_covariance(sc.depth, rc, 0.01)
+            for key, pts, sig, cov in (("exact", corners[idx], 1.0, None), ("cell", cell_pts, 1.0, cov_l),
+                                       ("laser only", cell_pts, 1e-3, cov_l)):
+                bd = cramer_rao(sc.camera, sc.T_camera_lidar, pts, sig, cov)
+                acc[key].append(mean_error_of_bound(bd.covariance, rpy, rng, 4000))
+        rows.append({"n": n, **{k: np.mean(v, axis=0) for k, v in acc.items()}})
+    return rows
+
+
+if __name__ == "__main__":
+    print("Cramer-Rao mean errors on the sample (1 px clicks): rotation deg / translation cm")
+    print("| n | exact laser | whole-cell laser (+1 cm range) | laser term alone |")
+    print("|---:|---|---|---|")
+    for r in bound_table():
+        print(f"| {r['n']} | " + " | ".join(f"{r[k][0]:.3f} deg / {100 * r[k][1]:.2f} cm"
+                                            for k in ("exact", "cell", "laser only")) + " |")

@@ -334,23 +334,25 @@ def solve_parts(bs: BenchScene, rep: SpeedReport, reps: Callable[[int], int], n:
     import numpy as np
 
     from calib_core import solve as S
-    from calib_core.solve import refine
+    from calib_core.solve import kernels
+    from calib_core.solve.whiten import whitening
 
     sc = bs.scene
     pts, brg, px = solve_inputs(bs, n, np.random.default_rng([BENCH_SEED, 10]))
-    T0, _, _ = S.initial_pose(pts, brg)
-    T, _ = refine.refine_pose(T0, pts, brg, cost="angular")
-    E = refine.tangent_basis(brg)
-    x_opt = np.concatenate([np.zeros(3), T[:3, 3]])
+    F = kernels.bearing_frames(brg)
+    W, _ = whitening(n, camera=sc.camera, frames=F)
+    R0, t0, _ = kernels.dlt_pose(pts, brg)
+    R, t, _, _ = kernels.lm_refine(R0, t0, pts, F, W, 200)
+    inl = np.ones(n, dtype=bool)
     parts = [
         ("whole solve_extrinsics", lambda: S.solve_extrinsics(pts, brg, camera=sc.camera, pixels=px)),
-        ("validate_pairs (input checks)", lambda: S.validate_pairs(pts, brg)),
-        ("initial_pose (Quan-Lan + P3P candidates)", lambda: S.initial_pose(pts, brg)),
-        ("  of which quan_lan_pose", lambda: S.bearing_pnp.quan_lan_pose(pts, brg)),
-        ("refine_pose, angular LM (scipy least_squares)", lambda: refine.refine_pose(T0, pts, brg, cost="angular")),
-        ("Jacobian + covariance", lambda: refine.covariance_from_jacobian(
-            refine.angular_jacobian(x_opt, T[:3, :3], pts, brg, E), 0.01, T[:3, :3])),
-        ("pixel residuals (camera.project)", lambda: sc.camera.project(pts @ T[:3, :3].T + T[:3, 3])),
+        ("validate_pairs (input checks, compiled pass)", lambda: S.validate_pairs(pts, brg)),
+        ("whitening (one camera.project of 4N probes)", lambda: whitening(n, camera=sc.camera, frames=F)),
+        ("dlt_pose (linear start, compiled)", lambda: kernels.dlt_pose(pts, brg)),
+        ("lm_refine (whitened angular LM, compiled)", lambda: kernels.lm_refine(R0, t0, pts, F, W, 200)),
+        ("finish + covariance (compiled)", lambda: kernels.covariance(kernels.finish(R, t, pts, F, W, inl)[2], 1.0)),
+        ("pixel residuals (camera.project)", lambda: sc.camera.project(pts @ R.T + t)),
+        ("pose_core (frames + DLT + LM + covariance, one compiled call)", lambda: kernels.pose_core(pts, brg, W, 200)),
     ]
     sub = SpeedReport()
     for label, fn in parts:

@@ -36,8 +36,7 @@ from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
 from calib_core.io.extrinsics import load_extrinsics_yaml
-from calib_core.pairs import resolve_pairs
-from calib_core.solve import solve_extrinsics
+from calib_core.solve import calibrate
 from calib_core.synthetic import load_sample, simulate_pairs
 from calib_core.transforms import rotation_angle_deg
 
@@ -56,8 +55,8 @@ def trials(scene):
     out = []
     for k in range(TRIALS):
         pairs = simulate_pairs(scene, PAIRS, np.random.default_rng(1000 + k), pixel_noise_px=1.0)
-        points, bearings, pixels = resolve_pairs(pairs, scene.depth, scene.camera)
-        out.append(solve_extrinsics(points, bearings, camera=scene.camera, pixels=pixels))
+        # As the CLI and the app do: ids, whole-cell laser picks modelled, robust solve.
+        out.append(calibrate(pairs, scene.depth, scene.camera))
     return out
 
 

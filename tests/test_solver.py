@@ -277,9 +277,15 @@ def test_outlier_is_flagged():
     assert clean.outliers == [] and clean.mean_deg < 0.2
     bad = noisy.copy()
     bad[5] = Rotation.from_rotvec(np.radians(10) * tangent_basis(bad[5:6])[0, 0]).apply(bad[5])
-    res = solve_extrinsics(points, bad)
-    assert res.outliers == [5]
-    assert any("pairs [5]" in w for w in res.warnings)
+    res = solve_extrinsics(points, bad, pair_ids=np.arange(100, 112))
+    assert res.outliers == [5] and res.outlier_ids == [105]
+    assert not res.inliers[5] and res.inliers.sum() == 11
+    assert res.quality.status == "warning"
+    assert any("pairs 105 left out as outliers" in w for w in res.quality.reasons)
+    # Left out of the fit: the pose is as good as without the bad pair.
+    rot_bad, trans_bad = pose_error(res.T_camera_lidar, T)
+    rot_clean, trans_clean = pose_error(clean.T_camera_lidar, T)
+    assert rot_bad < 2 * rot_clean + 1e-3 and trans_bad < 2 * trans_clean + 1e-4
 
 
 # -------------------------------------------------------- degeneracies
@@ -413,21 +419,32 @@ def test_gimbal_lock_warns():
 
 
 def test_lm_failure_becomes_calib_error(monkeypatch):
-    p, b = _base()
+    # The pixel cost runs scipy's MINPACK LM; its failures become one-line CalibErrors.
+    cam, T_true, points, pixels = pinhole_scene(21, 8)
+    bearings = cam.bearing(pixels)
 
     class Failed:
         status, message, x, cost, njev, nfev = 0, "The maximum number of function evaluations is exceeded.", np.zeros(6), 0.0, 1, 1
 
     monkeypatch.setattr(refine_module, "least_squares", lambda *a, **k: Failed())
     with pytest.raises(CalibError, match="Levenberg-Marquardt .*maximum number"):
-        solve_extrinsics(p, b)
+        solve_extrinsics(points, bearings, camera=cam, pixels=pixels, cost="pixel")
 
     def boom(*a, **k):
         raise ValueError("Residuals are not finite in the initial point.")
 
     monkeypatch.setattr(refine_module, "least_squares", boom)
     with pytest.raises(CalibError, match="not finite in the initial point"):
-        solve_extrinsics(p, b)
+        solve_extrinsics(points, bearings, camera=cam, pixels=pixels, cost="pixel")
+
+
+def test_angular_lm_failure_becomes_calib_error():
+    # Non-finite bearing frames make the cost non-finite: the compiled LM reports it, the wrapper raises.
+    p, b = _base()
+    T = np.eye(4)
+    T[:3, 3] = -p[0]
+    with pytest.raises(CalibError, match="Levenberg-Marquardt"):
+        refine_module.refine_angular(T, p, refine_module.bearing_frames(b) * np.nan)
 
 
 def test_pixel_cost_with_the_package_pinhole_model():

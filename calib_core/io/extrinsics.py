@@ -8,8 +8,10 @@ Layout::
       translation_m: [tx, ty, tz]
       quaternion_xyzw: [qx, qy, qz, qw]
       rpy_deg: [roll, pitch, yaw]                           # R = Rz(yaw) Ry(pitch) Rx(roll)
+    quality: {status: ok | warning | unreliable, reasons: [...]}
+    outliers: [{index, id, deg, px}, ...]                   # pairs left out of the fit (kept in pairs)
     sigma: {translation_m: [...], rpy_deg: [...]}            # 1-sigma at the optimum
-    residuals: {mean_px, std_px, mean_deg, std_deg, per_pair: [...], warnings: [...]}
+    residuals: {n_pairs, n_inliers, mean_px, std_px, mean_deg, std_deg, per_pair: [...], warnings: [...]}
     camera: {...}                                           # the camera description
     pairs: [...]                                            # the pairs that were solved
 
@@ -56,32 +58,44 @@ def transform_to_dict(T_camera_lidar: np.ndarray) -> dict[str, Any]:
 
 
 def result_to_dict(result) -> dict[str, Any]:
-    """``sigma`` and ``residuals`` blocks of a :class:`CalibrationResult`."""
+    """``quality``, ``outliers``, ``sigma`` and ``residuals`` blocks of a :class:`CalibrationResult`.
+
+    ``quality`` is ``{status: ok | warning | unreliable, reasons: [...]}``.
+    ``outliers`` lists the pairs left out of the fit (``index`` = position in
+    the pairs block, ``id`` = the pair's id, and their errors at the pose);
+    they stay in the ``pairs`` block.  ``per_pair`` has every pair, with
+    ``outlier: true`` for those.
+    """
     per_pair = []
-    outliers = set(int(i) for i in result.outliers)
+    outliers = [int(i) for i in result.outliers]
+    ids = list(getattr(result, "outlier_ids", []) or outliers)
+    out_set = set(outliers)
     res_px = np.asarray(result.residual_px, dtype=np.float64)
-    for i, deg in enumerate(np.asarray(result.residual_deg, dtype=np.float64)):
-        px = res_px[i] if i < len(res_px) else np.nan
-        per_pair.append(
-            {
-                "index": i,
-                "deg": float(deg),
-                "px": None if not np.isfinite(px) else float(px),
-                "outlier": i in outliers,
-            }
-        )
+    res_deg = np.asarray(result.residual_deg, dtype=np.float64)
+
+    def px_at(i: int):
+        return None if i >= len(res_px) or not np.isfinite(res_px[i]) else float(res_px[i])
+
+    for i, deg in enumerate(res_deg):
+        per_pair.append({"index": i, "deg": float(deg), "px": px_at(i), "outlier": i in out_set})
+    quality = getattr(result, "quality", None)
     return {
+        "quality": quality.to_dict() if quality is not None else {"status": "ok", "reasons": []},
+        "outliers": [
+            {"index": i, "id": int(pid), "deg": float(res_deg[i]), "px": px_at(i)} for i, pid in zip(outliers, ids)
+        ],
         "sigma": {
             "translation_m": _floats(result.sigma_translation_m),
             "rpy_deg": _floats(result.sigma_rpy_deg),
         },
         "residuals": {
             "n_pairs": int(result.n_pairs),
+            "n_inliers": int(result.n_pairs) - len(outliers),
             "cost": str(result.cost_name),
             "mean_px": _nan_to_none([result.mean_px])[0],
             "std_px": _nan_to_none([result.std_px])[0],
-            "mean_deg": float(result.mean_deg),
-            "std_deg": float(result.std_deg),
+            "mean_deg": _nan_to_none([result.mean_deg])[0],
+            "std_deg": _nan_to_none([result.std_deg])[0],
             "per_pair": per_pair,
             "warnings": [str(w) for w in result.warnings],
         },

@@ -1,47 +1,60 @@
-"""Extrinsic pose from laser-point / camera-bearing pairs (paper Sec. IV).
+"""Extrinsic pose from laser-point / camera-bearing pairs (paper Sec. IV), robust to wrong pairs.
 
 Pipeline of :func:`solve_extrinsics`:
 
-1. :mod:`.checks` rejects degenerate input (CalibError) and flags weak
-   geometry (warnings).
-2. :mod:`.bearing_pnp` finds an initial pose: Quan & Lan's linear N-point
-   depths + a rigid fit (:mod:`.rigid`), as in the paper, and Grunert P3P on
-   many triples as a robust fallback; the one with the smaller angular cost
-   wins.
-3. :mod:`.refine` runs Levenberg-Marquardt on the geodesic angle (eq. 7) or,
-   for comparisons, on the pixel error (eq. 6), and computes the covariance
-   ``sigma^2 (J^T J)^-1`` at the optimum.
+1. :mod:`.checks` rejects malformed or degenerate input (CalibError).
+2. :mod:`.whiten`: the angular residual of each pair is whitened with the
+   2x2 pixel-to-tangent Jacobian of the camera at the clicked pixel (and the
+   pair's ``pixel_sigma``), so that eq. 7 weighs pairs as the click noise does.
+3. Initial pose: a linear DLT on the bearings (:func:`.kernels.dlt_pose`,
+   n >= 6, not coplanar) or else Quan & Lan / P3P (:mod:`.bearing_pnp`).
+4. Levenberg-Marquardt on the whitened angular cost (compiled,
+   :mod:`.kernels`), or, with ``cost="pixel"``, on the pixel error (eq. 6).
+5. If any residual is far above the noise scale, :mod:`.robust` finds the
+   largest set of pairs that agree on one pose (LO-MSAC over P3P on
+   bearings); the others are left out of the fit and the covariance, and
+   reported.
+6. Covariance ``s^2 (J^T J)^-1`` on the pairs in the fit (Student-t
+   sigma, or the known noise), and a :class:`.quality.Quality` verdict.
 """
 
 from __future__ import annotations
 
+import functools
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from ..errors import CalibError
-from .bearing_pnp import angular_errors_rad, initial_pose
+from .bearing_pnp import initial_pose
+from . import kernels
 from .checks import (
+    CONDITION_WARNING,
     MIN_PAIRS,
     conditioning_warning,
-    outlier_indices,
     validate_initial_T,
     validate_pairs,
     validate_pixels,
 )
+from .kernels import dlt_pose
+from .quality import Quality, geometry_reasons
 from .refine import (
     PARAMETER_NAMES,
     PoseUncertainty,
-    angular_at_pose,
     bearing_frames,
     covariance_from_jacobian,
+    covariance_from_normal,
+    uncertainty_from_covariance,
     pixel_jacobian,
     pixel_residuals,
     pose_covariance,
     refine_angular,
     refine_pose,
 )
+from .robust import inlier_k, robust_fit, robust_scale
+from .whiten import check_pixel_sigma, laser_tangent_covariance, whitening
 
 __all__ = [
     "CalibrationResult",
@@ -50,7 +63,21 @@ __all__ = [
     "PoseUncertainty",
     "PARAMETER_NAMES",
     "MIN_PAIRS",
+    "Quality",
+    "warm_up",
+    "calibrate",
 ]
+
+
+#: Costs: "angular" = eq. 7 whitened by the camera (default), "geodesic" = eq. 7 as printed
+#: (every ray weighed alike), "pixel" = eq. 6.
+COSTS = ("angular", "geodesic", "pixel")
+#: Floor of the noise scale (whitened units: px, sigmas, or radians without a camera).
+_MIN_SCALE = {"px": 1e-3, "sigma": 1e-3, "noise": 1e-3, "rad": 1e-6}
+#: Expected sigma per axis of a pair's pixel error (1 px click + the laser pick), px or sigmas.
+PRIOR_PX = 1.5
+#: Residual scale above this many times :data:`PRIOR_PX` gives a warning.
+NOISY_FACTOR = 3.0
 
 
 @dataclass
@@ -60,7 +87,8 @@ class CalibrationResult:
     Attributes
     ----------
     T_camera_lidar : (4, 4) ndarray
-        Estimated pose, ``X_camera = T_camera_lidar @ X_lidar`` (metres).
+        Estimated pose, ``X_camera = T_camera_lidar @ X_lidar`` (metres),
+        fitted to the inliers only.
     initial_T_camera_lidar : (4, 4) ndarray
         The starting pose of the refinement.
     covariance_6x6 : (6, 6) ndarray
@@ -71,29 +99,47 @@ class CalibrationResult:
         1-sigma of the translation, metres.
     sigma_rpy_deg : (3,) ndarray
         1-sigma of roll, pitch, yaw, degrees (as in the paper's Table I).
+        When the noise is estimated from the residuals, sigmas are widened to
+        the 68.27 % Student-t interval with ``2 n_inliers - 6`` degrees of
+        freedom, so +-1 sigma covers 68.27 % also for few pairs.
     residual_deg : (N,) ndarray
-        Angle between each clicked bearing and its reprojected laser point.
+        Angle between each clicked bearing and its reprojected laser point,
+        for every pair (outliers included).
     residual_px : (N,) ndarray
         Pixel distance between each clicked pixel and the projected laser
         point; NaN where the point does not project into the image or there is
         no camera.
     mean_px, std_px, mean_deg, std_deg : float
-        Mean and standard deviation of the finite residuals (NaN if none).
+        Mean and standard deviation of the finite residuals of the inliers
+        (NaN if none).
     n_pairs : int
+        Pairs given (inliers and outliers).
     warnings : list of str
-        Weak geometry, outliers, poorly constrained parameters.
+        The lines of ``quality.reasons``, then notes on the output's form that do not
+        lower the quality (gimbal lock of roll/pitch/yaw).
     outliers : list of int
-        Indices of pairs with outlying angular residuals (rule of
-        :func:`calib_core.solve.checks.outlier_indices`, applied after
-        refitting without the worst pairs so that one bad click does not
-        implicate its neighbours).  They are reported, not removed:
-        ``T_camera_lidar`` uses all pairs.
+        Positions (0-based, in the input arrays) of the pairs left out of the
+        fit and the covariance as gross outliers.
+    outlier_ids : list of int
+        The same pairs by id (``pair_ids`` given to the solve, else positions).
+    inliers : (N,) bool ndarray
+        Pairs used in the fit.
+    quality : Quality
+        ``ok`` / ``warning`` / ``unreliable`` and one line per reason.
     iterations : int
-        Levenberg-Marquardt iterations (Jacobian evaluations).
+        Levenberg-Marquardt iterations (normal-equation evaluations).
     cost_name : str
-        ``"angular"`` (eq. 7) or ``"pixel"`` (eq. 6).
+        ``"angular"``, ``"geodesic"`` or ``"pixel"``.
     initial_method : str
-        ``"quan_lan"``, ``"p3p"`` or ``"given"``.
+        ``"dlt"``, ``"quan_lan"``, ``"p3p"`` or ``"given"``.
+    noise_scale : float
+        Estimated sigma per axis of the whitened residuals of the inliers, in
+        ``residual_unit``.
+    residual_unit : str
+        ``"px"`` (whitened by the camera), ``"sigma"`` (also divided by
+        ``pixel_sigma``), ``"noise"`` (divided by ``noise_rad``) or ``"rad"``.
+    hypotheses : int
+        Candidate poses scored by the robust search (0 when it was not needed).
     """
 
     T_camera_lidar: np.ndarray
@@ -110,9 +156,15 @@ class CalibrationResult:
     n_pairs: int
     warnings: list[str] = field(default_factory=list)
     outliers: list[int] = field(default_factory=list)
+    outlier_ids: list[int] = field(default_factory=list)
+    inliers: np.ndarray | None = None
+    quality: Quality = field(default_factory=Quality)
     iterations: int = 0
     cost_name: str = "angular"
     initial_method: str = ""
+    noise_scale: float = float("nan")
+    residual_unit: str = "rad"
+    hypotheses: int = 0
 
 
 def _mean_std(values: np.ndarray) -> tuple[float, float]:
@@ -128,32 +180,45 @@ def _pixel_errors(camera: Any, T: np.ndarray, points_lidar: np.ndarray, pixels: 
     return np.where(np.asarray(valid, dtype=bool) & np.isfinite(err), err, np.nan)
 
 
-def _find_outliers(
-    T: np.ndarray, points: np.ndarray, bearings: np.ndarray, residual_deg: np.ndarray, frames: np.ndarray
-) -> list[int]:
-    """Outlying pairs, robust to the pull a bad pair has on the least-squares fit.
+@functools.lru_cache(maxsize=256)
+def student_t_factor(dof: int) -> float:
+    """Half-width of the 68.27 % Student-t interval with ``dof`` degrees of freedom, in sigmas.
 
-    A bad click drags the fit, so good pairs near it get large residuals too.
-    Greedy backward elimination: while the rule of
-    :func:`~calib_core.solve.checks.outlier_indices` flags a pair, drop the
-    worst one and refit on the rest; finally judge every pair against the fit
-    and the residual statistics of the pairs kept.  Keeps at least 5 pairs.
+    ``t_ppf(Phi(1), dof)``: the factor that makes +-1 reported sigma cover
+    68.27 % when sigma is estimated from ``dof`` residual degrees of freedom.
     """
-    if not outlier_indices(residual_deg):
-        return []
-    keep = np.ones(len(points), dtype=bool)
-    r = residual_deg
-    while keep.sum() > MIN_PAIRS + 1:
-        flagged = [i for i in outlier_indices(r, reference_deg=r[keep]) if keep[i]]
-        if not flagged:
-            break
-        keep[max(flagged, key=lambda i: r[i])] = False
-        try:
-            T, _ = refine_angular(T, points[keep], frames[keep])
-        except CalibError:
-            break
-        r = np.degrees(angular_errors_rad(T, points, bearings))
-    return outlier_indices(r, reference_deg=r[keep])
+    from scipy.stats import norm, t
+
+    return float(t.ppf(norm.cdf(1.0), dof))
+
+
+def _check_pair_ids(pair_ids: object, n: int) -> list[int]:
+    if pair_ids is None:
+        return list(range(n))
+    ids = np.asarray(pair_ids)
+    if ids.shape != (n,) or not np.issubdtype(ids.dtype, np.integer):
+        raise CalibError(f"pair_ids must be {n} whole numbers, one per pair, got {ids.dtype} of shape {ids.shape}")
+    if len(set(ids.tolist())) != n:
+        raise CalibError("pair_ids must be unique")
+    return [int(i) for i in ids]
+
+
+def _ids_text(ids: list[int]) -> str:
+    shown = ", ".join(str(i) for i in ids[:8])
+    return shown + (f" and {len(ids) - 8} more" if len(ids) > 8 else "")
+
+
+def _initial(points: np.ndarray, bearings: np.ndarray) -> tuple[np.ndarray, str]:
+    """Linear DLT on the bearings when it applies (n >= 6, not coplanar), else Quan & Lan / P3P."""
+    R, t, ok = dlt_pose(points, bearings)
+    if ok:  # (finite by construction: ok needs a proper SVD and points in front)
+        T = np.eye(4)
+        T[:3, :3], T[:3, 3] = R, t
+        return T, "dlt"
+    T, method, init_cost = initial_pose(points, bearings)
+    if not np.isfinite(init_cost):
+        raise CalibError("no initial pose found from these pairs (all closed-form solutions failed)")
+    return T, method
 
 
 def solve_extrinsics(
@@ -165,6 +230,10 @@ def solve_extrinsics(
     cost: str = "angular",
     initial_T_camera_lidar: np.ndarray | None = None,
     noise_rad: float | None = None,
+    pixel_sigma: np.ndarray | None = None,
+    laser_cov_m2: np.ndarray | None = None,
+    pair_ids: np.ndarray | list[int] | None = None,
+    robust: bool = True,
 ) -> CalibrationResult:
     """Estimate ``T_camera_lidar`` from n >= 4 laser-point / bearing pairs.
 
@@ -176,25 +245,45 @@ def solve_extrinsics(
         Unit bearings of the clicked pixels in the OpenCV camera frame; any
         direction on the sphere (also more than 90 deg off axis).
     camera : CameraModel, optional
-        Needed for pixel residuals and for ``cost="pixel"``.
+        Whitens the angular residuals, and gives pixel residuals; needed for
+        ``cost="pixel"``.
     pixels : (N, 2) array_like, optional
         Clicked ``(u, v)`` pixels.  With a camera but without pixels, the
         pixels of the bearings (``camera.project(bearings)``) are used.
-    cost : {"angular", "pixel"}
-        ``"angular"``: geodesic angle, paper eq. 7 (the method).  ``"pixel"``:
-        reprojection error, eq. 6, for benchmarks; it starts from the angular
-        optimum.
+    cost : {"angular", "geodesic", "pixel"}
+        ``"angular"``: paper eq. 7 with each residual whitened by the
+        camera's pixel-to-angle Jacobian (default; without a camera it is eq.
+        7 as printed).  ``"geodesic"``: eq. 7 as printed, every ray weighed
+        alike.  ``"pixel"``: reprojection error, eq. 6, for comparisons; it
+        starts from the angular optimum.
     initial_T_camera_lidar : (4, 4) array_like, optional
         Start the refinement here instead of the closed-form initial pose.
     noise_rad : float, optional
         Known click noise (std of the bearing error along each tangent
-        direction, radians).  The covariance is then ``noise_rad^2 (J^T J)^-1``
-        (the Cramer-Rao bound); otherwise ``sigma^2`` is the residual variance
-        ``SSR / (2N - 6)``.  Used with the angular cost only.
+        direction, radians).  The residuals are then divided by it (no camera
+        whitening) and the covariance is ``(J^T J)^-1`` (the Cramer-Rao
+        bound); otherwise the noise is estimated from the residuals.
+    pixel_sigma : (N,) array_like, optional
+        1-sigma of each click in pixels (a pair's ``precision_px``): weights
+        the residuals (``1 / pixel_sigma``) and sets the expected noise for
+        the outlier test.  None: all pairs alike, 1 px.  Without a camera it
+        only sets relative weights.
+    laser_cov_m2 : (N, 3, 3) array_like, optional
+        Covariance of each laser point, metres^2, lidar frame (e.g. a
+        whole-cell pick, :func:`calib_core.solve.whiten.cell_pick_covariance`).
+        Its effect on the bearing, at the current pose, is added to the click
+        noise in the whitening.  Needs a camera; None: laser points exact.
+    pair_ids : (N,) array_like of int, optional
+        Ids of the pairs, used in messages and in ``outlier_ids``; default
+        their positions.  ``outliers`` always holds positions.
+    robust : bool
+        Find and leave out gross outliers (default).  False fits all pairs.
 
     Returns
     -------
     CalibrationResult
+        Always check ``result.quality.status``: ``"unreliable"`` means the
+        pose must not be used (the reasons say why).
 
     Raises
     ------
@@ -203,82 +292,180 @@ def solve_extrinsics(
         :func:`calib_core.solve.checks.validate_pairs`), a missing camera or
         pixels for ``cost="pixel"``, or a failed refinement (with the reason).
     """
-    if cost not in ("angular", "pixel"):
-        raise CalibError(f"unknown cost {cost!r}; use 'angular' or 'pixel'")
+    if cost not in COSTS:
+        raise CalibError(f"unknown cost {cost!r}; use one of {', '.join(COSTS)}")
     points, bearings, warnings = validate_pairs(points_lidar, bearings_camera)
     n = len(points)
+    ids = _check_pair_ids(pair_ids, n)
+    sigmas = check_pixel_sigma(pixel_sigma, n)
+    laser_cov = None
+    if laser_cov_m2 is not None:
+        laser_cov = np.asarray(laser_cov_m2, dtype=np.float64)
+        if laser_cov.shape != (n, 3, 3) or not np.all(np.isfinite(laser_cov)):
+            raise CalibError(f"laser_cov_m2 must be {n} finite 3x3 covariances, got shape {laser_cov.shape}")
     if noise_rad is not None and not (np.isfinite(noise_rad) and noise_rad > 0):
         raise CalibError(f"noise_rad must be a positive number, got {noise_rad!r}")
     if pixels is not None:
         pixels = validate_pixels(pixels, n)
-    elif camera is not None:
-        projected, valid = camera.project(bearings)
-        pixels = np.where(np.asarray(valid, dtype=bool)[:, None], np.asarray(projected, dtype=np.float64), np.nan)
-    if cost == "pixel" and (camera is None or pixels is None):
-        raise CalibError("cost='pixel' needs a camera and the clicked pixels")
-    if cost == "pixel" and not np.all(np.isfinite(pixels)):
-        bad = np.nonzero(~np.all(np.isfinite(pixels), axis=1))[0]
-        raise CalibError(f"cost='pixel': the bearings of pairs {bad.tolist()} do not map to pixels of this camera")
-
-    # 1. Initial pose.
-    if initial_T_camera_lidar is not None:
-        T_init = validate_initial_T(initial_T_camera_lidar)
-        method = "given"
-    else:
-        T_init, method, init_cost = initial_pose(points, bearings)
-        if not np.isfinite(init_cost):
-            raise CalibError("no initial pose found from these pairs (all closed-form solutions failed)")
-
-    # 2. Refinement: always on the angle; the pixel cost continues from there.
-    frames = bearing_frames(bearings)  # tangent bases, computed once per solve
-    T, iterations = refine_angular(T_init, points, frames)
     if cost == "pixel":
-        T, more = refine_pose(T, points, bearings, cost="pixel", camera=camera, pixels=pixels)
+        if camera is None or pixels is None:
+            raise CalibError("cost='pixel' needs a camera and the clicked pixels")
+
+    # 1. Whitening, computed once per solve (and once more at the pose for the laser term).
+    frames = kernels.bearing_frames(bearings)
+    whiten_camera = camera if cost != "geodesic" else None
+
+    def whiten(T_at: np.ndarray | None) -> tuple[np.ndarray, str]:
+        lt = None
+        if laser_cov is not None and T_at is not None and whiten_camera is not None:
+            lt = laser_tangent_covariance(T_at, points, frames, laser_cov)
+        return whitening(n, camera=whiten_camera, frames=frames, pixel_sigma=sigmas, noise_rad=noise_rad,
+                         laser_tangent_cov=lt)
+
+    W, unit = whiten(None)
+    # Expected scale of the whitened residuals, for the outlier test: the known noise, or the
+    # click noise plus the laser pick (whole-cell picks add about 1 px; measured 0.76 px on the sample).
+    prior = {"px": PRIOR_PX, "sigma": PRIOR_PX, "noise": 1.0}.get(unit)
+    floor = _MIN_SCALE[unit]
+
+    # 2. Initial pose and LM on all pairs.
+    if initial_T_camera_lidar is not None:
+        T_init, method = validate_initial_T(initial_T_camera_lidar), "given"
+    else:
+        T_init, method = _initial(points, bearings)
+    try:
+        T, iterations = refine_angular(T_init, points, frames, W)
+    except CalibError:
+        if not robust:
+            raise
+        T, iterations = T_init, 0
+    if laser_cov is not None and whiten_camera is not None:
+        # The laser term depends on the pose: whiten at the first optimum and refine once more.
+        W, unit = whiten(T)
+        try:
+            T, more = refine_angular(T, points, frames, W)
+            iterations += more
+        except CalibError:
+            if not robust:
+                raise
+    z, _ = kernels.whitened_residuals(T[:3, :3].copy(), T[:3, 3].copy(), points, frames, W)
+    r2 = z[:, 0] ** 2 + z[:, 1] ** 2
+
+    # 3. Outliers: only searched for when some residual is far above the noise scale.
+    # With a prior (expected click noise), any pair beyond it is suspect; without one, the
+    # median residual sets the scale.  A noisier-than-expected set just takes the robust path.
+    inliers = np.ones(n, dtype=bool)
+    hypotheses = 0
+    scale_ref = max(prior, floor) if prior is not None else max(robust_scale(r2), floor)
+    if robust and r2.max() >= (inlier_k(n) * scale_ref) ** 2:
+        fit = robust_fit(points, bearings, frames, W, prior, T[:3, :3], T[:3, 3], min_scale=floor)
+        hypotheses = fit.hypotheses
+        iterations += fit.iterations
+        if fit.inliers.sum() >= 3:
+            inliers = fit.inliers
+            T = np.eye(4)
+            T[:3, :3], T[:3, 3] = fit.R, fit.t
+        if laser_cov is not None and whiten_camera is not None:
+            # The laser term depends on the pose: whiten at the robust pose and refine once more.
+            W, unit = whiten(T)
+            keep = np.flatnonzero(inliers)
+            if keep.size >= 3:
+                T, more = refine_angular(T, points[keep], frames[keep], W[keep])
+                iterations += more
+    idx = np.flatnonzero(inliers)
+    n_in = idx.size
+    if cost == "pixel" and n_in >= 3:
+        bad = np.nonzero(~np.all(np.isfinite(pixels[idx]), axis=1))[0]
+        if bad.size:
+            raise CalibError(f"cost='pixel': pairs {bad.tolist()} have no finite pixel")
+        T, more = refine_pose(
+            T, points[idx], bearings[idx], cost="pixel", camera=camera, pixels=pixels[idx],
+            pixel_sigma=None if sigmas is None else sigmas[idx],
+        )
         iterations += more
 
-    # 3. Covariance at the optimum (parameters: delta about R_hat, t).
-    dof = 2 * n - 6
-    J, r, angle_rad = angular_at_pose(T, points, frames)
-    if cost == "angular":
-        if noise_rad is not None:
-            sigma = float(noise_rad)
-        else:
-            sigma = float(np.sqrt(np.sum(r**2) / dof))
-    else:
-        x_opt = np.concatenate([np.zeros(3), T[:3, 3]])
-        J = pixel_jacobian(x_opt, T[:3, :3], points, pixels, camera)
-        r = pixel_residuals(x_opt, T[:3, :3], points, pixels, camera)
-        sigma = float(np.sqrt(np.nansum(r**2) / dof))
+    # 4. Covariance on the inliers: Student-t sigma from the residuals, or the known noise.
+    R_hat, t_hat = T[:3, :3].copy(), T[:3, 3].copy()
+    dof = 2 * n_in - 6
+    z, theta, H, ssr, stats = kernels.finish(R_hat, t_hat, points, frames, W, inliers)
+    if cost == "pixel":
+        x_opt = np.concatenate([np.zeros(3), t_hat])
+        inv_s = 1.0 if sigmas is None else np.repeat(1.0 / sigmas[idx], 2)[:, None]
+        J = pixel_jacobian(x_opt, R_hat, points[idx], pixels[idx], camera) * inv_s
+        rp = pixel_residuals(x_opt, R_hat, points[idx], pixels[idx], camera).ravel() * np.ravel(inv_s)
+        J = np.where(np.isfinite(J), J, 0.0)
+        H = J.T @ J
+        ssr = float(np.nansum(rp**2))
         if noise_rad is not None:
             warnings.append("noise_rad is ignored with cost='pixel'; sigma comes from the pixel residuals")
-    uncertainty = covariance_from_jacobian(np.where(np.isfinite(J), J, 0.0), sigma, T[:3, :3])
-    weak = conditioning_warning(uncertainty.JtJ)
-    if weak:
-        warnings.append(weak)
+    noise_scale = math.sqrt(ssr / dof) if dof > 0 else float("nan")
+    if noise_rad is not None and cost != "pixel":
+        sigma = 1.0  # residuals are in units of the known noise
+    elif dof > 0:
+        sigma = noise_scale * student_t_factor(dof)
+    else:
+        sigma = float(prior) if prior is not None else float("inf")  # no redundancy: the expected noise
+    cov, condition = kernels.covariance(H, sigma)
+    uncertainty = uncertainty_from_covariance(cov, H, R_hat)
 
-    # 4. Report.  The log map's norm is the geodesic angle (atan2 form, as angular_errors_rad).
-    residual_deg = np.degrees(angle_rad)
-    if camera is not None and pixels is not None:
+    # 5. Report.
+    residual_deg = np.degrees(theta)
+    if camera is not None:
+        if pixels is None:
+            projected, valid = camera.project(bearings)
+            pixels = np.where(np.asarray(valid, dtype=bool)[:, None], np.asarray(projected, dtype=np.float64), np.nan)
         residual_px = _pixel_errors(camera, T, points, pixels)
-        off = np.nonzero(~np.isfinite(residual_px))[0]
+        off = np.flatnonzero(~np.isfinite(residual_px[idx]))
         if off.size:
             warnings.append(
-                f"pairs {off.tolist()} do not reproject into the image; their pixel error is NaN"
+                f"pairs {_ids_text([ids[idx[i]] for i in off])} do not reproject into the image; their pixel error is NaN"
             )
     else:
         residual_px = np.full(n, np.nan)
-    mean_deg, std_deg = _mean_std(residual_deg)
-    mean_px, std_px = _mean_std(residual_px)
-    outliers = _find_outliers(T, points, bearings, residual_deg, frames)
+    mean_deg, std_deg = math.degrees(stats[0]), math.degrees(stats[1])
+    mean_px, std_px = _mean_std(residual_px[idx])
+    outliers = np.flatnonzero(~inliers).tolist()
+    outlier_ids = [ids[i] for i in outliers]
+
+    unreliable: list[str] = []
     if outliers:
-        worst = ", ".join(f"{residual_deg[i]:.2f}" for i in outliers[:5])
-        warnings.append(f"pairs {outliers} have large residuals ({worst} deg); check these clicks")
-    pitch_deg = np.degrees(np.arcsin(np.clip(-T[2, 0], -1.0, 1.0)))
-    if abs(pitch_deg) > 89.0:
+        if n_in < MIN_PAIRS:
+            unreliable.append(f"only {n_in} of {n} pairs agree on one pose; at least {MIN_PAIRS} are needed")
+        elif 2 * n_in <= n:
+            unreliable.append(
+                f"only {n_in} of {n} pairs agree on one pose: with half of the pairs or more left out, "
+                "no consensus can be trusted"
+            )
+        worst = sorted(outliers, key=lambda i: -residual_deg[i])[:5]
+        sizes = ", ".join(
+            f"{residual_px[i]:.1f} px" if np.isfinite(residual_px[i]) else f"{residual_deg[i]:.2f} deg" for i in worst
+        )
+        warnings.insert(
+            0,
+            f"pairs {_ids_text(outlier_ids)} left out as outliers (largest errors {sizes}); check these clicks",
+        )
+    if not condition <= CONDITION_WARNING:
+        weak = conditioning_warning(H)
+        if weak:
+            warnings.append(weak)
+    bad_geo, weak_geo = geometry_reasons(
+        stats[3:6], n_in, kernels.rotation_sigma_deg(uncertainty.covariance_6x6), uncertainty.sigma_translation_m,
+        float(stats[2]),
+    )
+    unreliable += bad_geo
+    warnings += weak_geo
+    if unit == "px" and np.isfinite(noise_scale) and noise_scale > NOISY_FACTOR * prior:
         warnings.append(
+            f"the pairs fit to {noise_scale:.1f} px (1 sigma per axis), over {NOISY_FACTOR:g}x the {PRIOR_PX:g} px "
+            "expected of clicks and laser picks: check the camera model and the picks"
+        )
+    notes: list[str] = []  # about the output's form, not the calibration's quality
+    if abs(T[2, 0]) > math.sin(math.radians(89.0)):
+        notes.append(
             "pitch is within 1 deg of +-90 deg (gimbal lock): roll, yaw and their sigmas are ill-defined; "
             "use the matrix or quaternion"
         )
+    quality = Quality.from_reasons(unreliable, warnings)
     return CalibrationResult(
         T_camera_lidar=T,
         initial_T_camera_lidar=T_init,
@@ -292,9 +479,48 @@ def solve_extrinsics(
         mean_deg=mean_deg,
         std_deg=std_deg,
         n_pairs=n,
-        warnings=warnings,
+        warnings=list(quality.reasons) + notes,
         outliers=outliers,
+        outlier_ids=outlier_ids,
+        inliers=inliers,
+        quality=quality,
         iterations=iterations,
         cost_name=cost,
         initial_method=method,
+        noise_scale=noise_scale,
+        residual_unit=unit,
+        hypotheses=hypotheses,
     )
+
+
+def warm_up() -> float:
+    """Compile (or load from numba's cache) every solve kernel; returns the seconds it took.
+
+    The first call of a numba kernel compiles it (seconds) or loads it from
+    the on-disk cache (``cache=True``, milliseconds); call this once in a
+    background thread at start-up so that the first click never waits.
+    """
+    import time
+
+    t0 = time.perf_counter()
+    rng = np.random.default_rng(0)
+    d = rng.normal(size=(8, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    points = d * rng.uniform(2, 8, (8, 1))
+    bearings = d.copy()
+    bearings[0] = -bearings[0]  # one outlier: runs the robust path too
+    solve_extrinsics(points, bearings)  # DLT start, LM, robust search (P3P), report
+    solve_extrinsics(points[1:6], d[1:6])  # 5 pairs: Quan & Lan start (rigid fit)
+    from ..cameras import PinholeCamera  # whitening through a camera
+
+    cam = PinholeCamera(np.array([[300.0, 0, 320], [0, 300, 240], [0, 0, 1]]), np.zeros(5), 640, 480)
+    front = d.copy()
+    front[:, 2] = np.abs(front[:, 2]) + 1.0
+    front /= np.linalg.norm(front, axis=1, keepdims=True)
+    solve_extrinsics(front * 4.0, front, camera=cam, laser_cov_m2=np.broadcast_to(1e-4 * np.eye(3), (8, 3, 3)))
+    pose_covariance(np.eye(4), points, 1e-3)
+    kernels.pose_core(points[1:], d[1:], np.broadcast_to(np.eye(2), (7, 2, 2)).copy(), 5)
+    return time.perf_counter() - t0
+
+
+from .calibrate import calibrate  # noqa: E402  (uses solve_extrinsics above)

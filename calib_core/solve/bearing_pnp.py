@@ -27,6 +27,7 @@ import itertools
 
 import numpy as np
 
+from . import kernels
 from .checks import median
 from .refine import cross3
 from .rigid import rigid_fit
@@ -349,62 +350,9 @@ def p3p_grunert(points_lidar: np.ndarray, bearings_camera: np.ndarray) -> tuple[
     triple_index : (K,) int ndarray
         The triple each pose comes from.
     """
-    P = np.asarray(points_lidar, dtype=np.float64)
-    Bm = np.asarray(bearings_camera, dtype=np.float64)
-    a2 = np.sum((P[:, 1] - P[:, 2]) ** 2, axis=-1)
-    b2 = np.sum((P[:, 0] - P[:, 2]) ** 2, axis=-1)
-    c2 = np.sum((P[:, 0] - P[:, 1]) ** 2, axis=-1)
-    ca = np.sum(Bm[:, 1] * Bm[:, 2], axis=-1)
-    cb = np.sum(Bm[:, 0] * Bm[:, 2], axis=-1)
-    cg = np.sum(Bm[:, 0] * Bm[:, 1], axis=-1)
-    valid = (a2 > 0) & (b2 > 0) & (c2 > 0)
-    b2 = np.where(valid, b2, 1.0)
-    q = (a2 - c2) / b2
-    p = (a2 + c2) / b2
-    A4 = (q - 1) ** 2 - 4 * c2 / b2 * ca**2
-    A3 = 4 * (q * (1 - q) * cb - (1 - p) * ca * cg + 2 * c2 / b2 * ca**2 * cb)
-    A2 = 2 * (q**2 - 1 + 2 * q**2 * cb**2 + 2 * (b2 - c2) / b2 * ca**2 - 4 * p * ca * cb * cg + 2 * (b2 - a2) / b2 * cg**2)
-    A1 = 4 * (-q * (1 + q) * cb + 2 * a2 / b2 * cg**2 * cb - (1 - p) * ca * cg)
-    A0 = (1 + q) ** 2 - 4 * a2 / b2 * cg**2
-    coeffs = np.stack([A4, A3, A2, A1, A0], axis=-1)
-    # A vanishing leading coefficient would send a root to infinity.
-    valid &= np.abs(A4) > 1e-12 * np.max(np.abs(coeffs), axis=-1)
-    idx = np.nonzero(valid)[0]
-    if idx.size == 0:
-        return np.zeros((0, 4, 4)), np.zeros(0, dtype=np.int64)
-    mon = coeffs[idx, 1:] / coeffs[idx, :1]
-    companion = np.zeros((idx.size, 4, 4))
-    companion[:, 0, :] = -mon
-    companion[:, 1, 0] = companion[:, 2, 1] = companion[:, 3, 2] = 1.0
-    roots = np.linalg.eigvals(companion)  # (M', 4)
-    # Noise can turn a double root into a close complex pair: keep its real
-    # part as a candidate; the scoring on all pairs sorts it out.
-    real = np.abs(roots.imag) <= 1e-2 * (1 + np.abs(roots.real))
-    tri = np.repeat(idx, 4)[real.ravel()]
-    v = roots.real.ravel()[real.ravel()]
-    keep = v > 0
-    tri, v = tri[keep], v[keep]
-    s1 = np.sqrt(b2[tri] / np.maximum(1 + v**2 - 2 * v * cb[tri], 1e-300))
-    s3 = v * s1
-    # s2 from the c-equation (two roots) and from Grunert's u (eq. 8); keep the
-    # one that best satisfies the a-equation (robust where eq. 8 divides by 0).
-    disc = np.sqrt(np.maximum(c2[tri] - s1**2 * (1 - cg[tri] ** 2), 0.0))
-    qq = q[tri]
-    den = 2 * (cg[tri] - v * ca[tri])
-    with np.errstate(divide="ignore", invalid="ignore"):
-        u = ((-1 + qq) * v**2 - 2 * qq * cb[tri] * v + 1 + qq) / den
-    s2_cand = np.stack([s1 * cg[tri] + disc, s1 * cg[tri] - disc, u * s1], axis=-1)
-    a_res = np.abs(s2_cand**2 + s3[:, None] ** 2 - 2 * s2_cand * s3[:, None] * ca[tri, None] - a2[tri, None])
-    a_res = np.where(np.isfinite(s2_cand) & (s2_cand > 0), a_res, np.inf)
-    best = np.argmin(a_res, axis=-1)
-    s2 = s2_cand[np.arange(len(best)), best]
-    ok = np.isfinite(a_res[np.arange(len(best)), best]) & np.isfinite(s1) & (s1 > 0)
-    tri, s1, s2, s3 = tri[ok], s1[ok], s2[ok], s3[ok]
-    depths = np.stack([s1, s2, s3], axis=-1)
-    points_camera = depths[..., None] * Bm[tri]
-    T = rigid_fit(P[tri], points_camera)
-    good = np.all(np.isfinite(T), axis=(-1, -2))
-    return T[good], tri[good]
+    P = np.ascontiguousarray(points_lidar, dtype=np.float64).reshape(-1, 3, 3)
+    Bm = np.ascontiguousarray(bearings_camera, dtype=np.float64).reshape(-1, 3, 3)
+    return kernels.p3p_grunert(P, Bm)  # compiled: one implementation
 
 
 def _spread_order(bearings: np.ndarray, count: int) -> np.ndarray:

@@ -7,10 +7,12 @@ geometry gives warning strings that the solver passes on in its result.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
-from scipy.spatial import cKDTree
 
 from ..errors import CalibError
+from .kernels import pair_checks
 from .refine import PARAMETER_NAMES, cross3
 
 __all__ = [
@@ -19,7 +21,6 @@ __all__ = [
     "validate_pixels",
     "validate_initial_T",
     "conditioning_warning",
-    "outlier_indices",
 ]
 
 MIN_PAIRS = 4
@@ -53,47 +54,26 @@ def median(values: np.ndarray) -> float:
     return float(v[k]) if v.size % 2 else float((v[k - 1] + v[k]) / 2)
 
 
-def _pairs_text(pairs: np.ndarray) -> str:
-    shown = ", ".join(f"{i} and {j}" for i, j in pairs[:3])
-    return shown + (f" (and {len(pairs) - 3} more)" if len(pairs) > 3 else "")
-
-
 def _angle_rad(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Angle between rows of unit vectors, ``atan2(|a x b|, a . b)`` (precise near 0 and pi)."""
     c = cross3(a, b)
     return np.arctan2(np.sqrt(np.einsum("ij,ij->i", c, c)), np.einsum("ij,ij->i", a, b))
 
 
-def _close_pairs(vectors: np.ndarray, radius: float, distance) -> np.ndarray:
-    """Index pairs ``(i, j)``, ``i < j``, in lexicographic order, with ``distance(i, j) <= radius``.
-
-    A k-d tree finds the candidates within a Euclidean radius a little larger
-    than ``radius`` in O(n log n) (all pairs would be O(n^2)); ``distance``
-    (index arrays -> distances, never smaller than the Euclidean one) decides.
-    """
-    cand = cKDTree(vectors).query_pairs(radius * (1 + 1e-6), output_type="ndarray")
-    if cand.size:
-        cand = cand[distance(cand[:, 0], cand[:, 1]) <= radius]
-        cand = cand[np.lexsort((cand[:, 1], cand[:, 0]))]
-    return cand.reshape(-1, 2)
-
-
-def _largest_angle_deg(bearings: np.ndarray) -> float:
+def _largest_angle_deg(bearings: np.ndarray, cos_min_to_mean: float) -> float:
     """Largest angle between two unit bearings, degrees: exact below :data:`CONE_WARNING_DEG`,
     otherwise only known to be at least that.
 
-    The angle ``alpha`` from the mean direction to the farthest bearing is a
-    cheap bound: for that bearing ``b``, the mean of ``b . b_j`` over all
-    ``j`` is ``|mean| cos(alpha) <= cos(alpha)`` when ``alpha <= 90`` deg, so
-    some ``b_j`` is at least ``alpha`` away from ``b``; when ``alpha > 90``
-    deg that mean is negative, so some ``b_j`` is over 90 deg away.  Only a
-    narrow cone, the case the checks are about, needs all pairs.
+    The angle ``alpha`` from the mean direction to the farthest bearing
+    (``arccos(cos_min_to_mean)``) is a cheap bound: for that bearing ``b``,
+    the mean of ``b . b_j`` over all ``j`` is ``|mean| cos(alpha) <=
+    cos(alpha)`` when ``alpha <= 90`` deg, so some ``b_j`` is at least
+    ``alpha`` away from ``b``; when ``alpha > 90`` deg that mean is negative,
+    so some ``b_j`` is over 90 deg away.  Only a narrow cone, the case the
+    checks are about, needs all pairs.
     """
-    total = bearings.sum(axis=0)
-    norm = float(np.sqrt(total @ total))
-    if norm > 0:
-        # arccos is precise enough here: the bound only matters when it is large.
-        alpha_deg = float(np.degrees(np.arccos(np.clip((bearings @ total).min() / norm, -1.0, 1.0))))
+    if np.isfinite(cos_min_to_mean):
+        alpha_deg = math.degrees(math.acos(min(max(cos_min_to_mean, -1.0), 1.0)))
         if alpha_deg >= CONE_WARNING_DEG:
             return alpha_deg
     cos = bearings @ bearings.T
@@ -126,43 +106,38 @@ def validate_pairs(points_lidar: object, bearings_camera: object) -> tuple[np.nd
         pairs (names them); coincident or (nearly) collinear laser points; all
         bearings within 2 deg of each other.
     """
-    points = _as_array(points_lidar, "points_lidar", 3)
-    bearings = _as_array(bearings_camera, "bearings_camera", 3)
+    points = np.ascontiguousarray(_as_array(points_lidar, "points_lidar", 3))
+    bearings = np.ascontiguousarray(_as_array(bearings_camera, "bearings_camera", 3))
     if len(points) != len(bearings):
         raise CalibError(f"got {len(points)} laser points but {len(bearings)} bearings")
     n = len(points)
     if n < MIN_PAIRS:
         raise CalibError(f"need at least {MIN_PAIRS} pairs to solve the pose, got {n}")
-    for name, arr in (("laser point", points), ("bearing", bearings)):
-        bad = np.nonzero(~np.all(np.isfinite(arr), axis=1))[0]
-        if bad.size:
-            raise CalibError(f"pair {bad[0]}: {name} is not finite (NaN or inf)")
-    norms = np.linalg.norm(bearings, axis=1)
-    zero = np.nonzero(norms < 1e-12)[0]
-    if zero.size:
-        raise CalibError(f"pair {zero[0]}: bearing has zero length")
-    off = np.nonzero(np.abs(norms - 1) > UNIT_TOLERANCE)[0]
-    if off.size:
-        raise CalibError(f"pair {off[0]}: bearing is not a unit vector (norm {norms[off[0]]:.6g})")
+    # One compiled pass computes every figure; the messages are chosen here, in order.
+    bad_p, bad_b, norms, same_p, same_b, sv, cos_min = pair_checks(points, bearings, SAME_POINT_M, SAME_BEARING_RAD)
+    if bad_p >= 0:
+        raise CalibError(f"pair {bad_p}: laser point is not finite (NaN or inf)")
+    if bad_b >= 0:
+        raise CalibError(f"pair {bad_b}: bearing is not finite (NaN or inf)")
+    if norms.min() < 1e-12:
+        raise CalibError(f"pair {int(np.argmin(norms))}: bearing has zero length")
+    off = np.abs(norms - 1) > UNIT_TOLERANCE
+    if off.any():
+        i = int(np.argmax(off))
+        raise CalibError(f"pair {i}: bearing is not a unit vector (norm {norms[i]:.6g})")
     bearings = bearings / norms[:, None]
-
-    same = _close_pairs(points, SAME_POINT_M, lambda i, j: np.linalg.norm(points[i] - points[j], axis=1))
-    if same.size:
-        raise CalibError(f"pairs {_pairs_text(same)} use the same laser point")
-    # A chord is never longer than its angle: the tree's radius catches every candidate.
-    same = _close_pairs(bearings, SAME_BEARING_RAD, lambda i, j: _angle_rad(bearings[i], bearings[j]))
-    if same.size:
-        raise CalibError(f"pairs {_pairs_text(same)} use the same bearing (the same pixel clicked twice)")
-
-    s = np.linalg.svd(points - points.mean(axis=0), compute_uv=False)
-    if s[1] < COLLINEAR_RATIO * s[0]:
+    if same_p[0] >= 0:
+        raise CalibError(f"pairs {same_p[0]} and {same_p[1]} use the same laser point")
+    if same_b[0] >= 0:
+        raise CalibError(f"pairs {same_b[0]} and {same_b[1]} use the same bearing (the same pixel clicked twice)")
+    if sv[1] < COLLINEAR_RATIO * sv[0]:
         raise CalibError(
             "the laser points are (nearly) collinear, so the rotation about their line is undetermined; "
             "pick points off that line"
         )
 
     warnings: list[str] = []
-    max_angle_deg = _largest_angle_deg(bearings)
+    max_angle_deg = _largest_angle_deg(bearings, cos_min)
     if max_angle_deg < CONE_ERROR_DEG:
         raise CalibError(
             f"all pairs lie within {max_angle_deg:.2g} deg of each other in the view; "
@@ -225,23 +200,3 @@ def conditioning_warning(JtJ: np.ndarray) -> str | None:
         f"the pairs barely constrain {' + '.join(weak)} (condition number {cond:.1e}); "
         "add pairs at other depths and directions"
     )
-
-
-def outlier_indices(
-    residual_deg: np.ndarray, reference_deg: np.ndarray | None = None, min_deg: float = 1.0, k: float = 3.0
-) -> list[int]:
-    """Pairs whose angular residual is an outlier.
-
-    Rule: ``r_i > median(ref) + k * 1.4826 * MAD(ref)`` *and* ``r_i > min_deg``,
-    where ``ref`` are the reference residuals (default: all of them) and MAD is
-    the median absolute deviation (1.4826 MAD estimates the standard deviation
-    of Gaussian data without being dragged by the outliers themselves).  The
-    absolute floor keeps sub-degree clicks from being flagged when all
-    residuals are tiny.
-    """
-    r = np.asarray(residual_deg, dtype=np.float64)
-    ref = r if reference_deg is None else np.asarray(reference_deg, dtype=np.float64)
-    med = median(ref)
-    mad = median(np.abs(ref - med))
-    flagged = (r > med + k * 1.4826 * mad) & (r > min_deg)
-    return np.nonzero(flagged)[0].tolist()

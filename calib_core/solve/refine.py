@@ -1,18 +1,20 @@
-"""Levenberg-Marquardt refinement of ``T_camera_lidar`` and its covariance.
+"""Refinement of ``T_camera_lidar`` and its covariance.
 
-Angular cost (paper eq. 7): ``0.5 * sum_i angle(b_i, R p_i + t)^2``.  The
-residual of pair i is the 2-vector log map of the reprojected bearing
-``q_i = normalize(R p_i + t)`` into the tangent plane of the clicked bearing
-``b_i``,
+Angular cost (paper eq. 7): ``0.5 * sum_i |W_i r_i|^2`` where ``r_i`` is the
+2-vector log map of the reprojected bearing ``q_i = normalize(R p_i + t)``
+into the tangent plane of the clicked bearing ``b_i``,
 
     r_i = theta_i / sin(theta_i) * E_i q_i,   theta_i = atan2(|b_i x q_i|, b_i . q_i),
 
 where the rows of ``E_i`` (2x3) are an orthonormal basis of that tangent plane.
-``|r_i| = theta_i`` exactly, so ``sum |r_i|^2`` is the paper's cost, each pair
-gives two equations, and, unlike ``arccos``, ``r_i`` is smooth at
-``theta = 0``.
+``|r_i| = theta_i`` exactly, so with ``W_i = I`` the sum is the paper's cost;
+each pair gives two equations, and, unlike ``arccos``, ``r_i`` is smooth at
+``theta = 0``.  ``W_i`` whitens the residual (:mod:`calib_core.solve.whiten`).
+The residual, its Jacobian and the Levenberg-Marquardt loop are compiled
+(:mod:`calib_core.solve.kernels`); this module wraps them.
 
-Pixel cost (paper eq. 6): ``r_i = project(R p_i + t) - m_i``.
+Pixel cost (paper eq. 6, for comparisons): ``r_i = project(R p_i + t) - m_i``,
+minimised with scipy's MINPACK LM (the camera models are Python).
 
 Pose parameters: ``x = (delta, t)`` with ``R = exp([delta]_x) R0`` (rotation
 vector ``delta`` in radians, a perturbation about the camera axes of a fixed
@@ -29,6 +31,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..errors import CalibError
+from . import kernels
 
 __all__ = [
     "PARAMETER_NAMES",
@@ -45,7 +48,13 @@ __all__ = [
     "rpy_jacobian",
     "pose_covariance",
     "covariance_from_jacobian",
+    "covariance_from_normal",
+    "uncertainty_from_covariance",
+    "LM_MAX_ITER",
 ]
+
+#: Levenberg-Marquardt iterations before the solve gives up.
+LM_MAX_ITER = 200
 
 #: Names of the 6 pose parameters, in the order of the Jacobian columns and of
 #: ``covariance_6x6``.
@@ -129,17 +138,11 @@ def tangent_basis(bearings_camera: np.ndarray) -> np.ndarray:
     (N, 2, 3) ndarray
         Rows ``e1, e2`` with ``(e1, e2, b)`` a right-handed orthonormal frame.
     """
-    b = np.asarray(bearings_camera, dtype=np.float64)
-    # Cross with the coordinate axis least aligned with b (never parallel).
-    axis = np.eye(3)[np.argmin(np.abs(b), axis=1)]
-    e1 = cross3(b, axis)
-    e1 /= np.sqrt(np.einsum("ij,ij->i", e1, e1))[:, None]
-    e2 = cross3(b, e1)
-    return np.stack([e1, e2], axis=1)
+    return bearing_frames(bearings_camera)[:, :2, :].copy()
 
 
 def bearing_frames(bearings_camera: np.ndarray, E: np.ndarray | None = None) -> np.ndarray:
-    """Per-bearing orthonormal frames, rows ``e1, e2, b``.
+    """Per-bearing orthonormal frames, rows ``e1, e2, b`` (:func:`calib_core.solve.kernels.bearing_frames`).
 
     Parameters
     ----------
@@ -154,62 +157,14 @@ def bearing_frames(bearings_camera: np.ndarray, E: np.ndarray | None = None) -> 
         One product ``frames @ P`` gives a point's two tangent components and
         its component along the bearing (metres, like ``P``).
     """
-    b = np.asarray(bearings_camera, dtype=np.float64)
+    b = np.ascontiguousarray(bearings_camera, dtype=np.float64)
     if E is None:
-        E = tangent_basis(b)
+        return kernels.bearing_frames(b)
     return np.concatenate([E, b[:, None, :]], axis=1)
 
 
-class _LogMap(NamedTuple):
-    """Log map of points (camera frame) against bearings, with what its derivative needs."""
-
-    w: np.ndarray  # (N, 2) tangent components of the unit direction q
-    theta: np.ndarray  # (N,) geodesic angle, radians
-    g: np.ndarray  # (N,) theta / sin(theta)
-    h: np.ndarray  # (N,) (cos sin - theta) / sin^3
-    inv_norm: np.ndarray  # (N,) 1 / |P| (1 for P = 0)
-
-    @property
-    def residuals(self) -> np.ndarray:
-        return self.g[:, None] * self.w
-
-
-def _log_map(points_camera: np.ndarray, frames: np.ndarray) -> _LogMap:
-    y = np.einsum("nij,nj->ni", frames, points_camera)  # (e1.P, e2.P, b.P)
-    s_unit = np.hypot(y[:, 0], y[:, 1])
-    norm = np.hypot(s_unit, y[:, 2])  # |P|: the frame is orthonormal
-    inv_norm = 1.0 / np.where(norm > 0, norm, 1.0)
-    theta = np.arctan2(s_unit, y[:, 2])
-    s, c = s_unit * inv_norm, y[:, 2] * inv_norm
-    small = theta < 1e-3
-    if small.any():
-        s_safe = np.where(small, 1.0, s)
-        # g = theta / sin(theta); h = (cos sin - theta) / sin^3 (series near 0).
-        g = np.where(small, 1 + theta**2 / 6 + 7 * theta**4 / 360, theta / s_safe)
-        h = np.where(small, -2.0 / 3 - theta**2 / 5, (c * s_safe - theta) / s_safe**3)
-    else:
-        g = theta / s
-        h = (c * s - theta) / s**3
-    return _LogMap(y[:, :2] * inv_norm[:, None], theta, g, h, inv_norm)
-
-
-def _d_residual_d_point(lm: _LogMap, frames: np.ndarray) -> np.ndarray:
-    """``d r_i / d P_i`` (N, 2, 3) of the log-map residuals.
-
-    In the frame ``(e1, e2, b)`` of each bearing, with ``q = P / |P|`` in that
-    frame ``(w1, w2, c)``: ``dr/dq = [g I + h w w^T | -w]``.  Its component
-    along ``q`` is ``w (g + h s^2 - c) = 0`` (``r`` depends on the direction
-    only), so ``dr/dP = dr/dq F / |P|`` with no projection needed.
-    """
-    n = len(lm.w)
-    D = np.empty((n, 2, 3))
-    hw = lm.h[:, None] * lm.w
-    D[:, :, :2] = hw[:, :, None] * lm.w[:, None, :]
-    D[:, 0, 0] += lm.g
-    D[:, 1, 1] += lm.g
-    D[:, :, 2] = -lm.w
-    D *= lm.inv_norm[:, None, None]
-    return D @ frames
+def _identity_W(n: int) -> np.ndarray:
+    return np.broadcast_to(np.eye(2), (n, 2, 2)).copy()
 
 
 def log_map_residuals(points_camera: np.ndarray, bearings_camera: np.ndarray, E: np.ndarray) -> np.ndarray:
@@ -219,62 +174,27 @@ def log_map_residuals(points_camera: np.ndarray, bearings_camera: np.ndarray, E:
     bearing and the direction of the point.  ``E`` comes from
     :func:`tangent_basis` of the same bearings.
     """
-    return _log_map(points_camera, bearing_frames(bearings_camera, E)).residuals
+    P = np.ascontiguousarray(points_camera, dtype=np.float64)
+    frames = bearing_frames(bearings_camera, E)
+    z, _ = kernels.whitened_residuals(np.eye(3), np.zeros(3), P, frames, _identity_W(len(P)))
+    return z
 
 
 def _pose(x: np.ndarray, R0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return _rotation_matrix(x[:3]) @ R0, x[3:]
 
 
-class _AngularCost:
-    """Residuals and Jacobian of the angular cost as functions of ``x = (delta, t)``.
-
-    MINPACK asks for the Jacobian at the point whose residuals it evaluated
-    last, so the pose-dependent quantities are kept for the last ``x``.
-    """
-
-    def __init__(self, R0: np.ndarray, points_lidar: np.ndarray, frames: np.ndarray) -> None:
-        self.R0 = R0
-        self.points = points_lidar
-        self.frames = frames
-        self._key: bytes | None = None
-
-    def _at(self, x: np.ndarray) -> tuple[np.ndarray, _LogMap]:
-        key = x.tobytes()
-        if key != self._key:
-            R, t = _pose(x, self.R0)
-            rotated = self.points @ R.T
-            self._rotated, self._lm = rotated, _log_map(rotated + t, self.frames)
-            self._key = key
-        return self._rotated, self._lm
-
-    def residuals(self, x: np.ndarray) -> np.ndarray:
-        """``(2N,)`` log-map residuals, radians."""
-        return self._at(x)[1].residuals.ravel()
-
-    def jacobian(self, x: np.ndarray) -> np.ndarray:
-        """``(2N, 6)`` analytic Jacobian w.r.t. ``(delta, t)``."""
-        rotated, lm = self._at(x)
-        dr_dP = _d_residual_d_point(lm, self.frames)
-        n = len(rotated)
-        J = np.empty((n, 2, 6))
-        J[:, :, 3:] = dr_dP  # dP/dt = I
-        # d(exp(delta) R0 p)/d delta = -[R p]_x J_l(delta); a row d times -[a]_x is a x d.
-        a, d = rotated[:, None, :], dr_dP
-        cross = np.empty((n, 2, 3))
-        cross[..., 0] = a[..., 1] * d[..., 2] - a[..., 2] * d[..., 1]
-        cross[..., 1] = a[..., 2] * d[..., 0] - a[..., 0] * d[..., 2]
-        cross[..., 2] = a[..., 0] * d[..., 1] - a[..., 1] * d[..., 0]
-        J[:, :, :3] = cross @ _left_jacobian_so3(x[:3])
-        return J.reshape(-1, 6)
-
-
 def angular_jacobian(
     x: np.ndarray, R0: np.ndarray, points_lidar: np.ndarray, bearings_camera: np.ndarray, E: np.ndarray
 ) -> np.ndarray:
-    """Analytic Jacobian ``(2N, 6)`` of the log-map residuals w.r.t. ``x = (delta, t)``."""
-    frames = bearing_frames(bearings_camera, E)
-    return _AngularCost(R0, np.asarray(points_lidar, dtype=np.float64), frames).jacobian(np.asarray(x, dtype=np.float64))
+    """Analytic Jacobian ``(2N, 6)`` of the log-map residuals w.r.t. ``x = (delta, t)``, ``R = exp(delta) R0``."""
+    x = np.asarray(x, dtype=np.float64)
+    R, t = _pose(x, R0)
+    P = np.ascontiguousarray(points_lidar, dtype=np.float64)
+    J = kernels.jacobian(R, np.ascontiguousarray(t), P, bearing_frames(bearings_camera, E), _identity_W(len(P)))
+    # The kernel differentiates a left perturbation at R; exp(delta + d) R0 = exp(J_l d) exp(delta) R0.
+    J[:, :3] = J[:, :3] @ _left_jacobian_so3(x[:3])
+    return J
 
 
 def pixel_residuals(
@@ -326,6 +246,7 @@ def refine_pose(
     cost: str = "angular",
     camera: Any = None,
     pixels: np.ndarray | None = None,
+    pixel_sigma: np.ndarray | None = None,
 ) -> tuple[np.ndarray, int]:
     """Minimise the angular (eq. 7) or pixel (eq. 6) cost from ``T_initial``.
 
@@ -342,6 +263,10 @@ def refine_pose(
     camera : CameraModel, optional
     pixels : (N, 2) ndarray, optional
         Clicked ``(u, v)`` pixels.
+    pixel_sigma : (N,) ndarray, optional
+        1-sigma of each click, px: the pixel residuals are divided by it.
+        (The angular cost here is unwhitened; :func:`calib_core.solve.solve_extrinsics`
+        whitens it.)
 
     Returns
     -------
@@ -368,12 +293,14 @@ def refine_pose(
                 "at the initial pose"
             )
 
+        inv_s = 1.0 if pixel_sigma is None else np.repeat(1.0 / np.asarray(pixel_sigma, dtype=np.float64), 2)
+
         def fun(x: np.ndarray) -> np.ndarray:
-            r = pixel_residuals(x, R0, points_lidar, pixels, camera).ravel()
+            r = pixel_residuals(x, R0, points_lidar, pixels, camera).ravel() * inv_s
             return np.where(np.isfinite(r), r, _UNPROJECTABLE_PX)
 
         def jac(x: np.ndarray) -> np.ndarray:
-            J = pixel_jacobian(x, R0, points_lidar, pixels, camera)
+            J = pixel_jacobian(x, R0, points_lidar, pixels, camera) * (inv_s if np.ndim(inv_s) == 0 else inv_s[:, None])
             return np.where(np.isfinite(J), J, 0.0)
 
     else:
@@ -392,36 +319,63 @@ def _iterations(sol: Any) -> int:
     return int(sol.njev) if sol.njev is not None else int(sol.nfev)
 
 
-def refine_angular(T_initial: np.ndarray, points_lidar: np.ndarray, frames: np.ndarray) -> tuple[np.ndarray, int]:
-    """:func:`refine_pose` with the angular cost, given the bearing frames.
+def refine_angular(
+    T_initial: np.ndarray, points_lidar: np.ndarray, frames: np.ndarray, W: np.ndarray | None = None
+) -> tuple[np.ndarray, int]:
+    """:func:`refine_pose` with the (whitened) angular cost, given the bearing frames.
 
-    ``frames`` (N, 3, 3) has rows ``e1, e2, b`` per bearing (:func:`bearing_frames`),
-    so a caller that refines several times computes them once.
+    Parameters
+    ----------
+    T_initial : (4, 4) ndarray
+        Starting ``T_camera_lidar``.
+    points_lidar : (N, 3) ndarray
+        Laser points, lidar frame, metres.
+    frames : (N, 3, 3) ndarray
+        Rows ``e1, e2, b`` per bearing (:func:`bearing_frames`), so a caller
+        that refines several times computes them once.
+    W : (N, 2, 2) ndarray, optional
+        Whitening matrices; identity (paper eq. 7 as printed) when omitted.
+
+    Raises
+    ------
+    CalibError
+        The normal equations are singular or the cost is not finite.
     """
-    problem = _AngularCost(T_initial[:3, :3], np.asarray(points_lidar, dtype=np.float64), frames)
-    sol = _run_lm(problem.residuals, problem.jacobian, np.concatenate([np.zeros(3), T_initial[:3, 3]]), "angular")
-    return _pose_matrix(sol.x, problem.R0), _iterations(sol)
+    P = np.ascontiguousarray(points_lidar, dtype=np.float64)
+    W = _identity_W(len(P)) if W is None else np.ascontiguousarray(W, dtype=np.float64)
+    T0 = np.asarray(T_initial, dtype=np.float64)
+    R, t, iterations, status = kernels.lm_refine(
+        np.ascontiguousarray(T0[:3, :3]), np.ascontiguousarray(T0[:3, 3]), P, frames, W, LM_MAX_ITER
+    )
+    if status == -2 or not (np.all(np.isfinite(R)) and np.all(np.isfinite(t))):
+        raise CalibError("Levenberg-Marquardt (angular) failed: the cost is not finite at the initial pose")
+    if status == -1:
+        raise CalibError("Levenberg-Marquardt (angular) failed: the normal equations are singular (degenerate pairs)")
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R, t
+    return T, int(iterations)
 
 
 def angular_at_pose(
-    T_camera_lidar: np.ndarray, points_lidar: np.ndarray, frames: np.ndarray
+    T_camera_lidar: np.ndarray, points_lidar: np.ndarray, frames: np.ndarray, W: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Jacobian, residuals and angles of the angular cost at a pose.
+    """Jacobian, residuals and angles of the (whitened) angular cost at a pose.
 
     Returns
     -------
     J : (2N, 6) ndarray
         Jacobian w.r.t. ``(delta, t)`` about ``T_camera_lidar`` (``delta = 0``).
     residuals : (2N,) ndarray
-        Log-map residuals, radians.
+        Whitened log-map residuals (radians when ``W`` is omitted).
     angle_rad : (N,) ndarray
         Geodesic angle between each bearing and its transformed point.
     """
-    problem = _AngularCost(T_camera_lidar[:3, :3], np.asarray(points_lidar, dtype=np.float64), frames)
-    x = np.concatenate([np.zeros(3), T_camera_lidar[:3, 3]])
-    J = problem.jacobian(x)
-    lm = problem._at(x)[1]
-    return J, lm.residuals.ravel(), lm.theta
+    T = np.asarray(T_camera_lidar, dtype=np.float64)
+    P = np.ascontiguousarray(points_lidar, dtype=np.float64)
+    W = _identity_W(len(P)) if W is None else np.ascontiguousarray(W, dtype=np.float64)
+    R, t = np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3])
+    z, theta = kernels.whitened_residuals(R, t, P, frames, W)
+    return kernels.jacobian(R, t, P, frames, W), z.ravel(), theta
 
 
 def rpy_jacobian(R: np.ndarray) -> np.ndarray:
@@ -466,39 +420,33 @@ class PoseUncertainty(NamedTuple):
     JtJ: np.ndarray
 
 
-def covariance_from_jacobian(J: np.ndarray, sigma: float, R: np.ndarray) -> PoseUncertainty:
+def uncertainty_from_covariance(cov: np.ndarray, JtJ: np.ndarray, R: np.ndarray) -> PoseUncertainty:
+    """Sigmas of ``t`` and of roll/pitch/yaw from the 6x6 covariance of ``(delta, t)`` at rotation ``R``."""
+    sigma_t, sigma_rpy = kernels.rpy_sigmas(np.ascontiguousarray(R, dtype=np.float64), cov)
+    return PoseUncertainty(cov, sigma_t, sigma_rpy, JtJ)
+
+
+def covariance_from_normal(JtJ: np.ndarray, sigma: float, R: np.ndarray) -> PoseUncertainty:
     """``sigma^2 (J^T J)^-1`` and the sigmas of ``t`` and of roll/pitch/yaw.
 
     Parameters
     ----------
-    J : (2N, 6) ndarray
-        Jacobian of the residuals w.r.t. ``(delta, t)`` at the estimate.
+    JtJ : (6, 6) ndarray
+        Normal matrix of the residuals w.r.t. ``(delta, t)`` at the estimate.
     sigma : float
-        Standard deviation of one residual component (radians for the angular
-        cost, pixels for the pixel cost).
+        Standard deviation of one residual component, in the residuals' unit.
     R : (3, 3) ndarray
         Estimated rotation (for the roll/pitch/yaw Jacobian).
     """
-    JtJ = J.T @ J
-    # Inverse of the Jacobi-scaled matrix: rotations (rad) and translations (m)
-    # differ in scale by orders of magnitude.
-    d = np.sqrt(np.diag(JtJ))
-    if np.all(d > 0) and np.all(np.isfinite(JtJ)):
-        scaled = JtJ / d[:, None] / d[None, :]
-        eigval, eigvec = np.linalg.eigh(scaled)
-        if eigval[0] > 1e-14 * eigval[-1]:
-            inv_scaled = (eigvec / eigval) @ eigvec.T
-            cov = sigma**2 * inv_scaled / d[:, None] / d[None, :]
-        else:
-            cov = np.full((6, 6), np.inf)
-    else:
-        cov = np.full((6, 6), np.inf)
-    sigma_t = np.sqrt(np.diag(cov)[3:])
-    G = rpy_jacobian(R)
-    finite = np.all(np.isfinite(cov)) and np.all(np.isfinite(G))
-    cov_rpy = G @ cov[:3, :3] @ G.T if finite else np.full((3, 3), np.inf)
-    sigma_rpy = np.degrees(np.sqrt(np.abs(np.diag(cov_rpy))))
-    return PoseUncertainty(cov, sigma_t, sigma_rpy, JtJ)
+    JtJ = np.ascontiguousarray(JtJ, dtype=np.float64)
+    cov, _ = kernels.covariance(JtJ, float(sigma))
+    return uncertainty_from_covariance(cov, JtJ, np.asarray(R, dtype=np.float64))
+
+
+def covariance_from_jacobian(J: np.ndarray, sigma: float, R: np.ndarray) -> PoseUncertainty:
+    """:func:`covariance_from_normal` of ``J^T J`` for a ``(2N, 6)`` Jacobian ``J``."""
+    J = np.asarray(J, dtype=np.float64)
+    return covariance_from_normal(J.T @ J, sigma, R)
 
 
 def pose_covariance(T_camera_lidar: np.ndarray, points_lidar: np.ndarray, noise_rad: float) -> PoseUncertainty:
@@ -519,9 +467,10 @@ def pose_covariance(T_camera_lidar: np.ndarray, points_lidar: np.ndarray, noise_
         tangent directions, radians.
     """
     T = np.asarray(T_camera_lidar, dtype=np.float64)
-    points = np.asarray(points_lidar, dtype=np.float64)
+    points = np.ascontiguousarray(points_lidar, dtype=np.float64)
     points_camera = points @ T[:3, :3].T + T[:3, 3]
     bearings = points_camera / np.linalg.norm(points_camera, axis=1, keepdims=True)
-    E = tangent_basis(bearings)
-    J = angular_jacobian(np.concatenate([np.zeros(3), T[:3, 3]]), T[:3, :3], points, bearings, E)
-    return covariance_from_jacobian(J, float(noise_rad), T[:3, :3])
+    frames = bearing_frames(bearings)
+    R, t = np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3])
+    H, _, _ = kernels.normal_equations(R, t, points, frames, _identity_W(len(points)))
+    return covariance_from_normal(H, float(noise_rad), T[:3, :3])

@@ -11,12 +11,15 @@ closed form is the same as
 * S. Umeyama, "Least-squares estimation of transformation parameters between
   two point patterns", IEEE PAMI 13(4), 1991 (the reflection correction).
 
-Here: Arun's SVD with Umeyama's determinant fix, batched over leading axes.
+Here: Arun's SVD with Umeyama's determinant fix, batched over leading axes, compiled
+(:func:`calib_core.solve.kernels.rigid_fit_batch`).
 """
 
 from __future__ import annotations
 
 import numpy as np
+
+from . import kernels
 
 
 def rigid_fit(points_src: np.ndarray, points_dst: np.ndarray) -> np.ndarray:
@@ -39,21 +42,9 @@ def rigid_fit(points_src: np.ndarray, points_dst: np.ndarray) -> np.ndarray:
     """
     src = np.asarray(points_src, dtype=np.float64)
     dst = np.asarray(points_dst, dtype=np.float64)
-    mu_src = src.mean(axis=-2, keepdims=True)
-    mu_dst = dst.mean(axis=-2, keepdims=True)
-    # Cross-covariance H = sum (p_src - mu_src)(p_dst - mu_dst)^T.
-    H = np.swapaxes(src - mu_src, -1, -2) @ (dst - mu_dst)
-    U, _, Vt = np.linalg.svd(H)
-    V = np.swapaxes(Vt, -1, -2)
-    # Umeyama: flip the least-significant axis if the SVD gives a reflection.
-    sign = np.sign(np.linalg.det(V @ np.swapaxes(U, -1, -2)))
-    sign = np.where(sign == 0, 1.0, sign)
-    D = np.broadcast_to(np.eye(3), H.shape).copy()
-    D[..., 2, 2] = sign
-    R = V @ D @ np.swapaxes(U, -1, -2)
-    t = mu_dst[..., 0, :] - (R @ mu_src[..., 0, :, None])[..., 0]
-    T = np.zeros(H.shape[:-2] + (4, 4))
-    T[..., :3, :3] = R
-    T[..., :3, 3] = t
-    T[..., 3, 3] = 1.0
-    return T
+    lead = src.shape[:-2]
+    n = src.shape[-2]
+    T = kernels.rigid_fit_batch(
+        np.ascontiguousarray(src.reshape(-1, n, 3)), np.ascontiguousarray(dst.reshape(-1, n, 3))
+    )
+    return T.reshape(lead + (4, 4))

@@ -1,0 +1,373 @@
+"""The solve against OpenCV, side by side in one run, on identical pairs (issue 12).
+
+``python -m bench.solve_vs_opencv [--quick] [--out FILE]`` prints the tables and
+writes them as markdown (default ``docs/perf/solve_vs_opencv.md``).
+
+Sections
+--------
+1. **JIT**: numba compile time of every solve kernel (fresh cache directory,
+   in a subprocess) and the start-up with a warm cache (second subprocess).
+2. **Speed**: pinhole (1280x960, f = 640 px, OpenCV's model) and the sample's
+   OCam camera, n = 10 / 100 / 1000 pairs.  Per trial the same pairs go to
+
+   * ``solve_extrinsics`` -- the whole public solve: input checks, whitening
+     (one ``camera.project``), DLT start, compiled LM, outlier check,
+     covariance, quality verdict, pixel residuals (one more ``camera.project``);
+   * ``pose_core`` -- the compiled solve alone (frames, DLT, LM, covariance),
+     given the whitening: the same work as OpenCV's pair below;
+   * OpenCV ``solvePnP(SOLVEPNP_SQPNP)`` + ``solvePnPRefineLM`` (pinhole only:
+     OpenCV has no OCam model).
+
+   Methods alternate within each trial so that load changes hit all alike;
+   figures are medians.  The robust search is timed separately, with 10 %
+   gross outliers.
+3. **Accuracy**: simulated clicks (``simulate_pairs``: 1 px clicks, whole-cell
+   laser picks) on the sample scene.  Pinhole variant (``bench.compare``):
+   ours vs OpenCV on the same pairs.  OCam: ours vs the Cramer-Rao bound of
+   ``bench.crb`` with the laser term (the realistic bound).
+4. **Sigma coverage**: the share of trials whose error lies within the
+   reported 1 sigma and 2 sigma, per parameter (nominal 68.3 % and 95.4 %).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from .common import BENCH_SEED, REPO, log
+
+PIN_SIZE = (1280, 960)
+PIN_F = 640.0
+PARAMS = ("roll", "pitch", "yaw", "tx", "ty", "tz")
+
+
+# ------------------------------------------------------------------ JIT
+_JIT_SNIPPET = (
+    "import time; t0 = time.perf_counter(); import calib_core.solve as s; t1 = time.perf_counter(); "
+    "w = s.warm_up(); t2 = time.perf_counter(); w2 = s.warm_up(); "
+    "print(f'{t1 - t0:.4f} {w:.4f} {w2:.4f}')"
+)
+
+
+def jit_times() -> dict:
+    """Import, first warm-up (compile or cache load) and second warm-up, cold cache then warm cache."""
+    out = {}
+    with tempfile.TemporaryDirectory(prefix="ba-calib-numba-") as cache:
+        env = dict(os.environ, NUMBA_CACHE_DIR=cache, PYTHONPATH=str(REPO))
+        for label in ("cold cache (compile)", "warm cache"):
+            proc = subprocess.run([sys.executable, "-c", _JIT_SNIPPET], capture_output=True, text=True, env=env,
+                                  cwd=REPO, timeout=900)
+            if proc.returncode != 0:
+                raise RuntimeError(proc.stderr)
+            imp, first, second = (float(x) for x in proc.stdout.split())
+            out[label] = (imp, first, second)
+    return out
+
+
+# ------------------------------------------------------------------ speed
+def pinhole_camera():
+    from calib_core.cameras import PinholeCamera
+
+    w, h = PIN_SIZE
+    K = np.array([[PIN_F, 0.0, (w - 1) / 2.0], [0.0, PIN_F, (h - 1) / 2.0], [0.0, 0.0, 1.0]])
+    return PinholeCamera(K, np.zeros(5), w, h)
+
+
+def random_pairs(camera, n: int, rng: np.random.Generator, T: np.ndarray, noise_px: float = 1.0):
+    """Pixels spread over the image (inside its valid rays), points 2-15 m deep, clicks with 1 px noise."""
+    px, brg = np.empty((0, 2)), np.empty((0, 3))
+    while len(px) < n:
+        cand = np.column_stack([rng.uniform(10, camera.width - 10, 2 * n), rng.uniform(10, camera.height - 10, 2 * n)])
+        b = camera.bearing(cand)
+        ok = np.isfinite(b).all(axis=1)
+        px, brg = np.concatenate([px, cand[ok]]), np.concatenate([brg, b[ok]])
+    px, brg = px[:n], brg[:n]
+    pc = brg * rng.uniform(2.0, 15.0, (n, 1))
+    pl = (pc - T[:3, 3]) @ T[:3, :3]
+    clicked = px + rng.normal(0.0, noise_px, px.shape)
+    return np.ascontiguousarray(pl), np.ascontiguousarray(camera.bearing(clicked)), clicked
+
+
+def _opencv(camera, pl, px):
+    ok, rvec, tvec = cv2.solvePnP(pl, px, camera.K, camera.dist, flags=cv2.SOLVEPNP_SQPNP)
+    if ok:
+        rvec, tvec = cv2.solvePnPRefineLM(pl, px, camera.K, camera.dist, rvec, tvec)
+    return ok, rvec, tvec
+
+
+def _clock(fn, reps: int) -> tuple[float, float]:
+    """Median wall time and median CPU time of this process (seconds) over ``reps`` calls.
+
+    On a shared machine a call that spans several scheduler time slices is
+    preempted by other jobs, which inflates its wall time; the process's CPU
+    time (``time.process_time``, all threads) is not, so it is the fairer figure.
+    """
+    wall, cpu = [], []
+    for _ in range(reps):
+        c0 = time.process_time()
+        t0 = time.perf_counter()
+        fn()
+        wall.append(time.perf_counter() - t0)
+        cpu.append(time.process_time() - c0)
+    return float(np.median(wall)), float(np.median(cpu))
+
+
+def speed(quick: bool) -> list[dict]:
+    from calib_core.solve import kernels, solve_extrinsics
+    from calib_core.solve.whiten import whitening
+    from calib_core.synthetic import load_sample
+
+    rows = []
+    T = np.eye(4)
+    T[:3, 3] = [0.1, -0.05, 0.2]
+    cams = [("pinhole", pinhole_camera()), ("OCam (sample)", load_sample(REPO / "sample_data").camera)]
+    for cam_name, cam in cams:
+        for n in (10, 100, 1000):
+            trials = (4 if quick else 12) if n < 1000 else (3 if quick else 8)
+            reps = 5 if n < 1000 else 3
+            rng = np.random.default_rng([BENCH_SEED, 12, n])
+            t: dict = {k: [] for k in ("full", "core", "opencv", "robust")}
+            for _ in range(trials):
+                pl, brg, px = random_pairs(cam, n, rng, T)
+                F = kernels.bearing_frames(brg)
+                W, _ = whitening(n, camera=cam, frames=F)
+                t["full"].append(_clock(lambda: solve_extrinsics(pl, brg, camera=cam, pixels=px), reps))
+                t["core"].append(_clock(lambda: kernels.pose_core(pl, brg, W, 200), reps))
+                if cam_name == "pinhole":
+                    t["opencv"].append(_clock(lambda: _opencv(cam, pl, px), reps))
+                # 10 % gross outliers (at least one): stray clicks 30-80 px off.
+                bad = rng.choice(n, max(1, n // 10), replace=False)
+                px_bad = px.copy()
+                px_bad[bad] += rng.choice([-1, 1], (len(bad), 2)) * rng.uniform(30, 80, (len(bad), 2))
+                brg_bad = cam.bearing(px_bad)
+                inside = (px_bad >= 0).all(axis=1) & (px_bad[:, 0] <= cam.width - 1) & (px_bad[:, 1] <= cam.height - 1)
+                good = np.isfinite(brg_bad).all(axis=1) & inside  # strays that left the image are dropped
+                t["robust"].append(_clock(lambda: solve_extrinsics(pl[good], brg_bad[good], camera=cam,
+                                                                   pixels=px_bad[good]), max(1, reps - 2)))
+            row = {"camera": cam_name, "n": n, "trials": trials}
+            for k, v in t.items():
+                arr = np.array(v) if v else np.full((1, 2), np.nan)
+                row[k], row[k + "_wall"] = float(np.median(arr[:, 1])), float(np.median(arr[:, 0]))
+            rows.append(row)
+            log(f"  speed {cam_name} n={n} (CPU time): full {1e3 * row['full']:.3f} ms, core {1e3 * row['core']:.3f} ms, "
+                f"opencv {1e3 * row['opencv']:.3f} ms, robust (10 % outliers) {1e3 * row['robust']:.3f} ms; wall: "
+                f"full {1e3 * row['full_wall']:.3f}, core {1e3 * row['core_wall']:.3f}, "
+                f"opencv {1e3 * row['opencv_wall']:.3f}")
+    return rows
+
+
+# ------------------------------------------------------------------ accuracy
+def accuracy(quick: bool) -> tuple[list[dict], list[dict]]:
+    from calib_core.errors import CalibError
+    from calib_core.pairs import resolve_pairs
+    from calib_core.solve import calibrate
+    from calib_core.synthetic import simulate_pairs
+
+    from .common import load_scenes, pose_error
+    from .compare import pinhole_variant
+    from .crb import cell_rounding_covariance, cramer_rao, mean_error_of_bound
+
+    trials = 20 if quick else 100
+    scenes = load_scenes(())
+    omni = scenes[0]
+    pin = pinhole_variant(omni)
+    pin_rows, omni_rows = [], []
+    rng_b = np.random.default_rng(0)
+    from calib_core.transforms import rpy_deg_from_R
+
+    rpy_true = rpy_deg_from_R(omni.scene.T_camera_lidar[:3, :3])
+    for n in (6, 10, 20, 50):
+        errs: dict = {"ours": [], "opencv": [], "ours_omni": [], "bound": []}
+        for k in range(trials):
+            # Pinhole: the same pairs to both.
+            # The 90 deg pinhole view holds 40 corners of the sample, some sharing a depth cell: at most 30 pairs.
+            n_pin = min(n, 30)
+            if n_pin >= 6:
+                pairs = simulate_pairs(pin.scene, n_pin, np.random.default_rng([BENCH_SEED, 77, n, k]),
+                                       pixel_noise_px=1.0)
+                pts, _, px = resolve_pairs(pairs, pin.scene.depth, pin.scene.camera)
+                try:
+                    res = calibrate(pairs, pin.scene.depth, pin.scene.camera)
+                    e = pose_error(res.T_camera_lidar, pin.scene.T_camera_lidar)
+                    errs["ours"].append((e.rotation_deg, e.translation_norm_m))
+                except CalibError:
+                    errs["ours"].append((np.nan, np.nan))
+                ok, rvec, tvec = _opencv(pin.scene.camera, np.ascontiguousarray(pts), np.ascontiguousarray(px))
+                T = np.eye(4)
+                T[:3, :3], T[:3, 3] = cv2.Rodrigues(rvec)[0], tvec.ravel()
+                e = pose_error(T, pin.scene.T_camera_lidar)
+                errs["opencv"].append((e.rotation_deg, e.translation_norm_m) if ok else (np.nan, np.nan))
+            # OCam: ours against the realistic Cramer-Rao bound of the same pairs.
+            pairs = simulate_pairs(omni.scene, n, np.random.default_rng([BENCH_SEED, 78, n, k]), pixel_noise_px=1.0)
+            res = calibrate(pairs, omni.scene.depth, omni.scene.camera)
+            e = pose_error(res.T_camera_lidar, omni.scene.T_camera_lidar)
+            errs["ours_omni"].append((e.rotation_deg, e.translation_norm_m))
+            rc = np.array([p.laser_rc for p in pairs])
+            pts = omni.scene.depth.points[rc[:, 0], rc[:, 1]]
+            bound = cramer_rao(omni.scene.camera, omni.scene.T_camera_lidar, pts, 1.0,
+                               cell_rounding_covariance(omni.scene.depth, rc, 0.01))
+            errs["bound"].append(mean_error_of_bound(bound.covariance, rpy_true, rng_b, 1000 if quick else 4000))
+        m = {k: np.nanmean(np.array(v), axis=0) if v else np.array([np.nan, np.nan]) for k, v in errs.items()}
+        fails = int(np.sum(np.isnan(np.array(errs["ours"])[:, 0]))) if errs["ours"] else 0
+        pin_rows.append({"n": min(n, 30), "trials": len(errs["ours"]), "fails": fails, "ours": m["ours"],
+                         "opencv": m["opencv"]})
+        omni_rows.append({"n": n, "trials": trials, "ours": m["ours_omni"], "bound": m["bound"]})
+        log(f"  accuracy n={n}: pinhole ours {m['ours'][0]:.4f} deg {100 * m['ours'][1]:.3f} cm vs opencv "
+            f"{m['opencv'][0]:.4f} deg {100 * m['opencv'][1]:.3f} cm; OCam ours {m['ours_omni'][0]:.4f} deg "
+            f"{100 * m['ours_omni'][1]:.3f} cm vs bound {m['bound'][0]:.4f} deg {100 * m['bound'][1]:.3f} cm")
+    return pin_rows, omni_rows
+
+
+# ------------------------------------------------------------------ coverage
+def coverage(quick: bool, n: int = 10) -> dict:
+    """Share of trials within the reported 1 and 2 sigma, per parameter, on the sample (OCam).
+
+    Two noise models, each with its own trials: *realistic* (``simulate_pairs``: 1 px clicks and
+    whole-cell laser picks, solved with ``calibrate``) and *clicks only* (the picked cells' points
+    taken as exact, clicks = their true projections + 1 px noise, solved with ``solve_extrinsics``).
+    """
+    from calib_core.pairs import resolve_pairs
+    from calib_core.solve import calibrate, solve_extrinsics
+    from calib_core.synthetic import simulate_pairs
+    from calib_core.transforms import rpy_deg_from_R, transform_points
+
+    from .common import load_scenes, wrap_deg
+
+    trials = 60 if quick else 300
+    sc = load_scenes(())[0].scene
+    T_true = sc.T_camera_lidar
+    true_rpy = rpy_deg_from_R(T_true[:3, :3])
+    out = {"n": n}
+    for model in ("realistic", "clicks only"):
+        within = np.zeros((2, 6))
+        used = 0
+        for k in range(trials):
+            rng = np.random.default_rng([BENCH_SEED, 79 if model == "realistic" else 80, n, k])
+            pairs = simulate_pairs(sc, n, rng, pixel_noise_px=1.0)
+            if model == "realistic":
+                res = calibrate(pairs, sc.depth, sc.camera)
+            else:
+                pts, _, _ = resolve_pairs(pairs, sc.depth, sc.camera)
+                uv, ok = sc.camera.project(transform_points(T_true, pts))
+                clicked = uv + rng.normal(0.0, 1.0, uv.shape)
+                b = sc.camera.bearing(clicked)
+                if not (ok.all() and np.isfinite(b).all()):
+                    continue
+                res = solve_extrinsics(pts, b, camera=sc.camera, pixels=clicked)
+            if res.quality.status == "unreliable":
+                continue
+            err = np.concatenate([wrap_deg(rpy_deg_from_R(res.T_camera_lidar[:3, :3]) - true_rpy),
+                                  res.T_camera_lidar[:3, 3] - T_true[:3, 3]])
+            sig = np.concatenate([res.sigma_rpy_deg, res.sigma_translation_m])
+            within[0] += np.abs(err) <= sig
+            within[1] += np.abs(err) <= 2 * sig
+            used += 1
+        out[model] = {"trials": used, "one": within[0] / used, "two": within[1] / used}
+    return out
+
+
+# ------------------------------------------------------------------ report
+def markdown(jit, sp, pin_rows, omni_rows, cov, load, quick, cmd) -> str:
+    L = ["# Solve against OpenCV (issue 12)\n",
+         f"Generated by `{cmd}` on {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; "
+         f"OpenCV {cv2.__version__}, numpy {np.__version__}. "
+         f"Load average (1 min) {load[0]:.1f} at the start and {load[1]:.1f} at the end on "
+         f"{os.cpu_count()} cores shared with other jobs: absolute times are noisy; the methods alternate "
+         "within each trial, so their ratios are fairer than the absolute figures. All times are medians.\n"]
+    if quick:
+        L.append("> **Quick run**: few trials; a smoke test, not the reference.\n")
+    L.append("## JIT compile and start-up\n")
+    L.append("| cache | import calib_core.solve | first warm_up() | second warm_up() |\n|---|---:|---:|---:|")
+    for label, (imp, first, second) in jit.items():
+        L.append(f"| {label} | {imp:.2f} s | {first:.2f} s | {1e3 * second:.2f} ms |")
+    L.append("\n`warm_up()` compiles (cold cache) or loads (warm cache, `cache=True`) every solve kernel; the app "
+             "calls it in a background thread at start so that no click waits for a compile.\n")
+    L.append("## Speed, same pairs to every method\n")
+    L.append("Median CPU time of this process per solve (`time.process_time`: not inflated when other jobs preempt "
+             "us); the median wall times follow in brackets.\n")
+    L.append("| camera | n | trials | `solve_extrinsics` (whole) | `pose_core` (compiled solve) | OpenCV SQPnP + RefineLM "
+             "| whole / OpenCV | core / OpenCV | whole, robust, 10 % outliers |")
+    L.append("|---|---:|---:|---:|---:|---:|---:|---:|---:|")
+    for r in sp:
+        def ms(k):
+            return f"{1e3 * r[k]:.3f} ms ({1e3 * r[k + '_wall']:.3f})" if np.isfinite(r[k]) else "n/a (no OCam model)"
+        ratio_full = r["full"] / r["opencv"] if np.isfinite(r["opencv"]) else float("nan")
+        ratio_core = r["core"] / r["opencv"] if np.isfinite(r["opencv"]) else float("nan")
+        L.append(f"| {r['camera']} | {r['n']} | {r['trials']} | {ms('full')} | {ms('core')} | {ms('opencv')} | "
+                 f"{ratio_full:.2f} | {ratio_core:.2f} | {ms('robust')} |")
+    L.append("\n## Accuracy on the pinhole variant: ours vs OpenCV, same pairs\n")
+    L.append("Mean rotation error (deg) and translation error (cm) against the ground truth; ours = `calibrate` "
+             "(whitened angular cost with the laser-pick term, robust). Pairs: `simulate_pairs` on the sample's pinhole "
+             "variant (`bench.compare.pinhole_variant`: 1280x960, f = 640 px, at the true pose); its view holds 40 "
+             "corners, some of which share a depth cell, so the largest n is 30. *fails*: trials our solve refused "
+             "(CalibError).\n")
+    L.append("| n | trials | fails | ours rot | OpenCV rot | ratio | ours trans | OpenCV trans | ratio |\n"
+             "|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    for r in pin_rows:
+        o, c = r["ours"], r["opencv"]
+        L.append(f"| {r['n']} | {r['trials']} | {r['fails']} | {o[0]:.4f} | {c[0]:.4f} | {o[0] / c[0]:.3f} | {100 * o[1]:.3f} | "
+                 f"{100 * c[1]:.3f} | {o[1] / c[1]:.3f} |")
+    L.append("\n## Accuracy on the OCam sample: ours vs the Cramer-Rao bound\n")
+    L.append("Bound: `bench.crb.cramer_rao` at the true pose for each trial's pairs, 1 px clicks plus the whole-cell "
+             "laser pick and 1 cm range noise (`cell_rounding_covariance`); its mean errors by sampling the bound's "
+             "Gaussian.\n")
+    L.append("| n | trials | ours rot (deg) | bound rot | ratio | ours trans (cm) | bound trans | ratio |\n|---:|---:|---:|---:|---:|---:|---:|---:|")
+    for r in omni_rows:
+        o, b = r["ours"], r["bound"]
+        L.append(f"| {r['n']} | {r['trials']} | {o[0]:.4f} | {b[0]:.4f} | {o[0] / b[0]:.3f} | {100 * o[1]:.3f} | "
+                 f"{100 * b[1]:.3f} | {o[1] / b[1]:.3f} |")
+    L.append(f"\n## Sigma coverage (OCam sample, n = {cov['n']})\n")
+    L.append("Share of trials whose error is within the reported sigma (Student-t widened, see "
+             "`CalibrationResult.sigma_rpy_deg`). Nominal: 68.3 % and 95.4 %. *realistic*: `simulate_pairs` "
+             "(1 px clicks, whole-cell laser picks), solved with `calibrate`; *clicks only*: the picked cells' points "
+             "as exact laser points, clicks = their true projections + 1 px noise.\n")
+    L.append("| noise | trials | | " + " | ".join(PARAMS) + " |\n|---|---:|---|" + "---:|" * 6)
+    for model in ("realistic", "clicks only"):
+        c = cov.get(model)
+        if not c:
+            continue
+        L.append(f"| {model} | {c['trials']} | within 1 sigma | " + " | ".join(f"{100 * v:.1f} %" for v in c["one"]) + " |")
+        L.append(f"| {model} | {c['trials']} | within 2 sigma | " + " | ".join(f"{100 * v:.1f} %" for v in c["two"]) + " |")
+    return "\n".join(L) + "\n"
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(prog="python -m bench.solve_vs_opencv", description=__doc__.splitlines()[0])
+    p.add_argument("--quick", action="store_true")
+    p.add_argument("--out", type=Path, default=None)
+    p.add_argument("--skip", nargs="*", default=[], choices=["jit", "speed", "accuracy", "coverage"])
+    args = p.parse_args(argv)
+    out = args.out or (REPO / "bench" / "out" / "quick" / "solve_vs_opencv.md" if args.quick
+                       else REPO / "docs" / "perf" / "solve_vs_opencv.md")
+    load0 = os.getloadavg()
+    from calib_core.solve import warm_up
+
+    log(f"warm_up: {warm_up():.2f} s")
+    jit = {} if "jit" in args.skip else jit_times()
+    log(f"jit: {jit}")
+    sp = [] if "speed" in args.skip else speed(args.quick)
+    pin_rows, omni_rows = ([], []) if "accuracy" in args.skip else accuracy(args.quick)
+    cov = {"n": 10} if "coverage" in args.skip else coverage(args.quick)
+    for model in ("realistic", "clicks only"):
+        if model in cov:
+            log(f"coverage {model}: 1 sigma {np.round(100 * cov[model]['one'], 1)}, "
+                f"2 sigma {np.round(100 * cov[model]['two'], 1)}")
+    cmd = "python -m bench.solve_vs_opencv" + (" --quick" if args.quick else "")
+    md = markdown(jit, sp, pin_rows, omni_rows, cov, (load0[0], os.getloadavg()[0]), args.quick, cmd)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(md)
+    print(md)
+    log(f"wrote {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

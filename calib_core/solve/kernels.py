@@ -1,0 +1,971 @@
+"""Compiled kernels of the angular solve (numba, ``cache=True``).
+
+One implementation of each hot path (there is no pure-numpy twin):
+
+* :func:`whitened_residuals` -- the whitened log-map residual of every pair;
+* :func:`normal_equations` -- ``H = J^T J``, ``g = J^T z`` and the cost at a pose;
+* :func:`jacobian` -- the ``(2N, 6)`` whitened Jacobian (covariance, tests);
+* :func:`lm_refine` -- Levenberg-Marquardt on the 6x6 normal equations;
+* :func:`score_poses` -- squared whitened residuals of many candidate poses (RANSAC);
+* :func:`dlt_pose` -- a linear initial pose from the bearings (n >= 6).
+
+Residual of pair i (paper eq. 7, smooth at 0): with ``y = F_i (R p_i + t)``
+(``F_i`` rows ``e1, e2, b_i``), ``theta = atan2(|y_12|, y_3)`` and
+``r_i = theta / sin(theta) * y_12 / |y|``, so ``|r_i| = theta``.  The whitened
+residual is ``z_i = W_i r_i`` with ``W_i`` (2x2) from
+:mod:`calib_core.solve.whiten`.  Pose updates are left perturbations,
+``R <- exp([delta]_x) R``, ``t <- t + dt``; the Jacobian is taken at
+``delta = 0``, columns ``(delta_x, delta_y, delta_z, t_x, t_y, t_z)``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+__all__ = [
+    "whitened_residuals",
+    "normal_equations",
+    "jacobian",
+    "lm_refine",
+    "score_poses",
+    "dlt_pose",
+    "so3_exp",
+]
+
+_JIT = dict(cache=True, nogil=True, fastmath=False)
+
+
+@njit(**_JIT)
+def so3_exp(phi):
+    """``exp([phi]_x)`` (Rodrigues), with the Taylor series near 0."""
+    x, y, z = phi[0], phi[1], phi[2]
+    th2 = x * x + y * y + z * z
+    if th2 < 1e-8:
+        c = 1.0 - th2 / 2.0 + th2 * th2 / 24.0
+        a = 1.0 - th2 / 6.0
+        b = 0.5 - th2 / 24.0
+    else:
+        th = math.sqrt(th2)
+        c = math.cos(th)
+        a = math.sin(th) / th
+        b = (1.0 - c) / th2
+    R = np.empty((3, 3))
+    R[0, 0] = c + b * x * x
+    R[0, 1] = b * x * y - a * z
+    R[0, 2] = b * x * z + a * y
+    R[1, 0] = b * x * y + a * z
+    R[1, 1] = c + b * y * y
+    R[1, 2] = b * y * z - a * x
+    R[2, 0] = b * x * z - a * y
+    R[2, 1] = b * y * z + a * x
+    R[2, 2] = c + b * z * z
+    return R
+
+
+@njit(**_JIT)
+def _pair(R, t, p, F, W, out_z, out_J, want_J):
+    """Whitened residual (2,) of one pair into ``out_z`` and, if asked, its Jacobian (2, 6) into ``out_J``.
+
+    Returns the geodesic angle (radians).
+    """
+    a0 = R[0, 0] * p[0] + R[0, 1] * p[1] + R[0, 2] * p[2]
+    a1 = R[1, 0] * p[0] + R[1, 1] * p[1] + R[1, 2] * p[2]
+    a2 = R[2, 0] * p[0] + R[2, 1] * p[1] + R[2, 2] * p[2]
+    P0, P1, P2 = a0 + t[0], a1 + t[1], a2 + t[2]
+    y0 = F[0, 0] * P0 + F[0, 1] * P1 + F[0, 2] * P2
+    y1 = F[1, 0] * P0 + F[1, 1] * P1 + F[1, 2] * P2
+    y2 = F[2, 0] * P0 + F[2, 1] * P1 + F[2, 2] * P2
+    s_unit = math.hypot(y0, y1)
+    norm = math.hypot(s_unit, y2)
+    inv = 1.0 / norm if norm > 0.0 else 1.0
+    theta = math.atan2(s_unit, y2)
+    s = s_unit * inv
+    c = y2 * inv
+    w0, w1 = y0 * inv, y1 * inv
+    if theta < 1e-3:
+        th2 = theta * theta
+        g = 1.0 + th2 / 6.0 + 7.0 * th2 * th2 / 360.0
+        h = -2.0 / 3.0 - th2 / 5.0
+    else:
+        g = theta / s
+        h = (c * s - theta) / (s * s * s)
+    r0, r1 = g * w0, g * w1
+    out_z[0] = W[0, 0] * r0 + W[0, 1] * r1
+    out_z[1] = W[1, 0] * r0 + W[1, 1] * r1
+    if want_J:
+        # dr/dy (2x3, frame coordinates) = [g I + h w w^T | -w] / |P|; dr/dP = dr/dy F.
+        D00 = (g + h * w0 * w0) * inv
+        D01 = h * w0 * w1 * inv
+        D02 = -w0 * inv
+        D10 = D01
+        D11 = (g + h * w1 * w1) * inv
+        D12 = -w1 * inv
+        # Whitened: W D.
+        E00 = W[0, 0] * D00 + W[0, 1] * D10
+        E01 = W[0, 0] * D01 + W[0, 1] * D11
+        E02 = W[0, 0] * D02 + W[0, 1] * D12
+        E10 = W[1, 0] * D00 + W[1, 1] * D10
+        E11 = W[1, 0] * D01 + W[1, 1] * D11
+        E12 = W[1, 0] * D02 + W[1, 1] * D12
+        for k in range(3):
+            out_J[0, 3 + k] = E00 * F[0, k] + E01 * F[1, k] + E02 * F[2, k]
+            out_J[1, 3 + k] = E10 * F[0, k] + E11 * F[1, k] + E12 * F[2, k]
+        # d(exp(delta) R p)/d delta = -[R p]_x: a row d times -[a]_x is a x d.
+        for row in range(2):
+            d0, d1, d2 = out_J[row, 3], out_J[row, 4], out_J[row, 5]
+            out_J[row, 0] = a1 * d2 - a2 * d1
+            out_J[row, 1] = a2 * d0 - a0 * d2
+            out_J[row, 2] = a0 * d1 - a1 * d0
+    return theta
+
+
+@njit(**_JIT)
+def whitened_residuals(R, t, P, F, W):
+    """Whitened residuals ``(N, 2)`` and geodesic angles ``(N,)`` (radians) at pose ``(R, t)``."""
+    n = P.shape[0]
+    z = np.empty((n, 2))
+    theta = np.empty(n)
+    Jdummy = np.empty((2, 6))
+    for i in range(n):
+        theta[i] = _pair(R, t, P[i], F[i], W[i], z[i], Jdummy, False)
+    return z, theta
+
+
+@njit(**_JIT)
+def jacobian(R, t, P, F, W):
+    """Whitened Jacobian ``(2N, 6)`` at ``(R, t)`` w.r.t. ``(delta, t)`` (left perturbation, delta = 0)."""
+    n = P.shape[0]
+    J = np.empty((2 * n, 6))
+    z = np.empty(2)
+    for i in range(n):
+        _pair(R, t, P[i], F[i], W[i], z, J[2 * i : 2 * i + 2], True)
+    return J
+
+
+@njit(**_JIT)
+def normal_equations(R, t, P, F, W):
+    """``H = J^T J`` (6, 6), ``g = J^T z`` (6,) and ``cost = sum |z_i|^2`` at ``(R, t)``."""
+    H = np.zeros((6, 6))
+    g = np.zeros(6)
+    cost = 0.0
+    z = np.empty(2)
+    Ji = np.empty((2, 6))
+    for i in range(P.shape[0]):
+        _pair(R, t, P[i], F[i], W[i], z, Ji, True)
+        cost += z[0] * z[0] + z[1] * z[1]
+        for a in range(6):
+            g[a] += Ji[0, a] * z[0] + Ji[1, a] * z[1]
+            for b in range(a, 6):
+                H[a, b] += Ji[0, a] * Ji[0, b] + Ji[1, a] * Ji[1, b]
+    for a in range(6):
+        for b in range(a):
+            H[a, b] = H[b, a]
+    return H, g, cost
+
+
+@njit(**_JIT)
+def _cost(R, t, P, F, W):
+    z = np.empty(2)
+    Jd = np.empty((2, 6))
+    cost = 0.0
+    for i in range(P.shape[0]):
+        _pair(R, t, P[i], F[i], W[i], z, Jd, False)
+        cost += z[0] * z[0] + z[1] * z[1]
+    return cost
+
+
+@njit(**_JIT)
+def _cholesky_solve(A, b):
+    """Solve ``A x = b`` for a symmetric positive-definite 6x6 ``A``; ok False if it is not."""
+    n = A.shape[0]
+    L = np.zeros((n, n))
+    for j in range(n):
+        s = A[j, j]
+        for k in range(j):
+            s -= L[j, k] * L[j, k]
+        if not s > 0.0:
+            return b * 0.0, False
+        L[j, j] = math.sqrt(s)
+        for i in range(j + 1, n):
+            s = A[i, j]
+            for k in range(j):
+                s -= L[i, k] * L[j, k]
+            L[i, j] = s / L[j, j]
+    y = np.empty(n)
+    for i in range(n):
+        s = b[i]
+        for k in range(i):
+            s -= L[i, k] * y[k]
+        y[i] = s / L[i, i]
+    x = np.empty(n)
+    for i in range(n - 1, -1, -1):
+        s = y[i]
+        for k in range(i + 1, n):
+            s -= L[k, i] * x[k]
+        x[i] = s / L[i, i]
+    return x, True
+
+
+@njit(**_JIT)
+def _lm(R0, t0, P, F, W, max_iter):
+    """:func:`lm_refine`, also returning the normal matrix ``H`` and the cost at the returned pose."""
+    R = R0.copy()
+    t = t0.copy()
+    lam = 1e-4
+    H, g, cost = normal_equations(R, t, P, F, W)
+    if not np.isfinite(cost):
+        return R, t, 1, -2, H, cost
+    it = 1
+    A = np.empty((6, 6))
+    while it < max_iter:
+        for a in range(6):
+            for b in range(6):
+                A[a, b] = H[a, b]
+            A[a, a] = H[a, a] * (1.0 + lam) + 1e-300
+        dx, ok = _cholesky_solve(A, -g)
+        if not ok:
+            if lam > 1e12:
+                return R, t, it, -1, H, cost
+            lam *= 10.0
+            continue
+        # Predicted decrease -g.dx: at the noise floor of the cost nothing is left to gain
+        # (comparing costs there only measures rounding).
+        gd = 0.0
+        for a in range(6):
+            gd -= g[a] * dx[a]
+        if gd <= 1e-13 * cost or cost <= 1e-300:
+            return R, t, it, 1, H, cost
+        R_new = so3_exp(dx[:3]) @ R
+        t_new = t + dx[3:]
+        # One pass gives the new cost and, if the step is taken, the next normal equations.
+        H_new, g_new, cost_new = normal_equations(R_new, t_new, P, F, W)
+        it += 1
+        step = 0.0
+        scale = 0.0
+        for a in range(3):
+            step += dx[a] * dx[a]
+        for a in range(3, 6):
+            step += dx[a] * dx[a]
+            scale += t[a - 3] * t[a - 3]
+        small_step = math.sqrt(step) <= 1e-11 * (1.0 + math.sqrt(scale))
+        if np.isfinite(cost_new) and cost_new <= cost:
+            decrease = cost - cost_new
+            R, t, H, g, cost = R_new, t_new, H_new, g_new, cost_new
+            lam = max(lam / 10.0, 1e-12)
+            if small_step or decrease <= 1e-11 * cost or cost <= 1e-300:
+                return R, t, it, 1, H, cost
+        else:
+            if small_step:
+                return R, t, it, 1, H, cost
+            lam *= 10.0
+            if lam > 1e16:
+                return R, t, it, 1, H, cost  # no descent direction left: a minimum to rounding
+    return R, t, it, 0, H, cost
+
+
+@njit(**_JIT)
+def lm_refine(R0, t0, P, F, W, max_iter):
+    """Levenberg-Marquardt on the whitened angular cost.
+
+    Each iteration solves ``(H + lam diag(H)) dx = -g`` (Marquardt's scaling,
+    so radians and metres need no common unit), accepts the step if the cost
+    drops and then lowers ``lam``, else raises it.  Stops when the predicted
+    or actual decrease is at the cost's rounding level, the step is
+    negligible, or after ``max_iter`` normal-equation evaluations.
+
+    Returns
+    -------
+    R : (3, 3), t : (3,)
+    iterations : int
+        Normal-equation evaluations.
+    status : int
+        1 converged, 0 iteration limit, -1 singular normal equations, -2 non-finite cost.
+    """
+    R, t, it, status, _, _ = _lm(R0, t0, P, F, W, max_iter)
+    return R, t, it, status
+
+
+@njit(**_JIT)
+def score_poses(Rs, ts, P, F, W):
+    """Squared whitened residual norms ``(K, N)`` of K candidate poses ``Rs (K, 3, 3)``, ``ts (K, 3)``."""
+    K = Rs.shape[0]
+    n = P.shape[0]
+    out = np.empty((K, n))
+    z = np.empty(2)
+    Jd = np.empty((2, 6))
+    for k in range(K):
+        for i in range(n):
+            _pair(Rs[k], ts[k], P[i], F[i], W[i], z, Jd, False)
+            out[k, i] = z[0] * z[0] + z[1] * z[1]
+    return out
+
+
+@njit(**_JIT)
+def dlt_pose(P, B):
+    """Linear pose from n >= 6 bearings: ``b_i x (R p_i + t) = 0`` solved for the 12 entries of ``[R | t]``.
+
+    The points are centred and scaled first (Hartley's normalisation), the
+    null vector of ``A^T A`` (12x12) is taken, its 3x3 block is projected onto
+    SO(3) and the scale and sign are fixed so that the points lie in front
+    along their bearings.
+
+    Returns
+    -------
+    R : (3, 3), t : (3,)
+    ok : bool
+        False for fewer than 6 pairs or a degenerate (e.g. coplanar) set.
+    """
+    n = P.shape[0]
+    R = np.eye(3)
+    t = np.zeros(3)
+    if n < 6:
+        return R, t, False
+    mu = np.zeros(3)
+    for i in range(n):
+        mu += P[i]
+    mu /= n
+    spread = 0.0
+    for i in range(n):
+        for k in range(3):
+            spread += (P[i, k] - mu[k]) ** 2
+    spread = math.sqrt(spread / n)
+    if not spread > 0.0:
+        return R, t, False
+    M = np.zeros((12, 12))
+    row = np.empty(8)
+    for i in range(n):
+        q0 = (P[i, 0] - mu[0]) / spread
+        q1 = (P[i, 1] - mu[1]) / spread
+        q2 = (P[i, 2] - mu[2]) / spread
+        b0, b1, b2 = B[i, 0], B[i, 1], B[i, 2]
+        # x = (r00 r01 r02 t0 | r10 r11 r12 t1 | r20 r21 r22 t2); X_c = M q.
+        # rows of [b]_x X_c = 0: (b1 X2 - b2 X1), (b2 X0 - b0 X2), (b0 X1 - b1 X0).
+        # The three rows of b x X are dependent (sum_k b_k row_k = 0): keep the two that
+        # do not belong to the largest component of b.
+        skip = 0
+        if abs(b1) >= abs(b0) and abs(b1) >= abs(b2):
+            skip = 1
+        elif abs(b2) >= abs(b0) and abs(b2) >= abs(b1):
+            skip = 2
+        for eq in range(3):
+            if eq == skip:
+                continue
+            # The row has 8 non-zeros: blocks ia and ib of the unknowns, (q, 1) scaled by ca and cb.
+            if eq == 0:
+                ca, ia, cb, ib = b1, 2, -b2, 1
+            elif eq == 1:
+                ca, ia, cb, ib = b2, 0, -b0, 2
+            else:
+                ca, ia, cb, ib = b0, 1, -b1, 0
+            row[0], row[1], row[2], row[3] = ca * q0, ca * q1, ca * q2, ca
+            row[4], row[5], row[6], row[7] = cb * q0, cb * q1, cb * q2, cb
+            for a in range(8):
+                ga = 4 * ia + a if a < 4 else 4 * ib + a - 4
+                ra = row[a]
+                for b in range(8):
+                    gb = 4 * ia + b if b < 4 else 4 * ib + b - 4
+                    M[ga, gb] += ra * row[b]
+    w, V = np.linalg.eigh(M)
+    if not (w[1] > 1e-10 * w[11]):
+        return R, t, False  # a second null vector: degenerate configuration
+    x = V[:, 0]
+    A = np.empty((3, 3))
+    tt = np.empty(3)
+    for r in range(3):
+        for c in range(3):
+            A[r, c] = x[4 * r + c]
+        tt[r] = x[4 * r + 3]
+    U, S, Vt = np.linalg.svd(A)
+    scale = (S[0] + S[1] + S[2]) / 3.0
+    if not scale > 0.0:
+        return R, t, False
+    Rn = np.ascontiguousarray(U) @ np.ascontiguousarray(Vt)
+    sgn = 1.0
+    if np.linalg.det(Rn) < 0.0:
+        sgn = -1.0
+        Rn = -Rn
+    tt = tt * (sgn / scale)
+    # Points must lie in front along their bearings.
+    front = 0
+    for i in range(n):
+        q0 = (P[i, 0] - mu[0]) / spread
+        q1 = (P[i, 1] - mu[1]) / spread
+        q2 = (P[i, 2] - mu[2]) / spread
+        d = 0.0
+        for r in range(3):
+            d += B[i, r] * (Rn[r, 0] * q0 + Rn[r, 1] * q1 + Rn[r, 2] * q2 + tt[r])
+        if d > 0.0:
+            front += 1
+    if 2 * front < n:
+        return R, t, False
+    # Undo the normalisation: X_c = Rn (p - mu) / s + tt  ->  scaled by s: R = Rn, t = s tt - Rn mu.
+    R = Rn
+    for r in range(3):
+        t[r] = spread * tt[r] - (Rn[r, 0] * mu[0] + Rn[r, 1] * mu[1] + Rn[r, 2] * mu[2])
+    return R, t, True
+
+
+@njit(**_JIT)
+def bearing_frames(B):
+    """Rows ``e1, e2, b`` of an orthonormal right-handed frame per unit bearing, ``(N, 3, 3)``.
+
+    ``e1 = b x a / |b x a|`` with ``a`` the coordinate axis least aligned with
+    ``b`` (never parallel), ``e2 = b x e1``.
+    """
+    n = B.shape[0]
+    F = np.empty((n, 3, 3))
+    for i in range(n):
+        b0, b1, b2 = B[i, 0], B[i, 1], B[i, 2]
+        ab0, ab1, ab2 = abs(b0), abs(b1), abs(b2)
+        if ab0 <= ab1 and ab0 <= ab2:
+            e0, e1_, e2_ = 0.0, b2, -b1  # b x (1, 0, 0)
+        elif ab1 <= ab2:
+            e0, e1_, e2_ = -b2, 0.0, b0  # b x (0, 1, 0)
+        else:
+            e0, e1_, e2_ = b1, -b0, 0.0  # b x (0, 0, 1)
+        inv = 1.0 / math.sqrt(e0 * e0 + e1_ * e1_ + e2_ * e2_)
+        e0, e1_, e2_ = e0 * inv, e1_ * inv, e2_ * inv
+        F[i, 0, 0], F[i, 0, 1], F[i, 0, 2] = e0, e1_, e2_
+        F[i, 1, 0] = b1 * e2_ - b2 * e1_
+        F[i, 1, 1] = b2 * e0 - b0 * e2_
+        F[i, 1, 2] = b0 * e1_ - b1 * e0
+        F[i, 2, 0], F[i, 2, 1], F[i, 2, 2] = b0, b1, b2
+    return F
+
+
+@njit(**_JIT)
+def finish(R, t, P, F, W, inliers):
+    """Everything the report needs at the final pose, in one pass.
+
+    Returns
+    -------
+    z : (N, 2) whitened residuals of every pair
+    theta : (N,) geodesic angles, radians
+    H : (6, 6) normal matrix of the inliers
+    ssr : float, sum of the inliers' squared whitened residuals
+    stats : (7,) over the inliers: mean and std of theta (rad), median distance of the points
+        from the camera (m), and the singular values of the centred laser points (descending),
+        then their count
+    """
+    n = P.shape[0]
+    z = np.empty((n, 2))
+    theta = np.empty(n)
+    H = np.zeros((6, 6))
+    ssr = 0.0
+    Ji = np.empty((2, 6))
+    m = 0
+    for i in range(n):
+        if inliers[i]:
+            m += 1
+    ranges = np.empty(m)
+    mu = np.zeros(3)
+    k = 0
+    for i in range(n):
+        theta[i] = _pair(R, t, P[i], F[i], W[i], z[i], Ji, inliers[i])
+        if inliers[i]:
+            ssr += z[i, 0] * z[i, 0] + z[i, 1] * z[i, 1]
+            for a in range(6):
+                for b in range(a, 6):
+                    H[a, b] += Ji[0, a] * Ji[0, b] + Ji[1, a] * Ji[1, b]
+            d2 = 0.0
+            for r in range(3):
+                c = R[r, 0] * P[i, 0] + R[r, 1] * P[i, 1] + R[r, 2] * P[i, 2] + t[r]
+                d2 += c * c
+                mu[r] += P[i, r]
+            ranges[k] = math.sqrt(d2)
+            k += 1
+    for a in range(6):
+        for b in range(a):
+            H[a, b] = H[b, a]
+    stats = np.full(7, np.nan)
+    stats[6] = m
+    if m == 0:
+        return z, theta, H, ssr, stats
+    mu /= m
+    mean = 0.0
+    C = np.zeros((3, 3))
+    for i in range(n):
+        if inliers[i]:
+            mean += theta[i]
+            for a in range(3):
+                for b in range(3):
+                    C[a, b] += (P[i, a] - mu[a]) * (P[i, b] - mu[b])
+    mean /= m
+    var = 0.0
+    for i in range(n):
+        if inliers[i]:
+            var += (theta[i] - mean) ** 2
+    stats[0] = mean
+    stats[1] = math.sqrt(var / m)
+    stats[2] = np.median(ranges)
+    w = np.linalg.eigvalsh(C)
+    for a in range(3):
+        stats[3 + a] = math.sqrt(max(w[2 - a], 0.0))
+    return z, theta, H, ssr, stats
+
+
+@njit(**_JIT)
+def rotation_sigma_deg(cov):
+    """1-sigma of the rotation along its worst axis, degrees: ``sqrt(max eig(cov[:3, :3]))``.
+
+    Independent of how the rotation is written (roll/pitch/yaw sigmas blow up near gimbal lock
+    even when the rotation itself is well determined).
+    """
+    C = np.empty((3, 3))
+    for a in range(3):
+        for b in range(3):
+            if not np.isfinite(cov[a, b]):
+                return np.inf
+            C[a, b] = cov[a, b]
+    w = np.linalg.eigvalsh(C)
+    return math.degrees(math.sqrt(max(w[2], 0.0)))
+
+
+@njit(**_JIT)
+def rpy_sigmas(R, cov):
+    """1-sigma of ``t`` (m) and of roll, pitch, yaw (deg) from the covariance of ``(delta, t)`` at ``R``.
+
+    ``d(rpy)/d(delta)`` is the inverse of ``M = [R e_x-ish columns]`` (see
+    :func:`calib_core.solve.refine.rpy_jacobian`); inf at gimbal lock or for an infinite covariance.
+    """
+    st = np.empty(3)
+    sr = np.full(3, np.inf)
+    for a in range(3):
+        st[a] = math.sqrt(cov[3 + a, 3 + a]) if cov[3 + a, 3 + a] >= 0.0 else np.nan
+    cp = math.hypot(R[0, 0], R[1, 0])
+    if cp < 1e-9:
+        return st, sr
+    for a in range(3):
+        for b in range(3):
+            if not np.isfinite(cov[a, b]):
+                return st, sr
+    cy, sy = R[0, 0] / cp, R[1, 0] / cp
+    M = np.array([[R[0, 0], -sy, 0.0], [R[1, 0], cy, 0.0], [R[2, 0], 0.0, 1.0]])
+    G = np.linalg.inv(M)
+    for a in range(3):  # diag(G C G^T), written out (tiny, and no layout warnings)
+        acc = 0.0
+        for b in range(3):
+            for c in range(3):
+                acc += G[a, b] * cov[b, c] * G[a, c]
+        sr[a] = math.degrees(math.sqrt(abs(acc)))
+    return st, sr
+
+
+@njit(**_JIT)
+def covariance(H, sigma):
+    """``sigma^2 H^-1`` via the Jacobi-scaled eigen-decomposition; ``(cov, condition)``.
+
+    ``cov`` is all inf when ``H`` is singular (smallest scaled eigenvalue
+    below 1e-14 of the largest); ``condition`` is the scaled condition number.
+    """
+    cov = np.full((6, 6), np.inf)
+    d = np.empty(6)
+    for a in range(6):
+        if not (H[a, a] > 0.0) or not np.isfinite(H[a, a]):
+            return cov, np.inf
+        d[a] = math.sqrt(H[a, a])
+    S = np.empty((6, 6))
+    for a in range(6):
+        for b in range(6):
+            S[a, b] = H[a, b] / (d[a] * d[b])
+    w, V = np.linalg.eigh(S)
+    cond = w[5] / w[0] if w[0] > 0.0 else np.inf
+    if not (w[0] > 1e-14 * w[5]) or not np.isfinite(sigma):
+        return cov, cond
+    s2 = sigma * sigma
+    for a in range(6):
+        for b in range(6):
+            acc = 0.0
+            for k in range(6):
+                acc += V[a, k] * V[b, k] / w[k]
+            cov[a, b] = s2 * acc / (d[a] * d[b])
+    return cov, cond
+
+
+@njit(**_JIT)
+def _first_close(X, radius, angular):
+    """First pair ``(i, j)`` (i < j in sorted-by-x scan order) closer than ``radius``; (-1, -1) if none.
+
+    A sweep along x: only points within ``radius`` in x are compared, so
+    spread-out data costs O(n log n).  ``angular``: the distance is the angle
+    between unit vectors (never below their chord, so the sweep stays exact).
+    """
+    n = X.shape[0]
+    order = np.argsort(X[:, 0])
+    for a in range(n):
+        i = order[a]
+        for c in range(a + 1, n):
+            j = order[c]
+            if X[j, 0] - X[i, 0] > radius:
+                break
+            if angular:
+                c0 = X[i, 1] * X[j, 2] - X[i, 2] * X[j, 1]
+                c1 = X[i, 2] * X[j, 0] - X[i, 0] * X[j, 2]
+                c2 = X[i, 0] * X[j, 1] - X[i, 1] * X[j, 0]
+                dot = X[i, 0] * X[j, 0] + X[i, 1] * X[j, 1] + X[i, 2] * X[j, 2]
+                dist = math.atan2(math.sqrt(c0 * c0 + c1 * c1 + c2 * c2), dot)
+            else:
+                dist = math.sqrt((X[i, 0] - X[j, 0]) ** 2 + (X[i, 1] - X[j, 1]) ** 2 + (X[i, 2] - X[j, 2]) ** 2)
+            if dist <= radius:
+                return min(i, j), max(i, j)
+    return -1, -1
+
+
+@njit(**_JIT)
+def pair_checks(P, B, same_point_m, same_bearing_rad):
+    """The degeneracy figures of :func:`calib_core.solve.checks.validate_pairs` in one pass.
+
+    Returns
+    -------
+    bad_point, bad_bearing : int
+        First pair with a non-finite laser point / bearing, or -1.
+    bad_norm : int
+        First pair whose bearing norm is off 1 (checked by the caller's tolerance), -1 if all finite.
+    norms : (N,) bearing norms
+    same_point, same_bearing : (2,) int
+        A pair of pairs with the same laser point / bearing, or (-1, -1).
+    singular : (3,) singular values of the centred laser points, descending
+    cos_min_to_mean : float
+        Smallest cosine between a unit bearing and the normalised bearing sum
+        (NaN if the sum vanishes).
+    """
+    n = P.shape[0]
+    bad_point = -1
+    bad_bearing = -1
+    norms = np.empty(n)
+    for i in range(n):
+        if bad_point < 0 and not (np.isfinite(P[i, 0]) and np.isfinite(P[i, 1]) and np.isfinite(P[i, 2])):
+            bad_point = i
+        if bad_bearing < 0 and not (np.isfinite(B[i, 0]) and np.isfinite(B[i, 1]) and np.isfinite(B[i, 2])):
+            bad_bearing = i
+        norms[i] = math.sqrt(B[i, 0] ** 2 + B[i, 1] ** 2 + B[i, 2] ** 2)
+    same_p = np.full(2, -1)
+    same_b = np.full(2, -1)
+    sv = np.zeros(3)
+    cos_min = np.nan
+    if bad_point >= 0 or bad_bearing >= 0:
+        return bad_point, bad_bearing, norms, same_p, same_b, sv, cos_min
+    U = np.empty((n, 3))
+    for i in range(n):
+        inv = 1.0 / norms[i] if norms[i] > 0.0 else 0.0
+        for k in range(3):
+            U[i, k] = B[i, k] * inv
+    same_p[0], same_p[1] = _first_close(P, same_point_m, False)
+    same_b[0], same_b[1] = _first_close(U, same_bearing_rad, True)
+    mu = np.zeros(3)
+    for i in range(n):
+        mu += P[i]
+    mu /= n
+    C = np.zeros((3, 3))
+    for i in range(n):
+        for a in range(3):
+            for b in range(3):
+                C[a, b] += (P[i, a] - mu[a]) * (P[i, b] - mu[b])
+    w = np.linalg.eigvalsh(C)
+    for k in range(3):
+        sv[k] = math.sqrt(max(w[2 - k], 0.0))
+    s = np.zeros(3)
+    for i in range(n):
+        s += U[i]
+    sn = math.sqrt(s[0] ** 2 + s[1] ** 2 + s[2] ** 2)
+    if sn > 0.0:
+        cos_min = 1.0
+        for i in range(n):
+            c = (U[i, 0] * s[0] + U[i, 1] * s[1] + U[i, 2] * s[2]) / sn
+            if c < cos_min:
+                cos_min = c
+    return bad_point, bad_bearing, norms, same_p, same_b, sv, cos_min
+
+
+@njit(**_JIT)
+def pose_core(P, B, W, max_iter):
+    """The compiled solve alone: frames, linear DLT start, LM and covariance scale, one call.
+
+    No input checks, no outlier search, no report: what
+    :func:`calib_core.solve.solve_extrinsics` runs inside, exposed for the
+    benchmark against OpenCV's SQPnP + ``solvePnPRefineLM`` (which do neither).
+
+    Returns
+    -------
+    R, t, cov (6, 6) with the residual-variance scale ``SSR / (2N - 6)``, iterations, status
+    (as :func:`lm_refine`; -3 when the DLT start fails).
+    """
+    F = bearing_frames(B)
+    R0, t0, ok = dlt_pose(P, B)
+    if not ok:
+        return R0, t0, np.full((6, 6), np.inf), 0, -3
+    R, t, it, status, H, cost = _lm(R0, t0, P, F, W, max_iter)
+    dof = 2 * P.shape[0] - 6
+    sigma = math.sqrt(cost / dof) if dof > 0 else np.inf
+    cov, cond = covariance(H, sigma)
+    return R, t, cov, it, status
+
+
+@njit(**_JIT)
+def _rigid_fit_one(src, dst, out):
+    """Least-squares rigid ``T_dst_src`` of (N, 3) point sets into ``out`` (4, 4): Arun's SVD with
+    Umeyama's reflection fix (see :mod:`calib_core.solve.rigid`)."""
+    n = src.shape[0]
+    ms = np.zeros(3)
+    md = np.zeros(3)
+    for i in range(n):
+        for k in range(3):
+            ms[k] += src[i, k]
+            md[k] += dst[i, k]
+    ms /= n
+    md /= n
+    H = np.zeros((3, 3))
+    for i in range(n):
+        for a in range(3):
+            for b in range(3):
+                H[a, b] += (src[i, a] - ms[a]) * (dst[i, b] - md[b])
+    U, _, Vt = np.linalg.svd(H)
+    V = np.ascontiguousarray(Vt.T)
+    Ut = np.ascontiguousarray(U.T)
+    R = V @ Ut
+    if np.linalg.det(R) < 0.0:
+        for a in range(3):
+            V[a, 2] = -V[a, 2]
+        R = V @ Ut
+    for a in range(3):
+        for b in range(3):
+            out[a, b] = R[a, b]
+        out[a, 3] = md[a] - (R[a, 0] * ms[0] + R[a, 1] * ms[1] + R[a, 2] * ms[2])
+        out[3, a] = 0.0
+    out[3, 3] = 1.0
+
+
+@njit(**_JIT)
+def rigid_fit_batch(src, dst):
+    """:func:`_rigid_fit_one` over a batch: ``src, dst (M, N, 3)`` -> ``(M, 4, 4)``."""
+    M = src.shape[0]
+    out = np.empty((M, 4, 4))
+    for m in range(M):
+        _rigid_fit_one(src[m], dst[m], out[m])
+    return out
+
+
+@njit(**_JIT)
+def _cubic_largest_root(A, B, C):
+    """Largest real root of ``m^3 + A m^2 + B m + C`` (Cardano / trigonometric form, Newton-polished)."""
+    P = B - A * A / 3.0
+    Q = 2.0 * A * A * A / 27.0 - A * B / 3.0 + C
+    D = (Q / 2.0) ** 2 + (P / 3.0) ** 3
+    if D > 0.0:
+        sq = math.sqrt(D)
+        u = -Q / 2.0 + sq
+        v = -Q / 2.0 - sq
+        z = math.copysign(abs(u) ** (1.0 / 3.0), u) + math.copysign(abs(v) ** (1.0 / 3.0), v)
+    else:
+        rr = math.sqrt(max(-P / 3.0, 0.0))
+        arg = (-Q / 2.0) / (rr**3) if rr > 0.0 else 0.0
+        z = 2.0 * rr * math.cos(math.acos(min(max(arg, -1.0), 1.0)) / 3.0)
+    m = z - A / 3.0
+    for _ in range(2):
+        f = ((m + A) * m + B) * m + C
+        df = (3.0 * m + 2.0 * A) * m + B
+        if df != 0.0:
+            m -= f / df
+    return m
+
+
+@njit(**_JIT)
+def _quartic_real_roots(c4, c3, c2, c1, c0, out):
+    """Real roots of ``c4 x^4 + ... + c0`` by Ferrari's method, Newton-polished; returns their count.
+
+    A close complex pair (noise can split a double root) counts as one real root at its real part,
+    when its imaginary part is below 1e-2 (1 + |real part|).
+    """
+    a, b, c, d = c3 / c4, c2 / c4, c1 / c4, c0 / c4
+    p = b - 3.0 * a * a / 8.0
+    q = c - a * b / 2.0 + a * a * a / 8.0
+    r = d - a * c / 4.0 + a * a * b / 16.0 - 3.0 * a**4 / 256.0
+    k = 0
+    quad = np.empty((2, 2))  # y^2 + B y + C
+    if abs(q) < 1e-14 * (1.0 + abs(p) ** 1.5 + abs(r) ** 0.75):
+        disc = p * p - 4.0 * r
+        sq = math.sqrt(max(disc, 0.0))
+        for y2 in ((-p + sq) / 2.0, (-p - sq) / 2.0):
+            if y2 >= 0.0:
+                out[k] = math.sqrt(y2) - a / 4.0
+                out[k + 1] = -math.sqrt(y2) - a / 4.0
+                k += 2
+    else:
+        m = _cubic_largest_root(p, p * p / 4.0 - r, -q * q / 8.0)
+        if not m > 0.0:
+            return 0
+        s = math.sqrt(2.0 * m)
+        quad[0, 0], quad[0, 1] = s, p / 2.0 + m - q / (2.0 * s)
+        quad[1, 0], quad[1, 1] = -s, p / 2.0 + m + q / (2.0 * s)
+        for j in range(2):
+            Bq, Cq = quad[j, 0], quad[j, 1]
+            disc = Bq * Bq - 4.0 * Cq
+            if disc >= 0.0:
+                sq = math.sqrt(disc)
+                out[k] = (-Bq + sq) / 2.0 - a / 4.0
+                out[k + 1] = (-Bq - sq) / 2.0 - a / 4.0
+                k += 2
+            else:
+                re = -Bq / 2.0 - a / 4.0
+                if math.sqrt(-disc) / 2.0 <= 1e-2 * (1.0 + abs(re)):
+                    out[k] = re
+                    k += 1
+    for i in range(k):
+        x = out[i]
+        for _ in range(2):
+            f = (((c4 * x + c3) * x + c2) * x + c1) * x + c0
+            df = ((4.0 * c4 * x + 3.0 * c3) * x + 2.0 * c2) * x + c1
+            if df == 0.0:
+                break
+            step = f / df
+            if not np.isfinite(step) or abs(step) > 1e-2 * (1.0 + abs(x)):
+                break  # Newton leaving the root's basin (a near-double root): keep the closed form
+            x -= step
+        out[i] = x
+    return k
+
+
+@njit(**_JIT)
+def _triangle_pose(p, pc, out):
+    """Rigid ``T`` with ``pc = R p + t`` for two congruent triangles (3, 3), from their edge frames."""
+    Fl = np.empty((3, 3))
+    Fc = np.empty((3, 3))
+    for X, Fr in ((p, Fl), (pc, Fc)):
+        e1 = X[1] - X[0]
+        e1 = e1 / math.sqrt(e1[0] ** 2 + e1[1] ** 2 + e1[2] ** 2)
+        w = X[2] - X[0]
+        e3 = np.array([e1[1] * w[2] - e1[2] * w[1], e1[2] * w[0] - e1[0] * w[2], e1[0] * w[1] - e1[1] * w[0]])
+        e3 = e3 / math.sqrt(e3[0] ** 2 + e3[1] ** 2 + e3[2] ** 2)
+        e2 = np.array([e3[1] * e1[2] - e3[2] * e1[1], e3[2] * e1[0] - e3[0] * e1[2], e3[0] * e1[1] - e3[1] * e1[0]])
+        for k in range(3):
+            Fr[k, 0], Fr[k, 1], Fr[k, 2] = e1[k], e2[k], e3[k]
+    R = Fc @ np.ascontiguousarray(Fl.T)
+    for a in range(3):
+        for b in range(3):
+            out[a, b] = R[a, b]
+        cp = (pc[0, a] + pc[1, a] + pc[2, a]) / 3.0
+        cl = 0.0
+        for b in range(3):
+            cl += R[a, b] * (p[0, b] + p[1, b] + p[2, b]) / 3.0
+        out[a, 3] = cp - cl
+        out[3, a] = 0.0
+    out[3, 3] = 1.0
+
+
+@njit(**_JIT)
+def p3p_grunert(P, B):
+    """All P3P poses of M triples (Grunert, in the notation of Haralick et al. 1994).
+
+    ``P, B (M, 3, 3)``: laser points and unit bearings of each triple.  With
+    ``s2 = u s1`` and ``s3 = v s1`` the law of cosines gives a quartic in
+    ``v`` (their eq. 9), solved by the eigenvalues of its companion matrix;
+    ``s2`` is taken from whichever of the c-equation roots and Grunert's ``u``
+    (eq. 8) best satisfies the a-equation.  Only positive depths are kept.  The
+    quartic is solved in closed form (Ferrari, :func:`_quartic_real_roots`) and
+    the pose from the two triangles' edge frames (:func:`_triangle_pose`).
+
+    Returns
+    -------
+    T : (K, 4, 4) poses ``T_camera_lidar``; tri : (K,) the triple of each.
+    """
+    M = P.shape[0]
+    Ts = np.empty((4 * M, 4, 4))
+    tri = np.empty(4 * M, dtype=np.int64)
+    K = 0
+    roots = np.empty(4)
+    pc = np.empty((3, 3))
+    for m in range(M):
+        p = P[m]
+        b = B[m]
+        a2 = (p[1, 0] - p[2, 0]) ** 2 + (p[1, 1] - p[2, 1]) ** 2 + (p[1, 2] - p[2, 2]) ** 2
+        b2 = (p[0, 0] - p[2, 0]) ** 2 + (p[0, 1] - p[2, 1]) ** 2 + (p[0, 2] - p[2, 2]) ** 2
+        c2 = (p[0, 0] - p[1, 0]) ** 2 + (p[0, 1] - p[1, 1]) ** 2 + (p[0, 2] - p[1, 2]) ** 2
+        if not (a2 > 0.0 and b2 > 0.0 and c2 > 0.0):
+            continue
+        ca = b[1, 0] * b[2, 0] + b[1, 1] * b[2, 1] + b[1, 2] * b[2, 2]
+        cb = b[0, 0] * b[2, 0] + b[0, 1] * b[2, 1] + b[0, 2] * b[2, 2]
+        cg = b[0, 0] * b[1, 0] + b[0, 1] * b[1, 1] + b[0, 2] * b[1, 2]
+        q = (a2 - c2) / b2
+        pp = (a2 + c2) / b2
+        A4 = (q - 1) ** 2 - 4 * c2 / b2 * ca**2
+        A3 = 4 * (q * (1 - q) * cb - (1 - pp) * ca * cg + 2 * c2 / b2 * ca**2 * cb)
+        A2 = 2 * (q**2 - 1 + 2 * q**2 * cb**2 + 2 * (b2 - c2) / b2 * ca**2 - 4 * pp * ca * cb * cg
+                  + 2 * (b2 - a2) / b2 * cg**2)
+        A1 = 4 * (-q * (1 + q) * cb + 2 * a2 / b2 * cg**2 * cb - (1 - pp) * ca * cg)
+        A0 = (1 + q) ** 2 - 4 * a2 / b2 * cg**2
+        big = max(abs(A4), abs(A3), abs(A2), abs(A1), abs(A0))
+        if not (abs(A4) > 1e-12 * big):
+            continue  # a vanishing leading coefficient sends a root to infinity
+        nroots = _quartic_real_roots(A4, A3, A2, A1, A0, roots)
+        for ri in range(nroots):
+            v = roots[ri]
+            if not v > 0.0:
+                continue
+            s1 = math.sqrt(b2 / max(1.0 + v * v - 2.0 * v * cb, 1e-300))
+            s3 = v * s1
+            disc = math.sqrt(max(c2 - s1 * s1 * (1.0 - cg * cg), 0.0))
+            den = 2.0 * (cg - v * ca)
+            best, best_res = -1.0, np.inf
+            for cand_k in range(3):
+                if cand_k == 0:
+                    s2 = s1 * cg + disc
+                elif cand_k == 1:
+                    s2 = s1 * cg - disc
+                else:
+                    if den == 0.0:
+                        continue
+                    s2 = ((-1.0 + q) * v * v - 2.0 * q * cb * v + 1.0 + q) / den * s1
+                if not (s2 > 0.0 and np.isfinite(s2)):
+                    continue
+                res = abs(s2 * s2 + s3 * s3 - 2.0 * s2 * s3 * ca - a2)
+                if res < best_res:
+                    best, best_res = s2, res
+            if best < 0.0 or not (s1 > 0.0 and np.isfinite(s1)):
+                continue
+            for k in range(3):
+                pc[0, k] = s1 * b[0, k]
+                pc[1, k] = best * b[1, k]
+                pc[2, k] = s3 * b[2, k]
+            _triangle_pose(p, pc, Ts[K])  # the depths reproduce the triangle: its frame gives R exactly
+            ok = True
+            for a in range(3):
+                for c in range(4):
+                    if not np.isfinite(Ts[K, a, c]):
+                        ok = False
+            if ok:
+                tri[K] = m
+                K += 1
+    return Ts[:K], tri[:K]
+
+
+@njit(**_JIT)
+def tangent_probes(F, h):
+    """Directions ``b +- h e1``, ``b +- h e2`` of every bearing frame, stacked ``(4N, 3)`` in that order."""
+    n = F.shape[0]
+    out = np.empty((4 * n, 3))
+    for i in range(n):
+        for k in range(3):
+            out[i, k] = F[i, 2, k] + h * F[i, 0, k]
+            out[n + i, k] = F[i, 2, k] - h * F[i, 0, k]
+            out[2 * n + i, k] = F[i, 2, k] + h * F[i, 1, k]
+            out[3 * n + i, k] = F[i, 2, k] - h * F[i, 1, k]
+    return out
+
+
+@njit(**_JIT)
+def probe_jacobians(uv, h):
+    """``d pixel / d tangent`` ``(N, 2, 2)`` from the pixels of :func:`tangent_probes`, and ``ok (N,)``:
+    finite with a non-zero determinant."""
+    n = uv.shape[0] // 4
+    A = np.empty((n, 2, 2))
+    ok = np.empty(n, dtype=np.bool_)
+    for i in range(n):
+        for r in range(2):
+            A[i, r, 0] = (uv[i, r] - uv[n + i, r]) / (2.0 * h)
+            A[i, r, 1] = (uv[2 * n + i, r] - uv[3 * n + i, r]) / (2.0 * h)
+        det = A[i, 0, 0] * A[i, 1, 1] - A[i, 0, 1] * A[i, 1, 0]
+        ok[i] = np.isfinite(det) and det != 0.0
+    return A, ok

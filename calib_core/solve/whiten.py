@@ -1,0 +1,194 @@
+"""Whitening of the angular residuals: click noise is isotropic in pixels, not in angle.
+
+The log-map residual ``r_i`` of pair i lives in the tangent plane of the
+clicked bearing (radians).  A pixel error ``dm`` moves the bearing by
+``A_i^-1 dm`` in that plane, with ``A_i`` (2x2, px/rad) the derivative of the
+camera's projection along the tangent plane.  With click noise ``sigma_i`` px
+per axis the residual's covariance is ``sigma_i^2 A_i^-1 A_i^-T``, so
+
+    z_i = W_i r_i,   W_i = A_i / sigma_i
+
+has unit covariance (when ``sigma_i`` is the true noise) and eq. 7 with
+``z_i`` weighs each pair as the pixel cost (eq. 6) would, at the angular
+cost's speed.  ``J_i`` is computed once per solve, at the clicked pixels.
+
+The laser side has its own error: a pick lands on a whole depth-matrix cell
+(:func:`cell_pick_covariance`, metres^2 in the lidar frame).  Seen from the
+camera it moves the bearing by ``Sigma_L,i`` (:func:`laser_tangent_covariance`,
+which needs the pose), added to the click's covariance:
+``C_i = sigma_i^2 A_i^-1 A_i^-T + Sigma_L,i`` and ``W_i = chol(C_i)^-1``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from ..errors import CalibError
+from . import kernels
+
+__all__ = ["tangent_to_pixel", "whitening", "check_pixel_sigma", "cell_pick_covariance",
+           "laser_tangent_covariance"]
+
+#: Central-difference step on the sphere, radians (a fraction of a pixel for any real camera).
+STEP_RAD = 1e-4
+
+
+def check_pixel_sigma(pixel_sigma: object, n: int) -> np.ndarray | None:
+    """Validate a per-pair 1-sigma ``(N,)`` in px (None passes through)."""
+    if pixel_sigma is None:
+        return None
+    s = np.asarray(pixel_sigma, dtype=np.float64)
+    if s.ndim == 0:
+        s = np.full(n, float(s))
+    if s.shape != (n,):
+        raise CalibError(f"pixel_sigma must hold one value per pair ({n}), got shape {s.shape}")
+    bad = np.nonzero(~(np.isfinite(s) & (s > 0)))[0]
+    if bad.size:
+        raise CalibError(f"pair {bad[0]}: pixel_sigma must be a positive number of pixels, got {s[bad[0]]!r}")
+    return s
+
+
+def cell_pick_covariance(depth: Any, rows_cols: np.ndarray, range_sigma_m: float = 0.0) -> np.ndarray:
+    """Laser-point covariance ``(N, 3, 3)`` (metres^2, lidar frame) of picks on whole cells.
+
+    The true corner lies anywhere in the picked cell: uniform over one beam
+    step along the row and along the column (variance ``rho^2 |d dir|^2 / 12``
+    each, ``d dir`` the central difference of the neighbouring beam
+    directions), plus ``range_sigma_m^2`` along the beam.
+
+    Parameters
+    ----------
+    depth : DepthMatrix
+    rows_cols : (N, 2) int array_like
+        Picked ``(row, col)`` cells (valid).
+    range_sigma_m : float
+        1-sigma of the range, metres.
+    """
+    rc = np.asarray(rows_cols, dtype=np.int64).reshape(-1, 2)
+    H, W = depth.shape
+    dirs = np.asarray(depth.directions, dtype=np.float64)
+    wrap = bool(depth.meta.get("wrap_cols", False))
+
+    def step(r_lo, c_lo, r_hi, c_hi, span):
+        g = (dirs[r_hi, c_hi] - dirs[r_lo, c_lo]) / span[:, None]
+        return np.where(np.isfinite(g), g, 0.0)
+
+    r, c = rc[:, 0], rc[:, 1]
+    r_lo, r_hi = np.clip(r - 1, 0, H - 1), np.clip(r + 1, 0, H - 1)
+    g_row = step(r_lo, c, r_hi, c, np.maximum(r_hi - r_lo, 1).astype(float))
+    if wrap:
+        c_lo, c_hi, span = (c - 1) % W, (c + 1) % W, np.full(len(c), 2.0)
+    else:
+        c_lo, c_hi = np.clip(c - 1, 0, W - 1), np.clip(c + 1, 0, W - 1)
+        span = np.maximum(c_hi - c_lo, 1).astype(float)
+    g_col = step(r, c_lo, r, c_hi, span)
+    rho = np.asarray(depth.range_m, dtype=np.float64)[r, c]
+    beam = dirs[r, c]
+
+    def outer(a):
+        return a[:, :, None] * a[:, None, :]
+
+    return (rho**2 / 12.0)[:, None, None] * (outer(g_row) + outer(g_col)) + range_sigma_m**2 * outer(beam)
+
+
+def laser_tangent_covariance(T_camera_lidar: np.ndarray, points_lidar: np.ndarray, frames: np.ndarray,
+                             laser_cov_m2: np.ndarray) -> np.ndarray:
+    """Covariance ``(N, 2, 2)`` (rad^2) of the bearing residual caused by laser-point errors.
+
+    First order: ``dr = E_i R dX / |R X + t|`` (the tangent-plane part of the
+    moved point over its range), so ``Sigma_i = E_i R S_i R^T E_i^T / |P_i|^2``.
+    """
+    T = np.asarray(T_camera_lidar, dtype=np.float64)
+    R = T[:3, :3]
+    P = points_lidar @ R.T + T[:3, 3]
+    A = np.einsum("nij,jk->nik", frames[:, :2, :], R)  # E_i R, (N, 2, 3)
+    S = np.einsum("nij,njk,nlk->nil", A, laser_cov_m2, A)
+    return S / np.einsum("ij,ij->i", P, P)[:, None, None]
+
+
+def tangent_to_pixel(camera: Any, frames: np.ndarray) -> np.ndarray:
+    """``d pixel / d(tangent coordinates of the bearing)`` at each bearing, ``(N, 2, 2)`` px/rad.
+
+    Central differences of ``camera.project`` at ``b +- h e1`` and
+    ``b +- h e2`` (one call; projecting is cheaper than un-distorting pixels).
+
+    Parameters
+    ----------
+    camera : CameraModel
+    frames : (N, 3, 3) ndarray
+        Rows ``e1, e2, b`` of each clicked bearing.
+
+    Returns
+    -------
+    A : (N, 2, 2) ndarray
+        Columns: along ``e1``, along ``e2``.  NaN where the camera cannot
+        project one of the probes.
+    ok : (N,) bool ndarray
+        ``A`` is finite and invertible.
+    """
+    probe = kernels.tangent_probes(np.ascontiguousarray(frames, dtype=np.float64), STEP_RAD)
+    uv = np.ascontiguousarray(camera.project(probe)[0], dtype=np.float64)
+    return kernels.probe_jacobians(uv, STEP_RAD)
+
+
+def whitening(
+    n: int,
+    *,
+    camera: Any = None,
+    frames: np.ndarray | None = None,
+    pixel_sigma: np.ndarray | None = None,
+    noise_rad: float | None = None,
+    laser_tangent_cov: np.ndarray | None = None,
+) -> tuple[np.ndarray, str]:
+    """Whitening matrices ``W (N, 2, 2)`` and the unit of the whitened residuals.
+
+    * ``noise_rad`` given: ``W = I / noise_rad`` (known isotropic angular
+      noise; the whitened residuals are in units of that noise).
+    * a camera: ``W_i = A_i / sigma_i``, or with a laser term
+      ``W_i = chol(sigma_i^2 A_i^-1 A_i^-T + Sigma_L,i)^-1``
+      (``sigma_i`` from ``pixel_sigma``, default 1 px; ``Sigma_L,i`` =
+      ``laser_tangent_cov``, default 0): residuals in px of click noise (or
+      in sigmas when ``pixel_sigma`` is given).
+    * neither: ``W_i = I / sigma_i`` (radians; ``pixel_sigma`` then only sets
+      relative weights).
+
+    Returns
+    -------
+    W : (N, 2, 2) ndarray
+    unit : {"noise", "px", "sigma", "rad"}
+    """
+    s = np.ones(n) if pixel_sigma is None else pixel_sigma
+    if noise_rad is not None:
+        return np.broadcast_to(np.eye(2) / noise_rad, (n, 2, 2)).copy(), "noise"
+    eye = np.broadcast_to(np.eye(2), (n, 2, 2))
+    if camera is None:
+        return eye / s[:, None, None], "rad"
+    A, ok = tangent_to_pixel(camera, frames)  # px/rad: the whitened residual is the linearised pixel error
+    unit = "px" if pixel_sigma is None else "sigma"
+    if laser_tangent_cov is None and ok.all():
+        return (A if pixel_sigma is None else A / s[:, None, None]), unit
+    det = A[:, 0, 0] * A[:, 1, 1] - A[:, 0, 1] * A[:, 1, 0]
+    if not ok.any():
+        return eye / s[:, None, None], "rad"
+    if not ok.all():
+        # A probe the camera cannot project: the median isotropic px-per-radian of the other pairs.
+        A[~ok] = np.eye(2) * float(np.median(np.sqrt(np.abs(det[ok]))))
+        det = np.where(ok, det, A[:, 0, 0] * A[:, 1, 1])
+    if laser_tangent_cov is None:
+        return A / s[:, None, None], unit
+    # C = s^2 A^-1 A^-T + Sigma_L (rad^2) = L L^T (2x2 Cholesky, closed form); W = L^-1, W^T W = C^-1.
+    Ainv = np.empty_like(A)
+    Ainv[:, 0, 0], Ainv[:, 1, 1] = A[:, 1, 1] / det, A[:, 0, 0] / det
+    Ainv[:, 0, 1], Ainv[:, 1, 0] = -A[:, 0, 1] / det, -A[:, 1, 0] / det
+    Js = Ainv * s[:, None, None]
+    C = Js @ np.swapaxes(Js, 1, 2) + laser_tangent_cov
+    l00 = np.sqrt(C[:, 0, 0])
+    l10 = C[:, 1, 0] / l00
+    l11 = np.sqrt(np.maximum(C[:, 1, 1] - l10**2, 1e-300))
+    W = np.zeros_like(C)
+    W[:, 0, 0] = 1.0 / l00
+    W[:, 1, 1] = 1.0 / l11
+    W[:, 1, 0] = -l10 / (l00 * l11)
+    return W, ("px" if pixel_sigma is None else "sigma")

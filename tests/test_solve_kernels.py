@@ -1,0 +1,118 @@
+"""Compiled solve kernels, the whitening and the honesty of sigma, against independent truth."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+from scipy.stats import norm
+
+from calib_core.lidar.depth_matrix import DepthMatrix
+from calib_core.solve import kernels, solve_extrinsics, warm_up
+from calib_core.solve.whiten import cell_pick_covariance, whitening
+
+from test_solver import TinyPinhole, perturb, pinhole_scene, pose_error, random_scene
+
+
+def test_dlt_recovers_a_noise_free_pose_and_refuses_coplanar_points():
+    T, points, bearings = random_scene(31, 9)
+    R, t, ok = kernels.dlt_pose(points, bearings)
+    assert ok
+    np.testing.assert_allclose(R, T[:3, :3], atol=1e-9)
+    np.testing.assert_allclose(t, T[:3, 3], atol=1e-9)
+    flat = points.copy()
+    flat[:, 2] = 1.5  # coplanar laser points: the 12-unknown DLT has a second null vector
+    pc = flat @ T[:3, :3].T + T[:3, 3]
+    _, _, ok = kernels.dlt_pose(flat, pc / np.linalg.norm(pc, axis=1, keepdims=True))
+    assert not ok
+    _, _, ok = kernels.dlt_pose(points[:5], bearings[:5])
+    assert not ok
+
+
+def test_pose_core_matches_the_public_solve():
+    rng = np.random.default_rng(4)
+    T, points, bearings = random_scene(4, 30, near=2.0)
+    noisy = perturb(bearings, 1e-3, rng)
+    W = np.broadcast_to(np.eye(2), (30, 2, 2)).copy()
+    R, t, cov, it, status = kernels.pose_core(points, noisy, W, 200)
+    res = solve_extrinsics(points, noisy)
+    assert status == 1 and 1 <= it < 50
+    np.testing.assert_allclose(R, res.T_camera_lidar[:3, :3], atol=1e-9)
+    np.testing.assert_allclose(t, res.T_camera_lidar[:3, 3], atol=1e-9)
+    assert np.all(np.isfinite(cov)) and np.allclose(cov, cov.T)
+
+
+def test_whitened_residual_is_the_pixel_error_to_first_order():
+    cam, T, points, pixels = pinhole_scene(8, 12)
+    rng = np.random.default_rng(1)
+    clicked = pixels + rng.normal(0.0, 0.7, pixels.shape)
+    bearings = cam.bearing(clicked)
+    F = kernels.bearing_frames(bearings)
+    W, unit = whitening(12, camera=cam, frames=F)
+    assert unit == "px"
+    z, _ = kernels.whitened_residuals(T[:3, :3].copy(), T[:3, 3].copy(), points, F, W)
+    # Independent truth: the pixel distance between the click and the true projection.
+    np.testing.assert_allclose(np.linalg.norm(z, axis=1), np.linalg.norm(clicked - pixels, axis=1), rtol=0.02,
+                               atol=1e-3)
+    sig = np.full(12, 2.0)
+    W2, unit2 = whitening(12, camera=cam, frames=F, pixel_sigma=sig)
+    assert unit2 == "sigma"
+    np.testing.assert_allclose(W2, W / 2.0)
+
+
+def test_cell_pick_covariance_of_a_regular_grid():
+    # A spherical grid with 1 deg rows and 0.5 deg columns, every range 4 m.
+    el = np.radians(np.arange(10, -10, -1.0))
+    az = np.radians(np.arange(0, 20, 0.5))
+    E, A = np.meshgrid(el, az, indexing="ij")
+    d = np.stack([np.cos(E) * np.cos(A), np.cos(E) * np.sin(A), np.sin(E)], axis=-1)
+    rng_m = np.full(E.shape, 4.0)
+    depth = DepthMatrix(rng_m, d, d * 4.0, np.ones(E.shape, bool), {})
+    cov = cell_pick_covariance(depth, np.array([[10, 20]]), range_sigma_m=0.02)[0]
+    w = np.sort(np.linalg.eigvalsh(cov))
+    # Hand-computed: uniform over one cell, variance (rho * step)^2 / 12 per axis; range noise along the beam.
+    e10 = E[10, 20]
+    expected = np.sort([(4 * np.radians(1.0)) ** 2 / 12, (4 * np.radians(0.5) * np.cos(e10)) ** 2 / 12, 0.02**2])
+    np.testing.assert_allclose(w, expected, rtol=2e-3)
+
+
+def test_student_t_sigma_covers_68_and_95_percent():
+    """With the noise estimated from few residuals, +-1 and +-2 reported sigma cover 68.3 % and 95.4 %."""
+    # 10 pairs: 14 degrees of freedom.  (The factor matches 1 sigma exactly; with heavier tails, fewer
+    # degrees of freedom leave 2 sigma a little short, e.g. 92.7 % at 6.)
+    T, points, bearings = random_scene(12, 10, near=2.0, far=8.0, max_t=1.0)
+    rng = np.random.default_rng(0)
+    trials = 600
+    inside = np.zeros((2, 3))
+    for _ in range(trials):
+        noisy = perturb(bearings, np.radians(0.2), rng)
+        res = solve_extrinsics(points, noisy, initial_T_camera_lidar=T, robust=False)
+        err = res.T_camera_lidar[:3, 3] - T[:3, 3]
+        inside[0] += np.abs(err) <= res.sigma_translation_m
+        inside[1] += np.abs(err) <= 2 * res.sigma_translation_m
+    cover = inside / trials
+    # Binomial standard error at 600 trials: 1.9 points at 68 %, 0.9 at 95 %.
+    assert np.all(np.abs(cover[0] - (2 * norm.cdf(1) - 1)) < 0.06), cover
+    assert np.all(np.abs(cover[1] - (2 * norm.cdf(2) - 1)) < 0.035), cover
+
+
+def test_warm_up_compiles_once():
+    first = warm_up()
+    second = warm_up()
+    assert first > 0 and second < 1.0
+
+
+def test_geodesic_cost_is_eq7_unweighted():
+    """cost='geodesic' ignores the camera: the same pose as the solve without a camera."""
+    cam, T, points, pixels = pinhole_scene(5, 10)
+    rng = np.random.default_rng(2)
+    clicked = pixels + rng.normal(0.0, 1.0, pixels.shape)
+    b = cam.bearing(clicked)
+    geo = solve_extrinsics(points, b, camera=cam, pixels=clicked, cost="geodesic")
+    plain = solve_extrinsics(points, b)
+    np.testing.assert_allclose(geo.T_camera_lidar, plain.T_camera_lidar, atol=1e-9)
+    assert geo.residual_unit == "rad"
+    wh = solve_extrinsics(points, b, camera=cam, pixels=clicked)
+    pix = solve_extrinsics(points, b, camera=cam, pixels=clicked, cost="pixel")
+    # The whitened angular cost is the pixel cost to first order: the two optima nearly coincide.
+    assert max(pose_error(wh.T_camera_lidar, pix.T_camera_lidar)) < 0.1 * max(pose_error(geo.T_camera_lidar, pix.T_camera_lidar)) + 1e-6
