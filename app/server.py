@@ -55,7 +55,7 @@ from calib_core.io.images import load_image_rgb
 from calib_core.overlays import ba_edge_points_consensus, colorize_points, export_colored_ply
 from calib_core.pairs import Pair, resolve_pairs
 from calib_core.panorama import Panorama, refine_click_to_corner
-from calib_core.solve import solve_extrinsics
+from calib_core.solve import calibrate
 from calib_core.transforms import invert_T, rpy_deg_from_R, transform_points
 
 from .ba_view import ColumnWindow, ba_texture, cell_aspect_from_directions, covering_window, texture_factor
@@ -96,6 +96,14 @@ EDGE_MIN_SIZE = 0.012  # world units
 BA_WINDOW_MODES = {"all": "All columns", "camera": "Facing the camera", "custom": "Custom"}
 SNAP_RADIUS_PX = 4.0
 UP_AXES = {"+z": (0.0, 0.0, 1.0), "+y": (0.0, 1.0, 0.0), "-y": (0.0, -1.0, 0.0), "camera up (-y of camera)": None}
+
+
+#: The quality verdict as the result panel shows it (fixed strings: no user text).
+QUALITY_BADGES = {
+    "ok": "### 🟢 Quality: ok",
+    "warning": "### 🟡 Quality: warning",
+    "unreliable": "### 🔴 Quality: UNRELIABLE (do not use this pose)",
+}
 
 
 def md_escape(text: str) -> str:
@@ -925,8 +933,9 @@ class CalibrationApp:
         """The solve and what the error display and the 2-D overlays need (the cloud comes later)."""
         ids, pairs = payload
         t0 = time.perf_counter()
-        points, bearings, pixels = resolve_pairs(pairs, self.depth, self.camera)
-        result = solve_extrinsics(points, bearings, camera=self.camera, pixels=pixels)
+        points, _, pixels = resolve_pairs(pairs, self.depth, self.camera)
+        # The pairs carry their pick ids, so the solve names outliers and warnings by the ids the page shows.
+        result = calibrate(pairs, self.depth, self.camera)
         T = result.T_camera_lidar
         return SolveBundle(
             pick_ids=ids, pairs=pairs, result=result, pixels=pixels,
@@ -1297,6 +1306,16 @@ class CalibrationApp:
             T = r.T_camera_lidar
             t, rpy = T[:3, 3], rpy_deg_from_R(T[:3, :3])
             st, sr = np.asarray(r.sigma_translation_m), np.asarray(r.sigma_rpy_deg)
+            quality = getattr(r, "quality", None)
+            status = getattr(quality, "status", "ok")
+            reasons = list(getattr(quality, "reasons", []))
+            # The verdict first and in colour: never a confident wrong answer.
+            out.append(f"{QUALITY_BADGES.get(status, QUALITY_BADGES['unreliable'])}")
+            for reason in reasons:
+                out.append(f"• {md_escape(reason)}")
+            excluded = [int(i) for i in getattr(r, "outlier_ids", [])]
+            if excluded:
+                out.append("Left out of the fit: pair " + ", ".join(str(i) for i in excluded))
             out += [
                 f"**Solved with {r.n_pairs} pairs** ({md_escape(r.cost_name)} cost, {r.iterations} iterations, "
                 f"{bundle.seconds * 1000:.0f} ms)",
@@ -1308,16 +1327,16 @@ class CalibrationApp:
                 f"{sr[2]:.3f}) deg",
             ]
             for w in r.warnings:
-                out.append(f"Warning: {md_escape(w)}")
+                if w not in reasons:  # notes on the output's form (reasons are shown above)
+                    out.append(f"Note: {md_escape(w)}")
             self._md_result.content = "  \n".join(out)
-            outliers = set(int(i) for i in r.outliers)
-            rows = ["| pair | px | deg | |", "|---:|---:|---:|:---|"]
+            rows = ["| pair | px | deg | in fit |", "|---:|---:|---:|:---|"]
             for k, pid in enumerate(bundle.pick_ids):
                 px, deg = float(r.residual_px[k]), float(r.residual_deg[k])
-                if k in outliers:
-                    rows.append(f"| **{pid}** | **{_fmt(px, 2)}** | **{_fmt(deg, 3)}** | **outlier** |")
+                if pid in excluded:
+                    rows.append(f"| **{pid}** | **{_fmt(px, 2)}** | **{_fmt(deg, 3)}** | **excluded (outlier)** |")
                 else:
-                    rows.append(f"| {pid} | {_fmt(px, 2)} | {_fmt(deg, 3)} | |")
+                    rows.append(f"| {pid} | {_fmt(px, 2)} | {_fmt(deg, 3)} | yes |")
             self._md_table.content = "\n".join(rows)
 
     # ================================================================== cameras

@@ -96,7 +96,8 @@ class Pick:
         """The :class:`calib_core.pairs.Pair` of a complete pick."""
         if not self.complete:
             raise CalibError(f"pair {self.id} is incomplete")
-        return Pair(self.laser_rc, None if self.laser_rc is not None else self.laser_xyz, self.pixel)  # type: ignore[arg-type]
+        return Pair(self.laser_rc, None if self.laser_rc is not None else self.laser_xyz, self.pixel,  # type: ignore[arg-type]
+                    id=int(self.id))
 
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {"id": int(self.id)}

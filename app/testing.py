@@ -158,6 +158,11 @@ class AppDriver:
         return str(self.app._md_pairs.content)
 
     @property
+    def residual_table(self) -> str:
+        """The per-pair residual table (markdown) of the Calibration panel."""
+        return str(self.app._md_table.content)
+
+    @property
     def result_panel(self) -> str:
         """The text of the Calibration panel (errors, solve failures)."""
         return str(self.app._md_result.content)

@@ -41,7 +41,8 @@ def test_either_click_order_makes_a_pair():
     assert s.add_laser(5, 6) == b  # camera first
     assert ends(s) == [(1, (3, 4), (10.5, 20.25)), (2, (5, 6), (100.0, 50.0))]
     assert s.pending() is None
-    assert s.pairs() == [Pair((3, 4), None, (10.5, 20.25)), Pair((5, 6), None, (100.0, 50.0))]
+    # The pairs carry the ids the page shows (one id in the UI, warnings and files).
+    assert s.pairs() == [Pair((3, 4), None, (10.5, 20.25), id=a), Pair((5, 6), None, (100.0, 50.0), id=b)]
 
 
 def test_second_click_on_same_side_replaces_the_pending_end():
@@ -165,7 +166,7 @@ def test_export_writes_complete_pairs_readable_by_core(tmp_path):
     s.add_laser(6, 6)  # incomplete: not exported
     out = tmp_path / "out.yaml"
     assert s.export_pairs_file(out) == 1
-    assert load_pairs_yaml(out) == [Pair((3, 4), None, (10.5, 20.0))]
+    assert load_pairs_yaml(out) == [Pair((3, 4), None, (10.5, 20.0), id=s.picks[0].id)]
 
 
 def test_every_change_is_on_disk_before_it_returns_and_restored(tmp_path):
