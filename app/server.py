@@ -63,6 +63,7 @@ from .layout import ImageSlot, annotation_layout, bounds_of
 from .live_solver import LiveSolver
 from .security import TOKEN_QUERY, AccessPolicy, RefusalLog, is_loopback, start_guarded_viser, upload_display_name
 from .state import AnnotationState, Pick
+from .warm_up import WarmUp
 
 BA_TITLES = {
     "horizontal": "BA horizontal",
@@ -249,6 +250,8 @@ class CalibrationApp:
         token: str | None = None,
         allowed_hosts: tuple[str, ...] = (),
     ) -> None:
+        # Kernels compile in the background while the inputs load; nothing waits for it.
+        self.warm_up = WarmUp()
         self.scan_path, self.image_path, self.camera_path = Path(scan_path), Path(image_path), Path(camera_path)
         self.output_path = None if output_path is None else Path(output_path)
         if session_path is None:
