@@ -315,7 +315,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="ba-calib",
         description="Targetless camera / 3D-lidar extrinsic calibration with Bearing Angle images. "
-        "With no command, serves the bundled sample scene at http://127.0.0.1:8080.",
+        "With no command, runs 'serve' (the bundled sample scene at http://127.0.0.1:8080 unless "
+        "--scan/--image/--camera are given; --host and --port work as for serve).",
     )
     parser.add_argument("--debug", action="store_true", help="show tracebacks of internal errors")
     parser.add_argument("--version", action="version", version=f"ba-calib {_version()}")
@@ -422,18 +423,30 @@ def build_parser() -> argparse.ArgumentParser:
     which.add_argument("--index", type=int, default=None, help="the cloud with this 0-based index on its topic (default 0)")
     q.add_argument("-o", "--output", required=True, type=Path, help="output folder")
     q.set_defaults(func=cmd_bag_extract)
+    parser.commands = tuple(sub.choices)  # type: ignore[attr-defined]  (for with_default_command)
     return parser
+
+
+def with_default_command(parser: argparse.ArgumentParser, argv: Sequence[str] | None = None) -> list[str]:
+    """``argv`` with ``serve`` inserted when it names no command: ``ba-calib --port 8300`` serves.
+
+    The global options (``--debug``) stay in front; ``-h`` / ``--version`` are left to the main parser.
+    """
+    args = list(sys.argv[1:] if argv is None else argv)
+    commands = set(getattr(parser, "commands", ()))
+    i = 0
+    while i < len(args) and args[i] == "--debug":
+        i += 1
+    if i < len(args) and (args[i] in commands or args[i] in ("-h", "--help", "--version")):
+        return args
+    return args[:i] + ["serve"] + args[i:]
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     from calib_core.errors import CalibError
 
     parser = build_parser()
-    args = parser.parse_args(argv)
-    if args.command is None:
-        debug = args.debug
-        args = parser.parse_args(["serve"])
-        args.debug = debug
+    args = parser.parse_args(with_default_command(parser, argv))
     try:
         return int(args.func(args) or 0)
     except CalibError as exc:

@@ -50,10 +50,11 @@ import viser.transforms as vtf
 from calib_core.bearing_angle import BA_DIRECTIONS, ba_to_display, bearing_angle_images
 from calib_core.cameras import load_camera
 from calib_core.errors import CalibError
-from calib_core.io.extrinsics import save_extrinsics_yaml
+from calib_core.io.atomic import write_yaml_atomic
+from calib_core.io.extrinsics import extrinsics_to_dict, save_extrinsics_yaml
 from calib_core.io.images import load_image_rgb
 from calib_core.overlays import ba_edge_points_consensus, colorize_points, export_colored_ply
-from calib_core.pairs import Pair, resolve_pairs
+from calib_core.pairs import Pair, load_pairs_yaml, resolve_pairs
 from calib_core.panorama import Panorama, refine_click_to_corner
 from calib_core.solve import calibrate
 from calib_core.transforms import invert_T, rpy_deg_from_R, transform_points
@@ -96,6 +97,8 @@ ZOOM_STEP = 2.0
 EDGE_MIN_SIZE = 0.012  # world units
 BA_WINDOW_MODES = {"all": "All columns", "camera": "Facing the camera", "custom": "Custom"}
 SNAP_RADIUS_PX = 4.0
+#: The answers of the import question (the buttons of its modal).
+IMPORT_CHOICES = ("Append", "Replace all", "Cancel")
 UP_AXES = {"+z": (0.0, 0.0, 1.0), "+y": (0.0, 1.0, 0.0), "-y": (0.0, -1.0, 0.0), "camera up (-y of camera)": None}
 
 
@@ -521,8 +524,8 @@ class CalibrationApp:
             self._dd_selected.on_update(self._guard(self._on_select_dropdown))
             self._bg_edit = gui.add_button_group("Edit", ("Undo", "Redo", "Deselect", "Delete"))
             self._bg_edit.on_click(self._guard(self._on_edit))
-            self._btn_clear = gui.add_button("Clear all pairs", color="red", icon=viser.Icon.TRASH)
-            self._btn_clear.on_click(self._guard(lambda event: self.state.clear()))
+            self._btn_clear = gui.add_button("Clear all pairs (undoable)", color="red", icon=viser.Icon.TRASH)
+            self._btn_clear.on_click(self._guard(self._on_clear))
             self._cb_snap = gui.add_checkbox("Snap clicks to corners", initial_value=self._snap,
                                              hint="Refine each click to the strongest corner within 4 pixels")
             self._cb_snap.on_update(self._guard(self._on_view_checkbox))
@@ -856,11 +859,54 @@ class CalibrationApp:
             path = Path(tmp) / "upload.yaml"
             path.write_bytes(content)
             try:
-                ids = self.state.import_pairs_file(path)
+                pairs = load_pairs_yaml(path)
+                self.state.check_import(pairs)  # a file not of this scene is refused before asking anything
             except CalibError as exc:
                 raise CalibError(str(exc).replace(str(path), shown)) from None
-        self._notify(client, "Pairs imported", f"{len(ids)} pairs added from {shown} (undo removes them)",
-                     color="green")
+        if not self.state.picks or client is None or not hasattr(client, "gui"):
+            self._finish_import(client, shown, pairs, "Append")
+            return
+        self._ask_import(client, shown, pairs)
+
+    def _ask_import(self, client: Any, shown: str, pairs: list[Pair]) -> None:
+        """Ask this tab whether the uploaded pairs replace the current ones or are added to them."""
+        duplicates = self.state.count_duplicates(pairs)
+        modal = client.gui.add_modal("Import pairs")
+        with modal:
+            client.gui.add_markdown(
+                f"{md_escape(shown)} has {len(pairs)} pairs; there are {len(self.state.picks)} pairs now.  \n"
+                f"**Append** adds them ({duplicates} exact duplicates are skipped); **Replace all** removes the "
+                f"current pairs first. Undo reverses either.")
+            for label in IMPORT_CHOICES:
+                button = client.gui.add_button(label, color="red" if label == "Replace all" else None)
+
+                def answer(event: Any, label: str = label) -> None:
+                    modal.close()
+                    self._finish_import(event.client, shown, pairs, label)
+
+                button.on_click(self._guard(answer))
+
+    def _finish_import(self, client: Any, shown: str, pairs: list[Pair], choice: str) -> None:
+        if choice not in ("Append", "Replace all"):
+            return  # Cancel
+        replace = choice == "Replace all"
+        before = len(self.state.picks)
+        ids = self.state.import_pairs(pairs, replace_existing=replace)
+        skipped = len(pairs) - len(ids)
+        what = f"{len(ids)} pairs added from {shown}"
+        if replace:
+            what = f"{before} pairs replaced by {len(ids)} from {shown}"
+        if skipped:
+            what += f", {skipped} exact duplicates skipped"
+        self._notify(client, "Pairs imported", what + " (undo reverses this)", color="green")
+
+    def _on_clear(self, event: Any) -> None:
+        n = len(self.state.picks)
+        if n == 0:
+            raise CalibError("there are no pairs to clear")
+        self.state.clear()
+        self._notify(event.client, "Pairs cleared", f"{n} pairs removed. Undo (in Edit) brings them back.",
+                     color="yellow")
 
     def _on_download_pairs(self, event: Any) -> None:
         with tempfile.TemporaryDirectory() as tmp:
@@ -892,20 +938,22 @@ class CalibrationApp:
             event.client.send_file_download("colored_cloud.ply", data, save_immediately=True)
 
     def export_extrinsics(self) -> tuple[bytes, Path | None]:
-        """The extrinsics YAML of the last good solve, also written to ``output_path``.
+        """The extrinsics YAML of the last good solve to download; also written to ``output_path``.
 
-        Returns ``(file bytes, path written or None)``; CalibError before the first solve.
+        The written file names the camera's files relative to its own folder;
+        the download, whose folder is unknown, carries the camera inline.
+        Returns ``(download bytes, path written or None)``; CalibError before the first solve.
         """
         bundle = self._bundle
         if bundle is None:
             raise CalibError(f"no calibration yet: pick at least {MIN_PAIRS} pairs")
+        r = bundle.result
         if self.output_path is not None:
-            save_extrinsics_yaml(self.output_path, bundle.result.T_camera_lidar, bundle.result, self.camera, bundle.pairs)
-            return self.output_path.read_bytes(), self.output_path
+            save_extrinsics_yaml(self.output_path, r.T_camera_lidar, r, self.camera, bundle.pairs)
         with tempfile.TemporaryDirectory() as tmp:
             path = Path(tmp) / "extrinsics.yaml"
-            save_extrinsics_yaml(path, bundle.result.T_camera_lidar, bundle.result, self.camera, bundle.pairs)
-            return path.read_bytes(), None
+            write_yaml_atomic(path, extrinsics_to_dict(r.T_camera_lidar, r, self.camera, bundle.pairs, base_dir=None))
+            return path.read_bytes(), self.output_path
 
     # ================================================================ live solve
     def _on_state_change(self, state: AnnotationState) -> None:

@@ -350,14 +350,11 @@ class AnnotationState:
             self._commit_locked(Snapshot((), self._snap.next_id))
         self._notify()
 
-    def import_pairs(self, pairs: Sequence[Pair], replace_existing: bool = False) -> list[int]:
-        """Add pairs (e.g. from a pairs YAML) as one undoable step; returns the new ids.
-
-        If any pair's laser cell or pixel is invalid for this scene a
-        :class:`CalibError` names it and nothing is added.
-        """
+    def check_import(self, pairs: Sequence[Pair]) -> list[Pick]:
+        """The picks ``pairs`` would become (ids not yet given); CalibError names the first pair not of this scene."""
         checked = []
         for i, p in enumerate(pairs):
+            name = f"imported pair {i}" if p.id is None else f"imported pair {p.id}"
             try:
                 rc = None if p.laser_rc is None else self.check_laser_cell(*p.laser_rc)
                 xyz = None if p.laser_xyz is None else tuple(finite_vector(p.laser_xyz, 3, "laser_xyz"))
@@ -365,15 +362,49 @@ class AnnotationState:
                     raise CalibError("no laser end")
                 uv = self.check_pixel(*p.pixel)
             except CalibError as exc:
-                raise CalibError(f"imported pair {i}: {exc}") from None
-            checked.append((rc, xyz, uv))
+                raise CalibError(f"{name}: {exc}") from None
+            checked.append(Pick(-1 if p.id is None else int(p.id), laser_rc=rc,
+                                laser_xyz=None if rc is not None else xyz, pixel=uv))
+        return checked
+
+    def count_duplicates(self, pairs: Sequence[Pair]) -> int:
+        """How many of ``pairs`` are exact duplicates of a pick here (or of an earlier one of ``pairs``)."""
+        return len(pairs) - len(self._new_ends(self.check_import(pairs), self.picks))
+
+    @staticmethod
+    def _new_ends(checked: Sequence[Pick], existing: Sequence[Pick]) -> list[Pick]:
+        seen = {(p.laser_rc, p.laser_xyz, p.pixel) for p in existing}
+        out = []
+        for p in checked:
+            ends = (p.laser_rc, p.laser_xyz, p.pixel)
+            if ends not in seen:  # an exact duplicate adds nothing
+                seen.add(ends)
+                out.append(p)
+        return out
+
+    def import_pairs(self, pairs: Sequence[Pair], replace_existing: bool = False) -> list[int]:
+        """Add pairs (e.g. from a pairs YAML) as one undoable step; returns the ids of those added.
+
+        Exact duplicates (same laser end and pixel as a pick already here, or
+        as an earlier imported pair) are skipped.  A pair keeps the ``id`` it
+        has in the file unless that id is taken.  With ``replace_existing``
+        the imported pairs replace all picks (undo brings them back).  If any
+        pair's laser cell or pixel is invalid for this scene a
+        :class:`CalibError` names it and nothing is added.
+        """
+        checked = self.check_import(pairs)
         with self._lock:
             base = () if replace_existing else self._snap.picks
             next_id = self._snap.next_id
+            used = {p.id for p in base}
             new = []
-            for rc, xyz, uv in checked:
-                new.append(Pick(next_id, laser_rc=rc, laser_xyz=None if rc is not None else xyz, pixel=uv))
-                next_id += 1
+            for p in self._new_ends(checked, base):
+                pid = p.id if p.id >= 0 and p.id not in used else next_id
+                used.add(pid)
+                next_id = max(next_id, pid + 1)
+                new.append(Pick(pid, laser_rc=p.laser_rc, laser_xyz=p.laser_xyz, pixel=p.pixel))
+            if not new and not replace_existing:
+                return []
             self._commit_locked(Snapshot(base + tuple(new), next_id))
         self._notify()
         return [p.id for p in new]
