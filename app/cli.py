@@ -189,16 +189,14 @@ def cmd_ba_images(args: argparse.Namespace) -> int:
 def cmd_colorize(args: argparse.Namespace) -> int:
     from calib_core.io.extrinsics import load_extrinsics_yaml
     from calib_core.io.images import load_image_rgb
-    from calib_core.overlays import colorize_points, export_colored_ply
+    from calib_core.overlays import export_colored_scan
 
     depth = load_scan_from_args(args)
     camera = load_camera_from_args(args)
     image = load_image_rgb(args.image)
     T = load_extrinsics_yaml(args.extrinsics)["T_camera_lidar"]
-    points, _ = depth.valid_points()
-    colors, has_color = colorize_points(points, image, camera, T, occlusion=not args.no_occlusion)
-    export_colored_ply(args.output, points, colors, has_color)
-    print(f"coloured {int(has_color.sum())} of {len(points)} points; wrote {args.output}")
+    coloured, n = export_colored_scan(args.output, depth, image, camera, T, occlusion=not args.no_occlusion)
+    print(f"coloured {coloured} of {n} points; wrote {args.output}")
     return 0
 
 

@@ -53,7 +53,8 @@ from calib_core.errors import CalibError
 from calib_core.io.atomic import write_yaml_atomic
 from calib_core.io.extrinsics import extrinsics_to_dict, save_extrinsics_yaml
 from calib_core.io.images import load_image_rgb
-from calib_core.overlays import ba_edge_points_consensus, colorize_points, export_colored_ply
+from calib_core.overlays import (ba_edge_points_consensus, colorize_points, columns_seen_by_camera, export_colored_scan,
+                                 project_lidar_points)
 from calib_core.pairs import Pair, load_pairs_yaml, resolve_pairs
 from calib_core.panorama import Panorama, refine_click_to_corner
 from calib_core.solve import calibrate
@@ -928,11 +929,9 @@ class CalibrationApp:
         bundle = self._bundle
         if bundle is None:
             raise CalibError(f"no calibration yet: pick at least {MIN_PAIRS} pairs")
-        T = bundle.result.T_camera_lidar
-        colors, has_color = colorize_points(self.all_points_lidar, self.image, self.camera, T, occlusion=True)
         with tempfile.TemporaryDirectory() as tmp:
             path = Path(tmp) / "colored_cloud.ply"
-            export_colored_ply(path, self.all_points_lidar, colors, has_color)
+            export_colored_scan(path, self.depth, self.image, self.camera, bundle.result.T_camera_lidar)
             data = path.read_bytes()
         if event.client is not None:
             event.client.send_file_download("colored_cloud.ply", data, save_immediately=True)
@@ -1042,10 +1041,8 @@ class CalibrationApp:
 
     def _facing_window(self, T_camera_lidar: np.ndarray) -> ColumnWindow | None:
         """The scan columns whose points project into the camera image, or None."""
-        _, in_image = self.camera.project(transform_points(T_camera_lidar, self.all_points_lidar))
-        n_cols = self.depth.shape[1]
-        seen = np.zeros(n_cols, bool)
-        seen[self.all_rows_cols[in_image, 1]] = True
+        seen = columns_seen_by_camera(self.depth, self.camera, T_camera_lidar)
+        n_cols = len(seen)
         # A margin and coarse ends, so that the next solve usually keeps the same window.
         step = max(1, round(n_cols / 225))
         return covering_window(seen, self._wrap_cols, margin=step, quantum=step)
@@ -1284,18 +1281,19 @@ class CalibrationApp:
 
     def _predictions(self, picks: dict[int, Pick]) -> list[tuple[int, np.ndarray]]:
         """Display pixels where the last good calibration expects picks that have only a BA end."""
+        ids, pixels = self._predicted_pixels(picks)
+        uv, ok = self._display_from_pixels(pixels)
+        return [(pid, uv[k]) for k, pid in enumerate(ids) if ok[k]]
+
+    def _predicted_pixels(self, picks: dict[int, Pick]) -> tuple[list[int], np.ndarray]:
+        """Camera pixels where the last good calibration expects the picks that have only a laser cell."""
         bundle = self._bundle
-        if bundle is None:
-            return []
-        out = []
-        for p in picks.values():
-            if p.laser_rc is None or p.pixel is not None:
-                continue
-            point = transform_points(bundle.result.T_camera_lidar, self.depth.cell_points(np.array([p.laser_rc])))
-            uv, ok = self._display_from_camera_points(point)
-            if ok[0]:
-                out.append((p.id, uv[0]))
-        return out
+        pending = [p for p in picks.values() if p.laser_rc is not None and p.pixel is None]
+        if bundle is None or not pending:
+            return [], np.empty((0, 2))
+        points = self.depth.cell_points(np.array([p.laser_rc for p in pending]))
+        uv, ok = project_lidar_points(bundle.result.T_camera_lidar, self.camera, points)
+        return [p.id for p, good in zip(pending, ok) if good], uv[ok]
 
     def _show_solved_camera(self) -> None:
         """The solved camera's frame in the 3-D pane; without a solve no frame and a grey cloud."""
@@ -1321,12 +1319,9 @@ class CalibrationApp:
             if pending is not None:
                 need = "camera" if pending.pixel is None else "BA"
                 lines.append(f"Pair {pending.id} waits for a {need} click.")
-                bundle = self._bundle
-                if bundle is not None and pending.laser_rc is not None and pending.pixel is None:
-                    point = self.depth.cell_points(np.array([pending.laser_rc]))
-                    uv, ok = self.camera.project(transform_points(bundle.result.T_camera_lidar, point))
-                    if ok[0]:
-                        lines.append(f"Predicted camera pixel: ({uv[0, 0]:.1f}, {uv[0, 1]:.1f}) (cross in the image).")
+                ids, uv = self._predicted_pixels({pending.id: pending})
+                if ids:
+                    lines.append(f"Predicted camera pixel: ({uv[0, 0]:.1f}, {uv[0, 1]:.1f}) (cross in the image).")
             if selected is not None:
                 lines.append(f"**Pair {selected} selected:** clicks now move its ends (Deselect to add pairs).")
             if len(complete) < MIN_PAIRS:
