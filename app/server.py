@@ -47,22 +47,20 @@ import numpy as np
 import viser
 import viser.transforms as vtf
 
-from calib_core.bearing_angle import BA_DIRECTIONS, ba_to_display, bearing_angle_images
-from calib_core.cameras import load_camera
 from calib_core.errors import CalibError
 from calib_core.io.atomic import write_yaml_atomic
 from calib_core.io.extrinsics import extrinsics_to_dict, save_extrinsics_yaml
-from calib_core.io.images import load_image_rgb
-from calib_core.overlays import (ba_edge_points_consensus, colorize_points, columns_seen_by_camera, export_colored_scan,
-                                 project_lidar_points)
+from calib_core.overlays import colorize_points, columns_seen_by_camera, export_colored_scan, project_lidar_points
 from calib_core.pairs import Pair, load_pairs_yaml, resolve_pairs
-from calib_core.panorama import Panorama, refine_click_to_corner
+from calib_core.panorama import refine_click_to_corner
 from calib_core.solve import calibrate
 from calib_core.transforms import invert_T, rpy_deg_from_R, transform_points
 
-from .ba_view import ColumnWindow, ba_texture, cell_aspect_from_directions, covering_window, texture_factor
+from .ba_view import ColumnWindow, ba_texture, covering_window, texture_factor
 from .layout import ImageSlot, annotation_layout, bounds_of
 from .live_solver import LiveSolver
+from .prepared_scene import MAX_CLOUD_POINTS, PreparedScene
+from .scene_nodes import SceneNodes
 from .security import TOKEN_QUERY, AccessPolicy, RefusalLog, is_loopback, start_guarded_viser, upload_display_name
 from .state import AnnotationState, Pick
 from .warm_up import WarmUp
@@ -74,9 +72,6 @@ BA_TITLES = {
     "diag_neg45": "BA -45 deg",
 }
 MIN_PAIRS = 4
-#: Display points of the 3-D cloud (software WebGL slows down beyond ~100k).
-MAX_CLOUD_POINTS = 100_000
-MAX_EDGE_POINTS = 3000
 #: The 3-D pane's content sits far behind the annotation camera, so both
 #: share one scene without seeing each other.
 CLOUD_ORIGIN = np.array([0.0, 0.0, -5000.0])
@@ -192,12 +187,6 @@ class _Action:
         return getattr(self.event, name)
 
 
-def _load_scan(path: Path, options: dict | None):
-    from calib_core.io.scan_readers import load_scan
-
-    return load_scan(path, **(options or {}))
-
-
 class CalibrationApp:
     """The annotation app on one scene; the viser server runs from construction.
 
@@ -263,32 +252,18 @@ class CalibrationApp:
         self.session_path = Path(session_path)
         self.title = title or f"ba-calib: {self.scan_path.name} + {self.image_path.name}"
 
-        # -- data (all maths from calib_core) ------------------------------------
-        self.depth = _load_scan(self.scan_path, scan_options)
-        self.camera = load_camera(self.camera_path, image_size=image_size)
-        self.image = load_image_rgb(self.image_path)
-        h, w = self.image.shape[:2]
-        if (w, h) != (self.camera.width, self.camera.height):
-            raise CalibError(
-                f"{self.image_path}: image is {w}x{h} but the camera model {self.camera_path} is "
-                f"{self.camera.width}x{self.camera.height}"
-            )
-        self.ba_rad = bearing_angle_images(self.depth)
-        self.ba_keys = tuple(k for k in BA_DIRECTIONS if k in self.ba_rad)
-        self.ba_gray = {k: ba_to_display(self.ba_rad[k]) for k in self.ba_keys}
-        self.image_gray = self.image.mean(axis=2).astype(np.uint8)
-        self.panorama: Panorama | None = None
-        if self.camera.model in ("ocam", "fisheye"):
-            self.panorama = Panorama.for_camera(self.camera, image_mask=self.image.max(axis=2) > 0, oversample=2.0)
-            self.pano_image = self.panorama.render(self.image)
-            self.pano_gray = self.pano_image.mean(axis=2).astype(np.uint8)
-        self.edge_points_lidar, _ = ba_edge_points_consensus(self.ba_rad, self.depth, max_points=MAX_EDGE_POINTS)
-        self.all_points_lidar, self.all_rows_cols = self.depth.valid_points()
-        # BA display: rows stretched to about square cells in angle, a column window, crisp textures.
-        self.ba_cell_aspect = cell_aspect_from_directions(self.depth.directions)
-        self._wrap_cols = bool(self.depth.meta.get("wrap_cols", False))
-        stride = max(1, int(math.ceil(len(self.all_points_lidar) / max(1, int(max_cloud_points)))))
-        self.cloud_points_lidar = self.all_points_lidar[::stride]
+        # -- data (all maths from calib_core, no viser) ----------------------------------
+        self.scene_data = PreparedScene.load(self.scan_path, self.image_path, self.camera_path,
+                                             scan_options=scan_options, image_size=image_size,
+                                             max_cloud_points=max_cloud_points)
+        sd = self.scene_data
+        self.depth, self.camera, self.image = sd.depth, sd.camera, sd.image
+        self.ba_rad, self.ba_keys, self.ba_gray, self.image_gray = sd.ba_rad, sd.ba_keys, sd.ba_gray, sd.image_gray
+        self.panorama, self.pano_image, self.pano_gray = sd.panorama, sd.pano_image, sd.pano_gray
+        self.edge_points_lidar, self.all_points_lidar, self.all_rows_cols = (
+            sd.edge_points_lidar, sd.all_points_lidar, sd.all_rows_cols)
+        self.ba_cell_aspect, self._wrap_cols, self.cloud_points_lidar = (
+            sd.ba_cell_aspect, sd.wrap_cols, sd.cloud_points_lidar)
 
         # -- state ------------------------------------------------------------------
         # Every change is on disk (an fsync'd journal line) before the UI shows it; the journal is
@@ -332,9 +307,6 @@ class CalibrationApp:
         self._client_mode: dict[int, str] = {}
         self._last_click: dict[int, tuple] = {}  # client id -> ("ba", key, row, col) or ("camera", u, v)
         self._view_target: dict[int, tuple[np.ndarray, np.ndarray, float]] = {}
-        # What the scene shows now, per node name: (handle, data sent).  Redraws diff against it, so a
-        # click only sends the nodes it changed, mostly as in-place property updates.
-        self._drawn: dict[str, tuple[Any, tuple]] = {}
         self._marker_cache: dict[str, tuple[tuple, dict]] = {}  # slot key -> (inputs, number labels) last drawn
         self._overlay_inputs: tuple | None = None  # (solve, inputs) the overlays were last drawn from
         self._cloud_shows: SolveBundle | None = None  # the solve whose colours the 3-D cloud shows (None: grey)
@@ -362,6 +334,8 @@ class CalibrationApp:
             shown_host = f"[{shown_host}]"
         query = "" if self.access.token is None else f"/?{TOKEN_QUERY}={self.access.token}"
         self.url = f"http://{shown_host}:{self.port}{query}"
+        # Redraws diff against what the scene shows, so a click only sends the nodes it changed.
+        self.nodes = SceneNodes(self.server.scene)
         try:
             self._build_scene()
             self._build_gui()
@@ -1108,74 +1082,6 @@ class CalibrationApp:
             return uv, ok
         return self.camera.project(pts)
 
-    def _remove_node(self, name: str) -> None:
-        if self._drawn.pop(name, None) is not None:
-            self.server.scene.remove_by_name(name)
-
-    def _set_points(self, name: str, points: np.ndarray, colors, size: float, shape: str = "circle") -> None:
-        """Show ``points (N, 3)`` (world) as node ``name``; empty removes it.  Only changes are sent."""
-        pts = np.asarray(points, np.float32).reshape(-1, 3)
-        if len(pts) == 0:
-            self._remove_node(name)
-            return
-        cols = np.asarray(colors, np.uint8)
-        size = float(size)
-        old = self._drawn.get(name)
-        if old is not None and old[1][0] == "points" and old[1][4] == shape:
-            handle, (_, old_pts, old_cols, old_size, _) = old
-            if old_pts.shape == pts.shape and old_cols.shape == cols.shape:
-                if old_size == size and np.array_equal(old_pts, pts) and np.array_equal(old_cols, cols):
-                    return
-                # In place: viser sends only the properties that differ.
-                handle.points = pts
-                handle.colors = cols
-                handle.point_size = size
-                self._drawn[name] = (handle, ("points", pts, cols, size, shape))
-                return
-        handle = self.server.scene.add_point_cloud(
-            name, pts, cols, point_size=size, point_shape=shape, precision="float32", point_shading="flat",
-        )
-        self._drawn[name] = (handle, ("points", pts, cols, size, shape))
-
-    def _set_lines(self, name: str, segments: np.ndarray, colors, thickness: float = 2.0) -> None:
-        """Show line ``segments (N, 2, 3)`` (world) as node ``name``; empty removes it.  Only changes are sent."""
-        segs = np.asarray(segments, np.float32).reshape(-1, 2, 3)
-        if len(segs) == 0:
-            self._remove_node(name)
-            return
-        cols = np.asarray(colors, np.uint8)
-        thickness = float(thickness)
-        old = self._drawn.get(name)
-        if old is not None and old[1][0] == "lines" and old[1][3] == thickness:
-            handle, (_, old_segs, old_cols, _) = old
-            if old_segs.shape == segs.shape and old_cols.shape == cols.shape:
-                if np.array_equal(old_segs, segs) and np.array_equal(old_cols, cols):
-                    return
-                # Same number of segments: update in place (viser skips unchanged arrays).
-                handle.points = segs
-                handle.colors = cols
-                self._drawn[name] = (handle, ("lines", segs, cols, thickness))
-                return
-        # A new node, or a different number of segments (points and colours must change together).
-        handle = self.server.scene.add_line_segments(name, segs, cols, thickness=thickness, thickness_units="screen")
-        self._drawn[name] = (handle, ("lines", segs, cols, thickness))
-
-    def _set_label(self, name: str, text: str, position: np.ndarray) -> None:
-        """Show a pick-number label at ``position`` (world); an existing label is moved, not re-created."""
-        pos = tuple(float(x) for x in position)
-        old = self._drawn.get(name)
-        if old is not None and old[1][0] == "label":
-            handle, (_, old_text, old_pos) = old
-            if old_text == text and old_pos == pos:
-                return
-            if old_text != text:
-                handle.text = text
-            if old_pos != pos:
-                handle.position = pos
-        else:
-            handle = self.server.scene.add_label(name, text, position=pos, anchor="bottom-left", font_screen_scale=0.8)
-        self._drawn[name] = (handle, ("label", text, pos))
-
     def _refresh_scene(self) -> None:
         """Redraw markers, labels, selection and the reprojection overlays (only what changed is sent)."""
         with self._ui_lock, self.server.atomic():
@@ -1194,11 +1100,11 @@ class CalibrationApp:
                     self._marker_cache.pop(other, None)
                     for name in (f"/annot/markers/{other}/halo", f"/annot/markers/{other}/ring",
                                  f"/annot/selected/{other}"):
-                        self._set_lines(name, np.empty((0, 2, 3)), (0, 0, 0))
-            for name in [n for n, (_, spec) in self._drawn.items() if spec[0] == "label" and n not in labels]:
-                self._remove_node(name)
+                        self.nodes.lines(name, np.empty((0, 2, 3)), (0, 0, 0))
+            for name in [n for n in self.nodes.label_names() if n not in labels]:
+                self.nodes.remove(name)
             for name, (text, pos) in labels.items():
-                self._set_label(name, text, pos)
+                self.nodes.label(name, text, pos)
             self._draw_overlays(picks, predictions)
 
     def _draw_markers(self, key: str, picks: dict[int, Pick], selected: int | None) -> dict[str, tuple[str, np.ndarray]]:
@@ -1218,13 +1124,13 @@ class CalibrationApp:
         segs = marker_segments(world, r, cell_half_size=outline)
         per = len(segs) // max(len(ids), 1)
         seg_colors = np.repeat(colors, per * 2, axis=0).reshape(-1, 2, 3)
-        self._set_lines(f"/annot/markers/{key}/halo", segs + np.array([0.0, 0.0, 0.002]),
+        self.nodes.lines(f"/annot/markers/{key}/halo", segs + np.array([0.0, 0.0, 0.002]),
                         np.full(seg_colors.shape, 25, np.uint8), thickness=4.5)
-        self._set_lines(f"/annot/markers/{key}/ring", segs, seg_colors, thickness=2.0)
+        self.nodes.lines(f"/annot/markers/{key}/ring", segs, seg_colors, thickness=2.0)
         sel = [k for k, i in enumerate(ids) if i == selected]
         # One colour per segment of whatever the ring is made of (ticks included).
         sel_segs = marker_segments(world[sel] + [0.0, 0.0, 0.003], 1.5 * r)
-        self._set_lines(f"/annot/selected/{key}", sel_segs, np.full(sel_segs.shape, 255, np.uint8), thickness=4.0)
+        self.nodes.lines(f"/annot/selected/{key}", sel_segs, np.full(sel_segs.shape, 255, np.uint8), thickness=4.0)
         labels = {f"/annot/labels/{key}/{i}": (str(i), w + np.array([0.75 * r, -0.75 * r, -0.005]))
                   for i, w in zip(ids, world)}
         self._marker_cache[key] = (inputs, labels)
@@ -1271,12 +1177,12 @@ class CalibrationApp:
                     pred_segs.append(np.stack([c - r * d, c - 0.3 * r * d]))
                     pred_segs.append(np.stack([c + 0.3 * r * d, c + r * d]))
                     pred_cols += [picks[pid].color, picks[pid].color]
-        self._set_points("/annot/overlay/reprojected", reproj_pts, reproj_cols, MARKER_SIZE * 0.55, shape="diamond")
-        self._set_lines("/annot/overlay/residuals", segs, np.full(segs.shape, (255, 230, 0), np.uint8), thickness=2.0)
+        self.nodes.points("/annot/overlay/reprojected", reproj_pts, reproj_cols, MARKER_SIZE * 0.55, shape="diamond")
+        self.nodes.lines("/annot/overlay/residuals", segs, np.full(segs.shape, (255, 230, 0), np.uint8), thickness=2.0)
         # At least EDGE_MIN_SIZE: one pixel of a 1920 px image is too small to see in the full view.
-        self._set_points("/annot/overlay/edges", edge_world, (0, 190, 255), max(slot.units_per_px * 1.6, EDGE_MIN_SIZE),
+        self.nodes.points("/annot/overlay/edges", edge_world, (0, 190, 255), max(slot.units_per_px * 1.6, EDGE_MIN_SIZE),
                          shape="square")
-        self._set_lines("/annot/overlay/predicted", np.array(pred_segs).reshape(-1, 2, 3),
+        self.nodes.lines("/annot/overlay/predicted", np.array(pred_segs).reshape(-1, 2, 3),
                         np.repeat(np.array(pred_cols, np.uint8).reshape(-1, 1, 3), 2, axis=1), thickness=4.0)
 
     def _predictions(self, picks: dict[int, Pick]) -> list[tuple[int, np.ndarray]]:

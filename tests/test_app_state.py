@@ -665,7 +665,7 @@ def test_a_click_updates_only_what_it_changed_in_place(tmp_path):
         assert app.last_click_to_update() is None and app.last_update_time is None  # nothing solved yet
         ids = app.state.import_pairs(load_pairs_yaml(sample / "pairs.yaml")[:5])
         assert app.wait_idle(60) and app.result is not None
-        node = lambda name: app._drawn[name][0]  # noqa: E731
+        node = lambda name: app.nodes.drawn[name][0]  # noqa: E731
         ba_ring, cam_ring = node("/annot/markers/horizontal/ring"), node("/annot/markers/raw/ring")
         ba_points, cam_points = ba_ring.points.copy(), cam_ring.points.copy()
         label = node(f"/annot/labels/raw/{ids[1]}")
@@ -697,11 +697,11 @@ def test_a_click_updates_only_what_it_changed_in_place(tmp_path):
         app.state.add_pixel(100.0, 100.0)
         assert app.wait_idle(60)
         assert len(node("/annot/markers/raw/ring").points) == 6 * per_pick
-        assert f"/annot/labels/raw/{ids[-1] + 1}" in app._drawn
+        assert f"/annot/labels/raw/{ids[-1] + 1}" in app.nodes.drawn
         app.state.undo()
         assert app.wait_idle(60)
         assert len(node("/annot/markers/raw/ring").points) == 5 * per_pick
-        assert f"/annot/labels/raw/{ids[-1] + 1}" not in app._drawn
+        assert f"/annot/labels/raw/{ids[-1] + 1}" not in app.nodes.drawn
     finally:
         app.stop()
 
