@@ -38,7 +38,6 @@ import tempfile
 import threading
 import time
 import traceback
-from dataclasses import dataclass
 from pathlib import Path
 from types import SimpleNamespace
 from typing import Any, Callable
@@ -50,7 +49,7 @@ import viser.transforms as vtf
 from calib_core.errors import CalibError
 from calib_core.io.atomic import write_yaml_atomic
 from calib_core.io.extrinsics import extrinsics_to_dict, save_extrinsics_yaml
-from calib_core.overlays import colorize_points, columns_seen_by_camera, export_colored_scan, project_lidar_points
+from calib_core.overlays import colorize_points, columns_seen_by_camera, export_colored_scan
 from calib_core.pairs import Pair, load_pairs_yaml, resolve_pairs
 from calib_core.panorama import refine_click_to_corner
 from calib_core.solve import calibrate
@@ -59,135 +58,20 @@ from calib_core.transforms import invert_T, rpy_deg_from_R, transform_points
 from .ba_view import ColumnWindow, ba_texture, covering_window, texture_factor
 from .layout import ImageSlot, annotation_layout, bounds_of
 from .live_solver import LiveSolver
+from .overlay_drawing import OverlayDrawing
 from .prepared_scene import MAX_CLOUD_POINTS, PreparedScene
 from .scene_nodes import SceneNodes
 from .security import TOKEN_QUERY, AccessPolicy, RefusalLog, is_loopback, start_guarded_viser, upload_display_name
-from .state import AnnotationState, Pick
+from .state import AnnotationState
 from .warm_up import WarmUp
-
-BA_TITLES = {
-    "horizontal": "BA horizontal",
-    "vertical": "BA vertical",
-    "diag_pos45": "BA +45 deg",
-    "diag_neg45": "BA -45 deg",
-}
-MIN_PAIRS = 4
-#: The 3-D pane's content sits far behind the annotation camera, so both
-#: share one scene without seeing each other.
-CLOUD_ORIGIN = np.array([0.0, 0.0, -5000.0])
-#: Width (CSS px) kept free on the right for the floating control panel.
-PANEL_PX = 400
-MARKER_SIZE = 0.075  # world units (the camera image is 8 units wide): reprojection overlays
-#: Pick markers are hollow rings (screen-thin lines), so they never hide the
-#: picked cell: radius RING_CELLS cells, at least RING_MIN_RADIUS world units.
-RING_CELLS = 1.5
-RING_MIN_RADIUS = 0.03
-RING_SEGMENTS = 20
-#: Shift+click / drag this many ring radii from a marker selects it.
-PICK_RADII = 2.5
-#: "Zoom: on last click" magnifies to this many screen pixels per BA cell
-#: (narrow side) or per camera-image pixel.
-ZOOM_PX_PER_CELL = 14.0
-ZOOM_PX_PER_IMAGE_PX = 4.0
-ZOOM_STEP = 2.0
-EDGE_MIN_SIZE = 0.012  # world units
-BA_WINDOW_MODES = {"all": "All columns", "camera": "Facing the camera", "custom": "Custom"}
-SNAP_RADIUS_PX = 4.0
-#: The answers of the import question (the buttons of its modal).
-IMPORT_CHOICES = ("Append", "Replace all", "Cancel")
-UP_AXES = {"+z": (0.0, 0.0, 1.0), "+y": (0.0, 1.0, 0.0), "-y": (0.0, -1.0, 0.0), "camera up (-y of camera)": None}
+from .ui_common import (
+    BA_TITLES, MIN_PAIRS, CLOUD_ORIGIN, PANEL_PX, PICK_RADII, ZOOM_PX_PER_CELL, ZOOM_PX_PER_IMAGE_PX, ZOOM_STEP,
+    BA_WINDOW_MODES, SNAP_RADIUS_PX, IMPORT_CHOICES, UP_AXES, QUALITY_BADGES, md_escape, _fmt, SolveBundle,
+    CloudUpdate, _Action,
+)
 
 
-#: The quality verdict as the result panel shows it (fixed strings: no user text).
-QUALITY_BADGES = {
-    "ok": "### 🟢 Quality: ok",
-    "warning": "### 🟡 Quality: warning",
-    "unreliable": "### 🔴 Quality: UNRELIABLE (do not use this pose)",
-}
-
-
-def md_escape(text: str) -> str:
-    """Text safe to show literally inside viser markdown (no HTML, no markup)."""
-    out = []
-    for ch in str(text).replace("\r", " ").replace("\n", " "):
-        if ch == "&":
-            out.append("&amp;")
-        elif ch == "<":
-            out.append("&lt;")
-        elif ch == ">":
-            out.append("&gt;")
-        elif ch in "\\`*_{}[]()#+-.!|~":
-            out.append("\\" + ch)
-        else:
-            out.append(ch)
-    return "".join(out)
-
-
-def _fmt(x: float, digits: int = 3) -> str:
-    return "n/a" if x is None or not np.isfinite(x) else f"{x:.{digits}f}"
-
-
-@dataclass(eq=False)
-class SolveBundle:
-    """One finished solve and what the error display and 2-D overlays need from it (computed off the UI thread)."""
-
-    pick_ids: list[int]
-    pairs: list[Pair]
-    result: Any  # calib_core.solve.CalibrationResult
-    pixels: np.ndarray  # (N, 2) clicked, original image
-    points_camera: np.ndarray  # (N, 3) laser points moved by the solved pose
-    edges_camera: np.ndarray  # (M, 3) BA-edge points moved by the solved pose
-    seconds: float  # time of the solve job (resolve, solve, move the points)
-
-
-@dataclass(eq=False)
-class CloudUpdate:
-    """What the 3-D pane and the camera-facing BA window need from a solve; computed after it is shown."""
-
-    bundle: SolveBundle
-    colors: np.ndarray | None  # (K, 3) uint8 display-cloud colours; None: not asked for
-    facing_done: bool  # whether ``facing`` was computed
-    facing: ColumnWindow | None  # scan columns whose points project into the camera image
-    seconds: float
-
-
-def marker_segments(centres: np.ndarray, radius: float, cell_half_size: tuple[float, float] | None = None,
-                    ticks: bool = True) -> np.ndarray:
-    """Line segments ``(N * K, 2, 3)`` of a ring marker around each world point ``centres (N, 3)``.
-
-    A ring of :data:`RING_SEGMENTS` segments; with ``ticks``, four ticks from
-    the ring towards the centre that stop short of it; with
-    ``cell_half_size = (hx, hy)``, the outline of the rectangle ``+-hx, +-hy``
-    around the centre (the picked cell).  Lines lie in the plane z = const.
-    """
-    c = np.asarray(centres, dtype=np.float64).reshape(-1, 3)
-    a = np.linspace(0.0, 2.0 * np.pi, RING_SEGMENTS + 1)
-    circle = radius * np.stack([np.cos(a), np.sin(a), np.zeros_like(a)], axis=1)
-    shape = [np.stack([circle[:-1], circle[1:]], axis=1)]
-    if ticks:
-        d = np.array([[1.0, 0, 0], [-1.0, 0, 0], [0, 1.0, 0], [0, -1.0, 0]])
-        shape.append(np.stack([radius * d, 0.4 * radius * d], axis=1))
-    if cell_half_size is not None:
-        hx, hy = cell_half_size
-        corners = np.array([[-hx, -hy, 0], [hx, -hy, 0], [hx, hy, 0], [-hx, hy, 0]])
-        shape.append(np.stack([corners, np.roll(corners, -1, axis=0)], axis=1))
-    segs = np.concatenate(shape)  # (K, 2, 3)
-    return (c[:, None, None, :] + segs[None]).reshape(-1, 2, 3)
-
-
-class _Action:
-    """A queued viser event plus the widget value at the moment it fired."""
-
-    def __init__(self, event: Any, value: Any) -> None:
-        self.event = event
-        self.value = value
-        self.client = getattr(event, "client", None)
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self.event, name)
-
-
-class CalibrationApp:
+class CalibrationApp(OverlayDrawing):
     """The annotation app on one scene; the viser server runs from construction.
 
     Parameters
@@ -1061,146 +945,6 @@ class CalibrationApp:
             self._actions.put((lambda action: self._apply_ba_window(), _Action(None, None)))
 
     # ================================================================== drawing
-    def _display_from_pixels(self, pixels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Display coordinates (visible camera view) of original-image pixels."""
-        pixels = np.asarray(pixels, dtype=np.float64).reshape(-1, 2)
-        if len(pixels) == 0:
-            return pixels, np.zeros(0, bool)
-        if not self._use_panorama:
-            return pixels, np.isfinite(pixels).all(axis=1)
-        return self.panorama.from_camera_pixels(pixels)
-
-    def _display_from_camera_points(self, points_camera: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Display coordinates (visible camera view) of points in the camera frame."""
-        pts = np.asarray(points_camera, dtype=np.float64).reshape(-1, 3)
-        if len(pts) == 0:
-            return np.empty((0, 2)), np.zeros(0, bool)
-        if self._use_panorama:
-            uv, ok = self.panorama.project(pts)
-            # Only directions the camera model can see (the panorama is wider).
-            ok &= self.camera.project(pts)[1]
-            return uv, ok
-        return self.camera.project(pts)
-
-    def _refresh_scene(self) -> None:
-        """Redraw markers, labels, selection and the reprojection overlays (only what changed is sent)."""
-        with self._ui_lock, self.server.atomic():
-            picks = {p.id: p for p in self.state.picks}
-            selected = self.state.selected
-            labels: dict[str, tuple[str, np.ndarray]] = {}
-            cam_slot = self._camera_slot()
-            for key in (*self.ba_keys, cam_slot.key):
-                labels.update(self._draw_markers(key, picks, selected))
-            predictions = self._predictions(picks)
-            for pid, uv in predictions:
-                w = cam_slot.world_from_pixel(uv[None], z_offset=-0.015)[0]
-                labels[f"/annot/labels/predicted/{pid}"] = (f"{pid}?", w + np.array([0.06, -0.06, 0.0]))
-            for other in ("raw", "panorama"):
-                if other in self.slots and other != cam_slot.key:
-                    self._marker_cache.pop(other, None)
-                    for name in (f"/annot/markers/{other}/halo", f"/annot/markers/{other}/ring",
-                                 f"/annot/selected/{other}"):
-                        self.nodes.lines(name, np.empty((0, 2, 3)), (0, 0, 0))
-            for name in [n for n in self.nodes.label_names() if n not in labels]:
-                self.nodes.remove(name)
-            for name, (text, pos) in labels.items():
-                self.nodes.label(name, text, pos)
-            self._draw_overlays(picks, predictions)
-
-    def _draw_markers(self, key: str, picks: dict[int, Pick], selected: int | None) -> dict[str, tuple[str, np.ndarray]]:
-        """Draw the pick markers of slot ``key``; returns its number labels.  Skipped when nothing on it changed."""
-        slot = self.slots[key]
-        ids, uv = self._pick_ends(key)
-        inputs = (slot, tuple(ids), uv.tobytes(), selected if selected in ids else None)
-        cached = self._marker_cache.get(key)
-        if cached is not None and cached[0] == inputs:
-            return cached[1]
-        world = slot.world_from_pixel(uv, z_offset=-0.01)
-        colors = np.array([picks[i].color for i in ids], np.uint8).reshape(-1, 3)
-        r = self._ring_radius(slot)
-        # Hollow rings with ticks pointing at the clicked spot, and on BA images the
-        # outline of the picked cell: they mark the spot without hiding it.
-        outline = (0.5 * slot.units_per_px, 0.5 * slot.units_per_px_y) if key in self.ba_keys else None
-        segs = marker_segments(world, r, cell_half_size=outline)
-        per = len(segs) // max(len(ids), 1)
-        seg_colors = np.repeat(colors, per * 2, axis=0).reshape(-1, 2, 3)
-        self.nodes.lines(f"/annot/markers/{key}/halo", segs + np.array([0.0, 0.0, 0.002]),
-                        np.full(seg_colors.shape, 25, np.uint8), thickness=4.5)
-        self.nodes.lines(f"/annot/markers/{key}/ring", segs, seg_colors, thickness=2.0)
-        sel = [k for k, i in enumerate(ids) if i == selected]
-        # One colour per segment of whatever the ring is made of (ticks included).
-        sel_segs = marker_segments(world[sel] + [0.0, 0.0, 0.003], 1.5 * r)
-        self.nodes.lines(f"/annot/selected/{key}", sel_segs, np.full(sel_segs.shape, 255, np.uint8), thickness=4.0)
-        labels = {f"/annot/labels/{key}/{i}": (str(i), w + np.array([0.75 * r, -0.75 * r, -0.005]))
-                  for i, w in zip(ids, world)}
-        self._marker_cache[key] = (inputs, labels)
-        return labels
-
-    def _ring_radius(self, slot: ImageSlot) -> float:
-        """Pick-marker ring radius on ``slot`` (world units): a few cells, never vanishingly small."""
-        return max(RING_CELLS * max(slot.units_per_px, slot.units_per_px_y), RING_MIN_RADIUS)
-
-    def _draw_overlays(self, picks: dict[int, Pick], predictions: list[tuple[int, np.ndarray]]) -> None:
-        """Reprojected pairs, residual lines, BA-edge points and predicted-pixel crosses on the camera view."""
-        slot = self._camera_slot()
-        bundle = self._bundle
-        # Skipped when neither the solve, the view nor the picks it colours changed (e.g. a click on a BA image).
-        inputs = (slot, self._use_panorama, self._show_reprojection, self._show_edges,
-                  () if bundle is None else tuple(picks[i].color if i in picks else None for i in bundle.pick_ids),
-                  tuple((pid, uv.tobytes(), picks[pid].color) for pid, uv in predictions))
-        if self._overlay_inputs is not None and self._overlay_inputs[0] is bundle and self._overlay_inputs[1] == inputs:
-            return
-        self._overlay_inputs = (bundle, inputs)
-        reproj_pts, reproj_cols = np.empty((0, 3)), np.empty((0, 3), np.uint8)
-        segs = np.empty((0, 2, 3))
-        edge_world = np.empty((0, 3))
-        pred_segs, pred_cols = [], []
-        if bundle is not None:
-            if self._show_reprojection and len(bundle.pick_ids):
-                clicked, ok_c = self._display_from_pixels(bundle.pixels)
-                proj, ok_p = self._display_from_camera_points(bundle.points_camera)
-                colors = np.array([picks[pid].color if pid in picks else (255, 255, 0) for pid in bundle.pick_ids],
-                                  np.uint8).reshape(-1, 3)
-                reproj_pts = slot.world_from_pixel(proj[ok_p], z_offset=-0.012)
-                reproj_cols = colors[ok_p]
-                both = ok_p & ok_c
-                segs = np.stack([slot.world_from_pixel(clicked[both], z_offset=-0.008),
-                                 slot.world_from_pixel(proj[both], z_offset=-0.008)], axis=1)
-            if self._show_edges and len(bundle.edges_camera):
-                uv, ok = self._display_from_camera_points(bundle.edges_camera)
-                edge_world = slot.world_from_pixel(uv[ok], z_offset=-0.004)
-            # Where the current calibration predicts pending laser picks in the camera image.
-            for pid, uv in predictions:
-                c = slot.world_from_pixel(uv[None], z_offset=-0.015)[0]
-                r = MARKER_SIZE * 2.0
-                for d in (np.array([1.0, 0, 0]), np.array([0, 1.0, 0])):
-                    pred_segs.append(np.stack([c - r * d, c - 0.3 * r * d]))
-                    pred_segs.append(np.stack([c + 0.3 * r * d, c + r * d]))
-                    pred_cols += [picks[pid].color, picks[pid].color]
-        self.nodes.points("/annot/overlay/reprojected", reproj_pts, reproj_cols, MARKER_SIZE * 0.55, shape="diamond")
-        self.nodes.lines("/annot/overlay/residuals", segs, np.full(segs.shape, (255, 230, 0), np.uint8), thickness=2.0)
-        # At least EDGE_MIN_SIZE: one pixel of a 1920 px image is too small to see in the full view.
-        self.nodes.points("/annot/overlay/edges", edge_world, (0, 190, 255), max(slot.units_per_px * 1.6, EDGE_MIN_SIZE),
-                         shape="square")
-        self.nodes.lines("/annot/overlay/predicted", np.array(pred_segs).reshape(-1, 2, 3),
-                        np.repeat(np.array(pred_cols, np.uint8).reshape(-1, 1, 3), 2, axis=1), thickness=4.0)
-
-    def _predictions(self, picks: dict[int, Pick]) -> list[tuple[int, np.ndarray]]:
-        """Display pixels where the last good calibration expects picks that have only a BA end."""
-        ids, pixels = self._predicted_pixels(picks)
-        uv, ok = self._display_from_pixels(pixels)
-        return [(pid, uv[k]) for k, pid in enumerate(ids) if ok[k]]
-
-    def _predicted_pixels(self, picks: dict[int, Pick]) -> tuple[list[int], np.ndarray]:
-        """Camera pixels where the last good calibration expects the picks that have only a laser cell."""
-        bundle = self._bundle
-        pending = [p for p in picks.values() if p.laser_rc is not None and p.pixel is None]
-        if bundle is None or not pending:
-            return [], np.empty((0, 2))
-        points = self.depth.cell_points(np.array([p.laser_rc for p in pending]))
-        uv, ok = project_lidar_points(bundle.result.T_camera_lidar, self.camera, points)
-        return [p.id for p, good in zip(pending, ok) if good], uv[ok]
-
     def _show_solved_camera(self) -> None:
         """The solved camera's frame in the 3-D pane; without a solve no frame and a grey cloud."""
         bundle = self._bundle

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from app.server import md_escape
+from app.ui_common import md_escape
 from app.testing import AppDriver
 from calib_core.pairs import Pair, load_pairs_yaml, save_pairs_yaml
 
@@ -84,6 +84,6 @@ def test_clean_pairs_show_ok_and_every_pair_in_the_fit(tmp_path):
 
 
 def test_user_text_in_reasons_is_escaped():
-    from app.server import md_escape
+    from app.ui_common import md_escape
 
     assert "<" not in md_escape("<img src=x onerror=alert(1)>")

@@ -539,7 +539,7 @@ def test_ba_grid_follows_the_shape_of_the_shown_images():
 
 
 def test_pick_markers_are_rings_that_leave_the_picked_cell_visible():
-    from app.server import RING_SEGMENTS, marker_segments
+    from app.ui_common import RING_SEGMENTS, marker_segments
 
     centre = np.array([[1.0, 2.0, -0.01]])
     segs = marker_segments(centre, 0.1, cell_half_size=(0.01, 0.03))
@@ -581,7 +581,8 @@ def test_app_column_window_clicks_markers_and_zoom_on_the_sample(tmp_path):
     from types import SimpleNamespace
 
     from app.ba_view import ColumnWindow
-    from app.server import PANEL_PX, ZOOM_PX_PER_CELL, CalibrationApp, _Action
+    from app.server import CalibrationApp
+    from app.ui_common import PANEL_PX, ZOOM_PX_PER_CELL, _Action
 
     sample = Path(__file__).resolve().parents[1] / "sample_data"
     with socket.socket() as sock:
