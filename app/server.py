@@ -47,16 +47,15 @@ import viser
 import viser.transforms as vtf
 
 from calib_core.errors import CalibError
-from calib_core.io.atomic import write_yaml_atomic
-from calib_core.io.extrinsics import extrinsics_to_dict, save_extrinsics_yaml
-from calib_core.overlays import export_colored_scan
 from calib_core.pairs import Pair, load_pairs_yaml
 from calib_core.panorama import refine_click_to_corner
-from calib_core.transforms import invert_T, rpy_deg_from_R
+from calib_core.transforms import invert_T
 
 from .ba_view import ColumnWindow, ba_texture, texture_factor
 from .layout import ImageSlot, annotation_layout, bounds_of
 from .live_solver import LiveSolver
+from .calibration_panel import CalibrationPanel
+from .export_panel import ExportPanel
 from .live_coordinator import LiveSolveCoordinator
 from .overlay_drawing import OverlayDrawing
 from .prepared_scene import MAX_CLOUD_POINTS, PreparedScene
@@ -66,12 +65,11 @@ from .state import AnnotationState
 from .warm_up import WarmUp
 from .ui_common import (
     BA_TITLES, MIN_PAIRS, CLOUD_ORIGIN, PANEL_PX, PICK_RADII, ZOOM_PX_PER_CELL, ZOOM_PX_PER_IMAGE_PX, ZOOM_STEP,
-    BA_WINDOW_MODES, SNAP_RADIUS_PX, IMPORT_CHOICES, UP_AXES, QUALITY_BADGES, md_escape, _fmt, SolveBundle,
-    _Action,
+    BA_WINDOW_MODES, SNAP_RADIUS_PX, IMPORT_CHOICES, UP_AXES, md_escape, SolveBundle, _Action,
 )
 
 
-class CalibrationApp(OverlayDrawing, LiveSolveCoordinator):
+class CalibrationApp(OverlayDrawing, LiveSolveCoordinator, ExportPanel, CalibrationPanel):
     """The annotation app on one scene; the viser server runs from construction.
 
     Parameters
@@ -767,130 +765,9 @@ class CalibrationApp(OverlayDrawing, LiveSolveCoordinator):
         self._notify(event.client, "Pairs cleared", f"{n} pairs removed. Undo (in Edit) brings them back.",
                      color="yellow")
 
-    def _on_download_pairs(self, event: Any) -> None:
-        with tempfile.TemporaryDirectory() as tmp:
-            path = Path(tmp) / "pairs.yaml"
-            n = self.state.export_pairs_file(path)
-            data = path.read_bytes()
-        if event.client is not None:
-            event.client.send_file_download("pairs.yaml", data, save_immediately=True)
-        self._notify(event.client, "Pairs", f"{n} complete pairs downloaded", color="green")
-
-    def _on_download_yaml(self, event: Any) -> None:
-        data, path = self.export_extrinsics()
-        if event.client is not None:
-            event.client.send_file_download("extrinsics.yaml", data, save_immediately=True)
-        where = f" and written to {path}" if path is not None else ""
-        self._notify(event.client, "Extrinsics exported", f"extrinsics.yaml downloaded{where}", color="green")
-
-    def _on_download_ply(self, event: Any) -> None:
-        bundle = self._bundle
-        if bundle is None:
-            raise CalibError(f"no calibration yet: pick at least {MIN_PAIRS} pairs")
-        with tempfile.TemporaryDirectory() as tmp:
-            path = Path(tmp) / "colored_cloud.ply"
-            export_colored_scan(path, self.depth, self.image, self.camera, bundle.result.T_camera_lidar)
-            data = path.read_bytes()
-        if event.client is not None:
-            event.client.send_file_download("colored_cloud.ply", data, save_immediately=True)
-
-    def export_extrinsics(self) -> tuple[bytes, Path | None]:
-        """The extrinsics YAML of the last good solve to download; also written to ``output_path``.
-
-        The written file names the camera's files relative to its own folder;
-        the download, whose folder is unknown, carries the camera inline.
-        Returns ``(download bytes, path written or None)``; CalibError before the first solve.
-        """
-        bundle = self._bundle
-        if bundle is None:
-            raise CalibError(f"no calibration yet: pick at least {MIN_PAIRS} pairs")
-        r = bundle.result
-        if self.output_path is not None:
-            save_extrinsics_yaml(self.output_path, r.T_camera_lidar, r, self.camera, bundle.pairs)
-        with tempfile.TemporaryDirectory() as tmp:
-            path = Path(tmp) / "extrinsics.yaml"
-            write_yaml_atomic(path, extrinsics_to_dict(r.T_camera_lidar, r, self.camera, bundle.pairs, base_dir=None))
-            return path.read_bytes(), self.output_path
-
     # ================================================================ live solve
     # ============================================================ 3-D cloud
     # ================================================================== drawing
-    def _refresh_panel(self) -> None:
-        with self._ui_lock:
-            picks = self.state.picks
-            complete = [p for p in picks if p.complete]
-            pending = self.state.pending()
-            selected = self.state.selected
-            lines = [f"**Pairs:** {len(complete)} complete"]
-            if pending is not None:
-                need = "camera" if pending.pixel is None else "BA"
-                lines.append(f"Pair {pending.id} waits for a {need} click.")
-                ids, uv = self._predicted_pixels({pending.id: pending})
-                if ids:
-                    lines.append(f"Predicted camera pixel: ({uv[0, 0]:.1f}, {uv[0, 1]:.1f}) (cross in the image).")
-            if selected is not None:
-                lines.append(f"**Pair {selected} selected:** clicks now move its ends (Deselect to add pairs).")
-            if len(complete) < MIN_PAIRS:
-                lines.append(f"Pick {MIN_PAIRS - len(complete)} more to calibrate.")
-            lines.append(f"Undo: {'yes' if self.state.can_undo else 'no'}, redo: {'yes' if self.state.can_redo else 'no'}")
-            self._md_pairs.content = "  \n".join(lines)
-            options = ("none",) + tuple(f"#{p.id}" for p in picks)
-            if tuple(self._dd_selected.options) != options:
-                self._dd_selected.options = options
-            want = "none" if selected is None else f"#{selected}"
-            if self._dd_selected.value != want:
-                self._dd_selected.value = want
-
-            bundle, error = self._bundle, self._solve_error
-            out = []
-            if self._solving:
-                out.append(f"*Solving {len(complete)} pairs ...*")
-            if error is not None:
-                keep = " Showing the last good result." if bundle is not None else ""
-                out.append(f"**Solve failed:** {md_escape(error)}.{keep}")
-            if bundle is None:
-                if len(complete) < MIN_PAIRS:
-                    out.append(f"No calibration yet (needs {MIN_PAIRS} pairs).")
-                self._md_result.content = "  \n".join(out)
-                self._md_table.content = ""
-                return
-            r = bundle.result
-            T = r.T_camera_lidar
-            t, rpy = T[:3, 3], rpy_deg_from_R(T[:3, :3])
-            st, sr = np.asarray(r.sigma_translation_m), np.asarray(r.sigma_rpy_deg)
-            quality = getattr(r, "quality", None)
-            status = getattr(quality, "status", "ok")
-            reasons = list(getattr(quality, "reasons", []))
-            # The verdict first and in colour: never a confident wrong answer.
-            out.append(f"{QUALITY_BADGES.get(status, QUALITY_BADGES['unreliable'])}")
-            for reason in reasons:
-                out.append(f"• {md_escape(reason)}")
-            excluded = [int(i) for i in getattr(r, "outlier_ids", [])]
-            if excluded:
-                out.append("Left out of the fit: pair " + ", ".join(str(i) for i in excluded))
-            out += [
-                f"**Solved with {r.n_pairs} pairs** ({md_escape(r.cost_name)} cost, {r.iterations} iterations, "
-                f"{bundle.seconds * 1000:.0f} ms)",
-                f"**Mean error: {_fmt(r.mean_px)} px** (std {_fmt(r.std_px)} px), "
-                f"**{_fmt(r.mean_deg, 4)} deg** (std {_fmt(r.std_deg, 4)} deg)",
-                f"t = ({t[0]:.4f}, {t[1]:.4f}, {t[2]:.4f}) m, sigma T = ({st[0] * 100:.2f}, {st[1] * 100:.2f}, "
-                f"{st[2] * 100:.2f}) cm",
-                f"rpy = ({rpy[0]:.3f}, {rpy[1]:.3f}, {rpy[2]:.3f}) deg, sigma R = ({sr[0]:.3f}, {sr[1]:.3f}, "
-                f"{sr[2]:.3f}) deg",
-            ]
-            for w in r.warnings:
-                if w not in reasons:  # notes on the output's form (reasons are shown above)
-                    out.append(f"Note: {md_escape(w)}")
-            self._md_result.content = "  \n".join(out)
-            rows = ["| pair | px | deg | in fit |", "|---:|---:|---:|:---|"]
-            for k, pid in enumerate(bundle.pick_ids):
-                px, deg = float(r.residual_px[k]), float(r.residual_deg[k])
-                if pid in excluded:
-                    rows.append(f"| **{pid}** | **{_fmt(px, 2)}** | **{_fmt(deg, 3)}** | **excluded (outlier)** |")
-                else:
-                    rows.append(f"| {pid} | {_fmt(px, 2)} | {_fmt(deg, 3)} | yes |")
-            self._md_table.content = "\n".join(rows)
-
     # ================================================================== cameras
     def _on_connect(self, client: Any) -> None:
         try:
