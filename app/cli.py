@@ -215,7 +215,7 @@ def cmd_sample(args: argparse.Namespace) -> int:
 
 
 def cmd_serve(args: argparse.Namespace) -> int:
-    from app.server import serve
+    from app.serving import serve
 
     if args.scan is None and args.image is None and args.camera is None:
         sample = default_sample_dir()
