@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 import yaml
 
-from app.state import AnnotationState, pair_color
+from app.picks import pair_color
+from app.state import AnnotationState
 from calib_core.errors import CalibError
 from calib_core.pairs import Pair, load_pairs_yaml, save_pairs_yaml
 
@@ -232,6 +233,13 @@ def test_session_accepts_a_plain_pairs_file_and_rejects_other_scenes(tmp_path):
     save_pairs_yaml(path, [Pair((4, 5), None, (1.0, 2.0))])
     s = make_state(tmp_path)
     assert ends(s) == [(1, (4, 5), (1.0, 2.0))]
+    s.close()
+    # A pairs file with ids (as the app exports it) keeps them: one id in the UI and the files.
+    save_pairs_yaml(path, [Pair((4, 5), None, (1.0, 2.0), id=9), Pair((6, 7), None, (3.0, 4.0), id=3)])
+    s = make_state(tmp_path)
+    assert ends(s) == [(9, (4, 5), (1.0, 2.0)), (3, (6, 7), (3.0, 4.0))]
+    assert s.add_laser(8, 8) == 10  # new ids never collide with them
+    s.close()
     path.write_text(
         yaml.safe_dump(
             {"format": "ba-calib-session", "version": 1, "pairs": [{"id": 1, "laser_rc": [99, 0], "pixel": None}]}
