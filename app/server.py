@@ -32,7 +32,6 @@ from __future__ import annotations
 import os
 import queue
 import threading
-import time
 from pathlib import Path
 
 import numpy as np
@@ -223,56 +222,11 @@ class CalibrationApp(PairsPanel, CalibrationPanel, ViewPanel, ExportPanel, LiveS
             self.state.close()
             raise
 
-    # ======================================================================= scene
-    # ========================================================================= GUI
-    # ================================================================== callbacks
-    # ================================================================ live solve
-    # ============================================================ 3-D cloud
-    # ================================================================== drawing
-    # ================================================================== cameras
     # ================================================================ test hooks
     @property
     def ba_window(self) -> ColumnWindow:
         """The scan columns the BA images show."""
         return self._ba_window
-
-    @property
-    def result(self):
-        """The last good :class:`calib_core.solve.CalibrationResult`, or None."""
-        bundle = self._bundle
-        return None if bundle is None else bundle.result
-
-    def wait_idle(self, timeout: float = 30.0) -> bool:
-        """Block until queued user actions are applied and the live solver and the cloud worker are idle."""
-        deadline = time.monotonic() + timeout
-        while True:
-            while self._actions.unfinished_tasks:
-                if time.monotonic() > deadline:
-                    return False
-                time.sleep(0.01)
-            for worker in (self._solver, self._cloud_worker):
-                if not worker.wait_idle(max(0.0, deadline - time.monotonic())):
-                    return False
-            # A finished solve queues cloud work, finished cloud work may queue a view update.
-            if not self._actions.unfinished_tasks and self._solver.idle and self._cloud_worker.idle:
-                return True
-
-    def last_click_to_update(self) -> float | None:
-        """Seconds from the last change of the pairs to its solve shown: error display, table, 2-D overlays.
-
-        Measured from the start of the change in the state (before its
-        journal write) to the moment the result was handed to viser (sending it to
-        the browsers is not counted, nor is the 3-D cloud recolouring that
-        follows).  None before the first solve of a change.
-        """
-        last = self._last_update
-        return None if last is None else last[0]
-
-    @property
-    def last_update_time(self) -> float | None:
-        """``time.perf_counter()`` when the newest change's solve was shown (see :meth:`last_click_to_update`)."""
-        last = self._last_update
-        return None if last is None else last[1]
 
     def stop(self) -> None:
         """Stop the solver thread and the server; returns once the session file holds every change.
