@@ -266,14 +266,6 @@ class ViewPanel:
         self._apply_camera(client, new_look + np.array([0.0, 0.0, -new_dist]), new_look, np.array([0.0, -1.0, 0.0]),
                            fov)
 
-    def zoom_on_last_click(self, client_id: int) -> None:
-        """Centre one tab's 2-D view on the point it last clicked, magnified for precise picking.
-
-        A BA cell becomes :data:`ZOOM_PX_PER_CELL` screen pixels across its
-        narrow side; a camera pixel :data:`ZOOM_PX_PER_IMAGE_PX` screen pixels.
-        """
-        self._zoom_on_last(self.server.get_clients()[client_id])
-
     def _zoom_on_last(self, client: Any) -> None:
         last = self._last_click.get(client.client_id)
         if last is None:
@@ -319,10 +311,6 @@ class ViewPanel:
     def client_ids(self) -> list[int]:
         """Ids of the connected browser tabs."""
         return sorted(self.server.get_clients())
-
-    def show_view(self, client_id: int, mode: str = "all") -> None:
-        """Set one tab's view: ``all``, ``camera``, ``ba`` or ``3d``."""
-        self._set_view(self.server.get_clients()[client_id], mode)
 
     def view_settled(self, client_id: int) -> bool:
         """True once the tab reported a camera at the pose this app last set."""
