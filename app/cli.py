@@ -235,17 +235,15 @@ def cmd_ba_images(args: argparse.Namespace) -> int:
 def cmd_colorize(args: argparse.Namespace) -> int:
     from calib_core.io.extrinsics import load_extrinsics_yaml
     from calib_core.io.images import load_image_rgb
-    from calib_core.overlays import colorize_points, export_colored_ply
+    from calib_core.overlays import export_colored_scan
 
     # Small files first: a mistake in one of them is reported before the scan is loaded.
     T = load_extrinsics_yaml(args.extrinsics)["T_camera_lidar"]
     camera = load_camera_from_args(args)
     image = load_image_rgb(args.image)
     depth = load_scan_from_args(args)
-    points, _ = depth.valid_points()
-    colors, has_color = colorize_points(points, image, camera, T, occlusion=not args.no_occlusion)
-    export_colored_ply(args.output, points, colors, has_color)
-    print(f"coloured {int(has_color.sum())} of {len(points)} points; wrote {args.output}")
+    coloured, n = export_colored_scan(args.output, depth, image, camera, T, occlusion=not args.no_occlusion)
+    print(f"coloured {coloured} of {n} points; wrote {args.output}")
     return 0
 
 
@@ -268,7 +266,7 @@ def cmd_sample(args: argparse.Namespace) -> int:
 
 
 def cmd_serve(args: argparse.Namespace) -> int:
-    from app.server import serve
+    from app.serving import serve
 
     if args.scan is None and args.image is None and args.camera is None:
         sample = default_sample_dir()
@@ -366,7 +364,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="ba-calib",
         description="Targetless camera / 3D-lidar extrinsic calibration with Bearing Angle images. "
-        "With no command, serves the bundled sample scene at http://127.0.0.1:8080.",
+        "With no command, runs 'serve' (the bundled sample scene at http://127.0.0.1:8080 unless "
+        "--scan/--image/--camera are given; --host and --port work as for serve).",
     )
     parser.add_argument("--debug", action="store_true", help="show tracebacks of internal errors")
     parser.add_argument("--version", action="version", version=f"ba-calib {_version()}")
@@ -485,7 +484,23 @@ def build_parser() -> argparse.ArgumentParser:
     which.add_argument("--index", type=int, default=None, help="the cloud with this 0-based index on its topic (default 0)")
     q.add_argument("-o", "--output", required=True, type=Path, help="output folder")
     q.set_defaults(func=cmd_bag_extract)
+    parser.commands = tuple(sub.choices)  # type: ignore[attr-defined]  (for with_default_command)
     return parser
+
+
+def with_default_command(parser: argparse.ArgumentParser, argv: Sequence[str] | None = None) -> list[str]:
+    """``argv`` with ``serve`` inserted when it names no command: ``ba-calib --port 8300`` serves.
+
+    The global options (``--debug``) stay in front; ``-h`` / ``--version`` are left to the main parser.
+    """
+    args = list(sys.argv[1:] if argv is None else argv)
+    commands = set(getattr(parser, "commands", ()))
+    i = 0
+    while i < len(args) and args[i] == "--debug":
+        i += 1
+    if i < len(args) and (args[i] in commands or args[i] in ("-h", "--help", "--version")):
+        return args
+    return args[:i] + ["serve"] + args[i:]
 
 
 class _Parser(argparse.ArgumentParser):
@@ -627,13 +642,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             pass
     parser = build_parser()
     try:
-        args = parser.parse_args(argv)
+        args = parser.parse_args(with_default_command(parser, argv))
     except SystemExit as exc:
         return int(exc.code or 0) if isinstance(exc.code, int) else EXIT_USAGE
-    if args.command is None:
-        debug = args.debug
-        args = parser.parse_args(["serve"])
-        args.debug = debug
     noise = _Noise()
     try:
         check_args(args)

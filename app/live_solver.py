@@ -36,7 +36,6 @@ class LiveSolver:
         self._job: tuple[int, Any] | None = None
         self._busy = False
         self._stopped = False
-        self._done_version = -1
         self._thread = threading.Thread(target=self._run, name=name, daemon=True)
         self._thread.start()
 
@@ -45,12 +44,6 @@ class LiveSolver:
         with self._cond:
             self._job = (version, payload)
             self._cond.notify_all()
-
-    @property
-    def done_version(self) -> int:
-        """Version of the last finished job (-1 before the first)."""
-        with self._cond:
-            return self._done_version
 
     @property
     def idle(self) -> bool:
@@ -89,5 +82,4 @@ class LiveSolver:
                 traceback.print_exc()
             with self._cond:
                 self._busy = False
-                self._done_version = version
                 self._cond.notify_all()

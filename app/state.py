@@ -1,10 +1,7 @@
 """Annotation state of the browser app: the point pairs the user is picking.
 
-A *pick* is one correspondence under construction: a laser end (a depth-matrix
-cell ``(row, col)``, or a lidar-frame point ``laser_xyz`` for imported pairs)
-and a camera end (a pixel ``(u, v)`` in the ORIGINAL camera image).  Either end
-may still be missing while the user clicks; the two clicks can come in either
-order.
+A *pick* (:class:`app.picks.Pick`) is one correspondence under construction;
+its two clicks can come in either order.
 
 Every change goes through :class:`AnnotationState`, which
 
@@ -22,20 +19,18 @@ Every change goes through :class:`AnnotationState`, which
 * is thread-safe: viser runs callbacks on a thread pool, and two browser tabs
   share one state.
 
-This module is pure Python plus numpy; it holds no maths and knows nothing
-about viser.
+Pure Python plus numpy; no maths, no viser.
 """
 
 from __future__ import annotations
 
 import atexit
-import colorsys
 import os
 import sys
 import threading
 import time
 import weakref
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
@@ -45,73 +40,10 @@ from calib_core.errors import CalibError
 from calib_core.io.yaml_files import finite_vector
 from calib_core.pairs import Pair, load_pairs_yaml, save_pairs_yaml
 
+from .picks import SESSION_FORMAT, SESSION_VERSION, Pick, Snapshot, new_ends, restore_session
 from .session_store import SessionStore
 
-SESSION_FORMAT = "ba-calib-session"
-SESSION_VERSION = 1
 MAX_HISTORY = 500
-
-
-def pair_color(pick_id: int) -> tuple[int, int, int]:
-    """A stable, well-separated RGB colour for a pick id (golden-ratio hues)."""
-    hue = (0.08 + 0.61803398875 * int(pick_id)) % 1.0
-    r, g, b = colorsys.hsv_to_rgb(hue, 0.85, 1.0)
-    return int(round(255 * r)), int(round(255 * g)), int(round(255 * b))
-
-
-@dataclass(frozen=True)
-class Pick:
-    """One pair, possibly incomplete.
-
-    Attributes
-    ----------
-    id : int
-        Stable number shown on the markers (1, 2, ...); never reused.
-    laser_rc : (row, col) or None
-        Depth-matrix cell, 0-based.
-    laser_xyz : (x, y, z) or None
-        Laser point in the lidar frame, metres (imported pairs only).
-    pixel : (u, v) or None
-        Pixel in the original camera image, (column, row), top-left centre 0.
-    """
-
-    id: int
-    laser_rc: tuple[int, int] | None = None
-    laser_xyz: tuple[float, float, float] | None = None
-    pixel: tuple[float, float] | None = None
-
-    @property
-    def has_laser(self) -> bool:
-        return self.laser_rc is not None or self.laser_xyz is not None
-
-    @property
-    def complete(self) -> bool:
-        return self.has_laser and self.pixel is not None
-
-    @property
-    def color(self) -> tuple[int, int, int]:
-        return pair_color(self.id)
-
-    def to_pair(self) -> Pair:
-        """The :class:`calib_core.pairs.Pair` of a complete pick."""
-        if not self.complete:
-            raise CalibError(f"pair {self.id} is incomplete")
-        return Pair(self.laser_rc, None if self.laser_rc is not None else self.laser_xyz, self.pixel)  # type: ignore[arg-type]
-
-    def to_dict(self) -> dict[str, Any]:
-        out: dict[str, Any] = {"id": int(self.id)}
-        out["laser_rc"] = None if self.laser_rc is None else [int(v) for v in self.laser_rc]
-        out["laser_xyz"] = None if self.laser_xyz is None else [float(v) for v in self.laser_xyz]
-        out["pixel"] = None if self.pixel is None else [float(v) for v in self.pixel]
-        return out
-
-
-@dataclass(frozen=True)
-class Snapshot:
-    """The undoable part of the state."""
-
-    picks: tuple[Pick, ...] = ()
-    next_id: int = 1
 
 
 Listener = Callable[["AnnotationState"], None]
@@ -349,14 +281,11 @@ class AnnotationState:
             self._commit_locked(Snapshot((), self._snap.next_id))
         self._notify()
 
-    def import_pairs(self, pairs: Sequence[Pair], replace_existing: bool = False) -> list[int]:
-        """Add pairs (e.g. from a pairs YAML) as one undoable step; returns the new ids.
-
-        If any pair's laser cell or pixel is invalid for this scene a
-        :class:`CalibError` names it and nothing is added.
-        """
+    def check_import(self, pairs: Sequence[Pair]) -> list[Pick]:
+        """The picks ``pairs`` would become (ids not yet given); CalibError names the first pair not of this scene."""
         checked = []
         for i, p in enumerate(pairs):
+            name = f"imported pair {i}" if p.id is None else f"imported pair {p.id}"
             try:
                 rc = None if p.laser_rc is None else self.check_laser_cell(*p.laser_rc)
                 xyz = None if p.laser_xyz is None else tuple(finite_vector(p.laser_xyz, 3, "laser_xyz"))
@@ -364,15 +293,38 @@ class AnnotationState:
                     raise CalibError("no laser end")
                 uv = self.check_pixel(*p.pixel)
             except CalibError as exc:
-                raise CalibError(f"imported pair {i}: {exc}") from None
-            checked.append((rc, xyz, uv))
+                raise CalibError(f"{name}: {exc}") from None
+            checked.append(Pick(-1 if p.id is None else int(p.id), laser_rc=rc,
+                                laser_xyz=None if rc is not None else xyz, pixel=uv))
+        return checked
+
+    def count_duplicates(self, pairs: Sequence[Pair]) -> int:
+        """How many of ``pairs`` are exact duplicates of a pick here (or of an earlier one of ``pairs``)."""
+        return len(pairs) - len(new_ends(self.check_import(pairs), self.picks))
+
+    def import_pairs(self, pairs: Sequence[Pair], replace_existing: bool = False) -> list[int]:
+        """Add pairs (e.g. from a pairs YAML) as one undoable step; returns the ids of those added.
+
+        Exact duplicates (same laser end and pixel as a pick already here, or
+        as an earlier imported pair) are skipped.  A pair keeps the ``id`` it
+        has in the file unless that id is taken.  With ``replace_existing``
+        the imported pairs replace all picks (undo brings them back).  If any
+        pair's laser cell or pixel is invalid for this scene a
+        :class:`CalibError` names it and nothing is added.
+        """
+        checked = self.check_import(pairs)
         with self._lock:
             base = () if replace_existing else self._snap.picks
             next_id = self._snap.next_id
+            used = {p.id for p in base}
             new = []
-            for rc, xyz, uv in checked:
-                new.append(Pick(next_id, laser_rc=rc, laser_xyz=None if rc is not None else xyz, pixel=uv))
-                next_id += 1
+            for p in new_ends(checked, base):
+                pid = p.id if p.id >= 0 and p.id not in used else next_id
+                used.add(pid)
+                next_id = max(next_id, pid + 1)
+                new.append(Pick(pid, laser_rc=p.laser_rc, laser_xyz=p.laser_xyz, pixel=p.pixel))
+            if not new and not replace_existing:
+                return []
             self._commit_locked(Snapshot(base + tuple(new), next_id))
         self._notify()
         return [p.id for p in new]
@@ -542,62 +494,6 @@ class AnnotationState:
 
     def _restore(self, data: dict, path: Path) -> None:
         """Restore the session ``data`` read from ``path`` (the session YAML or its journal)."""
-        if data.get("format") != SESSION_FORMAT:
-            # A plain pairs file given as the session: start from its pairs.
-            pairs = load_pairs_yaml(path)
-            picks = []
-            for i, p in enumerate(pairs):
-                try:
-                    if p.laser_rc is not None:
-                        self.check_laser_cell(*p.laser_rc)
-                    self.check_pixel(*p.pixel)
-                except CalibError as exc:
-                    raise CalibError(f"{path}: pair {i}: {exc} (pairs from another scene?)") from None
-                picks.append(Pick(i + 1, laser_rc=p.laser_rc, laser_xyz=p.laser_xyz, pixel=p.pixel))
-            self._snap = Snapshot(tuple(picks), len(picks) + 1)
-            return
-        if data.get("version") != SESSION_VERSION:
-            raise CalibError(f"{path}: session version {data.get('version')!r} is not supported "
-                             f"(this ba-calib reads version {SESSION_VERSION})")
-        entries = data.get("pairs") or []
-        if not isinstance(entries, list):
-            raise CalibError(f"{path}: 'pairs' must be a list")
-        picks = []
-        for i, e in enumerate(entries):
-            where = f"{path}: pair {i}"
-            if not isinstance(e, dict) or "id" not in e:
-                raise CalibError(f"{where}: expected a mapping with an id")
-            try:
-                pick_id = int(e["id"])
-            except (TypeError, ValueError, OverflowError):
-                raise CalibError(f"{where}: id must be an integer") from None
-            rc = e.get("laser_rc")
-            xyz = e.get("laser_xyz")
-            px = e.get("pixel")
-            rc_f = None if rc is None else finite_vector(rc, 2, f"{where} laser_rc")
-            if rc_f is not None and any(float(v) != round(float(v)) for v in rc_f):
-                raise CalibError(f"{where}: laser_rc must be two integers (row, column), got {list(rc)}")
-            rc_t = None if rc_f is None else tuple(int(round(float(v))) for v in rc_f)
-            xyz_t = None if xyz is None else tuple(finite_vector(xyz, 3, f"{where} laser_xyz"))
-            px_t = None if px is None else tuple(finite_vector(px, 2, f"{where} pixel"))
-            # A session written for another scene must not inject invalid picks.
-            try:
-                if rc_t is not None:
-                    self.check_laser_cell(*rc_t)
-                if px_t is not None:
-                    self.check_pixel(*px_t)
-            except CalibError as exc:
-                raise CalibError(f"{where}: {exc} (session from another scene?)") from None
-            picks.append(Pick(pick_id, rc_t, xyz_t, px_t))  # type: ignore[arg-type]
-        ids = [p.id for p in picks]
-        if len(set(ids)) != len(ids):
-            raise CalibError(f"{path}: duplicate pair ids")
-        try:
-            next_id = max([int(data.get("next_id") or 1)] + [i + 1 for i in ids])
-        except (TypeError, ValueError, OverflowError):
-            raise CalibError(f"{path}: next_id must be an integer, got {data.get('next_id')!r}") from None
-        view = data.get("view") or {}
-        if not isinstance(view, dict):
-            raise CalibError(f"{path}: 'view' must be a mapping")
-        self._snap = Snapshot(tuple(picks), next_id)
-        self._view = dict(view)
+        self._snap, view = restore_session(data, path, self.check_laser_cell, self.check_pixel)
+        if view is not None:
+            self._view = view

@@ -29,6 +29,52 @@ import numpy as np
 _CLIENT_IDS = itertools.count(10_000)
 
 
+class _FakeWidget:
+    """A GUI element the app made for one tab: its label, content and click callback."""
+
+    def __init__(self, kind: str, label: str = "", content: str = "") -> None:
+        self.kind, self.label, self.content = kind, label, content
+        self.callbacks: list[Any] = []
+        self.closed = False
+
+    def on_click(self, cb: Any) -> Any:
+        self.callbacks.append(cb)
+        return cb
+
+    def close(self) -> None:
+        self.closed = True
+
+    def __enter__(self) -> "_FakeWidget":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        return None
+
+
+class _FakeGui:
+    """Records the modals (questions) the app opens in one tab, with their text and buttons."""
+
+    def __init__(self) -> None:
+        self.modals: list[tuple[_FakeWidget, list[_FakeWidget]]] = []
+
+    def add_modal(self, title: str, **kwargs: Any) -> _FakeWidget:
+        modal = _FakeWidget("modal", title)
+        self.modals.append((modal, []))
+        return modal
+
+    def add_markdown(self, content: str, **kwargs: Any) -> _FakeWidget:
+        w = _FakeWidget("markdown", content=content)
+        if self.modals:
+            self.modals[-1][1].append(w)
+        return w
+
+    def add_button(self, label: str, **kwargs: Any) -> _FakeWidget:
+        w = _FakeWidget("button", label)
+        if self.modals:
+            self.modals[-1][1].append(w)
+        return w
+
+
 @dataclass(eq=False)
 class FakeTab:
     """Stands in for a viser client handle: records what the app sends to this tab."""
@@ -36,6 +82,7 @@ class FakeTab:
     client_id: int = field(default_factory=lambda: next(_CLIENT_IDS))
     notifications: list[tuple[str, str]] = field(default_factory=list)
     downloads: list[tuple[str, bytes]] = field(default_factory=list)
+    gui: _FakeGui = field(default_factory=_FakeGui)
 
     def add_notification(self, title: str, body: str, **kwargs: Any) -> None:
         self.notifications.append((str(title), str(body)))
@@ -102,11 +149,38 @@ class AppDriver:
         return self._fire(self.app._guard(self.app._on_edit), SimpleNamespace(client=self.tab,
                                                                               target=SimpleNamespace(value=name)))
 
-    def upload_pairs(self, name: str, content: bytes) -> list[tuple[str, str]]:
-        """Upload a pairs file through this tab's "Import pairs YAML" button; the notifications it gave."""
+    def upload_pairs(self, name: str, content: bytes, answer: str | None = "Append") -> list[tuple[str, str]]:
+        """Upload a pairs file through this tab's "Import pairs YAML" button; the notifications it gave.
+
+        If the app asks whether to append or replace (there are pairs already), ``answer`` is
+        pressed (``"Append"``, ``"Replace all"`` or ``"Cancel"``); None leaves the question open.
+        """
         before = len(self.tab.notifications)
+        asked = len(self.tab.gui.modals)
         self.app.receive_upload(self.tab, name, content, wait=True)
+        if answer is not None and len(self.tab.gui.modals) > asked:
+            self.answer_question(answer)
         return self.tab.notifications[before:]
+
+    @property
+    def open_question(self) -> str | None:
+        """The text of the question the app asks in this tab (None: none open)."""
+        for modal, widgets in reversed(self.tab.gui.modals):
+            if not modal.closed:
+                return modal.label + ": " + " ".join(w.content for w in widgets if w.kind == "markdown")
+        return None
+
+    def answer_question(self, label: str) -> list[tuple[str, str]]:
+        """Press button ``label`` of the open question in this tab."""
+        for modal, widgets in reversed(self.tab.gui.modals):
+            if not modal.closed:
+                button = next(w for w in widgets if w.kind == "button" and w.label == label)
+                return self._fire(button.callbacks[-1], SimpleNamespace(client=self.tab, target=None))
+        raise ValueError("no question is open")
+
+    def press_clear_all(self) -> list[tuple[str, str]]:
+        """Press "Clear all pairs"."""
+        return self._fire(self.app._guard(self.app._on_clear), SimpleNamespace(client=self.tab, target=None))
 
     def wait_idle(self, timeout: float = 60.0) -> bool:
         """Wait for the live solve and cloud work the last actions started."""
@@ -144,7 +218,7 @@ class AppDriver:
 
     def selection_drawn(self, key: str) -> int:
         """Number of selection-ring line segments drawn on image ``key`` (0: no selection shown there)."""
-        entry = self.app._drawn.get(f"/annot/selected/{key}")
+        entry = self.app.nodes.drawn.get(f"/annot/selected/{key}")
         return 0 if entry is None else len(entry[1][1])
 
     @property
@@ -156,6 +230,11 @@ class AppDriver:
     def pairs_panel(self) -> str:
         """The text of the Pairs panel."""
         return str(self.app._md_pairs.content)
+
+    @property
+    def residual_table(self) -> str:
+        """The per-pair residual table (markdown) of the Calibration panel."""
+        return str(self.app._md_table.content)
 
     @property
     def result_panel(self) -> str:

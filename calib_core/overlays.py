@@ -433,3 +433,28 @@ def export_colored_ply(
     rgba = np.concatenate([rgb[keep], np.full((int(keep.sum()), 1), 255, np.uint8)], axis=1)
     cloud = trimesh.PointCloud(pts[keep], colors=rgba)
     write_bytes_atomic(path, cloud.export(file_type="ply"))
+
+
+def export_colored_scan(
+    path: str | os.PathLike, depth, image: np.ndarray, camera, T_camera_lidar: np.ndarray, occlusion: bool = True
+) -> tuple[int, int]:
+    """Colour every valid point of ``depth`` from ``image`` and write it as a PLY (Fig. 9); ``(coloured, points)``.
+
+    The one coloured-PLY export: ``ba-calib colorize`` and the app's download both call it.
+    """
+    points, _ = depth.valid_points()
+    colors, has_color = colorize_points(points, image, camera, T_camera_lidar, occlusion=occlusion)
+    export_colored_ply(path, points, colors, has_color)
+    return int(np.count_nonzero(has_color)), len(points)
+
+
+def columns_seen_by_camera(depth, camera, T_camera_lidar: np.ndarray) -> np.ndarray:
+    """``(n_cols,)`` bool: the depth-matrix columns with a valid point that projects into the camera image.
+
+    Frames: ``T_camera_lidar`` maps lidar points (metres) into the camera frame.
+    """
+    points, rows_cols = depth.valid_points()
+    _, in_image = project_lidar_points(T_camera_lidar, camera, points)
+    seen = np.zeros(depth.shape[1], bool)
+    seen[rows_cols[in_image, 1]] = True
+    return seen

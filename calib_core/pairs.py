@@ -180,6 +180,12 @@ def save_pairs_yaml(path: str | os.PathLike, pairs: Sequence[Pair]) -> None:
     write_yaml_atomic(path, {"pairs": pairs_to_list(pairs)})
 
 
+def _pair_name(pairs: Sequence[Pair], i: int) -> str:
+    """How messages name pair ``i``: by its id when it has one (as the UI shows it), else by position."""
+    pid = getattr(pairs[i], "id", None)
+    return f"pair {i}" if pid is None else f"pair {pid}"
+
+
 def resolve_pairs(pairs: Sequence[Pair], depth, camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Turn pairs into solver input.
 
@@ -215,21 +221,21 @@ def resolve_pairs(pairs: Sequence[Pair], depth, camera) -> tuple[np.ndarray, np.
         outside = (rc[:, 0] >= h) | (rc[:, 1] >= w) | (rc < 0).any(axis=1)
         if outside.any():
             i = rc_idx[int(np.argmax(outside))]
-            raise CalibError(f"pair {i}: laser cell {tuple(pairs[i].laser_rc)} is outside the {h}x{w} depth matrix")
+            raise CalibError(f"{_pair_name(pairs, i)}: laser cell {tuple(pairs[i].laser_rc)} is outside the {h}x{w} depth matrix")
         no_return = ~depth.valid[rc[:, 0], rc[:, 1]]
         if no_return.any():
             i = rc_idx[int(np.argmax(no_return))]
-            raise CalibError(f"pair {i}: laser cell {tuple(pairs[i].laser_rc)} has no laser return; pick a valid cell")
+            raise CalibError(f"{_pair_name(pairs, i)}: laser cell {tuple(pairs[i].laser_rc)} has no laser return; pick a valid cell")
         points[rc_idx] = depth.points[rc[:, 0], rc[:, 1]]
     inside = in_image(pixels, camera.width, camera.height)
     if not inside.all():
         i = int(np.argmin(inside))
         raise CalibError(
-            f"pair {i}: pixel ({pixels[i, 0]:.1f}, {pixels[i, 1]:.1f}) is outside the {camera.width}x{camera.height} camera image"
+            f"{_pair_name(pairs, i)}: pixel ({pixels[i, 0]:.1f}, {pixels[i, 1]:.1f}) is outside the {camera.width}x{camera.height} camera image"
         )
     bearings = camera.bearing(pixels) if n else np.empty((0, 3))
     bad = ~np.isfinite(bearings).all(axis=1)
     if bad.any():
         i = int(np.argmax(bad))
-        raise CalibError(f"pair {i}: pixel ({pixels[i, 0]:.1f}, {pixels[i, 1]:.1f}) has no ray under the {camera.model} camera model")
+        raise CalibError(f"{_pair_name(pairs, i)}: pixel ({pixels[i, 0]:.1f}, {pixels[i, 1]:.1f}) has no ray under the {camera.model} camera model")
     return points, bearings, pixels

@@ -65,15 +65,20 @@ def test_two_tabs_uploading_at_once_each_import_their_own_file(app, tmp_path):
             ub = await b.gui_uuid("GuiUploadButtonMessage", UPLOAD_LABEL)
             assert ua != ub  # one button per tab
             for _ in range(3):  # bounded repeats of the race: both uploads land in the same instant
+                app.state.clear()
                 n0 = len(app.state.picks)
                 await asyncio.gather(a.upload(ua, "a.yaml", files[0]), b.upload(ub, "b.yaml", files[1]))
                 deadline = time.monotonic() + 30
                 while len(app.state.picks) < n0 + 10 and time.monotonic() < deadline:
+                    # The upload that lands second finds pairs there and asks its own tab: append.
+                    await a.press_new_buttons("Append")
+                    await b.press_new_buttons("Append")
                     await asyncio.sleep(0.02)
                 got = [(p.laser_rc, p.pixel) for p in app.state.picks[n0:]]
                 want = [(p.laser_rc, p.pixel) for p in pairs]
                 assert sorted(got) == sorted(want)  # each file once: A's 5 and B's 5
             # A hostile file name is only shown, never used as a path: a clean import, no traceback.
+            app.state.clear()
             n0 = len(app.state.picks)
             # (One tab uploads one file at a time: its browser opens a file dialog for each.)
             await a.upload(ua, "..", files[0])

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 import yaml
 
-from app.state import AnnotationState, pair_color
+from app.picks import pair_color
+from app.state import AnnotationState
 from calib_core.errors import CalibError
 from calib_core.pairs import Pair, load_pairs_yaml, save_pairs_yaml
 
@@ -41,7 +42,8 @@ def test_either_click_order_makes_a_pair():
     assert s.add_laser(5, 6) == b  # camera first
     assert ends(s) == [(1, (3, 4), (10.5, 20.25)), (2, (5, 6), (100.0, 50.0))]
     assert s.pending() is None
-    assert s.pairs() == [Pair((3, 4), None, (10.5, 20.25)), Pair((5, 6), None, (100.0, 50.0))]
+    # The pairs carry the ids the page shows (one id in the UI, warnings and files).
+    assert s.pairs() == [Pair((3, 4), None, (10.5, 20.25), id=a), Pair((5, 6), None, (100.0, 50.0), id=b)]
 
 
 def test_second_click_on_same_side_replaces_the_pending_end():
@@ -165,7 +167,7 @@ def test_export_writes_complete_pairs_readable_by_core(tmp_path):
     s.add_laser(6, 6)  # incomplete: not exported
     out = tmp_path / "out.yaml"
     assert s.export_pairs_file(out) == 1
-    assert load_pairs_yaml(out) == [Pair((3, 4), None, (10.5, 20.0))]
+    assert load_pairs_yaml(out) == [Pair((3, 4), None, (10.5, 20.0), id=s.picks[0].id)]
 
 
 def test_every_change_is_on_disk_before_it_returns_and_restored(tmp_path):
@@ -231,6 +233,13 @@ def test_session_accepts_a_plain_pairs_file_and_rejects_other_scenes(tmp_path):
     save_pairs_yaml(path, [Pair((4, 5), None, (1.0, 2.0))])
     s = make_state(tmp_path)
     assert ends(s) == [(1, (4, 5), (1.0, 2.0))]
+    s.close()
+    # A pairs file with ids (as the app exports it) keeps them: one id in the UI and the files.
+    save_pairs_yaml(path, [Pair((4, 5), None, (1.0, 2.0), id=9), Pair((6, 7), None, (3.0, 4.0), id=3)])
+    s = make_state(tmp_path)
+    assert ends(s) == [(9, (4, 5), (1.0, 2.0)), (3, (6, 7), (3.0, 4.0))]
+    assert s.add_laser(8, 8) == 10  # new ids never collide with them
+    s.close()
     path.write_text(
         yaml.safe_dump(
             {"format": "ba-calib-session", "version": 1, "pairs": [{"id": 1, "laser_rc": [99, 0], "pixel": None}]}
@@ -538,7 +547,7 @@ def test_ba_grid_follows_the_shape_of_the_shown_images():
 
 
 def test_pick_markers_are_rings_that_leave_the_picked_cell_visible():
-    from app.server import RING_SEGMENTS, marker_segments
+    from app.ui_common import RING_SEGMENTS, marker_segments
 
     centre = np.array([[1.0, 2.0, -0.01]])
     segs = marker_segments(centre, 0.1, cell_half_size=(0.01, 0.03))
@@ -580,7 +589,8 @@ def test_app_column_window_clicks_markers_and_zoom_on_the_sample(tmp_path):
     from types import SimpleNamespace
 
     from app.ba_view import ColumnWindow
-    from app.server import PANEL_PX, ZOOM_PX_PER_CELL, CalibrationApp, _Action
+    from app.server import CalibrationApp
+    from app.ui_common import PANEL_PX, ZOOM_PX_PER_CELL, _Action
 
     sample = Path(__file__).resolve().parents[1] / "sample_data"
     with socket.socket() as sock:
@@ -664,7 +674,7 @@ def test_a_click_updates_only_what_it_changed_in_place(tmp_path):
         assert app.last_click_to_update() is None and app.last_update_time is None  # nothing solved yet
         ids = app.state.import_pairs(load_pairs_yaml(sample / "pairs.yaml")[:5])
         assert app.wait_idle(60) and app.result is not None
-        node = lambda name: app._drawn[name][0]  # noqa: E731
+        node = lambda name: app.nodes.drawn[name][0]  # noqa: E731
         ba_ring, cam_ring = node("/annot/markers/horizontal/ring"), node("/annot/markers/raw/ring")
         ba_points, cam_points = ba_ring.points.copy(), cam_ring.points.copy()
         label = node(f"/annot/labels/raw/{ids[1]}")
@@ -696,11 +706,11 @@ def test_a_click_updates_only_what_it_changed_in_place(tmp_path):
         app.state.add_pixel(100.0, 100.0)
         assert app.wait_idle(60)
         assert len(node("/annot/markers/raw/ring").points) == 6 * per_pick
-        assert f"/annot/labels/raw/{ids[-1] + 1}" in app._drawn
+        assert f"/annot/labels/raw/{ids[-1] + 1}" in app.nodes.drawn
         app.state.undo()
         assert app.wait_idle(60)
         assert len(node("/annot/markers/raw/ring").points) == 5 * per_pick
-        assert f"/annot/labels/raw/{ids[-1] + 1}" not in app._drawn
+        assert f"/annot/labels/raw/{ids[-1] + 1}" not in app.nodes.drawn
     finally:
         app.stop()
 

@@ -83,6 +83,17 @@ class WireClient:
         m = await self.wait_for(lambda m: m.get("type") == type_name and m.get("props", {}).get("label") == label)
         return m["uuid"]
 
+    async def press_new_buttons(self, label: str) -> int:
+        """Press every button labelled ``label`` the server made for this tab and not yet pressed; how many."""
+        pressed = self.__dict__.setdefault("_pressed", set())
+        found = [m["uuid"] for m in list(self.messages)
+                 if m.get("type") == "GuiButtonMessage" and m.get("props", {}).get("label") == label
+                 and m["uuid"] not in pressed]
+        for button in found:
+            pressed.add(button)
+            await self.send("GuiUpdateMessage", uuid=button, updates={"value": True})
+        return len(found)
+
     async def upload(self, button_uuid: str, filename: str, content: bytes) -> None:
         """Upload a file through an upload button, in one part."""
         transfer = str(uuid.uuid4())

@@ -1,0 +1,65 @@
+"""The ordered action worker: viser callbacks only queue their work, one thread applies it in arrival order and
+turns a CalibError into a notification for the tab that caused it (the app keeps running)."""
+
+from __future__ import annotations
+
+import traceback
+from typing import Any, Callable
+
+import viser
+
+from calib_core.errors import CalibError
+
+from .ui_common import _Action
+
+
+class ActionQueue:
+    """Part of :class:`app.server.CalibrationApp` (a mixin: it uses the app's attributes)."""
+
+    def _guard(self, fn: Callable) -> Callable:
+        """Wrap a callback: queue it for the ordered action worker.
+
+        Viser runs plain callbacks on a thread pool, where two quick clicks
+        can be handled out of order (a BA, camera, BA sequence would then pair
+        the wrong ends).  This async wrapper runs on the event loop, in arrival
+        order, and only snapshots the widget value and queues the work.
+        """
+
+        async def enqueue(event: Any) -> None:
+            target = getattr(event, "target", None)
+            value = getattr(target, "value", None) if not isinstance(target, viser.SceneNodeHandle) else None
+            self._actions.put((fn, _Action(event, value)))
+
+        return enqueue
+
+    def _run_actions(self) -> None:
+        """The action worker: applies queued user actions one by one; errors become notifications."""
+        while True:
+            item = self._actions.get()
+            try:
+                if item is None:
+                    return
+                fn, action = item
+                try:
+                    fn(action)
+                except CalibError as exc:
+                    self._notify(action.client, "Not accepted", str(exc))
+                except Exception as exc:  # never let a click kill anything
+                    traceback.print_exc()
+                    self._notify(action.client, "Internal error", f"{type(exc).__name__}: {exc}")
+            finally:
+                self._actions.task_done()
+
+    def _on_save_error(self, message: str) -> None:
+        # On the compactor's thread; the journal holds every change, the compaction is retried.
+        if hasattr(self, "server") and not getattr(self, "_stopped", True):
+            self._notify(None, "Session file not updated (retrying; no change lost)", message)
+
+    def _notify(self, client: Any, title: str, body: str, color: str = "red") -> None:
+        body = " ".join(str(body).split())
+        targets = [client] if client is not None else list(self.server.get_clients().values())
+        for c in targets:
+            try:
+                c.add_notification(title, body, color=color, auto_close_seconds=8.0, with_close_button=True)
+            except Exception:
+                pass

@@ -1,0 +1,207 @@
+"""The live-solve coordinator: every change of the pairs is solved in a worker thread (:class:`app.live_solver.LiveSolver`),
+shown when done, then the 3-D cloud colours and the camera-facing column window are computed in their own thread.
+The maths is :func:`calib_core.solve.calibrate` and :mod:`calib_core.overlays`."""
+
+from __future__ import annotations
+
+import time
+import traceback
+
+import numpy as np
+import viser.transforms as vtf
+
+from calib_core.errors import CalibError
+from calib_core.overlays import colorize_points, columns_seen_by_camera
+from calib_core.pairs import Pair, resolve_pairs
+from calib_core.solve import calibrate
+from calib_core.transforms import invert_T, transform_points
+
+from .ba_view import ColumnWindow, covering_window
+from .state import AnnotationState
+from .ui_common import MIN_PAIRS, SolveBundle, CloudUpdate, _Action
+
+
+class LiveSolveCoordinator:
+    """Part of :class:`app.server.CalibrationApp` (a mixin: it uses the app's attributes)."""
+
+    def _on_state_change(self, state: AnnotationState) -> None:
+        picks = [p for p in state.picks if p.complete]
+        key = tuple((p.id, p.to_pair()) for p in picks)
+        with self._ui_lock:
+            if key != self._submitted:
+                self._submitted = key
+                self._job += 1
+                if len(picks) >= MIN_PAIRS:
+                    self._solving = True
+                    self._solver.submit(self._job, ([p.id for p in picks], [p.to_pair() for p in picks]))
+                    # From the start of the change, its disk write included.
+                    self._change_time = (self._job, state.last_change_started or time.perf_counter())
+                else:
+                    # Too few pairs: results of older jobs no longer describe these pairs.
+                    self._result_floor = self._job
+                    self._bundle = None
+                    self._solve_error = None
+                    self._solving = False
+                    self._show_solved_camera()
+        try:
+            self._refresh_scene()
+        finally:
+            self._refresh_panel()  # the panel and the dropdown follow the state even if a drawing failed
+
+    def _solve_job(self, payload: tuple[list[int], list[Pair]]) -> SolveBundle:
+        """The solve and what the error display and the 2-D overlays need (the cloud comes later)."""
+        ids, pairs = payload
+        t0 = time.perf_counter()
+        points, _, pixels = resolve_pairs(pairs, self.depth, self.camera)
+        # The pairs carry their pick ids, so the solve names outliers and warnings by the ids the page shows.
+        result = calibrate(pairs, self.depth, self.camera)
+        T = result.T_camera_lidar
+        return SolveBundle(
+            pick_ids=ids, pairs=pairs, result=result, pixels=pixels,
+            points_camera=transform_points(T, points),
+            edges_camera=transform_points(T, self.edge_points_lidar) if len(self.edge_points_lidar) else np.empty((0, 3)),
+            seconds=time.perf_counter() - t0,
+        )
+
+    def _on_solved(self, job: int, bundle: SolveBundle | None, error: BaseException | None) -> None:
+        """Show a finished solve: errors, table, 2-D overlays first; then queue the cloud work."""
+        with self._ui_lock:
+            if job < self._result_floor or self._stopped:
+                return
+            self._solving = job < self._job
+            if error is not None:
+                msg = str(error) if isinstance(error, CalibError) else f"{type(error).__name__}: {error}"
+                self._solve_error = " ".join(msg.split())
+                if not isinstance(error, CalibError):
+                    traceback.print_exception(error)
+            else:
+                self._bundle = bundle
+                self._solve_error = None
+                self._show_solved_camera()
+            self._refresh_scene()
+            self._refresh_panel()
+            change_job, change_time = self._change_time
+            if job == change_job:
+                now = time.perf_counter()
+                self._last_update = (now - change_time, now)
+        self._request_cloud()
+
+    def _cloud_shown(self) -> bool:
+        """True while some tab shows the 3-D view."""
+        return any(m == "3d" for m in list(self._client_mode.values()))
+
+    def _request_cloud(self) -> None:
+        """Queue what the current solve still owes: cloud colours if a tab shows 3-D, the facing window in camera mode."""
+        bundle = self._bundle
+        if bundle is None or self._stopped:
+            return
+        if (self._cloud_shown() and self._cloud_shows is not bundle) or (
+                self._ba_mode == "camera" and self._facing_of is not bundle):
+            self._cloud_worker.submit(0, bundle)
+
+    def _cloud_colors(self, T_camera_lidar: np.ndarray) -> np.ndarray:
+        """Display-cloud colours ``(K, 3)`` uint8 from the camera image; grey where the camera does not see."""
+        colors, has_color = colorize_points(self.cloud_points_lidar, self.image, self.camera, T_camera_lidar,
+                                            occlusion=True)
+        # Pure black is the unlit border of a fisheye image, not scene colour: show it grey too.
+        has_color &= colors.any(axis=1)
+        return np.where(has_color[:, None], colors, np.uint8(110)).astype(np.uint8)
+
+    def _facing_window(self, T_camera_lidar: np.ndarray) -> ColumnWindow | None:
+        """The scan columns whose points project into the camera image, or None."""
+        seen = columns_seen_by_camera(self.depth, self.camera, T_camera_lidar)
+        n_cols = len(seen)
+        # A margin and coarse ends, so that the next solve usually keeps the same window.
+        step = max(1, round(n_cols / 225))
+        return covering_window(seen, self._wrap_cols, margin=step, quantum=step)
+
+    def _set_facing(self, bundle: SolveBundle, facing: ColumnWindow | None) -> None:
+        with self._ui_lock:
+            if bundle is not self._bundle:
+                return  # a newer solve is shown; its own window comes with it
+            self._facing_of = bundle
+            if facing is not None:  # the camera sees no column: keep the last window
+                self._ba_facing = facing
+
+    def _ensure_facing(self) -> None:
+        """Compute the camera-facing window of the current solve now, if not done yet (switch to camera mode)."""
+        bundle = self._bundle
+        if bundle is not None and self._facing_of is not bundle:
+            self._set_facing(bundle, self._facing_window(bundle.result.T_camera_lidar))
+
+    def _cloud_job(self, bundle: SolveBundle) -> CloudUpdate:
+        # Decided when the job runs: a tab may have left or entered the 3-D view meanwhile.
+        t0 = time.perf_counter()
+        T = bundle.result.T_camera_lidar
+        colors = self._cloud_colors(T) if self._cloud_shown() and self._cloud_shows is not bundle else None
+        facing_done = self._ba_mode == "camera" and self._facing_of is not bundle
+        facing = self._facing_window(T) if facing_done else None
+        return CloudUpdate(bundle, colors, facing_done, facing, time.perf_counter() - t0)
+
+    def _on_cloud_done(self, job: int, update: CloudUpdate | None, error: BaseException | None) -> None:
+        if error is not None:
+            traceback.print_exception(error)
+            return
+        with self._ui_lock:
+            if self._stopped or update.bundle is not self._bundle:
+                return  # superseded: the newer solve queued its own
+            if update.colors is not None:
+                self._cloud.colors = update.colors
+                self._cloud_shows = update.bundle
+            if update.facing_done:
+                self._set_facing(update.bundle, update.facing)
+        if update.facing_done and self._ba_mode == "camera" and not self._stopped:
+            # In the action worker, so a click is never mapped through a window that changed under it.
+            self._actions.put((lambda action: self._apply_ba_window(), _Action(None, None)))
+
+    def _show_solved_camera(self) -> None:
+        """The solved camera's frame in the 3-D pane; without a solve no frame and a grey cloud."""
+        bundle = self._bundle
+        if bundle is None:
+            self._camera_frame.visible = False
+            if self._cloud_shows is not None:
+                self._cloud.colors = np.full((len(self.cloud_points_lidar), 3), 150, np.uint8)
+                self._cloud_shows = None
+            return
+        T_lidar_camera = invert_T(bundle.result.T_camera_lidar)
+        self._camera_frame.wxyz = vtf.SO3.from_matrix(T_lidar_camera[:3, :3]).wxyz
+        self._camera_frame.position = T_lidar_camera[:3, 3]
+        self._camera_frame.visible = True
+
+    @property
+    def result(self):
+        """The last good :class:`calib_core.solve.CalibrationResult`, or None."""
+        bundle = self._bundle
+        return None if bundle is None else bundle.result
+
+    def wait_idle(self, timeout: float = 30.0) -> bool:
+        """Block until queued user actions are applied and the live solver and the cloud worker are idle."""
+        deadline = time.monotonic() + timeout
+        while True:
+            while self._actions.unfinished_tasks:
+                if time.monotonic() > deadline:
+                    return False
+                time.sleep(0.01)
+            for worker in (self._solver, self._cloud_worker):
+                if not worker.wait_idle(max(0.0, deadline - time.monotonic())):
+                    return False
+            # A finished solve queues cloud work, finished cloud work may queue a view update.
+            if not self._actions.unfinished_tasks and self._solver.idle and self._cloud_worker.idle:
+                return True
+
+    def last_click_to_update(self) -> float | None:
+        """Seconds from the last change of the pairs to its solve shown: error display, table, 2-D overlays.
+
+        Measured from the start of the change in the state (before its
+        journal write) to the moment the result was handed to viser (sending it to
+        the browsers is not counted, nor is the 3-D cloud recolouring that
+        follows).  None before the first solve of a change.
+        """
+        last = self._last_update
+        return None if last is None else last[0]
+
+    @property
+    def last_update_time(self) -> float | None:
+        """``time.perf_counter()`` when the newest change's solve was shown (see :meth:`last_click_to_update`)."""
+        last = self._last_update
+        return None if last is None else last[1]

@@ -1,0 +1,157 @@
+"""Drawing on the annotation views: pick markers and labels, the selection ring, and the camera-view overlays
+(reprojected pairs, residual lines, BA-edge points, predicted pixels).  Only changed scene nodes are sent
+(:class:`app.scene_nodes.SceneNodes`)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from calib_core.overlays import project_lidar_points
+
+from .layout import ImageSlot
+from .state import Pick
+from .ui_common import MARKER_SIZE, RING_CELLS, RING_MIN_RADIUS, EDGE_MIN_SIZE, marker_segments
+
+
+class OverlayDrawing:
+    """Part of :class:`app.server.CalibrationApp` (a mixin: it uses the app's attributes)."""
+
+    def _display_from_pixels(self, pixels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Display coordinates (visible camera view) of original-image pixels."""
+        pixels = np.asarray(pixels, dtype=np.float64).reshape(-1, 2)
+        if len(pixels) == 0:
+            return pixels, np.zeros(0, bool)
+        if not self._use_panorama:
+            return pixels, np.isfinite(pixels).all(axis=1)
+        return self.panorama.from_camera_pixels(pixels)
+
+    def _display_from_camera_points(self, points_camera: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Display coordinates (visible camera view) of points in the camera frame."""
+        pts = np.asarray(points_camera, dtype=np.float64).reshape(-1, 3)
+        if len(pts) == 0:
+            return np.empty((0, 2)), np.zeros(0, bool)
+        if self._use_panorama:
+            uv, ok = self.panorama.project(pts)
+            # Only directions the camera model can see (the panorama is wider).
+            ok &= self.camera.project(pts)[1]
+            return uv, ok
+        return self.camera.project(pts)
+
+    def _refresh_scene(self) -> None:
+        """Redraw markers, labels, selection and the reprojection overlays (only what changed is sent)."""
+        with self._ui_lock, self.server.atomic():
+            picks = {p.id: p for p in self.state.picks}
+            selected = self.state.selected
+            labels: dict[str, tuple[str, np.ndarray]] = {}
+            cam_slot = self._camera_slot()
+            for key in (*self.ba_keys, cam_slot.key):
+                labels.update(self._draw_markers(key, picks, selected))
+            predictions = self._predictions(picks)
+            for pid, uv in predictions:
+                w = cam_slot.world_from_pixel(uv[None], z_offset=-0.015)[0]
+                labels[f"/annot/labels/predicted/{pid}"] = (f"{pid}?", w + np.array([0.06, -0.06, 0.0]))
+            for other in ("raw", "panorama"):
+                if other in self.slots and other != cam_slot.key:
+                    self._marker_cache.pop(other, None)
+                    for name in (f"/annot/markers/{other}/halo", f"/annot/markers/{other}/ring",
+                                 f"/annot/selected/{other}"):
+                        self.nodes.lines(name, np.empty((0, 2, 3)), (0, 0, 0))
+            for name in [n for n in self.nodes.label_names() if n not in labels]:
+                self.nodes.remove(name)
+            for name, (text, pos) in labels.items():
+                self.nodes.label(name, text, pos)
+            self._draw_overlays(picks, predictions)
+
+    def _draw_markers(self, key: str, picks: dict[int, Pick], selected: int | None) -> dict[str, tuple[str, np.ndarray]]:
+        """Draw the pick markers of slot ``key``; returns its number labels.  Skipped when nothing on it changed."""
+        slot = self.slots[key]
+        ids, uv = self._pick_ends(key)
+        inputs = (slot, tuple(ids), uv.tobytes(), selected if selected in ids else None)
+        cached = self._marker_cache.get(key)
+        if cached is not None and cached[0] == inputs:
+            return cached[1]
+        world = slot.world_from_pixel(uv, z_offset=-0.01)
+        colors = np.array([picks[i].color for i in ids], np.uint8).reshape(-1, 3)
+        r = self._ring_radius(slot)
+        # Hollow rings with ticks pointing at the clicked spot, and on BA images the
+        # outline of the picked cell: they mark the spot without hiding it.
+        outline = (0.5 * slot.units_per_px, 0.5 * slot.units_per_px_y) if key in self.ba_keys else None
+        segs = marker_segments(world, r, cell_half_size=outline)
+        per = len(segs) // max(len(ids), 1)
+        seg_colors = np.repeat(colors, per * 2, axis=0).reshape(-1, 2, 3)
+        self.nodes.lines(f"/annot/markers/{key}/halo", segs + np.array([0.0, 0.0, 0.002]),
+                        np.full(seg_colors.shape, 25, np.uint8), thickness=4.5)
+        self.nodes.lines(f"/annot/markers/{key}/ring", segs, seg_colors, thickness=2.0)
+        sel = [k for k, i in enumerate(ids) if i == selected]
+        # One colour per segment of whatever the ring is made of (ticks included).
+        sel_segs = marker_segments(world[sel] + [0.0, 0.0, 0.003], 1.5 * r)
+        self.nodes.lines(f"/annot/selected/{key}", sel_segs, np.full(sel_segs.shape, 255, np.uint8), thickness=4.0)
+        labels = {f"/annot/labels/{key}/{i}": (str(i), w + np.array([0.75 * r, -0.75 * r, -0.005]))
+                  for i, w in zip(ids, world)}
+        self._marker_cache[key] = (inputs, labels)
+        return labels
+
+    def _ring_radius(self, slot: ImageSlot) -> float:
+        """Pick-marker ring radius on ``slot`` (world units): a few cells, never vanishingly small."""
+        return max(RING_CELLS * max(slot.units_per_px, slot.units_per_px_y), RING_MIN_RADIUS)
+
+    def _draw_overlays(self, picks: dict[int, Pick], predictions: list[tuple[int, np.ndarray]]) -> None:
+        """Reprojected pairs, residual lines, BA-edge points and predicted-pixel crosses on the camera view."""
+        slot = self._camera_slot()
+        bundle = self._bundle
+        # Skipped when neither the solve, the view nor the picks it colours changed (e.g. a click on a BA image).
+        inputs = (slot, self._use_panorama, self._show_reprojection, self._show_edges,
+                  () if bundle is None else tuple(picks[i].color if i in picks else None for i in bundle.pick_ids),
+                  tuple((pid, uv.tobytes(), picks[pid].color) for pid, uv in predictions))
+        if self._overlay_inputs is not None and self._overlay_inputs[0] is bundle and self._overlay_inputs[1] == inputs:
+            return
+        self._overlay_inputs = (bundle, inputs)
+        reproj_pts, reproj_cols = np.empty((0, 3)), np.empty((0, 3), np.uint8)
+        segs = np.empty((0, 2, 3))
+        edge_world = np.empty((0, 3))
+        pred_segs, pred_cols = [], []
+        if bundle is not None:
+            if self._show_reprojection and len(bundle.pick_ids):
+                clicked, ok_c = self._display_from_pixels(bundle.pixels)
+                proj, ok_p = self._display_from_camera_points(bundle.points_camera)
+                colors = np.array([picks[pid].color if pid in picks else (255, 255, 0) for pid in bundle.pick_ids],
+                                  np.uint8).reshape(-1, 3)
+                reproj_pts = slot.world_from_pixel(proj[ok_p], z_offset=-0.012)
+                reproj_cols = colors[ok_p]
+                both = ok_p & ok_c
+                segs = np.stack([slot.world_from_pixel(clicked[both], z_offset=-0.008),
+                                 slot.world_from_pixel(proj[both], z_offset=-0.008)], axis=1)
+            if self._show_edges and len(bundle.edges_camera):
+                uv, ok = self._display_from_camera_points(bundle.edges_camera)
+                edge_world = slot.world_from_pixel(uv[ok], z_offset=-0.004)
+            # Where the current calibration predicts pending laser picks in the camera image.
+            for pid, uv in predictions:
+                c = slot.world_from_pixel(uv[None], z_offset=-0.015)[0]
+                r = MARKER_SIZE * 2.0
+                for d in (np.array([1.0, 0, 0]), np.array([0, 1.0, 0])):
+                    pred_segs.append(np.stack([c - r * d, c - 0.3 * r * d]))
+                    pred_segs.append(np.stack([c + 0.3 * r * d, c + r * d]))
+                    pred_cols += [picks[pid].color, picks[pid].color]
+        self.nodes.points("/annot/overlay/reprojected", reproj_pts, reproj_cols, MARKER_SIZE * 0.55, shape="diamond")
+        self.nodes.lines("/annot/overlay/residuals", segs, np.full(segs.shape, (255, 230, 0), np.uint8), thickness=2.0)
+        # At least EDGE_MIN_SIZE: one pixel of a 1920 px image is too small to see in the full view.
+        self.nodes.points("/annot/overlay/edges", edge_world, (0, 190, 255), max(slot.units_per_px * 1.6, EDGE_MIN_SIZE),
+                         shape="square")
+        self.nodes.lines("/annot/overlay/predicted", np.array(pred_segs).reshape(-1, 2, 3),
+                        np.repeat(np.array(pred_cols, np.uint8).reshape(-1, 1, 3), 2, axis=1), thickness=4.0)
+
+    def _predictions(self, picks: dict[int, Pick]) -> list[tuple[int, np.ndarray]]:
+        """Display pixels where the last good calibration expects picks that have only a BA end."""
+        ids, pixels = self._predicted_pixels(picks)
+        uv, ok = self._display_from_pixels(pixels)
+        return [(pid, uv[k]) for k, pid in enumerate(ids) if ok[k]]
+
+    def _predicted_pixels(self, picks: dict[int, Pick]) -> tuple[list[int], np.ndarray]:
+        """Camera pixels where the last good calibration expects the picks that have only a laser cell."""
+        bundle = self._bundle
+        pending = [p for p in picks.values() if p.laser_rc is not None and p.pixel is None]
+        if bundle is None or not pending:
+            return [], np.empty((0, 2))
+        points = self.depth.cell_points(np.array([p.laser_rc for p in pending]))
+        uv, ok = project_lidar_points(bundle.result.T_camera_lidar, self.camera, points)
+        return [p.id for p, good in zip(pending, ok) if good], uv[ok]

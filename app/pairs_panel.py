@@ -1,0 +1,226 @@
+"""The pairs panel: clicks on the BA and camera images make and move pairs, Shift+click and the dropdown select,
+the Edit buttons (undo, redo, deselect, delete), Clear all, and importing a pairs file (append or replace)."""
+
+from __future__ import annotations
+
+import tempfile
+from pathlib import Path
+from types import SimpleNamespace
+from typing import Any, Callable
+
+import numpy as np
+import viser
+
+from calib_core.errors import CalibError
+from calib_core.pairs import Pair, load_pairs_yaml
+from calib_core.panorama import refine_click_to_corner
+
+from .security import upload_display_name
+from .ui_common import PICK_RADII, SNAP_RADIUS_PX, IMPORT_CHOICES, md_escape, _Action
+
+
+class PairsPanel:
+    """Part of :class:`app.server.CalibrationApp` (a mixin: it uses the app's attributes)."""
+
+    def _make_click_handler(self, key: str) -> Callable:
+        def on_click(event: Any) -> None:
+            uv = self.slots[key].pixel_from_ray(event.ray_origin, event.ray_direction)
+            if uv is None or not self.slots[key].contains(uv):
+                raise CalibError("click landed outside the image")
+            self._click(key, uv, client=event.client)
+
+        return self._guard(on_click)
+
+    def cell_from_display(self, key: str, uv: tuple[float, float]) -> tuple[int, int]:
+        """Scan cell ``(row, col)`` under display pixel ``uv`` of BA slot ``key`` (window applied)."""
+        return self._ba_window.cell_at(uv, self.depth.shape[0])
+
+    def _click(self, key: str, uv: tuple[float, float], pick_id: int | None = None, client: Any = None) -> int:
+        """A click at display pixel ``uv`` of slot ``key``: add a pair end, or move ``pick_id``'s end."""
+        if key in self.ba_keys:
+            if self._snap:
+                shown = self.ba_gray[key][:, self._ba_window.columns]
+                uv = tuple(refine_click_to_corner(shown, uv, 3.0))
+            row, col = self.cell_from_display(key, uv)
+            if pick_id is not None:
+                out = self.state.move_laser(pick_id, row, col)
+            else:
+                out = self.state.click_laser(row, col)
+            last: tuple = ("ba", key, row, col)
+        else:
+            if key != self._camera_slot().key:
+                raise CalibError("that camera view is hidden; click the visible one")
+            if self._snap:
+                gray = self.pano_gray if key == "panorama" else self.image_gray
+                uv = tuple(refine_click_to_corner(gray, uv, SNAP_RADIUS_PX))
+            pixel = self._original_from_display(uv)
+            if pick_id is not None:
+                out = self.state.move_pixel(pick_id, *pixel)
+            else:
+                out = self.state.click_pixel(*pixel)
+            last = ("camera", pixel[0], pixel[1])
+        if client is not None:
+            self._last_click[client.client_id] = last
+        return out
+
+    def _original_from_display(self, uv: tuple[float, float]) -> tuple[float, float]:
+        """Original camera pixel of a click on the visible camera view."""
+        if not self._use_panorama:
+            return float(uv[0]), float(uv[1])
+        raw, valid = self.panorama.to_camera_pixels(np.array([uv], dtype=np.float64))
+        if not valid[0]:
+            raise CalibError("the camera does not see that part of the panorama; click inside the picture")
+        return float(raw[0, 0]), float(raw[0, 1])
+
+    def _pick_ends(self, key: str) -> tuple[list[int], np.ndarray]:
+        """Ids and display pixels of the pick ends drawn on slot ``key``."""
+        picks = self.state.picks
+        if key in self.ba_keys:
+            # Only cells inside the shown column window have a place on the BA image.
+            sel = [p for p in picks if p.laser_rc is not None]
+            rc = np.array([p.laser_rc for p in sel], dtype=np.int64).reshape(-1, 2)
+            u, shown = self._ba_window.display_cols(rc[:, 1])
+            uv = np.stack([u, rc[:, 0].astype(np.float64)], axis=1)[shown]
+            return [p.id for p, ok in zip(sel, shown) if ok], uv
+        sel = [p for p in picks if p.pixel is not None]
+        uv, ok = self._display_from_pixels(np.array([p.pixel for p in sel], dtype=np.float64).reshape(-1, 2))
+        return [p.id for p, good in zip(sel, ok) if good], uv[ok]
+
+    def _nearest_pick(self, key: str, uv: tuple[float, float]) -> int | None:
+        ids, ends = self._pick_ends(key)
+        if not ids:
+            return None
+        slot = self.slots[key]
+        delta = ends - np.asarray(uv, dtype=np.float64)
+        d = np.hypot(delta[:, 0] * slot.units_per_px, delta[:, 1] * slot.units_per_px_y)  # world units
+        k = int(np.argmin(d))
+        return ids[k] if d[k] <= PICK_RADII * self._ring_radius(slot) else None
+
+    def _make_select_handler(self, key: str) -> Callable:
+        def on_shift_click(event: Any) -> None:
+            uv = self.slots[key].pixel_from_ray(event.ray_origin, event.ray_direction)
+            pick_id = None if uv is None else self._nearest_pick(key, uv)
+            self.state.select(pick_id)
+
+        return self._guard(on_shift_click)
+
+    def _make_drag_handler(self, key: str) -> Callable:
+        def on_drag(event: Any) -> None:
+            if event.phase != "end":
+                return
+            slot = self.slots[key]
+            start = slot.pixel_from_world(np.asarray(event.start_position)[None])[0]
+            end = slot.pixel_from_world(np.asarray(event.end_position)[None])[0]
+            pick_id = self._nearest_pick(key, tuple(start))
+            moved = np.hypot(*(np.asarray(event.end_screen_pos) - np.asarray(event.start_screen_pos)))
+            if pick_id is None:
+                if moved < 0.01 and slot.contains(start):  # a shaky click, not a drag
+                    self._click(key, tuple(start), client=event.client)
+                return
+            if not slot.contains(end):
+                raise CalibError("dropped outside the image; the pair was not moved")
+            self._click(key, (float(end[0]), float(end[1])), pick_id=pick_id, client=event.client)
+
+        return self._guard(on_drag)
+
+    def _on_select_dropdown(self, event: Any) -> None:
+        if event.client is None:  # our own update of the widget
+            return
+        value = str(event.value)
+        self.state.select(None if value == "none" else int(value.split()[0].lstrip("#")))
+
+    def _on_edit(self, event: Any) -> None:
+        action = event.value
+        if action == "Undo":
+            if not self.state.undo():
+                raise CalibError("nothing to undo")
+        elif action == "Redo":
+            if not self.state.redo():
+                raise CalibError("nothing to redo")
+        elif action == "Deselect":
+            self.state.select(None)
+        elif action == "Delete":
+            sel = self.state.selected
+            if sel is None:
+                raise CalibError("select a pair first (shift+click its marker or use the dropdown)")
+            self.state.delete(sel)
+
+    def _add_upload_button(self, client: Any) -> None:
+        """This tab's own "Import pairs YAML" button, in the shared Pairs folder above "Download pairs YAML"."""
+        with self._upload_lock:  # a folder is one GUI context at a time
+            with self._pairs_folder:
+                button = client.gui.add_upload_button("Import pairs YAML", icon=viser.Icon.UPLOAD, mime_type="*/*",
+                                                      order=self._btn_pairs.order - 0.5)
+        button.on_upload(self._guard(self._on_upload))
+
+    def _on_upload(self, event: Any) -> None:
+        f = event.value  # this tab's button: no other tab's upload can have replaced it
+        self._import_upload(event.client, getattr(f, "name", ""), getattr(f, "content", b""))
+
+    def receive_upload(self, client: Any, name: str, content: bytes, wait: bool = False) -> None:
+        """Import an uploaded pairs file as the upload button of ``client`` does (through the action queue).
+
+        The outcome is notified to ``client``; with ``wait``, returns once it is applied.
+        """
+        self._actions.put((lambda action: self._import_upload(client, name, content), _Action(SimpleNamespace(
+            client=client), None)))
+        if wait:
+            self._actions.join()
+
+    def _import_upload(self, client: Any, name: str, content: bytes) -> None:
+        # The client's file name is only ever shown, never used as a path.
+        shown = upload_display_name(name)
+        if not content:
+            raise CalibError(f"{shown}: the file is empty")
+        with tempfile.TemporaryDirectory() as tmp:
+            path = Path(tmp) / "upload.yaml"
+            path.write_bytes(content)
+            try:
+                pairs = load_pairs_yaml(path)
+                self.state.check_import(pairs)  # a file not of this scene is refused before asking anything
+            except CalibError as exc:
+                raise CalibError(str(exc).replace(str(path), shown)) from None
+        if not self.state.picks or client is None or not hasattr(client, "gui"):
+            self._finish_import(client, shown, pairs, "Append")
+            return
+        self._ask_import(client, shown, pairs)
+
+    def _ask_import(self, client: Any, shown: str, pairs: list[Pair]) -> None:
+        """Ask this tab whether the uploaded pairs replace the current ones or are added to them."""
+        duplicates = self.state.count_duplicates(pairs)
+        modal = client.gui.add_modal("Import pairs")
+        with modal:
+            client.gui.add_markdown(
+                f"{md_escape(shown)} has {len(pairs)} pairs; there are {len(self.state.picks)} pairs now.  \n"
+                f"**Append** adds them ({duplicates} exact duplicates are skipped); **Replace all** removes the "
+                f"current pairs first. Undo reverses either.")
+            for label in IMPORT_CHOICES:
+                button = client.gui.add_button(label, color="red" if label == "Replace all" else None)
+
+                def answer(event: Any, label: str = label) -> None:
+                    modal.close()
+                    self._finish_import(event.client, shown, pairs, label)
+
+                button.on_click(self._guard(answer))
+
+    def _finish_import(self, client: Any, shown: str, pairs: list[Pair], choice: str) -> None:
+        if choice not in ("Append", "Replace all"):
+            return  # Cancel
+        replace = choice == "Replace all"
+        before = len(self.state.picks)
+        ids = self.state.import_pairs(pairs, replace_existing=replace)
+        skipped = len(pairs) - len(ids)
+        what = f"{len(ids)} pairs added from {shown}"
+        if replace:
+            what = f"{before} pairs replaced by {len(ids)} from {shown}"
+        if skipped:
+            what += f", {skipped} exact duplicates skipped"
+        self._notify(client, "Pairs imported", what + " (undo reverses this)", color="green")
+
+    def _on_clear(self, event: Any) -> None:
+        n = len(self.state.picks)
+        if n == 0:
+            raise CalibError("there are no pairs to clear")
+        self.state.clear()
+        self._notify(event.client, "Pairs cleared", f"{n} pairs removed. Undo (in Edit) brings them back.",
+                     color="yellow")

@@ -1,0 +1,162 @@
+"""Picks (pairs under construction), the undoable snapshot of them, and reading them back from a session file.
+
+Pure Python plus numpy; no maths, no viser.
+"""
+
+from __future__ import annotations
+
+import colorsys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+from calib_core.errors import CalibError
+from calib_core.io.yaml_files import finite_vector
+from calib_core.pairs import Pair, load_pairs_yaml
+
+SESSION_FORMAT = "ba-calib-session"
+SESSION_VERSION = 1
+
+
+def pair_color(pick_id: int) -> tuple[int, int, int]:
+    """A stable, well-separated RGB colour for a pick id (golden-ratio hues)."""
+    hue = (0.08 + 0.61803398875 * int(pick_id)) % 1.0
+    r, g, b = colorsys.hsv_to_rgb(hue, 0.85, 1.0)
+    return int(round(255 * r)), int(round(255 * g)), int(round(255 * b))
+
+
+@dataclass(frozen=True)
+class Pick:
+    """One pair, possibly incomplete.
+
+    Attributes
+    ----------
+    id : int
+        Stable number shown on the markers (1, 2, ...); never reused.
+    laser_rc : (row, col) or None
+        Depth-matrix cell, 0-based.
+    laser_xyz : (x, y, z) or None
+        Laser point in the lidar frame, metres (imported pairs only).
+    pixel : (u, v) or None
+        Pixel in the original camera image, (column, row), top-left centre 0.
+    """
+
+    id: int
+    laser_rc: tuple[int, int] | None = None
+    laser_xyz: tuple[float, float, float] | None = None
+    pixel: tuple[float, float] | None = None
+
+    @property
+    def has_laser(self) -> bool:
+        return self.laser_rc is not None or self.laser_xyz is not None
+
+    @property
+    def complete(self) -> bool:
+        return self.has_laser and self.pixel is not None
+
+    @property
+    def color(self) -> tuple[int, int, int]:
+        return pair_color(self.id)
+
+    def to_pair(self) -> Pair:
+        """The :class:`calib_core.pairs.Pair` of a complete pick."""
+        if not self.complete:
+            raise CalibError(f"pair {self.id} is incomplete")
+        return Pair(self.laser_rc, None if self.laser_rc is not None else self.laser_xyz, self.pixel,  # type: ignore[arg-type]
+                    id=int(self.id))
+
+    def to_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"id": int(self.id)}
+        out["laser_rc"] = None if self.laser_rc is None else [int(v) for v in self.laser_rc]
+        out["laser_xyz"] = None if self.laser_xyz is None else [float(v) for v in self.laser_xyz]
+        out["pixel"] = None if self.pixel is None else [float(v) for v in self.pixel]
+        return out
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    """The undoable part of the state."""
+
+    picks: tuple[Pick, ...] = ()
+    next_id: int = 1
+
+
+def new_ends(checked: Sequence[Pick], existing: Sequence[Pick]) -> list[Pick]:
+    """The picks of ``checked`` whose ends are not already in ``existing`` (nor earlier in ``checked``)."""
+    seen = {(p.laser_rc, p.laser_xyz, p.pixel) for p in existing}
+    out = []
+    for p in checked:
+        ends = (p.laser_rc, p.laser_xyz, p.pixel)
+        if ends not in seen:  # an exact duplicate adds nothing
+            seen.add(ends)
+            out.append(p)
+    return out
+
+
+def restore_session(data: dict, path: Path, check_cell: Callable, check_pixel: Callable
+                    ) -> tuple[Snapshot, dict | None]:
+    """The picks (and view settings, None for a plain pairs file) of session ``data`` read from ``path``.
+
+    ``check_cell(row, col)`` and ``check_pixel(u, v)`` raise CalibError for ends not of this scene.
+    """
+    if data.get("format") != SESSION_FORMAT:
+        # A plain pairs file given as the session: start from its pairs.
+        pairs = load_pairs_yaml(path)
+        file_ids = [p.id for p in pairs]
+        keep_ids = None not in file_ids and len(set(file_ids)) == len(file_ids)
+        picks = []
+        for i, p in enumerate(pairs):
+            try:
+                if p.laser_rc is not None:
+                    check_cell(*p.laser_rc)
+                check_pixel(*p.pixel)
+            except CalibError as exc:
+                raise CalibError(f"{path}: pair {i}: {exc} (pairs from another scene?)") from None
+            # The file's ids when every pair has a distinct one: one id in the UI, files and messages.
+            pid = p.id if keep_ids else i + 1
+            picks.append(Pick(pid, laser_rc=p.laser_rc, laser_xyz=p.laser_xyz, pixel=p.pixel))
+        return Snapshot(tuple(picks), max([len(picks)] + [p.id for p in picks]) + 1), None
+    if data.get("version") != SESSION_VERSION:
+        raise CalibError(f"{path}: session version {data.get('version')!r} is not supported "
+                         f"(this ba-calib reads version {SESSION_VERSION})")
+    entries = data.get("pairs") or []
+    if not isinstance(entries, list):
+        raise CalibError(f"{path}: 'pairs' must be a list")
+    picks = []
+    for i, e in enumerate(entries):
+        where = f"{path}: pair {i}"
+        if not isinstance(e, dict) or "id" not in e:
+            raise CalibError(f"{where}: expected a mapping with an id")
+        try:
+            pick_id = int(e["id"])
+        except (TypeError, ValueError, OverflowError):
+            raise CalibError(f"{where}: id must be an integer") from None
+        rc = e.get("laser_rc")
+        xyz = e.get("laser_xyz")
+        px = e.get("pixel")
+        rc_f = None if rc is None else finite_vector(rc, 2, f"{where} laser_rc")
+        if rc_f is not None and any(float(v) != round(float(v)) for v in rc_f):
+            raise CalibError(f"{where}: laser_rc must be two integers (row, column), got {list(rc)}")
+        rc_t = None if rc_f is None else tuple(int(round(float(v))) for v in rc_f)
+        xyz_t = None if xyz is None else tuple(finite_vector(xyz, 3, f"{where} laser_xyz"))
+        px_t = None if px is None else tuple(finite_vector(px, 2, f"{where} pixel"))
+        # A session written for another scene must not inject invalid picks.
+        try:
+            if rc_t is not None:
+                check_cell(*rc_t)
+            if px_t is not None:
+                check_pixel(*px_t)
+        except CalibError as exc:
+            raise CalibError(f"{where}: {exc} (session from another scene?)") from None
+        picks.append(Pick(pick_id, rc_t, xyz_t, px_t))  # type: ignore[arg-type]
+    ids = [p.id for p in picks]
+    if len(set(ids)) != len(ids):
+        raise CalibError(f"{path}: duplicate pair ids")
+    try:
+        next_id = max([int(data.get("next_id") or 1)] + [i + 1 for i in ids])
+    except (TypeError, ValueError, OverflowError):
+        raise CalibError(f"{path}: next_id must be an integer, got {data.get('next_id')!r}") from None
+    view = data.get("view") or {}
+    if not isinstance(view, dict):
+        raise CalibError(f"{path}: 'view' must be a mapping")
+    return Snapshot(tuple(picks), next_id), dict(view)

@@ -1,0 +1,119 @@
+"""A scene loaded and precomputed for the app, with no viser: scan, camera, image, BA images, panorama, edges.
+
+Everything here comes from :mod:`calib_core`; the app only shows it.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from calib_core.bearing_angle import BA_DIRECTIONS, ba_to_display, bearing_angle_images
+from calib_core.cameras import load_camera
+from calib_core.errors import CalibError
+from calib_core.io.images import load_image_rgb
+from calib_core.overlays import ba_edge_points_consensus
+from calib_core.panorama import Panorama
+
+from .ba_view import cell_aspect_from_directions
+
+#: Display points of the 3-D cloud (software WebGL slows down beyond ~100k).
+MAX_CLOUD_POINTS = 100_000
+MAX_EDGE_POINTS = 3000
+
+
+@dataclass(eq=False)
+class PreparedScene:
+    """The inputs of one calibration and what the views need from them.
+
+    Attributes
+    ----------
+    depth : DepthMatrix
+        The organised scan (lidar frame, metres).
+    camera : CameraModel
+    image : (H, W, 3) uint8
+        The camera image.
+    ba_rad : dict of str to (R, C) float
+        Bearing Angle images (radians) per direction; ``ba_keys`` the directions present.
+    ba_gray : dict of str to (R, C) uint8
+        The BA images as shown.
+    panorama : Panorama or None
+        The unwrapping of an ``ocam`` / ``fisheye`` image, with ``pano_image`` (RGB) and ``pano_gray``.
+    edge_points_lidar : (M, 3) float
+        BA-edge points for the overlay (lidar frame, metres).
+    all_points_lidar, all_rows_cols : (N, 3) float, (N, 2) int
+        The valid scan points and their cells.
+    cloud_points_lidar : (K, 3) float
+        The subsample shown in the 3-D pane.
+    ba_cell_aspect : float
+        Row stretch that makes cells about square in angle.
+    wrap_cols : bool
+        Whether the scan's columns wrap around (a full revolution).
+    """
+
+    scan_path: Path
+    image_path: Path
+    camera_path: Path
+    depth: Any
+    camera: Any
+    image: np.ndarray
+    ba_rad: dict
+    ba_keys: tuple
+    ba_gray: dict
+    image_gray: np.ndarray
+    panorama: Panorama | None
+    pano_image: np.ndarray | None
+    pano_gray: np.ndarray | None
+    edge_points_lidar: np.ndarray
+    all_points_lidar: np.ndarray
+    all_rows_cols: np.ndarray
+    cloud_points_lidar: np.ndarray
+    ba_cell_aspect: float
+    wrap_cols: bool
+
+    @classmethod
+    def load(
+        cls,
+        scan_path: str | os.PathLike,
+        image_path: str | os.PathLike,
+        camera_path: str | os.PathLike,
+        *,
+        scan_options: dict | None = None,
+        image_size: tuple[int, int] | None = None,
+        max_cloud_points: int = MAX_CLOUD_POINTS,
+    ) -> "PreparedScene":
+        """Read the three files and precompute.  CalibError on unreadable or inconsistent inputs."""
+        from calib_core.io.scan_readers import load_scan
+
+        scan_path, image_path, camera_path = Path(scan_path), Path(image_path), Path(camera_path)
+        depth = load_scan(scan_path, **(scan_options or {}))
+        camera = load_camera(camera_path, image_size=image_size)
+        image = load_image_rgb(image_path)
+        h, w = image.shape[:2]
+        if (w, h) != (camera.width, camera.height):
+            raise CalibError(
+                f"{image_path}: image is {w}x{h} but the camera model {camera_path} is {camera.width}x{camera.height}"
+            )
+        ba_rad = bearing_angle_images(depth)
+        ba_keys = tuple(k for k in BA_DIRECTIONS if k in ba_rad)
+        panorama = pano_image = pano_gray = None
+        if camera.model in ("ocam", "fisheye"):
+            panorama = Panorama.for_camera(camera, image_mask=image.max(axis=2) > 0, oversample=2.0)
+            pano_image = panorama.render(image)
+            pano_gray = pano_image.mean(axis=2).astype(np.uint8)
+        edge_points, _ = ba_edge_points_consensus(ba_rad, depth, max_points=MAX_EDGE_POINTS)
+        points, rows_cols = depth.valid_points()
+        stride = max(1, int(math.ceil(len(points) / max(1, int(max_cloud_points)))))
+        return cls(
+            scan_path=scan_path, image_path=image_path, camera_path=camera_path, depth=depth, camera=camera,
+            image=image, ba_rad=ba_rad, ba_keys=ba_keys, ba_gray={k: ba_to_display(ba_rad[k]) for k in ba_keys},
+            image_gray=image.mean(axis=2).astype(np.uint8), panorama=panorama, pano_image=pano_image,
+            pano_gray=pano_gray, edge_points_lidar=edge_points, all_points_lidar=points, all_rows_cols=rows_cols,
+            cloud_points_lidar=points[::stride], ba_cell_aspect=cell_aspect_from_directions(depth.directions),
+            wrap_cols=bool(depth.meta.get("wrap_cols", False)),
+        )

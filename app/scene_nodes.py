@@ -1,0 +1,93 @@
+"""A cache of the scene nodes the app has drawn: redraws send only what changed, mostly as in-place updates."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+
+class SceneNodes:
+    """What the scene shows now, per node name: ``drawn[name] = (handle, data sent)``.
+
+    Parameters
+    ----------
+    scene : viser.SceneApi
+        The server's scene.
+    """
+
+    def __init__(self, scene: Any) -> None:
+        self.scene = scene
+        self.drawn: dict[str, tuple[Any, tuple]] = {}
+
+    def label_names(self) -> list[str]:
+        """Names of the labels drawn now."""
+        return [n for n, (_, spec) in self.drawn.items() if spec[0] == "label"]
+
+    def remove(self, name: str) -> None:
+        if self.drawn.pop(name, None) is not None:
+            self.scene.remove_by_name(name)
+
+    def points(self, name: str, points: np.ndarray, colors, size: float, shape: str = "circle") -> None:
+        """Show ``points (N, 3)`` (world) as node ``name``; empty removes it.  Only changes are sent."""
+        pts = np.asarray(points, np.float32).reshape(-1, 3)
+        if len(pts) == 0:
+            self.remove(name)
+            return
+        cols = np.asarray(colors, np.uint8)
+        size = float(size)
+        old = self.drawn.get(name)
+        if old is not None and old[1][0] == "points" and old[1][4] == shape:
+            handle, (_, old_pts, old_cols, old_size, _) = old
+            if old_pts.shape == pts.shape and old_cols.shape == cols.shape:
+                if old_size == size and np.array_equal(old_pts, pts) and np.array_equal(old_cols, cols):
+                    return
+                # In place: viser sends only the properties that differ.
+                handle.points = pts
+                handle.colors = cols
+                handle.point_size = size
+                self.drawn[name] = (handle, ("points", pts, cols, size, shape))
+                return
+        handle = self.scene.add_point_cloud(
+            name, pts, cols, point_size=size, point_shape=shape, precision="float32", point_shading="flat",
+        )
+        self.drawn[name] = (handle, ("points", pts, cols, size, shape))
+
+    def lines(self, name: str, segments: np.ndarray, colors, thickness: float = 2.0) -> None:
+        """Show line ``segments (N, 2, 3)`` (world) as node ``name``; empty removes it.  Only changes are sent."""
+        segs = np.asarray(segments, np.float32).reshape(-1, 2, 3)
+        if len(segs) == 0:
+            self.remove(name)
+            return
+        cols = np.asarray(colors, np.uint8)
+        thickness = float(thickness)
+        old = self.drawn.get(name)
+        if old is not None and old[1][0] == "lines" and old[1][3] == thickness:
+            handle, (_, old_segs, old_cols, _) = old
+            if old_segs.shape == segs.shape and old_cols.shape == cols.shape:
+                if np.array_equal(old_segs, segs) and np.array_equal(old_cols, cols):
+                    return
+                # Same number of segments: update in place (viser skips unchanged arrays).
+                handle.points = segs
+                handle.colors = cols
+                self.drawn[name] = (handle, ("lines", segs, cols, thickness))
+                return
+        # A new node, or a different number of segments (points and colours must change together).
+        handle = self.scene.add_line_segments(name, segs, cols, thickness=thickness, thickness_units="screen")
+        self.drawn[name] = (handle, ("lines", segs, cols, thickness))
+
+    def label(self, name: str, text: str, position: np.ndarray) -> None:
+        """Show a pick-number label at ``position`` (world); an existing label is moved, not re-created."""
+        pos = tuple(float(x) for x in position)
+        old = self.drawn.get(name)
+        if old is not None and old[1][0] == "label":
+            handle, (_, old_text, old_pos) = old
+            if old_text == text and old_pos == pos:
+                return
+            if old_text != text:
+                handle.text = text
+            if old_pos != pos:
+                handle.position = pos
+        else:
+            handle = self.scene.add_label(name, text, position=pos, anchor="bottom-left", font_screen_scale=0.8)
+        self.drawn[name] = (handle, ("label", text, pos))

@@ -1,0 +1,133 @@
+"""What the app's parts share: layout and marker constants, markdown escaping, the solve bundles, ring markers."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from calib_core.pairs import Pair
+
+from .ba_view import ColumnWindow
+
+BA_TITLES = {
+    "horizontal": "BA horizontal",
+    "vertical": "BA vertical",
+    "diag_pos45": "BA +45 deg",
+    "diag_neg45": "BA -45 deg",
+}
+MIN_PAIRS = 4
+#: The 3-D pane's content sits far behind the annotation camera, so both
+#: share one scene without seeing each other.
+CLOUD_ORIGIN = np.array([0.0, 0.0, -5000.0])
+#: Width (CSS px) kept free on the right for the floating control panel.
+PANEL_PX = 400
+MARKER_SIZE = 0.075  # world units (the camera image is 8 units wide): reprojection overlays
+#: Pick markers are hollow rings (screen-thin lines), so they never hide the
+#: picked cell: radius RING_CELLS cells, at least RING_MIN_RADIUS world units.
+RING_CELLS = 1.5
+RING_MIN_RADIUS = 0.03
+RING_SEGMENTS = 20
+#: Shift+click / drag this many ring radii from a marker selects it.
+PICK_RADII = 2.5
+#: "Zoom: on last click" magnifies to this many screen pixels per BA cell
+#: (narrow side) or per camera-image pixel.
+ZOOM_PX_PER_CELL = 14.0
+ZOOM_PX_PER_IMAGE_PX = 4.0
+ZOOM_STEP = 2.0
+EDGE_MIN_SIZE = 0.012  # world units
+BA_WINDOW_MODES = {"all": "All columns", "camera": "Facing the camera", "custom": "Custom"}
+SNAP_RADIUS_PX = 4.0
+#: The answers of the import question (the buttons of its modal).
+IMPORT_CHOICES = ("Append", "Replace all", "Cancel")
+UP_AXES = {"+z": (0.0, 0.0, 1.0), "+y": (0.0, 1.0, 0.0), "-y": (0.0, -1.0, 0.0), "camera up (-y of camera)": None}
+
+
+#: The quality verdict as the result panel shows it (fixed strings: no user text).
+QUALITY_BADGES = {
+    "ok": "### 🟢 Quality: ok",
+    "warning": "### 🟡 Quality: warning",
+    "unreliable": "### 🔴 Quality: UNRELIABLE (do not use this pose)",
+}
+
+
+def md_escape(text: str) -> str:
+    """Text safe to show literally inside viser markdown (no HTML, no markup)."""
+    out = []
+    for ch in str(text).replace("\r", " ").replace("\n", " "):
+        if ch == "&":
+            out.append("&amp;")
+        elif ch == "<":
+            out.append("&lt;")
+        elif ch == ">":
+            out.append("&gt;")
+        elif ch in "\\`*_{}[]()#+-.!|~":
+            out.append("\\" + ch)
+        else:
+            out.append(ch)
+    return "".join(out)
+
+
+def _fmt(x: float, digits: int = 3) -> str:
+    return "n/a" if x is None or not np.isfinite(x) else f"{x:.{digits}f}"
+
+
+@dataclass(eq=False)
+class SolveBundle:
+    """One finished solve and what the error display and 2-D overlays need from it (computed off the UI thread)."""
+
+    pick_ids: list[int]
+    pairs: list[Pair]
+    result: Any  # calib_core.solve.CalibrationResult
+    pixels: np.ndarray  # (N, 2) clicked, original image
+    points_camera: np.ndarray  # (N, 3) laser points moved by the solved pose
+    edges_camera: np.ndarray  # (M, 3) BA-edge points moved by the solved pose
+    seconds: float  # time of the solve job (resolve, solve, move the points)
+
+
+@dataclass(eq=False)
+class CloudUpdate:
+    """What the 3-D pane and the camera-facing BA window need from a solve; computed after it is shown."""
+
+    bundle: SolveBundle
+    colors: np.ndarray | None  # (K, 3) uint8 display-cloud colours; None: not asked for
+    facing_done: bool  # whether ``facing`` was computed
+    facing: ColumnWindow | None  # scan columns whose points project into the camera image
+    seconds: float
+
+
+def marker_segments(centres: np.ndarray, radius: float, cell_half_size: tuple[float, float] | None = None,
+                    ticks: bool = True) -> np.ndarray:
+    """Line segments ``(N * K, 2, 3)`` of a ring marker around each world point ``centres (N, 3)``.
+
+    A ring of :data:`RING_SEGMENTS` segments; with ``ticks``, four ticks from
+    the ring towards the centre that stop short of it; with
+    ``cell_half_size = (hx, hy)``, the outline of the rectangle ``+-hx, +-hy``
+    around the centre (the picked cell).  Lines lie in the plane z = const.
+    """
+    c = np.asarray(centres, dtype=np.float64).reshape(-1, 3)
+    a = np.linspace(0.0, 2.0 * np.pi, RING_SEGMENTS + 1)
+    circle = radius * np.stack([np.cos(a), np.sin(a), np.zeros_like(a)], axis=1)
+    shape = [np.stack([circle[:-1], circle[1:]], axis=1)]
+    if ticks:
+        d = np.array([[1.0, 0, 0], [-1.0, 0, 0], [0, 1.0, 0], [0, -1.0, 0]])
+        shape.append(np.stack([radius * d, 0.4 * radius * d], axis=1))
+    if cell_half_size is not None:
+        hx, hy = cell_half_size
+        corners = np.array([[-hx, -hy, 0], [hx, -hy, 0], [hx, hy, 0], [-hx, hy, 0]])
+        shape.append(np.stack([corners, np.roll(corners, -1, axis=0)], axis=1))
+    segs = np.concatenate(shape)  # (K, 2, 3)
+    return (c[:, None, None, :] + segs[None]).reshape(-1, 2, 3)
+
+
+class _Action:
+    """A queued viser event plus the widget value at the moment it fired."""
+
+    def __init__(self, event: Any, value: Any) -> None:
+        self.event = event
+        self.value = value
+        self.client = getattr(event, "client", None)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.event, name)

@@ -1,0 +1,358 @@
+"""The view panel and the per-tab cameras: camera image raw or unwrapped, overlays on/off, the BA column window,
+the 2-D / 3-D views, zoom, and where a view's pixel is on the page (for real-browser tests)."""
+
+from __future__ import annotations
+
+import math
+import time
+import traceback
+from typing import Any
+
+import numpy as np
+import viser.transforms as vtf
+
+from calib_core.errors import CalibError
+from calib_core.transforms import invert_T
+
+from .ba_view import ColumnWindow, ba_texture, texture_factor
+from .layout import ImageSlot, annotation_layout, bounds_of
+from .ui_common import (
+    BA_TITLES, MIN_PAIRS, CLOUD_ORIGIN, PANEL_PX, ZOOM_PX_PER_CELL, ZOOM_PX_PER_IMAGE_PX, ZOOM_STEP,
+    BA_WINDOW_MODES, UP_AXES,
+)
+
+
+class ViewPanel:
+    """Part of :class:`app.server.CalibrationApp` (a mixin: it uses the app's attributes)."""
+
+    def _layout(self) -> dict[str, ImageSlot]:
+        window = self._ba_window
+        return annotation_layout(self._camera_sizes, (window.width, self.depth.shape[0]), self.ba_keys,
+                                 cell_aspect=self.ba_cell_aspect)
+
+    def _wanted_ba_window(self) -> ColumnWindow:
+        """The column window the current mode asks for (custom until a solve says what the camera sees)."""
+        if self._ba_mode == "all":
+            return ColumnWindow.full(self.depth.shape[1], self._wrap_cols)
+        if self._ba_mode == "camera" and self._ba_facing is not None:
+            return self._ba_facing
+        return self._ba_custom
+
+    def _ba_texture(self, key: str) -> np.ndarray:
+        window = self._ba_window
+        return ba_texture(self.ba_gray[key], window, texture_factor(window.width, self.depth.shape[0]))
+
+    def _ba_title(self, key: str) -> str:
+        w = self._ba_window
+        title = BA_TITLES.get(key, key)
+        if w.is_full:
+            return title
+        last = (w.start + w.width - 1) % w.n_cols
+        return f"{title} (columns {w.start}-{last} of {w.n_cols})"
+
+    def _apply_ba_window(self) -> None:
+        """Show the window the mode asks for: new textures, slots, markers; re-frame 2-D tabs."""
+        with self._ui_lock:
+            window = self._wanted_ba_window()
+            if window == self._ba_window:
+                return
+            self._ba_window = window
+            old_slots, self.slots = self.slots, self._layout()
+            with self.server.atomic():
+                for key in self.ba_keys:
+                    s, handle = self.slots[key], self._image_handles[key]
+                    handle.image = self._ba_texture(key)
+                    handle.render_width = s.render_width
+                    handle.render_height = s.render_height
+                    handle.position = s.center
+                    x0, y0, _, _ = s.bounds()
+                    self._ba_titles[key].position = (x0, y0 - 0.03, -0.01)
+                    self._ba_titles[key].text = self._ba_title(key)
+            self._sync_window_widgets()
+        self._refresh_scene()
+        if self.slots == old_slots:
+            return  # same size (only the first column moved): keep every tab's zoom and pan
+        clients = self.server.get_clients()
+        for cid, mode in list(self._client_mode.items()):
+            if mode != "3d" and cid in clients:
+                self._set_view(clients[cid], mode)
+
+    def _sync_window_widgets(self) -> None:
+        """Show the current window in the GUI (server-side updates; their callbacks ignore them)."""
+        w = self._ba_window
+        want = BA_WINDOW_MODES[self._ba_mode]
+        if self._dd_ba_window.value != want:
+            self._dd_ba_window.value = want
+        if self._sl_ba_start.value != w.start:
+            self._sl_ba_start.value = w.start
+        if self._sl_ba_width.value != w.width:
+            self._sl_ba_width.value = max(w.width, self._sl_ba_width.min)
+
+    def _camera_slot(self) -> ImageSlot:
+        return self.slots["panorama" if self._use_panorama else "raw"]
+
+    def _update_camera_title(self) -> None:
+        s = self._camera_slot()
+        x0, y0, _, _ = s.bounds()
+        self._camera_title.position = (x0, y0 - 0.03, -0.01)
+        self._camera_title.text = (
+            f"Camera, unwrapped panorama ({self.camera.model}); errors are measured in the original image"
+            if self._use_panorama
+            else f"Camera image ({self.camera.model}, {self.camera.width}x{self.camera.height})"
+        )
+
+    def _on_view_checkbox(self, event: Any) -> None:
+        with self._ui_lock:
+            was_panorama = self._use_panorama
+            self._use_panorama = bool(self._cb_pano.value) and self.panorama is not None
+            self._show_reprojection = bool(self._cb_reproj.value)
+            self._show_edges = bool(self._cb_edges.value)
+            self._snap = bool(self._cb_snap.value)
+            if "panorama" in self._image_handles:
+                self._image_handles["panorama"].visible = self._use_panorama
+            self._image_handles["raw"].visible = not self._use_panorama
+            self._update_camera_title()
+        self.state.set_view(panorama=self._use_panorama, show_reprojection=self._show_reprojection,
+                            show_edges=self._show_edges, snap=self._snap)
+        self._refresh_scene()
+        if was_panorama != self._use_panorama:
+            # The camera view changed size: re-frame every tab that shows the 2-D view.
+            clients = self.server.get_clients()
+            for cid, mode in list(self._client_mode.items()):
+                if mode != "3d" and cid in clients:
+                    self._set_view(clients[cid], mode)
+
+    def _on_up_axis(self, event: Any) -> None:
+        self._up_axis = str(event.value)
+        self.state.set_view(up_axis=self._up_axis)
+        for cid, mode in list(self._client_mode.items()):
+            if mode == "3d":
+                client = self.server.get_clients().get(cid)
+                if client is not None:
+                    self._set_view(client, "3d")
+
+    def _on_view_mode(self, event: Any) -> None:
+        if event.client is not None:
+            self._set_view(event.client, "3d" if event.value == "3D cloud" else "all")
+
+    def _on_zoom(self, event: Any) -> None:
+        if event.client is not None:
+            self._set_view(event.client, {"All": "all", "Camera": "camera", "BA images": "ba"}[event.value])
+
+    def _on_magnify(self, event: Any) -> None:
+        if event.client is None:
+            return
+        if self._client_mode.get(event.client.client_id) == "3d":
+            raise CalibError("the zoom buttons work in the 2-D annotation view (the wheel zooms the 3-D view)")
+        if event.value == "In":
+            self._zoom(event.client, factor=ZOOM_STEP)
+        elif event.value == "Out":
+            self._zoom(event.client, factor=1.0 / ZOOM_STEP)
+        else:
+            self._zoom_on_last(event.client)
+
+    def _on_ba_window_mode(self, event: Any) -> None:
+        if event.client is None:  # our own update of the widget
+            return
+        mode = {label: m for m, label in BA_WINDOW_MODES.items()}.get(str(event.value), "all")
+        self._set_ba_mode(mode)
+        if mode == "camera" and self._ba_facing is None:
+            self._notify(event.client, "No calibration yet",
+                         f"Showing the columns set by the sliders; once {MIN_PAIRS} pairs are solved the BA images "
+                         "show the columns the camera sees.", color="yellow")
+
+    def _on_ba_window_slider(self, event: Any) -> None:
+        if event.client is None:
+            return
+        if event.value != event.target.value:
+            return  # a newer slider position is queued behind this one
+        self._ba_custom = ColumnWindow.make(int(self._sl_ba_start.value), int(self._sl_ba_width.value),
+                                            self.depth.shape[1], self._wrap_cols)
+        self._set_ba_mode("custom")
+
+    def _set_ba_mode(self, mode: str) -> None:
+        self._ba_mode = mode
+        if mode == "camera":
+            self._ensure_facing()
+        self._apply_ba_window()
+        self._sync_window_widgets()
+        w = self._ba_custom
+        self.state.set_view(ba_window_mode=mode, ba_window_start=int(w.start), ba_window_width=int(w.width))
+
+    def _on_connect(self, client: Any) -> None:
+        try:
+            self._add_upload_button(client)
+            self._set_view(client, "all")
+        except Exception:
+            traceback.print_exc()
+
+    def _on_disconnect(self, client: Any) -> None:
+        self._client_mode.pop(client.client_id, None)
+        self._view_target.pop(client.client_id, None)
+        self._last_click.pop(client.client_id, None)
+        self._update_cloud_visibility()
+
+    def _update_cloud_visibility(self) -> None:
+        self._cloud_root.visible = self._cloud_shown()
+        self._request_cloud()  # a tab that switches to 3-D gets the current solve's colours
+
+    def _set_view(self, client: Any, mode: str) -> None:
+        """Point one client's camera at the annotation images (``all``, ``camera``, ``ba``) or the 3-D cloud."""
+        cam = client.camera
+        fov = math.radians(30.0)
+        if mode == "3d":
+            self._client_mode[client.client_id] = "3d"
+            self._update_cloud_visibility()
+            up = self._up_vector()
+            bundle = self._bundle
+            if bundle is not None:
+                # Stand a little behind and above the solved camera, look where it looks (paper Fig. 9).
+                T_lidar_camera = invert_T(bundle.result.T_camera_lidar)
+                eye, forward = T_lidar_camera[:3, 3], T_lidar_camera[:3, :3] @ np.array([0.0, 0.0, 1.0])
+            else:
+                eye, forward = np.zeros(3), np.array([1.0, 0.0, 0.0])
+            level = forward - float(forward @ up) * up
+            if np.linalg.norm(level) < 0.1:
+                level = np.cross(up, [0.0, 0.0, 1.0]) if abs(up[2]) < 0.9 else np.cross(up, [1.0, 0.0, 0.0])
+            level /= np.linalg.norm(level)
+            pos = CLOUD_ORIGIN + eye - 1.5 * level + 0.7 * up
+            look = CLOUD_ORIGIN + eye + 3.0 * level
+            self._apply_camera(client, pos, look, up, math.radians(70.0))
+            return
+        self._client_mode[client.client_id] = mode
+        self._update_cloud_visibility()
+        if mode == "camera":
+            slots = [self._camera_slot()]
+        elif mode == "ba":
+            slots = [self.slots[k] for k in self.ba_keys]
+        else:
+            slots = [self._camera_slot()] + [self.slots[k] for k in self.ba_keys]
+        x0, y0, x1, y1 = bounds_of(slots)
+        y0 -= 0.3  # room for the titles
+        w_px, h_px = max(cam.image_width, 1), max(cam.image_height, 1)
+        usable_px = w_px - PANEL_PX if w_px > 2 * PANEL_PX else w_px
+        tan = math.tan(fov / 2)
+        margin = 1.06
+        dist = max((y1 - y0) * margin / (2 * tan), (x1 - x0) * margin * h_px / (usable_px * 2 * tan))
+        units_per_px = 2 * dist * tan / h_px
+        cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
+        look = np.array([cx + (w_px - usable_px) / 2 * units_per_px, cy, 0.0])
+        self._apply_camera(client, look + np.array([0.0, 0.0, -dist]), look, np.array([0.0, -1.0, 0.0]), fov)
+
+    def _zoom(self, client: Any, factor: float = 1.0, centre: np.ndarray | None = None,
+              units_per_screen_px: float | None = None) -> None:
+        """Magnify one tab's flat 2-D view by ``factor`` (or to ``units_per_screen_px``).
+
+        The point shown at the middle of the free canvas area (left of the
+        control panel) stays put, or ``centre`` (world) moves there.  The view
+        is squared up to face the image plane again.
+        """
+        cam = client.camera
+        try:
+            position, look = np.asarray(cam.position, float), np.asarray(cam.look_at, float)
+            fov, w_px, h_px = float(cam.fov), max(int(cam.image_width), 1), max(int(cam.image_height), 1)
+        except AssertionError:  # the tab has not reported its camera yet
+            return
+        tan = math.tan(fov / 2)
+        dist = max(abs(look[2] - position[2]), 1e-6)
+        units = 2 * dist * tan / h_px  # world units per screen pixel on the image plane
+        shift_px = (w_px - (w_px - PANEL_PX if w_px > 2 * PANEL_PX else w_px)) / 2
+        if centre is None:
+            centre = look - np.array([shift_px * units, 0.0, 0.0])
+        new_units = units / factor if units_per_screen_px is None else units_per_screen_px
+        new_units = float(np.clip(new_units, 1e-6, 0.2))  # 0.2 units/px: the whole layout is tiny
+        new_look = np.array([centre[0] + shift_px * new_units, centre[1], 0.0])
+        new_dist = new_units * h_px / (2 * tan)
+        self._apply_camera(client, new_look + np.array([0.0, 0.0, -new_dist]), new_look, np.array([0.0, -1.0, 0.0]),
+                           fov)
+
+    def _zoom_on_last(self, client: Any) -> None:
+        last = self._last_click.get(client.client_id)
+        if last is None:
+            raise CalibError("nothing clicked yet in this tab: click a BA or camera image first")
+        with self._ui_lock:
+            if last[0] == "ba":
+                _, key, row, col = last
+                slot = self.slots[key]
+                u, shown = self._ba_window.display_cols(np.array([col]))
+                if not shown[0]:
+                    raise CalibError(f"the last clicked cell (column {col}) is outside the shown BA columns")
+                centre = slot.world_from_pixel(np.array([[u[0], row]]))[0]
+                units = min(slot.units_per_px, slot.units_per_px_y) / ZOOM_PX_PER_CELL
+            else:
+                slot = self._camera_slot()
+                uv, ok = self._display_from_pixels(np.array([[last[1], last[2]]]))
+                if not ok[0]:
+                    raise CalibError("the last clicked camera pixel is not shown in this camera view")
+                centre = slot.world_from_pixel(uv)[0]
+                units = slot.units_per_px / ZOOM_PX_PER_IMAGE_PX
+        self._zoom(client, centre=centre, units_per_screen_px=units)
+
+    def _apply_camera(self, client: Any, position: np.ndarray, look_at: np.ndarray, up: np.ndarray, fov: float) -> None:
+        cam = client.camera
+        with client.atomic():
+            cam.fov = fov
+            cam.up_direction = tuple(up)
+            cam.position = tuple(position)
+            cam.look_at = tuple(look_at)
+            cam.up_direction = tuple(up)
+        self._view_target[client.client_id] = (np.asarray(position, float), np.asarray(look_at, float), time.time())
+
+    def _up_vector(self) -> np.ndarray:
+        axis = UP_AXES.get(self._up_axis)
+        if axis is None:
+            bundle = self._bundle
+            if bundle is None:
+                return np.array([0.0, 0.0, 1.0])
+            R_lidar_camera = bundle.result.T_camera_lidar[:3, :3].T
+            return R_lidar_camera @ np.array([0.0, -1.0, 0.0])
+        return np.array(axis, dtype=np.float64)
+
+    def client_ids(self) -> list[int]:
+        """Ids of the connected browser tabs."""
+        return sorted(self.server.get_clients())
+
+    def view_settled(self, client_id: int) -> bool:
+        """True once the tab reported a camera at the pose this app last set."""
+        client = self.server.get_clients().get(client_id)
+        target = self._view_target.get(client_id)
+        if client is None or target is None:
+            return False
+        try:
+            cam = client.camera
+            fresh = cam.update_timestamp > target[2]
+            return bool(fresh and np.allclose(cam.position, target[0], atol=1e-4)
+                        and np.allclose(cam.look_at, target[1], atol=1e-4))
+        except AssertionError:
+            return False
+
+    def page_position(self, client_id: int, target: str, uv: tuple[float, float]) -> tuple[float, float]:
+        """Where a pixel appears in a tab's canvas, as fractions of the canvas width and height.
+
+        Parameters
+        ----------
+        target : str
+            ``"camera"`` (``uv`` is an ORIGINAL camera-image pixel, shown in the
+            visible camera view) or a BA key (``uv`` = (col, row) of a scan
+            cell, which must lie in the shown column window; fractions of a
+            cell aim off its centre).
+        """
+        slot = self._camera_slot() if target == "camera" else self.slots[target]
+        disp = np.asarray(uv, dtype=np.float64).reshape(1, 2)
+        if target == "camera":
+            disp, ok = self._display_from_pixels(disp)
+            if not ok[0]:
+                raise CalibError(f"pixel {uv} is not shown in the camera view")
+        else:
+            u, shown = self._ba_window.display_cols(np.array([int(round(disp[0, 0]))]))
+            if not shown[0]:
+                raise CalibError(f"BA column {uv[0]} is outside the shown columns")
+            disp = np.array([[u[0] + disp[0, 0] - round(disp[0, 0]), disp[0, 1]]])
+        world = slot.world_from_pixel(disp)[0]
+        cam = self.server.get_clients()[client_id].camera
+        R_world_cam = vtf.SO3(np.asarray(cam.wxyz)).as_matrix()
+        p = R_world_cam.T @ (world - np.asarray(cam.position))
+        f = (cam.image_height / 2) / math.tan(cam.fov / 2)
+        x = f * p[0] / p[2] + cam.image_width / 2
+        y = f * p[1] / p[2] + cam.image_height / 2
+        return x / cam.image_width, y / cam.image_height
