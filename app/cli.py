@@ -177,6 +177,31 @@ def cmd_solve(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_propose(args: argparse.Namespace) -> int:
+    from calib_core.guide.session import GuidedSession
+    from calib_core.guide.propose import save_proposals_yaml
+    from calib_core.io.extrinsics import load_extrinsics_yaml
+    from calib_core.io.images import load_image_rgb
+    from calib_core.pairs import load_pairs_yaml
+
+    depth = load_scan_from_args(args)
+    camera = load_camera_from_args(args)
+    pairs = load_pairs_yaml(args.pairs)
+    T0 = load_extrinsics_yaml(args.extrinsics)["T_camera_lidar"] if args.extrinsics is not None else None
+    image = load_image_rgb(args.image) if args.image is not None else None
+    session = GuidedSession(depth, camera, pairs, T_initial=T0, image=image, click_sigma_px=args.click_sigma)
+    proposals = session.proposals(args.n)
+    save_proposals_yaml(args.output, proposals, session.state)
+    print(f"pose from {session.state.source} ({session.state.n_pairs} pairs); "
+          f"{len(session.candidates)} candidate cells, {len(proposals)} proposals")
+    for i, p in enumerate(proposals):
+        major, minor = p.ellipse_sigma_px()
+        print(f"{i:3d}  cell {p.laser_rc}  pixel ({p.pixel[0]:7.1f}, {p.pixel[1]:7.1f})  "
+              f"1-sigma {major:5.2f} x {minor:5.2f} px  gain {p.gain:6.3f}  {p.kind}")
+    print(f"wrote {args.output}")
+    return 0
+
+
 def cmd_ba_images(args: argparse.Namespace) -> int:
     from calib_core.bearing_angle import BA_DIRECTIONS, ba_to_display, bearing_angle_images
     from calib_core.io.images import save_image_rgb
@@ -378,6 +403,17 @@ def build_parser() -> argparse.ArgumentParser:
     )  # fmt: skip
     p.add_argument("-o", "--output", required=True, type=Path, help="extrinsics YAML to write")
     p.set_defaults(func=cmd_solve)
+
+    p = sub.add_parser("propose", help="propose the next pairs to click (guided picking), best first")
+    _add_scan_args(p)
+    _add_camera_arg(p)
+    p.add_argument("--pairs", required=True, type=Path, help="pairs so far (>= 4, or give --extrinsics)")
+    p.add_argument("--extrinsics", type=Path, default=None, help="initial extrinsics YAML (imported calibration)")
+    p.add_argument("--image", type=Path, default=None, help="camera image: propose only cells with an image corner near their pixel")
+    p.add_argument("-n", type=int, default=20, help="number of proposals (default 20)")
+    p.add_argument("--click-sigma", type=float, default=0.3, help="click noise of a guided pair, px (default 0.3)")
+    p.add_argument("-o", "--output", required=True, type=Path, help="proposals YAML to write")
+    p.set_defaults(func=cmd_propose)
 
     p = sub.add_parser("ba-images", help="write the four Bearing Angle images as PNG")
     _add_scan_args(p)

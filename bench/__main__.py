@@ -183,6 +183,13 @@ def main(argv=None) -> int:
     md += "\n" + organize.markdown(org)
     (out / "performance.md").write_text(md)
     log(f"wrote {out / 'performance.md'} and {perf}/*.png in {run_s:.0f} s")
+
+    # ---------------------------------------------------------- guided picking (its own section file)
+    from . import guide
+
+    g_res = guide.run(scenes, 2 if quick else 7, args.workers, real_trials=3 if quick else 10)
+    (out / "guide_performance.md").write_text(guide.markdown(g_res, scenes, "python -m bench" + (" --quick" if quick else "")) + "\n")
+    log(f"wrote {out / 'guide_performance.md'}")
     print()
     print(_targets_table(targets))
     print()

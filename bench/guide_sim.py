@@ -1,0 +1,132 @@
+"""A simulated person for guided picking on the synthetic scenes (ground truth known).
+
+The person is shown one proposal at a time (:class:`calib_core.guide.session.GuidedSession`).
+If the proposed cell is within two rows and columns of a true scene corner's
+whole-cell pick (:func:`calib_core.synthetic.picks.laser_picks`: the cell a
+careful person picks, the laser model of the Cramer-Rao bound) the person
+moves the cell there in the BA loupe when it differs (1 action) and clicks
+the corner's true projection plus Gaussian noise (1 action), making a
+``guided`` pair; otherwise they press "Not a corner" (1 action, no pair).  A proposal to re-click a
+rough starting pair is a click at its corner's true projection (1 action).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from calib_core.guide.auto_accept import auto_accept
+from calib_core.guide.session import GuidedSession
+from calib_core.pairs import Pair
+from calib_core.synthetic.picks import MAX_LASER_PICK_ERROR_M, laser_picks, simulate_pairs
+from calib_core.transforms import transform_points
+
+from .common import pose_error
+
+
+#: An auto-accepted pixel farther than this from the true projection is a wrong match, px.
+AUTO_WRONG_PX = 2.0
+
+
+def true_corner_of_cells(scene, rows_cols: np.ndarray, max_cells: int = 2) -> tuple[np.ndarray, np.ndarray]:
+    """Index of the true corner each cell is on (rule of the module docstring), or -1, and the corners' picks."""
+    rc = np.asarray(rows_cols, dtype=np.int64).reshape(-1, 2)
+    corners = np.asarray(scene.corners_lidar)
+    pick_rc, pick_err = laser_picks(scene.depth, corners)
+    cheb = np.abs(rc[:, None, :] - pick_rc[None, :, :]).max(axis=2)
+    ok = (cheb <= max_cells) & (pick_err[None, :] <= MAX_LASER_PICK_ERROR_M)
+    d = np.where(ok, cheb + 1e-3 * np.linalg.norm(scene.depth.points[rc[:, 0], rc[:, 1]][:, None, :] - corners[None], axis=2), np.inf)
+    best = np.argmin(d, axis=1)
+    return np.where(np.isfinite(d[np.arange(len(rc)), best]), best, -1), pick_rc
+
+
+def _judge_auto(run, session, scene, gates: dict, lookup, paired, tpix) -> None:
+    props = session.proposals(200)
+    for name, gate in gates.items():
+        passed, auto_px = auto_accept(session.corners, props, gate, image=scene.image, depth=scene.depth,
+                                      camera=scene.camera, T_camera_lidar=session.state.T_camera_lidar)
+        for p, ok, px in zip(props, passed, auto_px):
+            if not ok:
+                continue
+            corner = lookup.get(tuple(p.laser_rc), -1)
+            err = float(np.linalg.norm(px - tpix[corner])) if corner >= 0 and corner not in paired else float("inf")
+            run.auto.setdefault(name, []).append((err > AUTO_WRONG_PX, err))
+
+
+def true_pixels(scene) -> np.ndarray:
+    """True projections (N, 2) of the scene's corners."""
+    pix, _ = scene.camera.project(transform_points(scene.T_camera_lidar, scene.corners_lidar))
+    return np.asarray(pix, dtype=np.float64)
+
+
+@dataclass
+class GuidedRun:
+    """Outcome of one simulated guided session."""
+
+    errors: dict = field(default_factory=dict)  # n guided -> (rotation deg, translation m)
+    actions: int = 0
+    accepted: int = 0
+    reclicks: int = 0  # guided re-clicks of the rough starting pairs (counted in accepted)
+    inside_3sigma: list = field(default_factory=list)  # per accepted proposal: true pixel inside the 3-sigma ellipse
+    mahalanobis2: list = field(default_factory=list)
+    auto: dict = field(default_factory=dict)  # gate name -> per accepted proposal: (wrong, px error or inf)
+
+
+def guided_run(scene, rng: np.random.Generator, checkpoints=(10, 20, 30, 50), click_sigma_px: float = 0.3,
+               starters: list[Pair] | None = None, image: bool = True, max_actions: int = 2000,
+               order: str = "d_optimal", auto_gates: dict | None = None) -> GuidedRun:
+    """Start from ``starters`` (default: 4 farthest-point clicks at 1 px) and add guided pairs.
+
+    ``order`` is the proposal order (:func:`calib_core.guide.propose`).  With
+    ``auto_gates`` (name -> AutoGate), at every checkpoint all current proposals (up to 200) are
+    judged by :func:`calib_core.guide.auto_accept.auto_accept` under each gate; a pass is
+    wrong when the cell is on no true corner (or one already paired) or the
+    found pixel is more than :data:`AUTO_WRONG_PX` from the corner's true
+    projection.  (The person's loop is unchanged, so runs stay comparable.)
+    """
+    if starters is None:
+        starters = simulate_pairs(scene, 4, rng, pixel_noise_px=1.0)
+    options = {"order": order, "rng": rng} if order == "random" else {"order": order}
+    session = GuidedSession(scene.depth, scene.camera, starters, image=scene.image if image else None,
+                            click_sigma_px=click_sigma_px, **options)
+    truth_idx, pick_rc = true_corner_of_cells(scene, session.candidates.rows_cols)
+    pick_lookup = {tuple(rc): i for i, rc in reversed(list(enumerate(pick_rc.tolist())))}
+    paired = {pick_lookup[p.laser_rc] for p in starters if p.laser_rc in pick_lookup}
+    lookup = {tuple(rc): int(i) for rc, i in zip(session.candidates.rows_cols.tolist(), truth_idx)}
+    tpix = true_pixels(scene)
+    run = GuidedRun()
+    n_max = max(checkpoints)
+    while run.accepted < n_max and run.actions < max_actions:
+        props = session.proposals(1)
+        if not props:
+            break
+        p = props[0]
+        run.actions += 1
+        if p.replaces is not None:  # re-click of a rough pair: its cell is a corner's pick
+            corner = pick_lookup.get(tuple(p.laser_rc), -1)
+        else:
+            corner = lookup.get(tuple(p.laser_rc), -1)
+            corner = -1 if corner in paired else corner
+        if corner < 0:
+            session.not_a_corner(p)
+            continue
+        d = tpix[corner] - p.pixel
+        m2 = float(d @ np.linalg.solve(p.pixel_cov, d))
+        run.mahalanobis2.append(m2)
+        run.inside_3sigma.append(m2 <= 9.0)
+        click = tpix[corner] + rng.normal(0.0, click_sigma_px, 2)
+        cell = tuple(int(x) for x in pick_rc[corner])
+        if cell != tuple(p.laser_rc):
+            run.actions += 1
+        session.accept(p, click, laser_rc=cell)
+        paired.add(corner)
+        run.reclicks += p.replaces is not None
+        run.accepted += 1
+        if run.accepted in checkpoints and auto_gates and session.corners is not None:
+            _judge_auto(run, session, scene, auto_gates, lookup, paired, tpix)
+        if run.accepted in checkpoints:
+            T = session.solve().T_camera_lidar
+            e = pose_error(T, scene.T_camera_lidar)
+            run.errors[run.accepted] = (e.rotation_deg, e.translation_norm_m)
+    return run

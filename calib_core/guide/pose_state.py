@@ -1,0 +1,112 @@
+"""The current pose and its covariance, from the pairs so far and/or an imported extrinsic.
+
+The covariance is ``F^-1`` with ``F`` the Fisher information of the pairs
+(:mod:`.information`: each pair's click noise ``precision_px``, default
+:data:`DEFAULT_CLICK_SIGMA_PX`, plus the error of a careful whole-cell laser pick) and of the prior of
+an imported extrinsic.  When the pairs' whitened residuals show more noise
+than modelled, the covariance is inflated by their variance factor, so the
+predicted ellipses stay honest for careless clicks.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from ..errors import CalibError
+from ..pairs import Pair, resolve_pairs
+from ..solve import MIN_PAIRS, calibrate
+from .information import fisher_information, information_inverse, pair_noise, pixel_jacobians
+from .laser_noise import WHOLE_CELL_SIGMA, cell_covariance
+
+__all__ = ["PoseState", "current_pose", "DEFAULT_CLICK_SIGMA_PX", "DEFAULT_PRIOR_SIGMA"]
+
+#: Click noise of an unguided pair without ``precision_px``, pixels.
+DEFAULT_CLICK_SIGMA_PX = 1.0
+#: 1-sigma of an imported extrinsic: rotation (deg) and translation (m) per axis.
+DEFAULT_PRIOR_SIGMA = (1.0, 0.05)
+
+
+@dataclass(frozen=True)
+class PoseState:
+    """Pose estimate and uncertainty the proposals are computed from.
+
+    Attributes
+    ----------
+    T_camera_lidar : (4, 4) ndarray
+    covariance : (6, 6) ndarray
+        Of ``(delta [rad], t [m])`` about ``T_camera_lidar`` (:mod:`.information`).
+    variance_factor : float
+        Whitened residual variance of the pairs (>= 1 applied to ``covariance``; 1 without redundancy).
+    n_pairs : int
+    source : str
+        Where the pose came from.
+    """
+
+    T_camera_lidar: np.ndarray
+    covariance: np.ndarray
+    variance_factor: float
+    n_pairs: int
+    source: str
+
+
+def pair_sigmas(pairs: Sequence[Pair], default_px: float = DEFAULT_CLICK_SIGMA_PX) -> np.ndarray:
+    """Click noise of each pair: its ``precision_px`` or the default, pixels."""
+    return np.array([default_px if p.precision_px is None else p.precision_px for p in pairs], dtype=np.float64)
+
+
+def current_pose(
+    pairs: Sequence[Pair],
+    depth,
+    camera,
+    T_initial: np.ndarray | None = None,
+    prior_sigma: tuple[float, float] = DEFAULT_PRIOR_SIGMA,
+) -> PoseState:
+    """Solve the pairs (>= 4) or take ``T_initial``, and the pose covariance there.
+
+    Parameters
+    ----------
+    pairs : sequence of Pair
+        Check pairs (``check: true``) are left out.
+    depth : DepthMatrix or None
+        Needed when pairs name cells.
+    camera : CameraModel
+    T_initial : (4, 4) ndarray, optional
+        Imported extrinsic: the start of the solve; with fewer than 4
+        pairs, the pose itself, with ``prior_sigma`` (deg, m per axis).
+    prior_sigma : (float, float)
+        Used only with fewer than 4 pairs, when the pose is ``T_initial``.
+
+    Raises
+    ------
+    CalibError
+        Fewer than 4 pairs and no ``T_initial``, or a pose the pairs do not determine.
+    """
+    fit = [p for p in pairs if not p.check]
+    if len(fit) < MIN_PAIRS:
+        if T_initial is None:
+            raise CalibError(f"proposals need at least {MIN_PAIRS} pairs or an initial extrinsic; got {len(fit)} pairs")
+        # Too few pairs to solve: the imported pose and its prior alone.
+        s_rot, s_t = np.radians(prior_sigma[0]), prior_sigma[1]
+        cov = np.diag([s_rot**2] * 3 + [s_t**2] * 3)
+        return PoseState(np.asarray(T_initial, dtype=np.float64), cov, 1.0, len(fit), "extrinsics")
+    points, _, pixels = resolve_pairs(fit, depth, camera)
+    # Weighted by each pair's precision_px and whole-cell laser pick (robust: gross outliers left out).
+    T = calibrate(fit, depth, camera, initial_T_camera_lidar=T_initial).T_camera_lidar
+    predicted, J_pose, J_point = pixel_jacobians(camera, T, points)
+    laser = np.zeros((len(fit), 3, 3))
+    rc_idx = [i for i, p in enumerate(fit) if p.laser_rc is not None]
+    if rc_idx:
+        laser[rc_idx] = cell_covariance(depth, np.array([fit[i].laser_rc for i in rc_idx]), WHOLE_CELL_SIGMA)
+    S = pair_noise(pair_sigmas(fit), J_point, laser)
+    F = fisher_information(J_pose, S)
+    factor = 1.0
+    dof = 2 * len(fit) - 6
+    r = pixels - predicted
+    if dof > 0 and np.all(np.isfinite(r)):
+        chi2 = float(np.einsum("na,nab,nb->", r, np.linalg.inv(S), r))
+        factor = max(1.0, chi2 / dof)
+    source = "pairs" if T_initial is None else "pairs (started from the extrinsics)"
+    return PoseState(T, factor * information_inverse(F), factor, len(fit), source)

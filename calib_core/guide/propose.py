@@ -1,0 +1,297 @@
+"""Next-pair proposals: which laser cell to pair next, and where its pixel should be.
+
+Ranking is sequential D-optimal design: each proposal is the candidate that
+most increases ``log det F`` (:func:`.information.d_optimal_gain`) given the
+current pose covariance *and the proposals ranked before it*, so the list
+does not repeat one region.  A candidate's noise is the click noise of a
+guided pair plus the error of a whole-cell laser pick (:mod:`.laser_noise`): near features
+carry more translation information and, on sparse lidars, smaller cells,
+which the gain accounts for; cells wider than ``max_cell_m`` are dropped
+(no corner can be placed within them).
+
+Each proposal's ``pixel_cov`` is the covariance of the true feature's pixel
+about the predicted one: the pose covariance propagated to the pixel plus the
+offset of the proposed cell from the feature (``cell_sigma`` cells, default
+one: a detected corner cell may sit a cell or two off), ``J_pose C J_pose^T +
+J_X Sigma_L J_X^T`` (px^2).
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+from ..errors import CalibError
+from ..io.atomic import write_yaml_atomic
+from .candidates import KINDS, Candidates, find_candidates
+from .image_corners import CornerImage, strongest_near
+from .information import d_optimal_gain, pair_noise, pixel_jacobians, pose_pixel_covariance
+from .laser_noise import DEFAULT_CELL_SIGMA, DEFAULT_RANGE_SIGMA_M, WHOLE_CELL_SIGMA, cell_covariance
+from .pose_state import PoseState
+from .visibility import visible_in_camera
+
+__all__ = ["Proposal", "propose", "proposals_to_dict", "save_proposals_yaml", "GUIDED_CLICK_SIGMA_PX"]
+
+#: Click noise of a guided pair (magnified loupe, known target), pixels.
+GUIDED_CLICK_SIGMA_PX = 0.3
+#: Cells wider than this (metres) are not proposed.
+DEFAULT_MAX_CELL_M = 0.2
+#: Image-corner evidence needed at a proposal (structure-tensor lam_min, grey levels^2), when an image is given.
+DEFAULT_MIN_IMAGE_CORNER = 0.005
+
+
+@dataclass(frozen=True)
+class Proposal:
+    """One proposed pair.
+
+    Attributes
+    ----------
+    laser_rc : (int, int)
+        Depth-matrix cell.
+    laser_xyz : (3,) ndarray
+        Its point, lidar frame, metres.
+    pixel : (2,) ndarray
+        Predicted ``(u, v)`` under the current pose.
+    pixel_cov : (2, 2) ndarray
+        Covariance of the feature's true pixel about ``pixel``, px^2.
+    gain : float
+        Increase of ``log det`` of the pose information if this pair is
+        added after the proposals ranked before it (nats).
+    kind : str
+        Feature kind (:data:`calib_core.guide.candidates.KINDS`), or
+        ``"reclick"`` for re-clicking an existing rough pair in the loupe.
+    image_corner : float
+        Strongest image-corner measure near ``pixel`` (NaN without an image).
+    strength : float
+        The laser candidate's corner measure (:attr:`Candidates.strength`; NaN for a re-click).
+    replaces : int or None
+        For ``"reclick"``: index of the pair (in the list given to
+        :func:`propose`) that the new click replaces.
+    """
+
+    laser_rc: tuple[int, int]
+    laser_xyz: np.ndarray = field(repr=False)
+    pixel: np.ndarray
+    pixel_cov: np.ndarray = field(repr=False)
+    gain: float
+    kind: str
+    image_corner: float = float("nan")
+    strength: float = float("nan")
+    replaces: int | None = None
+
+    def ellipse_sigma_px(self) -> np.ndarray:
+        """1-sigma half-axes (major, minor) of the pixel ellipse, px."""
+        return np.sqrt(np.maximum(np.linalg.eigvalsh(self.pixel_cov)[::-1], 0.0))
+
+    def to_dict(self) -> dict:
+        return {
+            "laser_rc": [int(self.laser_rc[0]), int(self.laser_rc[1])],
+            "laser_xyz": [float(x) for x in self.laser_xyz],
+            "pixel": [float(x) for x in self.pixel],
+            "pixel_cov": [[float(x) for x in row] for row in self.pixel_cov],
+            "gain": float(self.gain),
+            "kind": self.kind,
+            **({"replaces": int(self.replaces)} if self.replaces is not None else {}),
+        }
+
+
+def _cell_extent_m(laser_cov: np.ndarray, range_sigma_m: float, cell_sigma: float) -> np.ndarray:
+    """Approximate largest cell extent (m) from its pick covariance (inverse of the cell model)."""
+    w = np.linalg.eigvalsh(laser_cov)[:, -1]
+    return np.sqrt(np.maximum(w - range_sigma_m**2, 0.0)) / cell_sigma
+
+
+def propose(
+    depth,
+    camera,
+    state: PoseState,
+    n: int = 20,
+    *,
+    candidates: Candidates | None = None,
+    exclude_rc: Sequence[tuple[int, int]] = (),
+    click_sigma_px: float = GUIDED_CLICK_SIGMA_PX,
+    corner_image: CornerImage | None = None,
+    min_image_corner: float = DEFAULT_MIN_IMAGE_CORNER,
+    max_cell_m: float = DEFAULT_MAX_CELL_M,
+    range_sigma_m: float = DEFAULT_RANGE_SIGMA_M,
+    cell_sigma: float = DEFAULT_CELL_SIGMA,
+    visible: np.ndarray | None = None,
+    reclick: Sequence[tuple[int, tuple[int, int], float]] = (),
+    order: str = "d_optimal",
+    paired_points_lidar: np.ndarray | None = None,
+    rng: np.random.Generator | None = None,
+) -> list[Proposal]:
+    """The ``n`` best next pairs, best first (module docstring).
+
+    Parameters
+    ----------
+    depth : DepthMatrix
+    camera : CameraModel
+    state : PoseState
+        Current pose and covariance (:func:`calib_core.guide.current_pose`).
+    n : int
+        Number of proposals.
+    candidates : Candidates, optional
+        Precomputed :func:`find_candidates` of ``depth`` (computed if None).
+    exclude_rc : sequence of (row, col)
+        Cells already paired; candidates within 2 cells of them are skipped.
+    click_sigma_px : float
+        Click noise assumed for the proposed pairs, pixels.
+    corner_image : CornerImage, optional
+        The camera image's corners: when given, only candidates with an image
+        corner of at least ``min_image_corner`` within their 3-sigma ellipse
+        (2..12 px) are proposed.
+    max_cell_m, range_sigma_m, cell_sigma : float
+        Laser pick model (:mod:`.laser_noise`).
+    visible : (len(candidates),) bool, optional
+        Which candidates the camera sees, if already known (a session
+        computes it once; it barely changes as the pose is refined).
+    reclick : sequence of (pair index, (row, col), sigma_px)
+        Existing pairs clicked with noise ``sigma_px`` (> ``click_sigma_px``)
+        that a re-click in the loupe may make precise.  Such a proposal is
+        ranked by the information it adds over the rough pair: its noise
+        ``S`` satisfies ``S^-1 = S_new^-1 - S_old^-1``.
+    order : {"d_optimal", "farthest", "random"}
+        ``"d_optimal"`` (the method); for comparisons, ``"farthest"``: the
+        candidate whose camera bearing is farthest from those of
+        ``paired_points_lidar`` and of the proposals before it (what a
+        person spreading clicks does), or ``"random"`` (needs ``rng``).
+        Gains are reported under every order.
+
+    Returns
+    -------
+    list of Proposal
+        Possibly fewer than ``n`` when the scan has fewer usable candidates.
+    """
+    if n < 1:
+        raise CalibError(f"the number of proposals must be at least 1, got {n}")
+    if not (np.isfinite(click_sigma_px) and click_sigma_px > 0):
+        raise CalibError(f"click noise must be a positive number of pixels, got {click_sigma_px}")
+    cand = find_candidates(depth) if candidates is None else candidates
+    keep = np.ones(len(cand), dtype=bool)
+    if len(exclude_rc):
+        ex = np.asarray(exclude_rc, dtype=np.int64).reshape(-1, 2)
+        near = np.abs(cand.rows_cols[:, None, :] - ex[None, :, :]).max(axis=2) <= 2
+        keep &= ~near.any(axis=1)
+    if visible is None:
+        scan_points, _ = depth.valid_points()
+        _, visible = visible_in_camera(camera, state.T_camera_lidar, scan_points, cand.points_lidar)
+    keep &= visible
+    cand = cand.subset(keep)
+    pixels, J_pose, J_point = pixel_jacobians(camera, state.T_camera_lidar, cand.points_lidar)
+    laser_cov = cell_covariance(depth, cand.rows_cols, cell_sigma, range_sigma_m)
+    laser_px = J_point @ laser_cov @ np.swapaxes(J_point, 1, 2)
+    pixel_cov = pose_pixel_covariance(J_pose, state.covariance) + laser_px
+    ok = np.all(np.isfinite(J_pose), axis=(1, 2)) & np.all(np.isfinite(pixel_cov), axis=(1, 2))
+    ok &= _cell_extent_m(laser_cov, range_sigma_m, cell_sigma) <= max_cell_m
+    strength = np.full(len(cand), np.nan)
+    if corner_image is not None:
+        major = np.sqrt(np.maximum(np.linalg.eigvalsh(np.where(ok[:, None, None], pixel_cov, 0.0))[:, -1], 0.0))
+        radius = np.clip(3.0 * major, 2.0, 12.0)
+        for r in np.unique(np.ceil(radius)):  # a few distinct radii
+            sel = np.ceil(radius) == r
+            strength[sel] = strongest_near(corner_image, pixels[sel], float(r))[1]
+        ok &= strength >= min_image_corner
+    idx = np.flatnonzero(ok)
+    # The pair's own noise: a guided pair ends on the corner's cell (whole-cell pick).
+    whole = cell_covariance(depth, cand.rows_cols[idx], WHOLE_CELL_SIGMA, range_sigma_m)
+    S = pair_noise(click_sigma_px, J_point[idx], whole)
+    J = J_pose[idx]
+    entries = [("candidate", int(i)) for i in idx]
+    rows_re = [(int(i), (int(rc[0]), int(rc[1])), float(sg)) for i, rc, sg in reclick if sg > click_sigma_px]
+    extra: dict = {}
+    if rows_re:
+        rc_re = np.array([r[1] for r in rows_re], dtype=np.int64)
+        pts_re = depth.points[rc_re[:, 0], rc_re[:, 1]]
+        pix_re, Jp_re, Jx_re = pixel_jacobians(camera, state.T_camera_lidar, pts_re)
+        whole_re = cell_covariance(depth, rc_re, WHOLE_CELL_SIGMA, range_sigma_m)
+        S_new = pair_noise(click_sigma_px, Jx_re, whole_re)
+        S_old = pair_noise(np.array([r[2] for r in rows_re]), Jx_re, whole_re)
+        S_eff = np.linalg.inv(np.linalg.inv(S_new) - np.linalg.inv(S_old))
+        cov_re = pose_pixel_covariance(Jp_re, state.covariance) + Jx_re @ whole_re @ np.swapaxes(Jx_re, 1, 2)
+        fine = np.all(np.isfinite(Jp_re), axis=(1, 2)) & np.all(np.isfinite(S_eff), axis=(1, 2))
+        for k in np.flatnonzero(fine):
+            extra[len(entries)] = (rows_re[k], rc_re[k], pts_re[k], pix_re[k], cov_re[k])
+            entries.append(("reclick", int(k)))
+        S = np.concatenate([S, S_eff[fine]])
+        J = np.concatenate([J, Jp_re[fine]])
+    if not entries:
+        return []
+    if order not in ("d_optimal", "farthest", "random"):
+        raise CalibError(f"unknown proposal order {order!r}; use d_optimal, farthest or random")
+    if order == "random" and rng is None:
+        raise CalibError("order='random' needs a random generator")
+    if order == "farthest":
+        pts = np.concatenate([cand.points_lidar[idx]] + ([depth.points[rc_re[fine, 0], rc_re[fine, 1]]] if rows_re else []))
+        R, t = state.T_camera_lidar[:3, :3], state.T_camera_lidar[:3, 3]
+        bear = pts @ R.T + t
+        bear /= np.linalg.norm(bear, axis=1, keepdims=True)
+        max_cos = np.full(len(bear), -1.0)
+        if paired_points_lidar is not None and len(paired_points_lidar):
+            pb = np.asarray(paired_points_lidar, dtype=np.float64) @ R.T + t
+            pb /= np.linalg.norm(pb, axis=1, keepdims=True)
+            max_cos = (bear @ pb.T).max(axis=1)
+    C = state.covariance.copy()
+    chosen: list[int] = []
+    gains: list[float] = []
+    alive = np.ones(len(entries), dtype=bool)
+    for _ in range(min(n, len(entries))):  # n is a few tens; each step is vectorised over the candidates
+        g = d_optimal_gain(J, S, C)
+        g = np.where(alive & np.isfinite(g), g, -np.inf)
+        if order == "d_optimal":
+            k = int(np.argmax(g))
+        elif order == "farthest":
+            k = int(np.argmin(np.where(np.isfinite(g), max_cos, np.inf)))
+            max_cos = np.maximum(max_cos, bear @ bear[k])
+        else:
+            live = np.flatnonzero(np.isfinite(g))
+            k = int(rng.choice(live)) if live.size else 0
+        if not np.isfinite(g[k]):
+            break
+        chosen.append(k)
+        gains.append(float(g[k]))
+        alive[k] = False
+        # Information update of the pair just ranked (Woodbury on the covariance).
+        Jk = J[k]
+        G = C @ Jk.T @ np.linalg.inv(S[k] + Jk @ C @ Jk.T)
+        C = C - G @ Jk @ C
+        C = 0.5 * (C + C.T)
+    out = []
+    for k, gain in zip(chosen, gains):
+        if entries[k][0] == "reclick":
+            (pair_index, _, _), rc, pt, pix, cov = extra[k]
+            out.append(Proposal((int(rc[0]), int(rc[1])), pt.copy(), pix.copy(), cov.copy(), gain, "reclick",
+                                replaces=pair_index))
+            continue
+        i = entries[k][1]
+        out.append(Proposal(
+            laser_rc=(int(cand.rows_cols[i, 0]), int(cand.rows_cols[i, 1])),
+            laser_xyz=cand.points_lidar[i].copy(),
+            pixel=pixels[i].copy(),
+            pixel_cov=pixel_cov[i].copy(),
+            gain=gain,
+            kind=KINDS[int(cand.kind[i])],
+            image_corner=float(strength[i]),
+            strength=float(cand.strength[i]),
+        ))
+    return out
+
+
+def proposals_to_dict(proposals: Sequence[Proposal], state: PoseState | None = None) -> dict:
+    """The ``proposals:`` document (best first), with the pose they were computed from."""
+    doc: dict = {"proposals": [p.to_dict() for p in proposals]}
+    if state is not None:
+        doc["pose"] = {
+            "T_camera_lidar": [[float(x) for x in row] for row in state.T_camera_lidar],
+            "from": state.source,
+            "n_pairs": int(state.n_pairs),
+        }
+    return doc
+
+
+def save_proposals_yaml(path: str | os.PathLike, proposals: Sequence[Proposal], state: PoseState | None = None) -> None:
+    """Write the proposals file atomically."""
+    write_yaml_atomic(path, proposals_to_dict(proposals, state))

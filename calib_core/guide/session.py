@@ -1,0 +1,108 @@
+"""A guided-picking session: pairs so far, the next proposal, accept / skip / not a corner.
+
+What the app's "next pair" action and the benchmark's simulated person
+drive: after every accepted pair the pose, its covariance and the proposals
+are recomputed.  Rough pairs (clicked without guidance) are proposed for a
+re-click in the loupe when that adds more information than a new pair; the
+re-click replaces them.  The candidates of the scan, and which of them the camera
+sees, are computed once.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+from ..pairs import Pair, resolve_pairs
+from ..solve import CalibrationResult, calibrate
+from .candidates import find_candidates
+from .image_corners import CornerImage, corner_image
+from .pose_state import DEFAULT_CLICK_SIGMA_PX, PoseState, current_pose
+from .propose import GUIDED_CLICK_SIGMA_PX, Proposal, propose
+from .visibility import visible_in_camera
+
+__all__ = ["GuidedSession"]
+
+
+class GuidedSession:
+    """Guided picking on one scene.
+
+    Parameters
+    ----------
+    depth : DepthMatrix
+    camera : CameraModel
+    pairs : sequence of Pair
+        Pairs so far (>= 4, or give ``T_initial``).
+    T_initial : (4, 4) ndarray, optional
+        Imported extrinsic.
+    image : (H, W, 3) uint8, optional
+        The camera image: proposals then need an image corner near their pixel.
+    click_sigma_px : float
+        Click noise of guided pairs (their ``precision_px``).
+    """
+
+    def __init__(self, depth, camera, pairs: Sequence[Pair] = (), T_initial: np.ndarray | None = None,
+                 image: np.ndarray | None = None, click_sigma_px: float = GUIDED_CLICK_SIGMA_PX,
+                 **propose_options) -> None:
+        self.depth, self.camera = depth, camera
+        self.pairs: list[Pair] = list(pairs)
+        self.T_initial = T_initial
+        self.click_sigma_px = float(click_sigma_px)
+        self.corners: CornerImage | None = corner_image(image) if image is not None else None
+        self.candidates = find_candidates(depth)
+        self.dropped: list[tuple[int, int]] = []
+        self.skipped: list[tuple[int, int]] = []
+        self.propose_options = propose_options
+        self._visible: np.ndarray | None = None
+        self.state: PoseState = self._update_state()
+
+    def _update_state(self) -> PoseState:
+        self.state = current_pose(self.pairs, self.depth, self.camera, self.T_initial)
+        if self._visible is None:
+            scan_points, _ = self.depth.valid_points()
+            _, self._visible = visible_in_camera(self.camera, self.state.T_camera_lidar, scan_points,
+                                                 self.candidates.points_lidar)
+        return self.state
+
+    def proposals(self, n: int = 20) -> list[Proposal]:
+        """The ``n`` best next pairs under the current state (skipped ones go last)."""
+        used = [p.laser_rc for p in self.pairs if p.laser_rc is not None] + self.dropped
+        rough = [(i, p.laser_rc, DEFAULT_CLICK_SIGMA_PX if p.precision_px is None else p.precision_px)
+                 for i, p in enumerate(self.pairs) if p.laser_rc is not None and not p.check]
+        fit = [p for p in self.pairs if not p.check]
+        paired_points = resolve_pairs(fit, self.depth, self.camera)[0] if fit else None
+        props = propose(self.depth, self.camera, self.state, n + len(self.skipped), candidates=self.candidates,
+                        exclude_rc=used, click_sigma_px=self.click_sigma_px, corner_image=self.corners,
+                        visible=self._visible, reclick=rough, paired_points_lidar=paired_points,
+                        **self.propose_options)
+        skipped = set(self.skipped)
+        return ([p for p in props if p.laser_rc not in skipped] + [p for p in props if p.laser_rc in skipped])[:n]
+
+    def accept(self, proposal: Proposal, pixel, source: str = "guided", precision_px: float | None = None,
+               laser_rc: tuple[int, int] | None = None) -> Pair:
+        """Make a pair of the proposal's cell (or ``laser_rc``, the cell the person moved it to)
+        and the clicked (or auto-found) pixel; update the pose."""
+        rc = proposal.laser_rc if laser_rc is None else (int(laser_rc[0]), int(laser_rc[1]))
+        pair = Pair(rc, None, (float(pixel[0]), float(pixel[1])), source=source,
+                    precision_px=self.click_sigma_px if precision_px is None else float(precision_px))
+        if proposal.replaces is not None:  # a re-click of a rough pair replaces it
+            self.pairs[proposal.replaces] = pair
+        else:
+            self.pairs.append(pair)
+        self._update_state()
+        return pair
+
+    def skip(self, proposal: Proposal) -> None:
+        """Show this proposal again only after the others."""
+        self.skipped.append(proposal.laser_rc)
+
+    def not_a_corner(self, proposal: Proposal) -> None:
+        """Drop the proposal's cell for good."""
+        self.dropped.append(proposal.laser_rc)
+
+    def solve(self) -> CalibrationResult:
+        """The calibration from the pairs so far (check pairs left out), each pair weighted by
+        its ``precision_px`` and whole-cell laser pick (:func:`calib_core.solve.calibrate`)."""
+        fit = [p for p in self.pairs if not p.check]
+        return calibrate(fit, self.depth, self.camera, initial_T_camera_lidar=self.state.T_camera_lidar)

@@ -1,0 +1,222 @@
+"""Guided picking (calib_core.guide) on the committed sample (seed 0), against its ground truth.
+
+The truth used here is the sample's own: the true pose, the 125 true corners
+(corners.yaml) and the room mesh (ray casting); Fisher information is
+recomputed here by finite differences of ``camera.project``, independently
+of calib_core.guide.information.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from app.cli import main as cli_main
+from calib_core.guide import corner_image, current_pose, propose
+from calib_core.guide.candidates import find_candidates
+from calib_core.guide.information import d_optimal_gain
+from calib_core.guide.junction import fit_junctions
+from calib_core.guide.session import GuidedSession
+from calib_core.guide.snap import snap_clicks
+from calib_core.pairs import Pair, load_pairs_yaml, save_pairs_yaml
+from calib_core.synthetic import load_sample
+from calib_core.synthetic.picks import laser_picks, simulate_pairs
+from calib_core.synthetic.render import cast
+from calib_core.transforms import rotation_angle_deg, transform_points
+
+SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return load_sample(SAMPLE)
+
+
+@pytest.fixture(scope="module")
+def truth(scene):
+    """True pixels of the corners and their whole-cell picks."""
+    pix, _ = scene.camera.project(transform_points(scene.T_camera_lidar, scene.corners_lidar))
+    rc, err = laser_picks(scene.depth, scene.corners_lidar)
+    return pix, rc, err
+
+
+def _corner_of(cells, pick_rc, max_cells=2):
+    """Index of the true corner whose whole-cell pick is within ``max_cells`` of each cell, or -1."""
+    cheb = np.abs(np.asarray(cells)[:, None, :] - pick_rc[None]).max(axis=2)
+    best = np.argmin(cheb, axis=1)
+    return np.where(cheb[np.arange(len(cheb)), best] <= max_cells, best, -1)
+
+
+def _pose_information(camera, T, points, sigma_px):
+    """Fisher information of (delta, t) by central differences of camera.project (isotropic pixel noise)."""
+    from scipy.spatial.transform import Rotation
+
+    h = 1e-6
+    J = np.empty((len(points), 2, 6))
+    for k in range(6):
+        dx = np.zeros(6)
+        dx[k] = h
+        out = []
+        for s in (1.0, -1.0):
+            R = Rotation.from_rotvec(s * dx[:3]).as_matrix() @ T[:3, :3]
+            out.append(camera.project(points @ R.T + T[:3, 3] + s * dx[3:])[0])
+        J[:, :, k] = (out[0] - out[1]) / (2 * h)
+    return np.einsum("nai,naj->ij", J, J) / sigma_px**2
+
+
+def test_gain_is_the_log_det_increase(scene):
+    pairs = simulate_pairs(scene, 6, np.random.default_rng(1), 0.5)
+    state = current_pose(pairs, scene.depth, scene.camera)
+    F0 = np.linalg.inv(state.covariance)
+    pts = scene.depth.points[[60, 90, 100], [300, 400, 500]]
+    from calib_core.guide.information import pixel_jacobians
+
+    _, J, _ = pixel_jacobians(scene.camera, state.T_camera_lidar, pts)
+    S = np.broadcast_to(0.3**2 * np.eye(2), (3, 2, 2))
+    gains = d_optimal_gain(J, S, state.covariance)
+    # One point at a time against the brute-force determinant with the independent Jacobian.
+    for i in range(3):
+        Fi = _pose_information(scene.camera, state.T_camera_lidar, pts[i : i + 1], 0.3)
+        expected = np.linalg.slogdet(F0 + Fi)[1] - np.linalg.slogdet(F0)[1]
+        assert gains[i] == pytest.approx(expected, rel=1e-4)
+
+
+def test_proposals_are_visible_and_their_ellipses_calibrated(scene, truth):
+    pix_true, pick_rc, _ = truth
+    pairs = simulate_pairs(scene, 6, np.random.default_rng(3), 0.3)
+    session = GuidedSession(scene.depth, scene.camera, pairs, image=scene.image)
+    props = session.proposals(60)
+    assert len(props) >= 30
+    xyz = np.array([p.laser_xyz for p in props])
+    # Visible: in the image under the true pose, and nothing of the room mesh between camera and point.
+    _, in_img = scene.camera.project(transform_points(scene.T_camera_lidar, xyz))
+    assert in_img.all()
+    world = transform_points(scene.T_world_lidar, xyz)
+    origin = np.broadcast_to(scene.room.T_world_camera[:3, 3], world.shape)
+    t, face = cast(scene.room, np.ascontiguousarray(origin), world - origin)
+    assert np.mean((face < 0) | (t >= 1.0 - 0.05 / np.linalg.norm(world - origin, axis=1))) >= 0.95
+    # Calibrated: the true corner's projection falls in the 3-sigma ellipse.
+    corner = _corner_of([p.laser_rc for p in props], pick_rc)
+    on = np.flatnonzero(corner >= 0)
+    assert on.size >= 10
+    m2 = [float(d @ np.linalg.solve(props[i].pixel_cov, d)) for i in on for d in [pix_true[corner[i]] - props[i].pixel]]
+    assert np.mean(np.array(m2) <= 9.0) >= 0.9
+
+
+def test_d_optimal_order_beats_random_order(scene):
+    pairs = simulate_pairs(scene, 5, np.random.default_rng(4), 0.5)
+    state = current_pose(pairs, scene.depth, scene.camera)
+    cand = find_candidates(scene.depth)
+    F0 = np.linalg.inv(state.covariance)
+
+    def logdet_after(props):
+        pts = np.array([p.laser_xyz for p in props])
+        return np.linalg.slogdet(F0 + _pose_information(scene.camera, state.T_camera_lidar, pts, 0.3))[1]
+
+    best = logdet_after(propose(scene.depth, scene.camera, state, 10, candidates=cand))
+    rng = np.random.default_rng(0)
+    randoms = [logdet_after(propose(scene.depth, scene.camera, state, 10, candidates=cand, order="random", rng=rng))
+               for _ in range(8)]
+    assert best > max(randoms)
+
+
+def test_guided_loop_recovers_the_ground_truth(scene, truth):
+    pix_true, pick_rc, _ = truth
+    rng = np.random.default_rng(5)
+    session = GuidedSession(scene.depth, scene.camera, simulate_pairs(scene, 4, rng, 1.0), image=scene.image)
+    made, shown = 0, 0
+    while made < 16 and shown < 200:
+        p = session.proposals(1)[0]
+        shown += 1
+        k = _corner_of([p.laser_rc], pick_rc)[0]
+        if p.replaces is None and (k < 0 or any(q.laser_rc == tuple(pick_rc[k]) for q in session.pairs)):
+            session.not_a_corner(p)
+            continue
+        if p.replaces is not None:
+            k = int(np.flatnonzero((pick_rc == p.laser_rc).all(axis=1))[0])
+        session.accept(p, pix_true[k] + rng.normal(0.0, 0.3, 2), laser_rc=tuple(pick_rc[k]))
+        made += 1
+    assert made == 16
+    assert all(q.source == "guided" and q.precision_px == 0.3 for q in session.pairs[-10:])
+    T = session.solve().T_camera_lidar
+    assert rotation_angle_deg(T[:3, :3], scene.T_camera_lidar[:3, :3]) < 0.3
+    assert np.linalg.norm(T[:3, 3] - scene.T_camera_lidar[:3, 3]) < 0.015
+
+
+def test_snap_never_worsens_clicks_on_the_sample_corners(scene, truth):
+    pix_true = truth[0]
+    ci = corner_image(scene.image)
+    rng = np.random.default_rng(6)
+    for sigma in (0.3, 1.0):
+        clicks = np.concatenate([pix_true + rng.normal(0.0, sigma, pix_true.shape) for _ in range(4)])
+        target = np.concatenate([pix_true] * 4)
+        snapped, ok = snap_clicks(ci, clicks, sigma)
+        before = np.linalg.norm(clicks - target, axis=1)
+        after = np.linalg.norm(snapped - target, axis=1)
+        if sigma < 1.0:
+            assert not ok.any() and np.array_equal(snapped, clicks)  # precise clicks stand
+        else:
+            assert ok.any()
+            assert after.mean() <= before.mean()
+        assert np.array_equal(snapped[~ok], clicks[~ok])
+
+
+def test_junction_fit_never_worsens_a_corner_pick(scene, truth):
+    _, rc, err = truth
+    fit = fit_junctions(scene.depth, rc)
+    assert fit.fitted.any()
+    new_err = np.linalg.norm(fit.points_lidar - scene.corners_lidar, axis=1)
+    assert np.all(new_err[fit.fitted] <= err[fit.fitted])
+    assert np.array_equal(fit.points_lidar[~fit.fitted], scene.depth.points[rc[~fit.fitted, 0], rc[~fit.fitted, 1]])
+
+
+def _args(tmp_path, pairs_file, *extra):
+    return ["propose", "--scan", str(SAMPLE / "scan.npz"), "--camera", str(SAMPLE / "camera.yaml"),
+            "--pairs", str(pairs_file), "-o", str(tmp_path / "proposals.yaml"), *extra]
+
+
+def test_propose_cli_round_trip(scene, tmp_path, capsys):
+    assert cli_main(_args(tmp_path, SAMPLE / "pairs.yaml", "-n", "8", "--image", str(SAMPLE / "image.png"))) == 0
+    doc = yaml.safe_load((tmp_path / "proposals.yaml").read_text())
+    props = doc["proposals"]
+    assert len(props) == 8
+    gains = [p["gain"] for p in props]
+    assert gains == sorted(gains, reverse=True) and gains[-1] > 0
+    for p in props:
+        r, c = p["laser_rc"]
+        assert np.allclose(p["laser_xyz"], scene.depth.points[r, c])
+        cov = np.array(p["pixel_cov"])
+        assert cov.shape == (2, 2) and np.allclose(cov, cov.T) and np.all(np.linalg.eigvalsh(cov) > 0)
+        # The predicted pixel is within 3 sigma of the laser point's true projection.
+        uv, _ = scene.camera.project(transform_points(scene.T_camera_lidar, np.array([p["laser_xyz"]])))
+        d = uv[0] - np.array(p["pixel"])
+        assert d @ np.linalg.solve(cov, d) <= 9.0
+    # Accepted proposals (clicked at their true pixels) are ordinary pairs for solve.
+    pairs = load_pairs_yaml(SAMPLE / "pairs.yaml")
+    for p in props:
+        uv, _ = scene.camera.project(transform_points(scene.T_camera_lidar, np.array([p["laser_xyz"]])))
+        pairs.append(Pair(tuple(p["laser_rc"]), None, (float(uv[0, 0]), float(uv[0, 1])), source="guided",
+                          precision_px=0.3))
+    save_pairs_yaml(tmp_path / "pairs.yaml", pairs)
+    solve_args = ["solve", "--scan", str(SAMPLE / "scan.npz"), "--camera", str(SAMPLE / "camera.yaml"),
+                  "--pairs", str(tmp_path / "pairs.yaml"), "-o", str(tmp_path / "extrinsics.yaml")]
+    assert cli_main(solve_args) == 0
+    T = np.array(yaml.safe_load((tmp_path / "extrinsics.yaml").read_text())["T_camera_lidar"]["matrix"])
+    assert rotation_angle_deg(T[:3, :3], scene.T_camera_lidar[:3, :3]) < 0.5
+    assert np.linalg.norm(T[:3, 3] - scene.T_camera_lidar[:3, 3]) < 0.02
+
+
+def test_propose_cli_bad_input_is_one_line(tmp_path, capsys):
+    few = tmp_path / "few.yaml"
+    save_pairs_yaml(few, load_pairs_yaml(SAMPLE / "pairs.yaml")[:2])
+    assert cli_main(_args(tmp_path, few)) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error:") and "at least 4 pairs" in err[0]
+    assert cli_main(_args(tmp_path, SAMPLE / "pairs.yaml", "-n", "0")) == 2
+    assert capsys.readouterr().err.startswith("error:")
+    # With an imported extrinsic, two pairs are enough.
+    assert cli_main(_args(tmp_path, few, "--extrinsics", str(SAMPLE / "ground_truth.yaml"), "-n", "3")) == 0
+    assert len(yaml.safe_load((tmp_path / "proposals.yaml").read_text())["proposals"]) == 3
