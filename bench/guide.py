@@ -39,6 +39,8 @@ from .common import BENCH_SEED, REPO, load_scenes, log, parallel_map, pose_error
 from .guide_sim import guided_run, true_pixels
 
 N_VALUES = (10, 20, 30, 50)
+#: A simulated session stops after this many actions (a person would stop long before).
+MAX_ACTIONS = 300
 #: Orders compared at 10 guided pairs: (row name, propose order, extra propose options).  Same scene,
 #: starters, candidates and per-corner click errors in every row (bench/guide_sim.py).
 ORDERS = (
@@ -78,7 +80,7 @@ def run(scenes, trials: int, workers: int, real_trials: int, order_trials: int =
     def guided(item):
         si, t = item
         r = guided_run(scenes[si].scene, np.random.default_rng([BENCH_SEED, si, t]), checkpoints=N_VALUES,
-                       auto_gates=gates)
+                       auto_gates=gates, max_actions=MAX_ACTIONS)
         return si, r
 
     def ordering(item):

@@ -72,6 +72,9 @@ class Proposal:
     replaces : int or None
         For ``"reclick"``: index of the pair (in the list given to
         :func:`propose`) that the new click replaces.
+    probability : float
+        Probability that the cell is a corner the person can click
+        (:mod:`.corner_probability`; 1 for a re-click; NaN without an image).
     """
 
     laser_rc: tuple[int, int]
@@ -298,7 +301,7 @@ def propose(
         if entries[k][0] == "reclick":
             (pair_index, _, _), rc, pt, pix, cov = extra[k]
             out.append(Proposal((int(rc[0]), int(rc[1])), pt.copy(), pix.copy(), cov.copy(), gain, "reclick",
-                                replaces=pair_index))
+                                replaces=pair_index, probability=1.0 if corner_image is not None else float("nan")))
             continue
         i = entries[k][1]
         out.append(Proposal(
