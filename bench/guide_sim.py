@@ -3,7 +3,9 @@
 The person is shown one proposal at a time (:class:`calib_core.guide.session.GuidedSession`).
 If the proposed cell is within two rows and columns of a true scene corner's
 whole-cell pick (:func:`calib_core.synthetic.picks.laser_picks`: the cell a
-careful person picks, the laser model of the Cramer-Rao bound) the person
+careful person picks, the laser model of the Cramer-Rao bound), that corner's
+true projection lies inside the proposal's 3-sigma ellipse, and no other such
+corner projects inside it elsewhere (:func:`person_accepts`), the person
 moves the cell there in the BA loupe when it differs (1 action) and clicks
 the corner's true projection plus Gaussian noise (1 action), making a
 ``guided`` pair; otherwise they press "Not a corner" (1 action, no pair).  A proposal to re-click a
@@ -41,6 +43,38 @@ def true_corner_of_cells(scene, rows_cols: np.ndarray, max_cells: int = 2) -> tu
     return np.where(np.isfinite(d[np.arange(len(rc)), best]), best, -1), pick_rc
 
 
+#: Two true corners farther apart than this in the image are different corners to the person, px.
+DISTINCT_PX = 2.0
+
+
+def person_accepts(scene, proposals, corner: np.ndarray, max_cells: int = 2) -> np.ndarray:
+    """Whether the simulated person clicks each proposal (module docstring), (N,) bool.
+
+    ``corner`` is :func:`true_corner_of_cells` of the proposals' cells.  The
+    person clicks only a true corner whose true projection lies inside the
+    proposal's 3-sigma ellipse (what the camera loupe shows) and that is
+    unambiguous: no other true corner, also within ``max_cells`` of the
+    proposed cell (the BA loupe cannot tell them apart), projects inside the
+    ellipse more than :data:`DISTINCT_PX` from it.
+    """
+    tpix = true_pixels(scene)
+    pick_rc, pick_err = laser_picks(scene.depth, np.asarray(scene.corners_lidar))
+    usable = pick_err <= MAX_LASER_PICK_ERROR_M
+    out = np.zeros(len(proposals), dtype=bool)
+    for i, (p, c) in enumerate(zip(proposals, corner)):
+        if c < 0:
+            continue
+        inv = np.linalg.inv(p.pixel_cov)
+        d = tpix - p.pixel
+        m2 = np.einsum("na,ab,nb->n", d, inv, d)
+        if not m2[c] <= 9.0:
+            continue
+        near_cell = usable & (np.abs(pick_rc - np.asarray(p.laser_rc)).max(axis=1) <= max_cells)
+        rivals = near_cell & (m2 <= 9.0) & (np.linalg.norm(tpix - tpix[c], axis=1) > DISTINCT_PX)
+        out[i] = not rivals.any()
+    return out
+
+
 def _judge_auto(run, session, scene, gates: dict, lookup, paired, tpix) -> None:
     props = session.proposals(200)
     for name, gate in gates.items():
@@ -66,6 +100,9 @@ class GuidedRun:
 
     errors: dict = field(default_factory=dict)  # n guided -> (rotation deg, translation m)
     actions: int = 0
+    shown: int = 0  # proposals shown (new pairs and re-clicks)
+    not_a_corner: int = 0
+    moves: int = 0  # laser cell moved in the BA loupe
     accepted: int = 0
     reclicks: int = 0  # guided re-clicks of the rough starting pairs (counted in accepted)
     inside_3sigma: list = field(default_factory=list)  # per accepted proposal: true pixel inside the 3-sigma ellipse
@@ -75,7 +112,7 @@ class GuidedRun:
 
 def guided_run(scene, rng: np.random.Generator, checkpoints=(10, 20, 30, 50), click_sigma_px: float = 0.3,
                starters: list[Pair] | None = None, image: bool = True, max_actions: int = 2000,
-               order: str = "d_optimal", auto_gates: dict | None = None) -> GuidedRun:
+               order: str = "d_optimal", auto_gates: dict | None = None, **propose_options) -> GuidedRun:
     """Start from ``starters`` (default: 4 farthest-point clicks at 1 px) and add guided pairs.
 
     ``order`` is the proposal order (:func:`calib_core.guide.propose`).  With
@@ -84,10 +121,12 @@ def guided_run(scene, rng: np.random.Generator, checkpoints=(10, 20, 30, 50), cl
     wrong when the cell is on no true corner (or one already paired) or the
     found pixel is more than :data:`AUTO_WRONG_PX` from the corner's true
     projection.  (The person's loop is unchanged, so runs stay comparable.)
+    ``propose_options`` go to :func:`calib_core.guide.propose` (e.g. ``corner_weights``).
     """
     if starters is None:
         starters = simulate_pairs(scene, 4, rng, pixel_noise_px=1.0)
     options = {"order": order, "rng": rng} if order == "random" else {"order": order}
+    options.update(propose_options)
     session = GuidedSession(scene.depth, scene.camera, starters, image=scene.image if image else None,
                             click_sigma_px=click_sigma_px, **options)
     truth_idx, pick_rc = true_corner_of_cells(scene, session.candidates.rows_cols)
@@ -95,6 +134,9 @@ def guided_run(scene, rng: np.random.Generator, checkpoints=(10, 20, 30, 50), cl
     paired = {pick_lookup[p.laser_rc] for p in starters if p.laser_rc in pick_lookup}
     lookup = {tuple(rc): int(i) for rc, i in zip(session.candidates.rows_cols.tolist(), truth_idx)}
     tpix = true_pixels(scene)
+    # One click error per true corner, drawn up front: whatever order the
+    # corners come in, a corner is clicked with the same error (fair order comparisons).
+    click_noise = rng.normal(0.0, click_sigma_px, tpix.shape)
     run = GuidedRun()
     n_max = max(checkpoints)
     while run.accepted < n_max and run.actions < max_actions:
@@ -103,22 +145,26 @@ def guided_run(scene, rng: np.random.Generator, checkpoints=(10, 20, 30, 50), cl
             break
         p = props[0]
         run.actions += 1
+        run.shown += 1
         if p.replaces is not None:  # re-click of a rough pair: its cell is a corner's pick
             corner = pick_lookup.get(tuple(p.laser_rc), -1)
         else:
             corner = lookup.get(tuple(p.laser_rc), -1)
             corner = -1 if corner in paired else corner
-        if corner < 0:
+        if corner >= 0:  # ellipse calibration: over every proposal on a true corner
+            d = tpix[corner] - p.pixel
+            m2 = float(d @ np.linalg.solve(p.pixel_cov, d))
+            run.mahalanobis2.append(m2)
+            run.inside_3sigma.append(m2 <= 9.0)
+        if corner < 0 or not person_accepts(scene, [p], np.array([corner]))[0]:
             session.not_a_corner(p)
+            run.not_a_corner += 1
             continue
-        d = tpix[corner] - p.pixel
-        m2 = float(d @ np.linalg.solve(p.pixel_cov, d))
-        run.mahalanobis2.append(m2)
-        run.inside_3sigma.append(m2 <= 9.0)
-        click = tpix[corner] + rng.normal(0.0, click_sigma_px, 2)
+        click = tpix[corner] + click_noise[corner]
         cell = tuple(int(x) for x in pick_rc[corner])
         if cell != tuple(p.laser_rc):
             run.actions += 1
+            run.moves += 1
         session.accept(p, click, laser_rc=cell)
         paired.add(corner)
         run.reclicks += p.replaces is not None

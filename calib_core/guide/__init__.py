@@ -6,6 +6,7 @@ Modules (one concept each):
 * :mod:`.laser_noise` -- error of a laser point picked as a whole cell;
 * :mod:`.candidates` -- corner cells of the scan (depth jumps, plane junctions);
 * :mod:`.visibility` -- which laser points the camera sees (z-buffer);
+* :mod:`.corner_probability` -- probability that a candidate is a corner the person can click;
 * :mod:`.image_corners` -- camera-image corners, the clean-isolated-corner test, sub-pixel refinement;
 * :mod:`.pose_state` -- current pose and covariance from pairs or an imported extrinsic;
 * :mod:`.propose` -- the ranked proposals with predicted pixels and ellipses;

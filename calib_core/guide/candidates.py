@@ -14,8 +14,10 @@ A depth-jump peak is kept only where the near side of the step covers
 clearly less or more than half of the 7x7 window around it
 (:func:`near_fraction`): a corner of the near region, not a straight stretch
 of a depth edge, where range noise alone makes structure-tensor peaks.
-The peak may sit a cell or two off the corner itself (the person moves the
-cell in the BA loupe; :mod:`.laser_noise` models the offset).
+The peak may sit a cell or two off the corner itself; a depth-jump peak is
+moved to the near-side cell at the corner's tip (:func:`snap_to_corner_cell`,
+the cell a person picks), and where that still misses the person moves the
+cell in the BA loupe (:mod:`.laser_noise` models the offset).
 
 Gradients are clipped to a fixed magnitude before the structure tensor, so a
 small step corners as well as a large one and the thresholds are absolute
@@ -30,7 +32,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-__all__ = ["Candidates", "KINDS", "find_candidates", "corner_response"]
+__all__ = ["Candidates", "KINDS", "find_candidates", "corner_response", "depth_discontinuity", "near_region_width",
+           "plane_residual_m", "snap_to_corner_cell"]
 
 #: Feature kinds; duplicates within ``min_distance`` keep the first kind.
 KINDS = ("depth_jump", "junction")
@@ -210,7 +213,7 @@ def find_candidates(depth, threshold: float = 0.5, min_distance: int = 1, min_sp
             # A corner of the near region, not a straight stretch of a depth edge.
             f = near_fraction(depth, rc)
             corner = (f <= _MAX_CONVEX_SHARE) | (f >= _MIN_CONCAVE_SHARE)
-            rc, s = rc[corner], s[corner]
+            rc, s = snap_to_corner_cell(depth, rc[corner]), s[corner]
         keep = ~taken[rc[:, 0], rc[:, 1]] & sound[rc[:, 0], rc[:, 1]]
         rc, s = rc[keep], s[keep]
         mark = np.zeros(depth.shape, np.uint8)
@@ -225,3 +228,107 @@ def find_candidates(depth, threshold: float = 0.5, min_distance: int = 1, min_sp
     rc = rc[first]
     return Candidates(rc, depth.points[rc[:, 0], rc[:, 1]], np.concatenate(kinds)[first],
                       np.concatenate(strengths).astype(np.float64)[first])
+
+
+def _log_range_windows(depth, rows_cols: np.ndarray, half: int) -> tuple[np.ndarray, np.ndarray]:
+    """Log ranges (N, k, k) of the windows around cells (no return = far: the window's max + 1) and validity."""
+    rc = np.asarray(rows_cols, dtype=np.int64).reshape(-1, 2)
+    H, W = depth.shape
+    off = np.arange(-half, half + 1)
+    rows = np.clip(rc[:, 0, None, None] + off[None, :, None], 0, H - 1)
+    cols = np.clip(rc[:, 1, None, None] + off[None, None, :], 0, W - 1)
+    ok = depth.valid[rows, cols]
+    lr = np.log(np.where(ok, depth.range_m[rows, cols], 1.0))
+    top = np.where(ok, lr, -np.inf).max(axis=(1, 2))
+    return np.where(ok, lr, np.where(np.isfinite(top), top, 0.0)[:, None, None] + 1.0), ok
+
+
+def depth_discontinuity(depth, rows_cols: np.ndarray, half: int = 2) -> np.ndarray:
+    """Largest step of log range between neighbouring cells in excess of its neighbouring steps, (N,).
+
+    A depth jump is a spike of the first difference along a row or column
+    (``|d_k| - max(|d_k-1|, |d_k+1|)``); a plane seen at a grazing angle has
+    large but smooth differences, and where two such planes meet (a wall
+    against the floor) the difference changes without a spike.
+    """
+    lr, _ = _log_range_windows(depth, rows_cols, half + 1)
+    best = np.zeros(len(lr))
+    for axis in (1, 2):
+        d = np.abs(np.diff(lr, axis=axis))
+        mid = np.take(d, np.arange(1, d.shape[axis] - 1), axis=axis)
+        before = np.take(d, np.arange(0, d.shape[axis] - 2), axis=axis)
+        after = np.take(d, np.arange(2, d.shape[axis]), axis=axis)
+        spike = mid - np.maximum(before, after)
+        best = np.maximum(best, spike.reshape(len(lr), -1).max(axis=1))
+    return best
+
+
+def near_region_width(depth, rows_cols: np.ndarray, half: int = 3) -> np.ndarray:
+    """Whether the near side of the depth step at each cell is at least 3 cells wide somewhere in the window, (N,) bool.
+
+    A near region thinner than that (a table leg, a cable) has no cell that
+    lies clearly on it, so its corner cannot be picked within a cell.
+    """
+    lr, _ = _log_range_windows(depth, rows_cols, half)
+    lo, hi = lr.min(axis=(1, 2)), lr.max(axis=(1, 2))
+    near = (lr < (0.5 * (lo + hi))[:, None, None]).astype(np.uint8)
+    core = np.stack([cv2.erode(m, np.ones((3, 3), np.uint8), borderValue=0) for m in near]) if len(near) else near
+    return core.reshape(len(lr), -1).any(axis=1)
+
+
+def plane_residual_m(depth, rows_cols: np.ndarray, half: int = 3) -> np.ndarray:
+    """RMS distance (m) of the window's points from their best-fitting plane, (N,); NaN with < 6 points.
+
+    About the range noise where the window is one plane (a floor seen at a
+    grazing angle, whose normals are noisy enough to look like a junction);
+    well above it where planes meet or a depth step crosses the window.
+    """
+    rc = np.asarray(rows_cols, dtype=np.int64).reshape(-1, 2)
+    H, W = depth.shape
+    off = np.arange(-half, half + 1)
+    rows = np.clip(rc[:, 0, None, None] + off[None, :, None], 0, H - 1).repeat(len(off), axis=2)
+    cols = np.clip(rc[:, 1, None, None] + off[None, None, :], 0, W - 1).repeat(len(off), axis=1)
+    ok = depth.valid[rows, cols].reshape(len(rc), -1)
+    P = np.nan_to_num(depth.points[rows, cols].reshape(len(rc), -1, 3))
+    n = ok.sum(axis=1)
+    w = ok[:, :, None].astype(np.float64)
+    mean = (P * w).sum(axis=1) / np.maximum(n, 1)[:, None]
+    D = (P - mean[:, None, :]) * w
+    cov = np.einsum("nki,nkj->nij", D, D) / np.maximum(n, 1)[:, None, None]
+    smallest = np.linalg.eigvalsh(cov)[:, 0]
+    return np.where(n >= 6, np.sqrt(np.maximum(smallest, 0.0)), np.nan)
+
+
+def snap_to_corner_cell(depth, rows_cols: np.ndarray, half: int = 2) -> np.ndarray:
+    """Move each depth-jump peak to the near-side cell at the tip of the corner, (N, 2).
+
+    The structure-tensor peak sits a cell or two off the corner; the cell a
+    person picks is the near-side cell with the most far-side neighbours
+    (5 of 8 at a convex corner), nearest the peak on ties.  A cell with no
+    near-side neighbour of that kind stays.
+    """
+    rc = np.asarray(rows_cols, dtype=np.int64).reshape(-1, 2)
+    if len(rc) == 0:
+        return rc
+    lr, _ = _log_range_windows(depth, rc, half + 1)
+    lo, hi = lr.min(axis=(1, 2)), lr.max(axis=(1, 2))
+    near = lr < (0.5 * (lo + hi))[:, None, None]
+    far = ~near
+    k = 2 * half + 3
+    counts = np.zeros((len(rc), k - 2, k - 2))
+    for dr in (-1, 0, 1):
+        for dc in (-1, 0, 1):
+            if dr or dc:
+                counts += far[:, 1 + dr:k - 1 + dr, 1 + dc:k - 1 + dc]
+    inner_near = near[:, 1:-1, 1:-1]
+    off = np.arange(-half, half + 1)
+    dist = np.maximum(np.abs(off)[:, None], np.abs(off)[None, :])
+    score = np.where(inner_near & (counts >= 4), counts * 10 - dist[None], -np.inf).reshape(len(rc), -1)
+    best = np.argmax(score, axis=1)
+    ok = np.isfinite(score[np.arange(len(rc)), best]) & (hi - lo >= 0.005)
+    H, W = depth.shape
+    new = rc + np.stack([off[best // len(off)], off[best % len(off)]], axis=1)
+    new[:, 0] = np.clip(new[:, 0], 0, H - 1)
+    new[:, 1] = np.clip(new[:, 1], 0, W - 1)
+    new = np.where(ok[:, None], new, rc)
+    return np.where(depth.valid[new[:, 0], new[:, 1]][:, None], new, rc)

@@ -22,12 +22,14 @@ import os
 from dataclasses import dataclass, field
 from typing import Sequence
 
+import cv2
 import numpy as np
 
 from ..errors import CalibError
 from ..io.atomic import write_yaml_atomic
 from .candidates import KINDS, Candidates, find_candidates
-from .image_corners import CornerImage, strongest_near
+from .corner_probability import WEIGHTS, corner_features, corner_probability, laser_features, scan_range_noise_m
+from .image_corners import CornerImage, content_mask, strongest_near
 from .information import d_optimal_gain, pair_noise, pixel_jacobians, pose_pixel_covariance
 from .laser_noise import DEFAULT_CELL_SIGMA, DEFAULT_RANGE_SIGMA_M, WHOLE_CELL_SIGMA, cell_covariance
 from .pose_state import PoseState
@@ -70,6 +72,9 @@ class Proposal:
     replaces : int or None
         For ``"reclick"``: index of the pair (in the list given to
         :func:`propose`) that the new click replaces.
+    probability : float
+        Probability that the cell is a corner the person can click
+        (:mod:`.corner_probability`; 1 for a re-click; NaN without an image).
     """
 
     laser_rc: tuple[int, int]
@@ -81,6 +86,7 @@ class Proposal:
     image_corner: float = float("nan")
     strength: float = float("nan")
     replaces: int | None = None
+    probability: float = float("nan")
 
     def ellipse_sigma_px(self) -> np.ndarray:
         """1-sigma half-axes (major, minor) of the pixel ellipse, px."""
@@ -94,6 +100,7 @@ class Proposal:
             "pixel_cov": [[float(x) for x in row] for row in self.pixel_cov],
             "gain": float(self.gain),
             "kind": self.kind,
+            **({"probability": float(self.probability)} if np.isfinite(self.probability) else {}),
             **({"replaces": int(self.replaces)} if self.replaces is not None else {}),
         }
 
@@ -123,6 +130,8 @@ def propose(
     order: str = "d_optimal",
     paired_points_lidar: np.ndarray | None = None,
     rng: np.random.Generator | None = None,
+    corner_weights=WEIGHTS,
+    laser_evidence: np.ndarray | None = None,
 ) -> list[Proposal]:
     """The ``n`` best next pairs, best first (module docstring).
 
@@ -159,7 +168,15 @@ def propose(
         candidate whose camera bearing is farthest from those of
         ``paired_points_lidar`` and of the proposals before it (what a
         person spreading clicks does), or ``"random"`` (needs ``rng``).
-        Gains are reported under every order.
+        Gains are reported under every order.  With ``corner_image``, the
+        D-optimal order maximises the expected gain ``gain x P`` with ``P``
+        the probability that the cell is a clickable corner
+        (:mod:`.corner_probability`), i.e. information per UI action.
+    corner_weights : (float, sequence of float)
+        Logistic weights of :func:`.corner_probability.corner_probability`.
+    laser_evidence : (len(candidates), 5) ndarray, optional
+        :func:`.corner_probability.laser_features` of the candidates, if
+        already known (a session computes it once).
 
     Returns
     -------
@@ -181,6 +198,11 @@ def propose(
         _, visible = visible_in_camera(camera, state.T_camera_lidar, scan_points, cand.points_lidar)
     keep &= visible
     cand = cand.subset(keep)
+    if corner_image is not None:
+        if laser_evidence is None:
+            laser_evidence = laser_features(depth, cand, scan_range_noise_m(depth))
+        else:
+            laser_evidence = np.asarray(laser_evidence)[keep]
     pixels, J_pose, J_point = pixel_jacobians(camera, state.T_camera_lidar, cand.points_lidar)
     laser_cov = cell_covariance(depth, cand.rows_cols, cell_sigma, range_sigma_m)
     laser_px = J_point @ laser_cov @ np.swapaxes(J_point, 1, 2)
@@ -195,11 +217,25 @@ def propose(
             sel = np.ceil(radius) == r
             strength[sel] = strongest_near(corner_image, pixels[sel], float(r))[1]
         ok &= strength >= min_image_corner
+        # The 3-sigma disc must lie inside the picture: the rim of a fisheye's image circle is no corner.
+        inside = cv2.distanceTransform(content_mask(np.rint(corner_image.gray * 255).astype(np.uint8), 0)
+                                       .astype(np.uint8), cv2.DIST_L2, 5)
+        H_img, W_img = inside.shape
+        pu = np.clip(np.rint(np.nan_to_num(pixels[:, 0])).astype(np.int64), 0, W_img - 1)
+        pv = np.clip(np.rint(np.nan_to_num(pixels[:, 1])).astype(np.int64), 0, H_img - 1)
+        ok &= inside[pv, pu] >= np.maximum(radius, 6.0)
+    probability = np.full(len(cand), np.nan)
+    if corner_image is not None and ok.any():
+        sel = np.flatnonzero(ok)
+        feats = corner_features(laser_evidence[sel], corner_image, pixels[sel], pixel_cov[sel])
+        probability[sel] = corner_probability(feats, corner_weights)
     idx = np.flatnonzero(ok)
     # The pair's own noise: a guided pair ends on the corner's cell (whole-cell pick).
     whole = cell_covariance(depth, cand.rows_cols[idx], WHOLE_CELL_SIGMA, range_sigma_m)
     S = pair_noise(click_sigma_px, J_point[idx], whole)
     J = J_pose[idx]
+    # Reclicks are of existing pairs: certainly corners.
+    P = np.where(np.isfinite(probability[idx]), probability[idx], 1.0)
     entries = [("candidate", int(i)) for i in idx]
     rows_re = [(int(i), (int(rc[0]), int(rc[1])), float(sg)) for i, rc, sg in reclick if sg > click_sigma_px]
     extra: dict = {}
@@ -217,6 +253,7 @@ def propose(
             extra[len(entries)] = (rows_re[k], rc_re[k], pts_re[k], pix_re[k], cov_re[k])
             entries.append(("reclick", int(k)))
         S = np.concatenate([S, S_eff[fine]])
+        P = np.concatenate([P, np.ones(int(fine.sum()))])
         J = np.concatenate([J, Jp_re[fine]])
     if not entries:
         return []
@@ -242,7 +279,7 @@ def propose(
         g = d_optimal_gain(J, S, C)
         g = np.where(alive & np.isfinite(g), g, -np.inf)
         if order == "d_optimal":
-            k = int(np.argmax(g))
+            k = int(np.argmax(np.where(np.isfinite(g), g * P, -np.inf)))
         elif order == "farthest":
             k = int(np.argmin(np.where(np.isfinite(g), max_cos, np.inf)))
             max_cos = np.maximum(max_cos, bear @ bear[k])
@@ -264,7 +301,7 @@ def propose(
         if entries[k][0] == "reclick":
             (pair_index, _, _), rc, pt, pix, cov = extra[k]
             out.append(Proposal((int(rc[0]), int(rc[1])), pt.copy(), pix.copy(), cov.copy(), gain, "reclick",
-                                replaces=pair_index))
+                                replaces=pair_index, probability=1.0 if corner_image is not None else float("nan")))
             continue
         i = entries[k][1]
         out.append(Proposal(
@@ -276,6 +313,7 @@ def propose(
             kind=KINDS[int(cand.kind[i])],
             image_corner=float(strength[i]),
             strength=float(cand.strength[i]),
+            probability=float(probability[i]),
         ))
     return out
 

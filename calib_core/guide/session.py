@@ -17,6 +17,7 @@ import numpy as np
 from ..pairs import Pair, resolve_pairs
 from ..solve import CalibrationResult, calibrate
 from .candidates import find_candidates
+from .corner_probability import laser_features, scan_range_noise_m
 from .image_corners import CornerImage, corner_image
 from .pose_state import DEFAULT_CLICK_SIGMA_PX, PoseState, current_pose
 from .propose import GUIDED_CLICK_SIGMA_PX, Proposal, propose
@@ -51,6 +52,8 @@ class GuidedSession:
         self.click_sigma_px = float(click_sigma_px)
         self.corners: CornerImage | None = corner_image(image) if image is not None else None
         self.candidates = find_candidates(depth)
+        self._laser_evidence = (laser_features(depth, self.candidates, scan_range_noise_m(depth))
+                                if self.corners is not None else None)
         self.dropped: list[tuple[int, int]] = []
         self.skipped: list[tuple[int, int]] = []
         self.propose_options = propose_options
@@ -75,6 +78,7 @@ class GuidedSession:
         props = propose(self.depth, self.camera, self.state, n + len(self.skipped), candidates=self.candidates,
                         exclude_rc=used, click_sigma_px=self.click_sigma_px, corner_image=self.corners,
                         visible=self._visible, reclick=rough, paired_points_lidar=paired_points,
+                        laser_evidence=self._laser_evidence,
                         **self.propose_options)
         skipped = set(self.skipped)
         return ([p for p in props if p.laser_rc not in skipped] + [p for p in props if p.laser_rc in skipped])[:n]
