@@ -30,7 +30,8 @@ from ..errors import CalibError
 TEMP_PREFIX = ".ba-calib-tmp-"
 
 
-def _kind(mode: int) -> str:
+def file_kind(mode: int) -> str:
+    """What a non-regular file is, from its ``st_mode`` ("a folder", "a device", ...), for messages."""
     if stat.S_ISDIR(mode):
         return "a folder"
     if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
@@ -76,7 +77,7 @@ def output_target(path: str | os.PathLike) -> Path:
         raise CalibError(f"{user}: cannot write here: {_reason(exc)}") from None
     if not stat.S_ISREG(st.st_mode):
         via = f" (via the link to {target})" if target != user else ""
-        raise CalibError(f"{user}: is {_kind(st.st_mode)}{via}; refusing to write over anything but a regular file")
+        raise CalibError(f"{user}: is {file_kind(st.st_mode)}{via}; refusing to write over anything but a regular file")
     return target
 
 

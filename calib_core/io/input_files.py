@@ -13,23 +13,12 @@ import stat
 from pathlib import Path
 
 from ..errors import CalibError
+from .atomic import file_kind
 
 #: Size limits in bytes, per kind of file (far above any real file of that kind).
 MAX_CAMERA_BYTES = 1 << 20
 MAX_EXTRINSICS_BYTES = 16 << 20
 MAX_SESSION_BYTES = 8 << 20
-
-
-def _kind(mode: int) -> str:
-    if stat.S_ISDIR(mode):
-        return "a folder"
-    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
-        return "a device"
-    if stat.S_ISFIFO(mode):
-        return "a FIFO (named pipe)"
-    if stat.S_ISSOCK(mode):
-        return "a socket"
-    return "not a regular file"
 
 
 def with_article(what: str) -> str:
@@ -75,7 +64,7 @@ def _check_stat(path: Path, st: os.stat_result, what: str, max_bytes: int, hint:
     if stat.S_ISDIR(st.st_mode):
         raise CalibError(f"{path}: is a folder, expected {with_article(what)}")
     if not stat.S_ISREG(st.st_mode):
-        raise CalibError(f"{path}: is {_kind(st.st_mode)}, expected {with_article(what)} (a regular file)")
+        raise CalibError(f"{path}: is {file_kind(st.st_mode)}, expected {with_article(what)} (a regular file)")
     if st.st_size > max_bytes:
         raise CalibError(f"{path}: {_size_text(st.st_size)} is too large for {with_article(what)} (at most {_size_text(max_bytes)}){'; ' + hint if hint else ''}")
 
