@@ -16,7 +16,18 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
-EXIT_USAGE = 2
+from .cli_guard import (  # noqa: F401  (with_default_command: public, used by tests)
+    EXIT_USAGE,
+    Noise,
+    OneLineParser,
+    check_args,
+    check_serve_files,
+    error_line,
+    remove_stale_temp_files,
+    with_default_command,
+)
+from .cli_toolchain import cmd_bag_extract, cmd_bag_info, cmd_export
+
 #: ``solve`` wrote the file but the calibration's quality status is ``unreliable``.
 EXIT_UNRELIABLE = 3
 
@@ -292,68 +303,6 @@ def cmd_serve(args: argparse.Namespace) -> int:
     return 0
 
 
-def _check_output_file(path: Path) -> None:
-    """Refuse to replace anything but a regular file (a folder, a device, a fifo)."""
-    from calib_core.errors import CalibError
-
-    if os.path.lexists(path) and not path.is_file():
-        raise CalibError(f"{path}: exists and is not a regular file; not replacing it")
-
-
-def cmd_export(args: argparse.Namespace) -> int:
-    from calib_core.io.atomic import write_bytes_atomic
-    from calib_core.io.extrinsic_formats import export_extrinsics, read_extrinsics_any
-
-    T = read_extrinsics_any(args.extrinsics).T_camera_lidar
-    text = export_extrinsics(T, args.format, args.parent_frame, args.child_frame, lidar_frame=args.lidar_frame)
-    if args.output is None:
-        sys.stdout.write(text)
-        return 0
-    _check_output_file(args.output)
-    write_bytes_atomic(args.output, text.encode("utf-8"))
-    print(f"wrote {args.output} ({args.format})", file=sys.stderr)
-    return 0
-
-
-def cmd_bag_info(args: argparse.Namespace) -> int:
-    import math
-
-    from calib_core.io.bags import bag_info
-
-    info = bag_info(args.bag)
-    print(f"{info.path}: {info.kind}, {info.duration_s:.3f} s, {sum(t.count for t in info.topics)} messages")
-    width = max([len(t.name) for t in info.topics] + [5])
-    print(f"{'topic':{width}}  {'type':34} {'count':>7} {'rate [Hz]':>10}")
-    for t in info.topics:
-        rate = f"{t.rate_hz:10.2f}" if math.isfinite(t.rate_hz) else f"{'-':>10}"
-        print(f"{t.name:{width}}  {t.msgtype:34} {t.count:7d} {rate}")
-    return 0
-
-
-def cmd_bag_extract(args: argparse.Namespace) -> int:
-    from calib_core.io.bags import read_bag_scene, write_bag_scene
-
-    scene = read_bag_scene(
-        args.bag, args.cloud_topic, args.image_topic, args.camera_info_topic, time_s=args.time, index=args.index
-    )
-    paths = write_bag_scene(scene, args.output)
-    for note in scene.notes:
-        print(note)
-    print(
-        f"cloud {scene.cloud_topic} #{scene.cloud_index} ({len(scene.cloud.xyz)} points, frame {scene.lidar_frame or '?'}) "
-        f"at {scene.cloud_time_s:.6f} s"
-    )
-    print(
-        f"image {scene.image_topic} at {scene.image_time_s:.6f} s (frame {scene.camera_frame or '?'}): "
-        f"gap {1000 * scene.gap_s:+.3f} ms"
-    )
-    if scene.camera is None:
-        print("no camera info: give the camera file yourself (--camera)")
-    for what, path in paths.items():
-        print(f"wrote {path} ({what})")
-    return 0
-
-
 def _version() -> str:
     from calib_core import __version__
 
@@ -361,7 +310,7 @@ def _version() -> str:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(
+    parser = OneLineParser(
         prog="ba-calib",
         description="Targetless camera / 3D-lidar extrinsic calibration with Bearing Angle images. "
         "With no command, runs 'serve' (the bundled sample scene at http://127.0.0.1:8080 unless "
@@ -488,152 +437,6 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def with_default_command(parser: argparse.ArgumentParser, argv: Sequence[str] | None = None) -> list[str]:
-    """``argv`` with ``serve`` inserted when it names no command: ``ba-calib --port 8300`` serves.
-
-    The global options (``--debug``) stay in front; ``-h`` / ``--version`` are left to the main parser.
-    """
-    args = list(sys.argv[1:] if argv is None else argv)
-    commands = set(getattr(parser, "commands", ()))
-    i = 0
-    while i < len(args) and args[i] == "--debug":
-        i += 1
-    if i < len(args) and (args[i] in commands or args[i] in ("-h", "--help", "--version")):
-        return args
-    return args[:i] + ["serve"] + args[i:]
-
-
-class _Parser(argparse.ArgumentParser):
-    """argparse with one-line errors: ``error: <problem> (see ba-calib ... --help)``, exit 2."""
-
-    def error(self, message: str):  # type: ignore[override]
-        print(f"error: {' '.join(message.split())} (see {self.prog} --help)", file=sys.stderr)
-        raise SystemExit(EXIT_USAGE)
-
-
-def check_args(args: argparse.Namespace) -> None:
-    """Numeric options that argparse's types let through but no command can use."""
-    from calib_core.errors import CalibError
-
-    def bad(option: str, value, want: str) -> None:
-        raise CalibError(f"{option}: expected {want}, got {value!r}")
-
-    beams = getattr(args, "beams", None)
-    if beams is not None and not 1 <= beams <= 4096:
-        bad("--beams", beams, "a number of beams from 1 to 4096")
-    for key in ("h_res_deg", "v_res_deg"):
-        v = getattr(args, key, None)
-        if v is not None and not 1e-4 <= v <= 90.0:  # also refuses nan
-            bad("--" + key.replace("_", "-"), v, "an angle in degrees from 0.0001 to 90")
-    size = getattr(args, "image_size", None)
-    if size is not None:
-        from calib_core.cameras.io import MAX_IMAGE_SIDE
-
-        if not all(1 <= v <= MAX_IMAGE_SIDE for v in size):
-            bad("--image-size", list(size), f"a width and a height from 1 to {MAX_IMAGE_SIDE} pixels")
-    port = getattr(args, "port", None)
-    if port is not None and not 0 <= port <= 65535:
-        bad("--port", port, "a port number from 0 to 65535")
-    max_pairs = getattr(args, "max_pairs", None)
-    if max_pairs is not None and not 1 <= max_pairs <= 10_000_000:
-        bad("--max-pairs", max_pairs, "a number of pairs from 1 to 10,000,000")
-
-
-def _check_serve_files(args: argparse.Namespace) -> None:
-    """``serve`` runs until stopped: a session it cannot restore, or an output it may not replace,
-    is reported now, in one line, rather than after the scene has loaded or at the first Export."""
-    if args.command != "serve":
-        return
-    from calib_core.io.atomic import output_target
-    from calib_core.io.session_file import check_session_file
-
-    if args.session is not None:
-        check_session_file(args.session)
-        output_target(args.session)
-    if args.output is not None:
-        output_target(args.output)
-
-
-def _remove_stale_temp_files(args: argparse.Namespace) -> None:
-    """Temporary files of interrupted writes, next to this command's outputs, from an earlier run."""
-    from calib_core.io.atomic import remove_stale_temp_files
-
-    for key in ("output", "session"):
-        path = getattr(args, key, None)
-        if path is None:
-            continue
-        path = Path(path)
-        if path.is_dir():
-            remove_stale_temp_files(path)
-        else:  # also what older versions left: .NAME.XXXXXXXX.tmp
-            remove_stale_temp_files(path.parent, legacy_for=[path.name])
-
-
-class _Noise:
-    """Collects what libraries say while a command runs: Python warnings and text written to fd 2.
-
-    C libraries (libpng inside OpenCV, for one) write straight to file descriptor 2, past
-    ``sys.stderr``; so fd 2 is pointed at a temporary file and read back afterwards.
-    """
-
-    def __init__(self) -> None:
-        self.lines: list[str] = []
-
-    def __enter__(self) -> "_Noise":
-        import tempfile
-        import warnings
-
-        self._warnings = warnings.catch_warnings(record=True)
-        self._records = self._warnings.__enter__()
-        warnings.simplefilter("default")
-        sys.stderr.flush()
-        self._saved_fd = os.dup(2)
-        self._file = tempfile.TemporaryFile()
-        os.dup2(self._file.fileno(), 2)
-        return self
-
-    def __exit__(self, *exc) -> None:
-        try:
-            sys.stderr.flush()
-        except (OSError, ValueError):
-            pass
-        os.dup2(self._saved_fd, 2)
-        os.close(self._saved_fd)
-        self._file.seek(0)
-        text = self._file.read(1 << 20).decode("utf-8", "backslashreplace")
-        self._file.close()
-        self._warnings.__exit__(*exc)
-        seen: set[str] = set()
-        for line in [f"{w.category.__name__}: {w.message}" for w in self._records] + text.splitlines():
-            line = " ".join(line.split())
-            if line and line not in seen:
-                seen.add(line)
-                self.lines.append(line)
-
-    def folded(self, limit: int = 300) -> str:
-        """The collected lines as a suffix of one error line (empty when nothing was said)."""
-        if not self.lines:
-            return ""
-        text = "; ".join(self.lines)
-        return f" [libraries said: {text if len(text) <= limit else text[: limit - 3] + '...'}]"
-
-
-def _error_line(exc: BaseException) -> tuple[str, int]:
-    """The one ``error:`` line and exit code for an exception a command raised."""
-    from calib_core.errors import CalibError
-
-    if isinstance(exc, CalibError):
-        return " ".join(str(exc).split()), EXIT_USAGE
-    if isinstance(exc, OSError):
-        where = exc.filename if exc.filename is not None else ""
-        return f"{where}: {exc.strerror or exc}" if where != "" else f"{exc.strerror or exc}", EXIT_USAGE
-    if isinstance(exc, RecursionError):
-        return "the input is nested too deeply to process", EXIT_USAGE
-    if isinstance(exc, MemoryError):
-        return "out of memory: the input is too large for this machine", EXIT_USAGE
-    return "", 1
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     for stream in (sys.stdout, sys.stderr):
         try:  # paths with undecodable bytes must not crash a print
@@ -645,11 +448,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = parser.parse_args(with_default_command(parser, argv))
     except SystemExit as exc:
         return int(exc.code or 0) if isinstance(exc.code, int) else EXIT_USAGE
-    noise = _Noise()
+    noise = Noise()
     try:
         check_args(args)
-        _check_serve_files(args)
-        _remove_stale_temp_files(args)
+        check_serve_files(args)
+        remove_stale_temp_files(args)
         if args.command == "serve":  # long-running: its warnings and logs go out live
             return int(args.func(args) or 0)
         with noise:
@@ -671,7 +474,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SystemExit:
         raise
     except BaseException as exc:  # noqa: BLE001 - one line unless --debug (lazrs panics are BaseExceptions)
-        message, code = _error_line(exc)
+        message, code = error_line(exc)
         if code == EXIT_USAGE:
             print(f"error: {message}{noise.folded()}", file=sys.stderr)
             return code
