@@ -25,12 +25,12 @@ import threading
 import time
 import zlib
 from pathlib import Path
-from typing import Any, Callable
+from typing import Callable
 
 import yaml
 
 from calib_core.errors import CalibError
-from calib_core.io.atomic import write_bytes_atomic
+from calib_core.io.atomic import fsync_folder, write_bytes_atomic
 from calib_core.io.yaml_files import read_yaml_mapping
 
 JOURNAL_SUFFIX = ".journal"
@@ -72,19 +72,6 @@ def decode_records(raw: bytes) -> list[tuple[int, dict]]:
         if isinstance(data, dict):
             out.append((seq, data))
     return out
-
-
-def _fsync_dir(path: Path) -> None:
-    try:
-        fd = os.open(path, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)
 
 
 class SessionStore:
@@ -205,7 +192,7 @@ class SessionStore:
                 os.close(fd)
                 raise OSError("the session journal is not a regular file")
             self._fd, self._bytes = fd, st.st_size
-            _fsync_dir(self.journal_path.parent)  # the journal's name survives a power cut too
+            fsync_folder(self.journal_path.parent)  # the journal's name survives a power cut too
         return self._fd
 
     def compact(self) -> None:

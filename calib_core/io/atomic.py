@@ -114,7 +114,7 @@ def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> None:
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, target)
-        _fsync_folder(target.parent)
+        fsync_folder(target.parent)
     except OSError as exc:
         _unlink_quietly(tmp)
         raise CalibError(f"{user}: cannot write: {_reason(exc)}") from None
@@ -129,7 +129,7 @@ def write_yaml_atomic(path: str | os.PathLike, data: Any) -> None:
     write_bytes_atomic(path, text.encode("utf-8"))
 
 
-def _fsync_folder(folder: Path) -> None:
+def fsync_folder(folder: Path) -> None:
     """Make the rename itself durable (a no-op where folders cannot be opened)."""
     try:
         fd = os.open(folder, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
