@@ -259,8 +259,7 @@ class AppDriver:
 
     def selection_drawn(self, key: str) -> int:
         """Number of selection-ring line segments drawn on image ``key`` (0: no selection shown there)."""
-        entry = self.app.nodes.drawn.get(f"/annot/selected/{key}")
-        return 0 if entry is None else len(entry[1][1])
+        return len(self.app.nodes.segments(f"/annot/selected/{key}"))
 
     @property
     def dropdown_value(self) -> str:
