@@ -177,3 +177,135 @@ def test_ten_pairs_through_the_loupes(tmp_path):
     assert min(ba_scales) >= 8.0
     assert min(loupe_px_scales) >= 8.0
     assert rot_err <= 0.5 and trans_err <= 0.05
+
+
+PJLAB = ROOT.parent / "shared" / "data" / "pjlab_opencalib_lidar2camera" / "auto_calib"
+PJLAB_PAIRS = ROOT / "real_data" / "pairs" / "auto_calib_pairs.yaml"
+PJLAB_SCREENSHOT = ROOT / "docs" / "img" / "loupes_auto_calib.png"
+N_REAL = 6
+
+
+def rough_extrinsic(T: np.ndarray, degrees: float = 2.0, metres: float = 0.20) -> np.ndarray:
+    """``T`` turned by ``degrees`` about a fixed oblique axis and shifted by ``metres`` (camera frame)."""
+    from scipy.spatial.transform import Rotation
+
+    axis = np.array([0.3, 1.0, 0.2]) / np.linalg.norm([0.3, 1.0, 0.2])
+    shift = np.array([1.0, -1.0, 0.5]) / np.linalg.norm([1.0, -1.0, 0.5])
+    out = np.eye(4)
+    out[:3, :3] = Rotation.from_rotvec(np.radians(degrees) * axis).as_matrix() @ T[:3, :3]
+    out[:3, 3] = T[:3, 3] + metres * shift
+    return out
+
+
+@pytest.mark.realdata
+@pytest.mark.skipif(not (PJLAB / "calib.pcd").is_file(), reason=f"real data not found at {PJLAB} (../shared/data)")
+@pytest.mark.skipif(not CHROMIUM.exists(), reason="/usr/bin/chromium is missing (apt-get install chromium); CI installs it")
+def test_six_pairs_on_the_real_scan_from_a_rough_extrinsic(tmp_path):
+    """PJLab auto_calib (64 x 1800 scan, 1920 x 1200 photo): 6 pairs at <= 4 actions each, every pick in a loupe.
+
+    The aimed cells and pixels are the committed pairs (real_data/pairs/auto_calib_pairs.yaml: foreground corners,
+    pixels projected with the published extrinsic).  The app starts from that extrinsic turned by 2 deg and
+    shifted by 20 cm.  A pair: a rough click on the full BA image (a few columns off), the cell in the BA loupe;
+    then, if the camera loupe (framed on the predicted pixel) does not show the corner, a rough click on the full
+    camera image; the pixel in the camera loupe.
+    """
+    import json
+
+    import yaml
+
+    sync_api = pytest.importorskip("playwright.sync_api", reason="the playwright package is not installed")
+    from app.server import CalibrationApp
+    from app.testing import AppDriver
+    from calib_core.pairs import load_pairs_yaml
+
+    t_start = time.monotonic()
+    doc = json.loads((PJLAB / "top_center_lidar-to-center_camera-extrinsic.json").read_text())
+    published = np.array(doc["top_center_lidar-to-center_camera-extrinsic"]["param"]["sensor_calib"]["data"], float)
+    rough = rough_extrinsic(published)
+    rough_path = tmp_path / "rough.yaml"
+    rough_path.write_text(yaml.safe_dump({"T_camera_lidar": {"matrix": rough.tolist()}}))
+    pairs = load_pairs_yaml(PJLAB_PAIRS)[:N_REAL]
+    app = CalibrationApp(PJLAB / "calib.pcd", PJLAB / "calib.png", PJLAB / "center_camera-intrinsic.json",
+                         session_path=tmp_path / "session.yaml", port=free_port(), initial_extrinsics_path=rough_path)
+    driver = AppDriver(app)
+    actions = 0
+    log: list[str] = []
+    cell_scales: list[float] = []
+    px_scales: list[float] = []
+    try:
+        np.testing.assert_allclose(app.initial_T_camera_lidar, rough, atol=1e-9)
+        with sync_api.sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS)
+            page = browser.new_page(viewport=VIEWPORT)
+            page.goto(app.url)
+            cid = wait_for(lambda: app.client_ids(), "the tab to connect")[0]
+            wait_for(lambda: app.view_settled(cid), "the annotation view to be set")
+            notice = page.locator(".mantine-Notification-root", has_text="Software WebGL")
+            notice.first.wait_for(timeout=TIMEOUT_S * 1000)
+            notice.first.locator("button").click()
+            notice.first.wait_for(state="detached", timeout=TIMEOUT_S * 1000)
+            box = page.locator("canvas").first.bounding_box()
+
+            def screen(target: str, uv) -> tuple[float, float]:
+                fx, fy = app.page_position(cid, target, uv)
+                assert 0.0 < fx < 1.0 and 0.0 < fy < 1.0, f"{target} {uv} is off screen"
+                return box["x"] + fx * box["width"], box["y"] + fy * box["height"]
+
+            def scale(target: str, uv) -> float:
+                a, b = np.array(screen(target, uv)), np.array(screen(target, (uv[0] + 1.0, uv[1])))
+                return float(np.hypot(*(b - a)))
+
+            def click(target: str, uv) -> None:
+                nonlocal actions
+                before = app.state.version
+                page.mouse.click(*screen(target, uv))
+                actions += 1
+                wait_for(lambda: app.state.version > before, f"the click on {target} to register")
+                assert driver.wait_idle(TIMEOUT_S)
+
+            def drawn() -> bool:
+                x, y = screen("camera", (960.0, 600.0))
+                shot = page.screenshot(clip={"x": x - 2, "y": y - 2, "width": 4, "height": 4})
+                rgb = np.asarray(Image.open(io.BytesIO(shot)).convert("RGB"), dtype=float).reshape(-1, 3)
+                return bool(np.abs(rgb.mean(axis=0) - 238.0).max() >= 12)
+
+            wait_for(drawn, "the page to draw the images", interval=0.2)
+            for k, pair in enumerate(pairs):
+                row, col = pair.laser_rc
+                key = "diag_pos45"
+                click(key, (col - 4, row + 1))  # rough: the full BA image shows about 0.3 px per column
+                s_cell = scale("loupe_ba", (col, row))
+                click("loupe_ba", (col, row))
+                n_actions = 2
+                if driver.loupe_display_pixel("camera", pair.pixel) is None:
+                    click("camera", (pair.pixel[0] + 6.0, pair.pixel[1] - 4.0))  # rough, to move the camera loupe
+                    n_actions += 1
+                s_px = scale("loupe_camera", pair.pixel)
+                click("loupe_camera", pair.pixel)
+                n_actions += 1
+                pick = app.state.picks[-1]
+                assert len(app.state.picks) == k + 1 and pick.complete
+                assert pick.laser_rc == (row, col)  # the aimed cell exactly (0 cells off)
+                assert np.hypot(*np.subtract(pick.pixel, pair.pixel)) < 0.05
+                cell_scales.append(s_cell)
+                px_scales.append(s_px)
+                log.append(f"pair {k + 1}: {n_actions} actions, BA loupe {s_cell:.1f} px/cell, "
+                           f"camera loupe {s_px:.2f} px/image px")
+            wait_for(lambda: app.result is not None and app.result.n_pairs == N_REAL and driver.wait_idle(),
+                     "the solve of the 6 pairs")
+            notes = page.locator(".mantine-Notification-root")
+            for _ in range(notes.count()):
+                try:
+                    notes.first.locator("button").first.click(timeout=1000)
+                except sync_api.TimeoutError:
+                    pass
+            size = save_small_png(page.screenshot(), PJLAB_SCREENSHOT)
+            browser.close()
+    finally:
+        app.stop()
+    print("\n" + "\n".join(log))
+    print(f"PJLab loupes e2e: {N_REAL} pairs in {actions} actions ({actions / N_REAL:.2f} per pair); BA loupe "
+          f"{min(cell_scales):.1f}-{max(cell_scales):.1f} px/cell; camera loupe {min(px_scales):.2f}-"
+          f"{max(px_scales):.2f} px/image px; screenshot {size / 1e3:.0f} kB; run time {time.monotonic() - t_start:.1f} s")
+    assert actions / N_REAL <= 4.0
+    assert min(cell_scales) >= 6.0 and min(px_scales) >= 2.0
