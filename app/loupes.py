@@ -156,6 +156,10 @@ class Loupes:
                 self.camera_crop = self._make_camera_crop(*c.center, c.cov_px2)
             self._show(kind)
 
+    def texture(self, kind: str) -> np.ndarray:
+        """The loupe's current texture (what the page shows)."""
+        return self._ba_texture() if kind == "ba" else self._camera_texture()
+
     def slot(self, kind: str) -> ImageSlot:
         """The loupe's image slot: its pixels are crop cells (BA) or original-image pixels (camera), offset by the crop."""
         return self._slots[kind]
@@ -314,7 +318,7 @@ class Loupes:
 
     def _ba_texture(self) -> np.ndarray:
         c = self.ba_crop
-        gray = self.app.ba_display(c.key)
+        gray = self.app.loupe_image(c.key)[0]
         n_rows, n_cols = gray.shape
         rows = c.row0 + np.arange(c.n_rows)
         cols = c.col0 + np.arange(c.n_cols)
@@ -362,13 +366,14 @@ class Loupes:
         handle.render_height = rh
         handle.position = slot.center
 
-    def _title(self, kind: str) -> str:
+    def title(self, kind: str) -> str:
+        """The loupe's title as the page shows it."""
         if kind == "ba":
             c = self.ba_crop
             row, col = c.center
             rng = self.app.depth.range_m[row, col]
             shown = f"{rng:.2f} m" if self.app.depth.valid[row, col] and np.isfinite(rng) else "no return"
-            name = self.app.ba_title(c.key)
+            name = self.app.loupe_image(c.key)[1]
             return f"{name} loupe: row {row}, column {col}, range {shown} ({c.n_cols} columns shown)"
         c = self.camera_crop
         return f"Camera loupe (original image): ({c.center[0]:.1f}, {c.center[1]:.1f}), {c.n} x {c.n} px shown"
@@ -379,7 +384,7 @@ class Loupes:
         with app.server.atomic():
             self._handles[kind].image = self._ba_texture() if kind == "ba" else self._camera_texture()
             self._place(kind)
-            self._titles[kind].text = self._title(kind)
+            self._titles[kind].text = self.title(kind)
             self._draw_marks(kind)
 
     def refresh(self) -> None:

@@ -135,3 +135,56 @@ def test_initial_extrinsics_upload(tmp_path):
         np.testing.assert_allclose(app.pose(), truth, atol=1e-12)
     finally:
         app.stop()
+
+
+def test_loupe_shows_range_and_contrast_and_the_edge_overlay_stays_in_the_fisheye_circle(tmp_path):
+    import yaml
+
+    from app.testing import AppDriver
+    from calib_core.pairs import load_pairs_yaml
+
+    session = tmp_path / "session.yaml"
+    session.write_text(yaml.safe_dump({"format": "ba-calib-session", "version": 1, "pairs": [],
+                                       "view": {"panorama": False}}))
+    from app.server import CalibrationApp
+
+    app = CalibrationApp(SAMPLE / "scan.npz", SAMPLE / "image.png", SAMPLE / "camera.yaml", session_path=session,
+                         port=0)
+    try:
+        d = AppDriver(app)
+        assert "Range" in app.loupe_sources()
+        app.loupes.frame_ba("horizontal", 90, 300)
+        k = app.loupes.texture("ba").shape[1] // app.loupes.ba_crop.n_cols  # texels per cell
+        ba_centre = d.loupe_texture("ba")[::k, ::k]
+        assert d.choose_loupe_source("Range") == []
+        rng = d.loupe_texture("ba")[::k, ::k]
+        c = app.loupes.ba_crop
+        depth = app.depth.range_m[c.row0:c.row0 + c.n_rows, c.col0:c.col0 + c.n_cols]
+        valid = app.depth.valid[c.row0:c.row0 + c.n_rows, c.col0:c.col0 + c.n_cols]
+        # Nearer is darker: the grey order follows the range order (log stretch is monotone).
+        order = np.argsort(depth[valid])
+        assert np.all(np.diff(rng[valid][order].astype(int)) >= 0) and not np.array_equal(rng, ba_centre)
+        assert "Range loupe" in app.loupes.title("ba")
+        # Contrast 2 spreads the grey levels of the BA panes about their median.
+        before = app.ba_display("horizontal").astype(float)
+        assert d.set_slider("Laser contrast", 2.0) == []
+        after = app.ba_display("horizontal").astype(float)
+        ok = before > 0
+        assert after[ok].std() > 1.3 * before[ok].std() and np.all(after[~ok] == 0)
+
+        app.state.import_pairs(load_pairs_yaml(SAMPLE / "pairs.yaml"))
+        assert d.wait_idle()
+        pts, cols = d.drawn_points("/annot/overlay/edges")
+        assert len(pts) > 100
+        uv = np.round(app.slots["raw"].pixel_from_world(pts)).astype(int)
+        lit = app.image.max(axis=2) > 0  # the fisheye circle, from the image itself
+        assert lit[uv[:, 1], uv[:, 0]].all()
+        # Opacity 0.5: each point's colour is halfway between the edge colour and the image under it.
+        assert d.set_slider("BA-edge opacity", 0.5) == []
+        pts, cols = d.drawn_points("/annot/overlay/edges")
+        uv = np.round(app.slots["raw"].pixel_from_world(pts)).astype(int)
+        expected = 0.5 * np.array([0, 190, 255]) + 0.5 * app.image[uv[:, 1], uv[:, 0]]
+        assert np.abs(cols.astype(float) - expected).max() <= 1.0
+        assert d.set_slider("BA-edge opacity", 0.0) == [] and len(d.drawn_points("/annot/overlay/edges")[0]) == 0
+    finally:
+        app.stop()
