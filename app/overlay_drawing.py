@@ -127,8 +127,8 @@ class OverlayDrawing:
                 uv, ok = self._display_from_camera_points(bundle.edges_camera)
                 # Only where the camera sees (inside a fisheye circle); blended with the image under each point.
                 raw, ok_raw = self.camera.project(bundle.edges_camera)
-                ij = np.clip(np.round(np.nan_to_num(raw)).astype(np.int64), 0,
-                             [self.camera.width - 1, self.camera.height - 1])
+                ij = np.clip(np.nan_to_num(np.round(raw), nan=0.0, posinf=0.0, neginf=0.0), 0,
+                             [self.camera.width - 1, self.camera.height - 1]).astype(np.int64)
                 ok &= ok_raw & self.scene_data.image_valid[ij[:, 1], ij[:, 0]]
                 edge_world = slot.world_from_pixel(uv[ok], z_offset=-0.004)
                 under = self.image[ij[ok, 1], ij[ok, 0]].astype(np.float64)

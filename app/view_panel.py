@@ -315,6 +315,11 @@ class ViewPanel:
         """Ids of the connected browser tabs."""
         return sorted(self.server.get_clients())
 
+    def view_set_time(self, client_id: int) -> float:
+        """``time.time()`` when this app last set the tab's camera (0.0: never)."""
+        target = self._view_target.get(client_id)
+        return 0.0 if target is None else float(target[2])
+
     def view_settled(self, client_id: int) -> bool:
         """True once the tab reported a camera at the pose this app last set."""
         client = self.server.get_clients().get(client_id)
