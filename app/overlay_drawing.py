@@ -18,24 +18,11 @@ class OverlayDrawing:
 
     def _display_from_pixels(self, pixels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Display coordinates (visible camera view) of original-image pixels."""
-        pixels = np.asarray(pixels, dtype=np.float64).reshape(-1, 2)
-        if len(pixels) == 0:
-            return pixels, np.zeros(0, bool)
-        if not self._use_panorama:
-            return pixels, np.isfinite(pixels).all(axis=1)
-        return self.panorama.from_camera_pixels(pixels)
+        return self.camera_view.display_from_pixels(pixels)
 
     def _display_from_camera_points(self, points_camera: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Display coordinates (visible camera view) of points in the camera frame."""
-        pts = np.asarray(points_camera, dtype=np.float64).reshape(-1, 3)
-        if len(pts) == 0:
-            return np.empty((0, 2)), np.zeros(0, bool)
-        if self._use_panorama:
-            uv, ok = self.panorama.project(pts)
-            # Only directions the camera model can see (the panorama is wider).
-            ok &= self.camera.project(pts)[1]
-            return uv, ok
-        return self.camera.project(pts)
+        return self.camera_view.display_from_camera_points(points_camera)
 
     def _refresh_scene(self) -> None:
         """Redraw markers, labels, selection and the reprojection overlays (only what changed is sent)."""
@@ -102,7 +89,7 @@ class OverlayDrawing:
         slot = self._camera_slot()
         bundle = self._bundle
         # Skipped when neither the solve, the view nor the picks it colours changed (e.g. a click on a BA image).
-        inputs = (slot, self._use_panorama, self._show_reprojection, self._show_edges, self._edge_opacity,
+        inputs = (slot, self.camera_view.key, self._show_reprojection, self._show_edges, self._edge_opacity,
                   () if bundle is None else tuple(picks[i].color if i in picks else None for i in bundle.pick_ids),
                   tuple((pid, uv.tobytes(), picks[pid].color) for pid, uv in predictions))
         if self._overlay_inputs is not None and self._overlay_inputs[0] is bundle and self._overlay_inputs[1] == inputs:
