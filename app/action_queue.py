@@ -3,6 +3,7 @@ turns a CalibError into a notification for the tab that caused it (the app keeps
 
 from __future__ import annotations
 
+import time
 import traceback
 from typing import Any, Callable
 
@@ -14,7 +15,12 @@ from .ui_common import _Action
 
 
 class ActionQueue:
-    """Part of :class:`app.server.CalibrationApp` (a mixin: it uses the app's attributes)."""
+    """Part of :class:`app.server.CalibrationApp` (a mixin: it uses the app's attributes).
+
+    ``last_action_timing`` is ``(wall seconds, thread CPU seconds)`` of the last applied action (None before).
+    """
+
+    last_action_timing: tuple[float, float] | None = None
 
     def _guard(self, fn: Callable) -> Callable:
         """Wrap a callback: queue it for the ordered action worker.
@@ -40,6 +46,7 @@ class ActionQueue:
                 if item is None:
                     return
                 fn, action = item
+                t0, c0 = time.perf_counter(), time.thread_time()
                 try:
                     fn(action)
                 except CalibError as exc:
@@ -48,6 +55,9 @@ class ActionQueue:
                     traceback.print_exc()
                     self._notify(action.client, "Internal error", f"{type(exc).__name__}: {exc}")
             finally:
+                if item is not None:
+                    # The worker's own share: wall time, and CPU time of this thread (immune to other processes).
+                    self.last_action_timing = (time.perf_counter() - t0, time.thread_time() - c0)
                 self._actions.task_done()
 
     def _on_save_error(self, message: str) -> None:

@@ -89,16 +89,15 @@ class OverlayDrawing:
         slot = self._camera_slot()
         bundle = self._bundle
         # Skipped when neither the solve, the view nor the picks it colours changed (e.g. a click on a BA image).
+        self._draw_predictions(slot, predictions)  # cheap, changes with every BA click
         inputs = (slot, self.camera_view.key, self._show_reprojection, self._show_edges, self._edge_opacity,
-                  () if bundle is None else tuple(picks[i].color if i in picks else None for i in bundle.pick_ids),
-                  tuple((pid, uv.tobytes(), picks[pid].color) for pid, uv in predictions))
+                  () if bundle is None else tuple(picks[i].color if i in picks else None for i in bundle.pick_ids))
         if self._overlay_inputs is not None and self._overlay_inputs[0] is bundle and self._overlay_inputs[1] == inputs:
             return
         self._overlay_inputs = (bundle, inputs)
         reproj_pts, reproj_cols = np.empty((0, 3)), np.empty((0, 3), np.uint8)
         segs = np.empty((0, 2, 3))
         edge_world, edge_cols = np.empty((0, 3)), np.empty((0, 3), np.uint8)
-        pred_segs, pred_cols = [], []
         if bundle is not None:
             if self._show_reprojection and len(bundle.pick_ids):
                 clicked, ok_c = self._display_from_pixels(bundle.pixels)
@@ -121,6 +120,15 @@ class OverlayDrawing:
                 under = self.image[ij[ok, 1], ij[ok, 0]].astype(np.float64)
                 a = self._edge_opacity
                 edge_cols = np.round(a * np.array([0.0, 190.0, 255.0]) + (1.0 - a) * under).astype(np.uint8)
+        self.nodes.points("/annot/overlay/reprojected", reproj_pts, reproj_cols, MARKER_SIZE * 0.55, shape="diamond")
+        self.nodes.lines("/annot/overlay/residuals", segs, np.full(segs.shape, (255, 230, 0), np.uint8), thickness=2.0)
+        # At least EDGE_MIN_SIZE: one pixel of a 1920 px image is too small to see in the full view.
+        self.nodes.points("/annot/overlay/edges", edge_world, edge_cols, max(slot.units_per_px * 1.6, EDGE_MIN_SIZE),
+                         shape="square")
+
+    def _draw_predictions(self, slot: ImageSlot, predictions: list[tuple[int, np.ndarray]]) -> None:
+        """Predicted pixels of pending laser picks on the camera view."""
+        pred_segs, pred_cols = [], []
         # Where the pose (solve or imported) predicts pending laser picks: a hollow ring with a gapped cross,
         # white on a black halo, so it stands out on any background and leaves the corner itself visible.
         for pid, uv in predictions:
@@ -132,11 +140,6 @@ class OverlayDrawing:
                 pred_segs.append(np.stack([c - 1.8 * r * d, c - 0.45 * r * d]))
                 pred_segs.append(np.stack([c + 0.45 * r * d, c + 1.8 * r * d]))
             pred_cols += [(255, 255, 255)] * (len(ring) + 4)
-        self.nodes.points("/annot/overlay/reprojected", reproj_pts, reproj_cols, MARKER_SIZE * 0.55, shape="diamond")
-        self.nodes.lines("/annot/overlay/residuals", segs, np.full(segs.shape, (255, 230, 0), np.uint8), thickness=2.0)
-        # At least EDGE_MIN_SIZE: one pixel of a 1920 px image is too small to see in the full view.
-        self.nodes.points("/annot/overlay/edges", edge_world, edge_cols, max(slot.units_per_px * 1.6, EDGE_MIN_SIZE),
-                         shape="square")
         pred = np.array(pred_segs).reshape(-1, 2, 3)
         self.nodes.lines("/annot/overlay/predicted_halo", pred + [0.0, 0.0, 0.001], np.zeros(pred.shape, np.uint8),
                          thickness=5.0)

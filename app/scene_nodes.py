@@ -2,9 +2,14 @@
 
 from __future__ import annotations
 
+import itertools
+import threading
 from typing import Any
 
 import numpy as np
+
+#: Hidden labels kept ready: a new pick then shows its numbers without creating scene nodes on the click path.
+LABEL_POOL = 48
 
 
 #: Where padding goes: behind the annotation backdrop (z = 0.5), seen by no view.
@@ -23,14 +28,35 @@ class SceneNodes:
     def __init__(self, scene: Any) -> None:
         self.scene = scene
         self.drawn: dict[str, tuple[Any, tuple]] = {}
+        self._label_pool: list[Any] = []
+        self._pool_ids = itertools.count()
+        self._refilling = threading.Lock()
+
+    def fill_label_pool(self, n: int = LABEL_POOL) -> None:
+        """Create hidden labels until ``n`` are ready (returns at once if another thread is at it)."""
+        if not self._refilling.acquire(blocking=False):
+            return
+        try:
+            while len(self._label_pool) < n:
+                self._label_pool.append(self.scene.add_label(
+                    f"/annot/label_pool/{next(self._pool_ids)}", "", position=HIDDEN, anchor="bottom-left",
+                    font_screen_scale=0.8, visible=False))
+        finally:
+            self._refilling.release()
 
     def label_names(self) -> list[str]:
         """Names of the labels drawn now."""
         return [n for n, (_, spec) in self.drawn.items() if spec[0] == "label"]
 
     def remove(self, name: str) -> None:
-        if self.drawn.pop(name, None) is not None:
-            self.scene.remove_by_name(name)
+        entry = self.drawn.pop(name, None)
+        if entry is None:
+            return
+        if entry[1][0] == "label":  # back to the pool, hidden
+            entry[0].visible = False
+            self._label_pool.append(entry[0])
+        else:
+            entry[0].remove()
 
     def points(self, name: str, points: np.ndarray, colors, size: float, shape: str = "circle") -> None:
         """Show ``points (N, 3)`` (world) as node ``name``; empty removes it.  Only changes are sent."""
@@ -116,5 +142,16 @@ class SceneNodes:
             if old_pos != pos:
                 handle.position = pos
         else:
-            handle = self.scene.add_label(name, text, position=pos, anchor="bottom-left", font_screen_scale=0.8)
+            try:
+                handle = self._label_pool.pop()
+            except IndexError:
+                handle = None
+            if handle is None:
+                handle = self.scene.add_label(name, text, position=pos, anchor="bottom-left", font_screen_scale=0.8)
+            else:
+                handle.text = text
+                handle.position = pos
+                handle.visible = True
+            if len(self._label_pool) < LABEL_POOL // 4:  # top up off the click path
+                threading.Thread(target=self.fill_label_pool, name="ba-calib-labels", daemon=True).start()
         self.drawn[name] = (handle, ("label", text, pos))

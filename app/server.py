@@ -207,6 +207,7 @@ class CalibrationApp(PairsPanel, CalibrationPanel, ViewPanel, ExportPanel, LiveS
         self.url = f"http://{shown_host}:{self.port}{query}"
         # Redraws diff against what the scene shows, so a click only sends the nodes it changed.
         self.nodes = SceneNodes(self.server.scene)
+        self.nodes.fill_label_pool()
         try:
             self._build_scene()
             self._build_gui()

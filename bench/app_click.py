@@ -10,7 +10,10 @@ A real :class:`app.server.CalibrationApp` (viser on a free local port, no browse
   new solve shown (errors, table, 2-D overlays: :meth:`CalibrationApp.last_click_to_update`).
 
 Each action's time is from the handler's call to the action applied (the page would show it).  The target
-is <= 20 ms per action.  The machine is shared: the medians are printed, with the minimum.
+is <= 20 ms per action.  The machine is shared: the wall-time medians are printed, with the minimum, and
+beside them CPU times, which other processes' load hardly changes: the click handler's own thread
+(``app.last_action_timing``; the camera click's solve runs in the solver thread after it) and the whole
+server process (all threads, including the live solve and the follow-up projection for predictions).
 """
 
 from __future__ import annotations
@@ -35,6 +38,8 @@ def run(reps: int = 12) -> dict[str, list[float]]:
     scene = load_sample(sample)
     pairs = simulate_pairs(scene, 4 + reps, np.random.default_rng(1), pixel_noise_px=0.0)
     times: dict[str, list[float]] = {"BA full click": [], "BA loupe click": [], "camera loupe click (to solve shown)": []}
+    cpu: dict[str, list[float]] = {k: [] for k in times}
+    worker: dict[str, list[float]] = {k: [] for k in times}  # the action worker's own thread CPU
     with tempfile.TemporaryDirectory() as tmp:
         app = CalibrationApp(sample / "scan.npz", sample / "image.png", sample / "camera.yaml",
                              session_path=Path(tmp) / "session.yaml", port=0)
@@ -43,41 +48,53 @@ def run(reps: int = 12) -> dict[str, list[float]]:
             for k, pair in enumerate(pairs):
                 row, col = pair.laser_rc
                 key = app.ba_keys[k % len(app.ba_keys)]
-                t0 = time.perf_counter()
+                c0, t0 = time.process_time(), time.perf_counter()
                 d.click_cell(key, min(row + 2, app.depth.shape[0] - 1), col - 3)
-                t1 = time.perf_counter()
+                c1, t1 = time.process_time(), time.perf_counter()
+                w1 = app.last_action_timing[1]
                 d.click_loupe_cell(row, col)
-                t2 = time.perf_counter()
+                c2, t2 = time.process_time(), time.perf_counter()
+                w2 = app.last_action_timing[1]
                 if app.pose() is None:
                     d.click_camera(*pair.pixel)
                     d.wait_idle()
                     continue
                 d.click_loupe_camera(*pair.pixel)
                 d.wait_idle()
+                c3 = time.process_time()
+                worker["BA full click"].append(w1)
+                worker["BA loupe click"].append(w2)
+                worker["camera loupe click (to solve shown)"].append(app.last_action_timing[1])
+                cpu["BA full click"].append(c1 - c0)
+                cpu["BA loupe click"].append(c2 - c1)
+                cpu["camera loupe click (to solve shown)"].append(c3 - c2)  # includes the cloud worker's follow-up
                 times["BA full click"].append(t1 - t0)
                 times["BA loupe click"].append(t2 - t1)
                 times["camera loupe click (to solve shown)"].append(app.last_click_to_update())
         finally:
             app.stop()
-    return times
+    return times, cpu, worker
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--reps", type=int, default=12, help="pairs timed after the first 4")
     args = parser.parse_args()
-    times = run(args.reps)
+    times, cpu, worker = run(args.reps)
     import os
 
     print(f"load average (1 min) {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores (shared machine: times scale with it)")
     print(f"click-to-update on the sample through the loupes (target <= {1e3 * TARGET_S:.0f} ms server-side):")
-    worst = 0.0
+    worst, worst_cpu = 0.0, 0.0
     for name, ts in times.items():
         med = float(np.median(ts))
         worst = max(worst, med)
+        worst_cpu = max(worst_cpu, float(np.median(worker[name])))
         print(f"  {name:38s} median {1e3 * med:6.1f} ms, min {1e3 * min(ts):6.1f} ms, max {1e3 * max(ts):6.1f} ms "
-              f"({len(ts)} clicks)")
-    print("PASS" if worst <= TARGET_S else "FAIL", f"(worst median {1e3 * worst:.1f} ms)")
+              f"({len(ts)} clicks); CPU median: click handler {1e3 * float(np.median(worker[name])):5.1f} ms, "
+              f"whole process {1e3 * float(np.median(cpu[name])):5.1f} ms")
+    print(f"wall time: {'PASS' if worst <= TARGET_S else 'FAIL'} (worst median {1e3 * worst:.1f} ms); click handler CPU: "
+          f"{'PASS' if worst_cpu <= TARGET_S else 'FAIL'} (worst median {1e3 * worst_cpu:.1f} ms)")
     return 0
 
 
