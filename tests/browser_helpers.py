@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 import socket
 import time
 from pathlib import Path
@@ -39,3 +40,18 @@ def wait_for(condition, what: str, timeout: float = TIMEOUT_S, interval: float =
         if time.monotonic() > deadline:
             pytest.fail(f"timed out after {timeout:.0f} s waiting for {what}")
         time.sleep(interval)
+
+
+def save_small_png(png: bytes, path: Path, max_bytes: int = 300_000) -> int:
+    """Save a screenshot as a palette PNG (under ``max_bytes`` when 64 colours allow); returns its size in bytes."""
+    from PIL import Image
+
+    img = Image.open(io.BytesIO(png)).convert("RGB")
+    for colors in (256, 128, 64):
+        buf = io.BytesIO()
+        img.quantize(colors=colors, method=Image.Quantize.MEDIANCUT).save(buf, format="PNG", optimize=True)
+        if buf.tell() < max_bytes:
+            break
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_bytes(buf.getvalue())
+    return len(buf.getvalue())

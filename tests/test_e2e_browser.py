@@ -24,7 +24,7 @@ from calib_core.io.extrinsics import load_extrinsics_yaml
 from calib_core.synthetic import load_sample, simulate_pairs
 from calib_core.transforms import rotation_angle_deg
 
-from browser_helpers import CHROMIUM, CHROMIUM_ARGS, TIMEOUT_S, free_port, wait_for
+from browser_helpers import CHROMIUM, CHROMIUM_ARGS, TIMEOUT_S, free_port, save_small_png, wait_for
 
 pytestmark = pytest.mark.browser
 
@@ -186,7 +186,7 @@ def test_annotate_sample_in_headless_chromium(tmp_path):
             wait_for(close_notifications, "notifications to close")
             page.get_by_text("Calibration", exact=True).first.evaluate("e => e.scrollIntoView({block: 'start'})")
             SCREENSHOT.parent.mkdir(exist_ok=True)
-            page.screenshot(path=str(SCREENSHOT))
+            save_small_png(page.screenshot(), SCREENSHOT)
             browser.close()
     finally:
         app.stop()

@@ -29,7 +29,7 @@ from calib_core.io.extrinsics import load_extrinsics_yaml
 from calib_core.synthetic import load_sample, simulate_pairs
 from calib_core.transforms import rotation_angle_deg
 
-from browser_helpers import CHROMIUM, CHROMIUM_ARGS, TIMEOUT_S, free_port, wait_for
+from browser_helpers import CHROMIUM, CHROMIUM_ARGS, TIMEOUT_S, free_port, save_small_png, wait_for
 
 pytestmark = pytest.mark.browser
 
@@ -39,19 +39,6 @@ SCREENSHOT = ROOT / "docs" / "img" / "loupes_sample.png"
 N_PAIRS = 10
 VIEWPORT = {"width": 1400, "height": 900}
 ROUGH_OFFSET = (2, -3)  # (rows, cols) of the full-image BA click from the wanted cell
-
-
-def save_small_png(png: bytes, path: Path, max_bytes: int = 300_000) -> int:
-    """Save a screenshot as a palette PNG (under ``max_bytes``); returns its size."""
-    img = Image.open(io.BytesIO(png)).convert("RGB")
-    for colors in (256, 128, 64):
-        buf = io.BytesIO()
-        img.quantize(colors=colors, method=Image.Quantize.MEDIANCUT).save(buf, format="PNG", optimize=True)
-        if buf.tell() < max_bytes:
-            break
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_bytes(buf.getvalue())
-    return len(buf.getvalue())
 
 
 @pytest.mark.skipif(not CHROMIUM.exists(), reason="/usr/bin/chromium is missing (apt-get install chromium); CI installs it")
