@@ -188,3 +188,21 @@ def test_loupe_shows_range_and_contrast_and_the_edge_overlay_stays_in_the_fishey
         assert d.set_slider("BA-edge opacity", 0.0) == [] and len(d.drawn_points("/annot/overlay/edges")[0]) == 0
     finally:
         app.stop()
+
+
+def test_bad_initial_extrinsics_and_bad_frames_are_one_line_errors(tmp_path):
+    from calib_core.errors import CalibError
+
+    with pytest.raises(CalibError, match="extrinsics file not found") as info:
+        make_app(tmp_path, initial_extrinsics_path=tmp_path / "missing.yaml")
+    assert "\n" not in str(info.value)
+    app = make_app(tmp_path)
+    try:
+        with pytest.raises(CalibError, match="no BA image 'nope'"):
+            app.loupes.frame_ba("nope", 1, 1)
+        with pytest.raises(CalibError, match="outside the 180 x 720 scan"):
+            app.loupes.frame_ba("horizontal", 180, 0)
+        with pytest.raises(CalibError, match="2x2 covariance"):
+            app.loupes.frame_camera(10.0, 10.0, cov_px2=np.eye(3))
+    finally:
+        app.stop()
