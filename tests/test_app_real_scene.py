@@ -72,6 +72,16 @@ def test_facing_the_camera_from_an_imported_extrinsic_before_any_pair(tmp_path):
             np.array([pair.laser_rc]))))
         assert ok[0]
         np.testing.assert_allclose(driver.loupe_view("camera")["center"], truth[0], atol=1e-6)
+        # The scan has intensity: the BA loupe can show it, brighter where the sensor reported more.
+        assert driver.choose_loupe_source("Intensity") == []
+        c = app.loupes.ba_crop
+        k = driver.loupe_texture("ba").shape[1] // c.n_cols
+        shown = driver.loupe_texture("ba")[::k, ::k].astype(int)
+        rows = np.clip(np.arange(c.row0, c.row0 + c.n_rows), 0, 63)
+        values = app.depth.meta["field_images"]["intensity"][rows][:, np.arange(c.col0, c.col0 + c.n_cols) % 1800]
+        ok = np.isfinite(values) & (np.arange(c.row0, c.row0 + c.n_rows) >= 0)[:, None]
+        order = np.argsort(values[ok], kind="stable")
+        assert ok.sum() > 50 and np.all(np.diff(shown[ok][order]) >= 0)
     finally:
         app.stop()
 
