@@ -173,7 +173,8 @@ class GuidePanel:
                 self._submitted = key
                 if self._active(len(pairs)):
                     self._busy = True
-                    self._want_next = self._guiding  # after a pair: frame the next proposal when it is in
+                    # A pair was finished: frame the next proposal when it is in (not after e.g. an undo).
+                    self._want_next = self._guiding and state.pending() is None
                     self._job_no += 1
                     self._worker.submit(self._job_no, (key, pairs, T0, list(self._skipped), list(self._dropped),
                                                        self._auto))
@@ -213,7 +214,11 @@ class GuidePanel:
             key, props, auto_pairs = result
             self._busy = False
             self._error = None
-            self._proposals, self._index, self._shown_key = props, 0, key
+            # A guided half pick still waiting for its click (e.g. after an undo) keeps its proposal shown.
+            half = self._guided_half()
+            cells = [tuple(p.laser_rc) for p in props]
+            index = cells.index(half.laser_rc) if half is not None and half.laser_rc in cells else 0
+            self._proposals, self._index, self._shown_key = props, index, key
             self._auto_pairs = auto_pairs
             self._pending_posts += 1
         self._post(self._advance)

@@ -1,0 +1,171 @@
+"""Guided picking in the app (issue 9), driven through :class:`app.testing.AppDriver` on the committed sample.
+
+The simulated person clicks, for each proposal, its true projection -- the
+proposed cell's laser point projected with the sample's ground-truth
+extrinsic (sample_data/ground_truth.yaml) -- plus 0.3 px Gaussian noise per
+axis, the click noise issue 9 assumes for a magnified, known target.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from calib_core.errors import CalibError
+from calib_core.io.extrinsics import load_extrinsics_yaml
+from calib_core.synthetic import load_sample, simulate_pairs
+from calib_core.transforms import rotation_angle_deg, transform_points
+
+from app.server import CalibrationApp
+from app.state import AnnotationState
+from app.testing import AppDriver
+
+SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
+N_GUIDED = 10
+CLICK_SIGMA_PX = 0.3
+# Issue 9's Cramer-Rao bound for the sample at 10 pairs of 0.3 px clicks (whole-cell laser picks): 0.22 deg and
+# 0.83 cm.  Here there are 14 pairs (4 clicks at true pixels + 10 guided), so the bound is no larger; one run's
+# error exceeds twice the bound's RMS with < 1 % probability (chi-square, 3 dof: P(> 12) = 0.7 %).
+MAX_ROT_DEG = 2 * 0.22
+MAX_TRANS_M = 2 * 0.0083
+
+
+def pose_error(T, truth) -> tuple[float, float]:
+    return float(rotation_angle_deg(T[:3, :3], truth[:3, :3])), float(np.linalg.norm(T[:3, 3] - truth[:3, 3]))
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return load_sample(SAMPLE)
+
+
+@pytest.fixture(scope="module")
+def truth():
+    return load_extrinsics_yaml(SAMPLE / "ground_truth.yaml")["T_camera_lidar"]
+
+
+@pytest.fixture
+def app(tmp_path):
+    a = CalibrationApp(SAMPLE / "scan.npz", SAMPLE / "image.png", SAMPLE / "camera.yaml",
+                       session_path=tmp_path / "session.yaml", port=0)
+    yield a
+    a.stop()
+
+
+def true_click(scene, truth, proposal, rng) -> np.ndarray:
+    """The simulated person's click: the proposed laser point's true projection + 0.3 px noise."""
+    pix, ok = scene.camera.project(transform_points(truth, np.asarray(proposal.laser_xyz, dtype=float)[None]))
+    assert ok[0], f"proposal {proposal.laser_rc} does not project into the image"
+    return np.asarray(pix[0], dtype=float) + rng.normal(0.0, CLICK_SIGMA_PX, 2)
+
+
+def click_start_pairs(driver: AppDriver, scene) -> None:
+    """4 clicks at ground-truth corner pairs: the cell nearest each corner and its true pixel."""
+    for pair in simulate_pairs(scene, 4, np.random.default_rng(3), pixel_noise_px=0.0):
+        assert driver.click_cell(driver.app.ba_keys[0], *pair.laser_rc) == []
+        assert driver.click_camera(*pair.pixel) == []
+
+
+def test_guided_pairs_beat_the_start_and_keep_their_tags(app, scene, truth, tmp_path):
+    d = AppDriver(app)
+    rng = np.random.default_rng(11)
+    click_start_pairs(d, scene)
+    assert d.wait_idle() and d.wait_guide()
+    err4 = pose_error(app.result.T_camera_lidar, truth)
+
+    assert d.press_guide("Next pair") == []
+    assert d.wait_guide()
+    for k in range(N_GUIDED):
+        proposal = d.guide_proposal
+        half = app.state.pending()
+        # "Next pair" (then each finished pair) started a guided half pick at the shown proposal's cell.
+        assert proposal is not None and half is not None
+        assert half.laser_rc == tuple(proposal.laser_rc) and half.pixel is None and half.source == "guided"
+        assert f"cell (row {proposal.laser_rc[0]}, col {proposal.laser_rc[1]})" in d.guide_panel
+        # One click completes the pair.
+        assert d.click_camera(*true_click(scene, truth, proposal, rng)) == []
+        assert d.wait_guide()
+        assert app.state.get(half.id).complete
+    assert d.wait_idle()
+    err = pose_error(app.result.T_camera_lidar, truth)
+    print(f"\nerror after 4 clicks: {err4[0]:.3f} deg, {100 * err4[1]:.2f} cm; after {N_GUIDED} guided pairs: "
+          f"{err[0]:.3f} deg, {100 * err[1]:.2f} cm (bound {MAX_ROT_DEG:.2f} deg, {100 * MAX_TRANS_M:.2f} cm)")
+    assert err[0] < err4[0] and err[1] < err4[1]
+    assert err[0] <= MAX_ROT_DEG and err[1] <= MAX_TRANS_M
+
+    # Tags reach the solve's pairs and survive a reload of the session file.
+    complete = app.state.complete_picks()
+    assert [p.source for p in complete] == ["clicked"] * 4 + ["guided"] * N_GUIDED
+    assert all(p.precision_px == pytest.approx(CLICK_SIGMA_PX) for p in complete[4:])
+    assert [(p.source, p.precision_px) for p in app.state.pairs()] == [(p.source, p.precision_px) for p in complete]
+    before = {p.id: (p.source, p.precision_px, p.laser_rc, p.pixel) for p in app.state.picks}
+    valid, size = app.depth.valid, (app.camera.width, app.camera.height)
+    app.stop()
+    again = AnnotationState(valid, size, tmp_path / "session.yaml")
+    try:
+        assert {p.id: (p.source, p.precision_px, p.laser_rc, p.pixel) for p in again.picks} == before
+    finally:
+        again.close()
+
+
+def test_skip_not_a_corner_undo(app, scene, truth):
+    d = AppDriver(app)
+    # Before a calibration exists the panel refuses and says why.
+    notes = d.press_guide("Next pair")
+    assert notes and "4 pairs" in notes[0][1]
+    click_start_pairs(d, scene)
+    assert d.wait_guide()
+    assert d.press_guide("Next pair") == [] and d.wait_guide()
+    first = d.guide_proposal
+    half = app.state.pending()
+    assert half.laser_rc == tuple(first.laser_rc)
+
+    # Skip: the same half pick moves to the next proposal; the skipped one comes back after the others.
+    assert d.press_guide("Skip") == [] and d.wait_guide()
+    second = d.guide_proposal
+    assert tuple(second.laser_rc) != tuple(first.laser_rc)
+    assert app.state.pending().id == half.id and app.state.pending().laser_rc == tuple(second.laser_rc)
+    # Not a corner: that cell is dropped for good (also after the proposals are recomputed).
+    assert d.press_guide("Not a corner") == [] and d.wait_guide()
+    third = d.guide_proposal
+    assert tuple(third.laser_rc) not in (tuple(first.laser_rc), tuple(second.laser_rc))
+    assert app.state.pending().laser_rc == tuple(third.laser_rc)
+
+    # Complete it, then undo: the guided tag stays with the half pick the undo brings back.
+    assert d.click_camera(*true_click(scene, truth, third, np.random.default_rng(0))) == [] and d.wait_guide()
+    assert tuple(second.laser_rc) not in [tuple(p.laser_rc) for p in app.guide.proposals]
+    n_complete = len(app.state.complete_picks())
+    while app.state.pending() is not None:  # the next guided half, started by itself
+        assert d.press_edit("Undo") == []
+    assert d.press_edit("Undo") == [] and d.wait_guide()
+    assert len(app.state.complete_picks()) == n_complete - 1
+    back = app.state.pending()
+    assert back.laser_rc == tuple(third.laser_rc) and back.pixel is None and back.source == "guided"
+
+    # Stop removes the half pick and leaves the pairs.
+    assert d.press_guide("Stop") == [] and d.wait_guide()
+    assert app.state.pending() is None and len(app.state.complete_picks()) == n_complete - 1
+
+
+def test_sessions_without_tags_load_and_bad_tags_are_refused(tmp_path):
+    valid = np.ones((10, 20), dtype=bool)
+    old = {"format": "ba-calib-session", "version": 1, "next_id": 3, "view": {},
+           "pairs": [{"id": 1, "laser_rc": [2, 3], "laser_xyz": None, "pixel": [10.0, 20.0]},
+                     {"id": 2, "laser_rc": [4, 5], "laser_xyz": None, "pixel": None}]}
+    path = tmp_path / "old.yaml"
+    path.write_text(yaml.safe_dump(old))
+    state = AnnotationState(valid, (100, 80), path)
+    try:
+        assert [(p.source, p.precision_px) for p in state.picks] == [("clicked", None), ("clicked", None)]
+        assert state.pairs()[0].source == "clicked" and state.pairs()[0].precision_px is None
+    finally:
+        state.close()
+    for bad, word in (({"source": "magic"}, "source"), ({"precision_px": -1.0}, "precision_px")):
+        doc = dict(old, pairs=[dict(old["pairs"][0], **bad)])
+        path.write_text(yaml.safe_dump(doc))
+        with pytest.raises(CalibError, match=word) as info:
+            AnnotationState(valid, (100, 80), path)
+        assert "\n" not in str(info.value)
