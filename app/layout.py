@@ -165,6 +165,30 @@ def annotation_layout(
     return slots
 
 
+@dataclass(frozen=True)
+class LoupeArea:
+    """Where a loupe is drawn: its top-left corner ``(x0, y0)`` and the largest size it may take (world units)."""
+
+    x0: float
+    y0: float
+    width: float
+    height: float
+
+
+def loupe_areas(main_bounds: tuple[float, float, float, float]) -> dict[str, LoupeArea]:
+    """Two loupe areas, ``"camera"`` above ``"ba"``, in a column right of the camera and BA images.
+
+    Each is square, half the height of the main block (titles included), so
+    that the whole page (images and loupes) fits a typical browser view at once.
+    """
+    x0, y0, x1, y1 = main_bounds
+    top = y0 - LABEL_HEIGHT  # the camera title sits above the camera image
+    side = min(max((y1 - top - GAP - LABEL_HEIGHT) / 2.0, 2.5), 6.0)
+    left = x1 + 3 * GAP
+    return {"camera": LoupeArea(left, y0, side, side),
+            "ba": LoupeArea(left, y0 + side + GAP + LABEL_HEIGHT, side, side)}
+
+
 def bounds_of(slots: list[ImageSlot]) -> tuple[float, float, float, float]:
     """Union of the slots' bounds ``(x_min, y_min, x_max, y_max)``."""
     b = np.array([s.bounds() for s in slots])

@@ -95,9 +95,8 @@ class LiveSolveCoordinator:
         bundle = self._bundle
         if bundle is None or self._stopped:
             return
-        if (self._cloud_shown() and self._cloud_shows is not bundle) or (
-                self._ba_mode == "camera" and self._facing_of is not bundle):
-            self._cloud_worker.submit(0, bundle)
+        # The loupes' camera-to-cell predictions need the scan projected under the new pose: always owed.
+        self._cloud_worker.submit(0, bundle)
 
     def _cloud_colors(self, T_camera_lidar: np.ndarray) -> np.ndarray:
         """Display-cloud colours ``(K, 3)`` uint8 from the camera image; grey where the camera does not see."""
@@ -128,6 +127,10 @@ class LiveSolveCoordinator:
         bundle = self._bundle
         if bundle is not None and self._facing_of is not bundle:
             self._set_facing(bundle, self._facing_window(bundle.result.T_camera_lidar))
+        elif bundle is None and self.initial_T_camera_lidar is not None:
+            facing = self._facing_window(self.initial_T_camera_lidar)  # before any solve: the imported pose
+            if facing is not None:
+                self._ba_facing = facing
 
     def _cloud_job(self, bundle: SolveBundle) -> CloudUpdate:
         # Decided when the job runs: a tab may have left or entered the 3-D view meanwhile.
@@ -136,6 +139,7 @@ class LiveSolveCoordinator:
         colors = self._cloud_colors(T) if self._cloud_shown() and self._cloud_shows is not bundle else None
         facing_done = self._ba_mode == "camera" and self._facing_of is not bundle
         facing = self._facing_window(T) if facing_done else None
+        self._projection(T)  # the loupes' camera-to-cell predictions, ready before the next click
         return CloudUpdate(bundle, colors, facing_done, facing, time.perf_counter() - t0)
 
     def _on_cloud_done(self, job: int, update: CloudUpdate | None, error: BaseException | None) -> None:

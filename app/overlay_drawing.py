@@ -61,6 +61,8 @@ class OverlayDrawing:
             for name, (text, pos) in labels.items():
                 self.nodes.label(name, text, pos)
             self._draw_overlays(picks, predictions)
+            if getattr(self, "loupes", None) is not None:
+                self.loupes.draw_marks()
 
     def _draw_markers(self, key: str, picks: dict[int, Pick], selected: int | None) -> dict[str, tuple[str, np.ndarray]]:
         """Draw the pick markers of slot ``key``; returns its number labels.  Skipped when nothing on it changed."""
@@ -124,21 +126,27 @@ class OverlayDrawing:
             if self._show_edges and len(bundle.edges_camera):
                 uv, ok = self._display_from_camera_points(bundle.edges_camera)
                 edge_world = slot.world_from_pixel(uv[ok], z_offset=-0.004)
-            # Where the current calibration predicts pending laser picks in the camera image.
-            for pid, uv in predictions:
-                c = slot.world_from_pixel(uv[None], z_offset=-0.015)[0]
-                r = MARKER_SIZE * 2.0
-                for d in (np.array([1.0, 0, 0]), np.array([0, 1.0, 0])):
-                    pred_segs.append(np.stack([c - r * d, c - 0.3 * r * d]))
-                    pred_segs.append(np.stack([c + 0.3 * r * d, c + r * d]))
-                    pred_cols += [picks[pid].color, picks[pid].color]
+        # Where the pose (solve or imported) predicts pending laser picks: a hollow ring with a gapped cross,
+        # white on a black halo, so it stands out on any background and leaves the corner itself visible.
+        for pid, uv in predictions:
+            c = slot.world_from_pixel(uv[None], z_offset=-0.015)[0]
+            r = MARKER_SIZE * 1.2
+            ring = marker_segments(c[None], r, ticks=False)
+            pred_segs.extend(ring)
+            for d in (np.array([1.0, 0, 0]), np.array([0, 1.0, 0])):
+                pred_segs.append(np.stack([c - 1.8 * r * d, c - 0.45 * r * d]))
+                pred_segs.append(np.stack([c + 0.45 * r * d, c + 1.8 * r * d]))
+            pred_cols += [(255, 255, 255)] * (len(ring) + 4)
         self.nodes.points("/annot/overlay/reprojected", reproj_pts, reproj_cols, MARKER_SIZE * 0.55, shape="diamond")
         self.nodes.lines("/annot/overlay/residuals", segs, np.full(segs.shape, (255, 230, 0), np.uint8), thickness=2.0)
         # At least EDGE_MIN_SIZE: one pixel of a 1920 px image is too small to see in the full view.
         self.nodes.points("/annot/overlay/edges", edge_world, (0, 190, 255), max(slot.units_per_px * 1.6, EDGE_MIN_SIZE),
                          shape="square")
-        self.nodes.lines("/annot/overlay/predicted", np.array(pred_segs).reshape(-1, 2, 3),
-                        np.repeat(np.array(pred_cols, np.uint8).reshape(-1, 1, 3), 2, axis=1), thickness=4.0)
+        pred = np.array(pred_segs).reshape(-1, 2, 3)
+        self.nodes.lines("/annot/overlay/predicted_halo", pred + [0.0, 0.0, 0.001], np.zeros(pred.shape, np.uint8),
+                         thickness=5.0)
+        self.nodes.lines("/annot/overlay/predicted", pred,
+                         np.repeat(np.array(pred_cols, np.uint8).reshape(-1, 1, 3), 2, axis=1), thickness=2.0)
 
     def _predictions(self, picks: dict[int, Pick]) -> list[tuple[int, np.ndarray]]:
         """Display pixels where the last good calibration expects picks that have only a BA end."""
@@ -148,10 +156,10 @@ class OverlayDrawing:
 
     def _predicted_pixels(self, picks: dict[int, Pick]) -> tuple[list[int], np.ndarray]:
         """Camera pixels where the last good calibration expects the picks that have only a laser cell."""
-        bundle = self._bundle
+        T = self.pose()  # the last good solve, else the imported initial extrinsic
         pending = [p for p in picks.values() if p.laser_rc is not None and p.pixel is None]
-        if bundle is None or not pending:
+        if T is None or not pending:
             return [], np.empty((0, 2))
         points = self.depth.cell_points(np.array([p.laser_rc for p in pending]))
-        uv, ok = project_lidar_points(bundle.result.T_camera_lidar, self.camera, points)
+        uv, ok = project_lidar_points(T, self.camera, points)
         return [p.id for p, good in zip(pending, ok) if good], uv[ok]

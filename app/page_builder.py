@@ -73,8 +73,9 @@ class PageBuilder:
             f"**{md_escape(self.title)}**  \n"
             "Click a point in any **BA image** and the same point in the **camera image** (either order) "
             "to make a pair. **Shift+click** a marker to select its pair; then clicks move it. "
-            "**Drag** a marker to move it. Wheel zooms on the view centre, right-drag pans; "
-            "**Zoom: on last click** centres and magnifies the point you last clicked. "
+            "**Drag** a marker to move it. The two **loupes** on the right magnify the last click and the "
+            "predicted other end; click in them for exact cells and sub-pixel points (a loupe click right after a "
+            "click on the full image refines it). Wheel zooms on the view centre, right-drag pans. "
             "**BA columns** shows only part of a wide scan, e.g. the part facing the camera."
         )
         self._pairs_folder = gui.add_folder("Pairs")
@@ -96,7 +97,10 @@ class PageBuilder:
         with gui.add_folder("Calibration"):
             self._md_result = gui.add_markdown("")
             self._md_table = gui.add_markdown("")
-        with gui.add_folder("View"):
+        self._view_folder = gui.add_folder("View")
+        with self._view_folder:
+            self._bg_loupe_zoom = gui.add_button_group("Loupe zoom", ("BA +", "BA -", "Camera +", "Camera -"))
+            self._bg_loupe_zoom.on_click(self._guard(self._on_loupe_zoom))
             self._bg_view = gui.add_button_group("Show", ("2D annotation", "3D cloud"))
             self._bg_view.on_click(self._guard(self._on_view_mode))
             self._bg_zoom = gui.add_button_group("Frame", ("All", "Camera", "BA images"))

@@ -22,10 +22,17 @@ from .ui_common import PICK_RADII, SNAP_RADIUS_PX, IMPORT_CHOICES, md_escape, _A
 class PairsPanel:
     """Part of :class:`app.server.CalibrationApp` (a mixin: it uses the app's attributes)."""
 
+    def _slot_of(self, key: str):
+        """The image slot of click key ``key``: a BA key, ``raw``, ``panorama``, ``loupe_ba`` or ``loupe_camera``."""
+        if key.startswith("loupe_"):
+            return self.loupes.slot(key[len("loupe_"):])
+        return self.slots[key]
+
     def _make_click_handler(self, key: str) -> Callable:
         def on_click(event: Any) -> None:
-            uv = self.slots[key].pixel_from_ray(event.ray_origin, event.ray_direction)
-            if uv is None or not self.slots[key].contains(uv):
+            slot = self._slot_of(key)
+            uv = slot.pixel_from_ray(event.ray_origin, event.ray_direction)
+            if uv is None or not slot.contains(uv):
                 raise CalibError("click landed outside the image")
             self._click(key, uv, client=event.client)
 
@@ -35,33 +42,79 @@ class PairsPanel:
         """Scan cell ``(row, col)`` under display pixel ``uv`` of BA slot ``key`` (window applied)."""
         return self._ba_window.cell_at(uv, self.depth.shape[0])
 
-    def _click(self, key: str, uv: tuple[float, float], pick_id: int | None = None, client: Any = None) -> int:
-        """A click at display pixel ``uv`` of slot ``key``: add a pair end, or move ``pick_id``'s end."""
+    def _target_of_click(self, key: str, uv: tuple[float, float]) -> tuple:
+        """``("ba", key, row, col)`` or ``("camera", u, v)`` (original pixel) under display pixel ``uv`` of ``key``."""
+        if key.startswith("loupe_"):
+            target = self.loupes.target_at(key[len("loupe_"):], uv)
+            if self._snap and target[0] == "ba":
+                col, row = refine_click_to_corner(self.ba_display(target[1]), (target[3], target[2]), 3.0)
+                target = ("ba", target[1], int(np.clip(round(row), 0, self.depth.shape[0] - 1)),
+                          int(round(col)) % self.depth.shape[1])
+            elif self._snap:
+                target = ("camera", *map(float, refine_click_to_corner(self.image_gray, target[1:], SNAP_RADIUS_PX)))
+            return target
         if key in self.ba_keys:
             if self._snap:
-                shown = self.ba_gray[key][:, self._ba_window.columns]
+                shown = self.ba_display(key)[:, self._ba_window.columns]
                 uv = tuple(refine_click_to_corner(shown, uv, 3.0))
-            row, col = self.cell_from_display(key, uv)
-            if pick_id is not None:
-                out = self.state.move_laser(pick_id, row, col)
-            else:
-                out = self.state.click_laser(row, col)
-            last: tuple = ("ba", key, row, col)
+            return ("ba", key, *self.cell_from_display(key, uv))
+        if key != self._camera_slot().key:
+            raise CalibError("that camera view is hidden; click the visible one")
+        if self._snap:
+            gray = self.pano_gray if key == "panorama" else self.image_gray
+            uv = tuple(refine_click_to_corner(gray, uv, SNAP_RADIUS_PX))
+        return ("camera", *self._original_from_display(uv))
+
+    def _click(self, key: str, uv: tuple[float, float], pick_id: int | None = None, client: Any = None) -> int:
+        """A click at display pixel ``uv`` of slot ``key``: add a pair end, or move ``pick_id``'s end.
+
+        A click in a loupe right after a click on the full image of the same
+        kind (BA or camera) refines that click: it moves the end just made.
+        Then the loupes frame the click and the other end (clicked or predicted).
+        """
+        target = self._target_of_click(key, uv)
+        kind, source = target[0], ("loupe" if key.startswith("loupe_") else "full")
+        cid = None if client is None else client.client_id
+        last = self._last_pick.get(cid)
+        if pick_id is None and source == "loupe" and last is not None and last[0] == kind and last[2] == "full":
+            ids = {p.id: p for p in self.state.picks}
+            if last[1] in ids and self.state.selected is None:
+                pick_id = last[1]  # refine the end the full-image click just made
+        if kind == "ba":
+            _, ba_key, row, col = target
+            out = self.state.move_laser(pick_id, row, col) if pick_id is not None else self.state.click_laser(row, col)
+            last_click: tuple = ("ba", ba_key, row, col)
         else:
-            if key != self._camera_slot().key:
-                raise CalibError("that camera view is hidden; click the visible one")
-            if self._snap:
-                gray = self.pano_gray if key == "panorama" else self.image_gray
-                uv = tuple(refine_click_to_corner(gray, uv, SNAP_RADIUS_PX))
-            pixel = self._original_from_display(uv)
-            if pick_id is not None:
-                out = self.state.move_pixel(pick_id, *pixel)
-            else:
-                out = self.state.click_pixel(*pixel)
-            last = ("camera", pixel[0], pixel[1])
+            _, u, v = target
+            out = self.state.move_pixel(pick_id, u, v) if pick_id is not None else self.state.click_pixel(u, v)
+            last_click = ("camera", u, v)
         if client is not None:
-            self._last_click[client.client_id] = last
+            self._last_click[cid] = last_click
+        self._last_pick[cid] = (kind, out, source)
+        self._frame_loupes(target, out, recentre=source == "full")
         return out
+
+    def _frame_loupes(self, target: tuple, pick_id: int, recentre: bool) -> None:
+        """After a click: the clicked loupe on the click, the other loupe on the pair's other end or its prediction."""
+        pick = next((p for p in self.state.picks if p.id == pick_id), None)
+        if target[0] == "ba":
+            if recentre:
+                self.loupes.frame_ba(*target[1:])
+            if pick is not None and pick.pixel is not None:
+                self.loupes.frame_camera(*pick.pixel)
+            else:
+                predicted = self.predict_pixel(target[2], target[3])
+                if predicted is not None:
+                    self.loupes.frame_camera(*predicted)
+        else:
+            if recentre:
+                self.loupes.frame_camera(target[1], target[2])
+            if pick is not None and pick.laser_rc is not None:
+                self.loupes.frame_ba(self.loupes.ba_crop.key, *pick.laser_rc)
+            else:
+                cell = self.predict_cell(target[1], target[2])
+                if cell is not None:
+                    self.loupes.frame_ba(self.loupes.ba_crop.key, *cell)
 
     def _original_from_display(self, uv: tuple[float, float]) -> tuple[float, float]:
         """Original camera pixel of a click on the visible camera view."""
@@ -75,6 +128,13 @@ class PairsPanel:
     def _pick_ends(self, key: str) -> tuple[list[int], np.ndarray]:
         """Ids and display pixels of the pick ends drawn on slot ``key``."""
         picks = self.state.picks
+        if key.startswith("loupe_"):
+            kind = key[len("loupe_"):]
+            sel = [p for p in picks if (p.laser_rc if kind == "ba" else p.pixel) is not None]
+            shown = [self.loupes.display_of(kind, (p.laser_rc[1], p.laser_rc[0]) if kind == "ba" else p.pixel)
+                     for p in sel]
+            keep = [(p.id, xy) for p, xy in zip(sel, shown) if xy is not None]
+            return [i for i, _ in keep], np.array([xy for _, xy in keep], np.float64).reshape(-1, 2)
         if key in self.ba_keys:
             # Only cells inside the shown column window have a place on the BA image.
             sel = [p for p in picks if p.laser_rc is not None]
@@ -90,7 +150,7 @@ class PairsPanel:
         ids, ends = self._pick_ends(key)
         if not ids:
             return None
-        slot = self.slots[key]
+        slot = self._slot_of(key)
         delta = ends - np.asarray(uv, dtype=np.float64)
         d = np.hypot(delta[:, 0] * slot.units_per_px, delta[:, 1] * slot.units_per_px_y)  # world units
         k = int(np.argmin(d))
@@ -98,7 +158,7 @@ class PairsPanel:
 
     def _make_select_handler(self, key: str) -> Callable:
         def on_shift_click(event: Any) -> None:
-            uv = self.slots[key].pixel_from_ray(event.ray_origin, event.ray_direction)
+            uv = self._slot_of(key).pixel_from_ray(event.ray_origin, event.ray_direction)
             pick_id = None if uv is None else self._nearest_pick(key, uv)
             self.state.select(pick_id)
 

@@ -23,8 +23,7 @@ tab shows the 3-D view.  A change is on disk before any of this
 (:mod:`app.session_store`), so what the page shows survives a kill -9.  :meth:`CalibrationApp.last_click_to_update`
 reports the time to the second step.
 
-Use :func:`serve` (what ``ba-calib`` runs), or :class:`CalibrationApp` to
-start and stop the server from Python (tests).
+Use :class:`CalibrationApp` to start and stop the server from Python (tests).
 """
 
 from __future__ import annotations
@@ -36,9 +35,10 @@ from pathlib import Path
 
 import numpy as np
 
-
 from .ba_view import ColumnWindow
 from .live_solver import LiveSolver
+from .loupes import Loupes
+from .loupe_support import LoupeSupport
 from .action_queue import ActionQueue
 from .page_builder import PageBuilder
 from .view_panel import ViewPanel
@@ -58,7 +58,7 @@ from .ui_common import BA_WINDOW_MODES, UP_AXES, SolveBundle
 
 # The parts are mixins for now (moved verbatim from one class); each owns one concern and its own module.
 class CalibrationApp(PairsPanel, CalibrationPanel, ViewPanel, ExportPanel, LiveSolveCoordinator, OverlayDrawing,
-                     PageBuilder, ActionQueue):
+                     PageBuilder, ActionQueue, LoupeSupport):
     """The annotation app on one scene; the viser server runs from construction.
 
     Parameters
@@ -113,6 +113,7 @@ class CalibrationApp(PairsPanel, CalibrationPanel, ViewPanel, ExportPanel, LiveS
         max_cloud_points: int = MAX_CLOUD_POINTS,
         token: str | None = None,
         allowed_hosts: tuple[str, ...] = (),
+        initial_extrinsics_path: str | os.PathLike | None = None,
     ) -> None:
         # Kernels compile in the background while the inputs load; nothing waits for it.
         self.warm_up = WarmUp()
@@ -135,6 +136,8 @@ class CalibrationApp(PairsPanel, CalibrationPanel, ViewPanel, ExportPanel, LiveS
             sd.edge_points_lidar, sd.all_points_lidar, sd.all_rows_cols)
         self.ba_cell_aspect, self._wrap_cols, self.cloud_points_lidar = (
             sd.ba_cell_aspect, sd.wrap_cols, sd.cloud_points_lidar)
+        self._bundle: SolveBundle | None = None
+        self._init_loupe_support(initial_extrinsics_path)  # CalibError on a bad file, before any server starts
 
         # -- state ------------------------------------------------------------------
         # Every change is on disk (an fsync'd journal line) before the UI shows it; the journal is
@@ -161,6 +164,7 @@ class CalibrationApp(PairsPanel, CalibrationPanel, ViewPanel, ExportPanel, LiveS
         self._ba_custom = ColumnWindow.make(start, width, n_cols, self._wrap_cols)
         self._ba_facing: ColumnWindow | None = None  # from the last good solve it was computed for
         self._facing_of: SolveBundle | None = None  # the solve ``_ba_facing`` was computed for
+        self._ensure_facing()  # from the imported initial extrinsic, if any
         self._ba_window = self._wanted_ba_window()
         self._camera_sizes = {"raw": (self.camera.width, self.camera.height)}
         if self.panorama is not None:
@@ -169,7 +173,6 @@ class CalibrationApp(PairsPanel, CalibrationPanel, ViewPanel, ExportPanel, LiveS
 
         self._ui_lock = threading.RLock()
         self._upload_lock = threading.Lock()
-        self._bundle: SolveBundle | None = None
         self._solve_error: str | None = None
         self._submitted: tuple | None = None
         self._job = 0
@@ -210,6 +213,7 @@ class CalibrationApp(PairsPanel, CalibrationPanel, ViewPanel, ExportPanel, LiveS
         try:
             self._build_scene()
             self._build_gui()
+            self.loupes = Loupes(self)  # the magnified BA and camera panes (public: frame_ba, frame_camera)
             self.server.on_client_connect(self._on_connect)
             self.server.on_client_disconnect(self._on_disconnect)
             self._solver = LiveSolver(self._solve_job, self._on_solved)

@@ -110,7 +110,7 @@ class AppDriver:
         return self.tab.notifications[before:]
 
     def _ray(self, key: str, uv: tuple[float, float], **extra: Any) -> Any:
-        world = self.app.slots[key].world_from_pixel(np.asarray(uv, dtype=np.float64).reshape(1, 2))[0]
+        world = self.app._slot_of(key).world_from_pixel(np.asarray(uv, dtype=np.float64).reshape(1, 2))[0]
         return SimpleNamespace(ray_origin=tuple(world - [0.0, 0.0, 1.0]), ray_direction=(0.0, 0.0, 1.0),
                                client=self.tab, target=None, **extra)
 
@@ -132,6 +132,46 @@ class AppDriver:
         if not ok[0]:
             raise ValueError(f"pixel ({u}, {v}) is not shown")
         return self.click(key, (float(disp[0, 0]), float(disp[0, 1])))
+
+    # ---------------------------------------------------------------- loupes
+    def loupe_display_pixel(self, kind: str, uv: tuple[float, float]) -> tuple[float, float] | None:
+        """Where loupe ``kind`` (``"ba"`` or ``"camera"``) shows ``uv``: ``(col, row)`` of a scan cell (BA) or an
+        original camera pixel ``(u, v)``; loupe pixel coordinates, None when the loupe does not show it."""
+        return self.app.loupes.display_of(kind, uv)
+
+    def click_loupe(self, kind: str, uv: tuple[float, float]) -> list[tuple[str, str]]:
+        """Click *through* loupe ``kind`` at ``uv``: ``(col, row)`` of a scan cell or an original pixel ``(u, v)``."""
+        shown = self.loupe_display_pixel(kind, uv)
+        if shown is None:
+            raise ValueError(f"{uv} is not shown in the {kind} loupe")
+        return self.click(f"loupe_{kind}", shown)
+
+    def click_loupe_cell(self, row: int, col: int) -> list[tuple[str, str]]:
+        """Click scan cell ``(row, col)`` in the BA loupe (it must show it)."""
+        return self.click_loupe("ba", (float(col), float(row)))
+
+    def click_loupe_camera(self, u: float, v: float) -> list[tuple[str, str]]:
+        """Click original camera pixel ``(u, v)`` in the camera loupe (it must show it)."""
+        return self.click_loupe("camera", (float(u), float(v)))
+
+    def press_loupe_zoom(self, label: str) -> list[tuple[str, str]]:
+        """Press a "Loupe zoom" button: ``"BA +"``, ``"BA -"``, ``"Camera +"`` or ``"Camera -"``."""
+        return self._fire(self.app._guard(self.app._on_loupe_zoom), SimpleNamespace(
+            client=self.tab, target=SimpleNamespace(value=label)))
+
+    def upload_initial_extrinsics(self, name: str, content: bytes) -> list[tuple[str, str]]:
+        """Upload an extrinsics file through this tab's "Import initial extrinsics" button."""
+        handler = self.app._guard(lambda action: self.app.receive_initial_extrinsics(action.client, name, content))
+        return self._fire(handler, SimpleNamespace(client=self.tab, target=None))
+
+    def loupe_view(self, kind: str) -> dict:
+        """What loupe ``kind`` shows: ``{"center", "size"}`` (+ ``"key"`` for BA): its centre cell ``(row, col)``
+        or pixel ``(u, v)`` and its width in cells or pixels."""
+        if kind == "ba":
+            c = self.app.loupes.ba_crop
+            return {"key": c.key, "center": c.center, "size": c.n_cols}
+        c = self.app.loupes.camera_crop
+        return {"center": c.center, "size": c.n}
 
     def shift_click(self, key: str, uv: tuple[float, float]) -> list[tuple[str, str]]:
         """Shift+click display pixel ``uv`` of image ``key`` (selects the pair whose marker is there)."""
@@ -189,7 +229,8 @@ class AppDriver:
     # ------------------------------------------------------------- for real tabs
     def node_name(self, key: str) -> str:
         """Scene node of image ``key`` (a BA key, ``raw`` or ``panorama``) that takes the clicks."""
-        return {"raw": "/annot/camera_raw", "panorama": "/annot/camera_pano"}.get(key, f"/annot/ba_{key}")
+        return {"raw": "/annot/camera_raw", "panorama": "/annot/camera_pano", "loupe_ba": "/annot/loupe_ba",
+                "loupe_camera": "/annot/loupe_camera"}.get(key, f"/annot/ba_{key}")
 
     def click_ray(self, key: str, uv: tuple[float, float]) -> tuple[str, tuple, tuple]:
         """``(node, ray_origin, ray_direction)`` of a click on display pixel ``uv`` of image ``key``."""

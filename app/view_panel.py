@@ -182,6 +182,7 @@ class ViewPanel:
     def _on_connect(self, client: Any) -> None:
         try:
             self._add_upload_button(client)
+            self._add_extrinsics_upload_button(client)
             self._set_view(client, "all")
         except Exception:
             traceback.print_exc()
@@ -227,6 +228,8 @@ class ViewPanel:
             slots = [self.slots[k] for k in self.ba_keys]
         else:
             slots = [self._camera_slot()] + [self.slots[k] for k in self.ba_keys]
+            if getattr(self, "loupes", None) is not None:  # the loupes are part of the page
+                slots += [self.loupes.slot("ba"), self.loupes.slot("camera")]
         x0, y0, x1, y1 = bounds_of(slots)
         y0 -= 0.3  # room for the titles
         w_px, h_px = max(cam.image_width, 1), max(cam.image_height, 1)
@@ -333,17 +336,25 @@ class ViewPanel:
         ----------
         target : str
             ``"camera"`` (``uv`` is an ORIGINAL camera-image pixel, shown in the
-            visible camera view) or a BA key (``uv`` = (col, row) of a scan
+            visible camera view), a BA key (``uv`` = (col, row) of a scan
             cell, which must lie in the shown column window; fractions of a
-            cell aim off its centre).
+            cell aim off its centre), ``"loupe_camera"`` (an original pixel the
+            camera loupe shows) or ``"loupe_ba"`` ((col, row) of a cell the BA loupe shows).
         """
-        slot = self._camera_slot() if target == "camera" else self.slots[target]
         disp = np.asarray(uv, dtype=np.float64).reshape(1, 2)
-        if target == "camera":
+        if target.startswith("loupe_"):
+            slot = self.loupes.slot(target[len("loupe_"):])
+            shown = self.loupes.display_of(target[len("loupe_"):], (disp[0, 0], disp[0, 1]))
+            if shown is None:
+                raise CalibError(f"{uv} is not shown in the {target[len('loupe_'):]} loupe")
+            disp = np.array([shown])
+        elif target == "camera":
+            slot = self._camera_slot()
             disp, ok = self._display_from_pixels(disp)
             if not ok[0]:
                 raise CalibError(f"pixel {uv} is not shown in the camera view")
         else:
+            slot = self.slots[target]
             u, shown = self._ba_window.display_cols(np.array([int(round(disp[0, 0]))]))
             if not shown[0]:
                 raise CalibError(f"BA column {uv[0]} is outside the shown columns")

@@ -1,0 +1,142 @@
+"""What the loupes need from the app: the pose to predict with (solved, else imported), predictions both ways,
+the initial-extrinsics import (constructor path or upload button), and the loupe zoom buttons.
+
+The maths is :mod:`calib_core.predict`; this only picks the pose and caches per pose.
+"""
+
+from __future__ import annotations
+
+import tempfile
+import threading
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import viser
+
+from calib_core.errors import CalibError
+from calib_core.predict import ProjectedScan, predict_pixel
+
+from .loupes import ZOOM_FACTOR
+from .security import upload_display_name
+from .ui_common import BA_TITLES
+
+
+class LoupeSupport:
+    """Part of :class:`app.server.CalibrationApp` (a mixin: it uses the app's attributes)."""
+
+    def _init_loupe_support(self, initial_extrinsics_path) -> None:
+        self.initial_T_camera_lidar: np.ndarray | None = None
+        self._last_pick: dict[Any, tuple] = {}  # client id -> (kind, pick id, "full" | "loupe")
+        self._projected: tuple[bytes, ProjectedScan] | None = None
+        self._projected_lock = threading.Lock()
+        if initial_extrinsics_path is not None:
+            self.set_initial_extrinsics(self._read_extrinsics(Path(initial_extrinsics_path)))
+
+    # ------------------------------------------------------------------ pose and predictions
+    def pose(self) -> np.ndarray | None:
+        """``T_camera_lidar`` predictions use: the last good solve, else the imported initial extrinsic, else None."""
+        bundle = self._bundle
+        if bundle is not None:
+            return bundle.result.T_camera_lidar
+        return self.initial_T_camera_lidar
+
+    def predict_pixel(self, row: int, col: int) -> tuple[float, float] | None:
+        """Original camera pixel where :meth:`pose` expects scan cell ``(row, col)``; None without a pose or unseen."""
+        T = self.pose()
+        if T is None:
+            return None
+        return predict_pixel(T, self.camera, self.depth, row, col)
+
+    def predict_cell(self, u: float, v: float) -> tuple[int, int] | None:
+        """Scan cell ``(row, col)`` the camera sees at original pixel ``(u, v)`` under :meth:`pose`; None if unknown."""
+        T = self.pose()
+        if T is None:
+            return None
+        return self._projection(T).cell_at(float(u), float(v))
+
+    def _projection(self, T: np.ndarray) -> ProjectedScan:
+        """Every scan point projected under ``T`` (cached per pose; built off the click path after a solve)."""
+        key = np.asarray(T, np.float64).tobytes()
+        with self._projected_lock:
+            cached = self._projected
+            if cached is not None and cached[0] == key:
+                return cached[1]
+            proj = ProjectedScan.build(T, self.camera, self.all_points_lidar, self.all_rows_cols)
+            self._projected = (key, proj)
+            return proj
+
+    def _warm_projection(self) -> None:
+        T = self.pose()
+        if T is not None:
+            self._projection(T)
+
+    # ------------------------------------------------------------------ initial extrinsics
+    def _read_extrinsics(self, path: Path, shown: str | None = None) -> np.ndarray:
+        from calib_core.io.extrinsic_formats import load_extrinsics_any
+
+        try:
+            return np.asarray(load_extrinsics_any(path), dtype=np.float64)
+        except CalibError as exc:
+            if shown is None:
+                raise
+            raise CalibError(str(exc).replace(str(path), shown)) from None
+
+    def set_initial_extrinsics(self, T_camera_lidar: np.ndarray | None) -> None:
+        """Use ``T_camera_lidar`` (4x4) for predictions and "facing the camera" until a solve exists (None: forget it)."""
+        if T_camera_lidar is not None:
+            T = np.asarray(T_camera_lidar, dtype=np.float64)
+            if T.shape != (4, 4) or not np.isfinite(T).all():
+                raise CalibError("the initial extrinsic must be a finite 4x4 matrix")
+            T_camera_lidar = T
+        self.initial_T_camera_lidar = T_camera_lidar
+        threading.Thread(target=self._warm_projection, name="ba-calib-projection", daemon=True).start()
+
+    def _after_initial_extrinsics(self) -> None:
+        """Redraw predictions and the facing window once an initial extrinsic is imported."""
+        if self._ba_mode == "camera" and self._bundle is None:
+            self._ensure_facing()
+            self._apply_ba_window()
+        self._overlay_inputs = None
+        self._refresh_scene()
+        self._refresh_panel()
+
+    def _add_extrinsics_upload_button(self, client: Any) -> None:
+        """This tab's "Import initial extrinsics" button, in the View folder."""
+        with self._upload_lock:
+            with self._view_folder:
+                button = client.gui.add_upload_button(
+                    "Import initial extrinsics", icon=viser.Icon.UPLOAD, mime_type="*/*",
+                    hint="A rough pose (any extrinsics format ba-calib reads): predictions and 'Facing the camera' "
+                         "work before 4 pairs")
+        button.on_upload(self._guard(lambda event: self.receive_initial_extrinsics(
+            event.client, getattr(event.value, "name", ""), getattr(event.value, "content", b""))))
+
+    def receive_initial_extrinsics(self, client: Any, name: str, content: bytes) -> None:
+        """Import an uploaded extrinsics file as the initial pose (the upload button's handler)."""
+        shown = upload_display_name(name)
+        if not content:
+            raise CalibError(f"{shown}: the file is empty")
+        suffix = Path(str(name)).suffix.lower()
+        suffix = suffix if suffix in (".yaml", ".yml", ".json", ".txt", ".urdf", ".xml", ".launch", ".py") else ".txt"
+        with tempfile.TemporaryDirectory() as tmp:
+            path = Path(tmp) / f"upload{suffix}"
+            path.write_bytes(content)
+            T = self._read_extrinsics(path, shown)
+        self.set_initial_extrinsics(T)
+        self._after_initial_extrinsics()
+        self._notify(client, "Initial extrinsics imported",
+                     f"{shown}: predictions use it until {4} pairs are solved", color="green")
+
+    # ------------------------------------------------------------------ display
+    def ba_display(self, key: str) -> np.ndarray:
+        """The grey image shown for BA direction ``key`` ``(rows, cols)`` uint8."""
+        return self.ba_gray[key]
+
+    def ba_title(self, key: str) -> str:
+        return BA_TITLES.get(key, key)
+
+    def _on_loupe_zoom(self, event: Any) -> None:
+        kind, step = {"BA +": ("ba", ZOOM_FACTOR), "BA -": ("ba", 1 / ZOOM_FACTOR),
+                      "Camera +": ("camera", ZOOM_FACTOR), "Camera -": ("camera", 1 / ZOOM_FACTOR)}[str(event.value)]
+        self.loupes.zoom(kind, step)

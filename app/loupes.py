@@ -1,0 +1,359 @@
+"""The two loupes: magnified, clickable crops of one BA image and of the original camera image.
+
+They sit right of the camera and BA images (:func:`app.layout.loupe_areas`),
+so the whole page and both loupes are visible at once.  Each is a viser scene
+image whose texture is a crop enlarged by nearest neighbour (crisp cells and
+pixels).  A click in a loupe maps back exactly: sub-pixel for the camera
+(the loupe shows the *original* image, whatever the main view shows), a whole
+scan cell for the BA loupe.
+
+The app moves them (:meth:`Loupes.frame_ba`, :meth:`Loupes.frame_camera`)
+after each click, to the click and to the other end's prediction; the zoom
+steps change how much they show around the same centre.  Display plumbing
+only: predictions come from :mod:`calib_core.predict`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from calib_core.errors import CalibError
+from calib_core.predict import ellipse_outline
+
+from .layout import ImageSlot, LoupeArea, bounds_of, loupe_areas
+from .ui_common import marker_segments
+
+#: Columns the BA loupe shows at zoom 1, and the camera loupe's crop side for a 640 px wide image.
+BA_LOUPE_COLUMNS = 32
+CAMERA_LOUPE_PX = 36
+ZOOM_FACTOR = 1.5
+BA_COLUMN_LIMITS = (8, 400)
+CAMERA_PX_LIMITS = (8, 1200)
+TEXTURE_TEXELS = 640  # texels along the longer side of a loupe texture (at least 1 per cell or pixel)
+PAD_GRAY = 60  # outside the scan or the image
+KINDS = ("ba", "camera")
+
+
+def node_name(kind: str) -> str:
+    """Scene node of loupe ``kind`` (``"ba"`` or ``"camera"``)."""
+    return f"/annot/loupe_{kind}"
+
+
+def slot_key(kind: str) -> str:
+    """The click-routing key of loupe ``kind`` (what the app's click handler receives)."""
+    return f"loupe_{kind}"
+
+
+@dataclass(frozen=True)
+class BaCrop:
+    """The BA loupe's view: image ``key``, top-left cell ``(row0, col0)``, ``n_rows`` x ``n_cols`` cells."""
+
+    key: str
+    row0: int
+    col0: int
+    n_rows: int
+    n_cols: int
+    center: tuple[int, int]  # (row, col) framed
+
+
+@dataclass(frozen=True)
+class CameraCrop:
+    """The camera loupe's view: original-image pixels ``[u0, u0 + n)`` x ``[v0, v0 + n)``."""
+
+    u0: int
+    v0: int
+    n: int
+    center: tuple[float, float]
+    cov_px2: tuple | None  # 2x2 covariance of the framed point (pixels^2), drawn as a 3-sigma ellipse
+
+
+class Loupes:
+    """The BA loupe and the camera loupe of one :class:`app.server.CalibrationApp`.
+
+    Public: :meth:`frame_ba`, :meth:`frame_camera`, :meth:`zoom`,
+    :attr:`ba_crop`, :attr:`camera_crop`, :meth:`slot`,
+    :meth:`target_at` (loupe pixel -> cell or original pixel) and
+    :meth:`display_of` (the inverse).
+    """
+
+    def __init__(self, app: Any) -> None:
+        self.app = app
+        main = [app.slots[k] for k in app.ba_keys] + [app.slots[k] for k in app._camera_sizes]
+        self.areas: dict[str, LoupeArea] = loupe_areas(bounds_of(main))
+        n_rows, n_cols = app.depth.shape
+        self._ba_cols = min(BA_LOUPE_COLUMNS, n_cols)
+        cam_w, cam_h = app.camera.width, app.camera.height
+        # Bigger images get a wider default crop, so a rough prediction still falls inside it.
+        self._cam_n = int(min(max(CAMERA_LOUPE_PX, round(CAMERA_LOUPE_PX * max(cam_w, cam_h) / 640 / 1.5)), 160))
+        self.ba_crop = self._make_ba_crop(app.ba_keys[0], n_rows // 2, n_cols // 2)
+        self.camera_crop = self._make_camera_crop((cam_w - 1) / 2.0, (cam_h - 1) / 2.0, None)
+        self._slots: dict[str, ImageSlot] = {}
+        scene = app.server.scene
+        self._handles: dict[str, Any] = {}
+        self._titles: dict[str, Any] = {}
+        for kind in KINDS:
+            area = self.areas[kind]
+            self._titles[kind] = scene.add_label(f"/annot/titles/loupe_{kind}", "", position=(area.x0, area.y0 - 0.03, -0.01),
+                                                 anchor="bottom-left", font_screen_scale=0.9)
+        self._handles["ba"] = scene.add_image(node_name("ba"), self._ba_texture(), 1.0, 1.0, format="png")
+        self._handles["camera"] = scene.add_image(node_name("camera"), self._camera_texture(), 1.0, 1.0, format="png")
+        for kind, handle in self._handles.items():
+            key = slot_key(kind)
+            handle.on_click(app._make_click_handler(key))
+            handle.on_click(modifier="shift")(app._make_select_handler(key))
+            handle.on_drag(lambda event: None)  # keeps left-drags from orbiting; a click is a click
+        self._place("ba")
+        self._place("camera")
+        self.refresh()
+
+    # ------------------------------------------------------------------ public
+    def frame_ba(self, key: str, row: int, col: int) -> None:
+        """Centre the BA loupe on scan cell ``(row, col)`` of BA image ``key``."""
+        if key not in self.app.ba_keys:
+            raise CalibError(f"no BA image {key!r} (one of {', '.join(self.app.ba_keys)})")
+        n_rows, n_cols = self.app.depth.shape
+        if not (0 <= int(row) < n_rows and 0 <= int(col) < n_cols):
+            raise CalibError(f"cell ({row}, {col}) is outside the {n_rows} x {n_cols} scan")
+        with self.app._ui_lock:
+            crop = self._make_ba_crop(key, int(row), int(col))
+            if crop != self.ba_crop:
+                self.ba_crop = crop
+                self._show("ba")
+
+    def frame_camera(self, u: float, v: float, cov_px2: np.ndarray | None = None) -> None:
+        """Centre the camera loupe on original-image pixel ``(u, v)``; ``cov_px2`` (2x2, px^2) draws its 3-sigma ellipse."""
+        if not (np.isfinite(u) and np.isfinite(v)):
+            raise CalibError("the camera loupe needs a finite pixel")
+        cov = None
+        if cov_px2 is not None:
+            c = np.asarray(cov_px2, dtype=np.float64)
+            if c.shape != (2, 2) or not np.isfinite(c).all():
+                raise CalibError("cov_px2 must be a finite 2x2 covariance (pixels squared)")
+            cov = tuple(map(tuple, c))
+        with self.app._ui_lock:
+            crop = self._make_camera_crop(float(u), float(v), cov)
+            if crop != self.camera_crop:
+                self.camera_crop = crop
+                self._show("camera")
+
+    def zoom(self, kind: str, factor: float) -> None:
+        """Magnify loupe ``kind`` by ``factor`` (> 1 shows less, bigger) around the same centre."""
+        with self.app._ui_lock:
+            if kind == "ba":
+                lo, hi = BA_COLUMN_LIMITS
+                self._ba_cols = int(min(max(round(self._ba_cols / factor), lo), hi, self.app.depth.shape[1]))
+                c = self.ba_crop
+                self.ba_crop = self._make_ba_crop(c.key, *c.center)
+            else:
+                lo, hi = CAMERA_PX_LIMITS
+                self._cam_n = int(min(max(round(self._cam_n / factor), lo), hi))
+                c = self.camera_crop
+                self.camera_crop = self._make_camera_crop(*c.center, c.cov_px2)
+            self._show(kind)
+
+    def slot(self, kind: str) -> ImageSlot:
+        """The loupe's image slot: its pixels are crop cells (BA) or original-image pixels (camera), offset by the crop."""
+        return self._slots[kind]
+
+    def target_at(self, kind: str, uv: tuple[float, float]) -> tuple:
+        """What loupe pixel ``uv`` shows: ``("ba", key, row, col)`` or ``("camera", u, v)`` (original pixel).
+
+        Raises CalibError outside the scan or the image.
+        """
+        x, y = float(uv[0]), float(uv[1])
+        if kind == "ba":
+            c = self.ba_crop
+            n_rows, n_cols = self.app.depth.shape
+            row = c.row0 + int(math.floor(y + 0.5))
+            col = c.col0 + int(math.floor(x + 0.5))
+            if self.app._wrap_cols:
+                col %= n_cols
+            if not (0 <= row < n_rows and 0 <= col < n_cols):
+                raise CalibError("that part of the loupe is outside the scan")
+            return ("ba", c.key, row, col)
+        c = self.camera_crop
+        u, v = c.u0 + x, c.v0 + y
+        w, h = self.app.camera.width, self.app.camera.height
+        if not (-0.5 <= u <= w - 0.5 and -0.5 <= v <= h - 0.5):
+            raise CalibError("that part of the loupe is outside the camera image")
+        return ("camera", u, v)
+
+    def display_of(self, kind: str, target: tuple[float, float]) -> tuple[float, float] | None:
+        """Loupe pixel showing ``target``: ``(col, row)`` of a scan cell (fractions aim off its centre) or an
+        original-image pixel ``(u, v)``; None when the loupe does not show it."""
+        if kind == "ba":
+            c = self.ba_crop
+            n_cols = self.app.depth.shape[1]
+            x = float(target[0]) - c.col0
+            if self.app._wrap_cols:
+                x = (x + 0.5) % n_cols - 0.5
+            y = float(target[1]) - c.row0
+        else:
+            c = self.camera_crop
+            x, y = float(target[0]) - c.u0, float(target[1]) - c.v0
+        slot = self._slots[kind]
+        return (x, y) if slot.contains((x, y)) else None
+
+    # ------------------------------------------------------------------ drawing
+    def draw_marks(self) -> None:
+        """Pick ends, predictions and the ellipse inside the loupes, and the loupes' outlines on the main images."""
+        app = self.app
+        nodes = app.nodes
+        picks = list(app.state.picks)
+        # BA loupe: the picked cells it shows, outlined in their pair colour.
+        s, c = self._slots["ba"], self.ba_crop
+        rc = np.array([p.laser_rc for p in picks if p.laser_rc is not None], np.float64).reshape(-1, 2)
+        cols = np.array([p.color for p in picks if p.laser_rc is not None], np.uint8).reshape(-1, 3)
+        xy = np.stack([rc[:, 1] - c.col0, rc[:, 0] - c.row0], axis=1)
+        if app._wrap_cols and len(xy):
+            xy[:, 0] = (xy[:, 0] + 0.5) % app.depth.shape[1] - 0.5
+        inside = np.array([s.contains(p) for p in xy], bool)
+        hx, hy = 0.5 * s.units_per_px, 0.5 * s.units_per_px_y
+        segs = marker_segments(s.world_from_pixel(xy[inside], z_offset=-0.01), 1.6 * max(hx, hy),
+                               cell_half_size=(hx, hy), ticks=True)
+        seg_cols = np.repeat(cols[inside], len(segs) // max(int(inside.sum()), 1) * 2, axis=0).reshape(-1, 2, 3)
+        nodes.lines("/annot/loupe/ba_marks", segs, seg_cols, thickness=2.5)
+        # Camera loupe: clicked pixels as rings, the framed centre (prediction) as a hollow black-white marker.
+        s, c = self._slots["camera"], self.camera_crop
+        px = np.array([p.pixel for p in picks if p.pixel is not None], np.float64).reshape(-1, 2)
+        cols = np.array([p.color for p in picks if p.pixel is not None], np.uint8).reshape(-1, 3)
+        xy = px - [c.u0, c.v0]
+        inside = np.array([s.contains(p) for p in xy], bool)
+        r = max(3.0, 0.06 * c.n) * s.units_per_px
+        segs = marker_segments(s.world_from_pixel(xy[inside], z_offset=-0.01), r)
+        seg_cols = np.repeat(cols[inside], len(segs) // max(int(inside.sum()), 1) * 2, axis=0).reshape(-1, 2, 3)
+        nodes.lines("/annot/loupe/camera_marks", segs, seg_cols, thickness=2.5)
+        centre = s.world_from_pixel(np.array([c.center]) - [c.u0, c.v0], z_offset=-0.012)
+        rr = max(2.0, 0.05 * c.n) * s.units_per_px
+        hollow = marker_segments(centre, rr, ticks=True)
+        nodes.lines("/annot/loupe/camera_centre_halo", hollow + [0, 0, 0.001], np.full(hollow.shape, 0, np.uint8),
+                    thickness=4.0)
+        nodes.lines("/annot/loupe/camera_centre", hollow, np.full(hollow.shape, 255, np.uint8), thickness=1.5)
+        ell = np.empty((0, 2, 3))
+        if c.cov_px2 is not None:
+            pts = ellipse_outline(c.center, np.array(c.cov_px2)) - [c.u0, c.v0]
+            w = s.world_from_pixel(pts, z_offset=-0.011)
+            ell = np.stack([w[:-1], w[1:]], axis=1)
+        nodes.lines("/annot/loupe/ellipse", ell, np.full(ell.shape, (255, 200, 0), np.uint8), thickness=1.0)
+        self._draw_outlines()
+
+    def _draw_outlines(self) -> None:
+        """Where each loupe looks, as a thin rectangle on the main BA and camera images (context)."""
+        app = self.app
+        c = self.ba_crop
+        segs = np.empty((0, 2, 3))
+        u, shown = app.ba_window.display_cols(np.array([c.col0 + c.n_cols // 2]) % app.depth.shape[1])
+        if shown[0]:
+            slot = app.slots[c.key]
+            x0 = u[0] - c.n_cols // 2 - 0.5
+            corners = np.array([[x0, c.row0 - 0.5], [x0 + c.n_cols, c.row0 - 0.5], [x0 + c.n_cols, c.row0 + c.n_rows - 0.5],
+                                [x0, c.row0 + c.n_rows - 0.5]])
+            corners[:, 0] = np.clip(corners[:, 0], -0.5, slot.width_px - 0.5)
+            corners[:, 1] = np.clip(corners[:, 1], -0.5, slot.height_px - 0.5)
+            w = slot.world_from_pixel(corners, z_offset=-0.02)
+            segs = np.stack([w, np.roll(w, -1, axis=0)], axis=1)
+        app.nodes.lines("/annot/loupe/ba_outline", segs, np.full(segs.shape, (255, 120, 0), np.uint8), thickness=2.0)
+        c = self.camera_crop
+        t = np.linspace(0.0, 1.0, 9)
+        a, b = c.u0 - 0.5, c.u0 + c.n - 0.5
+        top, bottom = c.v0 - 0.5, c.v0 + c.n - 0.5
+        ring = np.concatenate([np.stack([a + (b - a) * t, np.full_like(t, top)], 1),
+                               np.stack([np.full_like(t, b), top + (bottom - top) * t], 1),
+                               np.stack([b - (b - a) * t, np.full_like(t, bottom)], 1),
+                               np.stack([np.full_like(t, a), bottom - (bottom - top) * t], 1)])
+        disp, ok = app._display_from_pixels(ring)
+        segs = np.empty((0, 2, 3))
+        if ok.all():
+            w = app._camera_slot().world_from_pixel(disp, z_offset=-0.02)
+            segs = np.stack([w[:-1], w[1:]], axis=1)
+        app.nodes.lines("/annot/loupe/camera_outline", segs, np.full(segs.shape, (255, 120, 0), np.uint8),
+                        thickness=2.0)
+
+    # ------------------------------------------------------------------ internals
+    def _make_ba_crop(self, key: str, row: int, col: int) -> BaCrop:
+        n_rows_scan, n_cols_scan = self.app.depth.shape
+        n_cols = self._ba_cols
+        aspect = self.app.ba_cell_aspect
+        n_rows = int(min(max(round(n_cols / aspect), 1), n_rows_scan))
+        return BaCrop(key, int(row) - n_rows // 2, int(col) - n_cols // 2, n_rows, n_cols, (int(row), int(col)))
+
+    def _make_camera_crop(self, u: float, v: float, cov) -> CameraCrop:
+        n = self._cam_n
+        return CameraCrop(int(round(u)) - n // 2, int(round(v)) - n // 2, n, (float(u), float(v)), cov)
+
+    def _ba_texture(self) -> np.ndarray:
+        c = self.ba_crop
+        gray = self.app.ba_display(c.key)
+        n_rows, n_cols = gray.shape
+        rows = c.row0 + np.arange(c.n_rows)
+        cols = c.col0 + np.arange(c.n_cols)
+        if self.app._wrap_cols:
+            cols %= n_cols
+        ok_r = (rows >= 0) & (rows < n_rows)
+        ok_c = (cols >= 0) & (cols < n_cols)
+        crop = gray[np.clip(rows, 0, n_rows - 1)][:, np.clip(cols, 0, n_cols - 1)]
+        crop = np.where(ok_r[:, None] & ok_c[None, :], crop, np.uint8(PAD_GRAY)).astype(np.uint8)
+        k = max(1, TEXTURE_TEXELS // max(c.n_rows, c.n_cols))
+        return np.repeat(np.repeat(crop, k, axis=0), k, axis=1)
+
+    def _camera_texture(self) -> np.ndarray:
+        c = self.camera_crop
+        img = self.app.image
+        h, w = img.shape[:2]
+        us, vs = c.u0 + np.arange(c.n), c.v0 + np.arange(c.n)
+        ok = ((vs >= 0) & (vs < h))[:, None] & ((us >= 0) & (us < w))[None, :]
+        crop = img[np.clip(vs, 0, h - 1)][:, np.clip(us, 0, w - 1)]
+        crop = np.where(ok[..., None], crop, np.uint8(PAD_GRAY)).astype(np.uint8)
+        k = max(1, TEXTURE_TEXELS // c.n)
+        return np.repeat(np.repeat(crop, k, axis=0), k, axis=1)
+
+    def _place(self, kind: str) -> None:
+        """Fit the crop into the loupe's area (cells keep their drawn aspect), top-left aligned."""
+        area = self.areas[kind]
+        if kind == "ba":
+            c = self.ba_crop
+            unit_x = area.width / c.n_cols
+            unit_y = unit_x * self.app.ba_cell_aspect
+            if unit_y * c.n_rows > area.height:
+                unit_y = area.height / c.n_rows
+            w_px, h_px, rw, rh = c.n_cols, c.n_rows, area.width, unit_y * c.n_rows
+        else:
+            n = self.camera_crop.n
+            w_px = h_px = n
+            rw = rh = min(area.width, area.height)
+        slot = ImageSlot(slot_key(kind), w_px, h_px, (area.x0 + rw / 2, area.y0 + rh / 2, 0.0), rw, rh)
+        self._slots[kind] = slot
+        handle = self._handles[kind]
+        handle.render_width = rw
+        handle.render_height = rh
+        handle.position = slot.center
+
+    def _title(self, kind: str) -> str:
+        if kind == "ba":
+            c = self.ba_crop
+            row, col = c.center
+            rng = self.app.depth.range_m[row, col]
+            shown = f"{rng:.2f} m" if self.app.depth.valid[row, col] and np.isfinite(rng) else "no return"
+            name = self.app.ba_title(c.key)
+            return f"{name} loupe: row {row}, column {col}, range {shown} ({c.n_cols} columns shown)"
+        c = self.camera_crop
+        return f"Camera loupe (original image): ({c.center[0]:.1f}, {c.center[1]:.1f}), {c.n} x {c.n} px shown"
+
+    def _show(self, kind: str) -> None:
+        """Send the loupe's new texture, size and title, and redraw its marks (in one message batch)."""
+        app = self.app
+        with app.server.atomic():
+            self._handles[kind].image = self._ba_texture() if kind == "ba" else self._camera_texture()
+            self._place(kind)
+            self._titles[kind].text = self._title(kind)
+            self.draw_marks()
+
+    def refresh(self) -> None:
+        """Re-send both loupes (e.g. after the BA display changed)."""
+        with self.app._ui_lock:
+            self._show("ba")
+            self._show("camera")
