@@ -71,6 +71,10 @@ class GuidePanel:
         ``frame_camera(u, v, cov_px2=None)``) or None.
     ba_key : str
         The BA image the BA loupe shows.
+    on_start : callable, optional
+        Called after a guided half pick is started (the app forgets which
+        full-image click a loupe click would refine: the loupe click now
+        completes the new pick).
     order : float, optional
         Position of the folder in the control panel.
     """
@@ -79,9 +83,10 @@ class GuidePanel:
                  guard: Callable, post: Callable[[Callable[[], None]], None],
                  initial_T: Callable[[], np.ndarray | None] = lambda: None,
                  loupes: Callable[[], Any] = lambda: None, ba_key: str = "horizontal",
-                 order: float | None = None) -> None:
+                 order: float | None = None, on_start: Callable[[], None] = lambda: None) -> None:
         self.state, self.depth, self.camera, self.image = state, depth, camera, image
         self._post, self._initial_T, self._loupes, self._ba_key = post, initial_T, loupes, ba_key
+        self._on_start = on_start
         self._lock = threading.RLock()
         self._session: GuidedSession | None = None  # only touched on the worker thread
         self._proposals: list[Proposal] = []
@@ -105,7 +110,7 @@ class GuidePanel:
             self._md = gui.add_markdown("")
             self._buttons = {}
             for label in BUTTONS:
-                button = gui.add_button(label, disabled=True)
+                button = gui.add_button(label)
                 self._callbacks[label] = guard(lambda action, label=label: self._on_button(label))
                 button.on_click(self._callbacks[label])
                 self._buttons[label] = button
@@ -155,6 +160,11 @@ class GuidePanel:
             self._worker.wait_idle(max(0.0, min(0.05, deadline - time.monotonic())))
             time.sleep(0.005)
         return True
+
+    def update(self) -> None:
+        """Recompute the proposals if their inputs changed: call after importing an initial extrinsic
+        (changes of the pairs are seen by themselves)."""
+        self._on_state_change(self.state)
 
     def stop(self) -> None:
         self._worker.stop()
@@ -265,6 +275,7 @@ class GuidePanel:
             raise CalibError(f"pair {self.state.pending().id} is not finished; complete or undo it first")
         else:
             self.state.start_pick(*p.laser_rc, source="guided", precision_px=GUIDED_CLICK_SIGMA_PX)
+        self._on_start()
         loupes = self._loupes()
         if loupes is not None:
             loupes.frame_ba(self._ba_key, int(p.laser_rc[0]), int(p.laser_rc[1]))
@@ -272,6 +283,7 @@ class GuidePanel:
         self._refresh()
 
     def _on_button(self, label: str) -> None:
+        self.update()  # an initial extrinsic imported since the last change is used from now on
         if label == "Stop":
             self._guiding = self._want_next = False
             half = self._guided_half()
@@ -341,8 +353,6 @@ class GuidePanel:
             counts[pick.source] = counts.get(pick.source, 0) + 1
         lines.append("  \n" + ", ".join(f"{v} {k}" for k, v in counts.items()))
         self._md.content = "\n".join(lines)
-        for label, button in self._buttons.items():
-            button.disabled = not active
 
 
 def attach_guide_panel(app: Any) -> GuidePanel:
@@ -351,4 +361,5 @@ def attach_guide_panel(app: Any) -> GuidePanel:
                       post=lambda fn: app._actions.put((lambda action: fn(), _Action(None, None))),
                       initial_T=lambda: getattr(app, "initial_T_camera_lidar", None),
                       loupes=lambda: getattr(app, "loupes", None), ba_key=app.ba_keys[0],
-                      order=app._pairs_folder.order + 0.5)
+                      order=app._pairs_folder.order + 0.5,
+                      on_start=lambda: getattr(app, "_last_pick", {}).clear())

@@ -85,8 +85,11 @@ def test_guided_pairs_beat_the_start_and_keep_their_tags(app, scene, truth, tmp_
         assert proposal is not None and half is not None
         assert half.laser_rc == tuple(proposal.laser_rc) and half.pixel is None and half.source == "guided"
         assert f"cell (row {proposal.laser_rc[0]}, col {proposal.laser_rc[1]})" in d.guide_panel
-        # One click completes the pair.
-        assert d.click_camera(*true_click(scene, truth, proposal, rng)) == []
+        # The loupes are framed on the cell and on the predicted pixel.
+        assert tuple(d.loupe_view("ba")["center"]) == tuple(proposal.laser_rc)
+        assert np.allclose(d.loupe_view("camera")["center"], proposal.pixel, atol=0.5)
+        # One click in the camera loupe completes the pair.
+        assert d.click_loupe_camera(*true_click(scene, truth, proposal, rng)) == []
         assert d.wait_guide()
         assert app.state.get(half.id).complete
     assert d.wait_idle()
@@ -135,7 +138,7 @@ def test_skip_not_a_corner_undo(app, scene, truth):
     assert app.state.pending().laser_rc == tuple(third.laser_rc)
 
     # Complete it, then undo: the guided tag stays with the half pick the undo brings back.
-    assert d.click_camera(*true_click(scene, truth, third, np.random.default_rng(0))) == [] and d.wait_guide()
+    assert d.click_loupe_camera(*true_click(scene, truth, third, np.random.default_rng(0))) == [] and d.wait_guide()
     assert tuple(second.laser_rc) not in [tuple(p.laser_rc) for p in app.guide.proposals]
     n_complete = len(app.state.complete_picks())
     while app.state.pending() is not None:  # the next guided half, started by itself
