@@ -32,7 +32,7 @@ import numpy as np
 
 from calib_core.errors import CalibError
 from calib_core.guide import GUIDED_CLICK_SIGMA_PX, Proposal, current_pose
-from calib_core.guide.auto_accept import auto_accept
+from calib_core.guide.auto_accept import AutoGate, auto_accept
 from calib_core.guide.session import GuidedSession
 from calib_core.pairs import Pair
 
@@ -71,6 +71,9 @@ class GuidePanel:
         ``frame_camera(u, v, cov_px2=None)``) or None.
     ba_key : str
         The BA image the BA loupe shows.
+    auto_gate : AutoGate, optional
+        The auto-accept gate (default: the strict one of :mod:`calib_core.guide.auto_accept`);
+        the attribute :attr:`auto_gate` may be changed later.
     on_start : callable, optional
         Called after a guided half pick is started (the app forgets which
         full-image click a loupe click would refine: the loupe click now
@@ -83,10 +86,13 @@ class GuidePanel:
                  guard: Callable, post: Callable[[Callable[[], None]], None],
                  initial_T: Callable[[], np.ndarray | None] = lambda: None,
                  loupes: Callable[[], Any] = lambda: None, ba_key: str = "horizontal",
-                 order: float | None = None, on_start: Callable[[], None] = lambda: None) -> None:
+                 order: float | None = None, auto_gate: AutoGate | None = None,
+                 on_start: Callable[[], None] = lambda: None) -> None:
         self.state, self.depth, self.camera, self.image = state, depth, camera, image
         self._post, self._initial_T, self._loupes, self._ba_key = post, initial_T, loupes, ba_key
         self._on_start = on_start
+        self.auto_gate = auto_gate if auto_gate is not None else AutoGate()
+        self._auto_tried: set[tuple[int, int]] = set()  # cells auto-accepted once: never again (an undo sticks)
         self._lock = threading.RLock()
         self._session: GuidedSession | None = None  # only touched on the worker thread
         self._proposals: list[Proposal] = []
@@ -205,7 +211,7 @@ class GuidePanel:
         props = [p for p in s.proposals(N_PROPOSALS + len(pairs)) if p.replaces is None][:N_PROPOSALS]
         auto_pairs: list[Pair] = []
         if auto and props and s.corners is not None:
-            ok, pixels = auto_accept(s.corners, props, image=self.image, depth=self.depth, camera=self.camera,
+            ok, pixels = auto_accept(s.corners, props, self.auto_gate, image=self.image, depth=self.depth, camera=self.camera,
                                      T_camera_lidar=s.state.T_camera_lidar)
             auto_pairs = [Pair(tuple(p.laser_rc), None, (float(px[0]), float(px[1])), source="auto",
                                precision_px=AUTO_PRECISION_PX) for p, good, px in zip(props, ok, pixels) if good]
@@ -240,9 +246,10 @@ class GuidePanel:
             with self._lock:
                 auto_pairs, self._auto_pairs = self._auto_pairs, []
             pending = self.state.pending()
-            if pending is not None and pending.laser_rc is not None:
-                auto_pairs = [p for p in auto_pairs if p.laser_rc != pending.laser_rc]
+            skip = self._auto_tried | ({pending.laser_rc} if pending is not None else set())
+            auto_pairs = [p for p in auto_pairs if p.laser_rc not in skip]
             if auto_pairs and self._auto:
+                self._auto_tried.update(p.laser_rc for p in auto_pairs)
                 self.state.import_pairs(auto_pairs)  # one undoable step; the new proposals follow
                 return
             if self._want_next and self._guiding:
