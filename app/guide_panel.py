@@ -38,7 +38,7 @@ from calib_core.pairs import Pair
 
 from .live_solver import LiveSolver
 from .state import AnnotationState
-from .ui_common import MIN_PAIRS, _Action
+from .ui_common import MIN_PAIRS, _Action, md_escape
 
 #: Proposals computed per update.
 N_PROPOSALS = 20
@@ -339,7 +339,7 @@ class GuidePanel:
         if not active:
             lines.append(f"Starts after {MIN_PAIRS} pairs or an imported initial extrinsic.")
         elif error is not None:
-            lines.append(f"Proposals failed: {error}")
+            lines.append(f"Proposals failed: {md_escape(error)}")
         elif busy:
             lines.append("Computing proposals…")
         elif not props:
@@ -348,18 +348,18 @@ class GuidePanel:
             p = props[index]
             major = 3.0 * float(p.ellipse_sigma_px()[0])
             lines.append(f"Proposal {index + 1} of {len(props)}: cell (row {p.laser_rc[0]}, col {p.laser_rc[1]}), "
-                         f"{p.kind}, gain {p.gain:.3f}  ")
+                         f"{p.kind}, gain {p.gain:.3f}")
             lines.append(f"Predicted pixel ({p.pixel[0]:.1f}, {p.pixel[1]:.1f}), 3σ ±{major:.1f} px")
             half = self.state.pending()
             if half is not None and half.source == "guided" and half.laser_rc == tuple(p.laser_rc):
-                lines.append(f"  \nPair {half.id}: click the corner in the camera loupe.")
+                lines.append(f"Pair {half.id}: click the corner in the camera loupe.")
             elif self._guiding:
-                lines.append("  \nPress **Next pair** to continue.")
+                lines.append("Press **Next pair** to continue.")
         counts = {s: 0 for s in ("clicked", "guided", "auto")}
         for pick in self.state.complete_picks():
             counts[pick.source] = counts.get(pick.source, 0) + 1
-        lines.append("  \n" + ", ".join(f"{v} {k}" for k, v in counts.items()))
-        self._md.content = "\n".join(lines)
+        lines.append("Pairs: " + ", ".join(f"{v} {k}" for k, v in counts.items()))
+        self._md.content = "  \n".join(lines)
 
 
 def attach_guide_panel(app: Any) -> GuidePanel:
