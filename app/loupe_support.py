@@ -19,7 +19,6 @@ from calib_core.predict import ProjectedScan, predict_pixel
 
 from .loupes import ZOOM_FACTOR
 from .security import upload_display_name
-from .ui_common import BA_TITLES
 
 
 class LoupeSupport:
@@ -127,14 +126,6 @@ class LoupeSupport:
         self._after_initial_extrinsics()
         self._notify(client, "Initial extrinsics imported",
                      f"{shown}: predictions use it until {4} pairs are solved", color="green")
-
-    # ------------------------------------------------------------------ display
-    def ba_display(self, key: str) -> np.ndarray:
-        """The grey image shown for BA direction ``key`` ``(rows, cols)`` uint8."""
-        return self.ba_gray[key]
-
-    def ba_title(self, key: str) -> str:
-        return BA_TITLES.get(key, key)
 
     def _on_loupe_zoom(self, event: Any) -> None:
         kind, step = {"BA +": ("ba", ZOOM_FACTOR), "BA -": ("ba", 1 / ZOOM_FACTOR),

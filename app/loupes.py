@@ -33,7 +33,7 @@ CAMERA_LOUPE_PX = 36
 ZOOM_FACTOR = 1.5
 BA_COLUMN_LIMITS = (8, 400)
 CAMERA_PX_LIMITS = (8, 1200)
-TEXTURE_TEXELS = 640  # texels along the longer side of a loupe texture (at least 1 per cell or pixel)
+TEXTURE_TEXELS = 320  # texels along the longer side of a loupe texture (at least 1 per cell or pixel)
 PAD_GRAY = 60  # outside the scan or the image
 KINDS = ("ba", "camera")
 
@@ -92,6 +92,7 @@ class Loupes:
         self.ba_crop = self._make_ba_crop(app.ba_keys[0], n_rows // 2, n_cols // 2)
         self.camera_crop = self._make_camera_crop((cam_w - 1) / 2.0, (cam_h - 1) / 2.0, None)
         self._slots: dict[str, ImageSlot] = {}
+        self._marks_of: dict[str, tuple] = {}  # kind -> inputs its marks were last drawn from
         scene = app.server.scene
         self._handles: dict[str, Any] = {}
         self._titles: dict[str, Any] = {}
@@ -106,8 +107,8 @@ class Loupes:
             handle.on_click(app._make_click_handler(key))
             handle.on_click(modifier="shift")(app._make_select_handler(key))
             handle.on_drag(lambda event: None)  # keeps left-drags from orbiting; a click is a click
-        self._place("ba")
-        self._place("camera")
+        for kind in KINDS:
+            self._place(kind)  # sends the size and place once; later only when they change
         self.refresh()
 
     # ------------------------------------------------------------------ public
@@ -155,6 +156,10 @@ class Loupes:
                 self.camera_crop = self._make_camera_crop(*c.center, c.cov_px2)
             self._show(kind)
 
+    def texture(self, kind: str) -> np.ndarray:
+        """The loupe's current texture (what the page shows)."""
+        return self._ba_texture() if kind == "ba" else self._camera_texture()
+
     def slot(self, kind: str) -> ImageSlot:
         """The loupe's image slot: its pixels are crop cells (BA) or original-image pixels (camera), offset by the crop."""
         return self._slots[kind]
@@ -201,9 +206,27 @@ class Loupes:
     # ------------------------------------------------------------------ drawing
     def draw_marks(self) -> None:
         """Pick ends, predictions and the ellipse inside the loupes, and the loupes' outlines on the main images."""
+        self._draw_marks("ba")
+        self._draw_marks("camera")
+
+    def _draw_marks(self, kind: str) -> None:
+        """One loupe's marks and outline; skipped when neither its view, the picks nor the main view changed."""
         app = self.app
-        nodes = app.nodes
-        picks = list(app.state.picks)
+        picks = app.state.picks
+        crop = self.ba_crop if kind == "ba" else self.camera_crop
+        main = app.slots.get(crop.key) if kind == "ba" else app._camera_slot()
+        inputs = (crop, self._slots[kind], picks, main, app.ba_window)
+        if self._marks_of.get(kind) == inputs:
+            return
+        self._marks_of[kind] = inputs
+        if kind == "ba":
+            self._draw_ba_marks(list(picks))
+        else:
+            self._draw_camera_marks(list(picks))
+
+    def _draw_ba_marks(self, picks: list) -> None:
+        nodes = self.app.nodes
+        app = self.app
         # BA loupe: the picked cells it shows, outlined in their pair colour.
         s, c = self._slots["ba"], self.ba_crop
         rc = np.array([p.laser_rc for p in picks if p.laser_rc is not None], np.float64).reshape(-1, 2)
@@ -217,6 +240,10 @@ class Loupes:
                                cell_half_size=(hx, hy), ticks=True)
         seg_cols = np.repeat(cols[inside], len(segs) // max(int(inside.sum()), 1) * 2, axis=0).reshape(-1, 2, 3)
         nodes.lines("/annot/loupe/ba_marks", segs, seg_cols, thickness=2.5)
+        self._draw_ba_outline()
+
+    def _draw_camera_marks(self, picks: list) -> None:
+        nodes = self.app.nodes
         # Camera loupe: clicked pixels as rings, the framed centre (prediction) as a hollow black-white marker.
         s, c = self._slots["camera"], self.camera_crop
         px = np.array([p.pixel for p in picks if p.pixel is not None], np.float64).reshape(-1, 2)
@@ -239,10 +266,10 @@ class Loupes:
             w = s.world_from_pixel(pts, z_offset=-0.011)
             ell = np.stack([w[:-1], w[1:]], axis=1)
         nodes.lines("/annot/loupe/ellipse", ell, np.full(ell.shape, (255, 200, 0), np.uint8), thickness=1.0)
-        self._draw_outlines()
+        self._draw_camera_outline()
 
-    def _draw_outlines(self) -> None:
-        """Where each loupe looks, as a thin rectangle on the main BA and camera images (context)."""
+    def _draw_ba_outline(self) -> None:
+        """Where the BA loupe looks, as a thin rectangle on its main BA image (context)."""
         app = self.app
         c = self.ba_crop
         segs = np.empty((0, 2, 3))
@@ -257,6 +284,10 @@ class Loupes:
             w = slot.world_from_pixel(corners, z_offset=-0.02)
             segs = np.stack([w, np.roll(w, -1, axis=0)], axis=1)
         app.nodes.lines("/annot/loupe/ba_outline", segs, np.full(segs.shape, (255, 120, 0), np.uint8), thickness=2.0)
+
+    def _draw_camera_outline(self) -> None:
+        """Where the camera loupe looks, on the main camera view (curved on a panorama)."""
+        app = self.app
         c = self.camera_crop
         t = np.linspace(0.0, 1.0, 9)
         a, b = c.u0 - 0.5, c.u0 + c.n - 0.5
@@ -287,7 +318,7 @@ class Loupes:
 
     def _ba_texture(self) -> np.ndarray:
         c = self.ba_crop
-        gray = self.app.ba_display(c.key)
+        gray = self.app.loupe_image(c.key)[0]
         n_rows, n_cols = gray.shape
         rows = c.row0 + np.arange(c.n_rows)
         cols = c.col0 + np.arange(c.n_cols)
@@ -326,19 +357,23 @@ class Loupes:
             w_px = h_px = n
             rw = rh = min(area.width, area.height)
         slot = ImageSlot(slot_key(kind), w_px, h_px, (area.x0 + rw / 2, area.y0 + rh / 2, 0.0), rw, rh)
+        old = self._slots.get(kind)
         self._slots[kind] = slot
+        if old is not None and (old.render_width, old.render_height, old.center) == (rw, rh, slot.center):
+            return  # same place and size: only the texture changes
         handle = self._handles[kind]
         handle.render_width = rw
         handle.render_height = rh
         handle.position = slot.center
 
-    def _title(self, kind: str) -> str:
+    def title(self, kind: str) -> str:
+        """The loupe's title as the page shows it."""
         if kind == "ba":
             c = self.ba_crop
             row, col = c.center
             rng = self.app.depth.range_m[row, col]
             shown = f"{rng:.2f} m" if self.app.depth.valid[row, col] and np.isfinite(rng) else "no return"
-            name = self.app.ba_title(c.key)
+            name = self.app.loupe_image(c.key)[1]
             return f"{name} loupe: row {row}, column {col}, range {shown} ({c.n_cols} columns shown)"
         c = self.camera_crop
         return f"Camera loupe (original image): ({c.center[0]:.1f}, {c.center[1]:.1f}), {c.n} x {c.n} px shown"
@@ -349,8 +384,8 @@ class Loupes:
         with app.server.atomic():
             self._handles[kind].image = self._ba_texture() if kind == "ba" else self._camera_texture()
             self._place(kind)
-            self._titles[kind].text = self._title(kind)
-            self.draw_marks()
+            self._titles[kind].text = self.title(kind)
+            self._draw_marks(kind)
 
     def refresh(self) -> None:
         """Re-send both loupes (e.g. after the BA display changed)."""

@@ -102,7 +102,7 @@ class OverlayDrawing:
         slot = self._camera_slot()
         bundle = self._bundle
         # Skipped when neither the solve, the view nor the picks it colours changed (e.g. a click on a BA image).
-        inputs = (slot, self._use_panorama, self._show_reprojection, self._show_edges,
+        inputs = (slot, self._use_panorama, self._show_reprojection, self._show_edges, self._edge_opacity,
                   () if bundle is None else tuple(picks[i].color if i in picks else None for i in bundle.pick_ids),
                   tuple((pid, uv.tobytes(), picks[pid].color) for pid, uv in predictions))
         if self._overlay_inputs is not None and self._overlay_inputs[0] is bundle and self._overlay_inputs[1] == inputs:
@@ -110,7 +110,7 @@ class OverlayDrawing:
         self._overlay_inputs = (bundle, inputs)
         reproj_pts, reproj_cols = np.empty((0, 3)), np.empty((0, 3), np.uint8)
         segs = np.empty((0, 2, 3))
-        edge_world = np.empty((0, 3))
+        edge_world, edge_cols = np.empty((0, 3)), np.empty((0, 3), np.uint8)
         pred_segs, pred_cols = [], []
         if bundle is not None:
             if self._show_reprojection and len(bundle.pick_ids):
@@ -123,9 +123,17 @@ class OverlayDrawing:
                 both = ok_p & ok_c
                 segs = np.stack([slot.world_from_pixel(clicked[both], z_offset=-0.008),
                                  slot.world_from_pixel(proj[both], z_offset=-0.008)], axis=1)
-            if self._show_edges and len(bundle.edges_camera):
+            if self._show_edges and self._edge_opacity > 0 and len(bundle.edges_camera):
                 uv, ok = self._display_from_camera_points(bundle.edges_camera)
+                # Only where the camera sees (inside a fisheye circle); blended with the image under each point.
+                raw, ok_raw = self.camera.project(bundle.edges_camera)
+                ij = np.clip(np.round(np.nan_to_num(raw)).astype(np.int64), 0,
+                             [self.camera.width - 1, self.camera.height - 1])
+                ok &= ok_raw & self.scene_data.image_valid[ij[:, 1], ij[:, 0]]
                 edge_world = slot.world_from_pixel(uv[ok], z_offset=-0.004)
+                under = self.image[ij[ok, 1], ij[ok, 0]].astype(np.float64)
+                a = self._edge_opacity
+                edge_cols = np.round(a * np.array([0.0, 190.0, 255.0]) + (1.0 - a) * under).astype(np.uint8)
         # Where the pose (solve or imported) predicts pending laser picks: a hollow ring with a gapped cross,
         # white on a black halo, so it stands out on any background and leaves the corner itself visible.
         for pid, uv in predictions:
@@ -140,7 +148,7 @@ class OverlayDrawing:
         self.nodes.points("/annot/overlay/reprojected", reproj_pts, reproj_cols, MARKER_SIZE * 0.55, shape="diamond")
         self.nodes.lines("/annot/overlay/residuals", segs, np.full(segs.shape, (255, 230, 0), np.uint8), thickness=2.0)
         # At least EDGE_MIN_SIZE: one pixel of a 1920 px image is too small to see in the full view.
-        self.nodes.points("/annot/overlay/edges", edge_world, (0, 190, 255), max(slot.units_per_px * 1.6, EDGE_MIN_SIZE),
+        self.nodes.points("/annot/overlay/edges", edge_world, edge_cols, max(slot.units_per_px * 1.6, EDGE_MIN_SIZE),
                          shape="square")
         pred = np.array(pred_segs).reshape(-1, 2, 3)
         self.nodes.lines("/annot/overlay/predicted_halo", pred + [0.0, 0.0, 0.001], np.zeros(pred.shape, np.uint8),

@@ -101,6 +101,13 @@ class PageBuilder:
         with self._view_folder:
             self._bg_loupe_zoom = gui.add_button_group("Loupe zoom", ("BA +", "BA -", "Camera +", "Camera -"))
             self._bg_loupe_zoom.on_click(self._guard(self._on_loupe_zoom))
+            self._dd_loupe_source = gui.add_dropdown(
+                "BA loupe shows", self.loupe_sources(), initial_value=self._loupe_source,
+                hint="The BA image last clicked, one BA direction, the scan's intensity (if it has one) or range")
+            self._dd_loupe_source.on_update(self._guard(self._on_loupe_source))
+            self._sl_contrast = gui.add_slider("Laser contrast", 0.5, 3.0, 0.25, initial_value=self._contrast,
+                                               hint="Contrast of the BA images and the BA loupe")
+            self._sl_contrast.on_update(self._guard(self._on_contrast))
             self._bg_view = gui.add_button_group("Show", ("2D annotation", "3D cloud"))
             self._bg_view.on_click(self._guard(self._on_view_mode))
             self._bg_zoom = gui.add_button_group("Frame", ("All", "Camera", "BA images"))
@@ -129,6 +136,8 @@ class PageBuilder:
             self._cb_reproj.on_update(self._guard(self._on_view_checkbox))
             self._cb_edges = gui.add_checkbox("Reprojected BA-edge points", initial_value=self._show_edges)
             self._cb_edges.on_update(self._guard(self._on_view_checkbox))
+            self._sl_edge_opacity = gui.add_slider("BA-edge opacity", 0.0, 1.0, 0.1, initial_value=self._edge_opacity)
+            self._sl_edge_opacity.on_update(self._guard(self._on_edge_opacity))
             self._dd_up = gui.add_dropdown("3D up axis (lidar)", tuple(UP_AXES), initial_value=self._up_axis)
             self._dd_up.on_update(self._guard(self._on_up_axis))
         with gui.add_folder("Export"):

@@ -82,7 +82,12 @@ class PairsPanel:
                 pick_id = last[1]  # refine the end the full-image click just made
         if kind == "ba":
             _, ba_key, row, col = target
-            out = self.state.move_laser(pick_id, row, col) if pick_id is not None else self.state.click_laser(row, col)
+            try:
+                out = self.state.move_laser(pick_id, row, col) if pick_id is not None else self.state.click_laser(row, col)
+            except CalibError:
+                if source == "full":  # e.g. a cell with no return: still bring the loupe there to pick a good one
+                    self.loupes.frame_ba(ba_key, row, col)
+                raise
             last_click: tuple = ("ba", ba_key, row, col)
         else:
             _, u, v = target

@@ -15,6 +15,7 @@ import numpy as np
 
 from calib_core.bearing_angle import BA_DIRECTIONS, ba_to_display, bearing_angle_images
 from calib_core.cameras import load_camera
+from calib_core.display_images import field_to_gray, find_intensity
 from calib_core.errors import CalibError
 from calib_core.io.images import load_image_rgb
 from calib_core.overlays import ba_edge_points_consensus
@@ -54,6 +55,11 @@ class PreparedScene:
         Row stretch that makes cells about square in angle.
     wrap_cols : bool
         Whether the scan's columns wrap around (a full revolution).
+    laser_images : dict of str to (R, C) uint8
+        Other grey views of the scan for the BA loupe: ``"Range"`` always, ``"Intensity"`` when the scan
+        has a reflectance field (0 where no value).
+    image_valid : (H, W) bool
+        Pixels the camera lights (not the pure-black border of a fisheye circle).
     """
 
     scan_path: Path
@@ -75,6 +81,8 @@ class PreparedScene:
     cloud_points_lidar: np.ndarray
     ba_cell_aspect: float
     wrap_cols: bool
+    laser_images: dict
+    image_valid: np.ndarray
 
     @classmethod
     def load(
@@ -108,6 +116,10 @@ class PreparedScene:
             pano_gray = pano_image.mean(axis=2).astype(np.uint8)
         edge_points, _ = ba_edge_points_consensus(ba_rad, depth, max_points=MAX_EDGE_POINTS)
         points, rows_cols = depth.valid_points()
+        laser_images = {"Range": field_to_gray(np.where(depth.valid, depth.range_m, np.nan), log=True)}
+        intensity = find_intensity(depth.meta.get("field_images"))
+        if intensity is not None:
+            laser_images["Intensity"] = field_to_gray(intensity[1])
         stride = max(1, int(math.ceil(len(points) / max(1, int(max_cloud_points)))))
         return cls(
             scan_path=scan_path, image_path=image_path, camera_path=camera_path, depth=depth, camera=camera,
@@ -115,5 +127,6 @@ class PreparedScene:
             image_gray=image.mean(axis=2).astype(np.uint8), panorama=panorama, pano_image=pano_image,
             pano_gray=pano_gray, edge_points_lidar=edge_points, all_points_lidar=points, all_rows_cols=rows_cols,
             cloud_points_lidar=points[::stride], ba_cell_aspect=cell_aspect_from_directions(depth.directions),
-            wrap_cols=bool(depth.meta.get("wrap_cols", False)),
+            wrap_cols=bool(depth.meta.get("wrap_cols", False)), laser_images=laser_images,
+            image_valid=image.max(axis=2) > 0,
         )

@@ -7,10 +7,8 @@ clicks a BA image and the camera image, in either order, to make a pair; from
 shows the errors, a per-pair residual table, the reprojected points and BA
 edges, and a coloured point cloud in a 3-D view.
 
-Wide lidar scans (e.g. 64 x 1800) are shown with rows stretched to about
-square cells in angle and, on request, only a window of columns such as the
-part facing the camera (:mod:`app.ba_view`); zoom buttons centre and magnify
-the last click.
+Wide scans (e.g. 64 x 1800) get rows stretched to about square cells and, on request, a column window
+(:mod:`app.ba_view`); two loupes (:mod:`app.loupes`) magnify the last click and the predicted other end.
 
 Every number shown comes from :mod:`calib_core`; this module only routes
 clicks, draws, and moves data between the state, the solver and the page.
@@ -20,10 +18,9 @@ the scene nodes that changed are sent, mostly as in-place updates), then,
 from the solver thread, the errors, the residual table and the 2-D overlays;
 the 3-D cloud is recoloured after that in its own thread, and only while a
 tab shows the 3-D view.  A change is on disk before any of this
-(:mod:`app.session_store`), so what the page shows survives a kill -9.  :meth:`CalibrationApp.last_click_to_update`
-reports the time to the second step.
+(:mod:`app.session_store`), so what the page shows survives a kill -9 (:meth:`last_click_to_update`: step 2).
 
-Use :class:`CalibrationApp` to start and stop the server from Python (tests).
+Start and stop :class:`CalibrationApp` from Python (tests) or through ``ba-calib``.
 """
 
 from __future__ import annotations
@@ -39,6 +36,7 @@ from .ba_view import ColumnWindow
 from .live_solver import LiveSolver
 from .loupes import Loupes
 from .loupe_support import LoupeSupport
+from .display_panel import DisplayPanel
 from .action_queue import ActionQueue
 from .page_builder import PageBuilder
 from .view_panel import ViewPanel
@@ -58,7 +56,7 @@ from .ui_common import BA_WINDOW_MODES, UP_AXES, SolveBundle
 
 # The parts are mixins for now (moved verbatim from one class); each owns one concern and its own module.
 class CalibrationApp(PairsPanel, CalibrationPanel, ViewPanel, ExportPanel, LiveSolveCoordinator, OverlayDrawing,
-                     PageBuilder, ActionQueue, LoupeSupport):
+                     PageBuilder, ActionQueue, LoupeSupport, DisplayPanel):
     """The annotation app on one scene; the viser server runs from construction.
 
     Parameters
@@ -145,6 +143,7 @@ class CalibrationApp(PairsPanel, CalibrationPanel, ViewPanel, ExportPanel, LiveS
         self.state = AnnotationState(self.depth.valid, (self.camera.width, self.camera.height), self.session_path,
                                      on_save_error=self._on_save_error)
         view = self.state.view_settings()
+        self._init_display(view)  # what the laser panes and the loupe show, contrast, edge opacity
         self._use_panorama = bool(view.get("panorama", True)) and self.panorama is not None
         self._show_reprojection = bool(view.get("show_reprojection", True))
         self._show_edges = bool(view.get("show_edges", True))

@@ -164,6 +164,28 @@ class AppDriver:
         handler = self.app._guard(lambda action: self.app.receive_initial_extrinsics(action.client, name, content))
         return self._fire(handler, SimpleNamespace(client=self.tab, target=None))
 
+    def choose_loupe_source(self, name: str) -> list[tuple[str, str]]:
+        """Choose what the BA loupe shows in its dropdown (see ``app.loupe_sources()``)."""
+        return self._fire(self.app._guard(self.app._on_loupe_source), SimpleNamespace(
+            client=self.tab, target=SimpleNamespace(value=name)))
+
+    def set_slider(self, label: str, value: float) -> list[tuple[str, str]]:
+        """Move a slider of the View folder: ``"Laser contrast"`` or ``"BA-edge opacity"``."""
+        handler = {"Laser contrast": self.app._on_contrast, "BA-edge opacity": self.app._on_edge_opacity}[label]
+        target = SimpleNamespace(value=value)
+        return self._fire(self.app._guard(handler), SimpleNamespace(client=self.tab, target=target))
+
+    def loupe_texture(self, kind: str) -> np.ndarray:
+        """The texture the loupe shows now (a nearest-neighbour enlarged crop)."""
+        return self.app.loupes.texture(kind)
+
+    def drawn_points(self, name: str) -> tuple[np.ndarray, np.ndarray]:
+        """World positions and colours of scene points node ``name`` (e.g. ``/annot/overlay/edges``); empty if none."""
+        entry = self.app.nodes.drawn.get(name)
+        if entry is None:
+            return np.empty((0, 3)), np.empty((0, 3), np.uint8)
+        return np.asarray(entry[1][1]), np.asarray(entry[1][2])
+
     def loupe_view(self, kind: str) -> dict:
         """What loupe ``kind`` shows: ``{"center", "size"}`` (+ ``"key"`` for BA): its centre cell ``(row, col)``
         or pixel ``(u, v)`` and its width in cells or pixels."""
@@ -259,8 +281,7 @@ class AppDriver:
 
     def selection_drawn(self, key: str) -> int:
         """Number of selection-ring line segments drawn on image ``key`` (0: no selection shown there)."""
-        entry = self.app.nodes.drawn.get(f"/annot/selected/{key}")
-        return 0 if entry is None else len(entry[1][1])
+        return len(self.app.nodes.segments(f"/annot/selected/{key}"))
 
     @property
     def dropdown_value(self) -> str:

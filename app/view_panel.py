@@ -40,7 +40,7 @@ class ViewPanel:
 
     def _ba_texture(self, key: str) -> np.ndarray:
         window = self._ba_window
-        return ba_texture(self.ba_gray[key], window, texture_factor(window.width, self.depth.shape[0]))
+        return ba_texture(self.ba_display(key), window, texture_factor(window.width, self.depth.shape[0]))
 
     def _ba_title(self, key: str) -> str:
         w = self._ba_window

@@ -676,7 +676,8 @@ def test_a_click_updates_only_what_it_changed_in_place(tmp_path):
         assert app.wait_idle(60) and app.result is not None
         node = lambda name: app.nodes.drawn[name][0]  # noqa: E731
         ba_ring, cam_ring = node("/annot/markers/horizontal/ring"), node("/annot/markers/raw/ring")
-        ba_points, cam_points = ba_ring.points.copy(), cam_ring.points.copy()
+        segments = app.nodes.segments
+        ba_points, cam_points = segments("/annot/markers/horizontal/ring"), segments("/annot/markers/raw/ring")
         label = node(f"/annot/labels/raw/{ids[1]}")
         label_pos = np.array(label.position)
         residuals = node("/annot/overlay/residuals")
@@ -692,24 +693,24 @@ def test_a_click_updates_only_what_it_changed_in_place(tmp_path):
         # The same scene nodes, updated in place, not re-created.
         assert node("/annot/markers/horizontal/ring") is ba_ring and node("/annot/markers/raw/ring") is cam_ring
         assert node(f"/annot/labels/raw/{ids[1]}") is label and node("/annot/overlay/residuals") is residuals
-        np.testing.assert_array_equal(ba_ring.points, ba_points)  # BA ends did not move
+        np.testing.assert_array_equal(segments("/annot/markers/horizontal/ring"), ba_points)  # BA ends did not move
         # The camera image is 8 units over 640 px: 3 px = 0.0375 units along x, for pair 2's ring only.
         per_pick = len(cam_points) // 5
-        moved = cam_ring.points - cam_points
+        moved = segments("/annot/markers/raw/ring") - cam_points
         np.testing.assert_allclose(moved[per_pick:2 * per_pick, :, 0], 0.0375, atol=1e-5)
         np.testing.assert_allclose(moved[per_pick:2 * per_pick, :, 1:], 0.0, atol=1e-6)
         assert np.all(moved[:per_pick] == 0) and np.all(moved[2 * per_pick:] == 0)
         np.testing.assert_allclose(np.array(label.position) - label_pos, [0.0375, 0.0, 0.0], atol=1e-6)
         assert not np.array_equal(residuals.points, old_residuals)  # a new solve, new residual lines
 
-        # A new pick changes the number of rings: that node is re-created, with one more ring.
+        # A new pick adds one ring.
         app.state.add_pixel(100.0, 100.0)
         assert app.wait_idle(60)
-        assert len(node("/annot/markers/raw/ring").points) == 6 * per_pick
+        assert len(segments("/annot/markers/raw/ring")) == 6 * per_pick
         assert f"/annot/labels/raw/{ids[-1] + 1}" in app.nodes.drawn
         app.state.undo()
         assert app.wait_idle(60)
-        assert len(node("/annot/markers/raw/ring").points) == 5 * per_pick
+        assert len(segments("/annot/markers/raw/ring")) == 5 * per_pick
         assert f"/annot/labels/raw/{ids[-1] + 1}" not in app.nodes.drawn
     finally:
         app.stop()

@@ -1,0 +1,97 @@
+"""What the laser panes show: the BA loupe's image (BA as clicked, one BA direction, intensity, range), a contrast
+control for the BA panes and the loupe, and the BA-edge overlay's opacity.  Grey levels come from
+:mod:`calib_core.display_images` and :func:`calib_core.bearing_angle.ba_to_display`."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from calib_core.display_images import apply_contrast
+
+from .ba_view import ba_texture, texture_factor
+from .ui_common import BA_TITLES
+
+AS_CLICKED = "BA as clicked"
+
+
+class DisplayPanel:
+    """Part of :class:`app.server.CalibrationApp` (a mixin: it uses the app's attributes)."""
+
+    def _init_display(self, view: dict) -> None:
+        try:
+            self._contrast = float(view.get("contrast", 1.0))
+        except (TypeError, ValueError):
+            self._contrast = 1.0
+        self._contrast = float(np.clip(self._contrast, 0.5, 3.0))
+        source = str(view.get("loupe_shows", AS_CLICKED))
+        self._loupe_source = source if source in self.loupe_sources() else AS_CLICKED
+        try:
+            self._edge_opacity = float(np.clip(float(view.get("edge_opacity", 0.8)), 0.0, 1.0))
+        except (TypeError, ValueError):
+            self._edge_opacity = 0.8
+        self._shown_gray: dict[str, np.ndarray] = {}
+        self._recontrast()
+
+    def loupe_sources(self) -> tuple[str, ...]:
+        """The choices of what the BA loupe shows."""
+        return (AS_CLICKED, *(BA_TITLES.get(k, k) for k in self.ba_keys), *self.scene_data.laser_images)
+
+    def _recontrast(self) -> None:
+        images = {k: self.ba_gray[k] for k in self.ba_keys} | dict(self.scene_data.laser_images)
+        self._shown_gray = {k: apply_contrast(g, self._contrast) for k, g in images.items()}
+
+    def ba_display(self, key: str) -> np.ndarray:
+        """The grey image shown for BA direction ``key`` ``(rows, cols)`` uint8 (contrast applied)."""
+        return self._shown_gray[key]
+
+    def ba_title(self, key: str) -> str:
+        return BA_TITLES.get(key, key)
+
+    def loupe_image(self, key: str) -> tuple[np.ndarray, str]:
+        """The BA loupe's grey image and its name, when the last BA click was on direction ``key``."""
+        source = self._loupe_source
+        if source == AS_CLICKED:
+            return self.ba_display(key), self.ba_title(key)
+        for k in self.ba_keys:
+            if BA_TITLES.get(k, k) == source:
+                return self.ba_display(k), source
+        return self._shown_gray[source], source
+
+    @property
+    def edge_opacity(self) -> float:
+        """Opacity of the BA-edge overlay on the camera view (0 hides it)."""
+        return self._edge_opacity
+
+    def _on_loupe_source(self, event: Any) -> None:
+        if event.client is None:
+            return
+        source = str(event.value)
+        if source not in self.loupe_sources():
+            return
+        self._loupe_source = source
+        self.state.set_view(loupe_shows=source)
+        self.loupes.refresh()
+
+    def _on_contrast(self, event: Any) -> None:
+        if event.client is None or event.value != event.target.value:
+            return  # our own update, or a newer slider position is queued behind this one
+        self._contrast = float(np.clip(float(event.value), 0.5, 3.0))
+        self.state.set_view(contrast=self._contrast)
+        with self._ui_lock:
+            self._recontrast()
+            window = self._ba_window
+            k = texture_factor(window.width, self.depth.shape[0])
+            with self.server.atomic():
+                for key in self.ba_keys:
+                    self._image_handles[key].image = ba_texture(self.ba_display(key), window, k)
+            self.loupes.refresh()
+
+    def _on_edge_opacity(self, event: Any) -> None:
+        if event.client is None or event.value != event.target.value:
+            return
+        self._edge_opacity = float(np.clip(float(event.value), 0.0, 1.0))
+        self.state.set_view(edge_opacity=self._edge_opacity)
+        self._overlay_inputs = None  # redraw the overlays with the new blend
+        self._refresh_scene()
