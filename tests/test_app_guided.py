@@ -199,3 +199,30 @@ def test_auto_accept_tags_pairs_and_an_undo_sticks(app, scene, truth):
     left = app.state.complete_picks()
     print(f"\nloose gate: {len(auto)} pairs auto-accepted, {len(left)} pairs left after one undo")
     assert 4 <= len(left) < n
+
+
+def test_guided_from_an_imported_initial_extrinsic(app, scene, truth, tmp_path):
+    from calib_core.io.extrinsics import save_extrinsics_yaml
+    from calib_core.transforms import R_from_rpy_deg
+
+    d = AppDriver(app)
+    # A rough start: the truth turned by 0.5 deg about each axis and moved 3 cm.
+    rough = truth.copy()
+    rough[:3, :3] = R_from_rpy_deg(np.array([0.5, -0.5, 0.5])) @ truth[:3, :3]
+    rough[:3, 3] += [0.03, -0.01, 0.01]
+    save_extrinsics_yaml(tmp_path / "rough.yaml", rough)
+    assert not [n for n in d.upload_initial_extrinsics("rough.yaml", (tmp_path / "rough.yaml").read_bytes())
+                if n[0] != "Initial extrinsics imported"]
+    # No pair yet: the imported pose alone is enough to propose and frame.
+    assert d.press_guide("Next pair") == [] and d.wait_guide()
+    rng = np.random.default_rng(2)
+    for k in range(6):
+        proposal, half = d.guide_proposal, app.state.pending()
+        assert proposal is not None and half is not None and half.laser_rc == tuple(proposal.laser_rc)
+        assert d.click_loupe_camera(*true_click(scene, truth, proposal, rng)) == [] and d.wait_guide()
+    assert d.wait_idle()
+    picks = app.state.complete_picks()
+    assert len(picks) == 6 and all(p.source == "guided" for p in picks)
+    err = pose_error(app.result.T_camera_lidar, truth)
+    print(f"\nfrom a 0.87 deg / 3.3 cm initial extrinsic, 6 guided pairs: {err[0]:.3f} deg, {100 * err[1]:.2f} cm")
+    assert err[0] < pose_error(rough, truth)[0] and err[1] < pose_error(rough, truth)[1]
