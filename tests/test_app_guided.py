@@ -17,6 +17,7 @@ import yaml
 from calib_core.errors import CalibError
 from calib_core.io.extrinsics import load_extrinsics_yaml
 from calib_core.synthetic import load_sample, simulate_pairs
+from calib_core.synthetic.picks import MAX_LASER_PICK_ERROR_M, laser_picks
 from calib_core.transforms import rotation_angle_deg, transform_points
 
 from app.server import CalibrationApp
@@ -78,8 +79,10 @@ def test_guided_pairs_beat_the_start_and_keep_their_tags(app, scene, truth, tmp_
 
     assert d.press_guide("Next pair") == []
     assert d.wait_guide()
+    cells = []
     for k in range(N_GUIDED):
         proposal = d.guide_proposal
+        cells.append(tuple(proposal.laser_rc))
         half = app.state.pending()
         # "Next pair" (then each finished pair) started a guided half pick at the shown proposal's cell.
         assert proposal is not None and half is not None
@@ -96,6 +99,12 @@ def test_guided_pairs_beat_the_start_and_keep_their_tags(app, scene, truth, tmp_
     err = pose_error(app.result.T_camera_lidar, truth)
     print(f"\nerror after 4 clicks: {err4[0]:.3f} deg, {100 * err4[1]:.2f} cm; after {N_GUIDED} guided pairs: "
           f"{err[0]:.3f} deg, {100 * err[1]:.2f} cm (bound {MAX_ROT_DEG:.2f} deg, {100 * MAX_TRANS_M:.2f} cm)")
+    # For the record: how many proposed cells a person would find on a real scene corner (within 2 cells of a
+    # corner's whole-cell pick); the others would cost a "Not a corner" press in practice.
+    pick_rc, pick_err = laser_picks(scene.depth, np.asarray(scene.corners_lidar))
+    usable = pick_rc[pick_err <= MAX_LASER_PICK_ERROR_M]
+    on_corner = sum(bool((np.abs(usable - c).max(axis=1) <= 2).any()) for c in cells)
+    print(f"{on_corner} of {N_GUIDED} proposed cells lie within 2 cells of a true scene corner")
     assert err[0] < err4[0] and err[1] < err4[1]
     assert err[0] <= MAX_ROT_DEG and err[1] <= MAX_TRANS_M
 
