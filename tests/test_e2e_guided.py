@@ -54,7 +54,7 @@ def test_guided_pairs_in_headless_chromium(tmp_path):
     try:
         with sync_api.sync_playwright() as p:
             browser = p.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS)
-            page = browser.new_page(viewport={"width": 1600, "height": 1000})
+            page = browser.new_page(viewport={"width": 1400, "height": 900})
             page.goto(app.url)
             cid = wait_for(lambda: app.client_ids(), "the tab to connect")[0]
             wait_for(lambda: app.view_settled(cid), "the annotation view to be set")
@@ -98,6 +98,7 @@ def test_guided_pairs_in_headless_chromium(tmp_path):
                 wait_for(lambda: app.state.version > before, f"start pair {k + 1}: the camera click to register")
             shown_errors = [wait_for(lambda: solved(4), "the error display for 4 pairs")]
             T4 = app.result.T_camera_lidar
+            start_s = time.monotonic() - t_browser
 
             actions = 0
             page.get_by_role("button", name="Next pair").click()
@@ -145,7 +146,7 @@ def test_guided_pairs_in_headless_chromium(tmp_path):
           f"camera loupe screen px per image pixel at each click: {[round(v, 1) for v in px_per_image_px]}; "
           f"error after 4 clicks {err(T4)[0]:.3f} deg {err(T4)[1]:.2f} cm, after {N_GUIDED} guided pairs "
           f"{err(T)[0]:.3f} deg {err(T)[1]:.2f} cm; mean px error shown: {shown_errors}; "
-          f"browser time {browser_s:.1f} s")
+          f"browser time {browser_s:.1f} s ({start_s:.1f} s for the 4 clicked pairs)")
     assert per_pair <= MAX_ACTIONS_PER_PAIR
     assert len(set(shown_errors)) > 1  # the error panel followed the pairs
     assert err(T)[0] < err(T4)[0] and err(T)[1] < err(T4)[1]
