@@ -74,6 +74,12 @@ class GuidePanel:
     auto_gate : AutoGate, optional
         The auto-accept gate (default: the strict one of :mod:`calib_core.guide.auto_accept`);
         the attribute :attr:`auto_gate` may be changed later.
+    click_source : callable, optional
+        ``click_source(pick_id)`` -> ``"loupe"`` or ``"full"``: where the
+        camera click that last set that pick's pixel landed (None: unknown).
+        A guided pair clicked on the full image gets the default precision
+        and waits for a refining click in the camera loupe (which makes it
+        0.3 px again) before the next proposal is framed.
     on_start : callable, optional
         Called after a guided half pick is started (the app forgets which
         full-image click a loupe click would refine: the loupe click now
@@ -87,10 +93,13 @@ class GuidePanel:
                  initial_T: Callable[[], np.ndarray | None] = lambda: None,
                  loupes: Callable[[], Any] = lambda: None, ba_key: str = "horizontal",
                  order: float | None = None, auto_gate: AutoGate | None = None,
+                 click_source: Callable[[int], str | None] = lambda pick_id: None,
                  on_start: Callable[[], None] = lambda: None) -> None:
         self.state, self.depth, self.camera, self.image = state, depth, camera, image
         self._post, self._initial_T, self._loupes, self._ba_key = post, initial_T, loupes, ba_key
-        self._on_start = on_start
+        self._on_start, self._click_source = on_start, click_source
+        self._watch: list | None = None  # [id, pixel seen] of the guided pick started last
+        self._refine: int | None = None  # a guided pick clicked on the full image, not yet refined in the loupe
         self.auto_gate = auto_gate if auto_gate is not None else AutoGate()
         self._auto_tried: set[tuple[int, int]] = set()  # cells auto-accepted once: never again (an undo sticks)
         self._lock = threading.RLock()
@@ -189,14 +198,38 @@ class GuidePanel:
                 self._submitted = key
                 if self._active(len(pairs)):
                     self._busy = True
-                    # A pair was finished: frame the next proposal when it is in (not after e.g. an undo).
-                    self._want_next = self._guiding and state.pending() is None
                     self._job_no += 1
                     self._worker.submit(self._job_no, (key, pairs, T0, list(self._skipped), list(self._dropped),
                                                        self._auto))
                 else:
                     self._proposals, self._index, self._shown_key = [], 0, None
+            watch = self._watch
+            pick = next((p for p in state.picks if watch is not None and p.id == watch[0]), None)
+            if watch is not None and pick is None:
+                self._watch = None
+            elif pick is not None and pick.pixel is not None and pick.pixel != watch[1]:
+                # Judged after the click's action, once the app has noted where the click landed.
+                watch[1] = pick.pixel
+                self._pending_posts += 1
+                self._post(lambda: self._after_click(pick.id))
         self._refresh()
+
+    def _after_click(self, pick_id: int) -> None:
+        """A camera click set the guided pick's pixel: its precision, and whether to move on."""
+        try:
+            pick = next((p for p in self.state.picks if p.id == pick_id), None)
+            if pick is None or pick.pixel is None:
+                return
+            full = self._click_source(pick_id) == "full" and self._loupes() is not None
+            precision = None if full or self._click_source(pick_id) is None else GUIDED_CLICK_SIGMA_PX
+            if pick.precision_px != precision:
+                self.state.move_pixel(pick_id, *pick.pixel, precision_px=precision)
+            self._refine = pick_id if full else None
+            self._want_next = self._guiding and not full  # the new proposals then frame the next pair
+            self._refresh()
+        finally:
+            with self._lock:
+                self._pending_posts -= 1
 
     def _job(self, payload: tuple) -> tuple:
         """On the worker: sync the session with the pairs, rank, and (optionally) gate for auto-accept."""
@@ -281,7 +314,9 @@ class GuidePanel:
                 return
             raise CalibError(f"pair {self.state.pending().id} is not finished; complete or undo it first")
         else:
-            self.state.start_pick(*p.laser_rc, source="guided", precision_px=GUIDED_CLICK_SIGMA_PX)
+            half = self.state.get(self.state.start_pick(*p.laser_rc, source="guided",
+                                                        precision_px=GUIDED_CLICK_SIGMA_PX))
+        self._watch, self._refine = [half.id, None], None
         self._on_start()
         loupes = self._loupes()
         if loupes is not None:
@@ -353,6 +388,9 @@ class GuidePanel:
             half = self.state.pending()
             if half is not None and half.source == "guided" and half.laser_rc == tuple(p.laser_rc):
                 lines.append(f"Pair {half.id}: click the corner in the camera loupe.")
+            elif self._refine is not None:
+                lines.append(f"Pair {self._refine}: refine its pixel in the camera loupe (a click on the full "
+                             f"image is coarse), or press **Next pair**.")
             elif self._guiding:
                 lines.append("Press **Next pair** to continue.")
         counts = {s: 0 for s in ("clicked", "guided", "auto")}
@@ -369,4 +407,13 @@ def attach_guide_panel(app: Any) -> GuidePanel:
                       initial_T=lambda: getattr(app, "initial_T_camera_lidar", None),
                       loupes=lambda: getattr(app, "loupes", None), ba_key=app.ba_keys[0],
                       order=app._pairs_folder.order + 0.5,
+                      click_source=lambda pick_id: _click_source(app, pick_id),
                       on_start=lambda: getattr(app, "_last_pick", {}).clear())
+
+
+def _click_source(app: Any, pick_id: int) -> str | None:
+    """Where the app's last camera click on pick ``pick_id`` landed (``"loupe"``/``"full"``), from the loupes' record."""
+    for kind, pid, where in list(getattr(app, "_last_pick", {}).values()):
+        if kind == "camera" and pid == pick_id:
+            return where
+    return None

@@ -254,11 +254,9 @@ class AnnotationState:
         if source not in PAIR_SOURCES:
             raise CalibError(f"source must be one of {', '.join(PAIR_SOURCES)}, got {source!r}")
         with self._lock:
-            pending = self._pending_locked()
-            if pending is not None:
+            if (pending := self._pending_locked()) is not None:
                 raise CalibError(f"pair {pending.id} is not finished; complete it or undo it first")
-            new = Pick(self._snap.next_id, laser_rc=rc, source=source,
-                       precision_px=None if precision_px is None else float(precision_px))
+            new = Pick(self._snap.next_id, laser_rc=rc, source=source, precision_px=precision_px)
             self._commit_locked(Snapshot(self._snap.picks + (new,), self._snap.next_id + 1))
         self._notify()
         return new.id
@@ -271,11 +269,11 @@ class AnnotationState:
         self._notify()
         return out
 
-    def move_pixel(self, pick_id: int, u: float, v: float) -> int:
-        """Set the camera end of pick ``pick_id`` to an original-image pixel."""
+    def move_pixel(self, pick_id: int, u: float, v: float, **tags: Any) -> int:
+        """Set the camera end of pick ``pick_id`` to an original-image pixel (and its ``precision_px`` if given)."""
         uv = self.check_pixel(u, v)
         with self._lock:
-            out = self._move_locked(pick_id, pixel=uv)
+            out = self._move_locked(pick_id, pixel=uv, **{k: tags[k] for k in ("precision_px",) if k in tags})
         self._notify()
         return out
 
@@ -446,9 +444,8 @@ class AnnotationState:
             return new.id
         return self._move_locked(target.id, laser_rc=laser_rc, pixel=pixel)
 
-    def _move_locked(self, pick_id: int, laser_rc=None, pixel=None) -> int:
-        old = self.get(pick_id)
-        new = old
+    def _move_locked(self, pick_id: int, laser_rc=None, pixel=None, **tags: Any) -> int:
+        new = replace(self.get(pick_id), **tags)
         if laser_rc is not None:
             new = replace(new, laser_rc=laser_rc, laser_xyz=None)
         if pixel is not None:

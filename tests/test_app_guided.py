@@ -235,3 +235,23 @@ def test_guided_from_an_imported_initial_extrinsic(app, scene, truth, tmp_path):
     err = pose_error(app.result.T_camera_lidar, truth)
     print(f"\nfrom a 0.87 deg / 3.3 cm initial extrinsic, 6 guided pairs: {err[0]:.3f} deg, {100 * err[1]:.2f} cm")
     assert err[0] < pose_error(rough, truth)[0] and err[1] < pose_error(rough, truth)[1]
+
+
+def test_a_full_image_click_waits_for_the_loupe(app, scene, truth):
+    d = AppDriver(app)
+    click_start_pairs(d, scene)
+    assert d.wait_guide() and d.press_guide("Next pair") == [] and d.wait_guide()
+    proposal, half = d.guide_proposal, app.state.pending()
+    click = true_click(scene, truth, proposal, np.random.default_rng(4))
+    # A click on the full camera image completes the pair, but only at the default precision, and the next
+    # proposal waits: the loupe (now on the click) is where the pixel is placed precisely.
+    assert d.click_camera(*np.round(click)) == [] and d.wait_guide()
+    pick = app.state.get(half.id)
+    assert pick.complete and pick.source == "guided" and pick.precision_px is None
+    assert app.state.pending() is None and f"Pair {half.id}: refine" in d.guide_panel
+    # The click in the camera loupe refines the same pair (0.3 px again) and the next pair is framed.
+    assert d.click_loupe_camera(*click) == [] and d.wait_guide()
+    pick = app.state.get(half.id)
+    assert np.allclose(pick.pixel, click, atol=0.05) and pick.precision_px == pytest.approx(CLICK_SIGMA_PX)
+    nxt = app.state.pending()
+    assert nxt is not None and nxt.id != half.id and nxt.laser_rc == tuple(d.guide_proposal.laser_rc)
