@@ -7,7 +7,9 @@ worker thread after every change of the pairs, never on a viser callback.
 
 "Next pair" starts a pick at the shown proposal's cell (laser end only,
 ``source="guided"``, ``precision_px`` = the guided click's 0.3 px) and frames
-the loupes on the cell and on the predicted pixel with its 3-sigma ellipse.
+the loupes on the cell and on the predicted pixel with its 3-sigma ellipse;
+a proposal to re-click a rough pair selects that pair instead, so the click
+moves its pixel (it becomes ``guided``, 0.3 px).
 One click on the camera (loupe or image) completes the pair through the
 ordinary pick logic; when the new proposals arrive the next one is started
 and framed by itself, so a guided pair costs one click.  "Skip" moves the half
@@ -100,6 +102,8 @@ class GuidePanel:
         self._on_start, self._click_source = on_start, click_source
         self._watch: list | None = None  # [id, pixel seen] of the guided pick started last
         self._refine: int | None = None  # a guided pick clicked on the full image, not yet refined in the loupe
+        self._reclick: int | None = None  # the rough pair selected for a re-click
+        self._reclick_of: dict[tuple[int, int], int] = {}  # cell -> pick id of the re-click proposals
         self.auto_gate = auto_gate if auto_gate is not None else AutoGate()
         self._auto_tried: set[tuple[int, int]] = set()  # cells auto-accepted once: never again (an undo sticks)
         self._lock = threading.RLock()
@@ -194,15 +198,6 @@ class GuidePanel:
         T0 = self._initial_T()
         key = (tuple(pairs), None if T0 is None else np.asarray(T0, dtype=np.float64).tobytes(), self._auto)
         with self._lock:
-            if key != self._submitted:
-                self._submitted = key
-                if self._active(len(pairs)):
-                    self._busy = True
-                    self._job_no += 1
-                    self._worker.submit(self._job_no, (key, pairs, T0, list(self._skipped), list(self._dropped),
-                                                       self._auto))
-                else:
-                    self._proposals, self._index, self._shown_key = [], 0, None
             watch = self._watch
             pick = next((p for p in state.picks if watch is not None and p.id == watch[0]), None)
             if watch is not None and pick is None:
@@ -212,6 +207,15 @@ class GuidePanel:
                 watch[1] = pick.pixel
                 self._pending_posts += 1
                 self._post(lambda: self._after_click(pick.id))
+            if key != self._submitted:
+                self._submitted = key
+                if self._active(len(pairs)):
+                    self._busy = True
+                    self._job_no += 1
+                    self._worker.submit(self._job_no, (key, pairs, T0, list(self._skipped), list(self._dropped),
+                                                       self._auto))
+                else:
+                    self._proposals, self._index, self._shown_key = [], 0, None
         self._refresh()
 
     def _after_click(self, pick_id: int) -> None:
@@ -222,8 +226,10 @@ class GuidePanel:
                 return
             full = self._click_source(pick_id) == "full" and self._loupes() is not None
             precision = None if full or self._click_source(pick_id) is None else GUIDED_CLICK_SIGMA_PX
-            if pick.precision_px != precision:
-                self.state.move_pixel(pick_id, *pick.pixel, precision_px=precision)
+            if pick.precision_px != precision or pick.source != "guided":
+                self.state.move_pixel(pick_id, *pick.pixel, precision_px=precision, source="guided")
+            if pick_id == self._reclick:
+                self._end_reclick()
             self._refine = pick_id if full else None
             self._want_next = self._guiding and not full  # the new proposals then frame the next pair
             self._refresh()
@@ -240,15 +246,19 @@ class GuidePanel:
         s.pairs, s.T_initial = list(pairs), T0
         s.state = current_pose(s.pairs, self.depth, self.camera, T0)
         s.skipped, s.dropped = list(skipped), list(dropped)
-        # Re-clicks of rough pairs need a pick to be moved, not started: not offered here.
-        props = [p for p in s.proposals(N_PROPOSALS + len(pairs)) if p.replaces is None][:N_PROPOSALS]
+        # "Not a corner" on a re-click means: do not offer re-clicking that pair again.
+        gone = set(map(tuple, dropped))
+        props = [p for p in s.proposals(N_PROPOSALS + len(gone))
+                 if p.replaces is None or tuple(p.laser_rc) not in gone][:N_PROPOSALS]
+        # A re-click proposal names the pair it replaces by its index in ``pairs``: keep the pick id.
+        reclick_of = {tuple(p.laser_rc): pairs[p.replaces].id for p in props if p.replaces is not None}
         auto_pairs: list[Pair] = []
-        if auto and props and s.corners is not None:
+        if auto and props and s.corners is not None:  # (re-clicks are never auto-accepted: the gate refuses them)
             ok, pixels = auto_accept(s.corners, props, self.auto_gate, image=self.image, depth=self.depth, camera=self.camera,
                                      T_camera_lidar=s.state.T_camera_lidar)
             auto_pairs = [Pair(tuple(p.laser_rc), None, (float(px[0]), float(px[1])), source="auto",
                                precision_px=AUTO_PRECISION_PX) for p, good, px in zip(props, ok, pixels) if good]
-        return key, props, auto_pairs
+        return key, props, auto_pairs, reclick_of
 
     def _on_done(self, job: int, result: tuple | None, error: BaseException | None) -> None:
         with self._lock:
@@ -260,13 +270,15 @@ class GuidePanel:
                     f"{type(error).__name__}: {error}")
                 self._refresh()
                 return
-            key, props, auto_pairs = result
+            key, props, auto_pairs, self._reclick_of = result
             self._busy = False
             self._error = None
-            # A guided half pick still waiting for its click (e.g. after an undo) keeps its proposal shown.
+            # A guided pick still waiting for its click (e.g. after an undo) keeps its proposal shown.
             half = self._guided_half()
+            waiting = half.laser_rc if half is not None else next(
+                (rc for rc, pid in self._reclick_of.items() if pid == self._reclick), None)
             cells = [tuple(p.laser_rc) for p in props]
-            index = cells.index(half.laser_rc) if half is not None and half.laser_rc in cells else 0
+            index = cells.index(waiting) if waiting in cells else 0
             self._proposals, self._index, self._shown_key = props, index, key
             self._auto_pairs = auto_pairs
             self._pending_posts += 1
@@ -285,7 +297,9 @@ class GuidePanel:
                 self._auto_tried.update(p.laser_rc for p in auto_pairs)
                 self.state.import_pairs(auto_pairs)  # one undoable step; the new proposals follow
                 return
-            if self._want_next and self._guiding:
+            with self._lock:  # proposals of pairs that changed since (e.g. a re-click's new tag) wait for theirs
+                fresh = self._shown_key == self._submitted
+            if self._want_next and self._guiding and fresh:
                 self._want_next = False
                 self._start_current(quiet=True)
             self._refresh()
@@ -298,14 +312,36 @@ class GuidePanel:
         p = self.state.pending()
         return p if p is not None and p.source == "guided" and p.pixel is None else None
 
+    def _reclick_id(self, p: Proposal | None) -> int | None:
+        return None if p is None or p.replaces is None else self._reclick_of.get(tuple(p.laser_rc))
+
+    def _end_reclick(self) -> None:
+        if self._reclick is not None:
+            self._reclick = None
+            self.state.select(None)
+
     def _start_current(self, quiet: bool = False) -> None:
-        """Make (or move) the guided half pick at the shown proposal and frame the loupes on it."""
+        """Make (or move) the guided half pick at the shown proposal -- or, for a re-click, select the rough
+        pair so the next camera click moves its pixel -- and frame the loupes on it."""
         p = self.current
+        self._end_reclick()
         if p is None:
             self._refresh()
             return
         half = self._guided_half()
-        if half is not None:
+        rid = self._reclick_id(p)
+        if rid is not None:
+            if half is not None:
+                self.state.delete(half.id)  # the half pick of the proposal shown before
+            elif self.state.pending() is not None:
+                if quiet:
+                    self._refresh()
+                    return
+                raise CalibError(f"pair {self.state.pending().id} is not finished; complete or undo it first")
+            self.state.select(rid)
+            self._reclick, half = rid, self.state.get(rid)
+            self._watch, self._refine = [rid, half.pixel], None
+        elif half is not None:
             if half.laser_rc != tuple(p.laser_rc):
                 self.state.move_laser(half.id, *p.laser_rc)
         elif self.state.pending() is not None:
@@ -316,7 +352,8 @@ class GuidePanel:
         else:
             half = self.state.get(self.state.start_pick(*p.laser_rc, source="guided",
                                                         precision_px=GUIDED_CLICK_SIGMA_PX))
-        self._watch, self._refine = [half.id, None], None
+        if rid is None:
+            self._watch, self._refine = [half.id, None], None
         self._on_start()
         loupes = self._loupes()
         if loupes is not None:
@@ -328,6 +365,7 @@ class GuidePanel:
         self.update()  # an initial extrinsic imported since the last change is used from now on
         if label == "Stop":
             self._guiding = self._want_next = False
+            self._end_reclick()
             half = self._guided_half()
             if half is not None:
                 self.state.delete(half.id)
@@ -353,6 +391,7 @@ class GuidePanel:
             self._refresh()
             return
         if self.current is None:
+            self._end_reclick()
             half = self._guided_half()
             if half is not None:
                 self.state.delete(half.id)
@@ -382,11 +421,14 @@ class GuidePanel:
         else:
             p = props[index]
             major = 3.0 * float(p.ellipse_sigma_px()[0])
+            what = p.kind if p.replaces is None else f"re-click of pair {self._reclick_id(p)}"
             lines.append(f"Proposal {index + 1} of {len(props)}: cell (row {p.laser_rc[0]}, col {p.laser_rc[1]}), "
-                         f"{p.kind}, gain {p.gain:.3f}")
+                         f"{what}, gain {p.gain:.3f}")
             lines.append(f"Predicted pixel ({p.pixel[0]:.1f}, {p.pixel[1]:.1f}), 3σ ±{major:.1f} px")
             half = self.state.pending()
-            if half is not None and half.source == "guided" and half.laser_rc == tuple(p.laser_rc):
+            if self._reclick is not None and self._reclick_id(p) == self._reclick:
+                lines.append(f"Pair {self._reclick} (selected): re-click its corner in the camera loupe.")
+            elif half is not None and half.source == "guided" and half.laser_rc == tuple(p.laser_rc):
                 lines.append(f"Pair {half.id}: click the corner in the camera loupe.")
             elif self._refine is not None:
                 lines.append(f"Pair {self._refine}: refine its pixel in the camera loupe (a click on the full "

@@ -270,10 +270,10 @@ class AnnotationState:
         return out
 
     def move_pixel(self, pick_id: int, u: float, v: float, **tags: Any) -> int:
-        """Set the camera end of pick ``pick_id`` to an original-image pixel (and its ``precision_px`` if given)."""
+        """Set the camera end of pick ``pick_id`` to an original-image pixel (and ``precision_px``, ``source`` if given)."""
         uv = self.check_pixel(u, v)
         with self._lock:
-            out = self._move_locked(pick_id, pixel=uv, **{k: tags[k] for k in ("precision_px",) if k in tags})
+            out = self._move_locked(pick_id, pixel=uv, **{k: tags[k] for k in ("precision_px", "source") if k in tags})
         self._notify()
         return out
 
