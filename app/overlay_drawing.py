@@ -18,24 +18,11 @@ class OverlayDrawing:
 
     def _display_from_pixels(self, pixels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Display coordinates (visible camera view) of original-image pixels."""
-        pixels = np.asarray(pixels, dtype=np.float64).reshape(-1, 2)
-        if len(pixels) == 0:
-            return pixels, np.zeros(0, bool)
-        if not self._use_panorama:
-            return pixels, np.isfinite(pixels).all(axis=1)
-        return self.panorama.from_camera_pixels(pixels)
+        return self.camera_view.display_from_pixels(pixels)
 
     def _display_from_camera_points(self, points_camera: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Display coordinates (visible camera view) of points in the camera frame."""
-        pts = np.asarray(points_camera, dtype=np.float64).reshape(-1, 3)
-        if len(pts) == 0:
-            return np.empty((0, 2)), np.zeros(0, bool)
-        if self._use_panorama:
-            uv, ok = self.panorama.project(pts)
-            # Only directions the camera model can see (the panorama is wider).
-            ok &= self.camera.project(pts)[1]
-            return uv, ok
-        return self.camera.project(pts)
+        return self.camera_view.display_from_camera_points(points_camera)
 
     def _refresh_scene(self) -> None:
         """Redraw markers, labels, selection and the reprojection overlays (only what changed is sent)."""
@@ -102,7 +89,7 @@ class OverlayDrawing:
         slot = self._camera_slot()
         bundle = self._bundle
         # Skipped when neither the solve, the view nor the picks it colours changed (e.g. a click on a BA image).
-        inputs = (slot, self._use_panorama, self._show_reprojection, self._show_edges, self._edge_opacity,
+        inputs = (slot, self.camera_view.key, self._show_reprojection, self._show_edges, self._edge_opacity,
                   () if bundle is None else tuple(picks[i].color if i in picks else None for i in bundle.pick_ids),
                   tuple((pid, uv.tobytes(), picks[pid].color) for pid, uv in predictions))
         if self._overlay_inputs is not None and self._overlay_inputs[0] is bundle and self._overlay_inputs[1] == inputs:
@@ -127,8 +114,8 @@ class OverlayDrawing:
                 uv, ok = self._display_from_camera_points(bundle.edges_camera)
                 # Only where the camera sees (inside a fisheye circle); blended with the image under each point.
                 raw, ok_raw = self.camera.project(bundle.edges_camera)
-                ij = np.clip(np.round(np.nan_to_num(raw)).astype(np.int64), 0,
-                             [self.camera.width - 1, self.camera.height - 1])
+                ij = np.clip(np.nan_to_num(np.round(raw), nan=0.0, posinf=0.0, neginf=0.0), 0,
+                             [self.camera.width - 1, self.camera.height - 1]).astype(np.int64)
                 ok &= ok_raw & self.scene_data.image_valid[ij[:, 1], ij[:, 0]]
                 edge_world = slot.world_from_pixel(uv[ok], z_offset=-0.004)
                 under = self.image[ij[ok, 1], ij[ok, 0]].astype(np.float64)

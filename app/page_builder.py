@@ -23,16 +23,11 @@ class PageBuilder:
         # A no-op drag on the backdrop keeps left-drags from orbiting the flat view.
         backdrop.on_drag(lambda event: None)
         self._image_handles: dict[str, Any] = {}
-        raw = scene.add_image(
-            "/annot/camera_raw", self.image, self.slots["raw"].render_width, self.slots["raw"].render_height,
-            format="jpeg", jpeg_quality=92, position=self.slots["raw"].center, visible=not self._use_panorama,
-        )
-        self._image_handles["raw"] = raw
-        if self.panorama is not None:
-            s = self.slots["panorama"]
-            self._image_handles["panorama"] = scene.add_image(
-                "/annot/camera_pano", self.pano_image, s.render_width, s.render_height,
-                format="jpeg", jpeg_quality=92, position=s.center, visible=self._use_panorama,
+        for key, view in self.camera_views.items():
+            s = self.slots[key]
+            self._image_handles[key] = scene.add_image(
+                {"raw": "/annot/camera_raw", "panorama": "/annot/camera_pano"}[key], view.image, s.render_width,
+                s.render_height, format="jpeg", jpeg_quality=92, position=s.center, visible=key == self.camera_view.key,
             )
         self._ba_titles: dict[str, Any] = {}
         for key in self.ba_keys:
@@ -128,7 +123,7 @@ class PageBuilder:
                                                initial_value=max(self._ba_window.width, min(16, n_cols)))
             self._sl_ba_width.on_update(self._guard(self._on_ba_window_slider))
             self._cb_pano = gui.add_checkbox(
-                "Unwrapped panorama", initial_value=self._use_panorama, disabled=self.panorama is None,
+                "Unwrapped panorama", initial_value=self._use_panorama, disabled="panorama" not in self.camera_views,
                 hint="Show the camera image unwrapped (azimuth x elevation); clicks still give original-image pixels",
             )
             self._cb_pano.on_update(self._guard(self._on_view_checkbox))

@@ -58,11 +58,10 @@ class PairsPanel:
                 shown = self.ba_display(key)[:, self._ba_window.columns]
                 uv = tuple(refine_click_to_corner(shown, uv, 3.0))
             return ("ba", key, *self.cell_from_display(key, uv))
-        if key != self._camera_slot().key:
+        if key != self.camera_view.key:
             raise CalibError("that camera view is hidden; click the visible one")
         if self._snap:
-            gray = self.pano_gray if key == "panorama" else self.image_gray
-            uv = tuple(refine_click_to_corner(gray, uv, SNAP_RADIUS_PX))
+            uv = tuple(refine_click_to_corner(self.camera_view.gray, uv, SNAP_RADIUS_PX))
         return ("camera", *self._original_from_display(uv))
 
     def _click(self, key: str, uv: tuple[float, float], pick_id: int | None = None, client: Any = None) -> int:
@@ -123,9 +122,7 @@ class PairsPanel:
 
     def _original_from_display(self, uv: tuple[float, float]) -> tuple[float, float]:
         """Original camera pixel of a click on the visible camera view."""
-        if not self._use_panorama:
-            return float(uv[0]), float(uv[1])
-        raw, valid = self.panorama.to_camera_pixels(np.array([uv], dtype=np.float64))
+        raw, valid = self.camera_view.pixels_from_display(np.array([uv], dtype=np.float64))
         if not valid[0]:
             raise CalibError("the camera does not see that part of the panorama; click inside the picture")
         return float(raw[0, 0]), float(raw[0, 1])

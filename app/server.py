@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from .ba_view import ColumnWindow
+from .camera_view import camera_views
 from .live_solver import LiveSolver
 from .loupes import Loupes
 from .loupe_support import LoupeSupport
@@ -129,7 +130,6 @@ class CalibrationApp(PairsPanel, CalibrationPanel, ViewPanel, ExportPanel, LiveS
         sd = self.scene_data
         self.depth, self.camera, self.image = sd.depth, sd.camera, sd.image
         self.ba_rad, self.ba_keys, self.ba_gray, self.image_gray = sd.ba_rad, sd.ba_keys, sd.ba_gray, sd.image_gray
-        self.panorama, self.pano_image, self.pano_gray = sd.panorama, sd.pano_image, sd.pano_gray
         self.edge_points_lidar, self.all_points_lidar, self.all_rows_cols = (
             sd.edge_points_lidar, sd.all_points_lidar, sd.all_rows_cols)
         self.ba_cell_aspect, self._wrap_cols, self.cloud_points_lidar = (
@@ -144,7 +144,8 @@ class CalibrationApp(PairsPanel, CalibrationPanel, ViewPanel, ExportPanel, LiveS
                                      on_save_error=self._on_save_error)
         view = self.state.view_settings()
         self._init_display(view)  # what the laser panes and the loupe show, contrast, edge opacity
-        self._use_panorama = bool(view.get("panorama", True)) and self.panorama is not None
+        self.camera_views = camera_views(sd)  # raw, and panorama for ocam / fisheye (app.camera_view)
+        self._use_panorama = bool(view.get("panorama", True)) and "panorama" in self.camera_views
         self._show_reprojection = bool(view.get("show_reprojection", True))
         self._show_edges = bool(view.get("show_edges", True))
         self._snap = bool(view.get("snap", False))
@@ -165,9 +166,7 @@ class CalibrationApp(PairsPanel, CalibrationPanel, ViewPanel, ExportPanel, LiveS
         self._facing_of: SolveBundle | None = None  # the solve ``_ba_facing`` was computed for
         self._ensure_facing()  # from the imported initial extrinsic, if any
         self._ba_window = self._wanted_ba_window()
-        self._camera_sizes = {"raw": (self.camera.width, self.camera.height)}
-        if self.panorama is not None:
-            self._camera_sizes["panorama"] = (self.panorama.width, self.panorama.height)
+        self._camera_sizes = {k: (v.image.shape[1], v.image.shape[0]) for k, v in self.camera_views.items()}
         self.slots = self._layout()
 
         self._ui_lock = threading.RLock()

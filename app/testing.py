@@ -75,6 +75,25 @@ class _FakeGui:
         return w
 
 
+@dataclass
+class FakeCamera:
+    """The parts of a viser client camera the app reads and sets (a 1400 x 900 canvas)."""
+
+    position: tuple = (0.0, 0.0, -10.0)
+    look_at: tuple = (0.0, 0.0, 0.0)
+    up_direction: tuple = (0.0, -1.0, 0.0)
+    fov: float = 0.5
+    image_width: int = 1400
+    image_height: int = 900
+
+    def screen_of(self, world) -> tuple[float, float]:
+        """Canvas pixel of a world point on the annotation plane, for a camera looking along +z (as the app sets)."""
+        dist = self.look_at[2] - self.position[2]
+        f = (self.image_height / 2) / np.tan(self.fov / 2)
+        return (self.image_width / 2 + f * (world[0] - self.position[0]) / dist,
+                self.image_height / 2 + f * (world[1] - self.position[1]) / dist)
+
+
 @dataclass(eq=False)
 class FakeTab:
     """Stands in for a viser client handle: records what the app sends to this tab."""
@@ -83,6 +102,7 @@ class FakeTab:
     notifications: list[tuple[str, str]] = field(default_factory=list)
     downloads: list[tuple[str, bytes]] = field(default_factory=list)
     gui: _FakeGui = field(default_factory=_FakeGui)
+    camera: FakeCamera = field(default_factory=FakeCamera)
 
     def add_notification(self, title: str, body: str, **kwargs: Any) -> None:
         self.notifications.append((str(title), str(body)))
@@ -194,6 +214,47 @@ class AppDriver:
             return {"key": c.key, "center": c.center, "size": c.n_cols}
         c = self.app.loupes.camera_crop
         return {"center": c.center, "size": c.n}
+
+    # ---------------------------------------------------------------- view folder
+    def choose_ba_columns(self, label: str) -> list[tuple[str, str]]:
+        """Choose in the "BA columns" dropdown: ``"All columns"``, ``"Facing the camera"`` or ``"Custom"``."""
+        return self._fire(self.app._guard(self.app._on_ba_window_mode), SimpleNamespace(
+            client=self.tab, target=SimpleNamespace(value=label)))
+
+    def set_ba_columns(self, start: int, width: int) -> list[tuple[str, str]]:
+        """Move the "BA first column" and "BA columns shown" sliders to ``start`` and ``width``."""
+        self.app._sl_ba_start.value, self.app._sl_ba_width.value = int(start), int(width)
+        return self._fire(self.app._guard(self.app._on_ba_window_slider), SimpleNamespace(
+            client=self.tab, target=self.app._sl_ba_width))
+
+    @property
+    def ba_columns_choice(self) -> str:
+        """What the "BA columns" dropdown shows."""
+        return str(self.app._dd_ba_window.value)
+
+    def ba_texture(self, key: str) -> np.ndarray:
+        """The texture BA image ``key`` shows now (cells enlarged by nearest neighbour)."""
+        return np.asarray(self.app._image_handles[key].image)
+
+    def press_zoom(self, name: str) -> list[tuple[str, str]]:
+        """Press a "Zoom" button of the 2-D view: ``"In"``, ``"Out"`` or ``"On last click"``."""
+        return self._fire(self.app._guard(self.app._on_magnify), SimpleNamespace(
+            client=self.tab, target=SimpleNamespace(value=name)))
+
+    def show(self, view: str) -> list[tuple[str, str]]:
+        """Press "Show": ``"2D annotation"`` or ``"3D cloud"``."""
+        return self._fire(self.app._guard(self.app._on_view_mode), SimpleNamespace(
+            client=self.tab, target=SimpleNamespace(value=view)))
+
+    @property
+    def cloud_colors(self) -> np.ndarray:
+        """The 3-D cloud's colours ``(K, 3)`` as the page shows them."""
+        return np.asarray(self.app._cloud.colors)
+
+    @property
+    def cloud_shows_current_solve(self) -> bool:
+        """True when the 3-D cloud's colours come from the newest solve."""
+        return self.app._cloud_shows is not None and self.app._cloud_shows is self.app._bundle
 
     def shift_click(self, key: str, uv: tuple[float, float]) -> list[tuple[str, str]]:
         """Shift+click display pixel ``uv`` of image ``key`` (selects the pair whose marker is there)."""

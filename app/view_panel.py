@@ -12,9 +12,11 @@ import numpy as np
 import viser.transforms as vtf
 
 from calib_core.errors import CalibError
-from calib_core.transforms import invert_T
+from calib_core.cameras.pinhole import PinholeCamera
+from calib_core.transforms import invert_T, transform_points
 
 from .ba_view import ColumnWindow, ba_texture, texture_factor
+from .camera_view import CameraView
 from .layout import ImageSlot, annotation_layout, bounds_of
 from .ui_common import (
     BA_TITLES, MIN_PAIRS, CLOUD_ORIGIN, PANEL_PX, ZOOM_PX_PER_CELL, ZOOM_PX_PER_IMAGE_PX, ZOOM_STEP,
@@ -88,29 +90,29 @@ class ViewPanel:
         if self._sl_ba_width.value != w.width:
             self._sl_ba_width.value = max(w.width, self._sl_ba_width.min)
 
+    @property
+    def camera_view(self) -> CameraView:
+        """The camera view the page shows (raw image or panorama)."""
+        return self.camera_views["panorama" if self._use_panorama else "raw"]
+
     def _camera_slot(self) -> ImageSlot:
-        return self.slots["panorama" if self._use_panorama else "raw"]
+        return self.slots[self.camera_view.key]
 
     def _update_camera_title(self) -> None:
         s = self._camera_slot()
         x0, y0, _, _ = s.bounds()
         self._camera_title.position = (x0, y0 - 0.03, -0.01)
-        self._camera_title.text = (
-            f"Camera, unwrapped panorama ({self.camera.model}); errors are measured in the original image"
-            if self._use_panorama
-            else f"Camera image ({self.camera.model}, {self.camera.width}x{self.camera.height})"
-        )
+        self._camera_title.text = self.camera_view.title()
 
     def _on_view_checkbox(self, event: Any) -> None:
         with self._ui_lock:
             was_panorama = self._use_panorama
-            self._use_panorama = bool(self._cb_pano.value) and self.panorama is not None
+            self._use_panorama = bool(self._cb_pano.value) and "panorama" in self.camera_views
             self._show_reprojection = bool(self._cb_reproj.value)
             self._show_edges = bool(self._cb_edges.value)
             self._snap = bool(self._cb_snap.value)
-            if "panorama" in self._image_handles:
-                self._image_handles["panorama"].visible = self._use_panorama
-            self._image_handles["raw"].visible = not self._use_panorama
+            for key in self.camera_views:
+                self._image_handles[key].visible = key == self.camera_view.key
             self._update_camera_title()
         self.state.set_view(panorama=self._use_panorama, show_reprojection=self._show_reprojection,
                             show_edges=self._show_edges, snap=self._snap)
@@ -315,6 +317,11 @@ class ViewPanel:
         """Ids of the connected browser tabs."""
         return sorted(self.server.get_clients())
 
+    def view_set_time(self, client_id: int) -> float:
+        """``time.time()`` when this app last set the tab's camera (0.0: never)."""
+        target = self._view_target.get(client_id)
+        return 0.0 if target is None else float(target[2])
+
     def view_settled(self, client_id: int) -> bool:
         """True once the tab reported a camera at the pose this app last set."""
         client = self.server.get_clients().get(client_id)
@@ -359,11 +366,14 @@ class ViewPanel:
             if not shown[0]:
                 raise CalibError(f"BA column {uv[0]} is outside the shown columns")
             disp = np.array([[u[0] + disp[0, 0] - round(disp[0, 0]), disp[0, 1]]])
-        world = slot.world_from_pixel(disp)[0]
+        world = slot.world_from_pixel(disp)
         cam = self.server.get_clients()[client_id].camera
-        R_world_cam = vtf.SO3(np.asarray(cam.wxyz)).as_matrix()
-        p = R_world_cam.T @ (world - np.asarray(cam.position))
+        # The tab's view as a distortion-free pinhole (viser's camera frame is OpenCV's: +z forward, +y down).
+        T_world_view = np.eye(4)
+        T_world_view[:3, :3] = vtf.SO3(np.asarray(cam.wxyz)).as_matrix()
+        T_world_view[:3, 3] = cam.position
         f = (cam.image_height / 2) / math.tan(cam.fov / 2)
-        x = f * p[0] / p[2] + cam.image_width / 2
-        y = f * p[1] / p[2] + cam.image_height / 2
-        return x / cam.image_width, y / cam.image_height
+        view = PinholeCamera([[f, 0.0, cam.image_width / 2], [0.0, f, cam.image_height / 2], [0.0, 0.0, 1.0]], [],
+                             int(cam.image_width), int(cam.image_height))
+        xy, _ = view.project(transform_points(invert_T(T_world_view), world))
+        return float(xy[0, 0]) / cam.image_width, float(xy[0, 1]) / cam.image_height

@@ -50,7 +50,35 @@ def make_app(session: Path, **kwargs):
     return CalibrationApp(scan, image, camera, session_path=session, port=free_port(), **kwargs)
 
 
+def test_facing_the_camera_from_an_imported_extrinsic_before_any_pair(tmp_path):
+    """With the published extrinsic imported (its own JSON format), "Facing the camera" works with no pairs,
+    and a BA click frames the camera loupe on the published projection of that cell."""
+    from app.testing import AppDriver
+
+    extrinsic = DATA / "top_center_lidar-to-center_camera-extrinsic.json"
+    app = make_app(tmp_path / "session.yaml", initial_extrinsics_path=extrinsic)
+    try:
+        np.testing.assert_allclose(app.initial_T_camera_lidar, published_T(), atol=1e-9)
+        driver = AppDriver(app)
+        assert driver.choose_ba_columns("Facing the camera") == []  # no "No calibration yet"
+        assert app.wait_idle(10) and not app.ba_window.is_full and app.result is None
+        points, rows_cols = app.depth.valid_points()
+        _, in_image = app.camera.project(transform_points(published_T(), points))
+        seen = np.unique(rows_cols[in_image, 1])
+        assert set(range(seen.min(), seen.max() + 1)) <= set(app.ba_window.columns.tolist())
+        pair = load_pairs_yaml(PAIRS)[0]
+        driver.click_cell("horizontal", *pair.laser_rc)
+        truth, ok = app.camera.project(transform_points(published_T(), app.depth.cell_points(
+            np.array([pair.laser_rc]))))
+        assert ok[0]
+        np.testing.assert_allclose(driver.loupe_view("camera")["center"], truth[0], atol=1e-6)
+    finally:
+        app.stop()
+
+
 def test_camera_facing_window_shows_what_the_published_calibration_projects(tmp_path):
+    from app.testing import AppDriver
+
     session = tmp_path / "session.yaml"
     app = make_app(session)
     try:
@@ -60,7 +88,8 @@ def test_camera_facing_window_shows_what_the_published_calibration_projects(tmp_
         assert app.ba_window.is_full  # default: every column
         app.state.import_pairs_file(PAIRS)
         assert app.wait_idle(60) and app.result is not None
-        app._set_ba_mode("camera")
+        driver = AppDriver(app)
+        assert driver.choose_ba_columns("Facing the camera") == []
         assert app.wait_idle(10)
         window = app.ba_window
 
@@ -73,14 +102,15 @@ def test_camera_facing_window_shows_what_the_published_calibration_projects(tmp_
         assert set(range(seen.min(), seen.max() + 1)) <= shown
         assert window.width <= (seen.max() - seen.min() + 1) + 40  # small margins only
         # The BA images show exactly those columns, each cell a square block of texels.
-        tex = app._image_handles["horizontal"].image
+        tex = driver.ba_texture("horizontal")
         k = tex.shape[0] // 64
         assert tex.shape == (64 * k, window.width * k) and k >= 4
         np.testing.assert_array_equal(tex[::k, ::k], app.ba_gray["horizontal"][:, window.columns])
         # Markers of pairs outside the window are hidden; those inside keep their cell.
-        ids, uv = app._pick_ends("horizontal")
+        ids = driver.marker_ids("horizontal")
         assert len(ids) == len(load_pairs_yaml(PAIRS))  # every generated pair faces the camera
-        for pid, (u, v) in zip(ids, uv):
+        for pid in ids:
+            u, v = driver.marker_display_pixel("horizontal", pid)
             assert (int(v), window.scan_col(int(u))) == app.state.get(pid).laser_rc
     finally:
         app.stop()
@@ -142,9 +172,9 @@ def test_pick_exact_cells_on_the_real_scan_in_headless_chromium(tmp_path):
                 return bool(np.abs(rgb.mean(axis=0) - 238.0).max() >= 12)  # not the grey backdrop
 
             def set_view(button: str) -> None:
-                before = app._view_target.get(cid, (None, None, 0.0))[2]
+                before = app.view_set_time(cid)
                 page.get_by_role("button", name=button, exact=True).click()
-                wait_for(lambda: app._view_target.get(cid, (None, None, 0.0))[2] > before, f"'{button}' to apply")
+                wait_for(lambda: app.view_set_time(cid) > before, f"'{button}' to apply")
                 wait_for(lambda: app.view_settled(cid), f"the view after '{button}'")
 
             def click_ba(key: str, row: int, col: int, offset=(0.0, 0.0)) -> tuple[int, int]:

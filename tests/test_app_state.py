@@ -562,44 +562,19 @@ def test_pick_markers_are_rings_that_leave_the_picked_cell_visible():
 
 
 # ------------------------------------------------ the app on the sample (no browser)
-class FakeCamera:
-    """The parts of a viser client camera the app reads and sets."""
-
-    def __init__(self):
-        self.position, self.look_at, self.up_direction = (0.0, 0.0, -10.0), (0.0, 0.0, 0.0), (0.0, -1.0, 0.0)
-        self.fov, self.image_width, self.image_height = 0.5, 1400, 900
-
-
-class FakeClient:
-    def __init__(self):
-        self.client_id, self.camera, self.notes = 991, FakeCamera(), []
-
-    def atomic(self):
-        import contextlib
-
-        return contextlib.nullcontext()
-
-    def add_notification(self, title, body, **kwargs):
-        self.notes.append(title)
-
-
 def test_app_column_window_clicks_markers_and_zoom_on_the_sample(tmp_path):
-    import socket
     from pathlib import Path
-    from types import SimpleNamespace
 
     from app.ba_view import ColumnWindow
     from app.server import CalibrationApp
-    from app.ui_common import PANEL_PX, ZOOM_PX_PER_CELL, _Action
+    from app.testing import AppDriver
+    from app.ui_common import PANEL_PX, ZOOM_PX_PER_CELL
 
     sample = Path(__file__).resolve().parents[1] / "sample_data"
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        port = sock.getsockname()[1]
     session = tmp_path / "session.yaml"
     app = CalibrationApp(sample / "scan.npz", sample / "image.png", sample / "camera.yaml", session_path=session,
-                         port=port)
-    client = FakeClient()
+                         port=0)
+    d = AppDriver(app)
     try:
         assert app.depth.shape == (180, 720) and app.ba_window.is_full
         # 180 rows over 180 deg, 720 columns over 360 deg: cells drawn twice as tall as wide.
@@ -608,47 +583,44 @@ def test_app_column_window_clicks_markers_and_zoom_on_the_sample(tmp_path):
         assert s.units_per_px_y / s.units_per_px == pytest.approx(2.0, rel=1e-3)
 
         # "Facing the camera" before any calibration: the slider window (all columns) stays.
-        app._on_ba_window_mode(_Action(SimpleNamespace(client=client), "Facing the camera"))
-        assert app.ba_window.is_full and client.notes == ["No calibration yet"]
+        notes = d.choose_ba_columns("Facing the camera")
+        assert app.ba_window.is_full and [t for t, _ in notes] == ["No calibration yet"]
         # The user sets a custom window across column 0 with the sliders.
-        app._sl_ba_start.value, app._sl_ba_width.value = 700, 60
-        app._on_ba_window_slider(_Action(SimpleNamespace(client=client, target=app._sl_ba_width), 60))
+        d.set_ba_columns(700, 60)
         assert app.ba_window == ColumnWindow(700, 60, 720, True)
-        assert app._image_handles["horizontal"].image.shape[1] == 60 * (app._image_handles["horizontal"].image.shape[0] // 180)
+        tex = d.ba_texture("horizontal")
+        assert tex.shape[1] == 60 * (tex.shape[0] // 180)
 
         # A click at display (25.3, 10.4) is scan cell (row 10, column 700 + 25 - 720 = 5).
-        pid = app._click("horizontal", (25.3, 10.4), client=client)
+        assert d.click("horizontal", (25.3, 10.4)) == []
+        pid = app.state.picks[-1].id
         assert app.state.get(pid).laser_rc == (10, 5)
         app.state.add_pixel(100.0, 100.0)
         other = app.state.add_laser(20, 300)  # outside the window
-        ids, uv = app._pick_ends("vertical")
-        assert ids == [pid] and other not in ids
-        np.testing.assert_array_equal(uv, [[25.0, 10.0]])
+        assert d.marker_ids("vertical") == [pid] and other not in d.marker_ids("vertical")
+        assert d.marker_display_pixel("vertical", pid) == (25.0, 10.0)
 
         # Zoom on that click: the cell comes to the middle of the canvas left of the panel, 14 px wide.
-        app._click("diag_neg45", (25.0, 10.0), client=client)  # the same cell, re-clicked on another trace
-        app._zoom_on_last(client)
-        cam = client.camera
+        d.click("diag_neg45", (25.0, 10.0))  # the same cell, re-clicked on another trace
+        assert d.press_zoom("On last click") == []
+        cam = d.tab.camera
         centre = app.slots["diag_neg45"].world_from_pixel([[25.0, 10.0]])[0]
-        dist = cam.look_at[2] - cam.position[2]
-        f = (cam.image_height / 2) / np.tan(cam.fov / 2)
-        x = cam.image_width / 2 + f * (centre[0] - cam.position[0]) / dist
-        y = cam.image_height / 2 + f * (centre[1] - cam.position[1]) / dist
+        x, y = cam.screen_of(centre)
         assert (x, y) == pytest.approx(((cam.image_width - PANEL_PX) / 2, cam.image_height / 2))
-        assert f * app.slots["diag_neg45"].units_per_px / dist == pytest.approx(ZOOM_PX_PER_CELL)
-        app._zoom(client, factor=0.5)  # "Out": half the magnification, same point in the middle
-        dist2 = cam.look_at[2] - cam.position[2]
-        assert dist2 == pytest.approx(2 * dist)
-        assert cam.image_width / 2 + f * (centre[0] - cam.position[0]) / dist2 == pytest.approx(x)
+        right = app.slots["diag_neg45"].world_from_pixel([[26.0, 10.0]])[0]
+        assert cam.screen_of(right)[0] - x == pytest.approx(ZOOM_PX_PER_CELL)
+        assert d.press_zoom("Out") == []  # half the magnification, same point in the middle
+        assert cam.screen_of(right)[0] - cam.screen_of(centre)[0] == pytest.approx(ZOOM_PX_PER_CELL / 2)
+        assert cam.screen_of(centre)[0] == pytest.approx(x)
     finally:
         app.stop()
 
     # The window is part of the session.
     app = CalibrationApp(sample / "scan.npz", sample / "image.png", sample / "camera.yaml", session_path=session,
-                         port=port)
+                         port=0)
     try:
         assert app.ba_window == ColumnWindow(700, 60, 720, True)
-        assert app._dd_ba_window.value == "Custom"
+        assert AppDriver(app).ba_columns_choice == "Custom"
     finally:
         app.stop()
 
@@ -717,29 +689,26 @@ def test_a_click_updates_only_what_it_changed_in_place(tmp_path):
 
 
 def test_cloud_is_recoloured_only_while_a_tab_shows_3d(tmp_path):
-    import socket
     from pathlib import Path
 
     from app.server import CalibrationApp
+    from app.testing import AppDriver
     from calib_core.io.extrinsics import load_extrinsics_yaml
     from calib_core.transforms import transform_points
 
     sample = Path(__file__).resolve().parents[1] / "sample_data"
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        port = sock.getsockname()[1]
     app = CalibrationApp(sample / "scan.npz", sample / "image.png", sample / "camera.yaml",
-                         session_path=tmp_path / "session.yaml", port=port)
-    client = FakeClient()
+                         session_path=tmp_path / "session.yaml", port=0)
+    d = AppDriver(app)
     try:
         ids = app.state.import_pairs(load_pairs_yaml(sample / "pairs.yaml"))
         assert app.wait_idle(60) and app.result is not None
         # No tab shows the 3-D view: the error display is up, the cloud is not recoloured.
-        assert np.all(app._cloud.colors == 150)
+        assert np.all(d.cloud_colors == 150)
 
-        app._set_view(client, "3d")  # a tab switches to 3-D: the current solve's colours follow
+        d.show("3D cloud")  # a tab switches to 3-D: the current solve's colours follow
         assert app.wait_idle(60)
-        colors = np.asarray(app._cloud.colors)
+        colors = d.cloud_colors
         # Truth: the image colour where the ground-truth pose projects each point (points the camera sees).
         truth = load_extrinsics_yaml(sample / "ground_truth.yaml")["T_camera_lidar"]
         uv, ok = app.camera.project(transform_points(truth, app.cloud_points_lidar))
@@ -753,13 +722,13 @@ def test_cloud_is_recoloured_only_while_a_tab_shows_3d(tmp_path):
         u, v = app.state.get(ids[0]).pixel
         app.state.move_pixel(ids[0], u + 2.0, v)  # still in 3-D: each new solve recolours
         assert app.wait_idle(60)
-        assert app._cloud_shows is app._bundle
-        app._set_view(client, "all")
+        assert d.cloud_shows_current_solve
+        d.show("2D annotation")
         app.state.move_pixel(ids[0], u, v)  # back in 2-D: the cloud keeps the old colours
         assert app.wait_idle(60)
-        assert app._cloud_shows is not app._bundle
+        assert not d.cloud_shows_current_solve
         app.state.clear()  # fewer than 4 pairs: grey again
         assert app.wait_idle(60)
-        assert np.all(app._cloud.colors == 150)
+        assert np.all(d.cloud_colors == 150)
     finally:
         app.stop()
