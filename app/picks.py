@@ -12,7 +12,7 @@ from typing import Any, Callable, Sequence
 
 from calib_core.errors import CalibError
 from calib_core.io.yaml_files import finite_vector
-from calib_core.pairs import Pair, load_pairs_yaml
+from calib_core.pairs import PAIR_SOURCES, Pair, load_pairs_yaml
 
 SESSION_FORMAT = "ba-calib-session"
 SESSION_VERSION = 1
@@ -39,12 +39,19 @@ class Pick:
         Laser point in the lidar frame, metres (imported pairs only).
     pixel : (u, v) or None
         Pixel in the original camera image, (column, row), top-left centre 0.
+    source : {"clicked", "guided", "auto"}
+        How the pair was made (:data:`calib_core.pairs.PAIR_SOURCES`): an
+        unguided click, a click on a guided proposal, or accepted without a click.
+    precision_px : float or None
+        1-sigma of the pixel in px, when known (None: the solve's default).
     """
 
     id: int
     laser_rc: tuple[int, int] | None = None
     laser_xyz: tuple[float, float, float] | None = None
     pixel: tuple[float, float] | None = None
+    source: str = "clicked"
+    precision_px: float | None = None
 
     @property
     def has_laser(self) -> bool:
@@ -63,13 +70,18 @@ class Pick:
         if not self.complete:
             raise CalibError(f"pair {self.id} is incomplete")
         return Pair(self.laser_rc, None if self.laser_rc is not None else self.laser_xyz, self.pixel,  # type: ignore[arg-type]
-                    id=int(self.id))
+                    id=int(self.id), source=self.source, precision_px=self.precision_px)
 
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {"id": int(self.id)}
         out["laser_rc"] = None if self.laser_rc is None else [int(v) for v in self.laser_rc]
         out["laser_xyz"] = None if self.laser_xyz is None else [float(v) for v in self.laser_xyz]
         out["pixel"] = None if self.pixel is None else [float(v) for v in self.pixel]
+        # Written only when not the default, so files of unguided sessions stay as they were.
+        if self.source != "clicked":
+            out["source"] = self.source
+        if self.precision_px is not None:
+            out["precision_px"] = float(self.precision_px)
         return out
 
 
@@ -93,6 +105,39 @@ def new_ends(checked: Sequence[Pick], existing: Sequence[Pick]) -> list[Pick]:
     return out
 
 
+def pick_tags(entry: dict, where: str) -> dict[str, Any]:
+    """The ``source`` and ``precision_px`` of a session entry, checked (absent: the defaults)."""
+    out: dict[str, Any] = {}
+    source = entry.get("source", "clicked")
+    if source not in PAIR_SOURCES:
+        raise CalibError(f"{where}: source must be one of {', '.join(PAIR_SOURCES)}, got {source!r}")
+    out["source"] = source
+    if entry.get("precision_px") is not None:
+        (sigma,) = finite_vector([entry["precision_px"]], 1, f"{where} precision_px")
+        if not 0.0 < sigma <= 1000.0:
+            raise CalibError(f"{where}: precision_px must be a positive number of pixels, got {sigma}")
+        out["precision_px"] = float(sigma)
+    return out
+
+
+def checked_picks(pairs: Sequence[Pair], check_cell: Callable, check_pixel: Callable) -> list[Pick]:
+    """The picks ``pairs`` would become (id -1 where the pair has none); CalibError names the first bad pair."""
+    checked = []
+    for i, p in enumerate(pairs):
+        name = f"imported pair {i}" if p.id is None else f"imported pair {p.id}"
+        try:
+            rc = None if p.laser_rc is None else check_cell(*p.laser_rc)
+            xyz = None if p.laser_xyz is None else tuple(finite_vector(p.laser_xyz, 3, "laser_xyz"))
+            if rc is None and xyz is None:
+                raise CalibError("no laser end")
+            uv = check_pixel(*p.pixel)
+        except CalibError as exc:
+            raise CalibError(f"{name}: {exc}") from None
+        checked.append(Pick(-1 if p.id is None else int(p.id), laser_rc=rc, laser_xyz=None if rc is not None else xyz,
+                            pixel=uv, source=p.source, precision_px=p.precision_px))
+    return checked
+
+
 def restore_session(data: dict, path: Path, check_cell: Callable, check_pixel: Callable
                     ) -> tuple[Snapshot, dict | None]:
     """The picks (and view settings, None for a plain pairs file) of session ``data`` read from ``path``.
@@ -114,7 +159,8 @@ def restore_session(data: dict, path: Path, check_cell: Callable, check_pixel: C
                 raise CalibError(f"{path}: pair {i}: {exc} (pairs from another scene?)") from None
             # The file's ids when every pair has a distinct one: one id in the UI, files and messages.
             pid = p.id if keep_ids else i + 1
-            picks.append(Pick(pid, laser_rc=p.laser_rc, laser_xyz=p.laser_xyz, pixel=p.pixel))
+            picks.append(Pick(pid, laser_rc=p.laser_rc, laser_xyz=p.laser_xyz, pixel=p.pixel, source=p.source,
+                              precision_px=p.precision_px))
         return Snapshot(tuple(picks), max([len(picks)] + [p.id for p in picks]) + 1), None
     if data.get("version") != SESSION_VERSION:
         raise CalibError(f"{path}: session version {data.get('version')!r} is not supported "
@@ -148,7 +194,7 @@ def restore_session(data: dict, path: Path, check_cell: Callable, check_pixel: C
                 check_pixel(*px_t)
         except CalibError as exc:
             raise CalibError(f"{where}: {exc} (session from another scene?)") from None
-        picks.append(Pick(pick_id, rc_t, xyz_t, px_t))  # type: ignore[arg-type]
+        picks.append(Pick(pick_id, rc_t, xyz_t, px_t, **pick_tags(e, where)))  # type: ignore[arg-type]
     ids = [p.id for p in picks]
     if len(set(ids)) != len(ids):
         raise CalibError(f"{path}: duplicate pair ids")

@@ -44,6 +44,7 @@ from .view_panel import ViewPanel
 from .pairs_panel import PairsPanel
 from .calibration_panel import CalibrationPanel
 from .export_panel import ExportPanel
+from .guide_panel import attach_guide_panel
 from .live_coordinator import LiveSolveCoordinator
 from .overlay_drawing import OverlayDrawing
 from .prepared_scene import MAX_CLOUD_POINTS, PreparedScene
@@ -217,6 +218,7 @@ class CalibrationApp(PairsPanel, CalibrationPanel, ViewPanel, ExportPanel, LiveS
             self._solver = LiveSolver(self._solve_job, self._on_solved)
             # Cloud colours and the camera-facing window: after the solve is shown, in their own thread.
             self._cloud_worker = LiveSolver(self._cloud_job, self._on_cloud_done, name="ba-calib-cloud")
+            self.guide = attach_guide_panel(self)  # guided picking (app/guide_panel.py)
             self.state.subscribe(self._on_state_change)
             self._on_state_change(self.state)
         except BaseException:
@@ -244,6 +246,7 @@ class CalibrationApp(PairsPanel, CalibrationPanel, ViewPanel, ExportPanel, LiveS
         self._action_thread.join(timeout=5.0)
         self._solver.stop()
         self._cloud_worker.stop()
+        self.guide.stop()
         try:
             self.state.close()
         finally:

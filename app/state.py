@@ -37,10 +37,9 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from calib_core.errors import CalibError
-from calib_core.io.yaml_files import finite_vector
-from calib_core.pairs import Pair, load_pairs_yaml, save_pairs_yaml
+from calib_core.pairs import PAIR_SOURCES, Pair, load_pairs_yaml, save_pairs_yaml
 
-from .picks import SESSION_FORMAT, SESSION_VERSION, Pick, Snapshot, new_ends, restore_session
+from .picks import SESSION_FORMAT, SESSION_VERSION, Pick, Snapshot, checked_picks, new_ends, restore_session
 from .session_store import SessionStore
 
 MAX_HISTORY = 500
@@ -67,8 +66,7 @@ class AnnotationState:
     Parameters
     ----------
     depth_valid : (H, W) bool array
-        Which depth-matrix cells have a laser return (clicks elsewhere are
-        refused).
+        Which depth-matrix cells have a laser return (clicks elsewhere are refused).
     image_size : (width, height)
         Size of the original camera image in pixels.
     session_path : path-like, optional
@@ -249,6 +247,20 @@ class AnnotationState:
         self._notify()
         return out
 
+    def start_pick(self, row: int, col: int, *, source: str = "guided", precision_px: float | None = None) -> int:
+        """A new pick with only its laser end, tagged (guided "Next pair"); the next camera click completes it.
+        Refused (CalibError) while another pick is incomplete: that click would complete the other one."""
+        rc = self.check_laser_cell(row, col)
+        if source not in PAIR_SOURCES:
+            raise CalibError(f"source must be one of {', '.join(PAIR_SOURCES)}, got {source!r}")
+        with self._lock:
+            if (pending := self._pending_locked()) is not None:
+                raise CalibError(f"pair {pending.id} is not finished; complete it or undo it first")
+            new = Pick(self._snap.next_id, laser_rc=rc, source=source, precision_px=precision_px)
+            self._commit_locked(Snapshot(self._snap.picks + (new,), self._snap.next_id + 1))
+        self._notify()
+        return new.id
+
     def move_laser(self, pick_id: int, row: int, col: int) -> int:
         """Set the laser end of pick ``pick_id`` to a cell."""
         rc = self.check_laser_cell(row, col)
@@ -257,11 +269,11 @@ class AnnotationState:
         self._notify()
         return out
 
-    def move_pixel(self, pick_id: int, u: float, v: float) -> int:
-        """Set the camera end of pick ``pick_id`` to an original-image pixel."""
+    def move_pixel(self, pick_id: int, u: float, v: float, **tags: Any) -> int:
+        """Set the camera end of pick ``pick_id`` to an original-image pixel (and ``precision_px``, ``source`` if given)."""
         uv = self.check_pixel(u, v)
         with self._lock:
-            out = self._move_locked(pick_id, pixel=uv)
+            out = self._move_locked(pick_id, pixel=uv, **{k: tags[k] for k in ("precision_px", "source") if k in tags})
         self._notify()
         return out
 
@@ -283,20 +295,7 @@ class AnnotationState:
 
     def check_import(self, pairs: Sequence[Pair]) -> list[Pick]:
         """The picks ``pairs`` would become (ids not yet given); CalibError names the first pair not of this scene."""
-        checked = []
-        for i, p in enumerate(pairs):
-            name = f"imported pair {i}" if p.id is None else f"imported pair {p.id}"
-            try:
-                rc = None if p.laser_rc is None else self.check_laser_cell(*p.laser_rc)
-                xyz = None if p.laser_xyz is None else tuple(finite_vector(p.laser_xyz, 3, "laser_xyz"))
-                if rc is None and xyz is None:
-                    raise CalibError("no laser end")
-                uv = self.check_pixel(*p.pixel)
-            except CalibError as exc:
-                raise CalibError(f"{name}: {exc}") from None
-            checked.append(Pick(-1 if p.id is None else int(p.id), laser_rc=rc,
-                                laser_xyz=None if rc is not None else xyz, pixel=uv))
-        return checked
+        return checked_picks(pairs, self.check_laser_cell, self.check_pixel)
 
     def count_duplicates(self, pairs: Sequence[Pair]) -> int:
         """How many of ``pairs`` are exact duplicates of a pick here (or of an earlier one of ``pairs``)."""
@@ -322,7 +321,7 @@ class AnnotationState:
                 pid = p.id if p.id >= 0 and p.id not in used else next_id
                 used.add(pid)
                 next_id = max(next_id, pid + 1)
-                new.append(Pick(pid, laser_rc=p.laser_rc, laser_xyz=p.laser_xyz, pixel=p.pixel))
+                new.append(replace(p, id=pid))
             if not new and not replace_existing:
                 return []
             self._commit_locked(Snapshot(base + tuple(new), next_id))
@@ -445,9 +444,8 @@ class AnnotationState:
             return new.id
         return self._move_locked(target.id, laser_rc=laser_rc, pixel=pixel)
 
-    def _move_locked(self, pick_id: int, laser_rc=None, pixel=None) -> int:
-        old = self.get(pick_id)
-        new = old
+    def _move_locked(self, pick_id: int, laser_rc=None, pixel=None, **tags: Any) -> int:
+        new = replace(self.get(pick_id), **tags)
         if laser_rc is not None:
             new = replace(new, laser_rc=laser_rc, laser_xyz=None)
         if pixel is not None:

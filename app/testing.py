@@ -369,6 +369,39 @@ class AppDriver:
         """The text of the Calibration panel (errors, solve failures)."""
         return str(self.app._md_result.content)
 
+    # ------------------------------------------------ guided picking (guided helper; app/guide_panel.py)
+    def press_guide(self, name: str) -> list[tuple[str, str]]:
+        """Press a button of the Guided picking panel (``Next pair``, ``Skip``, ``Not a corner``, ``Stop``);
+        returns once it is applied (not waiting for proposals: see :meth:`wait_guide`)."""
+        return self._fire(self.app.guide.callback(name), SimpleNamespace(client=self.tab, target=None))
+
+    def set_auto_accept(self, on: bool) -> list[tuple[str, str]]:
+        """Tick or clear "Auto-accept clean corners"."""
+        return self._fire(self.app.guide.callback("auto"), SimpleNamespace(client=self.tab, target=SimpleNamespace(
+            value=bool(on))))
+
+    def wait_guide(self, timeout: float = 120.0) -> bool:
+        """Wait until the proposals are computed and what follows them (next pair started, auto pairs) is applied."""
+        import time
+
+        deadline = time.monotonic() + timeout
+        while True:
+            left = max(0.0, deadline - time.monotonic())
+            if not (self.app.guide.wait_idle(left) and self.app.wait_idle(left)):
+                return False
+            if self.app.guide.idle and not self.app._actions.unfinished_tasks:
+                return True
+
+    @property
+    def guide_proposal(self) -> Any:
+        """The proposal the Guided picking panel shows (a :class:`calib_core.guide.Proposal`) or None."""
+        return self.app.guide.current
+
+    @property
+    def guide_panel(self) -> str:
+        """The text of the Guided picking panel."""
+        return self.app.guide.text
+
 
 def _picks_json(app: Any) -> str:
     return json.dumps([p.to_dict() for p in app.state.picks], separators=(",", ":"))

@@ -1,0 +1,461 @@
+"""The Guide panel: guided picking in the app (issue 9).
+
+Once a calibration exists (4 pairs, or an imported initial extrinsic) a
+:class:`calib_core.guide.session.GuidedSession` -- built once per scene --
+ranks the laser cells worth pairing next; its proposals are recomputed in a
+worker thread after every change of the pairs, never on a viser callback.
+
+"Next pair" starts a pick at the shown proposal's cell (laser end only,
+``source="guided"``, ``precision_px`` = the guided click's 0.3 px) and frames
+the loupes on the cell and on the predicted pixel with its 3-sigma ellipse;
+a proposal to re-click a rough pair selects that pair instead, so the click
+moves its pixel (it becomes ``guided``, 0.3 px).
+One click on the camera (loupe or image) completes the pair through the
+ordinary pick logic; when the new proposals arrive the next one is started
+and framed by itself, so a guided pair costs one click.  "Skip" moves the half
+pick to the next proposal (the skipped one comes back last), "Not a corner"
+drops the cell for good, "Stop" removes the half pick.  Undo works on these
+picks as on any other.
+
+With "Auto-accept" on, proposals whose camera corner passes the strict gate
+of :mod:`calib_core.guide.auto_accept` are added as pairs tagged ``auto``
+(one undoable step per batch).
+
+All maths is :mod:`calib_core.guide`; this module routes buttons and draws text.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from typing import Any, Callable
+
+import numpy as np
+
+from calib_core.errors import CalibError
+from calib_core.guide import GUIDED_CLICK_SIGMA_PX, Proposal, current_pose
+from calib_core.guide.auto_accept import AutoGate, auto_accept
+from calib_core.guide.session import GuidedSession
+from calib_core.pairs import Pair
+
+from .live_solver import LiveSolver
+from .state import AnnotationState
+from .ui_common import MIN_PAIRS, _Action, md_escape
+
+#: Proposals computed per update.
+N_PROPOSALS = 20
+#: 1-sigma given to an auto-accepted pixel (cv2.cornerSubPix on a gated clean corner).  The gate accepts
+#: no proposal on the sample, so this is not measured there; it is set above the guided click's 0.3 px.
+AUTO_PRECISION_PX = 0.5
+BUTTONS = ("Next pair", "Skip", "Not a corner", "Stop")
+
+
+class GuidePanel:
+    """The Guide folder of the control panel and the guided-picking flow.
+
+    Parameters
+    ----------
+    gui : viser GUI API
+        Where the folder is added (``server.gui``).
+    state : AnnotationState
+        The pairs; the panel subscribes to its changes.
+    depth, camera, image
+        The scan's depth matrix, the camera model and the RGB camera image.
+    guard : callable
+        ``guard(fn)`` -> a viser callback that runs ``fn(action)`` on the app's
+        ordered action worker (a CalibError becomes a notification).
+    post : callable
+        ``post(fn)`` runs ``fn()`` on that same worker, after the queued actions.
+    initial_T : callable
+        ``initial_T()`` -> the imported initial ``T_camera_lidar`` (4x4) or None.
+    loupes : callable
+        ``loupes()`` -> the app's loupes (``frame_ba(key, row, col)``,
+        ``frame_camera(u, v, cov_px2=None)``) or None.
+    ba_key : str
+        The BA image the BA loupe shows.
+    auto_gate : AutoGate, optional
+        The auto-accept gate (default: the strict one of :mod:`calib_core.guide.auto_accept`);
+        the attribute :attr:`auto_gate` may be changed later.
+    click_source : callable, optional
+        ``click_source(pick_id)`` -> ``"loupe"`` or ``"full"``: where the
+        camera click that last set that pick's pixel landed (None: unknown).
+        A guided pair clicked on the full image gets the default precision
+        and waits for a refining click in the camera loupe (which makes it
+        0.3 px again) before the next proposal is framed.
+    on_start : callable, optional
+        Called after a guided half pick is started (the app forgets which
+        full-image click a loupe click would refine: the loupe click now
+        completes the new pick).
+    order : float, optional
+        Position of the folder in the control panel.
+    """
+
+    def __init__(self, gui: Any, state: AnnotationState, depth: Any, camera: Any, image: np.ndarray, *,
+                 guard: Callable, post: Callable[[Callable[[], None]], None],
+                 initial_T: Callable[[], np.ndarray | None] = lambda: None,
+                 loupes: Callable[[], Any] = lambda: None, ba_key: str = "horizontal",
+                 order: float | None = None, auto_gate: AutoGate | None = None,
+                 click_source: Callable[[int], str | None] = lambda pick_id: None,
+                 on_start: Callable[[], None] = lambda: None) -> None:
+        self.state, self.depth, self.camera, self.image = state, depth, camera, image
+        self._post, self._initial_T, self._loupes, self._ba_key = post, initial_T, loupes, ba_key
+        self._on_start, self._click_source = on_start, click_source
+        self._watch: list | None = None  # [id, pixel seen] of the guided pick started last
+        self._refine: int | None = None  # a guided pick clicked on the full image, not yet refined in the loupe
+        self._reclick: int | None = None  # the rough pair selected for a re-click
+        self._reclick_of: dict[tuple[int, int], int] = {}  # cell -> pick id of the re-click proposals
+        self.auto_gate = auto_gate if auto_gate is not None else AutoGate()
+        self._auto_tried: set[tuple[int, int]] = set()  # cells auto-accepted once: never again (an undo sticks)
+        self._lock = threading.RLock()
+        self._session: GuidedSession | None = None  # only touched on the worker thread
+        self._proposals: list[Proposal] = []
+        self._index = 0
+        self._skipped: list[tuple[int, int]] = []
+        self._dropped: list[tuple[int, int]] = []
+        self._submitted: tuple | None = None  # key of the newest job
+        self._job_no = 0
+        self._shown_key: tuple | None = None  # key the proposals were computed for
+        self._busy = False
+        self._error: str | None = None
+        self._guiding = False  # "Next pair" pressed, not stopped: frame the next proposal after each pair
+        self._want_next = False
+        self._pending_posts = 0
+        self._auto = False
+        self._auto_pairs: list[Pair] = []
+        self._callbacks: dict[str, Callable] = {}
+
+        folder = gui.add_folder("Guided picking", **({} if order is None else {"order": order}))
+        with folder:
+            self._md = gui.add_markdown("")
+            self._buttons = {}
+            for label in BUTTONS:
+                button = gui.add_button(label)
+                self._callbacks[label] = guard(lambda action, label=label: self._on_button(label))
+                button.on_click(self._callbacks[label])
+                self._buttons[label] = button
+            self._cb_auto = gui.add_checkbox(
+                "Auto-accept clean corners", initial_value=False,
+                hint="Add proposals whose camera corner passes a strict quality gate without a click (tagged auto)")
+            self._callbacks["auto"] = guard(lambda action: self._on_auto(bool(action.value)))
+            self._cb_auto.on_update(self._callbacks["auto"])
+        self._worker = LiveSolver(self._job, self._on_done, name="ba-calib-guide")
+        state.subscribe(self._on_state_change)
+        self._on_state_change(state)
+
+    # ---------------------------------------------------------------- reading
+    @property
+    def current(self) -> Proposal | None:
+        """The proposal shown (the one "Next pair" starts), or None."""
+        with self._lock:
+            return self._proposals[self._index] if self._index < len(self._proposals) else None
+
+    @property
+    def proposals(self) -> list[Proposal]:
+        """The current proposals, best first."""
+        with self._lock:
+            return list(self._proposals)
+
+    @property
+    def text(self) -> str:
+        """What the panel shows."""
+        return str(self._md.content)
+
+    def callback(self, name: str) -> Callable:
+        """The viser callback of button ``name`` (:data:`BUTTONS`) or of the ``"auto"`` checkbox."""
+        return self._callbacks[name]
+
+    @property
+    def idle(self) -> bool:
+        """No proposal computation running or queued, and nothing posted to the action worker."""
+        with self._lock:
+            return self._worker.idle and not self._busy and self._pending_posts == 0
+
+    def wait_idle(self, timeout: float = 60.0) -> bool:
+        """Block until :attr:`idle` (False on timeout)."""
+        deadline = time.monotonic() + timeout
+        while not self.idle:
+            if time.monotonic() > deadline:
+                return False
+            self._worker.wait_idle(max(0.0, min(0.05, deadline - time.monotonic())))
+            time.sleep(0.005)
+        return True
+
+    def update(self) -> None:
+        """Recompute the proposals if their inputs changed: call after importing an initial extrinsic
+        (changes of the pairs are seen by themselves)."""
+        self._on_state_change(self.state)
+
+    def stop(self) -> None:
+        self._worker.stop()
+
+    # ---------------------------------------------------------------- state -> job
+    def _active(self, n_complete: int) -> bool:
+        return n_complete >= MIN_PAIRS or self._initial_T() is not None
+
+    def _on_state_change(self, state: AnnotationState) -> None:
+        """After any change of the pairs: resubmit the proposals when the complete pairs changed."""
+        pairs = state.pairs()
+        T0 = self._initial_T()
+        key = (tuple(pairs), None if T0 is None else np.asarray(T0, dtype=np.float64).tobytes(), self._auto)
+        with self._lock:
+            watch = self._watch
+            pick = next((p for p in state.picks if watch is not None and p.id == watch[0]), None)
+            if watch is not None and pick is None:
+                self._watch = None
+            elif pick is not None and pick.pixel is not None and pick.pixel != watch[1]:
+                # Judged after the click's action, once the app has noted where the click landed.
+                watch[1] = pick.pixel
+                self._pending_posts += 1
+                self._post(lambda: self._after_click(pick.id))
+            if key != self._submitted:
+                self._submitted = key
+                if self._active(len(pairs)):
+                    self._busy = True
+                    self._job_no += 1
+                    self._worker.submit(self._job_no, (key, pairs, T0, list(self._skipped), list(self._dropped),
+                                                       self._auto))
+                else:
+                    self._proposals, self._index, self._shown_key = [], 0, None
+        self._refresh()
+
+    def _after_click(self, pick_id: int) -> None:
+        """A camera click set the guided pick's pixel: its precision, and whether to move on."""
+        try:
+            pick = next((p for p in self.state.picks if p.id == pick_id), None)
+            if pick is None or pick.pixel is None:
+                return
+            full = self._click_source(pick_id) == "full" and self._loupes() is not None
+            precision = None if full or self._click_source(pick_id) is None else GUIDED_CLICK_SIGMA_PX
+            if pick.precision_px != precision or pick.source != "guided":
+                self.state.move_pixel(pick_id, *pick.pixel, precision_px=precision, source="guided")
+            if pick_id == self._reclick:
+                self._end_reclick()
+            self._refine = pick_id if full else None
+            self._want_next = self._guiding and not full  # the new proposals then frame the next pair
+            self._refresh()
+        finally:
+            with self._lock:
+                self._pending_posts -= 1
+
+    def _job(self, payload: tuple) -> tuple:
+        """On the worker: sync the session with the pairs, rank, and (optionally) gate for auto-accept."""
+        key, pairs, T0, skipped, dropped, auto = payload
+        if self._session is None:
+            self._session = GuidedSession(self.depth, self.camera, pairs, T_initial=T0, image=self.image)
+        s = self._session
+        s.pairs, s.T_initial = list(pairs), T0
+        s.state = current_pose(s.pairs, self.depth, self.camera, T0)
+        s.skipped, s.dropped = list(skipped), list(dropped)
+        # "Not a corner" on a re-click means: do not offer re-clicking that pair again.
+        gone = set(map(tuple, dropped))
+        props = [p for p in s.proposals(N_PROPOSALS + len(gone))
+                 if p.replaces is None or tuple(p.laser_rc) not in gone][:N_PROPOSALS]
+        # A re-click proposal names the pair it replaces by its index in ``pairs``: keep the pick id.
+        reclick_of = {tuple(p.laser_rc): pairs[p.replaces].id for p in props if p.replaces is not None}
+        auto_pairs: list[Pair] = []
+        if auto and props and s.corners is not None:  # (re-clicks are never auto-accepted: the gate refuses them)
+            ok, pixels = auto_accept(s.corners, props, self.auto_gate, image=self.image, depth=self.depth, camera=self.camera,
+                                     T_camera_lidar=s.state.T_camera_lidar)
+            auto_pairs = [Pair(tuple(p.laser_rc), None, (float(px[0]), float(px[1])), source="auto",
+                               precision_px=AUTO_PRECISION_PX) for p, good, px in zip(props, ok, pixels) if good]
+        return key, props, auto_pairs, reclick_of
+
+    def _on_done(self, job: int, result: tuple | None, error: BaseException | None) -> None:
+        with self._lock:
+            if job != self._job_no:
+                return  # a newer job is queued; its result follows
+            if error is not None:
+                self._busy = False
+                self._error = " ".join(str(error).split()) if isinstance(error, CalibError) else (
+                    f"{type(error).__name__}: {error}")
+                self._refresh()
+                return
+            key, props, auto_pairs, self._reclick_of = result
+            self._busy = False
+            self._error = None
+            # A guided pick still waiting for its click (e.g. after an undo) keeps its proposal shown.
+            half = self._guided_half()
+            waiting = half.laser_rc if half is not None else next(
+                (rc for rc, pid in self._reclick_of.items() if pid == self._reclick), None)
+            cells = [tuple(p.laser_rc) for p in props]
+            index = cells.index(waiting) if waiting in cells else 0
+            self._proposals, self._index, self._shown_key = props, index, key
+            self._auto_pairs = auto_pairs
+            self._pending_posts += 1
+        self._post(self._advance)
+
+    # ---------------------------------------------------------------- on the action worker
+    def _advance(self) -> None:
+        """New proposals are in: add auto-accepted pairs, or start and frame the next guided pair."""
+        try:
+            with self._lock:
+                auto_pairs, self._auto_pairs = self._auto_pairs, []
+            pending = self.state.pending()
+            skip = self._auto_tried | ({pending.laser_rc} if pending is not None else set())
+            auto_pairs = [p for p in auto_pairs if p.laser_rc not in skip]
+            if auto_pairs and self._auto:
+                self._auto_tried.update(p.laser_rc for p in auto_pairs)
+                self.state.import_pairs(auto_pairs)  # one undoable step; the new proposals follow
+                return
+            with self._lock:  # proposals of pairs that changed since (e.g. a re-click's new tag) wait for theirs
+                fresh = self._shown_key == self._submitted
+            if self._want_next and self._guiding and fresh:
+                self._want_next = False
+                self._start_current(quiet=True)
+            self._refresh()
+        finally:
+            with self._lock:
+                self._pending_posts -= 1
+
+    def _guided_half(self):
+        """The pending pick if it is a guided half (laser end only), else None."""
+        p = self.state.pending()
+        return p if p is not None and p.source == "guided" and p.pixel is None else None
+
+    def _reclick_id(self, p: Proposal | None) -> int | None:
+        return None if p is None or p.replaces is None else self._reclick_of.get(tuple(p.laser_rc))
+
+    def _end_reclick(self) -> None:
+        if self._reclick is not None:
+            self._reclick = None
+            self.state.select(None)
+
+    def _start_current(self, quiet: bool = False) -> None:
+        """Make (or move) the guided half pick at the shown proposal -- or, for a re-click, select the rough
+        pair so the next camera click moves its pixel -- and frame the loupes on it."""
+        p = self.current
+        self._end_reclick()
+        if p is None:
+            self._refresh()
+            return
+        half = self._guided_half()
+        rid = self._reclick_id(p)
+        if rid is not None:
+            if half is not None:
+                self.state.delete(half.id)  # the half pick of the proposal shown before
+            elif self.state.pending() is not None:
+                if quiet:
+                    self._refresh()
+                    return
+                raise CalibError(f"pair {self.state.pending().id} is not finished; complete or undo it first")
+            self.state.select(rid)
+            self._reclick, half = rid, self.state.get(rid)
+            self._watch, self._refine = [rid, half.pixel], None
+        elif half is not None:
+            if half.laser_rc != tuple(p.laser_rc):
+                self.state.move_laser(half.id, *p.laser_rc)
+        elif self.state.pending() is not None:
+            if quiet:  # the person started a pair of their own meanwhile: leave it alone
+                self._refresh()
+                return
+            raise CalibError(f"pair {self.state.pending().id} is not finished; complete or undo it first")
+        else:
+            half = self.state.get(self.state.start_pick(*p.laser_rc, source="guided",
+                                                        precision_px=GUIDED_CLICK_SIGMA_PX))
+        if rid is None:
+            self._watch, self._refine = [half.id, None], None
+        self._on_start()
+        loupes = self._loupes()
+        if loupes is not None:
+            loupes.frame_ba(self._ba_key, int(p.laser_rc[0]), int(p.laser_rc[1]))
+            loupes.frame_camera(float(p.pixel[0]), float(p.pixel[1]), cov_px2=np.asarray(p.pixel_cov))
+        self._refresh()
+
+    def _on_button(self, label: str) -> None:
+        self.update()  # an initial extrinsic imported since the last change is used from now on
+        if label == "Stop":
+            self._guiding = self._want_next = False
+            self._end_reclick()
+            half = self._guided_half()
+            if half is not None:
+                self.state.delete(half.id)
+            self._refresh()
+            return
+        if not self._active(len(self.state.complete_picks())):
+            raise CalibError(f"guided picking starts after {MIN_PAIRS} pairs or an imported initial extrinsic")
+        with self._lock:
+            ready = not self._busy and self._shown_key == self._submitted
+            p = self.current if ready else None
+            if label in ("Skip", "Not a corner") and p is not None:
+                if label == "Skip":
+                    self._skipped.append(tuple(p.laser_rc))
+                    self._index = (self._index + 1) % len(self._proposals)
+                else:
+                    self._dropped.append(tuple(p.laser_rc))
+                    del self._proposals[self._index]
+                    if self._index >= len(self._proposals):
+                        self._index = 0
+        self._guiding = True
+        if not ready:  # framed as soon as the proposals are in
+            self._want_next = True
+            self._refresh()
+            return
+        if self.current is None:
+            self._end_reclick()
+            half = self._guided_half()
+            if half is not None:
+                self.state.delete(half.id)
+            self._refresh()
+            return
+        self._start_current()
+
+    def _on_auto(self, on: bool) -> None:
+        self._auto = on
+        self._on_state_change(self.state)  # recompute with (or without) the gate
+
+    # ---------------------------------------------------------------- drawing
+    def _refresh(self) -> None:
+        n = len(self.state.complete_picks())
+        active = self._active(n)
+        with self._lock:
+            busy, error, props, index = self._busy, self._error, self._proposals, self._index
+        lines = ["**Guided picking**"]
+        if not active:
+            lines.append(f"Starts after {MIN_PAIRS} pairs or an imported initial extrinsic.")
+        elif error is not None:
+            lines.append(f"Proposals failed: {md_escape(error)}")
+        elif busy:
+            lines.append("Computing proposals…")
+        elif not props:
+            lines.append("No proposal left.")
+        else:
+            p = props[index]
+            major = 3.0 * float(p.ellipse_sigma_px()[0])
+            what = p.kind if p.replaces is None else f"re-click of pair {self._reclick_id(p)}"
+            lines.append(f"Proposal {index + 1} of {len(props)}: cell (row {p.laser_rc[0]}, col {p.laser_rc[1]}), "
+                         f"{what}, gain {p.gain:.3f}")
+            lines.append(f"Predicted pixel ({p.pixel[0]:.1f}, {p.pixel[1]:.1f}), 3σ ±{major:.1f} px")
+            half = self.state.pending()
+            if self._reclick is not None and self._reclick_id(p) == self._reclick:
+                lines.append(f"Pair {self._reclick} (selected): re-click its corner in the camera loupe.")
+            elif half is not None and half.source == "guided" and half.laser_rc == tuple(p.laser_rc):
+                lines.append(f"Pair {half.id}: click the corner in the camera loupe.")
+            elif self._refine is not None:
+                lines.append(f"Pair {self._refine}: refine its pixel in the camera loupe (a click on the full "
+                             f"image is coarse), or press **Next pair**.")
+            elif self._guiding:
+                lines.append("Press **Next pair** to continue.")
+        counts = {s: 0 for s in ("clicked", "guided", "auto")}
+        for pick in self.state.complete_picks():
+            counts[pick.source] = counts.get(pick.source, 0) + 1
+        lines.append("Pairs: " + ", ".join(f"{v} {k}" for k, v in counts.items()))
+        self._md.content = "  \n".join(lines)
+
+
+def attach_guide_panel(app: Any) -> GuidePanel:
+    """The panel wired to a :class:`app.server.CalibrationApp` (the composition root's one line for it)."""
+    return GuidePanel(app.server.gui, app.state, app.depth, app.camera, app.image, guard=app._guard,
+                      post=lambda fn: app._actions.put((lambda action: fn(), _Action(None, None))),
+                      initial_T=lambda: getattr(app, "initial_T_camera_lidar", None),
+                      loupes=lambda: getattr(app, "loupes", None), ba_key=app.ba_keys[0],
+                      order=app._pairs_folder.order + 0.5,
+                      click_source=lambda pick_id: _click_source(app, pick_id),
+                      on_start=lambda: getattr(app, "_last_pick", {}).clear())
+
+
+def _click_source(app: Any, pick_id: int) -> str | None:
+    """Where the app's last camera click on pick ``pick_id`` landed (``"loupe"``/``"full"``), from the loupes' record."""
+    for kind, pid, where in list(getattr(app, "_last_pick", {}).values()):
+        if kind == "camera" and pid == pick_id:
+            return where
+    return None

@@ -1,0 +1,81 @@
+"""Guided picking in the app on a real scan: PJLab auto_calib (64 x 1800 lidar, 1920 x 1200 photo), ../shared/data.
+
+The app starts from the published extrinsic turned by 2 deg and shifted by 20 cm, with no pair.  "Next pair"
+is pressed once; for each proposal a simulated person clicks its true projection -- the proposed cell's laser
+point projected with the *published* calibration (not ground truth, but what careful clicks would match) -- with
+0.5 px noise in the camera loupe.  Where the loupe (framed on the prediction) does not show that pixel, the
+person first clicks the full camera image near it (1 px noise, whole pixels), then places it in the loupe.
+Every click and button press counts as an action.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from scipy.spatial.transform import Rotation
+
+from calib_core.transforms import rotation_angle_deg, transform_points
+
+ROOT = Path(__file__).resolve().parents[1]
+PJLAB = ROOT.parent / "shared" / "data" / "pjlab_opencalib_lidar2camera" / "auto_calib"
+N_GUIDED = 12
+
+
+def rough_extrinsic(T: np.ndarray, degrees: float = 2.0, metres: float = 0.20) -> np.ndarray:
+    """``T`` turned by ``degrees`` about a fixed oblique axis and shifted by ``metres``."""
+    axis = np.array([0.3, 1.0, 0.2]) / np.linalg.norm([0.3, 1.0, 0.2])
+    shift = np.array([1.0, -1.0, 0.5]) / np.linalg.norm([1.0, -1.0, 0.5])
+    out = np.eye(4)
+    out[:3, :3] = Rotation.from_rotvec(np.radians(degrees) * axis).as_matrix() @ T[:3, :3]
+    out[:3, 3] = T[:3, 3] + metres * shift
+    return out
+
+
+@pytest.mark.realdata
+@pytest.mark.skipif(not (PJLAB / "calib.pcd").is_file(), reason=f"real data not found at {PJLAB} (../shared/data)")
+def test_guided_pairs_on_the_real_scan_from_a_rough_extrinsic(tmp_path):
+    from app.server import CalibrationApp
+    from app.testing import AppDriver
+
+    doc = json.loads((PJLAB / "top_center_lidar-to-center_camera-extrinsic.json").read_text())
+    published = np.array(doc["top_center_lidar-to-center_camera-extrinsic"]["param"]["sensor_calib"]["data"], float)
+    rough_path = tmp_path / "rough.yaml"
+    rough_path.write_text(yaml.safe_dump({"T_camera_lidar": {"matrix": rough_extrinsic(published).tolist()}}))
+    app = CalibrationApp(PJLAB / "calib.pcd", PJLAB / "calib.png", PJLAB / "center_camera-intrinsic.json",
+                         session_path=tmp_path / "session.yaml", port=0, initial_extrinsics_path=rough_path)
+    d = AppDriver(app)
+    rng = np.random.default_rng(0)
+    try:
+        assert d.press_guide("Next pair") == [] and d.wait_guide()
+        actions, two_click = 1, 0
+        for k in range(N_GUIDED):
+            proposal, half = d.guide_proposal, app.state.pending()
+            if proposal.replaces is not None:  # a re-click: the pair is selected, the click moves its pixel
+                half = app.state.get(app.state.selected)
+            assert half is not None and half.laser_rc == tuple(proposal.laser_rc)
+            pix, ok = app.camera.project(transform_points(published, np.asarray(proposal.laser_xyz, float)[None]))
+            assert ok[0]
+            click = pix[0] + rng.normal(0.0, 0.5, 2)
+            if d.loupe_display_pixel("camera", click) is None:  # not in the loupe: find it on the full image
+                assert d.click_camera(*np.round(click + rng.normal(0.0, 1.0, 2))) == [] and d.wait_guide()
+                actions, two_click = actions + 1, two_click + 1
+            assert d.click_loupe_camera(*click) == [] and d.wait_guide()
+            actions += 1
+            done = app.state.get(half.id)
+            assert done.complete and done.source == "guided" and done.precision_px == pytest.approx(0.3)
+        assert d.wait_idle()
+        T = app.result.T_camera_lidar
+    finally:
+        app.stop()
+    rot = rotation_angle_deg(T[:3, :3], published[:3, :3])
+    trans = float(np.linalg.norm(T[:3, 3] - published[:3, 3]))
+    print(f"\nPJLab auto_calib from 2 deg / 20 cm: {N_GUIDED} guided pairs in {actions} actions "
+          f"({actions / N_GUIDED:.2f} per pair; {two_click} needed a full-image click first); "
+          f"{rot:.3f} deg, {100 * trans:.2f} cm from the published calibration")
+    # Issue 9's real-scene target (there with 5 rough + 20 guided pairs): within 0.1 deg and 5 cm.
+    assert rot <= 0.1 and trans <= 0.05
+    assert actions / N_GUIDED <= 1.5
