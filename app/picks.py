@@ -39,12 +39,15 @@ class Pick:
         Laser point in the lidar frame, metres (imported pairs only).
     pixel : (u, v) or None
         Pixel in the original camera image, (column, row), top-left centre 0.
+    check : bool
+        A check pair: left out of the fit, its error reported apart (Verify panel).
     """
 
     id: int
     laser_rc: tuple[int, int] | None = None
     laser_xyz: tuple[float, float, float] | None = None
     pixel: tuple[float, float] | None = None
+    check: bool = False
 
     @property
     def has_laser(self) -> bool:
@@ -63,13 +66,15 @@ class Pick:
         if not self.complete:
             raise CalibError(f"pair {self.id} is incomplete")
         return Pair(self.laser_rc, None if self.laser_rc is not None else self.laser_xyz, self.pixel,  # type: ignore[arg-type]
-                    id=int(self.id))
+                    id=int(self.id), check=bool(self.check))
 
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {"id": int(self.id)}
         out["laser_rc"] = None if self.laser_rc is None else [int(v) for v in self.laser_rc]
         out["laser_xyz"] = None if self.laser_xyz is None else [float(v) for v in self.laser_xyz]
         out["pixel"] = None if self.pixel is None else [float(v) for v in self.pixel]
+        if self.check:
+            out["check"] = True
         return out
 
 
@@ -114,7 +119,7 @@ def restore_session(data: dict, path: Path, check_cell: Callable, check_pixel: C
                 raise CalibError(f"{path}: pair {i}: {exc} (pairs from another scene?)") from None
             # The file's ids when every pair has a distinct one: one id in the UI, files and messages.
             pid = p.id if keep_ids else i + 1
-            picks.append(Pick(pid, laser_rc=p.laser_rc, laser_xyz=p.laser_xyz, pixel=p.pixel))
+            picks.append(Pick(pid, laser_rc=p.laser_rc, laser_xyz=p.laser_xyz, pixel=p.pixel, check=bool(p.check)))
         return Snapshot(tuple(picks), max([len(picks)] + [p.id for p in picks]) + 1), None
     if data.get("version") != SESSION_VERSION:
         raise CalibError(f"{path}: session version {data.get('version')!r} is not supported "
@@ -148,7 +153,10 @@ def restore_session(data: dict, path: Path, check_cell: Callable, check_pixel: C
                 check_pixel(*px_t)
         except CalibError as exc:
             raise CalibError(f"{where}: {exc} (session from another scene?)") from None
-        picks.append(Pick(pick_id, rc_t, xyz_t, px_t))  # type: ignore[arg-type]
+        check = e.get("check", False)
+        if not isinstance(check, bool):
+            raise CalibError(f"{where}: check must be true or false, got {check!r}")
+        picks.append(Pick(pick_id, rc_t, xyz_t, px_t, check=check))  # type: ignore[arg-type]
     ids = [p.id for p in picks]
     if len(set(ids)) != len(ids):
         raise CalibError(f"{path}: duplicate pair ids")

@@ -273,6 +273,15 @@ class AnnotationState:
             self._commit_locked(Snapshot(picks, self._snap.next_id))
         self._notify()
 
+    def set_check(self, pick_id: int, check: bool) -> None:
+        """Mark pick ``pick_id`` as a check pair (left out of the fit, error reported apart) or not; undoable."""
+        with self._lock:
+            old = self.get(pick_id)
+            if old.check != bool(check):
+                picks = tuple(replace(p, check=bool(check)) if p.id == pick_id else p for p in self._snap.picks)
+                self._commit_locked(Snapshot(picks, self._snap.next_id))
+        self._notify()
+
     def clear(self) -> None:
         """Remove every pick (undoable)."""
         with self._lock:
@@ -295,7 +304,7 @@ class AnnotationState:
             except CalibError as exc:
                 raise CalibError(f"{name}: {exc}") from None
             checked.append(Pick(-1 if p.id is None else int(p.id), laser_rc=rc,
-                                laser_xyz=None if rc is not None else xyz, pixel=uv))
+                                laser_xyz=None if rc is not None else xyz, pixel=uv, check=bool(p.check)))
         return checked
 
     def count_duplicates(self, pairs: Sequence[Pair]) -> int:
@@ -322,7 +331,7 @@ class AnnotationState:
                 pid = p.id if p.id >= 0 and p.id not in used else next_id
                 used.add(pid)
                 next_id = max(next_id, pid + 1)
-                new.append(Pick(pid, laser_rc=p.laser_rc, laser_xyz=p.laser_xyz, pixel=p.pixel))
+                new.append(Pick(pid, laser_rc=p.laser_rc, laser_xyz=p.laser_xyz, pixel=p.pixel, check=p.check))
             if not new and not replace_existing:
                 return []
             self._commit_locked(Snapshot(base + tuple(new), next_id))
