@@ -169,28 +169,9 @@ def format_summary(result, pairs_count: int, pair_ids: Sequence[int] | None = No
     return "\n".join(lines)
 
 
-def extrinsics_document(result, pairs, depth, camera, base_dir: Path | None) -> tuple[dict, list[str]]:
-    """The extrinsics YAML document of a :func:`calibrate` result with its ``verification:`` block.
-
-    The block (:func:`calib_core.verify.verification_to_dict`) describes the
-    same pose; when it cannot be computed (too few fit pairs) the document
-    goes without it and the reason comes back as a note.
-    """
-    from calib_core.errors import CalibError
-    from calib_core.io.extrinsics import extrinsics_to_dict
-    from calib_core.verify import verification_to_dict, verify_pairs
-
-    doc = extrinsics_to_dict(result.T_camera_lidar, result, camera, pairs, base_dir=base_dir)
-    try:
-        report = verify_pairs(pairs, depth, camera, result=result)
-    except CalibError as exc:
-        return doc, [f"no verification block: {exc}"]
-    doc["verification"] = verification_to_dict(report)
-    return doc, []
-
-
 def cmd_solve(args: argparse.Namespace) -> int | Outcome:
     from calib_core.io.atomic import write_yaml_atomic
+    from calib_core.verify import extrinsics_document
     from calib_core.pairs import load_pairs_yaml
     from calib_core.solve.calibrate import calibrate, pair_ids_and_sigmas
 
@@ -209,7 +190,7 @@ def cmd_solve(args: argparse.Namespace) -> int | Outcome:
         initial = load_extrinsics_any(args.initial_extrinsics)
     result = calibrate(pairs, depth, camera, cost=args.cost, initial_T_camera_lidar=initial)
     ids, _ = pair_ids_and_sigmas(pairs)
-    doc, notes = extrinsics_document(result, pairs, depth, camera, args.output.parent)
+    doc, notes = extrinsics_document(result, pairs, depth, camera, base_dir=args.output.parent)
     # Save before printing: a closed pipe (| head) must not lose the result.  Outliers stay in the pairs block.
     write_yaml_atomic(args.output, doc)
     print(format_summary(result, len(pairs), ids))

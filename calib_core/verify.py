@@ -41,6 +41,7 @@ __all__ = [
     "compare_to_reference",
     "error_vs_pair_count",
     "verification_to_dict",
+    "extrinsics_document",
 ]
 
 
@@ -518,3 +519,47 @@ def verification_to_dict(report: VerifyReport) -> dict[str, Any]:
         }
     doc["warnings"] = list(report.warnings)
     return doc
+
+
+def extrinsics_document(
+    result: CalibrationResult,
+    pairs: Sequence,
+    depth,
+    camera,
+    base_dir=None,
+    report: VerifyReport | None = None,
+    **verify_options: Any,
+) -> tuple[dict[str, Any], list[str]]:
+    """The extrinsics YAML document of a :func:`calib_core.solve.calibrate` result, with its ``verification:`` block.
+
+    Parameters
+    ----------
+    result : CalibrationResult
+        The fit of ``pairs`` (check pairs left out) by ``calibrate``.
+    pairs : sequence of Pair
+        All pairs, check pairs included.
+    base_dir : path-like or None
+        Folder the camera's file references are made relative to (None: the
+        camera inline, for a download).
+    report : VerifyReport, optional
+        A report on this same fit, already computed; else :func:`verify_pairs`
+        runs (with ``verify_options``, e.g. ``T_reference``).
+
+    Returns
+    -------
+    doc : dict
+        :func:`calib_core.io.extrinsics.extrinsics_to_dict` plus ``verification``.
+    notes : list of str
+        Why the document has no ``verification`` block, if it has none
+        (e.g. too few fit pairs for it).
+    """
+    from .io.extrinsics import extrinsics_to_dict
+
+    doc = extrinsics_to_dict(result.T_camera_lidar, result, camera, pairs, base_dir=base_dir)
+    if report is None:
+        try:
+            report = verify_pairs(pairs, depth, camera, result=result, **verify_options)
+        except CalibError as exc:
+            return doc, [f"no verification block: {exc}"]
+    doc["verification"] = verification_to_dict(report)
+    return doc, []
