@@ -44,7 +44,8 @@ from .page_builder import PageBuilder
 from .view_panel import ViewPanel
 from .pairs_panel import PairsPanel
 from .calibration_panel import CalibrationPanel
-from .export_panel import ExportPanel
+from .export_panel import ExportPanel, FormatExportPanel
+from .verify_panel import VerifyPanel
 from .live_coordinator import LiveSolveCoordinator
 from .overlay_drawing import OverlayDrawing
 from .prepared_scene import MAX_CLOUD_POINTS, PreparedScene
@@ -209,6 +210,7 @@ class CalibrationApp(PairsPanel, CalibrationPanel, ViewPanel, ExportPanel, LiveS
         try:
             self._build_scene()
             self._build_gui()
+            self.format_export = FormatExportPanel(self)  # verify: its own widgets (formats, reference import)
             self.server.on_client_connect(self._on_connect)
             self.server.on_client_disconnect(self._on_disconnect)
             self._solver = LiveSolver(self._solve_job, self._on_solved)
@@ -216,6 +218,7 @@ class CalibrationApp(PairsPanel, CalibrationPanel, ViewPanel, ExportPanel, LiveS
             self._cloud_worker = LiveSolver(self._cloud_job, self._on_cloud_done, name="ba-calib-cloud")
             self.state.subscribe(self._on_state_change)
             self._on_state_change(self.state)
+            self.verify_panel = VerifyPanel(self)  # verify: check pairs, leave-one-out, heat map, reference, plots
         except BaseException:
             self._actions.put(None)
             self.server.stop()
@@ -241,6 +244,7 @@ class CalibrationApp(PairsPanel, CalibrationPanel, ViewPanel, ExportPanel, LiveS
         self._action_thread.join(timeout=5.0)
         self._solver.stop()
         self._cloud_worker.stop()
+        self.verify_panel.stop()
         try:
             self.state.close()
         finally:
