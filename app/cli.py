@@ -283,6 +283,20 @@ def cmd_sample(args: argparse.Namespace) -> int:
 def cmd_serve(args: argparse.Namespace) -> int:
     from app.serving import serve
 
+    if getattr(args, "bag", None) is not None:
+        from app.serving import BagSource
+
+        if args.scan is not None or args.image is not None:
+            from calib_core.errors import CalibError
+
+            raise CalibError("serve --bag takes the scan and the image from the bag: leave out --scan and --image")
+        source = BagSource(args.bag, cloud_topic=args.cloud_topic, image_topic=args.image_topic,
+                           camera_info_topic=args.camera_info_topic, index=args.index, time_s=args.time,
+                           camera=args.camera, frames_dir=args.frames_dir, session=args.session)
+        serve(None, None, None, output_path=args.output, host=args.host, port=args.port,
+              scan_options=scan_options(args), image_size=tuple(args.image_size) if args.image_size else None,
+              initial_extrinsics_path=args.initial_extrinsics, bag=source)
+        return 0
     if args.scan is None and args.image is None and args.camera is None:
         sample = default_sample_dir()
         args.scan, args.image, args.camera = sample / "scan.npz", sample / "image.png", sample / "camera.yaml"
@@ -303,6 +317,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
         port=args.port,
         scan_options=scan_options(args),
         image_size=tuple(args.image_size) if args.image_size else None,
+        initial_extrinsics_path=args.initial_extrinsics,
     )
     return 0
 
@@ -337,6 +352,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--output", type=Path, default=None, help="where Export also writes the extrinsics YAML")
     p.add_argument("--host", default="127.0.0.1", help="interface to bind (default 127.0.0.1: this machine only)")
     p.add_argument("--port", type=int, default=8080)
+    p.add_argument("--initial-extrinsics", type=Path, default=None,
+                   help="start from this extrinsic (any format 'export' writes, or a ba-calib YAML)")
+    g = p.add_argument_group("ROS bags (no ROS needed)")
+    g.add_argument("--bag", type=Path, default=None,
+                   help="serve a frame of this .bag / ROS 2 bag folder (the page can switch frames)")
+    g.add_argument("--cloud-topic", default=None, help="sensor_msgs/PointCloud2 topic (default: the only one)")
+    g.add_argument("--image-topic", default=None, help="sensor_msgs/Image or CompressedImage topic (default: the only one)")
+    g.add_argument("--camera-info-topic", default=None, help="sensor_msgs/CameraInfo topic (default: the only one; --camera overrides)")
+    which = g.add_mutually_exclusive_group()
+    which.add_argument("--index", type=int, default=None, help="first frame: the cloud with this 0-based index (default 0)")
+    which.add_argument("--time", type=float, default=None, help="first frame: the cloud nearest this many seconds after the bag's start")
+    g.add_argument("--frames-dir", type=Path, default=None,
+                   help="where frames are extracted (default ./<bag name>.ba-calib-frames)")
     p.set_defaults(func=cmd_serve)
 
     p = sub.add_parser(
