@@ -297,6 +297,13 @@ def cmd_serve(args: argparse.Namespace) -> int:
               scan_options=scan_options(args), image_size=tuple(args.image_size) if args.image_size else None,
               initial_extrinsics_path=args.initial_extrinsics, bag=source)
         return 0
+    bag_only = [o for o, v in (("--cloud-topic", args.cloud_topic), ("--image-topic", args.image_topic),
+                               ("--camera-info-topic", args.camera_info_topic), ("--index", args.index),
+                               ("--time", args.time), ("--frames-dir", args.frames_dir)) if v is not None]
+    if bag_only:
+        from calib_core.errors import CalibError
+
+        raise CalibError(f"{', '.join(bag_only)} choose(s) what to read from a bag: give --bag too")
     if args.scan is None and args.image is None and args.camera is None:
         sample = default_sample_dir()
         args.scan, args.image, args.camera = sample / "scan.npz", sample / "image.png", sample / "camera.yaml"

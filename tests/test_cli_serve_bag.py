@@ -115,6 +115,8 @@ def test_cli_serve_bag_runs_and_bad_options_are_one_line(sample_cloud, tmp_path)
     assert proc.returncode == 2 and "leave out --scan and --image" in proc.stderr
     proc = _cli("serve", "--bag", str(bag), "--index", "1", "--time", "2")
     assert proc.returncode == 2
+    proc = _cli("serve", "--index", "1")
+    assert proc.returncode == 2 and proc.stderr.strip() == "error: --index choose(s) what to read from a bag: give --bag too"
     port = free_port()
     child = subprocess.Popen(
         [sys.executable, "-m", "app.cli", "serve", "--bag", str(bag), "--camera", str(SAMPLE / "camera.yaml"),
