@@ -256,7 +256,9 @@ class AppDriver:
         """Choose ``fmt`` and the frames in "Export to robotics formats", press Download; ``(file name, bytes)``."""
         panel = self.app.format_export
         panel._dd_format.value, panel._tx_parent.value, panel._tx_child.value = fmt, parent, child
-        self.app._actions.join()
+        # The widgets' own update callbacks arrive from viser's event loop at their own pace: refresh once more
+        # after all three values are set, as the last of those callbacks would.
+        self._fire(self.app._guard(lambda action: panel._refresh()), SimpleNamespace(client=self.tab, target=None))
         before = len(self.tab.downloads)
         notes = self._fire(self.app._guard(panel._on_download), SimpleNamespace(client=self.tab, target=None))
         if len(self.tab.downloads) == before:

@@ -187,6 +187,8 @@ class VerifyPanel:
     def _job(self, payload: tuple) -> Verification | None:
         key, ids, pairs, ref = payload
         time.sleep(SETTLE_S)
+        # The live solve and the page's answer to a click come first: they share the machine with this work.
+        self.app.wait_idle(timeout=5.0)
         if key != self._wanted or self._stopped:
             return None  # superseded: the newer job is queued
         t0 = time.perf_counter()
