@@ -144,7 +144,10 @@ class BagFramePanel:
             self.button.on_click(self._clicked)
 
     def _clicked(self, event: Any) -> None:
-        index = int(self.number.value)
+        self.request(int(self.number.value))
+
+    def request(self, index: int) -> None:
+        """Ask for frame ``index`` as the "Load this frame" button does (``serve`` then restarts the app on it)."""
         self._app._notify(None, "Loading frame", f"cloud {index}: the page reconnects in a moment", color="blue")
         self._on_request(index)
 
@@ -160,6 +163,7 @@ class BagServer:
         self.requests: queue.Queue[int] = queue.Queue()
         self.app: CalibrationApp | None = None
         self.frame: BagFrame | None = None
+        self.panel: BagFramePanel | None = None
 
     def load(self, index: int | None = None) -> CalibrationApp:
         """Stop the current app (if any) and serve frame ``index`` (None: the first frame)."""
@@ -191,7 +195,7 @@ class BagServer:
                              "take one yet: use it with 'solve --initial-extrinsics')")
         self.app = make_app(frame.scan, frame.image, frame.camera, session_path=frame.session, **options)
         self.frame = frame
-        BagFramePanel(self.app, self.source, frame, self.requests.put)
+        self.panel = BagFramePanel(self.app, self.source, frame, self.requests.put)
         for note in notes:
             print(f"ba-calib: {note}", flush=True)
         return self.app

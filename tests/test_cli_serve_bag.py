@@ -80,8 +80,9 @@ def test_serve_bag_shows_the_frame_and_switches_frames(kind, sample_cloud, tmp_p
         assert np.abs(T_tf - expected).max() < 1e-9
         assert "cloud 0 of 2" in server.frame.description
         port = app.port
-        # The page's "Load this frame" asks for frame 1; the app restarts on it, on the same port.
-        app2 = server.load(1)
+        # The page's "Load this frame" asks for frame 1; serve() then restarts the app on it, on the same port.
+        server.panel.request(1)
+        app2 = server.load(server.requests.get_nowait())
         assert app2 is not app and app2.port == port
         assert np.array_equal(app2.image, images[1])
         assert app2.session_path == tmp_path / "session.frame1.yaml"

@@ -48,6 +48,7 @@ def test_export_two_formats_and_see_the_verify_plots(tmp_path):
             page = browser.new_page(viewport={"width": 1400, "height": 1000}, accept_downloads=True)
             page.goto(app.url)
             wait_for(lambda: "Leave-one-out: mean" in page_text(page), "the Verify summary")
+            print(f"\nsummary shown after {time.monotonic() - t_browser:.1f} s")
 
             def download(fmt: str, parent: str, child: str) -> tuple[str, bytes]:
                 select = page.get_by_label("Format", exact=True)
@@ -76,6 +77,7 @@ def test_export_two_formats_and_see_the_verify_plots(tmp_path):
             assert data == export_extrinsics(T, "ros2-tf", "camera_optical", "velodyne").encode()
             assert "--frame-id camera_optical --child-frame-id velodyne" in data.decode()
 
+            print(f"two downloads done after {time.monotonic() - t_browser:.1f} s")
             # The Verify plots: uPlot canvases with lines and points drawn on them.
             plots = page.locator(".uplot canvas")
             wait_for(lambda: plots.count() >= 3, "three uPlot canvases")
