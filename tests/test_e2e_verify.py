@@ -45,7 +45,7 @@ def test_export_two_formats_and_see_the_verify_plots(tmp_path):
         t_browser = time.monotonic()
         with sync_api.sync_playwright() as p:
             browser = p.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS)
-            page = browser.new_page(viewport={"width": 1400, "height": 1000}, accept_downloads=True)
+            page = browser.new_page(viewport={"width": 1000, "height": 800}, accept_downloads=True)
             page.goto(app.url)
             wait_for(lambda: "Leave-one-out: mean" in page_text(page), "the Verify summary")
             print(f"\nsummary shown after {time.monotonic() - t_browser:.1f} s")
