@@ -41,8 +41,9 @@ def app(tmp_path_factory):
 @pytest.fixture()
 def driver(app):
     d = AppDriver(app)
-    d.upload_pairs("pairs.yaml", PAIRS, answer="Replace all")
-    assert d.wait_verified()
+    notes = d.upload_pairs("pairs.yaml", PAIRS, answer="Replace all")
+    assert notes and notes[-1][0] == "Pairs imported", notes
+    assert d.wait_verified(timeout=120.0)  # generous: the machine is shared
     assert len(app.state.complete_picks()) == 10
     return d
 
