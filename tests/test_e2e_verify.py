@@ -103,3 +103,45 @@ def test_export_two_formats_and_see_the_verify_plots(tmp_path):
         print(f"\nbrowser time {time.monotonic() - t_browser:.1f} s")
     finally:
         app.stop()
+
+
+@pytest.mark.skipif(not CHROMIUM.exists(), reason="/usr/bin/chromium is missing (apt-get install chromium); CI installs it")
+def test_serve_bag_switches_frames_from_the_page(tmp_path):
+    """``serve --bag``: the page's "Load this frame" restarts the app on another cloud; the page reconnects to it."""
+    sync_api = pytest.importorskip("playwright.sync_api", reason="the playwright package is not installed")
+    from bag_helpers import CloudSpec, SceneBag, write_bag
+
+    from app.serving import BagServer, BagSource
+    from calib_core.io.images import load_image_rgb
+    from calib_core.io.scan_readers import read_point_cloud
+
+    cloud = read_point_cloud(SAMPLE / "scan.npz")
+    spec = CloudSpec({a: cloud.xyz[:, i].copy() for i, a in enumerate("xyz")}, organized_shape=cloud.organized_shape)
+    image = load_image_rgb(SAMPLE / "image.png")
+    flipped = image[::-1].copy()
+    bag = write_bag(tmp_path / "bag", "mcap", SceneBag(clouds=[spec, spec], cloud_times=[50.0, 50.5],
+                                                       images=[image, flipped], image_times=[50.0, 50.5]))
+    server = BagServer(BagSource(bag, camera=SAMPLE / "camera.yaml", frames_dir=tmp_path / "frames",
+                                 session=tmp_path / "session.yaml"), port=free_port())
+    try:
+        app = server.load()
+        t_browser = time.monotonic()
+        with sync_api.sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS)
+            page = browser.new_page(viewport={"width": 1000, "height": 800})
+            page.goto(app.url)
+            wait_for(lambda: "cloud 0 of 2" in page_text(page), "the Bag frame folder on frame 0")
+            box = page.locator('div:has(label:text-is("Cloud index")):has(input)').last.locator("input")
+            box.fill("1")
+            box.press("Tab")
+            wait_for(lambda: int(server.panel.number.value) == 1, "the index to reach the app")
+            page.get_by_role("button", name="Load this frame").click()
+            index = server.requests.get(timeout=TIMEOUT_S)  # what serve()'s loop receives
+            assert index == 1
+            app = server.load(index)
+            wait_for(lambda: "cloud 1 of 2" in page_text(page), "the page to reconnect to frame 1", timeout=60)
+            assert np.array_equal(app.image, flipped)
+            browser.close()
+        print(f"\nbrowser time {time.monotonic() - t_browser:.1f} s")
+    finally:
+        server.stop()
