@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import threading
 import time
+import traceback
 from dataclasses import dataclass
 from typing import Any
 
@@ -213,9 +214,7 @@ class VerifyPanel:
             if version != self._version:
                 return  # a newer job is queued
             if error is not None:
-                if out is None and not isinstance(error, CalibError):
-                    import traceback
-
+                if not isinstance(error, CalibError):
                     traceback.print_exception(error)
                 msg = str(error) if isinstance(error, CalibError) else f"{type(error).__name__}: {error}"
                 self._error = " ".join(msg.split())
@@ -234,6 +233,12 @@ class VerifyPanel:
                                         f"Verification starts at {MIN_PAIRS} fit pairs.")
             self._md_table.content = ""
             self._md_heat.content = ""
+            # No stale figures beside a "not verified": the plots and the map empty out.
+            empty = np.zeros(0)
+            with self.app.server.atomic():
+                for plot in (self._plot_pairs, self._plot_count, self._plot_sigma):
+                    plot.data = tuple(empty for _ in plot.series)
+                self._img_heat.image = np.full((8, 8, 3), 230, np.uint8)
             return
         rep, ids = cur.report, cur.ids
         r = rep.result

@@ -228,3 +228,9 @@ def test_marking_the_last_fit_pairs_is_refused(app, driver):
     notes = driver.mark_check_pair(ids[6])
     assert notes and "last 4 fit pairs" in notes[0][1]
     assert sum(p.check for p in app.state.picks) == 6
+    # Fewer than 4 fit pairs (a pair deleted): not verified, and no stale figures are left on show.
+    driver.select_in_dropdown(ids[7])
+    driver.press_edit("Delete")
+    assert driver.wait_verified()
+    assert "Not verified" in driver.verify_summary and driver.verify_table == ""
+    assert all(len(a) == 0 for plot in driver.verify_plots().values() for a in plot)
