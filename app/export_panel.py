@@ -65,7 +65,9 @@ class ExportPanel:
         """The extrinsics YAML of the last good solve to download; also written to ``output_path``.
 
         The written file names the camera's files relative to its own folder;
-        the download, whose folder is unknown, carries the camera inline.
+        the download, whose folder is unknown, carries the camera inline.  Both
+        carry the ``verification:`` block of this solve (the Verify panel's, or
+        computed now when the panel has not finished it).
         Returns ``(download bytes, path written or None)``; CalibError before the first solve.
         """
         bundle = self._bundle
