@@ -66,6 +66,9 @@ class CalibrationPanel:
             excluded = [int(i) for i in getattr(r, "outlier_ids", [])]
             if excluded:
                 out.append("Left out of the fit: pair " + ", ".join(str(i) for i in excluded))
+            checks = [int(i) for i in getattr(r, "check_ids", [])]
+            if checks:
+                out.append("Check pairs (not in the fit, see Verify): " + ", ".join(str(i) for i in checks))
             out += [
                 f"**Solved with {r.n_pairs} pairs** ({md_escape(r.cost_name)} cost, {r.iterations} iterations, "
                 f"{bundle.seconds * 1000:.0f} ms)",
@@ -81,10 +84,17 @@ class CalibrationPanel:
                     out.append(f"Note: {md_escape(w)}")
             self._md_result.content = "  \n".join(out)
             rows = ["| pair | px | deg | in fit |", "|---:|---:|---:|:---|"]
-            for k, pid in enumerate(bundle.pick_ids):
+            # calibrate() leaves check pairs out: its rows are the fit pairs (pair_positions), checks come apart.
+            positions = getattr(r, "pair_positions", None) or list(range(len(r.residual_px)))
+            for k, pos in enumerate(positions):
+                pid = bundle.pick_ids[pos]
                 px, deg = float(r.residual_px[k]), float(r.residual_deg[k])
                 if pid in excluded:
                     rows.append(f"| **{pid}** | **{_fmt(px, 2)}** | **{_fmt(deg, 3)}** | **excluded (outlier)** |")
                 else:
                     rows.append(f"| {pid} | {_fmt(px, 2)} | {_fmt(deg, 3)} | yes |")
+            for pos, px, deg in zip(getattr(r, "check_positions", []), getattr(r, "check_residual_px", []),
+                                    getattr(r, "check_residual_deg", [])):
+                rows.append(f"| {bundle.pick_ids[pos]} | {_fmt(float(px), 2)} | {_fmt(float(deg), 3)} | "
+                            "no: check pair |")
             self._md_table.content = "\n".join(rows)

@@ -170,7 +170,8 @@ def format_summary(result, pairs_count: int, pair_ids: Sequence[int] | None = No
 
 
 def cmd_solve(args: argparse.Namespace) -> int | Outcome:
-    from calib_core.io.extrinsics import save_extrinsics_yaml
+    from calib_core.io.atomic import write_yaml_atomic
+    from calib_core.verify import extrinsics_document
     from calib_core.pairs import load_pairs_yaml
     from calib_core.solve.calibrate import calibrate, pair_ids_and_sigmas
 
@@ -189,9 +190,12 @@ def cmd_solve(args: argparse.Namespace) -> int | Outcome:
         initial = load_extrinsics_any(args.initial_extrinsics)
     result = calibrate(pairs, depth, camera, cost=args.cost, initial_T_camera_lidar=initial)
     ids, _ = pair_ids_and_sigmas(pairs)
+    doc, notes = extrinsics_document(result, pairs, depth, camera, base_dir=args.output.parent)
     # Save before printing: a closed pipe (| head) must not lose the result.  Outliers stay in the pairs block.
-    save_extrinsics_yaml(args.output, result.T_camera_lidar, result=result, camera=camera, pairs=pairs)
+    write_yaml_atomic(args.output, doc)
     print(format_summary(result, len(pairs), ids))
+    for note in notes:
+        print(f"note: {note}")
     print(f"\nwrote {args.output}")
     if result.quality.status == "unreliable":
         return Outcome(EXIT_UNRELIABLE, f"unreliable: {result.quality.reasons[0]} (exit code {EXIT_UNRELIABLE})")
@@ -279,6 +283,27 @@ def cmd_sample(args: argparse.Namespace) -> int:
 def cmd_serve(args: argparse.Namespace) -> int:
     from app.serving import serve
 
+    if getattr(args, "bag", None) is not None:
+        from app.serving import BagSource
+
+        if args.scan is not None or args.image is not None:
+            from calib_core.errors import CalibError
+
+            raise CalibError("serve --bag takes the scan and the image from the bag: leave out --scan and --image")
+        source = BagSource(args.bag, cloud_topic=args.cloud_topic, image_topic=args.image_topic,
+                           camera_info_topic=args.camera_info_topic, index=args.index, time_s=args.time,
+                           camera=args.camera, frames_dir=args.frames_dir, session=args.session)
+        serve(None, None, None, output_path=args.output, host=args.host, port=args.port,
+              scan_options=scan_options(args), image_size=tuple(args.image_size) if args.image_size else None,
+              initial_extrinsics_path=args.initial_extrinsics, bag=source)
+        return 0
+    bag_only = [o for o, v in (("--cloud-topic", args.cloud_topic), ("--image-topic", args.image_topic),
+                               ("--camera-info-topic", args.camera_info_topic), ("--index", args.index),
+                               ("--time", args.time), ("--frames-dir", args.frames_dir)) if v is not None]
+    if bag_only:
+        from calib_core.errors import CalibError
+
+        raise CalibError(f"{', '.join(bag_only)} choose(s) what to read from a bag: give --bag too")
     if args.scan is None and args.image is None and args.camera is None:
         sample = default_sample_dir()
         args.scan, args.image, args.camera = sample / "scan.npz", sample / "image.png", sample / "camera.yaml"
@@ -299,6 +324,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
         port=args.port,
         scan_options=scan_options(args),
         image_size=tuple(args.image_size) if args.image_size else None,
+        initial_extrinsics_path=args.initial_extrinsics,
     )
     return 0
 
@@ -333,6 +359,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--output", type=Path, default=None, help="where Export also writes the extrinsics YAML")
     p.add_argument("--host", default="127.0.0.1", help="interface to bind (default 127.0.0.1: this machine only)")
     p.add_argument("--port", type=int, default=8080)
+    p.add_argument("--initial-extrinsics", type=Path, default=None,
+                   help="start from this extrinsic (any format 'export' writes, or a ba-calib YAML)")
+    g = p.add_argument_group("ROS bags (no ROS needed)")
+    g.add_argument("--bag", type=Path, default=None,
+                   help="serve a frame of this .bag / ROS 2 bag folder (the page can switch frames)")
+    g.add_argument("--cloud-topic", default=None, help="sensor_msgs/PointCloud2 topic (default: the only one)")
+    g.add_argument("--image-topic", default=None, help="sensor_msgs/Image or CompressedImage topic (default: the only one)")
+    g.add_argument("--camera-info-topic", default=None, help="sensor_msgs/CameraInfo topic (default: the only one; --camera overrides)")
+    which = g.add_mutually_exclusive_group()
+    which.add_argument("--index", type=int, default=None, help="first frame: the cloud with this 0-based index (default 0)")
+    which.add_argument("--time", type=float, default=None, help="first frame: the cloud nearest this many seconds after the bag's start")
+    g.add_argument("--frames-dir", type=Path, default=None,
+                   help="where frames are extracted (default ./<bag name>.ba-calib-frames)")
     p.set_defaults(func=cmd_serve)
 
     p = sub.add_parser(

@@ -44,6 +44,8 @@ class Pick:
         unguided click, a click on a guided proposal, or accepted without a click.
     precision_px : float or None
         1-sigma of the pixel in px, when known (None: the solve's default).
+    check : bool
+        A check pair: left out of the fit, its error reported apart (Verify panel).
     """
 
     id: int
@@ -52,6 +54,7 @@ class Pick:
     pixel: tuple[float, float] | None = None
     source: str = "clicked"
     precision_px: float | None = None
+    check: bool = False
 
     @property
     def has_laser(self) -> bool:
@@ -70,7 +73,8 @@ class Pick:
         if not self.complete:
             raise CalibError(f"pair {self.id} is incomplete")
         return Pair(self.laser_rc, None if self.laser_rc is not None else self.laser_xyz, self.pixel,  # type: ignore[arg-type]
-                    id=int(self.id), source=self.source, precision_px=self.precision_px)
+                    id=int(self.id), source=self.source, precision_px=self.precision_px,
+                    check=bool(self.check))
 
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {"id": int(self.id)}
@@ -82,6 +86,8 @@ class Pick:
             out["source"] = self.source
         if self.precision_px is not None:
             out["precision_px"] = float(self.precision_px)
+        if self.check:
+            out["check"] = True
         return out
 
 
@@ -134,7 +140,7 @@ def checked_picks(pairs: Sequence[Pair], check_cell: Callable, check_pixel: Call
         except CalibError as exc:
             raise CalibError(f"{name}: {exc}") from None
         checked.append(Pick(-1 if p.id is None else int(p.id), laser_rc=rc, laser_xyz=None if rc is not None else xyz,
-                            pixel=uv, source=p.source, precision_px=p.precision_px))
+                            pixel=uv, source=p.source, precision_px=p.precision_px, check=bool(p.check)))
     return checked
 
 
@@ -160,7 +166,7 @@ def restore_session(data: dict, path: Path, check_cell: Callable, check_pixel: C
             # The file's ids when every pair has a distinct one: one id in the UI, files and messages.
             pid = p.id if keep_ids else i + 1
             picks.append(Pick(pid, laser_rc=p.laser_rc, laser_xyz=p.laser_xyz, pixel=p.pixel, source=p.source,
-                              precision_px=p.precision_px))
+                              precision_px=p.precision_px, check=bool(p.check)))
         return Snapshot(tuple(picks), max([len(picks)] + [p.id for p in picks]) + 1), None
     if data.get("version") != SESSION_VERSION:
         raise CalibError(f"{path}: session version {data.get('version')!r} is not supported "
@@ -194,7 +200,10 @@ def restore_session(data: dict, path: Path, check_cell: Callable, check_pixel: C
                 check_pixel(*px_t)
         except CalibError as exc:
             raise CalibError(f"{where}: {exc} (session from another scene?)") from None
-        picks.append(Pick(pick_id, rc_t, xyz_t, px_t, **pick_tags(e, where)))  # type: ignore[arg-type]
+        check = e.get("check", False)
+        if not isinstance(check, bool):
+            raise CalibError(f"{where}: check must be true or false, got {check!r}")
+        picks.append(Pick(pick_id, rc_t, xyz_t, px_t, check=check, **pick_tags(e, where)))  # type: ignore[arg-type]
     ids = [p.id for p in picks]
     if len(set(ids)) != len(ids):
         raise CalibError(f"{path}: duplicate pair ids")

@@ -43,8 +43,9 @@ from .page_builder import PageBuilder
 from .view_panel import ViewPanel
 from .pairs_panel import PairsPanel
 from .calibration_panel import CalibrationPanel
-from .export_panel import ExportPanel
+from .export_panel import ExportPanel, FormatExportPanel
 from .guide_panel import attach_guide_panel
+from .verify_panel import VerifyPanel
 from .live_coordinator import LiveSolveCoordinator
 from .overlay_drawing import OverlayDrawing
 from .prepared_scene import MAX_CLOUD_POINTS, PreparedScene
@@ -213,6 +214,7 @@ class CalibrationApp(PairsPanel, CalibrationPanel, ViewPanel, ExportPanel, LiveS
             self._build_scene()
             self._build_gui()
             self.loupes = Loupes(self)  # the magnified BA and camera panes (public: frame_ba, frame_camera)
+            self.format_export = FormatExportPanel(self)  # verify: its own widgets (formats, reference import)
             self.server.on_client_connect(self._on_connect)
             self.server.on_client_disconnect(self._on_disconnect)
             self._solver = LiveSolver(self._solve_job, self._on_solved)
@@ -221,6 +223,7 @@ class CalibrationApp(PairsPanel, CalibrationPanel, ViewPanel, ExportPanel, LiveS
             self.guide = attach_guide_panel(self)  # guided picking (app/guide_panel.py)
             self.state.subscribe(self._on_state_change)
             self._on_state_change(self.state)
+            self.verify_panel = VerifyPanel(self)  # verify: check pairs, leave-one-out, heat map, reference, plots
         except BaseException:
             self._actions.put(None)
             self.server.stop()
@@ -247,6 +250,7 @@ class CalibrationApp(PairsPanel, CalibrationPanel, ViewPanel, ExportPanel, LiveS
         self._solver.stop()
         self._cloud_worker.stop()
         self.guide.stop()
+        self.verify_panel.stop()
         try:
             self.state.close()
         finally:

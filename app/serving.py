@@ -1,22 +1,224 @@
-"""Serve the annotation app until Ctrl+C (what ``ba-calib`` and ``ba-calib serve`` run)."""
+"""Serve the annotation app until Ctrl+C (what ``ba-calib`` and ``ba-calib serve`` run).
+
+``serve --bag BAG`` serves one frame of a ROS bag (:class:`BagSource`): the
+chosen cloud, the image nearest to it in time and the camera from the bag's
+CameraInfo (or ``--camera``), extracted into a folder of files.  The page gets
+a "Bag frame" folder to choose another cloud: the app is then restarted on the
+same port with that frame (each frame has its own session file) and the page
+reconnects.  ``/tf_static`` between the cloud's and the image's frames is
+offered as the initial extrinsic.
+"""
 
 from __future__ import annotations
 
+import inspect
 import os
+import queue
 import signal
 import socket
 import threading
 import time
+from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
+
+from calib_core.errors import CalibError
 
 from .security import TOKEN_QUERY, is_loopback
 from .server import CalibrationApp
+from .ui_common import md_escape
+
+
+def app_takes_initial_extrinsics() -> bool:
+    """Whether this build's :class:`CalibrationApp` takes ``initial_extrinsics_path``."""
+    return "initial_extrinsics_path" in inspect.signature(CalibrationApp.__init__).parameters
+
+
+@dataclass
+class BagFrame:
+    """One frame of a bag, extracted to files (see :func:`calib_core.io.bags.write_bag_scene`)."""
+
+    index: int
+    scan: Path
+    image: Path
+    camera: Path
+    initial_extrinsics: Path | None  # from /tf_static, when it links the two frames
+    session: Path
+    description: str  # one markdown paragraph (user text escaped)
+    notes: list[str]
+
+
+@dataclass
+class BagSource:
+    """Where ``serve --bag`` takes its frames from.
+
+    Parameters
+    ----------
+    bag : path
+        ``.bag``, or a ROS 2 bag folder (or a file in it).
+    cloud_topic, image_topic, camera_info_topic : str, optional
+        Default: the bag's only topic of that type.
+    index, time_s : optional
+        The first frame: the cloud with this index on its topic, or the one
+        nearest to this many seconds after the bag's start (default index 0).
+    camera : path, optional
+        Camera file, for bags without CameraInfo (it wins over CameraInfo).
+    frames_dir : path, optional
+        Where frames are extracted (default ``./<bag name>.ba-calib-frames``).
+    session : path, optional
+        Session file of the first frame; other frames get ``<stem>.frameN<suffix>``
+        beside it (default ``./<bag name>.frameN.ba-calib-session.yaml``).
+    """
+
+    bag: Path
+    cloud_topic: str | None = None
+    image_topic: str | None = None
+    camera_info_topic: str | None = None
+    index: int | None = None
+    time_s: float | None = None
+    camera: Path | None = None
+    frames_dir: Path | None = None
+    session: Path | None = None
+    n_clouds: int = field(default=0, init=False)
+    first_index: int | None = field(default=None, init=False)
+
+    def __post_init__(self) -> None:
+        from calib_core.io.bags import bag_info
+
+        self.bag = Path(self.bag)
+        info = bag_info(self.bag)
+        self.name = info.path.name if info.path.is_dir() else info.path.stem
+        if self.frames_dir is None:
+            self.frames_dir = Path.cwd() / f"{self.name}.ba-calib-frames"
+        self._counts = {t.name: t.count for t in info.topics}
+
+    def session_for(self, index: int) -> Path:
+        if self.session is None:
+            return Path.cwd() / f"{self.name}.frame{index}.ba-calib-session.yaml"
+        if index == self.first_index:
+            return Path(self.session)
+        s = Path(self.session)
+        return s.with_name(f"{s.stem}.frame{index}{s.suffix}")
+
+    def extract(self, index: int | None = None) -> BagFrame:
+        """Extract frame ``index`` (None: the first frame, as given by ``index`` / ``time_s``)."""
+        from calib_core.io.bags import read_bag_scene, write_bag_scene
+
+        if index is None:
+            scene = read_bag_scene(self.bag, self.cloud_topic, self.image_topic, self.camera_info_topic,
+                                   time_s=self.time_s, index=self.index)
+        else:
+            scene = read_bag_scene(self.bag, self.cloud_topic, self.image_topic, self.camera_info_topic, index=index)
+        # Later frames read the same topics, without asking again.
+        self.cloud_topic, self.image_topic = scene.cloud_topic, scene.image_topic
+        self.camera_info_topic = scene.camera_info_topic
+        self.n_clouds = int(self._counts.get(scene.cloud_topic, 0))
+        if self.first_index is None:
+            self.first_index = scene.cloud_index
+        out = Path(self.frames_dir) / f"frame_{scene.cloud_index:05d}"
+        paths = write_bag_scene(scene, out)
+        camera = self.camera if self.camera is not None else paths.get("camera")
+        if camera is None:
+            raise CalibError(f"{self.bag}: no CameraInfo topic; give the camera file with --camera")
+        desc = (f"**{md_escape(self.name)}**, cloud {scene.cloud_index} of {self.n_clouds} on "
+                f"{md_escape(scene.cloud_topic)} ({len(scene.cloud.xyz)} points); image {md_escape(scene.image_topic)} "
+                f"{1000 * scene.gap_s:+.1f} ms from it")
+        if paths.get("initial_extrinsics") is not None:
+            desc += f"; /tf_static links {md_escape(scene.lidar_frame)} and {md_escape(scene.camera_frame)}"
+        return BagFrame(scene.cloud_index, paths["scan"], paths["image"], Path(camera), paths.get("initial_extrinsics"),
+                        self.session_for(scene.cloud_index), desc, list(scene.notes))
+
+
+class BagFramePanel:
+    """The "Bag frame" folder: which frame is shown, and a control to load another one."""
+
+    def __init__(self, app: CalibrationApp, source: BagSource, frame: BagFrame, on_request) -> None:
+        gui = app.server.gui
+        self._on_request = on_request
+        self._app = app
+        with gui.add_folder("Bag frame", order=-1.0):
+            gui.add_markdown(frame.description)
+            self.number = gui.add_number("Cloud index", initial_value=frame.index, min=0,
+                                         max=max(source.n_clouds - 1, 0), step=1)
+            self.button = gui.add_button("Load this frame", hint="Restarts the app on this frame (its own session)")
+            self.button.on_click(self._clicked)
+
+    def _clicked(self, event: Any) -> None:
+        self.request(int(self.number.value))
+
+    def request(self, index: int) -> None:
+        """Ask for frame ``index`` as the "Load this frame" button does (``serve`` then restarts the app on it)."""
+        self._app._notify(None, "Loading frame", f"cloud {index}: the page reconnects in a moment", color="blue")
+        self._on_request(index)
+
+
+class BagServer:
+    """Serve frames of a bag one at a time; :meth:`load` restarts the app on another frame (same port)."""
+
+    def __init__(self, source: BagSource, *, initial_extrinsics_path: str | os.PathLike | None = None,
+                 **app_options: Any) -> None:
+        self.source = source
+        self.initial_extrinsics_path = initial_extrinsics_path
+        self.app_options = app_options
+        self.requests: queue.Queue[int] = queue.Queue()
+        self.app: CalibrationApp | None = None
+        self.frame: BagFrame | None = None
+        self.panel: BagFramePanel | None = None
+
+    def load(self, index: int | None = None) -> CalibrationApp:
+        """Stop the current app (if any) and serve frame ``index`` (None: the first frame)."""
+        frame = self.source.extract(index)  # a bad frame leaves the current app running
+        options = dict(self.app_options)
+        previous = self.frame
+        if self.app is not None:
+            options["port"] = self.app.port
+            self.app.stop()
+            self.app = None
+        try:
+            return self._start(frame, options)
+        except CalibError:
+            if previous is None:
+                raise
+            self._start(previous, options)  # the frame shown before keeps being served
+            raise
+
+    def _start(self, frame: BagFrame, options: dict) -> CalibrationApp:
+        initial = self.initial_extrinsics_path or frame.initial_extrinsics
+        notes = list(frame.notes)
+        if initial is not None:
+            if app_takes_initial_extrinsics():
+                options["initial_extrinsics_path"] = initial
+            elif self.initial_extrinsics_path is not None:
+                raise CalibError("this build's app cannot start from an initial extrinsic yet (--initial-extrinsics)")
+            else:
+                notes.append(f"initial extrinsic from /tf_static written to {initial} (this build's app does not "
+                             "take one yet: use it with 'solve --initial-extrinsics')")
+        self.app = make_app(frame.scan, frame.image, frame.camera, session_path=frame.session, **options)
+        self.frame = frame
+        self.panel = BagFramePanel(self.app, self.source, frame, self.requests.put)
+        for note in notes:
+            print(f"ba-calib: {note}", flush=True)
+        return self.app
+
+    def stop(self) -> None:
+        if self.app is not None:
+            self.app.stop()
+            self.app = None
+
+
+def make_app(scan_path, image_path, camera_path, *, initial_extrinsics_path=None, **options: Any) -> CalibrationApp:
+    """A :class:`CalibrationApp`; ``initial_extrinsics_path`` only when given (older apps do not take it)."""
+    if initial_extrinsics_path is not None:
+        if not app_takes_initial_extrinsics():
+            raise CalibError("this build's app cannot start from an initial extrinsic yet (--initial-extrinsics)")
+        options["initial_extrinsics_path"] = initial_extrinsics_path
+    return CalibrationApp(scan_path, image_path, camera_path, **options)
 
 
 def serve(
-    scan_path: str | os.PathLike,
-    image_path: str | os.PathLike,
-    camera_path: str | os.PathLike,
+    scan_path: str | os.PathLike | None,
+    image_path: str | os.PathLike | None,
+    camera_path: str | os.PathLike | None,
     *,
     session_path: str | os.PathLike | None = None,
     output_path: str | os.PathLike | None = None,
@@ -27,15 +229,57 @@ def serve(
     image_size: tuple[int, int] | None = None,
     token: str | None = None,
     allowed_hosts: tuple[str, ...] = (),
+    initial_extrinsics_path: str | os.PathLike | None = None,
+    bag: BagSource | None = None,
 ) -> None:
     """Serve the annotation app until Ctrl+C; prints the URL (with the access token off loopback).
 
-    See :class:`CalibrationApp` for the parameters.  Bad input files raise
-    :class:`CalibError` before the server starts.
+    See :class:`CalibrationApp` for the parameters.  With ``bag`` the scene
+    comes from the bag (``scan_path`` and ``image_path`` are ignored) and the
+    page can switch frames.  Bad input files raise :class:`CalibError` before
+    the server starts.
     """
-    app = CalibrationApp(scan_path, image_path, camera_path, session_path=session_path, output_path=output_path,
-                         host=host, port=port, title=title, scan_options=scan_options, image_size=image_size,
-                         token=token, allowed_hosts=allowed_hosts)
+    options = dict(output_path=output_path, host=host, port=port, title=title, scan_options=scan_options,
+                   image_size=image_size, token=token, allowed_hosts=allowed_hosts)
+    server = None
+    if bag is not None:
+        server = BagServer(bag, initial_extrinsics_path=initial_extrinsics_path, **options)
+        app = server.load()
+    else:
+        app = make_app(scan_path, image_path, camera_path, session_path=session_path,
+                       initial_extrinsics_path=initial_extrinsics_path, **options)
+    _announce(app, host)
+    if threading.current_thread() is threading.main_thread():
+        # `kill` (SIGTERM) stops like Ctrl+C: stop() writes the last changes to the session file.
+        signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
+    try:
+        while True:
+            if server is None:
+                time.sleep(3600)
+                continue
+            try:
+                index = server.requests.get(timeout=1.0)
+            except queue.Empty:
+                continue
+            try:
+                app = server.load(index)
+            except CalibError as exc:
+                print(f"ba-calib: frame {index} not loaded: {exc}", flush=True)
+                if server.app is not None:
+                    server.app._notify(None, "Frame not loaded", str(exc))
+                    continue
+                raise
+            _announce(app, host)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        if server is not None:
+            server.stop()
+        else:
+            app.stop()
+
+
+def _announce(app: CalibrationApp, host: str) -> None:
     print(f"ba-calib: open {app.url} in a browser (Ctrl+C to stop)", flush=True)
     print(f"ba-calib: session file {app.session_path}", flush=True)
     if app.access.token is not None and not is_loopback(host):
@@ -43,16 +287,6 @@ def serve(
             print(f"ba-calib: from other machines: http://{socket.getfqdn()}:{app.port}/?{TOKEN_QUERY}="
                   f"{app.access.token}", flush=True)
         print(f"ba-calib: listening on {host}: requests without the token in the URL above are refused", flush=True)
-    if threading.current_thread() is threading.main_thread():
-        # `kill` (SIGTERM) stops like Ctrl+C: stop() writes the last changes to the session file.
-        signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
-    try:
-        while True:
-            time.sleep(3600)
-    except KeyboardInterrupt:
-        pass
-    finally:
-        app.stop()
 
 
 def _raise_keyboard_interrupt(signum: int, frame: Any) -> None:

@@ -285,6 +285,15 @@ class AnnotationState:
             self._commit_locked(Snapshot(picks, self._snap.next_id))
         self._notify()
 
+    def set_check(self, pick_id: int, check: bool) -> None:
+        """Mark pick ``pick_id`` as a check pair (left out of the fit, error reported apart) or not; undoable."""
+        with self._lock:
+            old = self.get(pick_id)
+            if old.check != bool(check):
+                picks = tuple(replace(p, check=bool(check)) if p.id == pick_id else p for p in self._snap.picks)
+                self._commit_locked(Snapshot(picks, self._snap.next_id))
+        self._notify()
+
     def clear(self) -> None:
         """Remove every pick (undoable)."""
         with self._lock:

@@ -403,6 +403,68 @@ class AppDriver:
         return self.app.guide.text
 
 
+    # ------------------------------------------------ verify helper: Export formats and the Verify panel
+    def mark_check_pair(self, pick_id: int, check: bool = True) -> list[tuple[str, str]]:
+        """Choose pair ``pick_id`` in Verify's "Pair to mark" and press "Make check pair" (or "Put back in fit")."""
+        panel = self.app.verify_panel
+        option = next((o for o in panel._dd_pair.options if o.split()[0] == f"#{pick_id}"), f"#{pick_id}")
+        panel._dd_pair.value = option
+        label = "Make check pair" if check else "Put back in fit"
+        return self._fire(self.app._guard(panel._on_check_button),
+                          SimpleNamespace(client=self.tab, target=SimpleNamespace(value=label)))
+
+    def download_format(self, fmt: str, parent: str = "lidar", child: str = "camera") -> tuple[str, bytes]:
+        """Choose ``fmt`` and the frames in "Export to robotics formats", press Download; ``(file name, bytes)``."""
+        panel = self.app.format_export
+        panel._dd_format.value, panel._tx_parent.value, panel._tx_child.value = fmt, parent, child
+        # The widgets' own update callbacks arrive from viser's event loop at their own pace: refresh once more
+        # after all three values are set, as the last of those callbacks would.
+        self._fire(self.app._guard(lambda action: panel._refresh()), SimpleNamespace(client=self.tab, target=None))
+        before = len(self.tab.downloads)
+        notes = self._fire(self.app._guard(panel._on_download), SimpleNamespace(client=self.tab, target=None))
+        if len(self.tab.downloads) == before:
+            raise ValueError(f"no download: {notes}")
+        return self.tab.downloads[-1]
+
+    def upload_reference(self, name: str, content: bytes) -> list[tuple[str, str]]:
+        """Upload a reference extrinsic through this tab's "Import reference extrinsic" button."""
+        before = len(self.tab.notifications)
+        self.app.format_export.receive_reference(self.tab, name, content, wait=True)
+        return self.tab.notifications[before:]
+
+    def download_extrinsics_yaml(self) -> bytes:
+        """Press "Download extrinsics YAML"; the bytes the tab receives."""
+        before = len(self.tab.downloads)
+        self._fire(self.app._guard(self.app._on_download_yaml), SimpleNamespace(client=self.tab, target=None))
+        if len(self.tab.downloads) == before:
+            raise ValueError("no download")
+        return self.tab.downloads[-1][1]
+
+    def wait_verified(self, timeout: float = 60.0) -> bool:
+        """Wait for the live solve and then for the Verify panel's computation of the newest pairs."""
+        return self.app.wait_idle(timeout) and self.app.verify_panel.wait_idle(timeout)
+
+    @property
+    def verify_summary(self) -> str:
+        """The Verify panel's summary text."""
+        return self.app.verify_panel.summary
+
+    @property
+    def verify_table(self) -> str:
+        """The Verify panel's per-pair table (markdown)."""
+        return self.app.verify_panel.table
+
+    def verify_plots(self) -> dict[str, tuple]:
+        """The data of the Verify plots: ``pairs``, ``count``, ``sigma``."""
+        return self.app.verify_panel.plot_data()
+
+    @property
+    def export_direction(self) -> str:
+        """The direction line of the format export panel."""
+        return str(self.app.format_export._md_direction.content)
+    # ------------------------------------------------ end of the verify helper's block
+
+
 def _picks_json(app: Any) -> str:
     return json.dumps([p.to_dict() for p in app.state.picks], separators=(",", ":"))
 

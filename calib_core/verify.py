@@ -41,6 +41,7 @@ __all__ = [
     "compare_to_reference",
     "error_vs_pair_count",
     "verification_to_dict",
+    "extrinsics_document",
 ]
 
 
@@ -356,6 +357,7 @@ def verify_calibration(
     scene_points_lidar: np.ndarray | None = None,
     cost: str = "angular",
     with_pair_count: bool = True,
+    result: CalibrationResult | None = None,
 ) -> VerifyReport:
     """Fit on the fit pairs, then check pairs, leave-one-out and (optionally) a reference.
 
@@ -371,6 +373,13 @@ def verify_calibration(
         An imported reference ``T_camera_lidar`` to compare with.
     scene_points_lidar : (M, 3) array, optional
         Scene points for the pixel comparison with the reference.
+    result : CalibrationResult, optional
+        The fit of the fit pairs already made (e.g. by
+        :func:`calib_core.solve.calibrate`, whose rows are the fit pairs in
+        order): used instead of fitting again, so the report describes that
+        pose.  Pairs it left out as outliers are left out of the other pairs'
+        leave-one-out refits; their own leave-one-out error is their error
+        under ``result`` (a pose fitted without them).
 
     Raises
     ------
@@ -387,9 +396,12 @@ def verify_calibration(
     fit_idx, chk_idx = np.flatnonzero(~check_mask), np.flatnonzero(check_mask)
     if len(fit_idx) < MIN_PAIRS:
         raise CalibError(f"{len(fit_idx)} fit pairs ({len(chk_idx)} are check pairs); the fit needs at least {MIN_PAIRS}")
-    result = solve_extrinsics(
-        points[fit_idx], bear[fit_idx], camera=camera, pixels=None if pix is None else pix[fit_idx], cost=cost
-    )
+    if result is None:
+        result = solve_extrinsics(
+            points[fit_idx], bear[fit_idx], camera=camera, pixels=None if pix is None else pix[fit_idx], cost=cost
+        )
+    elif len(result.residual_deg) != len(fit_idx):
+        raise CalibError(f"the given fit has {len(result.residual_deg)} pairs, but there are {len(fit_idx)} fit pairs")
     T = result.T_camera_lidar
     warnings: list[str] = []
     check_deg = angular_errors_deg(T, points[chk_idx], bear[chk_idx]) if chk_idx.size else np.zeros(0)
@@ -397,9 +409,19 @@ def verify_calibration(
         check_px = pixel_errors(T, points[chk_idx], pix[chk_idx], camera)
     else:
         check_px = np.full(chk_idx.size, np.nan)
-    loo_px, loo_deg = leave_one_out(
-        points[fit_idx], bear[fit_idx], None if pix is None else pix[fit_idx], camera, T_start=T, cost=cost
+    # Outliers the fit left out stay out of every refit; their own error is under the fit (made without them).
+    inl = np.ones(len(fit_idx), bool)
+    inl[[int(i) for i in getattr(result, "outliers", [])]] = False
+    loo_px, loo_deg = np.full(len(fit_idx), np.nan), np.full(len(fit_idx), np.nan)
+    sel = fit_idx[inl]
+    loo_px[inl], loo_deg[inl] = leave_one_out(
+        points[sel], bear[sel], None if pix is None else pix[sel], camera, T_start=T, cost=cost
     )
+    out_idx = fit_idx[~inl]
+    if out_idx.size:
+        loo_deg[~inl] = angular_errors_deg(T, points[out_idx], bear[out_idx])
+        if camera is not None and pix is not None:
+            loo_px[~inl] = pixel_errors(T, points[out_idx], pix[out_idx], camera)
     if len(fit_idx) <= MIN_PAIRS:
         warnings.append(f"leave-one-out needs more than {MIN_PAIRS} fit pairs")
     if chk_idx.size == 0:
@@ -497,3 +519,47 @@ def verification_to_dict(report: VerifyReport) -> dict[str, Any]:
         }
     doc["warnings"] = list(report.warnings)
     return doc
+
+
+def extrinsics_document(
+    result: CalibrationResult,
+    pairs: Sequence,
+    depth,
+    camera,
+    base_dir=None,
+    report: VerifyReport | None = None,
+    **verify_options: Any,
+) -> tuple[dict[str, Any], list[str]]:
+    """The extrinsics YAML document of a :func:`calib_core.solve.calibrate` result, with its ``verification:`` block.
+
+    Parameters
+    ----------
+    result : CalibrationResult
+        The fit of ``pairs`` (check pairs left out) by ``calibrate``.
+    pairs : sequence of Pair
+        All pairs, check pairs included.
+    base_dir : path-like or None
+        Folder the camera's file references are made relative to (None: the
+        camera inline, for a download).
+    report : VerifyReport, optional
+        A report on this same fit, already computed; else :func:`verify_pairs`
+        runs (with ``verify_options``, e.g. ``T_reference``).
+
+    Returns
+    -------
+    doc : dict
+        :func:`calib_core.io.extrinsics.extrinsics_to_dict` plus ``verification``.
+    notes : list of str
+        Why the document has no ``verification`` block, if it has none
+        (e.g. too few fit pairs for it).
+    """
+    from .io.extrinsics import extrinsics_to_dict
+
+    doc = extrinsics_to_dict(result.T_camera_lidar, result, camera, pairs, base_dir=base_dir)
+    if report is None:
+        try:
+            report = verify_pairs(pairs, depth, camera, result=result, **verify_options)
+        except CalibError as exc:
+            return doc, [f"no verification block: {exc}"]
+    doc["verification"] = verification_to_dict(report)
+    return doc, []

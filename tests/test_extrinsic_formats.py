@@ -297,3 +297,21 @@ def test_several_sensors_compose_the_chain_between_lidar_and_camera():
     assert np.abs(got.T_camera_lidar - expected).max() < 1e-12 and got.format == "urdf"
     with pytest.raises(CalibError, match="no chain"):
         parse_extrinsics(urdf, lidar_frame="lidar_top", camera_frame="cam_rear")
+
+
+def test_the_nine_exports_round_trip_and_point_the_right_way(tmp_path):
+    """Target of issue 13, printed: the 8 formats, ``matrix`` in both directions (9 exports), each with
+    both frame orders for the TF-like ones: round trip error and the cv2.projectPoints direction gap."""
+    truth = project(T_TRUE)
+    cases = [(f, LIDAR, CAMERA) for f in FORMATS if f != "matrix"] + [("matrix", LIDAR, CAMERA), ("matrix", CAMERA, LIDAR)]
+    assert len(cases) == 9
+    lines = []
+    for fmt, parent, child in cases:
+        text = export_extrinsics(T_TRUE, fmt, parent, child)
+        path = tmp_path / f"{fmt}-{parent}{FORMATS[fmt].suffix}"
+        path.write_text(text)
+        trip = float(np.abs(read_extrinsics_any(path).T_camera_lidar - T_TRUE).max())
+        gap = float(np.abs(project(independent_T_camera_lidar(fmt, text, parent)) - truth).max())
+        lines.append(f"  {fmt:10} parent {parent:15} round trip {trip:.2e}   direction gap {gap:.2e} px")
+        assert trip < 1e-9 and gap < 1e-6
+    print("\n" + "\n".join(lines))
