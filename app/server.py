@@ -1,24 +1,12 @@
-"""The browser annotation app: a viser server around :mod:`calib_core`.
+"""The browser annotation app: a viser server around :mod:`calib_core` (the composition root).
 
-The page shows the four Bearing Angle images beside the camera image (raw, or
-unwrapped into a panorama for ``ocam`` / ``fisheye`` cameras).  The user
-clicks a BA image and the camera image, in either order, to make a pair; from
-4 pairs on the extrinsics are solved live in a worker thread and the page
-shows the errors, a per-pair residual table, the reprojected points and BA
-edges, and a coloured point cloud in a 3-D view.
-
-Wide scans (e.g. 64 x 1800) get rows stretched to about square cells and, on request, a column window
-(:mod:`app.ba_view`); two loupes (:mod:`app.loupes`) magnify the last click and the predicted other end.
-
-Every number shown comes from :mod:`calib_core`; this module only routes
-clicks, draws, and moves data between the state, the solver and the page.
-
-A click is answered in this order: the changed pick markers at once (only
-the scene nodes that changed are sent, mostly as in-place updates), then,
-from the solver thread, the errors, the residual table and the 2-D overlays;
-the 3-D cloud is recoloured after that in its own thread, and only while a
-tab shows the 3-D view.  A change is on disk before any of this
-(:mod:`app.session_store`), so what the page shows survives a kill -9 (:meth:`last_click_to_update`: step 2).
+The page shows the four Bearing Angle images beside the camera image (raw, or unwrapped into a panorama),
+with two loupes (:mod:`app.loupes`) that magnify the last click and the predicted other end.  A BA click and
+a camera click, in either order, make a pair; from 4 pairs on the extrinsics are solved live in a worker
+thread.  Each panel owns one concern (pairs, view, calibration, guide, verify, export); every number shown
+comes from :mod:`calib_core`.  A change is on disk (:mod:`app.session_store`) before the page shows it, so it
+survives a kill -9; then the changed markers are sent at once, the solve's errors, table and overlays follow
+from the solver thread (:meth:`last_click_to_update`), and the 3-D cloud is recoloured last in its own thread.
 
 Start and stop :class:`CalibrationApp` from Python (tests) or through ``ba-calib``.
 """
