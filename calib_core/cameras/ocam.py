@@ -179,6 +179,8 @@ class OCamCamera:
         # The compiled kernels' parameter vector (layout: calib_core.cameras.kernels).
         self._prm = np.array([self._s_max, 1.0 / self._s_step, self.c, self.d, self.e, self.xc, self.yc,
                               self.width, self.height, self._invdet, self.rho_max])
+        #: ``(model code, parameters, table)`` for compiled callers (:func:`.kernels.project_model`).
+        self.compiled_projection = (kernels.MODEL_OCAM, self._prm, table)
 
     def rho_from_angle(self, alpha: np.ndarray) -> np.ndarray:
         """Radius (pixels) at which rays at ``alpha`` rad from the axis land.

@@ -304,6 +304,142 @@ def score_poses(Rs, ts, P, F, W):
 
 
 @njit(**_JIT)
+def _det3(A):
+    return (A[0, 0] * (A[1, 1] * A[2, 2] - A[1, 2] * A[2, 1]) - A[0, 1] * (A[1, 0] * A[2, 2] - A[1, 2] * A[2, 0])
+            + A[0, 2] * (A[1, 0] * A[2, 1] - A[1, 1] * A[2, 0]))
+
+
+@njit(**_JIT)
+def _polar3(A):
+    """Rotation nearest to ``A`` (3x3, ``det A > 0``) and the mean of its singular values.
+
+    Higham's scaled Newton iteration ``X <- (z X + X^-T / z) / 2`` on the
+    orthogonal polar factor (quadratic convergence; a DLT block is close to a
+    scaled rotation, so a handful of steps); mean singular value
+    ``trace(R^T A) / 3``.  ``(I, 0)`` if ``A`` is singular.
+    """
+    X = A.copy()
+    Y = np.empty((3, 3))
+    for _ in range(50):
+        d = _det3(X)
+        if not (d > 0.0 and np.isfinite(d)):
+            return np.eye(3), 0.0
+        # X^-T = cofactor matrix / det.
+        Y[0, 0] = (X[1, 1] * X[2, 2] - X[1, 2] * X[2, 1]) / d
+        Y[0, 1] = (X[1, 2] * X[2, 0] - X[1, 0] * X[2, 2]) / d
+        Y[0, 2] = (X[1, 0] * X[2, 1] - X[1, 1] * X[2, 0]) / d
+        Y[1, 0] = (X[0, 2] * X[2, 1] - X[0, 1] * X[2, 2]) / d
+        Y[1, 1] = (X[0, 0] * X[2, 2] - X[0, 2] * X[2, 0]) / d
+        Y[1, 2] = (X[0, 1] * X[2, 0] - X[0, 0] * X[2, 1]) / d
+        Y[2, 0] = (X[0, 1] * X[1, 2] - X[0, 2] * X[1, 1]) / d
+        Y[2, 1] = (X[0, 2] * X[1, 0] - X[0, 0] * X[1, 2]) / d
+        Y[2, 2] = (X[0, 0] * X[1, 1] - X[0, 1] * X[1, 0]) / d
+        z = abs(d) ** (-1.0 / 3.0)
+        change = 0.0
+        for a in range(3):
+            for b in range(3):
+                new = 0.5 * (z * X[a, b] + Y[a, b] / z)
+                change = max(change, abs(new - X[a, b]))
+                X[a, b] = new
+        if change <= 4e-16 * 8.0:
+            break
+    scale = 0.0
+    for a in range(3):
+        for b in range(3):
+            scale += X[a, b] * A[a, b]
+    return X, scale / 3.0
+
+
+@njit(**_JIT)
+def _cholesky(A, L):
+    """Lower Cholesky factor of a symmetric positive-definite ``A`` into ``L``; False if it is not."""
+    n = A.shape[0]
+    for j in range(n):
+        s = A[j, j]
+        for k in range(j):
+            s -= L[j, k] * L[j, k]
+        if not s > 0.0:
+            return False
+        L[j, j] = math.sqrt(s)
+        for i in range(j + 1, n):
+            s = A[i, j]
+            for k in range(j):
+                s -= L[i, k] * L[j, k]
+            L[i, j] = s / L[j, j]
+        for i in range(j):
+            L[i, j] = 0.0
+    return True
+
+
+@njit(**_JIT)
+def _chol_solve_inplace(L, x):
+    n = L.shape[0]
+    for i in range(n):
+        s = x[i]
+        for k in range(i):
+            s -= L[i, k] * x[k]
+        x[i] = s / L[i, i]
+    for i in range(n - 1, -1, -1):
+        s = x[i]
+        for k in range(i + 1, n):
+            s -= L[k, i] * x[k]
+        x[i] = s / L[i, i]
+
+
+@njit(**_JIT)
+def _null_vector(M):
+    """Unit eigenvector of the smallest eigenvalue of a PSD ``M``, and False if a second one is near zero.
+
+    Inverse iteration on ``M + delta I`` (``delta = 1e-13 trace M``, so the
+    Cholesky factor exists even for noise-free data): the wanted vector grows
+    by ``lambda_1 / lambda_0`` per step, thousands for a DLT, so a few steps
+    give it to rounding.  The second eigenvalue is then estimated the same
+    way on the complement (a Rayleigh quotient); below ``1e-10 trace M`` the
+    null space is at least 2-D (degenerate).  A few microseconds, where
+    LAPACK's ``eigh`` of a 12x12 takes over ten.
+    """
+    n = M.shape[0]
+    tr = 0.0
+    for a in range(n):
+        tr += M[a, a]
+    x = np.ones(n)
+    if not (tr > 0.0 and np.isfinite(tr)):
+        return x, False
+    Ms = M.copy()
+    for a in range(n):
+        Ms[a, a] += 1e-13 * tr
+    L = np.empty((n, n))
+    if not _cholesky(Ms, L):
+        return x, False
+    for a in range(n):
+        x[a] = 1.0 + 0.1 * a  # not orthogonal to the null vector (a generic start)
+    for _ in range(6):
+        _chol_solve_inplace(L, x)
+        nx = math.sqrt(np.dot(x, x))
+        x /= nx
+    # Second eigenvalue: inverse iteration orthogonal to x.
+    y = np.empty(n)
+    for a in range(n):
+        y[a] = 1.0 if a % 2 == 0 else -0.5 - 0.05 * a
+    lam1 = 0.0
+    for _ in range(8):
+        d = np.dot(y, x)
+        y -= d * x
+        ny = math.sqrt(np.dot(y, y))
+        if not ny > 0.0:
+            return x, False
+        y /= ny
+        _chol_solve_inplace(L, y)
+    d = np.dot(y, x)
+    y -= d * x
+    ny2 = np.dot(y, y)
+    if not ny2 > 0.0:
+        return x, False
+    lam1 = np.dot(y, M @ y) / ny2
+    return x, lam1 > 1e-10 * tr
+
+
+@njit(**_JIT)
 def dlt_pose(P, B):
     """Linear pose from n >= 6 bearings: ``b_i x (R p_i + t) = 0`` solved for the 12 entries of ``[R | t]``.
 
@@ -368,25 +504,22 @@ def dlt_pose(P, B):
                 for b in range(8):
                     gb = 4 * ia + b if b < 4 else 4 * ib + b - 4
                     M[ga, gb] += ra * row[b]
-    w, V = np.linalg.eigh(M)
-    if not (w[1] > 1e-10 * w[11]):
+    x, ok = _null_vector(M)
+    if not ok:
         return R, t, False  # a second null vector: degenerate configuration
-    x = V[:, 0]
     A = np.empty((3, 3))
     tt = np.empty(3)
     for r in range(3):
         for c in range(3):
             A[r, c] = x[4 * r + c]
         tt[r] = x[4 * r + 3]
-    U, S, Vt = np.linalg.svd(A)
-    scale = (S[0] + S[1] + S[2]) / 3.0
+    sgn = 1.0
+    if _det3(A) < 0.0:
+        sgn = -1.0
+        A = -A
+    Rn, scale = _polar3(A)
     if not scale > 0.0:
         return R, t, False
-    Rn = np.ascontiguousarray(U) @ np.ascontiguousarray(Vt)
-    sgn = 1.0
-    if np.linalg.det(Rn) < 0.0:
-        sgn = -1.0
-        Rn = -Rn
     tt = tt * (sgn / scale)
     # Points must lie in front along their bearings.
     front = 0
