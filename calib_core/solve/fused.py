@@ -36,7 +36,6 @@ from .kernels import (
     rotation_sigma_deg,
     rpy_sigmas,
     tangent_probes,
-    whitened_residuals,
 )
 
 __all__ = ["solve_fused", "OK", "BAD_INPUT", "GENERAL", "ROBUST", "UNIT_CODES"]
@@ -200,9 +199,11 @@ def solve_fused(P, B, pixels, has_pixels, model, prm, table, whiten_cam, sig, ha
                 return GENERAL
         if not np.isfinite(t[a]):
             return GENERAL
-    # 4. Outlier test: as the general path, robust search when any residual is beyond the threshold.
+    # 4. Report figures on all pairs (H is the LM's, at this very pose), then the outlier test as the
+    # general path: the robust search when any residual is beyond the threshold.
+    inliers = np.ones(n, dtype=np.bool_)
+    z, theta, _, ssr, stats_in = finish(R, t, P, F, W, inliers, False)
     if robust:
-        z, _ = whitened_residuals(R, t, P, F, W)
         r2 = np.empty(n)
         r2max = 0.0
         for i in range(n):
@@ -216,10 +217,9 @@ def solve_fused(P, B, pixels, has_pixels, model, prm, table, whiten_cam, sig, ha
             scale_ref = max(scale_ref, floor)
         if r2max >= (k_in * scale_ref) ** 2:
             return ROBUST
-    # 5. Covariance and report figures on all pairs.
-    inliers = np.ones(n, dtype=np.bool_)
-    z, theta, H_in, ssr, stats_in = finish(R, t, P, F, W, inliers)
-    H[:, :] = H_in
+    # 5. Covariance.
+    H[:, :] = H_lm
+    H_in = H_lm
     stats[:] = stats_in
     for i in range(n):
         residual_deg[i] = math.degrees(theta[i])

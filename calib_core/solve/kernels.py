@@ -65,54 +65,60 @@ def so3_exp(phi):
     return R
 
 
-@njit(**_JIT)
-def _pair(R, t, p, F, W, out_z, out_J, want_J):
-    """Whitened residual (2,) of one pair into ``out_z`` and, if asked, its Jacobian (2, 6) into ``out_J``.
+#: Below this ratio |y_12| / y_3 the residual's factor ``theta / |y_12|`` comes from its series (no atan2).
+_SERIES_X = 0.05
 
-    Returns the geodesic angle (radians).
+
+@njit(**_JIT)
+def _pair(R, t, P, F, W, i, out_z, out_J, want_J):
+    """Whitened residual (2,) of pair ``i`` into ``out_z`` and, if asked, its Jacobian (2, 6) into ``out_J``.
+
+    Whole arrays and an index rather than row views: numba's views cost as
+    much as the arithmetic here.  Returns the geodesic angle (radians).  With ``rho = |y_12|``, the residual
+    is ``r = phi y_12``, ``phi = atan2(rho, y_3) / rho``; ``dr/dy = [phi I +
+    kappa y_12 y_12^T | -y_12 / |y|^2]`` with ``kappa = (y_3 / |y|^2 - phi) / rho^2``.
+    Near the axis (``x = rho / y_3 < 0.05``, every pair of a converging solve)
+    both come from their series in ``x^2`` (relative error < 1e-14), without atan2.
     """
-    a0 = R[0, 0] * p[0] + R[0, 1] * p[1] + R[0, 2] * p[2]
-    a1 = R[1, 0] * p[0] + R[1, 1] * p[1] + R[1, 2] * p[2]
-    a2 = R[2, 0] * p[0] + R[2, 1] * p[1] + R[2, 2] * p[2]
+    p0, p1, p2 = P[i, 0], P[i, 1], P[i, 2]
+    a0 = R[0, 0] * p0 + R[0, 1] * p1 + R[0, 2] * p2
+    a1 = R[1, 0] * p0 + R[1, 1] * p1 + R[1, 2] * p2
+    a2 = R[2, 0] * p0 + R[2, 1] * p1 + R[2, 2] * p2
     P0, P1, P2 = a0 + t[0], a1 + t[1], a2 + t[2]
-    y0 = F[0, 0] * P0 + F[0, 1] * P1 + F[0, 2] * P2
-    y1 = F[1, 0] * P0 + F[1, 1] * P1 + F[1, 2] * P2
-    y2 = F[2, 0] * P0 + F[2, 1] * P1 + F[2, 2] * P2
-    s_unit = math.hypot(y0, y1)
-    norm = math.hypot(s_unit, y2)
-    inv = 1.0 / norm if norm > 0.0 else 1.0
-    theta = math.atan2(s_unit, y2)
-    s = s_unit * inv
-    c = y2 * inv
-    w0, w1 = y0 * inv, y1 * inv
-    if theta < 1e-3:
-        th2 = theta * theta
-        g = 1.0 + th2 / 6.0 + 7.0 * th2 * th2 / 360.0
-        h = -2.0 / 3.0 - th2 / 5.0
+    y0 = F[i, 0, 0] * P0 + F[i, 0, 1] * P1 + F[i, 0, 2] * P2
+    y1 = F[i, 1, 0] * P0 + F[i, 1, 1] * P1 + F[i, 1, 2] * P2
+    y2 = F[i, 2, 0] * P0 + F[i, 2, 1] * P1 + F[i, 2, 2] * P2
+    rho2 = y0 * y0 + y1 * y1
+    n2 = rho2 + y2 * y2
+    if y2 > 0.0 and rho2 < (_SERIES_X * _SERIES_X) * (y2 * y2):
+        x2 = rho2 / (y2 * y2)
+        inv = 1.0 / y2
+        # atan(x) / x and (1 / (1 + x^2) - atan(x) / x) / x^2, to x^8.
+        f = 1.0 - x2 * (1.0 / 3.0 - x2 * (1.0 / 5.0 - x2 * (1.0 / 7.0 - x2 * (1.0 / 9.0))))
+        q = -2.0 / 3.0 + x2 * (4.0 / 5.0 - x2 * (6.0 / 7.0 - x2 * (8.0 / 9.0 - x2 * (10.0 / 11.0))))
+        phi = f * inv
+        kappa = q * inv * inv * inv
+        theta = f * math.sqrt(rho2) * inv
     else:
-        g = theta / s
-        h = (c * s - theta) / (s * s * s)
-    r0, r1 = g * w0, g * w1
-    out_z[0] = W[0, 0] * r0 + W[0, 1] * r1
-    out_z[1] = W[1, 0] * r0 + W[1, 1] * r1
+        rho = math.sqrt(rho2)
+        theta = math.atan2(rho, y2)
+        if rho > 0.0:
+            phi = theta / rho
+            kappa = (y2 / n2 - phi) / rho2
+        else:  # on the axis, behind: no direction to rotate in
+            phi = 0.0
+            kappa = 0.0
+    wy0 = W[i, 0, 0] * y0 + W[i, 0, 1] * y1
+    wy1 = W[i, 1, 0] * y0 + W[i, 1, 1] * y1
+    out_z[0] = phi * wy0
+    out_z[1] = phi * wy1
     if want_J:
-        # dr/dy (2x3, frame coordinates) = [g I + h w w^T | -w] / |P|; dr/dP = dr/dy F.
-        D00 = (g + h * w0 * w0) * inv
-        D01 = h * w0 * w1 * inv
-        D02 = -w0 * inv
-        D10 = D01
-        D11 = (g + h * w1 * w1) * inv
-        D12 = -w1 * inv
-        # Whitened: W D.
-        E00 = W[0, 0] * D00 + W[0, 1] * D10
-        E01 = W[0, 0] * D01 + W[0, 1] * D11
-        E02 = W[0, 0] * D02 + W[0, 1] * D12
-        E10 = W[1, 0] * D00 + W[1, 1] * D10
-        E11 = W[1, 0] * D01 + W[1, 1] * D11
-        E12 = W[1, 0] * D02 + W[1, 1] * D12
+        # dz/dP = W dr/dy F = phi W F_12 + (W y_12) v^T, v = kappa F_12^T y_12 - F_3 / |y|^2.
+        inv_n2 = 1.0 / n2
         for k in range(3):
-            out_J[0, 3 + k] = E00 * F[0, k] + E01 * F[1, k] + E02 * F[2, k]
-            out_J[1, 3 + k] = E10 * F[0, k] + E11 * F[1, k] + E12 * F[2, k]
+            v = kappa * (y0 * F[i, 0, k] + y1 * F[i, 1, k]) - F[i, 2, k] * inv_n2
+            out_J[0, 3 + k] = phi * (W[i, 0, 0] * F[i, 0, k] + W[i, 0, 1] * F[i, 1, k]) + wy0 * v
+            out_J[1, 3 + k] = phi * (W[i, 1, 0] * F[i, 0, k] + W[i, 1, 1] * F[i, 1, k]) + wy1 * v
         # d(exp(delta) R p)/d delta = -[R p]_x: a row d times -[a]_x is a x d.
         for row in range(2):
             d0, d1, d2 = out_J[row, 3], out_J[row, 4], out_J[row, 5]
@@ -129,8 +135,10 @@ def whitened_residuals(R, t, P, F, W):
     z = np.empty((n, 2))
     theta = np.empty(n)
     Jdummy = np.empty((2, 6))
+    zi = np.empty(2)
     for i in range(n):
-        theta[i] = _pair(R, t, P[i], F[i], W[i], z[i], Jdummy, False)
+        theta[i] = _pair(R, t, P, F, W, i, zi, Jdummy, False)
+        z[i, 0], z[i, 1] = zi[0], zi[1]
     return z, theta
 
 
@@ -141,7 +149,7 @@ def jacobian(R, t, P, F, W):
     J = np.empty((2 * n, 6))
     z = np.empty(2)
     for i in range(n):
-        _pair(R, t, P[i], F[i], W[i], z, J[2 * i : 2 * i + 2], True)
+        _pair(R, t, P, F, W, i, z, J[2 * i : 2 * i + 2], True)
     return J
 
 
@@ -154,7 +162,7 @@ def normal_equations(R, t, P, F, W):
     z = np.empty(2)
     Ji = np.empty((2, 6))
     for i in range(P.shape[0]):
-        _pair(R, t, P[i], F[i], W[i], z, Ji, True)
+        _pair(R, t, P, F, W, i, z, Ji, True)
         cost += z[0] * z[0] + z[1] * z[1]
         for a in range(6):
             g[a] += Ji[0, a] * z[0] + Ji[1, a] * z[1]
@@ -172,7 +180,7 @@ def _cost(R, t, P, F, W):
     Jd = np.empty((2, 6))
     cost = 0.0
     for i in range(P.shape[0]):
-        _pair(R, t, P[i], F[i], W[i], z, Jd, False)
+        _pair(R, t, P, F, W, i, z, Jd, False)
         cost += z[0] * z[0] + z[1] * z[1]
     return cost
 
@@ -297,8 +305,9 @@ def score_poses(Rs, ts, P, F, W):
     z = np.empty(2)
     Jd = np.empty((2, 6))
     for k in range(K):
+        Rk, tk = Rs[k], ts[k]
         for i in range(n):
-            _pair(Rs[k], ts[k], P[i], F[i], W[i], z, Jd, False)
+            _pair(Rk, tk, P, F, W, i, z, Jd, False)
             out[k, i] = z[0] * z[0] + z[1] * z[1]
     return out
 
@@ -570,8 +579,11 @@ def bearing_frames(B):
 
 
 @njit(**_JIT)
-def finish(R, t, P, F, W, inliers):
+def finish(R, t, P, F, W, inliers, want_H=True):
     """Everything the report needs at the final pose, in one pass.
+
+    ``want_H=False`` skips the normal matrix (zeros): for a caller that has it
+    at this pose already (the LM's last one).
 
     Returns
     -------
@@ -595,12 +607,14 @@ def finish(R, t, P, F, W, inliers):
             m += 1
     ranges = np.empty(m)
     mu = np.zeros(3)
+    zi = np.empty(2)
     k = 0
     for i in range(n):
-        theta[i] = _pair(R, t, P[i], F[i], W[i], z[i], Ji, inliers[i])
+        theta[i] = _pair(R, t, P, F, W, i, zi, Ji, inliers[i] and want_H)
+        z[i, 0], z[i, 1] = zi[0], zi[1]
         if inliers[i]:
             ssr += z[i, 0] * z[i, 0] + z[i, 1] * z[i, 1]
-            for a in range(6):
+            for a in range(6 if want_H else 0):
                 for b in range(a, 6):
                     H[a, b] += Ji[0, a] * Ji[0, b] + Ji[1, a] * Ji[1, b]
             d2 = 0.0
