@@ -155,22 +155,71 @@ def jacobian(R, t, P, F, W):
 
 @njit(**_JIT)
 def normal_equations(R, t, P, F, W):
-    """``H = J^T J`` (6, 6), ``g = J^T z`` (6,) and ``cost = sum |z_i|^2`` at ``(R, t)``."""
-    H = np.zeros((6, 6))
-    g = np.zeros(6)
+    """``H = J^T J`` (6, 6), ``g = J^T z`` (6,) and ``cost = sum |z_i|^2`` at ``(R, t)``.
+
+    The 21 distinct entries of ``H`` and the 6 of ``g`` are summed in scalars (registers),
+    not in arrays: about half the time per pair."""
+    h00 = h01 = h02 = h03 = h04 = h05 = h11 = h12 = h13 = h14 = h15 = h22 = h23 = h24 = h25 = h33 = h34 = h35 = h44 = h45 = h55 = 0.0
+    g0 = g1 = g2 = g3 = g4 = g5 = 0.0
     cost = 0.0
     z = np.empty(2)
-    Ji = np.empty((2, 6))
+    J = np.empty((2, 6))
     for i in range(P.shape[0]):
-        _pair(R, t, P, F, W, i, z, Ji, True)
-        cost += z[0] * z[0] + z[1] * z[1]
-        for a in range(6):
-            g[a] += Ji[0, a] * z[0] + Ji[1, a] * z[1]
-            for b in range(a, 6):
-                H[a, b] += Ji[0, a] * Ji[0, b] + Ji[1, a] * Ji[1, b]
-    for a in range(6):
-        for b in range(a):
-            H[a, b] = H[b, a]
+        _pair(R, t, P, F, W, i, z, J, True)
+        z0, z1 = z[0], z[1]
+        cost += z0 * z0 + z1 * z1
+        u0, u1, u2, u3, u4, u5 = J[0, 0], J[0, 1], J[0, 2], J[0, 3], J[0, 4], J[0, 5]
+        v0, v1, v2, v3, v4, v5 = J[1, 0], J[1, 1], J[1, 2], J[1, 3], J[1, 4], J[1, 5]
+        g0 += u0 * z0 + v0 * z1
+        g1 += u1 * z0 + v1 * z1
+        g2 += u2 * z0 + v2 * z1
+        g3 += u3 * z0 + v3 * z1
+        g4 += u4 * z0 + v4 * z1
+        g5 += u5 * z0 + v5 * z1
+        h00 += u0 * u0 + v0 * v0
+        h01 += u0 * u1 + v0 * v1
+        h02 += u0 * u2 + v0 * v2
+        h03 += u0 * u3 + v0 * v3
+        h04 += u0 * u4 + v0 * v4
+        h05 += u0 * u5 + v0 * v5
+        h11 += u1 * u1 + v1 * v1
+        h12 += u1 * u2 + v1 * v2
+        h13 += u1 * u3 + v1 * v3
+        h14 += u1 * u4 + v1 * v4
+        h15 += u1 * u5 + v1 * v5
+        h22 += u2 * u2 + v2 * v2
+        h23 += u2 * u3 + v2 * v3
+        h24 += u2 * u4 + v2 * v4
+        h25 += u2 * u5 + v2 * v5
+        h33 += u3 * u3 + v3 * v3
+        h34 += u3 * u4 + v3 * v4
+        h35 += u3 * u5 + v3 * v5
+        h44 += u4 * u4 + v4 * v4
+        h45 += u4 * u5 + v4 * v5
+        h55 += u5 * u5 + v5 * v5
+    H = np.empty((6, 6))
+    H[0, 0] = h00
+    H[0, 1] = H[1, 0] = h01
+    H[0, 2] = H[2, 0] = h02
+    H[0, 3] = H[3, 0] = h03
+    H[0, 4] = H[4, 0] = h04
+    H[0, 5] = H[5, 0] = h05
+    H[1, 1] = h11
+    H[1, 2] = H[2, 1] = h12
+    H[1, 3] = H[3, 1] = h13
+    H[1, 4] = H[4, 1] = h14
+    H[1, 5] = H[5, 1] = h15
+    H[2, 2] = h22
+    H[2, 3] = H[3, 2] = h23
+    H[2, 4] = H[4, 2] = h24
+    H[2, 5] = H[5, 2] = h25
+    H[3, 3] = h33
+    H[3, 4] = H[4, 3] = h34
+    H[3, 5] = H[5, 3] = h35
+    H[4, 4] = h44
+    H[4, 5] = H[5, 4] = h45
+    H[5, 5] = h55
+    g = np.array([g0, g1, g2, g3, g4, g5])
     return H, g, cost
 
 
@@ -479,40 +528,49 @@ def dlt_pose(P, B):
     spread = math.sqrt(spread / n)
     if not spread > 0.0:
         return R, t, False
-    M = np.zeros((12, 12))
-    row = np.empty(8)
+    # Each pair adds ([b]_x^T [b]_x) kron (q q^T), q = (p_normalised, 1): with K = |b|^2 I - b b^T,
+    # block (r, c) of the 12x12 (rows of [R | t]) gains K[r, c] q q^T.  All three rows of b x X = 0
+    # (they span the same constraints as two of them) make K simple: 60 products per pair.
+    acc = np.zeros((6, 10))  # block pairs (00, 11, 22, 01, 02, 12) x the 10 distinct entries of q q^T
+    Q = np.empty(10)
     for i in range(n):
         q0 = (P[i, 0] - mu[0]) / spread
         q1 = (P[i, 1] - mu[1]) / spread
         q2 = (P[i, 2] - mu[2]) / spread
+        Q[0], Q[1], Q[2], Q[3] = q0 * q0, q0 * q1, q0 * q2, q0
+        Q[4], Q[5], Q[6] = q1 * q1, q1 * q2, q1
+        Q[7], Q[8], Q[9] = q2 * q2, q2, 1.0
         b0, b1, b2 = B[i, 0], B[i, 1], B[i, 2]
-        # x = (r00 r01 r02 t0 | r10 r11 r12 t1 | r20 r21 r22 t2); X_c = M q.
-        # rows of [b]_x X_c = 0: (b1 X2 - b2 X1), (b2 X0 - b0 X2), (b0 X1 - b1 X0).
-        # The three rows of b x X are dependent (sum_k b_k row_k = 0): keep the two that
-        # do not belong to the largest component of b.
-        skip = 0
-        if abs(b1) >= abs(b0) and abs(b1) >= abs(b2):
-            skip = 1
-        elif abs(b2) >= abs(b0) and abs(b2) >= abs(b1):
-            skip = 2
-        for eq in range(3):
-            if eq == skip:
-                continue
-            # The row has 8 non-zeros: blocks ia and ib of the unknowns, (q, 1) scaled by ca and cb.
-            if eq == 0:
-                ca, ia, cb, ib = b1, 2, -b2, 1
-            elif eq == 1:
-                ca, ia, cb, ib = b2, 0, -b0, 2
-            else:
-                ca, ia, cb, ib = b0, 1, -b1, 0
-            row[0], row[1], row[2], row[3] = ca * q0, ca * q1, ca * q2, ca
-            row[4], row[5], row[6], row[7] = cb * q0, cb * q1, cb * q2, cb
-            for a in range(8):
-                ga = 4 * ia + a if a < 4 else 4 * ib + a - 4
-                ra = row[a]
-                for b in range(8):
-                    gb = 4 * ia + b if b < 4 else 4 * ib + b - 4
-                    M[ga, gb] += ra * row[b]
+        bb = b0 * b0 + b1 * b1 + b2 * b2
+        k00, k11, k22 = bb - b0 * b0, bb - b1 * b1, bb - b2 * b2
+        k01, k02, k12 = -b0 * b1, -b0 * b2, -b1 * b2
+        for e in range(10):
+            qe = Q[e]
+            acc[0, e] += k00 * qe
+            acc[1, e] += k11 * qe
+            acc[2, e] += k22 * qe
+            acc[3, e] += k01 * qe
+            acc[4, e] += k02 * qe
+            acc[5, e] += k12 * qe
+    M = np.empty((12, 12))
+    for blk in range(6):
+        if blk < 3:
+            r, c = blk, blk
+        elif blk == 3:
+            r, c = 0, 1
+        elif blk == 4:
+            r, c = 0, 2
+        else:
+            r, c = 1, 2
+        e = 0
+        for u in range(4):
+            for v in range(u, 4):
+                val = acc[blk, e]
+                M[4 * r + u, 4 * c + v] = val
+                M[4 * r + v, 4 * c + u] = val
+                M[4 * c + u, 4 * r + v] = val
+                M[4 * c + v, 4 * r + u] = val
+                e += 1
     x, ok = _null_vector(M)
     if not ok:
         return R, t, False  # a second null vector: degenerate configuration
