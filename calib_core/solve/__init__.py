@@ -327,6 +327,8 @@ _NO_PIXELS = np.zeros((0, 2))
 _NO_SIGMA = np.zeros(0)
 _NO_T = np.eye(4)
 _NO_TABLE = np.zeros((1, 2))
+_NO_CHECKS = np.zeros(0)
+_NO_CHECKS.flags.writeable = False  # shared by results: never written (calibrate() assigns new arrays)
 
 
 def _as_pairs_array(a: object, dim: int) -> np.ndarray | None:
@@ -380,6 +382,7 @@ def _solve_fast(points_lidar, bearings_camera, camera, pixels, cost, initial_T, 
     T, T0, cov, H = np.empty((4, 4)), np.empty((4, 4)), np.empty((6, 6)), np.empty((6, 6))
     stats, residual_deg, residual_px = np.empty(7), np.empty(n), np.empty(n)
     sigma_t, sigma_rpy, info = np.empty(3), np.empty(3), np.empty(fused.INFO_SIZE)
+    inliers = np.empty(n, dtype=bool)
     status = fused.solve_fused(
         points, bearings, _NO_PIXELS if pixels is None else pixels, pixels is not None, model, prm, table,
         whiten_cam, _NO_SIGMA if sigmas is None else sigmas, sigmas is not None,
@@ -387,7 +390,7 @@ def _solve_fast(points_lidar, bearings_camera, camera, pixels, cost, initial_T, 
         bool(robust), inlier_k(n), -1.0 if prior is None else prior, _MIN_SCALE[unit],
         student_t_factor(dof) if dof > 0 else 1.0, LM_MAX_ITER, SAME_POINT_M, SAME_BEARING_RAD, UNIT_TOLERANCE,
         COLLINEAR_RATIO, _CONE_COS, STEP_RAD, T, T0, cov, H, stats, residual_deg, residual_px, sigma_t, sigma_rpy,
-        info,
+        info, inliers,
     )
     if status != fused.OK:
         return None
@@ -426,7 +429,7 @@ def _solve_fast(points_lidar, bearings_camera, camera, pixels, cost, initial_T, 
         warnings=list(quality.reasons) + _gimbal_notes(T),
         outliers=[],
         outlier_ids=[],
-        inliers=np.ones(n, dtype=bool),
+        inliers=inliers,
         quality=quality,
         iterations=int(info[fused.I_ITER]),
         cost_name=cost,
@@ -434,6 +437,8 @@ def _solve_fast(points_lidar, bearings_camera, camera, pixels, cost, initial_T, 
         noise_scale=noise_scale,
         residual_unit=unit,
         hypotheses=0,
+        check_residual_px=_NO_CHECKS,
+        check_residual_deg=_NO_CHECKS,
     )
 
 

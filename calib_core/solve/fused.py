@@ -82,7 +82,8 @@ def _store_pose(T, R, t):
 @kernel
 def solve_fused(P, B, pixels, has_pixels, model, prm, table, whiten_cam, sig, has_sig, noise, T_init, has_init,
                 robust, k_in, prior, floor, tfac, max_iter, same_point_m, same_bearing_rad, unit_tol,
-                collinear_ratio, cone_cos, step_rad, T, T0, cov, H, stats, residual_deg, rpx, st, sr, info):
+                collinear_ratio, cone_cos, step_rad, T, T0, cov, H, stats, residual_deg, rpx, st, sr, info,
+                inliers_out):
     """Solve ``T_camera_lidar`` when the general path would not branch; else say why (status).
 
     Parameters
@@ -113,7 +114,7 @@ def solve_fused(P, B, pixels, has_pixels, model, prm, table, whiten_cam, sig, ha
         The thresholds of :mod:`.checks` (``cone_cos`` = cos of the cone width
         below which the general path must measure the cone) and of :mod:`.whiten`.
 
-    T, T0, cov, H, stats, residual_deg, rpx, st, sr, info : float64 arrays, written
+    T, T0, cov, H, stats, residual_deg, rpx, st, sr, info, inliers_out : arrays, written
         (outputs are passed in: boxing a dozen arrays on return would cost more than the solve).
 
     Returns
@@ -203,6 +204,7 @@ def solve_fused(P, B, pixels, has_pixels, model, prm, table, whiten_cam, sig, ha
     # general path: the robust search when any residual is beyond the threshold.
     inliers = np.ones(n, dtype=np.bool_)
     z, theta, _, ssr, stats_in = finish(R, t, P, F, W, inliers, False)
+    inliers_out[:] = True
     if robust:
         r2 = np.empty(n)
         r2max = 0.0
