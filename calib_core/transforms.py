@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.spatial.transform import Rotation
 
 from .errors import CalibError
 
@@ -34,6 +33,14 @@ __all__ = [
 ]
 
 
+def _Rotation():
+    """``scipy.spatial.transform.Rotation``, imported on first use: importing ``scipy.spatial`` takes
+    0.3-0.8 s, on the app's start-up path otherwise."""
+    from scipy.spatial.transform import Rotation
+
+    return Rotation
+
+
 def _finite_array(value: ArrayLike, shape: tuple[int, ...], name: str) -> np.ndarray:
     a = np.asarray(value, dtype=np.float64)
     if a.shape != shape:
@@ -43,8 +50,8 @@ def _finite_array(value: ArrayLike, shape: tuple[int, ...], name: str) -> np.nda
     return a
 
 
-def _rotation(R: ArrayLike, name: str = "R") -> Rotation:
-    return Rotation.from_matrix(_finite_array(R, (3, 3), name))
+def _rotation(R: ArrayLike, name: str = "R"):
+    return _Rotation().from_matrix(_finite_array(R, (3, 3), name))
 
 
 def make_T(R: ArrayLike, t: ArrayLike) -> np.ndarray:
@@ -120,7 +127,7 @@ def rpy_deg_from_R(R: ArrayLike) -> np.ndarray:
 def R_from_rpy_deg(rpy_deg: ArrayLike) -> np.ndarray:
     """Rotation matrix ``Rz(yaw) Ry(pitch) Rx(roll)`` from ``(roll, pitch, yaw)`` in degrees."""
     rpy = _finite_array(np.ravel(rpy_deg), (3,), "rpy_deg")
-    return Rotation.from_euler("xyz", rpy, degrees=True).as_matrix()
+    return _Rotation().from_euler("xyz", rpy, degrees=True).as_matrix()
 
 
 def quat_xyzw_from_R(R: ArrayLike) -> np.ndarray:
@@ -133,11 +140,11 @@ def R_from_quat_xyzw(q: ArrayLike) -> np.ndarray:
     q = _finite_array(np.ravel(q), (4,), "quaternion")
     if np.linalg.norm(q) < 1e-12:
         raise CalibError("quaternion has zero length")
-    return Rotation.from_quat(q).as_matrix()
+    return _Rotation().from_quat(q).as_matrix()
 
 
 def rotation_angle_deg(R_a: ArrayLike, R_b: ArrayLike) -> float:
     """Angle in degrees, in [0, 180], of the relative rotation ``R_a^T R_b``."""
     Ra = _finite_array(R_a, (3, 3), "R_a")
     Rb = _finite_array(R_b, (3, 3), "R_b")
-    return float(np.degrees(Rotation.from_matrix(Ra.T @ Rb).magnitude()))
+    return float(np.degrees(_Rotation().from_matrix(Ra.T @ Rb).magnitude()))

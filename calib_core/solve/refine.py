@@ -28,7 +28,6 @@ import math
 from typing import Any, Callable, NamedTuple
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from ..errors import CalibError
 from . import kernels
@@ -226,6 +225,8 @@ def pixel_jacobian(
 
 def _run_lm(fun: Callable, jac: Callable, x0: np.ndarray, what: str) -> Any:
     try:
+        from scipy.optimize import least_squares  # only the pixel cost uses it: off the start-up path
+
         sol = least_squares(
             fun, x0, jac=jac, method="lm", x_scale="jac", ftol=1e-12, xtol=1e-12, gtol=1e-12, max_nfev=2000
         )
