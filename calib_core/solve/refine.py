@@ -223,10 +223,16 @@ def pixel_jacobian(
     return np.stack(cols, axis=1)
 
 
+def least_squares(*args: Any, **kwargs: Any) -> Any:
+    """``scipy.optimize.least_squares``, imported on first use (only the pixel cost needs it; importing
+    ``scipy.optimize`` would cost the app's start-up 0.2-0.4 s)."""
+    from scipy.optimize import least_squares as scipy_least_squares
+
+    return scipy_least_squares(*args, **kwargs)
+
+
 def _run_lm(fun: Callable, jac: Callable, x0: np.ndarray, what: str) -> Any:
     try:
-        from scipy.optimize import least_squares  # only the pixel cost uses it: off the start-up path
-
         sol = least_squares(
             fun, x0, jac=jac, method="lm", x_scale="jac", ftol=1e-12, xtol=1e-12, gtol=1e-12, max_nfev=2000
         )
