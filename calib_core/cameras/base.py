@@ -24,7 +24,6 @@ from typing import Any, ClassVar, Protocol, runtime_checkable
 import numpy as np
 
 from ..arrays import as_rows
-from ..errors import CalibError
 
 
 @runtime_checkable
