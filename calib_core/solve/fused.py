@@ -15,6 +15,12 @@ Status codes (``status`` output):
   a camera probe that does not project, a failed LM;
 * :data:`ROBUST` -- a residual exceeds the outlier threshold: the robust
   search must run (never hidden: the general path finds and reports them).
+
+numba keys the disk cache of :func:`solve_fused` by this file only, while it
+compiles in the kernels it calls (:mod:`.kernels`,
+:mod:`calib_core.cameras.kernels`): after editing those, touch this file (or
+delete its ``__pycache__/fused.*.nb*``), or a stale compiled copy is loaded.
+An installed package gets new files, so new timestamps, on every upgrade.
 """
 
 from __future__ import annotations
