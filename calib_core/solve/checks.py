@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-from ..arrays import angle_between_rad, as_rows
+from ..arrays import angle_between_rad, as_rows, as_transform
 from ..errors import CalibError
 from .kernels import pair_checks
 from .refine import PARAMETER_NAMES
@@ -151,11 +151,7 @@ def validate_pixels(pixels: object, n: int) -> np.ndarray:
 
 def validate_initial_T(T: object) -> np.ndarray:
     """Check a user-supplied initial ``T_camera_lidar`` and re-orthonormalise its rotation."""
-    a = np.asarray(T, dtype=np.float64)
-    if a.shape != (4, 4):
-        raise CalibError(f"initial_T_camera_lidar must be 4x4, got shape {a.shape}")
-    if not np.all(np.isfinite(a)):
-        raise CalibError("initial_T_camera_lidar contains NaN or infinite values")
+    a = as_transform(T, "initial_T_camera_lidar")
     R = a[:3, :3]
     if np.abs(R.T @ R - np.eye(3)).max() > 1e-3 or np.linalg.det(R) <= 0:
         raise CalibError("initial_T_camera_lidar does not hold a rotation matrix")
