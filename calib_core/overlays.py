@@ -9,6 +9,7 @@ import numpy as np
 
 from ._jit import kernel
 from .bearing_angle import PREVIOUS_NEIGHBOUR, ba_to_uint8
+from .arrays import as_transform
 from .errors import CalibError
 from .io.atomic import write_bytes_atomic
 from .transforms import transform_points
@@ -361,11 +362,7 @@ def colorize_points(
     h, w = img.shape[:2]
     if (w, h) != (camera.width, camera.height):
         raise CalibError(f"image is {w}x{h} but the camera model is {camera.width}x{camera.height}")
-    T = np.asarray(T_camera_lidar, dtype=np.float64)
-    if T.shape != (4, 4):
-        raise CalibError(f"T_camera_lidar must be a 4x4 matrix, got shape {T.shape}")
-    if not np.all(np.isfinite(T)):
-        raise CalibError("T_camera_lidar contains NaN or infinite values")
+    T = as_transform(T_camera_lidar)
     packed = _packed_rgbx(img)
     pts = np.asarray(points_lidar)
     if pts.dtype not in (np.float32, np.float64):

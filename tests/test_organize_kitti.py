@@ -17,6 +17,7 @@ import pytest
 
 from app.cli import main as cli_main
 from calib_core.errors import CalibError
+from calib_core.io.point_clouds.float_bin import read_float_records
 from calib_core.io.scan_readers import load_scan
 from calib_core.lidar.organize_cloud import organize_cloud
 
@@ -31,7 +32,7 @@ REPORT = re.compile(
 
 
 def kitti_points() -> np.ndarray:
-    return np.fromfile(KITTI_BIN, dtype="<f4").reshape(-1, 4)
+    return read_float_records(KITTI_BIN, 4)  # x, y, z, reflectance
 
 
 def parse_report(stdout: str) -> re.Match:
@@ -236,7 +237,7 @@ MMDET3D_REDUCED = REPO.parent / "shared" / "data" / "other_tools_files" / "bin" 
 @pytest.mark.skipif(not MMDET3D_REDUCED.is_file(), reason=f"{MMDET3D_REDUCED} not found")
 def test_kitti_velodyne_reduced_from_mmdetection3d_has_64_rows(tmp_path, capsys):
     # KITTI 000008 as mmdetection3d ships it: only the points in the camera's view.
-    cloud = np.fromfile(MMDET3D_REDUCED, dtype="<f4").reshape(-1, 4)
+    cloud = read_float_records(MMDET3D_REDUCED, 4)
     azimuth = np.arctan2(cloud[:, 1], cloud[:, 0])
     assert np.ptp(np.degrees(azimuth)) < 90.0  # cropped to the camera
     # Independent count of the sweeps: this file's sweeps all start at azimuth 0.

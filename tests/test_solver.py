@@ -458,3 +458,86 @@ def test_pixel_cost_with_the_package_pinhole_model():
     res = solve_extrinsics(points_lidar, cam.bearing(pixels), camera=cam, pixels=pixels, cost="pixel")
     assert max(pose_error(res.T_camera_lidar, T_true)) < 1e-6
     assert res.mean_px < 1e-4
+
+
+# ------------------------------------- compiled common case vs the general path
+class ProtocolOnlyCamera:
+    """A camera with only the protocol's members, as a user might write one: the solve cannot use a
+    compiled projection for it and takes its step-by-step path, the reference for the compiled one."""
+
+    def __init__(self, camera):
+        self._camera = camera
+        self.model, self.width, self.height = camera.model, camera.width, camera.height
+
+    def project(self, points):
+        return self._camera.project(points)
+
+    def bearing(self, pixels):
+        return self._camera.bearing(pixels)
+
+
+def _package_camera(kind: str):
+    cameras = pytest.importorskip("calib_core.cameras")
+    if kind == "pinhole":
+        K = np.array([[500.0, 0, 320], [0, 500, 240], [0, 0, 1]])
+        return cameras.PinholeCamera(K, np.array([-0.2, 0.05, 0.001, -0.001, 0]), 640, 480)
+    if kind == "fisheye":
+        K = np.array([[300.0, 0, 320], [0, 300, 240], [0, 0, 1]])
+        return cameras.FisheyeCamera(K, np.array([0.05, -0.01, 0.002, 0.0]), 640, 480)
+    # OCamCalib's model, the sample's calib_results.txt: rho -> z polynomial, inverse polynomial, centre
+    # (row, column), affine part.
+    invpol = [172.5167522396248, 108.1876196890501, -1.695535567957569, 8.844187868415595, 11.472821400448383,
+              -0.9956662444193077, 0.8557068249478024, 7.722745755817153, -2.685037333633238, -7.700400472500214,
+              3.414250193240605, 6.670703905124788, -0.8659304877271558, -3.070421516611275, -0.263886958108428,
+              0.66039717892231, 0.18539331056797265]
+    return cameras.OCamCamera([-111.29, 0.0, 0.0041857, -1.54014e-05, 7.42759e-08], invpol, 242.3, 318.6,
+                              1.0008, 0.0011, -0.0009, 640, 480)
+
+
+@pytest.mark.parametrize("kind", ["pinhole", "fisheye", "ocam"])
+@pytest.mark.parametrize("n, options", [(6, {}), (12, {"pixel_sigma": 0.7}), (150, {}), (12, {"cost": "geodesic"}),
+                                         (12, {"noise_rad": 2e-3}), (12, {"robust": False})])
+def test_compiled_path_matches_the_step_by_step_path(kind, n, options):
+    # The package's cameras take the compiled common case; the same camera without its compiled projection
+    # takes the general path.  Both must give the same pose, sigmas, residuals and verdict.
+    cam = _package_camera(kind)
+    rng = np.random.default_rng(n)
+    T_true, _, _ = random_scene(n, 1, max_t=0.3)
+    margin = 40
+    pixels = np.column_stack([rng.uniform(margin, cam.width - margin, 3 * n),
+                              rng.uniform(margin, cam.height - margin, 3 * n)])
+    rays = cam.bearing(pixels)
+    keep = np.flatnonzero(np.isfinite(rays).all(axis=1))[:n]
+    assert keep.size == n
+    pixels, rays = pixels[keep], rays[keep]
+    points_lidar = (rays * rng.uniform(2, 12, (n, 1)) - T_true[:3, 3]) @ T_true[:3, :3]
+    clicked = pixels + rng.normal(0, 1.0, pixels.shape)
+    bearings = cam.bearing(clicked)
+    fast = solve_extrinsics(points_lidar, bearings, camera=cam, pixels=clicked, **options)
+    general = solve_extrinsics(points_lidar, bearings, camera=ProtocolOnlyCamera(cam), pixels=clicked, **options)
+    assert max(pose_error(fast.T_camera_lidar, general.T_camera_lidar)) < 1e-9
+    np.testing.assert_allclose(fast.covariance_6x6, general.covariance_6x6, rtol=1e-6, atol=1e-16)
+    np.testing.assert_allclose(fast.sigma_rpy_deg, general.sigma_rpy_deg, rtol=1e-6)
+    np.testing.assert_allclose(fast.residual_px, general.residual_px, rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(fast.residual_deg, general.residual_deg, rtol=1e-6, atol=1e-12)
+    assert fast.quality == general.quality and fast.warnings == general.warnings
+    assert fast.outliers == general.outliers == [] and fast.initial_method == general.initial_method
+    assert fast.residual_unit == general.residual_unit and fast.cost_name == general.cost_name
+    if "noise_rad" not in options:  # (a stated noise_rad is taken as true, here it is not)
+        # And the figures are right, not just alike: the truth lies within a few reported sigmas.
+        err_t = np.abs(fast.T_camera_lidar[:3, 3] - T_true[:3, 3])
+        assert np.all(err_t <= 5 * fast.sigma_translation_m + 1e-9)
+
+
+def test_compiled_path_hands_outliers_to_the_robust_search():
+    # One stray click: the compiled common case must not hide it (it hands over to the robust search).
+    cam = _package_camera("pinhole")
+    rng = np.random.default_rng(3)
+    T_true, _, _ = random_scene(3, 1, max_t=0.3)
+    pixels = np.column_stack([rng.uniform(40, 600, 15), rng.uniform(40, 440, 15)])
+    points_lidar = (cam.bearing(pixels) * rng.uniform(2, 12, (15, 1)) - T_true[:3, 3]) @ T_true[:3, :3]
+    clicked = pixels + rng.normal(0, 0.5, pixels.shape)
+    clicked[4] += [40.0, -30.0]
+    res = solve_extrinsics(points_lidar, cam.bearing(clicked), camera=cam, pixels=clicked)
+    assert res.outliers == [4] and res.quality.status == "warning" and res.hypotheses > 0
+    assert max(pose_error(res.T_camera_lidar, T_true)) < 0.5

@@ -23,7 +23,7 @@ from typing import Any, ClassVar, Protocol, runtime_checkable
 
 import numpy as np
 
-from ..errors import CalibError
+from ..arrays import as_rows
 
 
 @runtime_checkable
@@ -97,13 +97,9 @@ def in_image(pixels: np.ndarray, width: int, height: int) -> np.ndarray:
 
 
 def as_points(arr: Any, name: str, dim: int) -> np.ndarray:
-    """``arr`` as a float64 ``(N, dim)`` array, or a :class:`CalibError`."""
-    a = np.asarray(arr, dtype=np.float64)
-    if a.ndim == 1 and a.shape[0] == dim:
-        a = a[None, :]
-    if a.ndim != 2 or a.shape[1] != dim:
-        raise CalibError(f"{name} must be an (N, {dim}) array, got shape {a.shape}")
-    return a
+    """``arr`` as a float64 ``(N, dim)`` array (one ``(dim,)`` row allowed), or a :class:`CalibError`
+    (:func:`calib_core.arrays.as_rows`)."""
+    return as_rows(arr, name, dim)
 
 
 def as_points_keep_float32(points: Any) -> np.ndarray:

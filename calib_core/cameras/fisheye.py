@@ -84,6 +84,8 @@ class FisheyeCamera:
         self._prm[: kernels._F_D] = (K[0, 0], K[0, 1], K[0, 2], K[1, 1], K[1, 2], self.theta_max, self.theta_d_max,
                                      self.width, self.height)
         self._prm[kernels._F_D :] = self.D
+        #: ``(model code, parameters, table)`` for compiled callers (:func:`.kernels.project_model`).
+        self.compiled_projection = (kernels.MODEL_FISHEYE, self._prm, np.zeros((1, 2)))
 
     def project(self, points: Any) -> tuple[np.ndarray, np.ndarray]:
         """Pixels of points in the OpenCV camera frame (metres).

@@ -373,6 +373,25 @@ def ocam_bearing(uv, p, pol, rays):
         rays[i, 0], rays[i, 1], rays[i, 2] = yp / norm, xp / norm, -zp / norm  # OCam (x, y, z) -> OpenCV
 
 
+#: Model codes of :func:`project_model` (a camera's ``compiled_projection``).
+MODEL_PINHOLE, MODEL_FISHEYE, MODEL_OCAM = 0, 1, 2
+
+
+@kernel
+def project_model(model, p, table, points, pixels, valid):
+    """``project`` of the model with code ``model``, for callers that are compiled themselves.
+
+    ``(model, p, table)`` is a camera's ``compiled_projection``; ``table`` is
+    only read by OCam (the others get a dummy ``(1, 2)`` array).
+    """
+    if model == MODEL_PINHOLE:
+        pinhole_project(points, p, pixels, valid)
+    elif model == MODEL_FISHEYE:
+        fisheye_project(points, p, pixels, valid)
+    else:
+        ocam_project(points, p, table, pixels, valid)
+
+
 def warm_up() -> None:
     """Compile (or load from numba's disk cache) the camera kernels for the inputs the package gives them.
 

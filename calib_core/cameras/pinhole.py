@@ -128,6 +128,8 @@ class PinholeCamera:
         self._prm_project, self._prm_bearing = prm.copy(), prm.copy()
         self._prm_project[kernels._P_T :] = self._tilt.ravel()
         self._prm_bearing[kernels._P_T :] = self._tilt_inv.ravel()
+        #: ``(model code, parameters, table)`` for compiled callers (:func:`.kernels.project_model`).
+        self.compiled_projection = (kernels.MODEL_PINHOLE, self._prm_project, np.zeros((1, 2)))
 
     # -- F: camera -> image ---------------------------------------------------
     def project(self, points: Any) -> tuple[np.ndarray, np.ndarray]:

@@ -27,9 +27,9 @@ import itertools
 
 import numpy as np
 
+from ..arrays import angle_between_rad
 from . import kernels
 from .checks import median
-from .refine import cross3
 from .rigid import rigid_fit
 
 __all__ = [
@@ -64,10 +64,7 @@ def angular_errors_rad(
     """
     T = np.asarray(T_camera_lidar, dtype=np.float64)
     P = np.einsum("...ij,nj->...ni", T[..., :3, :3], points_lidar) + T[..., None, :3, 3]
-    c = cross3(bearings_camera, P)
-    cross = np.sqrt(np.einsum("...i,...i->...", c, c))
-    dot = np.einsum("ni,...ni->...n", bearings_camera, P)
-    return np.arctan2(cross, dot)
+    return angle_between_rad(bearings_camera, P)
 
 
 # --------------------------------------------------------------------------

@@ -11,9 +11,10 @@ import math
 
 import numpy as np
 
+from ..arrays import angle_between_rad, as_rows, as_transform
 from ..errors import CalibError
 from .kernels import pair_checks
-from .refine import PARAMETER_NAMES, cross3
+from .refine import PARAMETER_NAMES
 
 __all__ = [
     "MIN_PAIRS",
@@ -40,24 +41,11 @@ CONE_WARNING_DEG = 15.0
 CONDITION_WARNING = 1e4
 
 
-def _as_array(value: object, name: str, dim: int) -> np.ndarray:
-    a = np.asarray(value, dtype=np.float64)
-    if a.ndim != 2 or a.shape[1] != dim:
-        raise CalibError(f"{name} must be an (N, {dim}) array, got shape {a.shape}")
-    return a
-
-
 def median(values: np.ndarray) -> float:
     """``np.median`` of a 1-D array (same value), without its overhead for a few elements."""
     v = np.sort(values)
     k = v.size // 2
     return float(v[k]) if v.size % 2 else float((v[k - 1] + v[k]) / 2)
-
-
-def _angle_rad(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Angle between rows of unit vectors, ``atan2(|a x b|, a . b)`` (precise near 0 and pi)."""
-    c = cross3(a, b)
-    return np.arctan2(np.sqrt(np.einsum("ij,ij->i", c, c)), np.einsum("ij,ij->i", a, b))
 
 
 def _largest_angle_deg(bearings: np.ndarray, cos_min_to_mean: float) -> float:
@@ -78,7 +66,7 @@ def _largest_angle_deg(bearings: np.ndarray, cos_min_to_mean: float) -> float:
             return alpha_deg
     cos = bearings @ bearings.T
     i, j = np.unravel_index(np.argmin(cos), cos.shape)
-    return float(np.degrees(_angle_rad(bearings[i : i + 1], bearings[j : j + 1])[0]))
+    return float(np.degrees(angle_between_rad(bearings[i], bearings[j])))
 
 
 def validate_pairs(points_lidar: object, bearings_camera: object) -> tuple[np.ndarray, np.ndarray, list[str]]:
@@ -106,8 +94,8 @@ def validate_pairs(points_lidar: object, bearings_camera: object) -> tuple[np.nd
         pairs (names them); coincident or (nearly) collinear laser points; all
         bearings within 2 deg of each other.
     """
-    points = np.ascontiguousarray(_as_array(points_lidar, "points_lidar", 3))
-    bearings = np.ascontiguousarray(_as_array(bearings_camera, "bearings_camera", 3))
+    points = np.ascontiguousarray(as_rows(points_lidar, "points_lidar", 3, single_row=False))
+    bearings = np.ascontiguousarray(as_rows(bearings_camera, "bearings_camera", 3, single_row=False))
     if len(points) != len(bearings):
         raise CalibError(f"got {len(points)} laser points but {len(bearings)} bearings")
     n = len(points)
@@ -152,7 +140,7 @@ def validate_pairs(points_lidar: object, bearings_camera: object) -> tuple[np.nd
 
 def validate_pixels(pixels: object, n: int) -> np.ndarray:
     """Check clicked pixels ``(N, 2)``; return a float64 copy."""
-    px = _as_array(pixels, "pixels", 2)
+    px = as_rows(pixels, "pixels", 2, single_row=False)
     if len(px) != n:
         raise CalibError(f"got {len(px)} pixels for {n} pairs")
     bad = np.nonzero(~np.all(np.isfinite(px), axis=1))[0]
@@ -163,11 +151,7 @@ def validate_pixels(pixels: object, n: int) -> np.ndarray:
 
 def validate_initial_T(T: object) -> np.ndarray:
     """Check a user-supplied initial ``T_camera_lidar`` and re-orthonormalise its rotation."""
-    a = np.asarray(T, dtype=np.float64)
-    if a.shape != (4, 4):
-        raise CalibError(f"initial_T_camera_lidar must be 4x4, got shape {a.shape}")
-    if not np.all(np.isfinite(a)):
-        raise CalibError("initial_T_camera_lidar contains NaN or infinite values")
+    a = as_transform(T, "initial_T_camera_lidar")
     R = a[:3, :3]
     if np.abs(R.T @ R - np.eye(3)).max() > 1e-3 or np.linalg.det(R) <= 0:
         raise CalibError("initial_T_camera_lidar does not hold a rotation matrix")

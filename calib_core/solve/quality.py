@@ -8,6 +8,7 @@ as outliers, weak geometry, residuals above the expected click noise).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -91,15 +92,17 @@ def geometry_reasons(
     weak: list[str] = []
     m = int(n_inliers)
     s_rot = float(rotation_sigma_deg)
-    s_t = float(np.max(sigma_translation_m)) if np.all(np.isfinite(sigma_translation_m)) else np.inf
-    if not (np.isfinite(s_rot) and np.isfinite(s_t)):
+    # Plain floats: this runs once per solve, where numpy's per-call overhead would dominate.
+    s_ts = [float(v) for v in sigma_translation_m]
+    s_t = max(s_ts) if all(math.isfinite(v) for v in s_ts) else math.inf
+    if not (math.isfinite(s_rot) and math.isfinite(s_t)):
         bad.append("the uncertainty of the pose is undefined (the pairs in the fit do not determine it)")
     else:
         if s_rot > UNRELIABLE_ROTATION_DEG:
             bad.append(f"the rotation is uncertain by {s_rot:.1f} deg (1 sigma, above {UNRELIABLE_ROTATION_DEG:g} deg)")
         elif s_rot > WARNING_ROTATION_DEG:
             weak.append(f"the rotation is uncertain by {s_rot:.2f} deg (1 sigma); add well-spread pairs")
-        frac = s_t / median_range_m if median_range_m > 0 else np.inf
+        frac = s_t / median_range_m if median_range_m > 0 else math.inf
         if frac > UNRELIABLE_TRANSLATION_FRACTION:
             bad.append(
                 f"the translation is uncertain by {100 * s_t:.1f} cm (1 sigma, {100 * frac:.0f} % of the "
@@ -107,8 +110,8 @@ def geometry_reasons(
             )
         elif frac > WARNING_TRANSLATION_FRACTION:
             weak.append(f"the translation is uncertain by {100 * s_t:.1f} cm (1 sigma); add pairs at other depths")
-    sv = np.asarray(singular_values, dtype=np.float64)
-    if m >= 4 and sv[2] < COPLANAR_RATIO * sv[0] and m < 2 * FEW_INLIERS:
+    sv0, sv2 = float(singular_values[0]), float(singular_values[2])
+    if m >= 4 and sv2 < COPLANAR_RATIO * sv0 and m < 2 * FEW_INLIERS:
         weak.append(
             f"the {m} laser points in the fit lie near one plane: few coplanar pairs can fit a wrong pose; "
             "add pairs off that plane"

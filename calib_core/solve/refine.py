@@ -28,7 +28,6 @@ import math
 from typing import Any, Callable, NamedTuple
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from ..errors import CalibError
 from . import kernels
@@ -222,6 +221,14 @@ def pixel_jacobian(
         minus = pixel_residuals(x - dx, R0, points_lidar, pixels, camera)
         cols.append(((plus - minus) / (2 * step)).ravel())
     return np.stack(cols, axis=1)
+
+
+def least_squares(*args: Any, **kwargs: Any) -> Any:
+    """``scipy.optimize.least_squares``, imported on first use (only the pixel cost needs it; importing
+    ``scipy.optimize`` would cost the app's start-up 0.2-0.4 s)."""
+    from scipy.optimize import least_squares as scipy_least_squares
+
+    return scipy_least_squares(*args, **kwargs)
 
 
 def _run_lm(fun: Callable, jac: Callable, x0: np.ndarray, what: str) -> Any:

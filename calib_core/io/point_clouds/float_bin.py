@@ -64,6 +64,18 @@ def detect_bin_columns(values: np.ndarray) -> tuple[int | None, str]:
     return period, summary
 
 
+def read_float_records(path: str | Path, columns: int) -> np.ndarray:
+    """The raw ``(N, columns)`` little-endian float32 records of a ``.bin`` (e.g. KITTI's 4), as stored.
+
+    For callers that rewrite a cloud in the same layout (cropped or shuffled
+    copies in tests and benchmarks); :func:`read_bin` is the checked reader.
+    """
+    data = np.fromfile(path, dtype="<f4")
+    if data.size % columns:
+        raise CalibError(f"{path}: {data.size} float32 values do not split into records of {columns}")
+    return data.reshape(-1, columns)
+
+
 def read_bin(path: Path, max_points: int, bin_columns: int | None = None, **_) -> PointCloud:
     """A ``.bin`` of float32 records of ``bin_columns`` values (detected when None)."""
     size = path.stat().st_size
@@ -104,7 +116,7 @@ def read_bin(path: Path, max_points: int, bin_columns: int | None = None, **_) -
     n_points = n_values // columns
     if n_points > max_points:
         raise too_many_points(path, "holds", n_points, max_points)
-    data = np.fromfile(path, dtype="<f4").reshape(n_points, columns)
+    data = read_float_records(path, columns)
     distance = np.linalg.norm(data[:, :3].astype(np.float64), axis=1)
     distance = distance[np.isfinite(distance)]
     if len(distance) and np.median(distance) < _SMALLEST_MEDIAN_RANGE_M:
