@@ -25,7 +25,10 @@ and adds ``k`` corners clicked at ``sigma`` px:
   rotation error any order can reach from this pool;
 * ``... + re-clicks`` -- as above, but a click may also re-click one of the 4
   rough pairs at ``sigma`` (what the guided session proposes when it adds
-  more information than a new corner); each re-click costs one of the ``k`` clicks.
+  more information than a new corner); each re-click costs one of the ``k`` clicks;
+* ``..., detected corners only`` -- the pool restricted to the true corners
+  that a laser corner candidate (:func:`calib_core.guide.find_candidates`)
+  lies within two cells of: what the proposals can offer at best.
 """
 
 from __future__ import annotations
@@ -34,7 +37,8 @@ import argparse
 
 import numpy as np
 
-from calib_core.guide.information import fisher_information, pair_noise, pixel_jacobians
+from calib_core.guide.candidates import find_candidates
+from calib_core.guide.information import pair_noise, pixel_jacobians
 from calib_core.guide.laser_noise import WHOLE_CELL_SIGMA, cell_covariance
 from calib_core.synthetic.picks import MAX_LASER_PICK_ERROR_M, laser_picks, simulate_pairs
 from calib_core.transforms import transform_points
@@ -42,7 +46,7 @@ from calib_core.transforms import transform_points
 from .common import BENCH_SEED, load_scenes, log
 
 DESIGNS = ("farthest", "greedy D", "exchange D", "greedy rot", "exchange rot", "greedy D + re-clicks",
-           "exchange rot + re-clicks")
+           "exchange rot + re-clicks", "greedy D, detected corners only", "exchange rot, detected corners only")
 #: Fixed standard-normal draws for E||delta|| (shared by every design: differences are not MC noise).
 _Z = np.random.default_rng(BENCH_SEED).standard_normal((4000, 3))
 
@@ -128,7 +132,17 @@ def farthest(bear, pool, start, k):
     return chosen
 
 
-def trial(scene, rng, k: int, sigma: float, start_sigma: float = 1.0) -> dict:
+def detected_corners(scene) -> np.ndarray:
+    """Mask of the true corners with a laser corner candidate within two cells of their whole-cell pick."""
+    from .guide_sim import true_corner_of_cells
+
+    idx, _ = true_corner_of_cells(scene, find_candidates(scene.depth).rows_cols)
+    mask = np.zeros(len(scene.corners_lidar), dtype=bool)
+    mask[idx[idx >= 0]] = True
+    return mask
+
+
+def trial(scene, rng, k: int, sigma: float, start_sigma: float = 1.0, detected: np.ndarray | None = None) -> dict:
     rc, ok, J_pose, J_point, laser, bear = corner_pool(scene)
     starters = simulate_pairs(scene, 4, rng, pixel_noise_px=start_sigma)
     lookup = {tuple(r): i for i, r in reversed(list(enumerate(rc.tolist())))}
@@ -150,6 +164,13 @@ def trial(scene, rng, k: int, sigma: float, start_sigma: float = 1.0) -> dict:
     for name, s in sets.items():
         F = F0 + B[s].sum(axis=0)
         out[name] = (expected_rotation_deg(F), expected_translation_m(F), _score(F, "D"))
+    if detected is not None:
+        pool_d = [i for i in pool if detected[i]]
+        sets_d = {"greedy D, detected corners only": greedy(F0, B, pool_d, k, "D"),
+                  "exchange rot, detected corners only": exchange(F0, B, pool_d, greedy(F0, B, pool_d, k, "rot"), "rot")}
+        for name, s in sets_d.items():
+            F = F0 + B[s].sum(axis=0)
+            out[name] = (expected_rotation_deg(F), expected_translation_m(F), _score(F, "D"))
     for name, s in (("greedy D + re-clicks", gdx), ("exchange rot + re-clicks", grx)):
         F = F0 + Bx[s].sum(axis=0)
         out[name] = (expected_rotation_deg(F), expected_translation_m(F), _score(F, "D"))
@@ -164,6 +185,9 @@ def main(argv=None) -> int:
     p.add_argument("--sigma", type=float, nargs="*", default=[0.3, 1.0], help="click noise of the added corners, px")
     a = p.parse_args(argv)
     scenes = load_scenes(tuple(a.seeds))
+    detected = [detected_corners(bs.scene) for bs in scenes]
+    print("Detected true corners (a candidate within 2 cells): "
+          + ", ".join(f"{bs.name} {int(d.sum())} of {len(d)}" for bs, d in zip(scenes, detected)) + "\n")
     print(f"Oracle design comparison (`python -m bench.guide_order --trials {a.trials} --seeds "
           f"{' '.join(map(str, a.seeds))}`): expected errors from the Fisher information at the true pose; "
           f"{a.trials} random 4-pair starts per scene on {', '.join(s.name for s in scenes)}.\n")
@@ -174,7 +198,8 @@ def main(argv=None) -> int:
             rows = []
             for si, bs in enumerate(scenes):
                 for t in range(a.trials):
-                    rows.append(trial(bs.scene, np.random.default_rng([BENCH_SEED, 13, si, t]), k, sigma))
+                    rows.append(trial(bs.scene, np.random.default_rng([BENCH_SEED, 13, si, t]), k, sigma,
+                                      detected=detected[si]))
             far_r = np.mean([r["farthest"][0] for r in rows])
             far_ld = np.mean([r["farthest"][2] for r in rows])
             for name in DESIGNS:

@@ -20,7 +20,7 @@ import numpy as np
 
 from calib_core.guide.auto_accept import auto_accept
 from calib_core.guide.information import fisher_information, pair_noise, pixel_jacobians
-from calib_core.guide.laser_noise import WHOLE_CELL_SIGMA, cell_covariance
+from calib_core.guide.laser_noise import PICK_CELL_SIGMA, cell_covariance
 from calib_core.guide.pose_state import pair_sigmas
 from calib_core.guide.session import GuidedSession
 from calib_core.pairs import Pair
@@ -105,6 +105,7 @@ class GuidedRun:
 
     errors: dict = field(default_factory=dict)  # n guided -> (rotation deg, translation m)
     expected: dict = field(default_factory=dict)  # n guided -> expected (rotation deg, translation m) of the pairs
+    actions_at: dict = field(default_factory=dict)  # n guided -> actions so far
     actions: int = 0
     shown: int = 0  # proposals shown (new pairs and re-clicks)
     not_a_corner: int = 0
@@ -119,7 +120,7 @@ class GuidedRun:
 def guided_run(scene, rng: np.random.Generator, checkpoints=(10, 20, 30, 50), click_sigma_px: float = 0.3,
                starters: list[Pair] | None = None, image: bool = True, max_actions: int = 2000,
                order: str = "d_optimal", auto_gates: dict | None = None, click_z: np.ndarray | None = None,
-               **propose_options) -> GuidedRun:
+               count_pairs: bool = False, **propose_options) -> GuidedRun:
     """Start from ``starters`` (default: 4 farthest-point clicks at 1 px) and add guided pairs.
 
     ``order`` is the proposal order (:func:`calib_core.guide.propose`).  With
@@ -132,7 +133,9 @@ def guided_run(scene, rng: np.random.Generator, checkpoints=(10, 20, 30, 50), cl
     ``click_z`` (n_corners, 2): standard-normal click errors per true corner
     (scaled by ``click_sigma_px``), to share them with other arms; drawn from ``rng`` if None.
     At every checkpoint, besides the solve's error, the expected error of the
-    pairs so far (:func:`expected_error`) is recorded.
+    pairs so far (:func:`expected_error`) is recorded.  Checkpoints count
+    clicks (re-clicks of rough pairs included), or with ``count_pairs`` the
+    pairs added to the solve (a re-click replaces a pair and adds none).
     """
     if starters is None:
         starters = simulate_pairs(scene, 4, rng, pixel_noise_px=1.0)
@@ -152,7 +155,12 @@ def guided_run(scene, rng: np.random.Generator, checkpoints=(10, 20, 30, 50), cl
     click_noise = click_sigma_px * np.asarray(click_z)
     run = GuidedRun()
     n_max = max(checkpoints)
-    while run.accepted < n_max and run.actions < max_actions:
+    n0 = len(session.pairs)
+
+    def progress() -> int:
+        return len(session.pairs) - n0 if count_pairs else run.accepted
+
+    while progress() < n_max and run.actions < max_actions:
         props = session.proposals(1)
         if not props:
             break
@@ -183,13 +191,16 @@ def guided_run(scene, rng: np.random.Generator, checkpoints=(10, 20, 30, 50), cl
         paired.add(corner)
         run.reclicks += p.replaces is not None
         run.accepted += 1
-        if run.accepted in checkpoints and auto_gates and session.corners is not None:
+        n = progress()
+        if n not in checkpoints or n in run.errors:
+            continue
+        if auto_gates and session.corners is not None:
             _judge_auto(run, session, scene, auto_gates, lookup, paired, tpix)
-        if run.accepted in checkpoints:
-            T = session.solve().T_camera_lidar
-            e = pose_error(T, scene.T_camera_lidar)
-            run.errors[run.accepted] = (e.rotation_deg, e.translation_norm_m)
-            run.expected[run.accepted] = expected_error(scene, session.pairs)
+        T = session.solve().T_camera_lidar
+        e = pose_error(T, scene.T_camera_lidar)
+        run.errors[n] = (e.rotation_deg, e.translation_norm_m)
+        run.expected[n] = expected_error(scene, session.pairs)
+        run.actions_at[n] = run.actions
     return run
 
 
@@ -199,16 +210,17 @@ def expected_error(scene, pairs) -> tuple[float, float]:
     rc = np.array([p.laser_rc for p in pairs], dtype=np.int64)
     pts = scene.depth.points[rc[:, 0], rc[:, 1]]
     _, J_pose, J_point = pixel_jacobians(scene.camera, scene.T_camera_lidar, pts)
-    S = pair_noise(pair_sigmas(pairs), J_point, cell_covariance(scene.depth, rc, WHOLE_CELL_SIGMA))
+    S = pair_noise(pair_sigmas(pairs), J_point, cell_covariance(scene.depth, rc, PICK_CELL_SIGMA))
     F = fisher_information(J_pose, S)
     return expected_rotation_deg(F), expected_translation_m(F)
 
 
-def unguided_run(scene, starters: list[Pair], click_z: np.ndarray, n_added: int, click_sigma_px: float) -> GuidedRun:
-    """The person without guidance: after ``starters``, ``n_added`` more true corners chosen by
-    farthest-point sampling of their camera bearings (continuing from the starters' corners, as
+def unguided_run(scene, starters: list[Pair], click_z: np.ndarray, checkpoints, click_sigma_px: float) -> GuidedRun:
+    """The person without guidance: after ``starters``, more true corners chosen by farthest-point
+    sampling of their camera bearings (continuing from the starters' corners, as
     :func:`calib_core.synthetic.picks.simulate_pairs` chooses), clicked at the true projection plus
-    ``click_sigma_px * click_z`` of that corner; solved with each pair weighted by its precision."""
+    ``click_sigma_px * click_z`` of that corner; solved (each pair weighted by its precision) after
+    each number of added corners in ``checkpoints``."""
     corners = np.asarray(scene.corners_lidar, dtype=np.float64)
     pick_rc, err = laser_picks(scene.depth, corners)
     usable = err <= MAX_LASER_PICK_ERROR_M
@@ -220,41 +232,49 @@ def unguided_run(scene, starters: list[Pair], click_z: np.ndarray, n_added: int,
     max_cos[start] = np.inf
     tpix = true_pixels(scene)
     pairs = list(starters)
-    for _ in range(n_added):
+    run = GuidedRun()
+    for n in range(1, max(checkpoints) + 1):
         c = int(np.argmin(max_cos))
+        if not np.isfinite(max_cos[c]):
+            break
         max_cos = np.maximum(max_cos, bear @ bear[c])
         max_cos[c] = np.inf
         px = tpix[c] + click_sigma_px * click_z[c]
         pairs.append(Pair((int(pick_rc[c, 0]), int(pick_rc[c, 1])), None, (float(px[0]), float(px[1])),
                           precision_px=click_sigma_px))
-    run = GuidedRun(accepted=n_added, actions=n_added, shown=n_added)
-    e = pose_error(calibrate(pairs, scene.depth, scene.camera).T_camera_lidar, scene.T_camera_lidar)
-    run.errors[n_added] = (e.rotation_deg, e.translation_norm_m)
-    run.expected[n_added] = expected_error(scene, pairs)
+        run.accepted = run.actions = run.shown = n
+        if n in checkpoints:
+            run.actions_at[n] = n
+            e = pose_error(calibrate(pairs, scene.depth, scene.camera).T_camera_lidar, scene.T_camera_lidar)
+            run.errors[n] = (e.rotation_deg, e.translation_norm_m)
+            run.expected[n] = expected_error(scene, pairs)
     return run
 
 
-#: Arms of the order comparison: name -> (kind, propose order or None, click noise px, extra propose options).
+#: Arms of the order comparison: name -> (kind, propose order or None, click noise px).
 ORDER_ARMS = {
     "guided D-optimal (shipped), 0.3 px": ("guided", "d_optimal", 0.3),
+    "guided D-optimal (shipped), 0.3 px, counting pairs (re-clicks free)": ("guided pairs", "d_optimal", 0.3),
     "guided, farthest order over the same proposals, 0.3 px": ("guided", "farthest", 0.3),
     "unguided farthest-point corners, 1 px (issue's model)": ("unguided", None, 1.0),
     "unguided farthest-point corners, 0.3 px (same noise)": ("unguided", None, 0.3),
 }
 
 
-def order_trial(scene, rng: np.random.Generator, n_added: int = 6, arms=tuple(ORDER_ARMS)) -> dict:
+def order_trial(scene, rng: np.random.Generator, checkpoints=(6, 10), arms=tuple(ORDER_ARMS)) -> dict:
     """One trial of the order comparison: every arm starts from the same 4 rough pairs (farthest-point
-    corners from a random start, 1 px clicks) and adds ``n_added`` clicks; a corner clicked in several
-    arms gets the same standard-normal error (scaled by the arm's click noise).  Returns arm -> GuidedRun."""
+    corners from a random start, 1 px clicks) and adds clicks (errors recorded after each number in
+    ``checkpoints``; a guided re-click counts as a click); a corner clicked in several arms gets the same
+    standard-normal error (scaled by the arm's click noise).  Returns arm -> GuidedRun."""
     starters = simulate_pairs(scene, 4, rng, pixel_noise_px=1.0)
     z = rng.standard_normal((len(scene.corners_lidar), 2))
     out = {}
     for name in arms:
         kind, order, sigma = ORDER_ARMS[name]
-        if kind == "guided":
-            out[name] = guided_run(scene, rng, checkpoints=(n_added,), click_sigma_px=sigma, starters=starters,
-                                   order=order, click_z=z)
+        if kind.startswith("guided"):
+            out[name] = guided_run(scene, rng, checkpoints=tuple(checkpoints), click_sigma_px=sigma,
+                                   starters=starters, order=order, click_z=z, max_actions=300,
+                                   count_pairs=kind == "guided pairs")
         else:
-            out[name] = unguided_run(scene, starters, z, n_added, sigma)
+            out[name] = unguided_run(scene, starters, z, tuple(checkpoints), sigma)
     return out

@@ -309,19 +309,19 @@ def test_not_a_corner_on_a_reclick_is_not_proposed_again(scene):
                                          reclicks=False).proposals(20) if p.replaces is not None]
 
 
-def test_d_optimal_order_beats_farthest_point_order_in_information(scene, truth):
-    """Over the same candidates, the D-optimal ranking's first 10 proposals carry more pose information
-    (recomputed independently, at the true pose) than the farthest-point ranking's."""
-    pairs = simulate_pairs(scene, 4, np.random.default_rng(3), 1.0)
-    state = current_pose(pairs, scene.depth, scene.camera)
-    cand = find_candidates(scene.depth)
-    pts0 = np.array([scene.depth.points[p.laser_rc[0], p.laser_rc[1]] for p in pairs])
-    F0 = _pose_information(scene.camera, scene.T_camera_lidar, pts0, 1.0)
 
-    def logdet_after(props):
-        pts = np.array([p.laser_xyz for p in props])
-        return np.linalg.slogdet(F0 + _pose_information(scene.camera, scene.T_camera_lidar, pts, 0.3))[1]
+def test_pick_noise_model_is_calibrated_on_the_true_corners(scene, truth):
+    """The image offsets of the true corners' careful picks from their true projections are, under the
+    pick covariance of :mod:`calib_core.guide.laser_noise`, as spread as a 2-D Gaussian's (mean squared
+    Mahalanobis distance 2), neither much tighter nor much wider."""
+    from calib_core.guide.information import pixel_jacobians
+    from calib_core.guide.laser_noise import PICK_CELL_SIGMA, cell_covariance
 
-    d_opt = propose(scene.depth, scene.camera, state, 10, candidates=cand)
-    far = propose(scene.depth, scene.camera, state, 10, candidates=cand, order="farthest", paired_points_lidar=pts0)
-    assert logdet_after(d_opt) > logdet_after(far)
+    pix_true, pick_rc, err = truth
+    ok = err <= 0.05
+    pts = scene.depth.points[pick_rc[ok, 0], pick_rc[ok, 1]]
+    pix, _, J_point = pixel_jacobians(scene.camera, scene.T_camera_lidar, pts)
+    cov = J_point @ cell_covariance(scene.depth, pick_rc[ok], PICK_CELL_SIGMA) @ np.swapaxes(J_point, 1, 2)
+    d = pix - pix_true[ok]
+    m2 = np.einsum("na,nab,nb->n", d, np.linalg.inv(cov), d)
+    assert 1.2 <= m2.mean() <= 3.0

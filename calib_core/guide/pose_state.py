@@ -19,7 +19,7 @@ from ..errors import CalibError
 from ..pairs import Pair, resolve_pairs
 from ..solve import MIN_PAIRS, calibrate
 from .information import fisher_information, information_inverse, pair_noise, pixel_jacobians
-from .laser_noise import WHOLE_CELL_SIGMA, cell_covariance
+from .laser_noise import PICK_CELL_SIGMA, cell_covariance
 
 __all__ = ["PoseState", "current_pose", "DEFAULT_CLICK_SIGMA_PX", "DEFAULT_PRIOR_SIGMA"]
 
@@ -99,7 +99,7 @@ def current_pose(
     laser = np.zeros((len(fit), 3, 3))
     rc_idx = [i for i, p in enumerate(fit) if p.laser_rc is not None]
     if rc_idx:
-        laser[rc_idx] = cell_covariance(depth, np.array([fit[i].laser_rc for i in rc_idx]), WHOLE_CELL_SIGMA)
+        laser[rc_idx] = cell_covariance(depth, np.array([fit[i].laser_rc for i in rc_idx]), PICK_CELL_SIGMA)
     S = pair_noise(pair_sigmas(fit), J_point, laser)
     F = fisher_information(J_pose, S)
     factor = 1.0
