@@ -75,6 +75,11 @@ def load_pjlab() -> RealScene:
                      load_image_rgb(DATA / "calib.png"), T, load_pairs_yaml(PAIRS))
 
 
+def _in_image(camera, uv, margin_px: float = 1.5) -> bool:
+    """Whether a pixel and its 0.5 px click noise (3 sigma) stay on the picture."""
+    return bool(margin_px <= uv[0] <= camera.width - 1 - margin_px and margin_px <= uv[1] <= camera.height - 1 - margin_px)
+
+
 def real_trial(scene: RealScene, rng: np.random.Generator, n_rough: int = 5, rough_px: float = 3.0,
                n_guided: int = 20, click_px: float = 0.5, use_image: bool = False) -> tuple[float, float, int, float]:
     """One trial against the published pose: rotation error (deg), translation error (m), guided
@@ -97,12 +102,13 @@ def real_trial(scene: RealScene, rng: np.random.Generator, n_rough: int = 5, rou
             break
         p = props[0]
         uv, ok = scene.camera.project(transform_points(T, np.asarray(p.laser_xyz)[None]))
-        if not ok[0]:
+        if not (ok[0] and _in_image(scene.camera, uv[0])):  # the person cannot click a point off the picture
             session.not_a_corner(p)
             continue
         d = uv[0] - p.pixel
         inside.append(float(d @ np.linalg.solve(p.pixel_cov, d)) <= 9.0)
-        session.accept(p, uv[0] + rng.normal(0.0, click_px, 2))
+        click = np.clip(uv[0] + rng.normal(0.0, click_px, 2), 0, [scene.camera.width - 1, scene.camera.height - 1])
+        session.accept(p, click)
         made += 1
     est = session.solve().T_camera_lidar
     share = float(np.mean(inside)) if inside else float("nan")
@@ -133,10 +139,11 @@ def auto_accept_check(scene: RealScene, rng: np.random.Generator, gate=None, n_r
         if not props:
             break
         uv, ok = scene.camera.project(transform_points(T, np.asarray(props[0].laser_xyz)[None]))
-        if not ok[0]:
+        if not (ok[0] and _in_image(scene.camera, uv[0])):
             session.not_a_corner(props[0])
             continue
-        session.accept(props[0], uv[0] + rng.normal(0.0, click_px, 2))
+        session.accept(props[0], np.clip(uv[0] + rng.normal(0.0, click_px, 2), 0,
+                                         [scene.camera.width - 1, scene.camera.height - 1]))
         made += 1
     props = session.proposals(200)
     passed, pixels = auto_accept(session.corners, props, gate, image=scene.image, depth=scene.depth,

@@ -2,10 +2,11 @@
 
 The covariance is ``F^-1`` with ``F`` the Fisher information of the pairs
 (:mod:`.information`: each pair's click noise ``precision_px``, default
-:data:`DEFAULT_CLICK_SIGMA_PX`, plus the error of a careful whole-cell laser pick) and of the prior of
-an imported extrinsic.  When the pairs' whitened residuals show more noise
-than modelled, the covariance is inflated by their variance factor, so the
-predicted ellipses stay honest for careless clicks.
+:data:`DEFAULT_CLICK_SIGMA_PX`, plus the error of a careful laser pick,
+:data:`.laser_noise.PICK_CELL_SIGMA`) and of the prior of an imported extrinsic.
+When the pairs' whitened residuals show more noise than modelled, the
+covariance is inflated by their variance factor, so the predicted ellipses
+stay honest for careless clicks.
 """
 
 from __future__ import annotations

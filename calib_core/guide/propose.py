@@ -4,7 +4,7 @@ Ranking is sequential D-optimal design: each proposal is the candidate that
 most increases ``log det F`` (:func:`.information.d_optimal_gain`) given the
 current pose covariance *and the proposals ranked before it*, so the list
 does not repeat one region.  A candidate's noise is the click noise of a
-guided pair plus the error of a whole-cell laser pick (:mod:`.laser_noise`): near features
+guided pair plus the error of a careful laser pick (:data:`.laser_noise.PICK_CELL_SIGMA`): near features
 carry more translation information and, on sparse lidars, smaller cells,
 which the gain accounts for; cells wider than ``max_cell_m`` are dropped
 (no corner can be placed within them).
@@ -230,7 +230,7 @@ def propose(
         feats = corner_features(laser_evidence[sel], corner_image, pixels[sel], pixel_cov[sel])
         probability[sel] = corner_probability(feats, corner_weights)
     idx = np.flatnonzero(ok)
-    # The pair's own noise: a guided pair ends on the corner's cell (whole-cell pick).
+    # The pair's own noise: a guided pair ends on the corner's cell (careful pick).
     whole = cell_covariance(depth, cand.rows_cols[idx], PICK_CELL_SIGMA, range_sigma_m)
     S = pair_noise(click_sigma_px, J_point[idx], whole)
     J = J_pose[idx]
