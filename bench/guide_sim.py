@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from calib_core.guide.auto_accept import auto_accept
+from calib_core.guide.corner_probability import FEATURES
 from calib_core.guide.information import fisher_information, pair_noise, pixel_jacobians
 from calib_core.guide.laser_noise import PICK_CELL_SIGMA, cell_covariance
 from calib_core.guide.pose_state import pair_sigmas
@@ -251,13 +252,16 @@ def unguided_run(scene, starters: list[Pair], click_z: np.ndarray, checkpoints, 
     return run
 
 
-#: Arms of the order comparison: name -> (kind, propose order or None, click noise px).
+#: Ranking by the gain alone (information per click) instead of gain x P (per action), without re-clicks.
+PER_CLICK = {"corner_weights": (0.0, (0.0,) * len(FEATURES)), "reclicks": False}
+#: Arms of the order comparison: name -> (kind, propose order or None, click noise px, session options).
 ORDER_ARMS = {
-    "guided D-optimal (shipped), 0.3 px": ("guided", "d_optimal", 0.3),
-    "guided D-optimal (shipped), 0.3 px, counting pairs (re-clicks free)": ("guided pairs", "d_optimal", 0.3),
-    "guided, farthest order over the same proposals, 0.3 px": ("guided", "farthest", 0.3),
-    "unguided farthest-point corners, 1 px (issue's model)": ("unguided", None, 1.0),
-    "unguided farthest-point corners, 0.3 px (same noise)": ("unguided", None, 0.3),
+    "guided D-optimal (shipped), 0.3 px": ("guided", "d_optimal", 0.3, {}),
+    "guided D-optimal (shipped), 0.3 px, counting pairs (re-clicks free)": ("guided pairs", "d_optimal", 0.3, {}),
+    "guided, farthest order over the same proposals, 0.3 px": ("guided", "farthest", 0.3, {}),
+    "unguided farthest-point corners, 1 px (issue's model)": ("unguided", None, 1.0, {}),
+    "unguided farthest-point corners, 0.3 px (same noise)": ("unguided", None, 0.3, {}),
+    "guided D-optimal per click (gain only, no re-clicks), 0.3 px": ("guided", "d_optimal", 0.3, PER_CLICK),
 }
 
 
@@ -270,11 +274,11 @@ def order_trial(scene, rng: np.random.Generator, checkpoints=(6, 10), arms=tuple
     z = rng.standard_normal((len(scene.corners_lidar), 2))
     out = {}
     for name in arms:
-        kind, order, sigma = ORDER_ARMS[name]
+        kind, order, sigma, options = ORDER_ARMS[name]
         if kind.startswith("guided"):
             out[name] = guided_run(scene, rng, checkpoints=tuple(checkpoints), click_sigma_px=sigma,
                                    starters=starters, order=order, click_z=z, max_actions=300,
-                                   count_pairs=kind == "guided pairs")
+                                   count_pairs=kind == "guided pairs", **options)
         else:
             out[name] = unguided_run(scene, starters, z, tuple(checkpoints), sigma)
     return out
