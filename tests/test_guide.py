@@ -264,3 +264,64 @@ def test_corner_probability_favours_true_corners(scene, truth):
     # Rank-sum AUC: a true corner outranks a non-corner more often than not, clearly.
     auc = (P[on][:, None] > P[~on][None, :]).mean()
     assert auc >= 0.6
+
+
+def test_auto_accept_passes_only_true_corners_at_their_true_pixel(scene, truth):
+    """The default gate accepts some proposals of a 20-pair guided session on the sample, and every
+    accepted one is on a true corner not yet paired, its image corner within 2 px of the true projection."""
+    from calib_core.guide.auto_accept import auto_accept
+
+    pix_true, pick_rc, _ = truth
+    rng = np.random.default_rng(11)
+    session = GuidedSession(scene.depth, scene.camera, simulate_pairs(scene, 4, rng, 1.0), image=scene.image)
+    made, shown = 0, 0
+    while made < 20 and shown < 300:
+        p = session.proposals(1)[0]
+        shown += 1
+        k = _corner_of([p.laser_rc], pick_rc)[0]
+        if p.replaces is not None:
+            k = int(np.flatnonzero((pick_rc == p.laser_rc).all(axis=1))[0])
+        elif k < 0 or any(q.laser_rc == tuple(pick_rc[k]) for q in session.pairs):
+            session.not_a_corner(p)
+            continue
+        session.accept(p, pix_true[k] + rng.normal(0.0, 0.3, 2), laser_rc=tuple(pick_rc[k]))
+        made += 1
+    props = session.proposals(200)
+    ok, px = auto_accept(session.corners, props, image=scene.image, depth=scene.depth, camera=scene.camera,
+                         T_camera_lidar=session.state.T_camera_lidar)
+    assert ok.sum() >= 1
+    assert np.all(np.isnan(px[~ok]))
+    paired = {q.laser_rc for q in session.pairs}
+    for i in np.flatnonzero(ok):
+        k = _corner_of([props[i].laser_rc], pick_rc)[0]
+        assert k >= 0 and tuple(pick_rc[k]) not in paired
+        assert np.linalg.norm(px[i] - pix_true[k]) <= 2.0
+
+
+def test_not_a_corner_on_a_reclick_is_not_proposed_again(scene):
+    session = GuidedSession(scene.depth, scene.camera, simulate_pairs(scene, 4, np.random.default_rng(0), 1.0),
+                            image=scene.image)
+    reclicks = [p for p in session.proposals(20) if p.replaces is not None]
+    assert reclicks
+    session.not_a_corner(reclicks[0])
+    assert all(p.replaces != reclicks[0].replaces for p in session.proposals(20))
+    assert not [p for p in GuidedSession(scene.depth, scene.camera, session.pairs, image=scene.image,
+                                         reclicks=False).proposals(20) if p.replaces is not None]
+
+
+
+def test_pick_noise_model_is_calibrated_on_the_true_corners(scene, truth):
+    """The image offsets of the true corners' careful picks from their true projections are, under the
+    pick covariance of :mod:`calib_core.guide.laser_noise`, as spread as a 2-D Gaussian's (mean squared
+    Mahalanobis distance 2), neither much tighter nor much wider."""
+    from calib_core.guide.information import pixel_jacobians
+    from calib_core.guide.laser_noise import PICK_CELL_SIGMA, cell_covariance
+
+    pix_true, pick_rc, err = truth
+    ok = err <= 0.05
+    pts = scene.depth.points[pick_rc[ok, 0], pick_rc[ok, 1]]
+    pix, _, J_point = pixel_jacobians(scene.camera, scene.T_camera_lidar, pts)
+    cov = J_point @ cell_covariance(scene.depth, pick_rc[ok], PICK_CELL_SIGMA) @ np.swapaxes(J_point, 1, 2)
+    d = pix - pix_true[ok]
+    m2 = np.einsum("na,nab,nb->n", d, np.linalg.inv(cov), d)
+    assert 1.2 <= m2.mean() <= 3.0

@@ -2,10 +2,11 @@
 
 The covariance is ``F^-1`` with ``F`` the Fisher information of the pairs
 (:mod:`.information`: each pair's click noise ``precision_px``, default
-:data:`DEFAULT_CLICK_SIGMA_PX`, plus the error of a careful whole-cell laser pick) and of the prior of
-an imported extrinsic.  When the pairs' whitened residuals show more noise
-than modelled, the covariance is inflated by their variance factor, so the
-predicted ellipses stay honest for careless clicks.
+:data:`DEFAULT_CLICK_SIGMA_PX`, plus the error of a careful laser pick,
+:data:`.laser_noise.PICK_CELL_SIGMA`) and of the prior of an imported extrinsic.
+When the pairs' whitened residuals show more noise than modelled, the
+covariance is inflated by their variance factor, so the predicted ellipses
+stay honest for careless clicks.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from ..errors import CalibError
 from ..pairs import Pair, resolve_pairs
 from ..solve import MIN_PAIRS, calibrate
 from .information import fisher_information, information_inverse, pair_noise, pixel_jacobians
-from .laser_noise import WHOLE_CELL_SIGMA, cell_covariance
+from .laser_noise import PICK_CELL_SIGMA, cell_covariance
 
 __all__ = ["PoseState", "current_pose", "DEFAULT_CLICK_SIGMA_PX", "DEFAULT_PRIOR_SIGMA"]
 
@@ -99,7 +100,7 @@ def current_pose(
     laser = np.zeros((len(fit), 3, 3))
     rc_idx = [i for i, p in enumerate(fit) if p.laser_rc is not None]
     if rc_idx:
-        laser[rc_idx] = cell_covariance(depth, np.array([fit[i].laser_rc for i in rc_idx]), WHOLE_CELL_SIGMA)
+        laser[rc_idx] = cell_covariance(depth, np.array([fit[i].laser_rc for i in rc_idx]), PICK_CELL_SIGMA)
     S = pair_noise(pair_sigmas(fit), J_point, laser)
     F = fisher_information(J_pose, S)
     factor = 1.0

@@ -4,7 +4,7 @@ Ranking is sequential D-optimal design: each proposal is the candidate that
 most increases ``log det F`` (:func:`.information.d_optimal_gain`) given the
 current pose covariance *and the proposals ranked before it*, so the list
 does not repeat one region.  A candidate's noise is the click noise of a
-guided pair plus the error of a whole-cell laser pick (:mod:`.laser_noise`): near features
+guided pair plus the error of a careful laser pick (:data:`.laser_noise.PICK_CELL_SIGMA`): near features
 carry more translation information and, on sparse lidars, smaller cells,
 which the gain accounts for; cells wider than ``max_cell_m`` are dropped
 (no corner can be placed within them).
@@ -31,7 +31,7 @@ from .candidates import KINDS, Candidates, find_candidates
 from .corner_probability import WEIGHTS, corner_features, corner_probability, laser_features, scan_range_noise_m
 from .image_corners import CornerImage, content_mask, strongest_near
 from .information import d_optimal_gain, pair_noise, pixel_jacobians, pose_pixel_covariance
-from .laser_noise import DEFAULT_CELL_SIGMA, DEFAULT_RANGE_SIGMA_M, WHOLE_CELL_SIGMA, cell_covariance
+from .laser_noise import DEFAULT_CELL_SIGMA, DEFAULT_RANGE_SIGMA_M, PICK_CELL_SIGMA, cell_covariance
 from .pose_state import PoseState
 from .visibility import visible_in_camera
 
@@ -230,8 +230,8 @@ def propose(
         feats = corner_features(laser_evidence[sel], corner_image, pixels[sel], pixel_cov[sel])
         probability[sel] = corner_probability(feats, corner_weights)
     idx = np.flatnonzero(ok)
-    # The pair's own noise: a guided pair ends on the corner's cell (whole-cell pick).
-    whole = cell_covariance(depth, cand.rows_cols[idx], WHOLE_CELL_SIGMA, range_sigma_m)
+    # The pair's own noise: a guided pair ends on the corner's cell (careful pick).
+    whole = cell_covariance(depth, cand.rows_cols[idx], PICK_CELL_SIGMA, range_sigma_m)
     S = pair_noise(click_sigma_px, J_point[idx], whole)
     J = J_pose[idx]
     # Reclicks are of existing pairs: certainly corners.
@@ -243,7 +243,7 @@ def propose(
         rc_re = np.array([r[1] for r in rows_re], dtype=np.int64)
         pts_re = depth.points[rc_re[:, 0], rc_re[:, 1]]
         pix_re, Jp_re, Jx_re = pixel_jacobians(camera, state.T_camera_lidar, pts_re)
-        whole_re = cell_covariance(depth, rc_re, WHOLE_CELL_SIGMA, range_sigma_m)
+        whole_re = cell_covariance(depth, rc_re, PICK_CELL_SIGMA, range_sigma_m)
         S_new = pair_noise(click_sigma_px, Jx_re, whole_re)
         S_old = pair_noise(np.array([r[2] for r in rows_re]), Jx_re, whole_re)
         S_eff = np.linalg.inv(np.linalg.inv(S_new) - np.linalg.inv(S_old))

@@ -41,11 +41,13 @@ class GuidedSession:
         The camera image: proposals then need an image corner near their pixel.
     click_sigma_px : float
         Click noise of guided pairs (their ``precision_px``).
+    reclicks : bool
+        Whether rough pairs are proposed for a re-click in the loupe (default True).
     """
 
     def __init__(self, depth, camera, pairs: Sequence[Pair] = (), T_initial: np.ndarray | None = None,
                  image: np.ndarray | None = None, click_sigma_px: float = GUIDED_CLICK_SIGMA_PX,
-                 **propose_options) -> None:
+                 reclicks: bool = True, **propose_options) -> None:
         self.depth, self.camera = depth, camera
         self.pairs: list[Pair] = list(pairs)
         self.T_initial = T_initial
@@ -57,6 +59,7 @@ class GuidedSession:
         self.dropped: list[tuple[int, int]] = []
         self.skipped: list[tuple[int, int]] = []
         self.propose_options = propose_options
+        self.reclicks = bool(reclicks)
         self._visible: np.ndarray | None = None
         self.state: PoseState = self._update_state()
 
@@ -71,8 +74,10 @@ class GuidedSession:
     def proposals(self, n: int = 20) -> list[Proposal]:
         """The ``n`` best next pairs under the current state (skipped ones go last)."""
         used = [p.laser_rc for p in self.pairs if p.laser_rc is not None] + self.dropped
+        dropped = set(self.dropped)  # "Not a corner" on a re-click: do not propose that re-click again
         rough = [(i, p.laser_rc, DEFAULT_CLICK_SIGMA_PX if p.precision_px is None else p.precision_px)
-                 for i, p in enumerate(self.pairs) if p.laser_rc is not None and not p.check]
+                 for i, p in enumerate(self.pairs) if p.laser_rc is not None and not p.check
+                 and tuple(p.laser_rc) not in dropped] if self.reclicks else []
         fit = [p for p in self.pairs if not p.check]
         paired_points = resolve_pairs(fit, self.depth, self.camera)[0] if fit else None
         props = propose(self.depth, self.camera, self.state, n + len(self.skipped), candidates=self.candidates,
