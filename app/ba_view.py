@@ -25,17 +25,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from calib_core.arrays import angle_between_rad
+
 #: Largest texture side (SwiftShader, measured) and texel budget per BA image.
 MAX_TEXTURE_SIDE = 8192
 MAX_TEXELS = 2_000_000
 MAX_TEXTURE_FACTOR = 16
 MAX_CELL_ASPECT = 8.0
-
-
-def _angles_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Angles (radians) between unit vectors ``a`` and ``b`` (..., 3); NaN where either is NaN."""
-    cross = np.linalg.norm(np.cross(a, b), axis=-1)
-    return np.arctan2(cross, np.sum(a * b, axis=-1))
 
 
 def cell_aspect_from_directions(directions: np.ndarray) -> float:
@@ -61,8 +57,8 @@ def cell_aspect_from_directions(directions: np.ndarray) -> float:
         return 1.0
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN rows or columns
-        row_step = np.nanmean(np.nanmedian(_angles_between(d[1:], d[:-1]), axis=1))
-        col_step = np.nanmax(np.nanmedian(_angles_between(d[:, 1:], d[:, :-1]), axis=1))
+        row_step = np.nanmean(np.nanmedian(angle_between_rad(d[1:], d[:-1]), axis=1))
+        col_step = np.nanmax(np.nanmedian(angle_between_rad(d[:, 1:], d[:, :-1]), axis=1))
     if not (np.isfinite(row_step) and np.isfinite(col_step)) or row_step <= 0 or col_step <= 0:
         return 1.0
     return float(np.clip(row_step / col_step, 1.0 / MAX_CELL_ASPECT, MAX_CELL_ASPECT))

@@ -99,6 +99,9 @@ class LoupeSupport:
         self._overlay_inputs = None
         self._refresh_scene()
         self._refresh_panel()
+        guide = getattr(self, "guide", None)
+        if guide is not None:  # proposals can start from the imported pose
+            guide.update()
 
     def _add_extrinsics_upload_button(self, client: Any) -> None:
         """This tab's "Import initial extrinsics" button, in the View folder."""

@@ -26,6 +26,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from .arrays import angle_between_rad
 from .errors import CalibError
 from .solve import MIN_PAIRS, CalibrationResult, solve_extrinsics
 from .transforms import rotation_angle_deg, transform_points
@@ -96,10 +97,7 @@ def pixel_errors(T_camera_lidar: np.ndarray, points_lidar: np.ndarray, pixels: n
 
 def angular_errors_deg(T_camera_lidar: np.ndarray, points_lidar: np.ndarray, bearings: np.ndarray) -> np.ndarray:
     """Angle (deg) between each bearing and the direction of its transformed laser point."""
-    p = transform_points(T_camera_lidar, points_lidar)
-    p = p / np.linalg.norm(p, axis=1, keepdims=True)
-    cross = np.linalg.norm(np.cross(p, bearings), axis=1)
-    return np.degrees(np.arctan2(cross, np.sum(p * bearings, axis=1)))
+    return np.degrees(angle_between_rad(transform_points(T_camera_lidar, points_lidar), bearings))
 
 
 def leave_one_out(
