@@ -26,6 +26,7 @@ from .cli_guard import (  # noqa: F401  (with_default_command: public, used by t
     remove_stale_temp_files,
     with_default_command,
 )
+from .cli_serve import add_serve_parser
 from .cli_toolchain import cmd_bag_extract, cmd_bag_info, cmd_export
 
 #: ``solve`` wrote the file but the calibration's quality status is ``unreliable``.
@@ -280,55 +281,6 @@ def cmd_sample(args: argparse.Namespace) -> int:
     return 0
 
 
-def cmd_serve(args: argparse.Namespace) -> int:
-    from app.serving import serve
-
-    if getattr(args, "bag", None) is not None:
-        from app.serving import BagSource
-
-        if args.scan is not None or args.image is not None:
-            from calib_core.errors import CalibError
-
-            raise CalibError("serve --bag takes the scan and the image from the bag: leave out --scan and --image")
-        source = BagSource(args.bag, cloud_topic=args.cloud_topic, image_topic=args.image_topic,
-                           camera_info_topic=args.camera_info_topic, index=args.index, time_s=args.time,
-                           camera=args.camera, frames_dir=args.frames_dir, session=args.session)
-        serve(None, None, None, output_path=args.output, host=args.host, port=args.port,
-              scan_options=scan_options(args), image_size=tuple(args.image_size) if args.image_size else None,
-              initial_extrinsics_path=args.initial_extrinsics, bag=source)
-        return 0
-    bag_only = [o for o, v in (("--cloud-topic", args.cloud_topic), ("--image-topic", args.image_topic),
-                               ("--camera-info-topic", args.camera_info_topic), ("--index", args.index),
-                               ("--time", args.time), ("--frames-dir", args.frames_dir)) if v is not None]
-    if bag_only:
-        from calib_core.errors import CalibError
-
-        raise CalibError(f"{', '.join(bag_only)} choose(s) what to read from a bag: give --bag too")
-    if args.scan is None and args.image is None and args.camera is None:
-        sample = default_sample_dir()
-        args.scan, args.image, args.camera = sample / "scan.npz", sample / "image.png", sample / "camera.yaml"
-        if args.session is None:
-            args.session = Path.cwd() / "ba-calib-sample-session.yaml"
-    missing = [n for n in ("scan", "image", "camera") if getattr(args, n) is None]
-    if missing:
-        from calib_core.errors import CalibError
-
-        raise CalibError("serve needs --scan, --image and --camera (or none of them, for the sample); missing: " + ", ".join("--" + m for m in missing))
-    serve(
-        args.scan,
-        args.image,
-        args.camera,
-        session_path=args.session,
-        output_path=args.output,
-        host=args.host,
-        port=args.port,
-        scan_options=scan_options(args),
-        image_size=tuple(args.image_size) if args.image_size else None,
-        initial_extrinsics_path=args.initial_extrinsics,
-    )
-    return 0
-
-
 def _version() -> str:
     from calib_core import __version__
 
@@ -346,33 +298,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"ba-calib {_version()}")
     sub = parser.add_subparsers(dest="command")
 
-    p = sub.add_parser("serve", help="open the browser app on a scene")
-    p.add_argument("--scan", type=Path)
-    p.add_argument("--image", type=Path)
-    p.add_argument("--camera", type=Path)
-    p.add_argument("--image-size", type=int, nargs=2, metavar=("W", "H"), default=None)
-    p.add_argument("--organize", choices=["auto", "ring", "elevation", "firing", "spherical"], default="auto")
-    p.add_argument("--beams", type=int, default=None)
-    p.add_argument("--h-res-deg", type=float, default=None)
-    p.add_argument("--v-res-deg", type=float, default=None)
-    p.add_argument("--session", type=Path, default=None, help="pairs session file, saved after every change and restored on start")
-    p.add_argument("--output", type=Path, default=None, help="where Export also writes the extrinsics YAML")
-    p.add_argument("--host", default="127.0.0.1", help="interface to bind (default 127.0.0.1: this machine only)")
-    p.add_argument("--port", type=int, default=8080)
-    p.add_argument("--initial-extrinsics", type=Path, default=None,
-                   help="start from this extrinsic (any format 'export' writes, or a ba-calib YAML)")
-    g = p.add_argument_group("ROS bags (no ROS needed)")
-    g.add_argument("--bag", type=Path, default=None,
-                   help="serve a frame of this .bag / ROS 2 bag folder (the page can switch frames)")
-    g.add_argument("--cloud-topic", default=None, help="sensor_msgs/PointCloud2 topic (default: the only one)")
-    g.add_argument("--image-topic", default=None, help="sensor_msgs/Image or CompressedImage topic (default: the only one)")
-    g.add_argument("--camera-info-topic", default=None, help="sensor_msgs/CameraInfo topic (default: the only one; --camera overrides)")
-    which = g.add_mutually_exclusive_group()
-    which.add_argument("--index", type=int, default=None, help="first frame: the cloud with this 0-based index (default 0)")
-    which.add_argument("--time", type=float, default=None, help="first frame: the cloud nearest this many seconds after the bag's start")
-    g.add_argument("--frames-dir", type=Path, default=None,
-                   help="where frames are extracted (default ./<bag name>.ba-calib-frames)")
-    p.set_defaults(func=cmd_serve)
+    add_serve_parser(sub)
 
     p = sub.add_parser(
         "solve",
