@@ -55,3 +55,56 @@ def save_small_png(png: bytes, path: Path, max_bytes: int = 300_000) -> int:
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_bytes(buf.getvalue())
     return len(buf.getvalue())
+
+
+def page_text(page) -> str:
+    """The page's visible text, whitespace collapsed."""
+    return " ".join(page.inner_text("body").split())
+
+
+class AnnotationTab:
+    """A headless-Chromium tab on a running app, connected, its annotation view set, the WebGL notice closed.
+
+    ``screen(target, uv)`` is the page position of pixel ``uv`` of a view (``"camera"``, a BA key,
+    ``"loupe_ba"``, ``"loupe_camera"``), from the camera the tab reported (:meth:`CalibrationApp.page_position`).
+    """
+
+    def __init__(self, playwright, app, viewport: dict, **page_options) -> None:
+        self.app = app
+        self.browser = playwright.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS)
+        self.page = self.browser.new_page(viewport=viewport, **page_options)
+        self.page.goto(app.url)
+        self.cid = wait_for(lambda: app.client_ids(), "the tab to connect")[0]
+        wait_for(lambda: app.view_settled(self.cid), "the annotation view to be set")
+        # The software-WebGL notice swallows clicks at the top left: close it.
+        notice = self.page.locator(".mantine-Notification-root", has_text="Software WebGL")
+        notice.first.wait_for(timeout=TIMEOUT_S * 1000)
+        notice.first.locator("button").click()
+        notice.first.wait_for(state="detached", timeout=TIMEOUT_S * 1000)
+        self.box = self.page.locator("canvas").first.bounding_box()
+        assert self.box is not None
+
+    def screen(self, target: str, uv) -> tuple[float, float]:
+        fx, fy = self.app.page_position(self.cid, target, uv)
+        assert 0.0 < fx < 1.0 and 0.0 < fy < 1.0, f"{target} {uv} is off screen"
+        return self.box["x"] + fx * self.box["width"], self.box["y"] + fy * self.box["height"]
+
+    def scale(self, target: str, uv) -> float:
+        """Screen px per BA cell (column step) or per image pixel at ``uv`` of ``target``."""
+        import numpy as np
+
+        a, b = np.array(self.screen(target, uv)), np.array(self.screen(target, (uv[0] + 1.0, uv[1])))
+        return float(np.hypot(*(b - a)))
+
+    def shows_image_at(self, points) -> bool:
+        """True once every ``(target, uv)`` of ``points`` shows something other than the light-grey backdrop."""
+        import numpy as np
+        from PIL import Image
+
+        for target, uv in points:
+            x, y = self.screen(target, uv)
+            shot = self.page.screenshot(clip={"x": x - 2, "y": y - 2, "width": 4, "height": 4})
+            rgb = np.asarray(Image.open(io.BytesIO(shot)).convert("RGB"), dtype=float).reshape(-1, 3)
+            if np.abs(rgb.mean(axis=0) - 238.0).max() < 12:
+                return False
+        return True

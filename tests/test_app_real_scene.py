@@ -10,7 +10,6 @@ calibration, see ``real_data/README.md``).
 
 from __future__ import annotations
 
-import io
 import json
 import time
 from pathlib import Path
@@ -21,7 +20,7 @@ import pytest
 from calib_core.pairs import load_pairs_yaml, save_pairs_yaml
 from calib_core.transforms import transform_points
 
-from browser_helpers import CHROMIUM, CHROMIUM_ARGS, TIMEOUT_S, free_port, wait_for
+from browser_helpers import CHROMIUM, AnnotationTab, free_port, wait_for
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "data" / "pjlab_opencalib_lidar2camera" / "auto_calib"
@@ -139,7 +138,6 @@ def test_camera_facing_window_shows_what_the_published_calibration_projects(tmp_
 @pytest.mark.skipif(not CHROMIUM.exists(), reason="/usr/bin/chromium is missing (apt-get install chromium); CI installs it")
 def test_pick_exact_cells_on_the_real_scan_in_headless_chromium(tmp_path):
     sync_api = pytest.importorskip("playwright.sync_api", reason="the playwright package is not installed")
-    from PIL import Image
 
     scene_files()
     t_start = time.monotonic()
@@ -152,22 +150,9 @@ def test_pick_exact_cells_on_the_real_scan_in_headless_chromium(tmp_path):
         app.state.import_pairs_file(preloaded)  # a calibration exists: the camera-facing window is known
         assert app.wait_idle(60) and app.result is not None
         with sync_api.sync_playwright() as p:
-            browser = p.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS)
-            page = browser.new_page(viewport={"width": 1400, "height": 900})
-            page.goto(app.url)
-            cid = wait_for(lambda: app.client_ids(), "the tab to connect")[0]
-            wait_for(lambda: app.view_settled(cid), "the annotation view to be set")
-            notice = page.locator(".mantine-Notification-root", has_text="Software WebGL")
-            notice.first.wait_for(timeout=TIMEOUT_S * 1000)
-            notice.first.locator("button").click()
-            notice.first.wait_for(state="detached", timeout=TIMEOUT_S * 1000)
-            box = page.locator("canvas").first.bounding_box()
-            assert box is not None
+            tab = AnnotationTab(p, app, {"width": 1400, "height": 900})
+            page, cid, screen = tab.page, tab.cid, tab.screen
 
-            def screen(target: str, uv) -> tuple[float, float]:
-                fx, fy = app.page_position(cid, target, uv)
-                assert 0.0 < fx < 1.0 and 0.0 < fy < 1.0, f"{target} {uv} is off screen"
-                return box["x"] + fx * box["width"], box["y"] + fy * box["height"]
 
             def px_per_cell(key: str, row: int, col: int) -> tuple[float, float]:
                 x0, y0 = screen(key, (col, row))
@@ -175,11 +160,8 @@ def test_pick_exact_cells_on_the_real_scan_in_headless_chromium(tmp_path):
                 _, y1 = screen(key, (col, row + 1))
                 return x1 - x0, y1 - y0
 
-            def drawn(target: str, uv) -> bool:
-                x, y = screen(target, uv)
-                shot = page.screenshot(clip={"x": x - 2, "y": y - 2, "width": 4, "height": 4})
-                rgb = np.asarray(Image.open(io.BytesIO(shot)).convert("RGB"), dtype=float).reshape(-1, 3)
-                return bool(np.abs(rgb.mean(axis=0) - 238.0).max() >= 12)  # not the grey backdrop
+            def drawn(target: str, uv) -> bool:  # not the grey backdrop
+                return tab.shows_image_at(((target, uv),))
 
             def set_view(button: str) -> None:
                 before = app.view_set_time(cid)
@@ -237,7 +219,7 @@ def test_pick_exact_cells_on_the_real_scan_in_headless_chromium(tmp_path):
             assert text_ok
             set_view("BA images")
             page.screenshot(path=str(tmp_path / "real_scene.png"))
-            browser.close()
+            tab.browser.close()
     finally:
         app.stop()
 

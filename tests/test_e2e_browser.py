@@ -11,20 +11,18 @@ corner's true camera pixel.  Screen positions come from the app's test hook
 
 from __future__ import annotations
 
-import io
 import re
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
-from PIL import Image
 
 from calib_core.io.extrinsics import load_extrinsics_yaml
 from calib_core.synthetic import load_sample, simulate_pairs
 from calib_core.transforms import rotation_angle_deg
 
-from browser_helpers import CHROMIUM, CHROMIUM_ARGS, TIMEOUT_S, free_port, save_small_png, wait_for
+from browser_helpers import CHROMIUM, TIMEOUT_S, AnnotationTab, page_text, free_port, save_small_png, wait_for
 
 pytestmark = pytest.mark.browser
 
@@ -33,9 +31,6 @@ SAMPLE = ROOT / "sample_data"
 SCREENSHOT = ROOT / "docs" / "screenshot.png"
 N_PAIRS = 8
 
-
-def page_text(page) -> str:
-    return " ".join(page.inner_text("body").split())
 
 
 @pytest.mark.skipif(not CHROMIUM.exists(), reason="/usr/bin/chromium is missing (apt-get install chromium); CI installs it")
@@ -57,21 +52,8 @@ def test_annotate_sample_in_headless_chromium(tmp_path):
     mean_px_after: list[float] = []
     try:
         with sync_api.sync_playwright() as p:
-            browser = p.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS)
-            page = browser.new_page(viewport={"width": 1400, "height": 900}, accept_downloads=True)
-            page.goto(app.url)
-            cid = wait_for(lambda: app.client_ids(), "the tab to connect")[0]
-            wait_for(lambda: app.view_settled(cid), "the annotation view to be set")
-
-            # The software-WebGL notice swallows clicks at the top left: close it.
-            notice = page.locator(".mantine-Notification-root", has_text="Software WebGL")
-            notice.first.wait_for(timeout=TIMEOUT_S * 1000)
-            notice.first.locator("button").click()
-            notice.first.wait_for(state="detached", timeout=TIMEOUT_S * 1000)
-
-            canvas = page.locator("canvas").first
-            box = canvas.bounding_box()
-            assert box is not None
+            tab = AnnotationTab(p, app, {"width": 1400, "height": 900}, accept_downloads=True)
+            page, cid, box = tab.page, tab.cid, tab.box
 
             def click(target: str, uv) -> None:
                 fx, fy = app.page_position(cid, target, uv)
@@ -81,14 +63,7 @@ def test_annotate_sample_in_headless_chromium(tmp_path):
             # Wait until the images are drawn (their meshes take the clicks): the
             # page shows something other than the light-grey backdrop there.
             def drawn() -> bool:
-                for target, uv in (("camera", (320.0, 300.0)), (app.ba_keys[0], (360.0, 90.0))):
-                    fx, fy = app.page_position(cid, target, uv)
-                    x, y = box["x"] + fx * box["width"], box["y"] + fy * box["height"]
-                    shot = page.screenshot(clip={"x": x - 2, "y": y - 2, "width": 4, "height": 4})
-                    rgb = np.asarray(Image.open(io.BytesIO(shot)).convert("RGB"), dtype=float).reshape(-1, 3)
-                    if np.abs(rgb.mean(axis=0) - 238.0).max() < 12:
-                        return False
-                return True
+                return tab.shows_image_at((("camera", (320.0, 300.0)), (app.ba_keys[0], (360.0, 90.0))))
 
             wait_for(drawn, "the page to draw the images", interval=0.2)
             ba_keys = app.ba_keys
@@ -166,7 +141,7 @@ def test_annotate_sample_in_headless_chromium(tmp_path):
             assert predicted_err_px < 3.0
 
             # A second tab sees the same pairs.
-            page2 = browser.new_page(viewport={"width": 1400, "height": 900})
+            page2 = tab.browser.new_page(viewport={"width": 1400, "height": 900})
             page2.goto(app.url)
             wait_for(lambda: f"Pairs: {N_PAIRS} complete" in page_text(page2), "the second tab to show the pairs")
             page2.close()
@@ -187,7 +162,7 @@ def test_annotate_sample_in_headless_chromium(tmp_path):
             page.get_by_text("Calibration", exact=True).first.evaluate("e => e.scrollIntoView({block: 'start'})")
             SCREENSHOT.parent.mkdir(exist_ok=True)
             save_small_png(page.screenshot(), SCREENSHOT)
-            browser.close()
+            tab.browser.close()
     finally:
         app.stop()
 

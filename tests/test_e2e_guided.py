@@ -11,20 +11,18 @@ press counts as a UI action.  Screen positions come from the app's
 
 from __future__ import annotations
 
-import io
 import re
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
-from PIL import Image
 
 from calib_core.io.extrinsics import load_extrinsics_yaml
 from calib_core.synthetic import load_sample, simulate_pairs
 from calib_core.transforms import rotation_angle_deg, transform_points
 
-from browser_helpers import CHROMIUM, CHROMIUM_ARGS, TIMEOUT_S, free_port, wait_for
+from browser_helpers import CHROMIUM, TIMEOUT_S, AnnotationTab, page_text, free_port, wait_for
 
 pytestmark = pytest.mark.browser
 
@@ -34,9 +32,6 @@ CLICK_SIGMA_PX = 0.3
 MAX_ACTIONS_PER_PAIR = 1.5  # issue 9
 MIN_SCREEN_PX_PER_IMAGE_PX = 8.0  # issue 9, camera loupe
 
-
-def page_text(page) -> str:
-    return " ".join(page.inner_text("body").split())
 
 
 @pytest.mark.skipif(not CHROMIUM.exists(), reason="/usr/bin/chromium is missing (apt-get install chromium); CI installs it")
@@ -53,32 +48,12 @@ def test_guided_pairs_in_headless_chromium(tmp_path):
                          session_path=tmp_path / "session.yaml", port=free_port())
     try:
         with sync_api.sync_playwright() as p:
-            browser = p.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS)
-            page = browser.new_page(viewport={"width": 1400, "height": 900})
-            page.goto(app.url)
-            cid = wait_for(lambda: app.client_ids(), "the tab to connect")[0]
-            wait_for(lambda: app.view_settled(cid), "the annotation view to be set")
-            notice = page.locator(".mantine-Notification-root", has_text="Software WebGL")
-            notice.first.wait_for(timeout=TIMEOUT_S * 1000)
-            notice.first.locator("button").click()
-            notice.first.wait_for(state="detached", timeout=TIMEOUT_S * 1000)
-            canvas = page.locator("canvas").first
-            box = canvas.bounding_box()
-            assert box is not None
+            tab = AnnotationTab(p, app, {"width": 1400, "height": 900})
+            page, screen = tab.page, tab.screen
 
-            def screen(target: str, uv) -> tuple[float, float]:
-                fx, fy = app.page_position(cid, target, uv)
-                assert 0.0 < fx < 1.0 and 0.0 < fy < 1.0, f"{target} {uv} is off screen"
-                return box["x"] + fx * box["width"], box["y"] + fy * box["height"]
 
             def drawn() -> bool:  # the images are on the page (not the light-grey backdrop)
-                for target, uv in (("camera", (320.0, 300.0)), (app.ba_keys[0], (360.0, 90.0))):
-                    x, y = screen(target, uv)
-                    shot = page.screenshot(clip={"x": x - 2, "y": y - 2, "width": 4, "height": 4})
-                    rgb = np.asarray(Image.open(io.BytesIO(shot)).convert("RGB"), dtype=float).reshape(-1, 3)
-                    if np.abs(rgb.mean(axis=0) - 238.0).max() < 12:
-                        return False
-                return True
+                return tab.shows_image_at((("camera", (320.0, 300.0)), (app.ba_keys[0], (360.0, 90.0))))
 
             wait_for(drawn, "the page to draw the images", interval=0.2)
             t_browser = time.monotonic()
@@ -144,7 +119,7 @@ def test_guided_pairs_in_headless_chromium(tmp_path):
                 shown_errors.append(wait_for(lambda: solved(r.n_pairs) == mean and mean,
                                              f"the error display after guided pair {k + 1}"))
             browser_s = time.monotonic() - t_browser
-            browser.close()
+            tab.browser.close()
         T = app.result.T_camera_lidar
     finally:
         app.stop()

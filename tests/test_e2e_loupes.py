@@ -17,19 +17,17 @@ screen positions from the app's page-position hook; the scale at each pick
 
 from __future__ import annotations
 
-import io
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
-from PIL import Image
 
 from calib_core.io.extrinsics import load_extrinsics_yaml
 from calib_core.synthetic import load_sample, simulate_pairs
 from calib_core.transforms import rotation_angle_deg
 
-from browser_helpers import CHROMIUM, CHROMIUM_ARGS, TIMEOUT_S, free_port, save_small_png, wait_for
+from browser_helpers import CHROMIUM, TIMEOUT_S, AnnotationTab, free_port, save_small_png, wait_for
 
 pytestmark = pytest.mark.browser
 
@@ -60,26 +58,10 @@ def test_ten_pairs_through_the_loupes(tmp_path):
     loupe_px_scales: list[float] = []
     try:
         with sync_api.sync_playwright() as p:
-            browser = p.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS)
-            page = browser.new_page(viewport=VIEWPORT)
-            page.goto(app.url)
-            cid = wait_for(lambda: app.client_ids(), "the tab to connect")[0]
-            wait_for(lambda: app.view_settled(cid), "the annotation view to be set")
-            notice = page.locator(".mantine-Notification-root", has_text="Software WebGL")
-            notice.first.wait_for(timeout=TIMEOUT_S * 1000)
-            notice.first.locator("button").click()
-            notice.first.wait_for(state="detached", timeout=TIMEOUT_S * 1000)
-            box = page.locator("canvas").first.bounding_box()
+            tab = AnnotationTab(p, app, VIEWPORT)
+            page, screen, scale = tab.page, tab.screen, tab.scale
 
-            def screen(target: str, uv) -> tuple[float, float]:
-                fx, fy = app.page_position(cid, target, uv)
-                assert 0.0 < fx < 1.0 and 0.0 < fy < 1.0, f"{target} {uv} is off screen"
-                return box["x"] + fx * box["width"], box["y"] + fy * box["height"]
 
-            def scale(target: str, uv) -> float:
-                """Screen px per BA cell (column step) or per image pixel at ``uv`` of ``target``."""
-                a, b = np.array(screen(target, uv)), np.array(screen(target, (uv[0] + 1.0, uv[1])))
-                return float(np.hypot(*(b - a)))
 
             def click(target: str, uv) -> None:
                 nonlocal actions
@@ -90,13 +72,7 @@ def test_ten_pairs_through_the_loupes(tmp_path):
                 assert driver.wait_idle(TIMEOUT_S)  # the loupes re-framed (as a person waits to see them move)
 
             def drawn() -> bool:  # the images and loupes are on the page (not the light backdrop)
-                for target, uv in (("camera", (320.0, 300.0)), ("loupe_ba", driver.loupe_view("ba")["center"][::-1])):
-                    x, y = screen(target, uv)
-                    shot = page.screenshot(clip={"x": x - 2, "y": y - 2, "width": 4, "height": 4})
-                    rgb = np.asarray(Image.open(io.BytesIO(shot)).convert("RGB"), dtype=float).reshape(-1, 3)
-                    if np.abs(rgb.mean(axis=0) - 238.0).max() < 12:
-                        return False
-                return True
+                return tab.shows_image_at((("camera", (320.0, 300.0)), ("loupe_ba", driver.loupe_view("ba")["center"][::-1])))
 
             wait_for(drawn, "the page to draw the images and loupes", interval=0.2)
             for k, pair in enumerate(pairs):
@@ -150,7 +126,7 @@ def test_ten_pairs_through_the_loupes(tmp_path):
 
             wait_for(close_notifications, "notifications to close")
             size = save_small_png(page.screenshot(), SCREENSHOT)
-            browser.close()
+            tab.browser.close()
     finally:
         app.stop()
 
@@ -222,25 +198,10 @@ def test_six_pairs_on_the_real_scan_from_a_rough_extrinsic(tmp_path):
     try:
         np.testing.assert_allclose(app.initial_T_camera_lidar, rough, atol=1e-9)
         with sync_api.sync_playwright() as p:
-            browser = p.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS)
-            page = browser.new_page(viewport=VIEWPORT)
-            page.goto(app.url)
-            cid = wait_for(lambda: app.client_ids(), "the tab to connect")[0]
-            wait_for(lambda: app.view_settled(cid), "the annotation view to be set")
-            notice = page.locator(".mantine-Notification-root", has_text="Software WebGL")
-            notice.first.wait_for(timeout=TIMEOUT_S * 1000)
-            notice.first.locator("button").click()
-            notice.first.wait_for(state="detached", timeout=TIMEOUT_S * 1000)
-            box = page.locator("canvas").first.bounding_box()
+            tab = AnnotationTab(p, app, VIEWPORT)
+            page, screen, scale = tab.page, tab.screen, tab.scale
 
-            def screen(target: str, uv) -> tuple[float, float]:
-                fx, fy = app.page_position(cid, target, uv)
-                assert 0.0 < fx < 1.0 and 0.0 < fy < 1.0, f"{target} {uv} is off screen"
-                return box["x"] + fx * box["width"], box["y"] + fy * box["height"]
 
-            def scale(target: str, uv) -> float:
-                a, b = np.array(screen(target, uv)), np.array(screen(target, (uv[0] + 1.0, uv[1])))
-                return float(np.hypot(*(b - a)))
 
             def click(target: str, uv) -> None:
                 nonlocal actions
@@ -251,10 +212,7 @@ def test_six_pairs_on_the_real_scan_from_a_rough_extrinsic(tmp_path):
                 assert driver.wait_idle(TIMEOUT_S)
 
             def drawn() -> bool:
-                x, y = screen("camera", (960.0, 600.0))
-                shot = page.screenshot(clip={"x": x - 2, "y": y - 2, "width": 4, "height": 4})
-                rgb = np.asarray(Image.open(io.BytesIO(shot)).convert("RGB"), dtype=float).reshape(-1, 3)
-                return bool(np.abs(rgb.mean(axis=0) - 238.0).max() >= 12)
+                return tab.shows_image_at((("camera", (960.0, 600.0)),))
 
             wait_for(drawn, "the page to draw the images", interval=0.2)
             for k, pair in enumerate(pairs):
@@ -287,7 +245,7 @@ def test_six_pairs_on_the_real_scan_from_a_rough_extrinsic(tmp_path):
                 except sync_api.TimeoutError:
                     pass
             size = save_small_png(page.screenshot(), PJLAB_SCREENSHOT)
-            browser.close()
+            tab.browser.close()
     finally:
         app.stop()
     print("\n" + "\n".join(log))
