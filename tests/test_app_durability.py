@@ -15,6 +15,7 @@ import signal
 import subprocess
 import sys
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -50,50 +51,63 @@ def read_reply(proc: subprocess.Popen, words: tuple[str, ...]) -> tuple[str, str
     raise AssertionError("no reply from the child")
 
 
+def run_trial(trial: int, session: Path, rows: np.ndarray, cols: np.ndarray) -> dict:
+    """One child: a run of clicks, then SIGKILL right after the last ack (or up to 60 ms later)."""
+    rng = np.random.default_rng([8, trial])
+    proc = start_child(session)
+    out = {"acked": None, "changes": 0, "seconds": [], "refusals": []}
+    try:
+        # Mostly short runs; every 10th crosses the journal's compaction threshold (200 records).
+        n = 230 if trial % 10 == 9 else int(rng.integers(1, 30))
+        out["n"] = n
+        for k in range(n):
+            if rng.random() < 0.08 and k:
+                cmd = "undo"
+            elif k % 2 == 0:
+                i = int(rng.integers(len(rows)))
+                cmd = f"ba {rows[i]} {cols[i]}"
+            else:
+                cmd = f"cam {rng.uniform(220, 420):.2f} {rng.uniform(160, 320):.2f}"
+            t0 = time.perf_counter()
+            proc.stdin.write(cmd + "\n")
+            proc.stdin.flush()
+            status, picks = read_reply(proc, ("ack", "nack"))
+            out["seconds"].append(time.perf_counter() - t0)
+            if status == "ack":
+                out["acked"] = json.loads(picks)
+                out["changes"] += 1
+            else:
+                out["refusals"].append(json.loads(picks))
+        if trial % 2:
+            time.sleep(float(rng.uniform(0.0, 0.06)))
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait(10)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(10)
+    return out
+
+
 def test_no_acknowledged_change_is_lost_to_kill_9(tmp_path):
     depth = load_scan(SAMPLE / "scan.npz")
     camera = load_camera(SAMPLE / "camera.yaml")
     size = (camera.width, camera.height)
     rows, cols = np.nonzero(depth.valid)
-    rng = np.random.default_rng(8)
     lost, changes, seconds, refusals = [], 0, [], []
-    for trial in range(TRIALS):
-        session = tmp_path / f"session{trial}.yaml"
-        proc = start_child(session)
-        try:
-            # Mostly short runs; every 10th crosses the journal's compaction threshold (200 records).
-            n = 230 if trial % 10 == 9 else int(rng.integers(1, 30))
-            acked = None
-            for k in range(n):
-                if rng.random() < 0.08 and k:
-                    cmd = "undo"
-                elif k % 2 == 0:
-                    i = int(rng.integers(len(rows)))
-                    cmd = f"ba {rows[i]} {cols[i]}"
-                else:
-                    cmd = f"cam {rng.uniform(220, 420):.2f} {rng.uniform(160, 320):.2f}"
-                t0 = time.perf_counter()
-                proc.stdin.write(cmd + "\n")
-                proc.stdin.flush()
-                status, picks = read_reply(proc, ("ack", "nack"))
-                seconds.append(time.perf_counter() - t0)
-                if status == "ack":
-                    acked = json.loads(picks)
-                    changes += 1
-                else:
-                    refusals.append(json.loads(picks))
-            if trial % 2:
-                time.sleep(float(rng.uniform(0.0, 0.06)))
-            os.kill(proc.pid, signal.SIGKILL)
-            proc.wait(10)
-        finally:
-            if proc.poll() is None:
-                proc.kill()
-                proc.wait(10)
-        restored = AnnotationState(depth.valid, size, session)
-        got = [p.to_dict() for p in restored.picks]
-        if acked is not None and got != acked:
-            lost.append((trial, n, len(got), len(acked)))
+    # Two children at a time: pytest runs on one core, and each child's start-up is most of a trial.
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        runs = pool.map(lambda trial: (trial, run_trial(trial, tmp_path / f"session{trial}.yaml", rows, cols)),
+                        range(TRIALS))
+        for trial, out in runs:
+            changes += out["changes"]
+            seconds += out["seconds"]
+            refusals += out["refusals"]
+            restored = AnnotationState(depth.valid, size, tmp_path / f"session{trial}.yaml")
+            got = [p.to_dict() for p in restored.picks]
+            restored.close()
+            if out["acked"] is not None and got != out["acked"]:
+                lost.append((trial, out["n"], len(got), len(out["acked"])))
     print(f"\nkill -9 after an acknowledged change: {len(lost)} of {TRIALS} trials lost it "
           f"({changes} acknowledged changes; click to ack median {np.median(seconds) * 1000:.1f} ms, "
           f"max {np.max(seconds) * 1000:.1f} ms); lost (trial, changes, restored, acked): {lost}; "
