@@ -137,7 +137,7 @@ class LiveSolveCoordinator:
         t0 = time.perf_counter()
         T = bundle.result.T_camera_lidar
         colors = self._cloud_colors(T) if self._cloud_shown() and self._cloud_shows is not bundle else None
-        facing_done = self._ba_mode == "camera" and self._facing_of is not bundle
+        facing_done = self.state.view.ba_window_mode == "camera" and self._facing_of is not bundle
         facing = self._facing_window(T) if facing_done else None
         self._projection(T)  # the loupes' camera-to-cell predictions, ready before the next click
         return CloudUpdate(bundle, colors, facing_done, facing, time.perf_counter() - t0)
@@ -154,7 +154,7 @@ class LiveSolveCoordinator:
                 self._cloud_shows = update.bundle
             if update.facing_done:
                 self._set_facing(update.bundle, update.facing)
-        if update.facing_done and self._ba_mode == "camera" and not self._stopped:
+        if update.facing_done and self.state.view.ba_window_mode == "camera" and not self._stopped:
             # In the action worker, so a click is never mapped through a window that changed under it.
             self._actions.put((lambda action: self._apply_ba_window(), _Action(None, None)))
 

@@ -93,7 +93,7 @@ class LoupeSupport:
 
     def _after_initial_extrinsics(self) -> None:
         """Redraw predictions and the facing window once an initial extrinsic is imported."""
-        if self._ba_mode == "camera" and self._bundle is None:
+        if self.state.view.ba_window_mode == "camera" and self._bundle is None:
             self._ensure_facing()
             self._apply_ba_window()
         self._overlay_inputs = None

@@ -90,7 +90,8 @@ class OverlayDrawing:
         bundle = self._bundle
         # Skipped when neither the solve, the view nor the picks it colours changed (e.g. a click on a BA image).
         self._draw_predictions(slot, predictions)  # cheap, changes with every BA click
-        inputs = (slot, self.camera_view.key, self._show_reprojection, self._show_edges, self._edge_opacity,
+        view = self.state.view
+        inputs = (slot, self.camera_view.key, view.show_reprojection, view.show_edges, view.edge_opacity,
                   () if bundle is None else tuple(picks[i].color if i in picks else None for i in bundle.pick_ids))
         if self._overlay_inputs is not None and self._overlay_inputs[0] is bundle and self._overlay_inputs[1] == inputs:
             return
@@ -99,7 +100,7 @@ class OverlayDrawing:
         segs = np.empty((0, 2, 3))
         edge_world, edge_cols = np.empty((0, 3)), np.empty((0, 3), np.uint8)
         if bundle is not None:
-            if self._show_reprojection and len(bundle.pick_ids):
+            if view.show_reprojection and len(bundle.pick_ids):
                 clicked, ok_c = self._display_from_pixels(bundle.pixels)
                 proj, ok_p = self._display_from_camera_points(bundle.points_camera)
                 colors = np.array([picks[pid].color if pid in picks else (255, 255, 0) for pid in bundle.pick_ids],
@@ -109,7 +110,7 @@ class OverlayDrawing:
                 both = ok_p & ok_c
                 segs = np.stack([slot.world_from_pixel(clicked[both], z_offset=-0.008),
                                  slot.world_from_pixel(proj[both], z_offset=-0.008)], axis=1)
-            if self._show_edges and self._edge_opacity > 0 and len(bundle.edges_camera):
+            if view.show_edges and view.edge_opacity > 0 and len(bundle.edges_camera):
                 uv, ok = self._display_from_camera_points(bundle.edges_camera)
                 # Only where the camera sees (inside a fisheye circle); blended with the image under each point.
                 raw, ok_raw = self.camera.project(bundle.edges_camera)
@@ -118,7 +119,7 @@ class OverlayDrawing:
                 ok &= ok_raw & self.scene_data.image_valid[ij[:, 1], ij[:, 0]]
                 edge_world = slot.world_from_pixel(uv[ok], z_offset=-0.004)
                 under = self.image[ij[ok, 1], ij[ok, 0]].astype(np.float64)
-                a = self._edge_opacity
+                a = view.edge_opacity
                 edge_cols = np.round(a * np.array([0.0, 190.0, 255.0]) + (1.0 - a) * under).astype(np.uint8)
         self.nodes.points("/annot/overlay/reprojected", reproj_pts, reproj_cols, MARKER_SIZE * 0.55, shape="diamond")
         self.nodes.lines("/annot/overlay/residuals", segs, np.full(segs.shape, (255, 230, 0), np.uint8), thickness=2.0)

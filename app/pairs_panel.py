@@ -46,21 +46,21 @@ class PairsPanel:
         """``("ba", key, row, col)`` or ``("camera", u, v)`` (original pixel) under display pixel ``uv`` of ``key``."""
         if key.startswith("loupe_"):
             target = self.loupes.target_at(key[len("loupe_"):], uv)
-            if self._snap and target[0] == "ba":
+            if self.state.view.snap and target[0] == "ba":
                 col, row = refine_click_to_corner(self.ba_display(target[1]), (target[3], target[2]), 3.0)
                 target = ("ba", target[1], int(np.clip(round(row), 0, self.depth.shape[0] - 1)),
                           int(round(col)) % self.depth.shape[1])
-            elif self._snap:
+            elif self.state.view.snap:
                 target = ("camera", *map(float, refine_click_to_corner(self.image_gray, target[1:], SNAP_RADIUS_PX)))
             return target
         if key in self.ba_keys:
-            if self._snap:
+            if self.state.view.snap:
                 shown = self.ba_display(key)[:, self._ba_window.columns]
                 uv = tuple(refine_click_to_corner(shown, uv, 3.0))
             return ("ba", key, *self.cell_from_display(key, uv))
         if key != self.camera_view.key:
             raise CalibError("that camera view is hidden; click the visible one")
-        if self._snap:
+        if self.state.view.snap:
             uv = tuple(refine_click_to_corner(self.camera_view.gray, uv, SNAP_RADIUS_PX))
         return ("camera", *self._original_from_display(uv))
 

@@ -41,7 +41,8 @@ from .scene_nodes import SceneNodes
 from .security import TOKEN_QUERY, AccessPolicy, RefusalLog, start_guarded_viser
 from .state import AnnotationState
 from .warm_up import WarmUp
-from .ui_common import BA_WINDOW_MODES, UP_AXES, SolveBundle
+from .ui_common import SolveBundle
+from .view_settings import ViewSettings
 
 
 # The parts are mixins for now (moved verbatim from one class); each owns one concern and its own module.
@@ -129,28 +130,12 @@ class CalibrationApp(PairsPanel, CalibrationPanel, ViewPanel, ExportPanel, LiveS
         # -- state ------------------------------------------------------------------
         # Every change is on disk (an fsync'd journal line) before the UI shows it; the journal is
         # compacted into the session YAML in the background and by stop().
+        # The view settings live in the state only (``state.view``, saved with the session).
+        default_view = ViewSettings(up_axis="+y" if self.depth.meta.get("model") == "rotating_2d" else "+z")
         self.state = AnnotationState(self.depth.valid, (self.camera.width, self.camera.height), self.session_path,
-                                     on_save_error=self._on_save_error)
-        view = self.state.view_settings()
-        self._init_display(view)  # what the laser panes and the loupe show, contrast, edge opacity
+                                     on_save_error=self._on_save_error, default_view=default_view)
+        self._init_display()  # the laser panes' grey levels, with the saved contrast
         self.camera_views = camera_views(sd)  # raw, and panorama for ocam / fisheye (app.camera_view)
-        self._use_panorama = bool(view.get("panorama", True)) and "panorama" in self.camera_views
-        self._show_reprojection = bool(view.get("show_reprojection", True))
-        self._show_edges = bool(view.get("show_edges", True))
-        self._snap = bool(view.get("snap", False))
-        self._up_axis = str(view.get("up_axis", "+y" if self.depth.meta.get("model") == "rotating_2d" else "+z"))
-        if self._up_axis not in UP_AXES:
-            self._up_axis = "+z"
-
-        n_cols = self.depth.shape[1]
-        self._ba_mode = str(view.get("ba_window_mode", "all"))
-        if self._ba_mode not in BA_WINDOW_MODES:
-            self._ba_mode = "all"
-        try:
-            start, width = int(view.get("ba_window_start", 0)), int(view.get("ba_window_width", n_cols))
-        except (TypeError, ValueError):
-            start, width = 0, n_cols
-        self._ba_custom = ColumnWindow.make(start, width, n_cols, self._wrap_cols)
         self._ba_facing: ColumnWindow | None = None  # from the last good solve it was computed for
         self._facing_of: SolveBundle | None = None  # the solve ``_ba_facing`` was computed for
         self._ensure_facing()  # from the imported initial extrinsic, if any

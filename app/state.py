@@ -24,12 +24,9 @@ Pure Python plus numpy; no maths, no viser.
 
 from __future__ import annotations
 
-import atexit
 import os
-import sys
 import threading
 import time
-import weakref
 from dataclasses import replace
 from pathlib import Path
 from typing import Any, Callable, Sequence
@@ -40,25 +37,13 @@ from calib_core.errors import CalibError
 from calib_core.pairs import PAIR_SOURCES, Pair, load_pairs_yaml, save_pairs_yaml
 
 from .picks import SESSION_FORMAT, SESSION_VERSION, Pick, Snapshot, checked_picks, new_ends, restore_session
-from .session_store import SessionStore
+from .session_store import SessionStore, compact_at_exit, forget_at_exit
+from .view_settings import ViewSettings
 
 MAX_HISTORY = 500
 
 
 Listener = Callable[["AnnotationState"], None]
-
-_OPEN_STORES: "weakref.WeakSet[SessionStore]" = weakref.WeakSet()
-
-
-@atexit.register
-def _compact_open_stores() -> None:
-    """At interpreter exit, fold the journals into the session files (the data is safe either way)."""
-    for store in list(_OPEN_STORES):
-        try:
-            store.compact()
-        except Exception as exc:  # exiting anyway: say so, do not hide it
-            print(f"ba-calib: {exc}", file=sys.stderr)
-
 
 class AnnotationState:
     """Thread-safe pairs under construction, with undo/redo and a session file.
@@ -79,6 +64,9 @@ class AnnotationState:
         the journal into the YAML (retried; no change is lost meanwhile).
         A change whose journal line cannot be written raises CalibError and
         is not made.
+    default_view : ViewSettings, optional
+        The view settings of a new session, and the fallback of every setting
+        a session file lacks or holds a bad value for.
     """
 
     def __init__(
@@ -88,6 +76,7 @@ class AnnotationState:
         session_path: str | os.PathLike | None = None,
         *,
         on_save_error: Callable[[str], None] | None = None,
+        default_view: ViewSettings | None = None,
     ) -> None:
         self._valid = np.asarray(depth_valid, dtype=bool)
         if self._valid.ndim != 2:
@@ -98,7 +87,7 @@ class AnnotationState:
         self._undo: list[Snapshot] = []
         self._redo: list[Snapshot] = []
         self._selected: int | None = None
-        self._view: dict[str, Any] = {}
+        self._view = ViewSettings() if default_view is None else default_view
         self._version = 0
         self._change_started: float | None = None
         self._listeners: list[Listener] = []
@@ -110,7 +99,7 @@ class AnnotationState:
             if data is not None:
                 self._restore(data, self.session_path if from_yaml else store.journal_path)
             self._store = store
-            _OPEN_STORES.add(store)
+            compact_at_exit(store)
 
     # ------------------------------------------------------------------ queries
     @property
@@ -167,10 +156,11 @@ class AnnotationState:
         """``time.perf_counter()`` when the newest saved change began (before its disk write), or None."""
         return self._change_started
 
-    def view_settings(self) -> dict[str, Any]:
-        """A copy of the saved view settings (panorama on/off, overlays ...)."""
+    @property
+    def view(self) -> ViewSettings:
+        """The view settings (panorama on/off, overlays ...): the one copy the app reads."""
         with self._lock:
-            return dict(self._view)
+            return self._view
 
     # ------------------------------------------------------------- validation
     def check_laser_cell(self, row: int, col: int) -> tuple[int, int]:
@@ -382,17 +372,21 @@ class AnnotationState:
             self._version += 1
         self._notify()
 
-    def set_view(self, **settings: Any) -> None:
-        """Update saved view settings (plain YAML-able values); saved with the session."""
+    def set_view(self, **changes: Any) -> ViewSettings:
+        """Change view settings (:meth:`ViewSettings.changed`: CalibError on an unknown name or a bad value).
+
+        Saved with the session, not an undoable step.  Returns the new settings.
+        """
         with self._lock:
-            changed = {k: v for k, v in settings.items() if self._view.get(k, object()) != v}
-            if not changed:
-                return
+            new = self._view.changed(**changes)
+            if new == self._view:
+                return new
             before = self._checkpoint_locked()
-            self._view.update(changed)
+            self._view = new
             self._version += 1
             self._save_locked(before)
         self._notify()
+        return new
 
     # -------------------------------------------------------------- listeners
     def subscribe(self, listener: Listener) -> None:
@@ -409,7 +403,7 @@ class AnnotationState:
                 "version": SESSION_VERSION,
                 "next_id": int(self._snap.next_id),
                 "pairs": [p.to_dict() for p in self._snap.picks],
-                "view": dict(self._view),
+                "view": self._view.to_dict(),
             }
 
     def flush_session(self) -> None:
@@ -435,7 +429,7 @@ class AnnotationState:
         with self._lock:
             store, self._store = self._store, None
         if store is not None:
-            _OPEN_STORES.discard(store)
+            forget_at_exit(store)
             store.close()
 
     # -------------------------------------------------------------- internals
@@ -476,7 +470,7 @@ class AnnotationState:
     def _checkpoint_locked(self) -> tuple:
         # Taken at the start of every saved change: also when the change began (for timing hooks).
         self._change_started = time.perf_counter()
-        return self._snap, list(self._undo), list(self._redo), self._selected, dict(self._view), self._version
+        return self._snap, list(self._undo), list(self._redo), self._selected, self._view, self._version
 
     def _after_change_locked(self, before: tuple) -> None:
         ids = {p.id for p in self._snap.picks}
@@ -503,4 +497,4 @@ class AnnotationState:
         """Restore the session ``data`` read from ``path`` (the session YAML or its journal)."""
         self._snap, view = restore_session(data, path, self.check_laser_cell, self.check_pixel)
         if view is not None:
-            self._view = view
+            self._view = ViewSettings.from_dict(view, default=self._view)

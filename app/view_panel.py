@@ -34,11 +34,18 @@ class ViewPanel:
 
     def _wanted_ba_window(self) -> ColumnWindow:
         """The column window the current mode asks for (custom until a solve says what the camera sees)."""
-        if self._ba_mode == "all":
+        mode = self.state.view.ba_window_mode
+        if mode == "all":
             return ColumnWindow.full(self.depth.shape[1], self._wrap_cols)
-        if self._ba_mode == "camera" and self._ba_facing is not None:
+        if mode == "camera" and self._ba_facing is not None:
             return self._ba_facing
         return self._ba_custom
+
+    @property
+    def _ba_custom(self) -> ColumnWindow:
+        """The saved custom column window, fitted to the scan (width 0: every column)."""
+        view, n_cols = self.state.view, self.depth.shape[1]
+        return ColumnWindow.make(view.ba_window_start, view.ba_window_width or n_cols, n_cols, self._wrap_cols)
 
     def _ba_texture(self, key: str) -> np.ndarray:
         window = self._ba_window
@@ -82,7 +89,7 @@ class ViewPanel:
     def _sync_window_widgets(self) -> None:
         """Show the current window in the GUI (server-side updates; their callbacks ignore them)."""
         w = self._ba_window
-        want = BA_WINDOW_MODES[self._ba_mode]
+        want = BA_WINDOW_MODES[self.state.view.ba_window_mode]
         if self._dd_ba_window.value != want:
             self._dd_ba_window.value = want
         if self._sl_ba_start.value != w.start:
@@ -93,7 +100,8 @@ class ViewPanel:
     @property
     def camera_view(self) -> CameraView:
         """The camera view the page shows (raw image or panorama)."""
-        return self.camera_views["panorama" if self._use_panorama else "raw"]
+        panorama = self.state.view.panorama and "panorama" in self.camera_views  # saved choice, if this camera has one
+        return self.camera_views["panorama" if panorama else "raw"]
 
     def _camera_slot(self) -> ImageSlot:
         return self.slots[self.camera_view.key]
@@ -105,19 +113,15 @@ class ViewPanel:
         self._camera_title.text = self.camera_view.title()
 
     def _on_view_checkbox(self, event: Any) -> None:
-        with self._ui_lock:
-            was_panorama = self._use_panorama
-            self._use_panorama = bool(self._cb_pano.value) and "panorama" in self.camera_views
-            self._show_reprojection = bool(self._cb_reproj.value)
-            self._show_edges = bool(self._cb_edges.value)
-            self._snap = bool(self._cb_snap.value)
+        with self._ui_lock:  # a drawing on another thread sees the old or the new camera view, never a mix
+            was = self.camera_view.key
+            self.state.set_view(panorama=bool(self._cb_pano.value), show_reprojection=bool(self._cb_reproj.value),
+                                show_edges=bool(self._cb_edges.value), snap=bool(self._cb_snap.value))
             for key in self.camera_views:
                 self._image_handles[key].visible = key == self.camera_view.key
             self._update_camera_title()
-        self.state.set_view(panorama=self._use_panorama, show_reprojection=self._show_reprojection,
-                            show_edges=self._show_edges, snap=self._snap)
         self._refresh_scene()
-        if was_panorama != self._use_panorama:
+        if was != self.camera_view.key:
             # The camera view changed size: re-frame every tab that shows the 2-D view.
             clients = self.server.get_clients()
             for cid, mode in list(self._client_mode.items()):
@@ -125,8 +129,7 @@ class ViewPanel:
                     self._set_view(clients[cid], mode)
 
     def _on_up_axis(self, event: Any) -> None:
-        self._up_axis = str(event.value)
-        self.state.set_view(up_axis=self._up_axis)
+        self.state.set_view(up_axis=str(event.value))
         for cid, mode in list(self._client_mode.items()):
             if mode == "3d":
                 client = self.server.get_clients().get(cid)
@@ -168,18 +171,17 @@ class ViewPanel:
             return
         if event.value != event.target.value:
             return  # a newer slider position is queued behind this one
-        self._ba_custom = ColumnWindow.make(int(self._sl_ba_start.value), int(self._sl_ba_width.value),
-                                            self.depth.shape[1], self._wrap_cols)
-        self._set_ba_mode("custom")
+        self._set_ba_mode("custom", ColumnWindow.make(int(self._sl_ba_start.value), int(self._sl_ba_width.value),
+                                                      self.depth.shape[1], self._wrap_cols))
 
-    def _set_ba_mode(self, mode: str) -> None:
-        self._ba_mode = mode
+    def _set_ba_mode(self, mode: str, custom: ColumnWindow | None = None) -> None:
+        """Save the BA column mode (and the custom window, if given), then show it."""
+        w = self._ba_custom if custom is None else custom
+        self.state.set_view(ba_window_mode=mode, ba_window_start=int(w.start), ba_window_width=int(w.width))
         if mode == "camera":
             self._ensure_facing()
         self._apply_ba_window()
         self._sync_window_widgets()
-        w = self._ba_custom
-        self.state.set_view(ba_window_mode=mode, ba_window_start=int(w.start), ba_window_width=int(w.width))
 
     def _on_connect(self, client: Any) -> None:
         try:
@@ -304,7 +306,7 @@ class ViewPanel:
         self._view_target[client.client_id] = (np.asarray(position, float), np.asarray(look_at, float), time.time())
 
     def _up_vector(self) -> np.ndarray:
-        axis = UP_AXES.get(self._up_axis)
+        axis = UP_AXES.get(self.state.view.up_axis)
         if axis is None:
             bundle = self._bundle
             if bundle is None:
