@@ -14,7 +14,7 @@ class CalibrationPanel:
     """Part of :class:`app.server.CalibrationApp` (a mixin: it uses the app's attributes)."""
 
     def _refresh_panel(self) -> None:
-        with self._ui_lock:
+        with self.ui_lock:
             picks = self.state.picks
             complete = [p for p in picks if p.complete]
             pending = self.state.pending()

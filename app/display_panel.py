@@ -73,7 +73,7 @@ class DisplayPanel:
         if event.client is None or event.value != event.target.value:
             return  # our own update, or a newer slider position is queued behind this one
         self.state.set_view(contrast=float(event.value))  # clipped to CONTRAST_RANGE
-        with self._ui_lock:
+        with self.ui_lock:
             self._recontrast()
             window = self._ba_window
             k = texture_factor(window.width, self.depth.shape[0])

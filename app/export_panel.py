@@ -15,7 +15,6 @@ from __future__ import annotations
 import tempfile
 import threading
 from pathlib import Path
-from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -28,7 +27,7 @@ from calib_core.overlays import export_colored_scan
 from calib_core.verify import extrinsics_document
 
 from .security import upload_display_name
-from .ui_common import MIN_PAIRS, _Action, md_escape
+from .ui_common import MIN_PAIRS, md_escape
 
 
 class ExportPanel:
@@ -41,14 +40,14 @@ class ExportPanel:
             data = path.read_bytes()
         if event.client is not None:
             event.client.send_file_download("pairs.yaml", data, save_immediately=True)
-        self._notify(event.client, "Pairs", f"{n} complete pairs downloaded", color="green")
+        self.notify(event.client, "Pairs", f"{n} complete pairs downloaded", color="green")
 
     def _on_download_yaml(self, event: Any) -> None:
         data, path = self.export_extrinsics()
         if event.client is not None:
             event.client.send_file_download("extrinsics.yaml", data, save_immediately=True)
         where = f" and written to {path}" if path is not None else ""
-        self._notify(event.client, "Extrinsics exported", f"extrinsics.yaml downloaded{where}", color="green")
+        self.notify(event.client, "Extrinsics exported", f"extrinsics.yaml downloaded{where}", color="green")
 
     def _on_download_ply(self, event: Any) -> None:
         bundle = self._bundle
@@ -94,14 +93,14 @@ class FormatExportPanel:
     ----------
     app : CalibrationApp
         Read: ``result`` (the last good solve), ``verify_panel`` (gets the
-        imported reference); actions go through ``app._guard``.
+        imported reference); actions go through ``app.guard``.
     """
 
     def __init__(self, app: Any) -> None:
         self.app = app
         self._upload_lock = threading.Lock()
         gui = app.server.gui
-        guard = app._guard
+        guard = app.guard
         self._folder = gui.add_folder("Export to robotics formats", expand_by_default=True)
         with self._folder:
             self._dd_format = gui.add_dropdown("Format", tuple(FORMATS), initial_value="ros2-tf",
@@ -163,7 +162,7 @@ class FormatExportPanel:
         name = self.file_name(fmt)
         if action.client is not None:
             action.client.send_file_download(name, data, save_immediately=True)
-        self.app._notify(action.client, "Extrinsics exported", f"{name} downloaded ({fmt})", color="green")
+        self.app.notify(action.client, "Extrinsics exported", f"{name} downloaded ({fmt})", color="green")
 
     # ------------------------------------------------------------------ reference
     def _on_connect(self, client: Any) -> None:
@@ -172,7 +171,7 @@ class FormatExportPanel:
             with self._folder:
                 button = client.gui.add_upload_button("Import reference extrinsic", icon=viser.Icon.UPLOAD,
                                                       mime_type="*/*")
-        button.on_upload(self.app._guard(self._on_upload))
+        button.on_upload(self.app.guard(self._on_upload))
 
     def _on_upload(self, action: Any) -> None:
         f = action.value
@@ -180,10 +179,7 @@ class FormatExportPanel:
 
     def receive_reference(self, client: Any, name: str, content: bytes, wait: bool = False) -> None:
         """Import a reference extrinsic as the upload button of ``client`` does (through the action queue)."""
-        self.app._actions.put((lambda action: self.import_reference(client, name, content),
-                               _Action(SimpleNamespace(client=client), None)))
-        if wait:
-            self.app._actions.join()
+        self.app.post(lambda: self.import_reference(client, name, content), client=client, wait=wait)
 
     def import_reference(self, client: Any, name: str, content: bytes) -> np.ndarray:
         """Parse an uploaded extrinsic (any format) and hand it to the Verify panel; returns its T_camera_lidar."""
@@ -206,6 +202,6 @@ class FormatExportPanel:
         panel = getattr(self.app, "verify_panel", None)
         if panel is not None:
             panel.set_reference(parsed.T_camera_lidar, shown)
-        self.app._notify(client, "Reference imported",
+        self.app.notify(client, "Reference imported",
                          f"{shown} ({parsed.format}) is compared with the calibration in Verify", color="green")
         return parsed.T_camera_lidar

@@ -16,7 +16,7 @@ from .ui_common import MARKER_SIZE, RING_CELLS, RING_MIN_RADIUS, EDGE_MIN_SIZE, 
 class OverlayDrawing:
     """Part of :class:`app.server.CalibrationApp` (a mixin: it uses the app's attributes)."""
 
-    def _display_from_pixels(self, pixels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def display_from_pixels(self, pixels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Display coordinates (visible camera view) of original-image pixels."""
         return self.camera_view.display_from_pixels(pixels)
 
@@ -26,11 +26,11 @@ class OverlayDrawing:
 
     def _refresh_scene(self) -> None:
         """Redraw markers, labels, selection and the reprojection overlays (only what changed is sent)."""
-        with self._ui_lock, self.server.atomic():
+        with self.ui_lock, self.server.atomic():
             picks = {p.id: p for p in self.state.picks}
             selected = self.state.selected
             labels: dict[str, tuple[str, np.ndarray]] = {}
-            cam_slot = self._camera_slot()
+            cam_slot = self.camera_slot()
             for key in (*self.ba_keys, cam_slot.key):
                 labels.update(self._draw_markers(key, picks, selected))
             predictions = self._predictions(picks)
@@ -86,7 +86,7 @@ class OverlayDrawing:
 
     def _draw_overlays(self, picks: dict[int, Pick], predictions: list[tuple[int, np.ndarray]]) -> None:
         """Reprojected pairs, residual lines, BA-edge points and predicted-pixel crosses on the camera view."""
-        slot = self._camera_slot()
+        slot = self.camera_slot()
         bundle = self._bundle
         # Skipped when neither the solve, the view nor the picks it colours changed (e.g. a click on a BA image).
         self._draw_predictions(slot, predictions)  # cheap, changes with every BA click
@@ -101,7 +101,7 @@ class OverlayDrawing:
         edge_world, edge_cols = np.empty((0, 3)), np.empty((0, 3), np.uint8)
         if bundle is not None:
             if view.show_reprojection and len(bundle.pick_ids):
-                clicked, ok_c = self._display_from_pixels(bundle.pixels)
+                clicked, ok_c = self.display_from_pixels(bundle.pixels)
                 proj, ok_p = self._display_from_camera_points(bundle.points_camera)
                 colors = np.array([picks[pid].color if pid in picks else (255, 255, 0) for pid in bundle.pick_ids],
                                   np.uint8).reshape(-1, 3)
@@ -150,7 +150,7 @@ class OverlayDrawing:
     def _predictions(self, picks: dict[int, Pick]) -> list[tuple[int, np.ndarray]]:
         """Display pixels where the last good calibration expects picks that have only a BA end."""
         ids, pixels = self._predicted_pixels(picks)
-        uv, ok = self._display_from_pixels(pixels)
+        uv, ok = self.display_from_pixels(pixels)
         return [(pid, uv[k]) for k, pid in enumerate(ids) if ok[k]]
 
     def _predicted_pixels(self, picks: dict[int, Pick]) -> tuple[list[int], np.ndarray]:
@@ -162,3 +162,6 @@ class OverlayDrawing:
         points = self.depth.cell_points(np.array([p.laser_rc for p in pending]))
         uv, ok = project_lidar_points(T, self.camera, points)
         return [p.id for p, good in zip(pending, ok) if good], uv[ok]
+
+    # Old private names, still used by app/testing.py.
+    _display_from_pixels = display_from_pixels

@@ -122,7 +122,7 @@ class CalibrationApp(PairsPanel, CalibrationPanel, ViewPanel, ExportPanel, LiveS
         self.ba_rad, self.ba_keys, self.ba_gray, self.image_gray = sd.ba_rad, sd.ba_keys, sd.ba_gray, sd.image_gray
         self.edge_points_lidar, self.all_points_lidar, self.all_rows_cols = (
             sd.edge_points_lidar, sd.all_points_lidar, sd.all_rows_cols)
-        self.ba_cell_aspect, self._wrap_cols, self.cloud_points_lidar = (
+        self.ba_cell_aspect, self.wrap_cols, self.cloud_points_lidar = (
             sd.ba_cell_aspect, sd.wrap_cols, sd.cloud_points_lidar)
         self._bundle: SolveBundle | None = None
         self._init_loupe_support(initial_extrinsics_path)  # CalibError on a bad file, before any server starts
@@ -140,10 +140,10 @@ class CalibrationApp(PairsPanel, CalibrationPanel, ViewPanel, ExportPanel, LiveS
         self._facing_of: SolveBundle | None = None  # the solve ``_ba_facing`` was computed for
         self._ensure_facing()  # from the imported initial extrinsic, if any
         self._ba_window = self._wanted_ba_window()
-        self._camera_sizes = {k: (v.image.shape[1], v.image.shape[0]) for k, v in self.camera_views.items()}
+        self.camera_sizes = {k: (v.image.shape[1], v.image.shape[0]) for k, v in self.camera_views.items()}
         self.slots = self._layout()
 
-        self._ui_lock = threading.RLock()
+        self.ui_lock = threading.RLock()  # public: held while the scene and the panels are redrawn
         self._upload_lock = threading.Lock()
         self._solve_error: str | None = None
         self._submitted: tuple | None = None

@@ -10,7 +10,6 @@ import numpy as np
 from calib_core.pairs import Pair
 
 from .ba_view import ColumnWindow
-from .view_settings import BA_WINDOW_MODES, UP_AXES  # noqa: F401  (re-exported: the panels import them from here)
 
 BA_TITLES = {
     "horizontal": "BA horizontal",
