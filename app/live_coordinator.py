@@ -173,6 +173,11 @@ class LiveSolveCoordinator:
         self._camera_frame.visible = True
 
     @property
+    def solve_bundle(self) -> SolveBundle | None:
+        """The last good solve with what was solved (pick ids, pairs), or None."""
+        return self._bundle
+
+    @property
     def result(self):
         """The last good :class:`calib_core.solve.CalibrationResult`, or None."""
         bundle = self._bundle

@@ -9,6 +9,8 @@ import numpy as np
 import viser
 
 
+from .calibration_panel import CalibrationPanel
+from .export_panel import ExportPanel
 from .ui_common import CLOUD_ORIGIN, md_escape
 from .view_settings import BA_WINDOW_MODES, UP_AXES
 
@@ -91,9 +93,8 @@ class PageBuilder:
             # which two tabs uploading at once would overwrite.
             self._btn_pairs = gui.add_button("Download pairs YAML", icon=viser.Icon.DOWNLOAD)
             self._btn_pairs.on_click(self.guard(self._on_download_pairs))
-        with gui.add_folder("Calibration"):
-            self._md_result = gui.add_markdown("")
-            self._md_table = gui.add_markdown("")
+        self.calibration_panel = CalibrationPanel(gui)
+        self._md_result, self._md_table = self.calibration_panel.md_result, self.calibration_panel.md_table  # testing.py
         self._view_folder = gui.add_folder("View")
         with self._view_folder:
             self._bg_loupe_zoom = gui.add_button_group("Loupe zoom", ("BA +", "BA -", "Camera +", "Camera -"))
@@ -137,13 +138,5 @@ class PageBuilder:
             self._sl_edge_opacity.on_update(self.guard(self._on_edge_opacity))
             self._dd_up = gui.add_dropdown("3D up axis (lidar)", tuple(UP_AXES), initial_value=view.up_axis)
             self._dd_up.on_update(self.guard(self._on_up_axis))
-        with gui.add_folder("Export"):
-            self._btn_yaml = gui.add_button("Download extrinsics YAML", icon=viser.Icon.DOWNLOAD, color="green")
-            self._btn_yaml.on_click(self.guard(self._on_download_yaml))
-            self._btn_ply = gui.add_button("Download coloured PLY", icon=viser.Icon.DOWNLOAD)
-            self._btn_ply.on_click(self.guard(self._on_download_ply))
-            where = f"Also written to {md_escape(str(self.output_path))}  \n" if self.output_path else ""
-            self._md_export = gui.add_markdown(
-                f"{where}Session (saved after every change): {md_escape(str(self.session_path))}"
-            )
+        self.export_panel = ExportPanel(self)
         self._sync_window_widgets()

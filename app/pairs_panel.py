@@ -15,7 +15,7 @@ from calib_core.pairs import Pair, load_pairs_yaml
 from calib_core.panorama import refine_click_to_corner
 
 from .security import upload_display_name
-from .ui_common import PICK_RADII, SNAP_RADIUS_PX, IMPORT_CHOICES, md_escape
+from .ui_common import MIN_PAIRS, PICK_RADII, SNAP_RADIUS_PX, IMPORT_CHOICES, md_escape
 
 
 class PairsPanel:
@@ -26,6 +26,43 @@ class PairsPanel:
         if key.startswith("loupe_"):
             return self.loupes.slot(key[len("loupe_"):])
         return self.slots[key]
+
+    def _refresh_panel(self) -> None:
+        """Show the pairs summary, the selection dropdown and the calibration panel as they are now."""
+        with self.ui_lock:
+            picks = self.state.picks
+            complete = [p for p in picks if p.complete]
+            pending = self.state.pending()
+            selected = self.state.selected
+            lines = [f"**Pairs:** {len(complete)} complete"]
+            if pending is not None:
+                need = "camera" if pending.pixel is None else "BA"
+                lines.append(f"Pair {pending.id} waits for a {need} click.")
+                ids, uv = self._predicted_pixels({pending.id: pending})
+                if ids:
+                    lines.append(f"Predicted camera pixel: ({uv[0, 0]:.1f}, {uv[0, 1]:.1f}) (cross in the image).")
+            if selected is not None:
+                lines.append(f"**Pair {selected} selected:** clicks now move its ends (Deselect to add pairs).")
+            if len(complete) < MIN_PAIRS:
+                lines.append(f"Pick {MIN_PAIRS - len(complete)} more to calibrate.")
+            lines.append(f"Undo: {'yes' if self.state.can_undo else 'no'}, redo: {'yes' if self.state.can_redo else 'no'}")
+            self._md_pairs.content = "  \n".join(lines)
+            options = ("none",) + tuple(f"#{p.id}" for p in picks)
+            if tuple(self._dd_selected.options) != options:
+                self._dd_selected.options = options
+            want = "none" if selected is None else f"#{selected}"
+            if self._dd_selected.value != want:
+                self._dd_selected.value = want
+            self.calibration_panel.show(self._bundle, self._solve_error, self._solving, len(complete))
+
+    def _on_download_pairs(self, event: Any) -> None:
+        with tempfile.TemporaryDirectory() as tmp:
+            path = Path(tmp) / "pairs.yaml"
+            n = self.state.export_pairs_file(path)
+            data = path.read_bytes()
+        if event.client is not None:
+            event.client.send_file_download("pairs.yaml", data, save_immediately=True)
+        self.notify(event.client, "Pairs", f"{n} complete pairs downloaded", color="green")
 
     def make_click_handler(self, key: str) -> Callable:
         """The on-click callback of image slot ``key`` (a BA key, a camera view or ``loupe_*``): adds or moves an end."""

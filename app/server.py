@@ -30,8 +30,7 @@ from .action_queue import ActionQueue
 from .page_builder import PageBuilder
 from .view_panel import ViewPanel
 from .pairs_panel import PairsPanel
-from .calibration_panel import CalibrationPanel
-from .export_panel import ExportPanel, FormatExportPanel
+from .export_panel import FormatExportPanel
 from .guide_panel import attach_guide_panel
 from .verify_panel import VerifyPanel
 from .live_coordinator import LiveSolveCoordinator
@@ -46,7 +45,7 @@ from .view_settings import ViewSettings
 
 
 # The parts are mixins for now (moved verbatim from one class); each owns one concern and its own module.
-class CalibrationApp(PairsPanel, CalibrationPanel, ViewPanel, ExportPanel, LiveSolveCoordinator, OverlayDrawing,
+class CalibrationApp(PairsPanel, ViewPanel, LiveSolveCoordinator, OverlayDrawing,
                      PageBuilder, ActionQueue, LoupeSupport, DisplayPanel):
     """The annotation app on one scene; the viser server runs from construction.
 
@@ -208,6 +207,14 @@ class CalibrationApp(PairsPanel, CalibrationPanel, ViewPanel, ExportPanel, LiveS
     def ba_window(self) -> ColumnWindow:
         """The scan columns the BA images show."""
         return self._ba_window
+
+    def export_extrinsics(self) -> tuple[bytes, Path | None]:
+        """:meth:`app.export_panel.ExportPanel.export_extrinsics`."""
+        return self.export_panel.export_extrinsics()
+
+    @property
+    def _on_download_yaml(self):  # the handler app/testing.py fires
+        return self.export_panel.on_download_yaml
 
     def stop(self) -> None:
         """Stop the solver thread and the server; returns once the session file holds every change.
