@@ -1,23 +1,18 @@
-"""Annotation state of the browser app: the point pairs the user is picking.
+"""Annotation state of the browser app: the point pairs the user is picking, and the view settings.
 
-A *pick* (:class:`app.picks.Pick`) is one correspondence under construction;
-its two clicks can come in either order.
+A *pick* (:class:`app.picks.Pick`) is one correspondence under construction; its two clicks can come in
+either order.  Every change goes through :class:`AnnotationState`, which
 
-Every change goes through :class:`AnnotationState`, which
-
-* checks the input (invalid laser cell, pixel outside the image ->
-  :class:`calib_core.errors.CalibError` with a one-line message),
-* keeps an undo/redo history of whole snapshots (every change is undoable,
-  including *clear all* and *import*),
-* puts every change on disk before it returns (and so before any listener
-  shows it): an fsync'd journal line beside the session file, compacted into
-  the session YAML in the background (:class:`app.session_store.SessionStore`),
-  so that closing the tab or killing the server loses no acknowledged click;
-  a change that cannot be saved is refused and undone.  The session is
-  restored on start; :meth:`AnnotationState.flush_session` and
-  :meth:`AnnotationState.close` bring the YAML itself up to date,
-* is thread-safe: viser runs callbacks on a thread pool, and two browser tabs
-  share one state.
+* checks the input (invalid laser cell, pixel outside the image -> :class:`calib_core.errors.CalibError`
+  with a one-line message; a bad view setting likewise, :class:`app.view_settings.ViewSettings`),
+* keeps an undo/redo history of whole snapshots of the picks (every change of them is undoable, including
+  *clear all* and *import*; view settings are not part of it),
+* puts every change on disk before it returns (and so before any listener shows it): an fsync'd journal
+  line beside the session file, compacted into the session YAML in the background
+  (:class:`app.session_store.SessionStore`), so that closing the tab or killing the server loses no
+  acknowledged click; a change that cannot be saved is refused and undone.  The session is restored on
+  start; :meth:`AnnotationState.flush_session` and :meth:`AnnotationState.close` bring the YAML up to date,
+* is thread-safe: viser runs callbacks on a thread pool, and two browser tabs share one state.
 
 Pure Python plus numpy; no maths, no viser.
 """
