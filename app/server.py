@@ -44,7 +44,9 @@ from .ui_common import SolveBundle
 from .view_settings import ViewSettings
 
 
-# The parts are mixins for now (moved verbatim from one class); each owns one concern and its own module.
+# Panels that are classes own their widgets and use only the app's public services (app/app_services.py):
+# CalibrationPanel, ExportPanel, FormatExportPanel, Loupes, GuidePanel, VerifyPanel.  The bases below are
+# still mixins (one concern and module each) that share the app's attributes.
 class CalibrationApp(PairsPanel, ViewPanel, LiveSolveCoordinator, OverlayDrawing,
                      PageBuilder, ActionQueue, LoupeSupport, DisplayPanel):
     """The annotation app on one scene; the viser server runs from construction.
