@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import time
 import traceback
+from types import SimpleNamespace
 from typing import Any, Callable
 
 import viser
@@ -22,7 +23,7 @@ class ActionQueue:
 
     last_action_timing: tuple[float, float] | None = None
 
-    def _guard(self, fn: Callable) -> Callable:
+    def guard(self, fn: Callable) -> Callable:
         """Wrap a callback: queue it for the ordered action worker.
 
         Viser runs plain callbacks on a thread pool, where two quick clicks
@@ -38,6 +39,16 @@ class ActionQueue:
 
         return enqueue
 
+    def post(self, fn: Callable[[], Any], client: Any = None, wait: bool = False) -> None:
+        """Run ``fn()`` on the action worker, after the actions queued before it.
+
+        A CalibError it raises becomes a notification for ``client`` (every tab
+        if None).  With ``wait``, return once the queue is drained.
+        """
+        self._actions.put((lambda action: fn(), _Action(SimpleNamespace(client=client), None)))
+        if wait:
+            self._actions.join()
+
     def _run_actions(self) -> None:
         """The action worker: applies queued user actions one by one; errors become notifications."""
         while True:
@@ -50,10 +61,10 @@ class ActionQueue:
                 try:
                     fn(action)
                 except CalibError as exc:
-                    self._notify(action.client, "Not accepted", str(exc))
+                    self.notify(action.client, "Not accepted", str(exc))
                 except Exception as exc:  # never let a click kill anything
                     traceback.print_exc()
-                    self._notify(action.client, "Internal error", f"{type(exc).__name__}: {exc}")
+                    self.notify(action.client, "Internal error", f"{type(exc).__name__}: {exc}")
             finally:
                 if item is not None:
                     # The worker's own share: wall time, and CPU time of this thread (immune to other processes).
@@ -63,9 +74,10 @@ class ActionQueue:
     def _on_save_error(self, message: str) -> None:
         # On the compactor's thread; the journal holds every change, the compaction is retried.
         if hasattr(self, "server") and not getattr(self, "_stopped", True):
-            self._notify(None, "Session file not updated (retrying; no change lost)", message)
+            self.notify(None, "Session file not updated (retrying; no change lost)", message)
 
-    def _notify(self, client: Any, title: str, body: str, color: str = "red") -> None:
+    def notify(self, client: Any, title: str, body: str, color: str = "red") -> None:
+        """Show a notification in one tab (``client``) or, with None, in every tab (the text is shown as is)."""
         body = " ".join(str(body).split())
         targets = [client] if client is not None else list(self.server.get_clients().values())
         for c in targets:
@@ -73,3 +85,7 @@ class ActionQueue:
                 c.add_notification(title, body, color=color, auto_close_seconds=8.0, with_close_button=True)
             except Exception:
                 pass
+
+    # The old private names, still used by app/testing.py.
+    _guard = guard
+    _notify = notify

@@ -1,100 +1,99 @@
-"""The calibration panel: the pairs summary, the solve's quality verdict in colour with its reasons, the errors,
-the pose with its sigmas and the per-pair residual table (excluded pairs marked by id).  User text is escaped."""
+"""The calibration panel: the solve's quality verdict in colour with its reasons, the errors, the pose with its
+sigmas and the per-pair residual table (excluded pairs marked by id).  User text is escaped."""
 
 from __future__ import annotations
+
+from typing import Any
 
 import numpy as np
 
 from calib_core.transforms import rpy_deg_from_R
 
-from .ui_common import MIN_PAIRS, QUALITY_BADGES, md_escape, _fmt
+from .ui_common import MIN_PAIRS, QUALITY_BADGES, SolveBundle, md_escape, _fmt
 
 
 class CalibrationPanel:
-    """Part of :class:`app.server.CalibrationApp` (a mixin: it uses the app's attributes)."""
+    """The "Calibration" folder: it owns its widgets and shows what :meth:`show` is given (no app state).
 
-    def _refresh_panel(self) -> None:
-        with self._ui_lock:
-            picks = self.state.picks
-            complete = [p for p in picks if p.complete]
-            pending = self.state.pending()
-            selected = self.state.selected
-            lines = [f"**Pairs:** {len(complete)} complete"]
-            if pending is not None:
-                need = "camera" if pending.pixel is None else "BA"
-                lines.append(f"Pair {pending.id} waits for a {need} click.")
-                ids, uv = self._predicted_pixels({pending.id: pending})
-                if ids:
-                    lines.append(f"Predicted camera pixel: ({uv[0, 0]:.1f}, {uv[0, 1]:.1f}) (cross in the image).")
-            if selected is not None:
-                lines.append(f"**Pair {selected} selected:** clicks now move its ends (Deselect to add pairs).")
-            if len(complete) < MIN_PAIRS:
-                lines.append(f"Pick {MIN_PAIRS - len(complete)} more to calibrate.")
-            lines.append(f"Undo: {'yes' if self.state.can_undo else 'no'}, redo: {'yes' if self.state.can_redo else 'no'}")
-            self._md_pairs.content = "  \n".join(lines)
-            options = ("none",) + tuple(f"#{p.id}" for p in picks)
-            if tuple(self._dd_selected.options) != options:
-                self._dd_selected.options = options
-            want = "none" if selected is None else f"#{selected}"
-            if self._dd_selected.value != want:
-                self._dd_selected.value = want
+    Parameters
+    ----------
+    gui : viser.GuiApi
+        Where the folder goes (created here, after the folders made before).
+    """
 
-            bundle, error = self._bundle, self._solve_error
-            out = []
-            if self._solving:
-                out.append(f"*Solving {len(complete)} pairs ...*")
-            if error is not None:
-                keep = " Showing the last good result." if bundle is not None else ""
-                out.append(f"**Solve failed:** {md_escape(error)}.{keep}")
-            if bundle is None:
-                if len(complete) < MIN_PAIRS:
-                    out.append(f"No calibration yet (needs {MIN_PAIRS} pairs).")
-                self._md_result.content = "  \n".join(out)
-                self._md_table.content = ""
-                return
-            r = bundle.result
-            T = r.T_camera_lidar
-            t, rpy = T[:3, 3], rpy_deg_from_R(T[:3, :3])
-            st, sr = np.asarray(r.sigma_translation_m), np.asarray(r.sigma_rpy_deg)
-            quality = getattr(r, "quality", None)
-            status = getattr(quality, "status", "ok")
-            reasons = list(getattr(quality, "reasons", []))
-            # The verdict first and in colour: never a confident wrong answer.
-            out.append(f"{QUALITY_BADGES.get(status, QUALITY_BADGES['unreliable'])}")
-            for reason in reasons:
-                out.append(f"• {md_escape(reason)}")
-            excluded = [int(i) for i in getattr(r, "outlier_ids", [])]
-            if excluded:
-                out.append("Left out of the fit: pair " + ", ".join(str(i) for i in excluded))
-            checks = [int(i) for i in getattr(r, "check_ids", [])]
-            if checks:
-                out.append("Check pairs (not in the fit, see Verify): " + ", ".join(str(i) for i in checks))
-            out += [
-                f"**Solved with {r.n_pairs} pairs** ({md_escape(r.cost_name)} cost, {r.iterations} iterations, "
-                f"{bundle.seconds * 1000:.0f} ms)",
-                f"**Mean error: {_fmt(r.mean_px)} px** (std {_fmt(r.std_px)} px), "
-                f"**{_fmt(r.mean_deg, 4)} deg** (std {_fmt(r.std_deg, 4)} deg)",
-                f"t = ({t[0]:.4f}, {t[1]:.4f}, {t[2]:.4f}) m, sigma T = ({st[0] * 100:.2f}, {st[1] * 100:.2f}, "
-                f"{st[2] * 100:.2f}) cm",
-                f"rpy = ({rpy[0]:.3f}, {rpy[1]:.3f}, {rpy[2]:.3f}) deg, sigma R = ({sr[0]:.3f}, {sr[1]:.3f}, "
-                f"{sr[2]:.3f}) deg",
-            ]
-            for w in r.warnings:
-                if w not in reasons:  # notes on the output's form (reasons are shown above)
-                    out.append(f"Note: {md_escape(w)}")
-            self._md_result.content = "  \n".join(out)
-            rows = ["| pair | px | deg | in fit |", "|---:|---:|---:|:---|"]
-            # calibrate() leaves check pairs out: its rows are the fit pairs (pair_positions), checks come apart.
-            positions = getattr(r, "pair_positions", None) or list(range(len(r.residual_px)))
-            for k, pos in enumerate(positions):
-                pid = bundle.pick_ids[pos]
-                px, deg = float(r.residual_px[k]), float(r.residual_deg[k])
-                if pid in excluded:
-                    rows.append(f"| **{pid}** | **{_fmt(px, 2)}** | **{_fmt(deg, 3)}** | **excluded (outlier)** |")
-                else:
-                    rows.append(f"| {pid} | {_fmt(px, 2)} | {_fmt(deg, 3)} | yes |")
-            for pos, px, deg in zip(getattr(r, "check_positions", []), getattr(r, "check_residual_px", []),
-                                    getattr(r, "check_residual_deg", [])):
-                rows.append(f"| {bundle.pick_ids[pos]} | {_fmt(float(px), 2)} | {_fmt(float(deg), 3)} | "
-                            "no: check pair |")
-            self._md_table.content = "\n".join(rows)
+    def __init__(self, gui: Any) -> None:
+        with gui.add_folder("Calibration"):
+            self.md_result = gui.add_markdown("")
+            self.md_table = gui.add_markdown("")
+
+    @property
+    def result_text(self) -> str:
+        """The result markdown as shown (quality verdict, errors, pose)."""
+        return str(self.md_result.content)
+
+    @property
+    def table_text(self) -> str:
+        """The per-pair residual table as shown (markdown)."""
+        return str(self.md_table.content)
+
+    def show(self, bundle: SolveBundle | None, error: str | None, solving: bool, n_complete: int) -> None:
+        """Show the last good solve ``bundle`` (None: none yet), the last solve's ``error``, whether a solve
+        runs, and how many pairs are complete."""
+        out = []
+        if solving:
+            out.append(f"*Solving {n_complete} pairs ...*")
+        if error is not None:
+            keep = " Showing the last good result." if bundle is not None else ""
+            out.append(f"**Solve failed:** {md_escape(error)}.{keep}")
+        if bundle is None:
+            if n_complete < MIN_PAIRS:
+                out.append(f"No calibration yet (needs {MIN_PAIRS} pairs).")
+            self.md_result.content = "  \n".join(out)
+            self.md_table.content = ""
+            return
+        r = bundle.result
+        T = r.T_camera_lidar
+        t, rpy = T[:3, 3], rpy_deg_from_R(T[:3, :3])
+        st, sr = np.asarray(r.sigma_translation_m), np.asarray(r.sigma_rpy_deg)
+        quality = getattr(r, "quality", None)
+        status = getattr(quality, "status", "ok")
+        reasons = list(getattr(quality, "reasons", []))
+        # The verdict first and in colour: never a confident wrong answer.
+        out.append(f"{QUALITY_BADGES.get(status, QUALITY_BADGES['unreliable'])}")
+        for reason in reasons:
+            out.append(f"• {md_escape(reason)}")
+        excluded = [int(i) for i in getattr(r, "outlier_ids", [])]
+        if excluded:
+            out.append("Left out of the fit: pair " + ", ".join(str(i) for i in excluded))
+        checks = [int(i) for i in getattr(r, "check_ids", [])]
+        if checks:
+            out.append("Check pairs (not in the fit, see Verify): " + ", ".join(str(i) for i in checks))
+        out += [
+            f"**Solved with {r.n_pairs} pairs** ({md_escape(r.cost_name)} cost, {r.iterations} iterations, "
+            f"{bundle.seconds * 1000:.0f} ms)",
+            f"**Mean error: {_fmt(r.mean_px)} px** (std {_fmt(r.std_px)} px), "
+            f"**{_fmt(r.mean_deg, 4)} deg** (std {_fmt(r.std_deg, 4)} deg)",
+            f"t = ({t[0]:.4f}, {t[1]:.4f}, {t[2]:.4f}) m, sigma T = ({st[0] * 100:.2f}, {st[1] * 100:.2f}, "
+            f"{st[2] * 100:.2f}) cm",
+            f"rpy = ({rpy[0]:.3f}, {rpy[1]:.3f}, {rpy[2]:.3f}) deg, sigma R = ({sr[0]:.3f}, {sr[1]:.3f}, "
+            f"{sr[2]:.3f}) deg",
+        ]
+        for w in r.warnings:
+            if w not in reasons:  # notes on the output's form (reasons are shown above)
+                out.append(f"Note: {md_escape(w)}")
+        self.md_result.content = "  \n".join(out)
+        rows = ["| pair | px | deg | in fit |", "|---:|---:|---:|:---|"]
+        # calibrate() leaves check pairs out: its rows are the fit pairs (pair_positions), checks come apart.
+        positions = getattr(r, "pair_positions", None) or list(range(len(r.residual_px)))
+        for k, pos in enumerate(positions):
+            pid = bundle.pick_ids[pos]
+            px, deg = float(r.residual_px[k]), float(r.residual_deg[k])
+            if pid in excluded:
+                rows.append(f"| **{pid}** | **{_fmt(px, 2)}** | **{_fmt(deg, 3)}** | **excluded (outlier)** |")
+            else:
+                rows.append(f"| {pid} | {_fmt(px, 2)} | {_fmt(deg, 3)} | yes |")
+        for pos, px, deg in zip(getattr(r, "check_positions", []), getattr(r, "check_residual_px", []),
+                                getattr(r, "check_residual_deg", [])):
+            rows.append(f"| {bundle.pick_ids[pos]} | {_fmt(float(px), 2)} | {_fmt(float(deg), 3)} | "
+                        "no: check pair |")
+        self.md_table.content = "\n".join(rows)

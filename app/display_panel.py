@@ -12,25 +12,14 @@ from calib_core.display_images import apply_contrast
 
 from .ba_view import ba_texture, texture_factor
 from .ui_common import BA_TITLES
+from .view_settings import AS_CLICKED
 
-AS_CLICKED = "BA as clicked"
 
 
 class DisplayPanel:
     """Part of :class:`app.server.CalibrationApp` (a mixin: it uses the app's attributes)."""
 
-    def _init_display(self, view: dict) -> None:
-        try:
-            self._contrast = float(view.get("contrast", 1.0))
-        except (TypeError, ValueError):
-            self._contrast = 1.0
-        self._contrast = float(np.clip(self._contrast, 0.5, 3.0))
-        source = str(view.get("loupe_shows", AS_CLICKED))
-        self._loupe_source = source if source in self.loupe_sources() else AS_CLICKED
-        try:
-            self._edge_opacity = float(np.clip(float(view.get("edge_opacity", 0.8)), 0.0, 1.0))
-        except (TypeError, ValueError):
-            self._edge_opacity = 0.8
+    def _init_display(self) -> None:
         self._shown_gray: dict[str, np.ndarray] = {}
         self._recontrast()
 
@@ -40,7 +29,8 @@ class DisplayPanel:
 
     def _recontrast(self) -> None:
         images = {k: self.ba_gray[k] for k in self.ba_keys} | dict(self.scene_data.laser_images)
-        self._shown_gray = {k: apply_contrast(g, self._contrast) for k, g in images.items()}
+        contrast = self.state.view.contrast
+        self._shown_gray = {k: apply_contrast(g, contrast) for k, g in images.items()}
 
     def ba_display(self, key: str) -> np.ndarray:
         """The grey image shown for BA direction ``key`` ``(rows, cols)`` uint8 (contrast applied)."""
@@ -51,7 +41,7 @@ class DisplayPanel:
 
     def loupe_image(self, key: str) -> tuple[np.ndarray, str]:
         """The BA loupe's grey image and its name, when the last BA click was on direction ``key``."""
-        source = self._loupe_source
+        source = self.loupe_source
         if source == AS_CLICKED:
             return self.ba_display(key), self.ba_title(key)
         for k in self.ba_keys:
@@ -60,9 +50,15 @@ class DisplayPanel:
         return self._shown_gray[source], source
 
     @property
+    def loupe_source(self) -> str:
+        """What the BA loupe shows (the saved choice if this scene has it, else :data:`AS_CLICKED`)."""
+        source = self.state.view.loupe_shows
+        return source if source in self.loupe_sources() else AS_CLICKED
+
+    @property
     def edge_opacity(self) -> float:
         """Opacity of the BA-edge overlay on the camera view (0 hides it)."""
-        return self._edge_opacity
+        return self.state.view.edge_opacity
 
     def _on_loupe_source(self, event: Any) -> None:
         if event.client is None:
@@ -70,16 +66,14 @@ class DisplayPanel:
         source = str(event.value)
         if source not in self.loupe_sources():
             return
-        self._loupe_source = source
         self.state.set_view(loupe_shows=source)
         self.loupes.refresh()
 
     def _on_contrast(self, event: Any) -> None:
         if event.client is None or event.value != event.target.value:
             return  # our own update, or a newer slider position is queued behind this one
-        self._contrast = float(np.clip(float(event.value), 0.5, 3.0))
-        self.state.set_view(contrast=self._contrast)
-        with self._ui_lock:
+        self.state.set_view(contrast=float(event.value))  # clipped to CONTRAST_RANGE
+        with self.ui_lock:
             self._recontrast()
             window = self._ba_window
             k = texture_factor(window.width, self.depth.shape[0])
@@ -91,7 +85,6 @@ class DisplayPanel:
     def _on_edge_opacity(self, event: Any) -> None:
         if event.client is None or event.value != event.target.value:
             return
-        self._edge_opacity = float(np.clip(float(event.value), 0.0, 1.0))
-        self.state.set_view(edge_opacity=self._edge_opacity)
+        self.state.set_view(edge_opacity=float(event.value))  # clipped to EDGE_OPACITY_RANGE
         self._overlay_inputs = None  # redraw the overlays with the new blend
         self._refresh_scene()

@@ -1,6 +1,6 @@
 """The export panels.
 
-* :class:`ExportPanel` (part of the app): pairs YAML, extrinsics YAML with its
+* :class:`ExportPanel` (owns its widgets): extrinsics YAML with its
   ``verification:`` block (written to ``output_path`` with file references
   relative to its folder; the download carries the camera inline) and the
   coloured PLY (:func:`calib_core.overlays.export_colored_scan`).
@@ -15,7 +15,6 @@ from __future__ import annotations
 import tempfile
 import threading
 from pathlib import Path
-from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -28,35 +27,46 @@ from calib_core.overlays import export_colored_scan
 from calib_core.verify import extrinsics_document
 
 from .security import upload_display_name
-from .ui_common import MIN_PAIRS, _Action, md_escape
+from .ui_common import MIN_PAIRS, md_escape
 
 
 class ExportPanel:
-    """Part of :class:`app.server.CalibrationApp` (a mixin: it uses the app's attributes)."""
+    """The "Export" folder of one :class:`app.server.CalibrationApp` (owns its widgets).
 
-    def _on_download_pairs(self, event: Any) -> None:
-        with tempfile.TemporaryDirectory() as tmp:
-            path = Path(tmp) / "pairs.yaml"
-            n = self.state.export_pairs_file(path)
-            data = path.read_bytes()
-        if event.client is not None:
-            event.client.send_file_download("pairs.yaml", data, save_immediately=True)
-        self._notify(event.client, "Pairs", f"{n} complete pairs downloaded", color="green")
+    Parameters
+    ----------
+    app : app.app_services.AppServices
+        Also read: ``solve_bundle`` (the last good solve), ``depth``, ``camera``, ``image``,
+        ``output_path``, ``session_path`` and ``verify_panel`` (if built yet).
+    """
 
-    def _on_download_yaml(self, event: Any) -> None:
+    def __init__(self, app: Any) -> None:
+        self.app = app
+        gui = app.server.gui
+        with gui.add_folder("Export"):
+            self._btn_yaml = gui.add_button("Download extrinsics YAML", icon=viser.Icon.DOWNLOAD, color="green")
+            self._btn_yaml.on_click(app.guard(self.on_download_yaml))
+            self._btn_ply = gui.add_button("Download coloured PLY", icon=viser.Icon.DOWNLOAD)
+            self._btn_ply.on_click(app.guard(self._on_download_ply))
+            where = f"Also written to {md_escape(str(app.output_path))}  \n" if app.output_path else ""
+            self._md_export = gui.add_markdown(
+                f"{where}Session (saved after every change): {md_escape(str(app.session_path))}")
+
+    def on_download_yaml(self, event: Any) -> None:
+        """"Download extrinsics YAML" pressed in tab ``event.client``."""
         data, path = self.export_extrinsics()
         if event.client is not None:
             event.client.send_file_download("extrinsics.yaml", data, save_immediately=True)
         where = f" and written to {path}" if path is not None else ""
-        self._notify(event.client, "Extrinsics exported", f"extrinsics.yaml downloaded{where}", color="green")
+        self.app.notify(event.client, "Extrinsics exported", f"extrinsics.yaml downloaded{where}", color="green")
 
     def _on_download_ply(self, event: Any) -> None:
-        bundle = self._bundle
+        bundle = self.app.solve_bundle
         if bundle is None:
             raise CalibError(f"no calibration yet: pick at least {MIN_PAIRS} pairs")
         with tempfile.TemporaryDirectory() as tmp:
             path = Path(tmp) / "colored_cloud.ply"
-            export_colored_scan(path, self.depth, self.image, self.camera, bundle.result.T_camera_lidar)
+            export_colored_scan(path, self.app.depth, self.app.image, self.app.camera, bundle.result.T_camera_lidar)
             data = path.read_bytes()
         if event.client is not None:
             event.client.send_file_download("colored_cloud.ply", data, save_immediately=True)
@@ -70,21 +80,22 @@ class ExportPanel:
         computed now when the panel has not finished it).
         Returns ``(download bytes, path written or None)``; CalibError before the first solve.
         """
-        bundle = self._bundle
+        app = self.app
+        bundle = app.solve_bundle
         if bundle is None:
             raise CalibError(f"no calibration yet: pick at least {MIN_PAIRS} pairs")
         r = bundle.result
-        panel = getattr(self, "verify_panel", None)
+        panel = getattr(app, "verify_panel", None)
         report = panel.report_for(bundle.pairs, r) if panel is not None else None
-        if self.output_path is not None:
-            doc, _ = extrinsics_document(r, bundle.pairs, self.depth, self.camera, base_dir=self.output_path.parent,
+        if app.output_path is not None:
+            doc, _ = extrinsics_document(r, bundle.pairs, app.depth, app.camera, base_dir=app.output_path.parent,
                                          report=report)
-            write_yaml_atomic(self.output_path, doc)
-        doc, _ = extrinsics_document(r, bundle.pairs, self.depth, self.camera, base_dir=None, report=report)
+            write_yaml_atomic(app.output_path, doc)
+        doc, _ = extrinsics_document(r, bundle.pairs, app.depth, app.camera, base_dir=None, report=report)
         with tempfile.TemporaryDirectory() as tmp:
             path = Path(tmp) / "extrinsics.yaml"
             write_yaml_atomic(path, doc)
-            return path.read_bytes(), self.output_path
+            return path.read_bytes(), app.output_path
 
 
 class FormatExportPanel:
@@ -94,14 +105,14 @@ class FormatExportPanel:
     ----------
     app : CalibrationApp
         Read: ``result`` (the last good solve), ``verify_panel`` (gets the
-        imported reference); actions go through ``app._guard``.
+        imported reference); actions go through ``app.guard``.
     """
 
     def __init__(self, app: Any) -> None:
         self.app = app
         self._upload_lock = threading.Lock()
         gui = app.server.gui
-        guard = app._guard
+        guard = app.guard
         self._folder = gui.add_folder("Export to robotics formats", expand_by_default=True)
         with self._folder:
             self._dd_format = gui.add_dropdown("Format", tuple(FORMATS), initial_value="ros2-tf",
@@ -163,7 +174,7 @@ class FormatExportPanel:
         name = self.file_name(fmt)
         if action.client is not None:
             action.client.send_file_download(name, data, save_immediately=True)
-        self.app._notify(action.client, "Extrinsics exported", f"{name} downloaded ({fmt})", color="green")
+        self.app.notify(action.client, "Extrinsics exported", f"{name} downloaded ({fmt})", color="green")
 
     # ------------------------------------------------------------------ reference
     def _on_connect(self, client: Any) -> None:
@@ -172,7 +183,7 @@ class FormatExportPanel:
             with self._folder:
                 button = client.gui.add_upload_button("Import reference extrinsic", icon=viser.Icon.UPLOAD,
                                                       mime_type="*/*")
-        button.on_upload(self.app._guard(self._on_upload))
+        button.on_upload(self.app.guard(self._on_upload))
 
     def _on_upload(self, action: Any) -> None:
         f = action.value
@@ -180,10 +191,7 @@ class FormatExportPanel:
 
     def receive_reference(self, client: Any, name: str, content: bytes, wait: bool = False) -> None:
         """Import a reference extrinsic as the upload button of ``client`` does (through the action queue)."""
-        self.app._actions.put((lambda action: self.import_reference(client, name, content),
-                               _Action(SimpleNamespace(client=client), None)))
-        if wait:
-            self.app._actions.join()
+        self.app.post(lambda: self.import_reference(client, name, content), client=client, wait=wait)
 
     def import_reference(self, client: Any, name: str, content: bytes) -> np.ndarray:
         """Parse an uploaded extrinsic (any format) and hand it to the Verify panel; returns its T_camera_lidar."""
@@ -206,6 +214,6 @@ class FormatExportPanel:
         panel = getattr(self.app, "verify_panel", None)
         if panel is not None:
             panel.set_reference(parsed.T_camera_lidar, shown)
-        self.app._notify(client, "Reference imported",
+        self.app.notify(client, "Reference imported",
                          f"{shown} ({parsed.format}) is compared with the calibration in Verify", color="green")
         return parsed.T_camera_lidar

@@ -40,7 +40,7 @@ from calib_core.pairs import Pair
 
 from .live_solver import LiveSolver
 from .state import AnnotationState
-from .ui_common import MIN_PAIRS, _Action, md_escape
+from .ui_common import MIN_PAIRS, md_escape
 
 #: Proposals computed per update.
 N_PROPOSALS = 20
@@ -444,18 +444,9 @@ class GuidePanel:
 
 def attach_guide_panel(app: Any) -> GuidePanel:
     """The panel wired to a :class:`app.server.CalibrationApp` (the composition root's one line for it)."""
-    return GuidePanel(app.server.gui, app.state, app.depth, app.camera, app.image, guard=app._guard,
-                      post=lambda fn: app._actions.put((lambda action: fn(), _Action(None, None))),
+    return GuidePanel(app.server.gui, app.state, app.depth, app.camera, app.image, guard=app.guard,
+                      post=app.post,
                       initial_T=lambda: getattr(app, "initial_T_camera_lidar", None),
                       loupes=lambda: getattr(app, "loupes", None), ba_key=app.ba_keys[0],
-                      order=app._pairs_folder.order + 0.5,
-                      click_source=lambda pick_id: _click_source(app, pick_id),
-                      on_start=lambda: getattr(app, "_last_pick", {}).clear())
-
-
-def _click_source(app: Any, pick_id: int) -> str | None:
-    """Where the app's last camera click on pick ``pick_id`` landed (``"loupe"``/``"full"``), from the loupes' record."""
-    for kind, pid, where in list(getattr(app, "_last_pick", {}).values()):
-        if kind == "camera" and pid == pick_id:
-            return where
-    return None
+                      order=app.pairs_folder.order + 0.5,
+                      click_source=app.camera_click_source, on_start=app.forget_last_picks)

@@ -18,7 +18,7 @@ from calib_core.transforms import invert_T, transform_points
 
 from .ba_view import ColumnWindow, covering_window
 from .state import AnnotationState
-from .ui_common import MIN_PAIRS, SolveBundle, CloudUpdate, _Action
+from .ui_common import MIN_PAIRS, SolveBundle, CloudUpdate
 
 
 class LiveSolveCoordinator:
@@ -27,7 +27,7 @@ class LiveSolveCoordinator:
     def _on_state_change(self, state: AnnotationState) -> None:
         picks = [p for p in state.picks if p.complete]
         key = tuple((p.id, p.to_pair()) for p in picks)
-        with self._ui_lock:
+        with self.ui_lock:
             if key != self._submitted:
                 self._submitted = key
                 self._job += 1
@@ -65,7 +65,7 @@ class LiveSolveCoordinator:
 
     def _on_solved(self, job: int, bundle: SolveBundle | None, error: BaseException | None) -> None:
         """Show a finished solve: errors, table, 2-D overlays first; then queue the cloud work."""
-        with self._ui_lock:
+        with self.ui_lock:
             if job < self._result_floor or self._stopped:
                 return
             self._solving = job < self._job
@@ -112,10 +112,10 @@ class LiveSolveCoordinator:
         n_cols = len(seen)
         # A margin and coarse ends, so that the next solve usually keeps the same window.
         step = max(1, round(n_cols / 225))
-        return covering_window(seen, self._wrap_cols, margin=step, quantum=step)
+        return covering_window(seen, self.wrap_cols, margin=step, quantum=step)
 
     def _set_facing(self, bundle: SolveBundle, facing: ColumnWindow | None) -> None:
-        with self._ui_lock:
+        with self.ui_lock:
             if bundle is not self._bundle:
                 return  # a newer solve is shown; its own window comes with it
             self._facing_of = bundle
@@ -137,7 +137,7 @@ class LiveSolveCoordinator:
         t0 = time.perf_counter()
         T = bundle.result.T_camera_lidar
         colors = self._cloud_colors(T) if self._cloud_shown() and self._cloud_shows is not bundle else None
-        facing_done = self._ba_mode == "camera" and self._facing_of is not bundle
+        facing_done = self.state.view.ba_window_mode == "camera" and self._facing_of is not bundle
         facing = self._facing_window(T) if facing_done else None
         self._projection(T)  # the loupes' camera-to-cell predictions, ready before the next click
         return CloudUpdate(bundle, colors, facing_done, facing, time.perf_counter() - t0)
@@ -146,7 +146,7 @@ class LiveSolveCoordinator:
         if error is not None:
             traceback.print_exception(error)
             return
-        with self._ui_lock:
+        with self.ui_lock:
             if self._stopped or update.bundle is not self._bundle:
                 return  # superseded: the newer solve queued its own
             if update.colors is not None:
@@ -154,9 +154,9 @@ class LiveSolveCoordinator:
                 self._cloud_shows = update.bundle
             if update.facing_done:
                 self._set_facing(update.bundle, update.facing)
-        if update.facing_done and self._ba_mode == "camera" and not self._stopped:
+        if update.facing_done and self.state.view.ba_window_mode == "camera" and not self._stopped:
             # In the action worker, so a click is never mapped through a window that changed under it.
-            self._actions.put((lambda action: self._apply_ba_window(), _Action(None, None)))
+            self.post(self._apply_ba_window)
 
     def _show_solved_camera(self) -> None:
         """The solved camera's frame in the 3-D pane; without a solve no frame and a grey cloud."""
@@ -171,6 +171,11 @@ class LiveSolveCoordinator:
         self._camera_frame.wxyz = vtf.SO3.from_matrix(T_lidar_camera[:3, :3]).wxyz
         self._camera_frame.position = T_lidar_camera[:3, 3]
         self._camera_frame.visible = True
+
+    @property
+    def solve_bundle(self) -> SolveBundle | None:
+        """The last good solve with what was solved (pick ids, pairs), or None."""
+        return self._bundle
 
     @property
     def result(self):

@@ -32,6 +32,17 @@ class LoupeSupport:
         if initial_extrinsics_path is not None:
             self.set_initial_extrinsics(self._read_extrinsics(Path(initial_extrinsics_path)))
 
+    def camera_click_source(self, pick_id: int) -> str | None:
+        """Where the last camera click on pick ``pick_id`` landed in its tab: ``"loupe"``, ``"full"`` or None."""
+        for kind, pid, where in list(self._last_pick.values()):
+            if kind == "camera" and pid == pick_id:
+                return where
+        return None
+
+    def forget_last_picks(self) -> None:
+        """Forget the last click of every tab, so that the next loupe click adds an end instead of refining one."""
+        self._last_pick.clear()
+
     # ------------------------------------------------------------------ pose and predictions
     def pose(self) -> np.ndarray | None:
         """``T_camera_lidar`` predictions use: the last good solve, else the imported initial extrinsic, else None."""
@@ -93,7 +104,7 @@ class LoupeSupport:
 
     def _after_initial_extrinsics(self) -> None:
         """Redraw predictions and the facing window once an initial extrinsic is imported."""
-        if self._ba_mode == "camera" and self._bundle is None:
+        if self.state.view.ba_window_mode == "camera" and self._bundle is None:
             self._ensure_facing()
             self._apply_ba_window()
         self._overlay_inputs = None
@@ -111,7 +122,7 @@ class LoupeSupport:
                     "Import initial extrinsics", icon=viser.Icon.UPLOAD, mime_type="*/*",
                     hint="A rough pose (any extrinsics format ba-calib reads): predictions and 'Facing the camera' "
                          "work before 4 pairs")
-        button.on_upload(self._guard(lambda event: self.receive_initial_extrinsics(
+        button.on_upload(self.guard(lambda event: self.receive_initial_extrinsics(
             event.client, getattr(event.value, "name", ""), getattr(event.value, "content", b""))))
 
     def receive_initial_extrinsics(self, client: Any, name: str, content: bytes) -> None:
@@ -127,7 +138,7 @@ class LoupeSupport:
             T = self._read_extrinsics(path, shown)
         self.set_initial_extrinsics(T)
         self._after_initial_extrinsics()
-        self._notify(client, "Initial extrinsics imported",
+        self.notify(client, "Initial extrinsics imported",
                      f"{shown}: predictions use it until {4} pairs are solved", color="green")
 
     def _on_loupe_zoom(self, event: Any) -> None:

@@ -82,7 +82,7 @@ class Loupes:
 
     def __init__(self, app: Any) -> None:
         self.app = app
-        main = [app.slots[k] for k in app.ba_keys] + [app.slots[k] for k in app._camera_sizes]
+        main = [app.slots[k] for k in app.ba_keys] + [app.slots[k] for k in app.camera_sizes]
         self.areas: dict[str, LoupeArea] = loupe_areas(bounds_of(main))
         n_rows, n_cols = app.depth.shape
         self._ba_cols = min(BA_LOUPE_COLUMNS, n_cols)
@@ -104,8 +104,8 @@ class Loupes:
         self._handles["camera"] = scene.add_image(node_name("camera"), self._camera_texture(), 1.0, 1.0, format="png")
         for kind, handle in self._handles.items():
             key = slot_key(kind)
-            handle.on_click(app._make_click_handler(key))
-            handle.on_click(modifier="shift")(app._make_select_handler(key))
+            handle.on_click(app.make_click_handler(key))
+            handle.on_click(modifier="shift")(app.make_select_handler(key))
             handle.on_drag(lambda event: None)  # keeps left-drags from orbiting; a click is a click
         for kind in KINDS:
             self._place(kind)  # sends the size and place once; later only when they change
@@ -119,7 +119,7 @@ class Loupes:
         n_rows, n_cols = self.app.depth.shape
         if not (0 <= int(row) < n_rows and 0 <= int(col) < n_cols):
             raise CalibError(f"cell ({row}, {col}) is outside the {n_rows} x {n_cols} scan")
-        with self.app._ui_lock:
+        with self.app.ui_lock:
             crop = self._make_ba_crop(key, int(row), int(col))
             if crop != self.ba_crop:
                 self.ba_crop = crop
@@ -135,7 +135,7 @@ class Loupes:
             if c.shape != (2, 2) or not np.isfinite(c).all():
                 raise CalibError("cov_px2 must be a finite 2x2 covariance (pixels squared)")
             cov = tuple(map(tuple, c))
-        with self.app._ui_lock:
+        with self.app.ui_lock:
             crop = self._make_camera_crop(float(u), float(v), cov)
             if crop != self.camera_crop:
                 self.camera_crop = crop
@@ -143,7 +143,7 @@ class Loupes:
 
     def zoom(self, kind: str, factor: float) -> None:
         """Magnify loupe ``kind`` by ``factor`` (> 1 shows less, bigger) around the same centre."""
-        with self.app._ui_lock:
+        with self.app.ui_lock:
             if kind == "ba":
                 lo, hi = BA_COLUMN_LIMITS
                 self._ba_cols = int(min(max(round(self._ba_cols / factor), lo), hi, self.app.depth.shape[1]))
@@ -175,7 +175,7 @@ class Loupes:
             n_rows, n_cols = self.app.depth.shape
             row = c.row0 + int(math.floor(y + 0.5))
             col = c.col0 + int(math.floor(x + 0.5))
-            if self.app._wrap_cols:
+            if self.app.wrap_cols:
                 col %= n_cols
             if not (0 <= row < n_rows and 0 <= col < n_cols):
                 raise CalibError("that part of the loupe is outside the scan")
@@ -194,7 +194,7 @@ class Loupes:
             c = self.ba_crop
             n_cols = self.app.depth.shape[1]
             x = float(target[0]) - c.col0
-            if self.app._wrap_cols:
+            if self.app.wrap_cols:
                 x = (x + 0.5) % n_cols - 0.5
             y = float(target[1]) - c.row0
         else:
@@ -214,7 +214,7 @@ class Loupes:
         app = self.app
         picks = app.state.picks
         crop = self.ba_crop if kind == "ba" else self.camera_crop
-        main = app.slots.get(crop.key) if kind == "ba" else app._camera_slot()
+        main = app.slots.get(crop.key) if kind == "ba" else app.camera_slot()
         inputs = (crop, self._slots[kind], picks, main, app.ba_window)
         if self._marks_of.get(kind) == inputs:
             return
@@ -232,7 +232,7 @@ class Loupes:
         rc = np.array([p.laser_rc for p in picks if p.laser_rc is not None], np.float64).reshape(-1, 2)
         cols = np.array([p.color for p in picks if p.laser_rc is not None], np.uint8).reshape(-1, 3)
         xy = np.stack([rc[:, 1] - c.col0, rc[:, 0] - c.row0], axis=1)
-        if app._wrap_cols and len(xy):
+        if app.wrap_cols and len(xy):
             xy[:, 0] = (xy[:, 0] + 0.5) % app.depth.shape[1] - 0.5
         inside = np.array([s.contains(p) for p in xy], bool)
         hx, hy = 0.5 * s.units_per_px, 0.5 * s.units_per_px_y
@@ -296,10 +296,10 @@ class Loupes:
                                np.stack([np.full_like(t, b), top + (bottom - top) * t], 1),
                                np.stack([b - (b - a) * t, np.full_like(t, bottom)], 1),
                                np.stack([np.full_like(t, a), bottom - (bottom - top) * t], 1)])
-        disp, ok = app._display_from_pixels(ring)
+        disp, ok = app.display_from_pixels(ring)
         segs = np.empty((0, 2, 3))
         if ok.all():
-            w = app._camera_slot().world_from_pixel(disp, z_offset=-0.02)
+            w = app.camera_slot().world_from_pixel(disp, z_offset=-0.02)
             segs = np.stack([w[:-1], w[1:]], axis=1)
         app.nodes.lines("/annot/loupe/camera_outline", segs, np.full(segs.shape, (255, 120, 0), np.uint8),
                         thickness=2.0)
@@ -322,7 +322,7 @@ class Loupes:
         n_rows, n_cols = gray.shape
         rows = c.row0 + np.arange(c.n_rows)
         cols = c.col0 + np.arange(c.n_cols)
-        if self.app._wrap_cols:
+        if self.app.wrap_cols:
             cols %= n_cols
         ok_r = (rows >= 0) & (rows < n_rows)
         ok_c = (cols >= 0) & (cols < n_cols)
@@ -389,6 +389,6 @@ class Loupes:
 
     def refresh(self) -> None:
         """Re-send both loupes (e.g. after the BA display changed)."""
-        with self.app._ui_lock:
+        with self.app.ui_lock:
             self._show("ba")
             self._show("camera")

@@ -16,7 +16,7 @@ from .ui_common import MARKER_SIZE, RING_CELLS, RING_MIN_RADIUS, EDGE_MIN_SIZE, 
 class OverlayDrawing:
     """Part of :class:`app.server.CalibrationApp` (a mixin: it uses the app's attributes)."""
 
-    def _display_from_pixels(self, pixels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def display_from_pixels(self, pixels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Display coordinates (visible camera view) of original-image pixels."""
         return self.camera_view.display_from_pixels(pixels)
 
@@ -26,11 +26,11 @@ class OverlayDrawing:
 
     def _refresh_scene(self) -> None:
         """Redraw markers, labels, selection and the reprojection overlays (only what changed is sent)."""
-        with self._ui_lock, self.server.atomic():
+        with self.ui_lock, self.server.atomic():
             picks = {p.id: p for p in self.state.picks}
             selected = self.state.selected
             labels: dict[str, tuple[str, np.ndarray]] = {}
-            cam_slot = self._camera_slot()
+            cam_slot = self.camera_slot()
             for key in (*self.ba_keys, cam_slot.key):
                 labels.update(self._draw_markers(key, picks, selected))
             predictions = self._predictions(picks)
@@ -86,11 +86,12 @@ class OverlayDrawing:
 
     def _draw_overlays(self, picks: dict[int, Pick], predictions: list[tuple[int, np.ndarray]]) -> None:
         """Reprojected pairs, residual lines, BA-edge points and predicted-pixel crosses on the camera view."""
-        slot = self._camera_slot()
+        slot = self.camera_slot()
         bundle = self._bundle
         # Skipped when neither the solve, the view nor the picks it colours changed (e.g. a click on a BA image).
         self._draw_predictions(slot, predictions)  # cheap, changes with every BA click
-        inputs = (slot, self.camera_view.key, self._show_reprojection, self._show_edges, self._edge_opacity,
+        view = self.state.view
+        inputs = (slot, self.camera_view.key, view.show_reprojection, view.show_edges, view.edge_opacity,
                   () if bundle is None else tuple(picks[i].color if i in picks else None for i in bundle.pick_ids))
         if self._overlay_inputs is not None and self._overlay_inputs[0] is bundle and self._overlay_inputs[1] == inputs:
             return
@@ -99,8 +100,8 @@ class OverlayDrawing:
         segs = np.empty((0, 2, 3))
         edge_world, edge_cols = np.empty((0, 3)), np.empty((0, 3), np.uint8)
         if bundle is not None:
-            if self._show_reprojection and len(bundle.pick_ids):
-                clicked, ok_c = self._display_from_pixels(bundle.pixels)
+            if view.show_reprojection and len(bundle.pick_ids):
+                clicked, ok_c = self.display_from_pixels(bundle.pixels)
                 proj, ok_p = self._display_from_camera_points(bundle.points_camera)
                 colors = np.array([picks[pid].color if pid in picks else (255, 255, 0) for pid in bundle.pick_ids],
                                   np.uint8).reshape(-1, 3)
@@ -109,7 +110,7 @@ class OverlayDrawing:
                 both = ok_p & ok_c
                 segs = np.stack([slot.world_from_pixel(clicked[both], z_offset=-0.008),
                                  slot.world_from_pixel(proj[both], z_offset=-0.008)], axis=1)
-            if self._show_edges and self._edge_opacity > 0 and len(bundle.edges_camera):
+            if view.show_edges and view.edge_opacity > 0 and len(bundle.edges_camera):
                 uv, ok = self._display_from_camera_points(bundle.edges_camera)
                 # Only where the camera sees (inside a fisheye circle); blended with the image under each point.
                 raw, ok_raw = self.camera.project(bundle.edges_camera)
@@ -118,7 +119,7 @@ class OverlayDrawing:
                 ok &= ok_raw & self.scene_data.image_valid[ij[:, 1], ij[:, 0]]
                 edge_world = slot.world_from_pixel(uv[ok], z_offset=-0.004)
                 under = self.image[ij[ok, 1], ij[ok, 0]].astype(np.float64)
-                a = self._edge_opacity
+                a = view.edge_opacity
                 edge_cols = np.round(a * np.array([0.0, 190.0, 255.0]) + (1.0 - a) * under).astype(np.uint8)
         self.nodes.points("/annot/overlay/reprojected", reproj_pts, reproj_cols, MARKER_SIZE * 0.55, shape="diamond")
         self.nodes.lines("/annot/overlay/residuals", segs, np.full(segs.shape, (255, 230, 0), np.uint8), thickness=2.0)
@@ -149,7 +150,7 @@ class OverlayDrawing:
     def _predictions(self, picks: dict[int, Pick]) -> list[tuple[int, np.ndarray]]:
         """Display pixels where the last good calibration expects picks that have only a BA end."""
         ids, pixels = self._predicted_pixels(picks)
-        uv, ok = self._display_from_pixels(pixels)
+        uv, ok = self.display_from_pixels(pixels)
         return [(pid, uv[k]) for k, pid in enumerate(ids) if ok[k]]
 
     def _predicted_pixels(self, picks: dict[int, Pick]) -> tuple[list[int], np.ndarray]:
@@ -161,3 +162,6 @@ class OverlayDrawing:
         points = self.depth.cell_points(np.array([p.laser_rc for p in pending]))
         uv, ok = project_lidar_points(T, self.camera, points)
         return [p.id for p, good in zip(pending, ok) if good], uv[ok]
+
+    # Old private names, still used by app/testing.py.
+    _display_from_pixels = display_from_pixels

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import tempfile
 from pathlib import Path
-from types import SimpleNamespace
 from typing import Any, Callable
 
 import numpy as np
@@ -16,7 +15,7 @@ from calib_core.pairs import Pair, load_pairs_yaml
 from calib_core.panorama import refine_click_to_corner
 
 from .security import upload_display_name
-from .ui_common import PICK_RADII, SNAP_RADIUS_PX, IMPORT_CHOICES, md_escape, _Action
+from .ui_common import MIN_PAIRS, PICK_RADII, SNAP_RADIUS_PX, IMPORT_CHOICES, md_escape
 
 
 class PairsPanel:
@@ -28,7 +27,45 @@ class PairsPanel:
             return self.loupes.slot(key[len("loupe_"):])
         return self.slots[key]
 
-    def _make_click_handler(self, key: str) -> Callable:
+    def _refresh_panel(self) -> None:
+        """Show the pairs summary, the selection dropdown and the calibration panel as they are now."""
+        with self.ui_lock:
+            picks = self.state.picks
+            complete = [p for p in picks if p.complete]
+            pending = self.state.pending()
+            selected = self.state.selected
+            lines = [f"**Pairs:** {len(complete)} complete"]
+            if pending is not None:
+                need = "camera" if pending.pixel is None else "BA"
+                lines.append(f"Pair {pending.id} waits for a {need} click.")
+                ids, uv = self._predicted_pixels({pending.id: pending})
+                if ids:
+                    lines.append(f"Predicted camera pixel: ({uv[0, 0]:.1f}, {uv[0, 1]:.1f}) (cross in the image).")
+            if selected is not None:
+                lines.append(f"**Pair {selected} selected:** clicks now move its ends (Deselect to add pairs).")
+            if len(complete) < MIN_PAIRS:
+                lines.append(f"Pick {MIN_PAIRS - len(complete)} more to calibrate.")
+            lines.append(f"Undo: {'yes' if self.state.can_undo else 'no'}, redo: {'yes' if self.state.can_redo else 'no'}")
+            self._md_pairs.content = "  \n".join(lines)
+            options = ("none",) + tuple(f"#{p.id}" for p in picks)
+            if tuple(self._dd_selected.options) != options:
+                self._dd_selected.options = options
+            want = "none" if selected is None else f"#{selected}"
+            if self._dd_selected.value != want:
+                self._dd_selected.value = want
+            self.calibration_panel.show(self._bundle, self._solve_error, self._solving, len(complete))
+
+    def _on_download_pairs(self, event: Any) -> None:
+        with tempfile.TemporaryDirectory() as tmp:
+            path = Path(tmp) / "pairs.yaml"
+            n = self.state.export_pairs_file(path)
+            data = path.read_bytes()
+        if event.client is not None:
+            event.client.send_file_download("pairs.yaml", data, save_immediately=True)
+        self.notify(event.client, "Pairs", f"{n} complete pairs downloaded", color="green")
+
+    def make_click_handler(self, key: str) -> Callable:
+        """The on-click callback of image slot ``key`` (a BA key, a camera view or ``loupe_*``): adds or moves an end."""
         def on_click(event: Any) -> None:
             slot = self._slot_of(key)
             uv = slot.pixel_from_ray(event.ray_origin, event.ray_direction)
@@ -36,7 +73,7 @@ class PairsPanel:
                 raise CalibError("click landed outside the image")
             self._click(key, uv, client=event.client)
 
-        return self._guard(on_click)
+        return self.guard(on_click)
 
     def cell_from_display(self, key: str, uv: tuple[float, float]) -> tuple[int, int]:
         """Scan cell ``(row, col)`` under display pixel ``uv`` of BA slot ``key`` (window applied)."""
@@ -46,21 +83,21 @@ class PairsPanel:
         """``("ba", key, row, col)`` or ``("camera", u, v)`` (original pixel) under display pixel ``uv`` of ``key``."""
         if key.startswith("loupe_"):
             target = self.loupes.target_at(key[len("loupe_"):], uv)
-            if self._snap and target[0] == "ba":
+            if self.state.view.snap and target[0] == "ba":
                 col, row = refine_click_to_corner(self.ba_display(target[1]), (target[3], target[2]), 3.0)
                 target = ("ba", target[1], int(np.clip(round(row), 0, self.depth.shape[0] - 1)),
                           int(round(col)) % self.depth.shape[1])
-            elif self._snap:
+            elif self.state.view.snap:
                 target = ("camera", *map(float, refine_click_to_corner(self.image_gray, target[1:], SNAP_RADIUS_PX)))
             return target
         if key in self.ba_keys:
-            if self._snap:
+            if self.state.view.snap:
                 shown = self.ba_display(key)[:, self._ba_window.columns]
                 uv = tuple(refine_click_to_corner(shown, uv, 3.0))
             return ("ba", key, *self.cell_from_display(key, uv))
         if key != self.camera_view.key:
             raise CalibError("that camera view is hidden; click the visible one")
-        if self._snap:
+        if self.state.view.snap:
             uv = tuple(refine_click_to_corner(self.camera_view.gray, uv, SNAP_RADIUS_PX))
         return ("camera", *self._original_from_display(uv))
 
@@ -145,7 +182,7 @@ class PairsPanel:
             uv = np.stack([u, rc[:, 0].astype(np.float64)], axis=1)[shown]
             return [p.id for p, ok in zip(sel, shown) if ok], uv
         sel = [p for p in picks if p.pixel is not None]
-        uv, ok = self._display_from_pixels(np.array([p.pixel for p in sel], dtype=np.float64).reshape(-1, 2))
+        uv, ok = self.display_from_pixels(np.array([p.pixel for p in sel], dtype=np.float64).reshape(-1, 2))
         return [p.id for p, good in zip(sel, ok) if good], uv[ok]
 
     def _nearest_pick(self, key: str, uv: tuple[float, float]) -> int | None:
@@ -158,13 +195,14 @@ class PairsPanel:
         k = int(np.argmin(d))
         return ids[k] if d[k] <= PICK_RADII * self._ring_radius(slot) else None
 
-    def _make_select_handler(self, key: str) -> Callable:
+    def make_select_handler(self, key: str) -> Callable:
+        """The Shift+click callback of image slot ``key``: selects the pair whose marker is nearest."""
         def on_shift_click(event: Any) -> None:
             uv = self._slot_of(key).pixel_from_ray(event.ray_origin, event.ray_direction)
             pick_id = None if uv is None else self._nearest_pick(key, uv)
             self.state.select(pick_id)
 
-        return self._guard(on_shift_click)
+        return self.guard(on_shift_click)
 
     def _make_drag_handler(self, key: str) -> Callable:
         def on_drag(event: Any) -> None:
@@ -183,7 +221,7 @@ class PairsPanel:
                 raise CalibError("dropped outside the image; the pair was not moved")
             self._click(key, (float(end[0]), float(end[1])), pick_id=pick_id, client=event.client)
 
-        return self._guard(on_drag)
+        return self.guard(on_drag)
 
     def _on_select_dropdown(self, event: Any) -> None:
         if event.client is None:  # our own update of the widget
@@ -210,10 +248,10 @@ class PairsPanel:
     def _add_upload_button(self, client: Any) -> None:
         """This tab's own "Import pairs YAML" button, in the shared Pairs folder above "Download pairs YAML"."""
         with self._upload_lock:  # a folder is one GUI context at a time
-            with self._pairs_folder:
+            with self.pairs_folder:
                 button = client.gui.add_upload_button("Import pairs YAML", icon=viser.Icon.UPLOAD, mime_type="*/*",
                                                       order=self._btn_pairs.order - 0.5)
-        button.on_upload(self._guard(self._on_upload))
+        button.on_upload(self.guard(self._on_upload))
 
     def _on_upload(self, event: Any) -> None:
         f = event.value  # this tab's button: no other tab's upload can have replaced it
@@ -224,10 +262,7 @@ class PairsPanel:
 
         The outcome is notified to ``client``; with ``wait``, returns once it is applied.
         """
-        self._actions.put((lambda action: self._import_upload(client, name, content), _Action(SimpleNamespace(
-            client=client), None)))
-        if wait:
-            self._actions.join()
+        self.post(lambda: self._import_upload(client, name, content), client=client, wait=wait)
 
     def _import_upload(self, client: Any, name: str, content: bytes) -> None:
         # The client's file name is only ever shown, never used as a path.
@@ -263,7 +298,7 @@ class PairsPanel:
                     modal.close()
                     self._finish_import(event.client, shown, pairs, label)
 
-                button.on_click(self._guard(answer))
+                button.on_click(self.guard(answer))
 
     def _finish_import(self, client: Any, shown: str, pairs: list[Pair], choice: str) -> None:
         if choice not in ("Append", "Replace all"):
@@ -277,12 +312,16 @@ class PairsPanel:
             what = f"{before} pairs replaced by {len(ids)} from {shown}"
         if skipped:
             what += f", {skipped} exact duplicates skipped"
-        self._notify(client, "Pairs imported", what + " (undo reverses this)", color="green")
+        self.notify(client, "Pairs imported", what + " (undo reverses this)", color="green")
 
     def _on_clear(self, event: Any) -> None:
         n = len(self.state.picks)
         if n == 0:
             raise CalibError("there are no pairs to clear")
         self.state.clear()
-        self._notify(event.client, "Pairs cleared", f"{n} pairs removed. Undo (in Edit) brings them back.",
+        self.notify(event.client, "Pairs cleared", f"{n} pairs removed. Undo (in Edit) brings them back.",
                      color="yellow")
+
+    # Old private names, still used by app/testing.py.
+    _make_click_handler = make_click_handler
+    _make_select_handler = make_select_handler

@@ -30,8 +30,7 @@ from .action_queue import ActionQueue
 from .page_builder import PageBuilder
 from .view_panel import ViewPanel
 from .pairs_panel import PairsPanel
-from .calibration_panel import CalibrationPanel
-from .export_panel import ExportPanel, FormatExportPanel
+from .export_panel import FormatExportPanel
 from .guide_panel import attach_guide_panel
 from .verify_panel import VerifyPanel
 from .live_coordinator import LiveSolveCoordinator
@@ -41,11 +40,14 @@ from .scene_nodes import SceneNodes
 from .security import TOKEN_QUERY, AccessPolicy, RefusalLog, start_guarded_viser
 from .state import AnnotationState
 from .warm_up import WarmUp
-from .ui_common import BA_WINDOW_MODES, UP_AXES, SolveBundle
+from .ui_common import SolveBundle
+from .view_settings import ViewSettings
 
 
-# The parts are mixins for now (moved verbatim from one class); each owns one concern and its own module.
-class CalibrationApp(PairsPanel, CalibrationPanel, ViewPanel, ExportPanel, LiveSolveCoordinator, OverlayDrawing,
+# Panels that are classes own their widgets and use only the app's public services (app/app_services.py):
+# CalibrationPanel, ExportPanel, FormatExportPanel, Loupes, GuidePanel, VerifyPanel.  The bases below are
+# still mixins (one concern and module each) that share the app's attributes.
+class CalibrationApp(PairsPanel, ViewPanel, LiveSolveCoordinator, OverlayDrawing,
                      PageBuilder, ActionQueue, LoupeSupport, DisplayPanel):
     """The annotation app on one scene; the viser server runs from construction.
 
@@ -121,7 +123,7 @@ class CalibrationApp(PairsPanel, CalibrationPanel, ViewPanel, ExportPanel, LiveS
         self.ba_rad, self.ba_keys, self.ba_gray, self.image_gray = sd.ba_rad, sd.ba_keys, sd.ba_gray, sd.image_gray
         self.edge_points_lidar, self.all_points_lidar, self.all_rows_cols = (
             sd.edge_points_lidar, sd.all_points_lidar, sd.all_rows_cols)
-        self.ba_cell_aspect, self._wrap_cols, self.cloud_points_lidar = (
+        self.ba_cell_aspect, self.wrap_cols, self.cloud_points_lidar = (
             sd.ba_cell_aspect, sd.wrap_cols, sd.cloud_points_lidar)
         self._bundle: SolveBundle | None = None
         self._init_loupe_support(initial_extrinsics_path)  # CalibError on a bad file, before any server starts
@@ -129,36 +131,20 @@ class CalibrationApp(PairsPanel, CalibrationPanel, ViewPanel, ExportPanel, LiveS
         # -- state ------------------------------------------------------------------
         # Every change is on disk (an fsync'd journal line) before the UI shows it; the journal is
         # compacted into the session YAML in the background and by stop().
+        # The view settings live in the state only (``state.view``, saved with the session).
+        default_view = ViewSettings(up_axis="+y" if self.depth.meta.get("model") == "rotating_2d" else "+z")
         self.state = AnnotationState(self.depth.valid, (self.camera.width, self.camera.height), self.session_path,
-                                     on_save_error=self._on_save_error)
-        view = self.state.view_settings()
-        self._init_display(view)  # what the laser panes and the loupe show, contrast, edge opacity
+                                     on_save_error=self._on_save_error, default_view=default_view)
+        self._init_display()  # the laser panes' grey levels, with the saved contrast
         self.camera_views = camera_views(sd)  # raw, and panorama for ocam / fisheye (app.camera_view)
-        self._use_panorama = bool(view.get("panorama", True)) and "panorama" in self.camera_views
-        self._show_reprojection = bool(view.get("show_reprojection", True))
-        self._show_edges = bool(view.get("show_edges", True))
-        self._snap = bool(view.get("snap", False))
-        self._up_axis = str(view.get("up_axis", "+y" if self.depth.meta.get("model") == "rotating_2d" else "+z"))
-        if self._up_axis not in UP_AXES:
-            self._up_axis = "+z"
-
-        n_cols = self.depth.shape[1]
-        self._ba_mode = str(view.get("ba_window_mode", "all"))
-        if self._ba_mode not in BA_WINDOW_MODES:
-            self._ba_mode = "all"
-        try:
-            start, width = int(view.get("ba_window_start", 0)), int(view.get("ba_window_width", n_cols))
-        except (TypeError, ValueError):
-            start, width = 0, n_cols
-        self._ba_custom = ColumnWindow.make(start, width, n_cols, self._wrap_cols)
         self._ba_facing: ColumnWindow | None = None  # from the last good solve it was computed for
         self._facing_of: SolveBundle | None = None  # the solve ``_ba_facing`` was computed for
         self._ensure_facing()  # from the imported initial extrinsic, if any
         self._ba_window = self._wanted_ba_window()
-        self._camera_sizes = {k: (v.image.shape[1], v.image.shape[0]) for k, v in self.camera_views.items()}
+        self.camera_sizes = {k: (v.image.shape[1], v.image.shape[0]) for k, v in self.camera_views.items()}
         self.slots = self._layout()
 
-        self._ui_lock = threading.RLock()
+        self.ui_lock = threading.RLock()  # public: held while the scene and the panels are redrawn
         self._upload_lock = threading.Lock()
         self._solve_error: str | None = None
         self._submitted: tuple | None = None
@@ -223,6 +209,14 @@ class CalibrationApp(PairsPanel, CalibrationPanel, ViewPanel, ExportPanel, LiveS
     def ba_window(self) -> ColumnWindow:
         """The scan columns the BA images show."""
         return self._ba_window
+
+    def export_extrinsics(self) -> tuple[bytes, Path | None]:
+        """:meth:`app.export_panel.ExportPanel.export_extrinsics`."""
+        return self.export_panel.export_extrinsics()
+
+    @property
+    def _on_download_yaml(self):  # the handler app/testing.py fires
+        return self.export_panel.on_download_yaml
 
     def stop(self) -> None:
         """Stop the solver thread and the server; returns once the session file holds every change.

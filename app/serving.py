@@ -148,7 +148,7 @@ class BagFramePanel:
 
     def request(self, index: int) -> None:
         """Ask for frame ``index`` as the "Load this frame" button does (``serve`` then restarts the app on it)."""
-        self._app._notify(None, "Loading frame", f"cloud {index}: the page reconnects in a moment", color="blue")
+        self._app.notify(None, "Loading frame", f"cloud {index}: the page reconnects in a moment", color="blue")
         self._on_request(index)
 
 
@@ -266,7 +266,7 @@ def serve(
             except CalibError as exc:
                 print(f"ba-calib: frame {index} not loaded: {exc}", flush=True)
                 if server.app is not None:
-                    server.app._notify(None, "Frame not loaded", str(exc))
+                    server.app.notify(None, "Frame not loaded", str(exc))
                     continue
                 raise
             _announce(app, host)

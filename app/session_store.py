@@ -17,12 +17,14 @@ CRC and is ignored; that change was never acknowledged.
 
 from __future__ import annotations
 
+import atexit
 import json
 import os
 import stat
 import sys
 import threading
 import time
+import weakref
 import zlib
 from pathlib import Path
 from typing import Callable
@@ -300,3 +302,26 @@ class SessionStore:
                     print(f"ba-calib: {exc}", file=sys.stderr)
                 with self._lock:
                     self._cond.wait(RETRY_S)
+
+
+_OPEN_STORES: "weakref.WeakSet[SessionStore]" = weakref.WeakSet()
+
+
+def compact_at_exit(store: SessionStore) -> None:
+    """Fold ``store``'s journal into its session file at interpreter exit, if it is still open then."""
+    _OPEN_STORES.add(store)
+
+
+def forget_at_exit(store: SessionStore) -> None:
+    """Undo :func:`compact_at_exit` (the store was closed)."""
+    _OPEN_STORES.discard(store)
+
+
+@atexit.register
+def _compact_open_stores() -> None:
+    """At interpreter exit, fold the journals into the session files (the data is safe either way)."""
+    for store in list(_OPEN_STORES):
+        try:
+            store.compact()
+        except Exception as exc:  # exiting anyway: say so, do not hide it
+            print(f"ba-calib: {exc}", file=sys.stderr)

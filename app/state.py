@@ -1,35 +1,27 @@
-"""Annotation state of the browser app: the point pairs the user is picking.
+"""Annotation state of the browser app: the point pairs the user is picking, and the view settings.
 
-A *pick* (:class:`app.picks.Pick`) is one correspondence under construction;
-its two clicks can come in either order.
+A *pick* (:class:`app.picks.Pick`) is one correspondence under construction; its two clicks can come in
+either order.  Every change goes through :class:`AnnotationState`, which
 
-Every change goes through :class:`AnnotationState`, which
-
-* checks the input (invalid laser cell, pixel outside the image ->
-  :class:`calib_core.errors.CalibError` with a one-line message),
-* keeps an undo/redo history of whole snapshots (every change is undoable,
-  including *clear all* and *import*),
-* puts every change on disk before it returns (and so before any listener
-  shows it): an fsync'd journal line beside the session file, compacted into
-  the session YAML in the background (:class:`app.session_store.SessionStore`),
-  so that closing the tab or killing the server loses no acknowledged click;
-  a change that cannot be saved is refused and undone.  The session is
-  restored on start; :meth:`AnnotationState.flush_session` and
-  :meth:`AnnotationState.close` bring the YAML itself up to date,
-* is thread-safe: viser runs callbacks on a thread pool, and two browser tabs
-  share one state.
+* checks the input (invalid laser cell, pixel outside the image -> :class:`calib_core.errors.CalibError`
+  with a one-line message; a bad view setting likewise, :class:`app.view_settings.ViewSettings`),
+* keeps an undo/redo history of whole snapshots of the picks (every change of them is undoable, including
+  *clear all* and *import*; view settings are not part of it),
+* puts every change on disk before it returns (and so before any listener shows it): an fsync'd journal
+  line beside the session file, compacted into the session YAML in the background
+  (:class:`app.session_store.SessionStore`), so that closing the tab or killing the server loses no
+  acknowledged click; a change that cannot be saved is refused and undone.  The session is restored on
+  start; :meth:`AnnotationState.flush_session` and :meth:`AnnotationState.close` bring the YAML up to date,
+* is thread-safe: viser runs callbacks on a thread pool, and two browser tabs share one state.
 
 Pure Python plus numpy; no maths, no viser.
 """
 
 from __future__ import annotations
 
-import atexit
 import os
-import sys
 import threading
 import time
-import weakref
 from dataclasses import replace
 from pathlib import Path
 from typing import Any, Callable, Sequence
@@ -40,25 +32,13 @@ from calib_core.errors import CalibError
 from calib_core.pairs import PAIR_SOURCES, Pair, load_pairs_yaml, save_pairs_yaml
 
 from .picks import SESSION_FORMAT, SESSION_VERSION, Pick, Snapshot, checked_picks, new_ends, restore_session
-from .session_store import SessionStore
+from .session_store import SessionStore, compact_at_exit, forget_at_exit
+from .view_settings import ViewSettings
 
 MAX_HISTORY = 500
 
 
 Listener = Callable[["AnnotationState"], None]
-
-_OPEN_STORES: "weakref.WeakSet[SessionStore]" = weakref.WeakSet()
-
-
-@atexit.register
-def _compact_open_stores() -> None:
-    """At interpreter exit, fold the journals into the session files (the data is safe either way)."""
-    for store in list(_OPEN_STORES):
-        try:
-            store.compact()
-        except Exception as exc:  # exiting anyway: say so, do not hide it
-            print(f"ba-calib: {exc}", file=sys.stderr)
-
 
 class AnnotationState:
     """Thread-safe pairs under construction, with undo/redo and a session file.
@@ -79,6 +59,9 @@ class AnnotationState:
         the journal into the YAML (retried; no change is lost meanwhile).
         A change whose journal line cannot be written raises CalibError and
         is not made.
+    default_view : ViewSettings, optional
+        The view settings of a new session, and the fallback of every setting
+        a session file lacks or holds a bad value for.
     """
 
     def __init__(
@@ -88,6 +71,7 @@ class AnnotationState:
         session_path: str | os.PathLike | None = None,
         *,
         on_save_error: Callable[[str], None] | None = None,
+        default_view: ViewSettings | None = None,
     ) -> None:
         self._valid = np.asarray(depth_valid, dtype=bool)
         if self._valid.ndim != 2:
@@ -98,7 +82,7 @@ class AnnotationState:
         self._undo: list[Snapshot] = []
         self._redo: list[Snapshot] = []
         self._selected: int | None = None
-        self._view: dict[str, Any] = {}
+        self._view = ViewSettings() if default_view is None else default_view
         self._version = 0
         self._change_started: float | None = None
         self._listeners: list[Listener] = []
@@ -110,7 +94,7 @@ class AnnotationState:
             if data is not None:
                 self._restore(data, self.session_path if from_yaml else store.journal_path)
             self._store = store
-            _OPEN_STORES.add(store)
+            compact_at_exit(store)
 
     # ------------------------------------------------------------------ queries
     @property
@@ -167,10 +151,11 @@ class AnnotationState:
         """``time.perf_counter()`` when the newest saved change began (before its disk write), or None."""
         return self._change_started
 
-    def view_settings(self) -> dict[str, Any]:
-        """A copy of the saved view settings (panorama on/off, overlays ...)."""
+    @property
+    def view(self) -> ViewSettings:
+        """The view settings (panorama on/off, overlays ...): the one copy the app reads."""
         with self._lock:
-            return dict(self._view)
+            return self._view
 
     # ------------------------------------------------------------- validation
     def check_laser_cell(self, row: int, col: int) -> tuple[int, int]:
@@ -382,17 +367,21 @@ class AnnotationState:
             self._version += 1
         self._notify()
 
-    def set_view(self, **settings: Any) -> None:
-        """Update saved view settings (plain YAML-able values); saved with the session."""
+    def set_view(self, **changes: Any) -> ViewSettings:
+        """Change view settings (:meth:`ViewSettings.changed`: CalibError on an unknown name or a bad value).
+
+        Saved with the session, not an undoable step.  Returns the new settings.
+        """
         with self._lock:
-            changed = {k: v for k, v in settings.items() if self._view.get(k, object()) != v}
-            if not changed:
-                return
+            new = self._view.changed(**changes)
+            if new == self._view:
+                return new
             before = self._checkpoint_locked()
-            self._view.update(changed)
+            self._view = new
             self._version += 1
             self._save_locked(before)
         self._notify()
+        return new
 
     # -------------------------------------------------------------- listeners
     def subscribe(self, listener: Listener) -> None:
@@ -409,7 +398,7 @@ class AnnotationState:
                 "version": SESSION_VERSION,
                 "next_id": int(self._snap.next_id),
                 "pairs": [p.to_dict() for p in self._snap.picks],
-                "view": dict(self._view),
+                "view": self._view.to_dict(),
             }
 
     def flush_session(self) -> None:
@@ -435,7 +424,7 @@ class AnnotationState:
         with self._lock:
             store, self._store = self._store, None
         if store is not None:
-            _OPEN_STORES.discard(store)
+            forget_at_exit(store)
             store.close()
 
     # -------------------------------------------------------------- internals
@@ -476,7 +465,7 @@ class AnnotationState:
     def _checkpoint_locked(self) -> tuple:
         # Taken at the start of every saved change: also when the change began (for timing hooks).
         self._change_started = time.perf_counter()
-        return self._snap, list(self._undo), list(self._redo), self._selected, dict(self._view), self._version
+        return self._snap, list(self._undo), list(self._redo), self._selected, self._view, self._version
 
     def _after_change_locked(self, before: tuple) -> None:
         ids = {p.id for p in self._snap.picks}
@@ -503,4 +492,4 @@ class AnnotationState:
         """Restore the session ``data`` read from ``path`` (the session YAML or its journal)."""
         self._snap, view = restore_session(data, path, self.check_laser_cell, self.check_pixel)
         if view is not None:
-            self._view = view
+            self._view = ViewSettings.from_dict(view, default=self._view)

@@ -37,11 +37,9 @@ ZOOM_PX_PER_CELL = 14.0
 ZOOM_PX_PER_IMAGE_PX = 4.0
 ZOOM_STEP = 2.0
 EDGE_MIN_SIZE = 0.012  # world units
-BA_WINDOW_MODES = {"all": "All columns", "camera": "Facing the camera", "custom": "Custom"}
 SNAP_RADIUS_PX = 4.0
 #: The answers of the import question (the buttons of its modal).
 IMPORT_CHOICES = ("Append", "Replace all", "Cancel")
-UP_AXES = {"+z": (0.0, 0.0, 1.0), "+y": (0.0, 1.0, 0.0), "-y": (0.0, -1.0, 0.0), "camera up (-y of camera)": None}
 
 
 #: The quality verdict as the result panel shows it (fixed strings: no user text).

@@ -75,7 +75,7 @@ class VerifyPanel:
     ----------
     app : CalibrationApp
         Read: ``state``, ``depth``, ``camera``, ``image``, ``all_points_lidar``;
-        user actions go through ``app._guard`` (the app's ordered action worker).
+        user actions go through ``app.guard`` (the app's ordered action worker).
     """
 
     def __init__(self, app: Any) -> None:
@@ -96,7 +96,7 @@ class VerifyPanel:
 
     # ------------------------------------------------------------------ widgets
     def _build(self, gui: Any) -> None:
-        guard = self.app._guard
+        guard = self.app.guard
         with gui.add_folder("Verify"):
             self._md_summary = gui.add_markdown("")
             self._dd_pair = gui.add_dropdown("Pair to mark", ("none",), initial_value="none",

@@ -20,8 +20,8 @@ from .camera_view import CameraView
 from .layout import ImageSlot, annotation_layout, bounds_of
 from .ui_common import (
     BA_TITLES, MIN_PAIRS, CLOUD_ORIGIN, PANEL_PX, ZOOM_PX_PER_CELL, ZOOM_PX_PER_IMAGE_PX, ZOOM_STEP,
-    BA_WINDOW_MODES, UP_AXES,
 )
+from .view_settings import BA_WINDOW_MODES, UP_AXES
 
 
 class ViewPanel:
@@ -29,16 +29,23 @@ class ViewPanel:
 
     def _layout(self) -> dict[str, ImageSlot]:
         window = self._ba_window
-        return annotation_layout(self._camera_sizes, (window.width, self.depth.shape[0]), self.ba_keys,
+        return annotation_layout(self.camera_sizes, (window.width, self.depth.shape[0]), self.ba_keys,
                                  cell_aspect=self.ba_cell_aspect)
 
     def _wanted_ba_window(self) -> ColumnWindow:
         """The column window the current mode asks for (custom until a solve says what the camera sees)."""
-        if self._ba_mode == "all":
-            return ColumnWindow.full(self.depth.shape[1], self._wrap_cols)
-        if self._ba_mode == "camera" and self._ba_facing is not None:
+        mode = self.state.view.ba_window_mode
+        if mode == "all":
+            return ColumnWindow.full(self.depth.shape[1], self.wrap_cols)
+        if mode == "camera" and self._ba_facing is not None:
             return self._ba_facing
         return self._ba_custom
+
+    @property
+    def _ba_custom(self) -> ColumnWindow:
+        """The saved custom column window, fitted to the scan (width 0: every column)."""
+        view, n_cols = self.state.view, self.depth.shape[1]
+        return ColumnWindow.make(view.ba_window_start, view.ba_window_width or n_cols, n_cols, self.wrap_cols)
 
     def _ba_texture(self, key: str) -> np.ndarray:
         window = self._ba_window
@@ -54,7 +61,7 @@ class ViewPanel:
 
     def _apply_ba_window(self) -> None:
         """Show the window the mode asks for: new textures, slots, markers; re-frame 2-D tabs."""
-        with self._ui_lock:
+        with self.ui_lock:
             window = self._wanted_ba_window()
             if window == self._ba_window:
                 return
@@ -82,7 +89,7 @@ class ViewPanel:
     def _sync_window_widgets(self) -> None:
         """Show the current window in the GUI (server-side updates; their callbacks ignore them)."""
         w = self._ba_window
-        want = BA_WINDOW_MODES[self._ba_mode]
+        want = BA_WINDOW_MODES[self.state.view.ba_window_mode]
         if self._dd_ba_window.value != want:
             self._dd_ba_window.value = want
         if self._sl_ba_start.value != w.start:
@@ -93,31 +100,29 @@ class ViewPanel:
     @property
     def camera_view(self) -> CameraView:
         """The camera view the page shows (raw image or panorama)."""
-        return self.camera_views["panorama" if self._use_panorama else "raw"]
+        panorama = self.state.view.panorama and "panorama" in self.camera_views  # saved choice, if this camera has one
+        return self.camera_views["panorama" if panorama else "raw"]
 
-    def _camera_slot(self) -> ImageSlot:
+    def camera_slot(self) -> ImageSlot:
+        """Where the visible camera view (raw or panorama) lies on the page."""
         return self.slots[self.camera_view.key]
 
     def _update_camera_title(self) -> None:
-        s = self._camera_slot()
+        s = self.camera_slot()
         x0, y0, _, _ = s.bounds()
         self._camera_title.position = (x0, y0 - 0.03, -0.01)
         self._camera_title.text = self.camera_view.title()
 
     def _on_view_checkbox(self, event: Any) -> None:
-        with self._ui_lock:
-            was_panorama = self._use_panorama
-            self._use_panorama = bool(self._cb_pano.value) and "panorama" in self.camera_views
-            self._show_reprojection = bool(self._cb_reproj.value)
-            self._show_edges = bool(self._cb_edges.value)
-            self._snap = bool(self._cb_snap.value)
+        with self.ui_lock:  # a drawing on another thread sees the old or the new camera view, never a mix
+            was = self.camera_view.key
+            self.state.set_view(panorama=bool(self._cb_pano.value), show_reprojection=bool(self._cb_reproj.value),
+                                show_edges=bool(self._cb_edges.value), snap=bool(self._cb_snap.value))
             for key in self.camera_views:
                 self._image_handles[key].visible = key == self.camera_view.key
             self._update_camera_title()
-        self.state.set_view(panorama=self._use_panorama, show_reprojection=self._show_reprojection,
-                            show_edges=self._show_edges, snap=self._snap)
         self._refresh_scene()
-        if was_panorama != self._use_panorama:
+        if was != self.camera_view.key:
             # The camera view changed size: re-frame every tab that shows the 2-D view.
             clients = self.server.get_clients()
             for cid, mode in list(self._client_mode.items()):
@@ -125,8 +130,7 @@ class ViewPanel:
                     self._set_view(clients[cid], mode)
 
     def _on_up_axis(self, event: Any) -> None:
-        self._up_axis = str(event.value)
-        self.state.set_view(up_axis=self._up_axis)
+        self.state.set_view(up_axis=str(event.value))
         for cid, mode in list(self._client_mode.items()):
             if mode == "3d":
                 client = self.server.get_clients().get(cid)
@@ -159,7 +163,7 @@ class ViewPanel:
         mode = {label: m for m, label in BA_WINDOW_MODES.items()}.get(str(event.value), "all")
         self._set_ba_mode(mode)
         if mode == "camera" and self._ba_facing is None:
-            self._notify(event.client, "No calibration yet",
+            self.notify(event.client, "No calibration yet",
                          f"Showing the columns set by the sliders; once {MIN_PAIRS} pairs are solved the BA images "
                          "show the columns the camera sees.", color="yellow")
 
@@ -168,18 +172,17 @@ class ViewPanel:
             return
         if event.value != event.target.value:
             return  # a newer slider position is queued behind this one
-        self._ba_custom = ColumnWindow.make(int(self._sl_ba_start.value), int(self._sl_ba_width.value),
-                                            self.depth.shape[1], self._wrap_cols)
-        self._set_ba_mode("custom")
+        self._set_ba_mode("custom", ColumnWindow.make(int(self._sl_ba_start.value), int(self._sl_ba_width.value),
+                                                      self.depth.shape[1], self.wrap_cols))
 
-    def _set_ba_mode(self, mode: str) -> None:
-        self._ba_mode = mode
+    def _set_ba_mode(self, mode: str, custom: ColumnWindow | None = None) -> None:
+        """Save the BA column mode (and the custom window, if given), then show it."""
+        w = self._ba_custom if custom is None else custom
+        self.state.set_view(ba_window_mode=mode, ba_window_start=int(w.start), ba_window_width=int(w.width))
         if mode == "camera":
             self._ensure_facing()
         self._apply_ba_window()
         self._sync_window_widgets()
-        w = self._ba_custom
-        self.state.set_view(ba_window_mode=mode, ba_window_start=int(w.start), ba_window_width=int(w.width))
 
     def _on_connect(self, client: Any) -> None:
         try:
@@ -225,11 +228,11 @@ class ViewPanel:
         self._client_mode[client.client_id] = mode
         self._update_cloud_visibility()
         if mode == "camera":
-            slots = [self._camera_slot()]
+            slots = [self.camera_slot()]
         elif mode == "ba":
             slots = [self.slots[k] for k in self.ba_keys]
         else:
-            slots = [self._camera_slot()] + [self.slots[k] for k in self.ba_keys]
+            slots = [self.camera_slot()] + [self.slots[k] for k in self.ba_keys]
             if getattr(self, "loupes", None) is not None:  # the loupes are part of the page
                 slots += [self.loupes.slot("ba"), self.loupes.slot("camera")]
         x0, y0, x1, y1 = bounds_of(slots)
@@ -275,7 +278,7 @@ class ViewPanel:
         last = self._last_click.get(client.client_id)
         if last is None:
             raise CalibError("nothing clicked yet in this tab: click a BA or camera image first")
-        with self._ui_lock:
+        with self.ui_lock:
             if last[0] == "ba":
                 _, key, row, col = last
                 slot = self.slots[key]
@@ -285,8 +288,8 @@ class ViewPanel:
                 centre = slot.world_from_pixel(np.array([[u[0], row]]))[0]
                 units = min(slot.units_per_px, slot.units_per_px_y) / ZOOM_PX_PER_CELL
             else:
-                slot = self._camera_slot()
-                uv, ok = self._display_from_pixels(np.array([[last[1], last[2]]]))
+                slot = self.camera_slot()
+                uv, ok = self.display_from_pixels(np.array([[last[1], last[2]]]))
                 if not ok[0]:
                     raise CalibError("the last clicked camera pixel is not shown in this camera view")
                 centre = slot.world_from_pixel(uv)[0]
@@ -304,7 +307,7 @@ class ViewPanel:
         self._view_target[client.client_id] = (np.asarray(position, float), np.asarray(look_at, float), time.time())
 
     def _up_vector(self) -> np.ndarray:
-        axis = UP_AXES.get(self._up_axis)
+        axis = UP_AXES.get(self.state.view.up_axis)
         if axis is None:
             bundle = self._bundle
             if bundle is None:
@@ -356,8 +359,8 @@ class ViewPanel:
                 raise CalibError(f"{uv} is not shown in the {target[len('loupe_'):]} loupe")
             disp = np.array([shown])
         elif target == "camera":
-            slot = self._camera_slot()
-            disp, ok = self._display_from_pixels(disp)
+            slot = self.camera_slot()
+            disp, ok = self.display_from_pixels(disp)
             if not ok[0]:
                 raise CalibError(f"pixel {uv} is not shown in the camera view")
         else:
@@ -377,3 +380,6 @@ class ViewPanel:
                              int(cam.image_width), int(cam.image_height))
         xy, _ = view.project(transform_points(invert_T(T_world_view), world))
         return float(xy[0, 0]) / cam.image_width, float(xy[0, 1]) / cam.image_height
+
+    # Old private names, still used by app/testing.py.
+    _camera_slot = camera_slot

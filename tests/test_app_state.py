@@ -10,6 +10,7 @@ import yaml
 
 from app.picks import pair_color
 from app.state import AnnotationState
+from app.view_settings import ViewSettings
 from calib_core.errors import CalibError
 from calib_core.pairs import Pair, load_pairs_yaml, save_pairs_yaml
 
@@ -184,7 +185,7 @@ def test_every_change_is_on_disk_before_it_returns_and_restored(tmp_path):
     s.set_view(panorama=False, show_edges=True)
     crashed = make_state(tmp_path)
     assert ends(crashed) == [(2, (7, 8), (33.0, 44.0))]
-    assert crashed.view_settings() == {"panorama": False, "show_edges": True}
+    assert crashed.view == ViewSettings(panorama=False, show_edges=True)
     s.close()  # what the app's stop() does: the YAML itself holds everything, the journal is gone
     assert not journal.exists() and not list(tmp_path.glob("*.tmp"))
     data = yaml.safe_load(path.read_text())
@@ -193,7 +194,7 @@ def test_every_change_is_on_disk_before_it_returns_and_restored(tmp_path):
     # "Restart": a new state on the session file.
     t = make_state(tmp_path)
     assert ends(t) == [(2, (7, 8), (33.0, 44.0))]
-    assert t.view_settings() == {"panorama": False, "show_edges": True}
+    assert t.view == ViewSettings(panorama=False, show_edges=True)
     assert t.add_laser(9, 9) == 3  # ids continue after the restored ones
     assert t.pending().id == 3
     t.close()
@@ -225,8 +226,8 @@ def test_a_change_that_cannot_be_saved_is_refused_and_not_made(tmp_path):
     with pytest.raises(CalibError, match="cannot save the change.*not made"):
         s.add_pixel(1.0, 2.0)
     with pytest.raises(CalibError, match="not made"):
-        s.set_view(panorama=True)
-    assert s.version == v0 and s.picks == picks0 and s.view_settings() == {} and not s.can_redo
+        s.set_view(panorama=False)
+    assert s.version == v0 and s.picks == picks0 and s.view == ViewSettings() and not s.can_redo
     assert s.undo() is False  # the restored state has no history, and the refused change left none
 def test_session_accepts_a_plain_pairs_file_and_rejects_other_scenes(tmp_path):
     path = tmp_path / "session.yaml"

@@ -1,0 +1,123 @@
+"""The app's view settings: one frozen, typed record, saved in the session file.
+
+:class:`ViewSettings` is the one place the view settings live: the
+:class:`app.state.AnnotationState` holds the current one (``state.view``) and
+changes it with ``state.set_view(**changes)``; the panels read it from there.
+Session files store it as a plain mapping (:meth:`ViewSettings.to_dict`);
+:meth:`ViewSettings.from_dict` reads it back, and a missing, unknown or bad
+value there falls back to the default, so files of older versions still load.
+
+Which choices exist for a given scene (a panorama, the loupe's image sources,
+the scan's width) is not known here: the app checks those where it uses them.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields, replace
+from typing import Any, Mapping
+
+from calib_core.errors import CalibError
+
+#: What the BA images show: every column, the columns the camera sees, or the sliders' window.
+BA_WINDOW_MODES = {"all": "All columns", "camera": "Facing the camera", "custom": "Custom"}
+#: The 3-D pane's up direction, in the lidar frame (None: the solved camera's up).
+UP_AXES = {"+z": (0.0, 0.0, 1.0), "+y": (0.0, 1.0, 0.0), "-y": (0.0, -1.0, 0.0), "camera up (-y of camera)": None}
+#: The BA loupe shows the direction that was clicked (other choices are scene-specific names).
+AS_CLICKED = "BA as clicked"
+CONTRAST_RANGE = (0.5, 3.0)
+EDGE_OPACITY_RANGE = (0.0, 1.0)
+
+
+@dataclass(frozen=True)
+class ViewSettings:
+    """How the page shows the scene (no pairs: changing these is not an undoable step).
+
+    Attributes
+    ----------
+    panorama : bool
+        Show the camera image unwrapped (when the camera model has a panorama).
+    show_reprojection, show_edges : bool
+        Draw the reprojected pairs with their residuals / the reprojected BA-edge points.
+    snap : bool
+        Snap clicks to the nearest corner.
+    up_axis : str
+        Key of :data:`UP_AXES`: the 3-D pane's up direction.
+    ba_window_mode : str
+        Key of :data:`BA_WINDOW_MODES`.
+    ba_window_start, ba_window_width : int
+        The custom column window (scan columns); width 0 means every column.
+        The app clips them to the scan (:meth:`app.ba_view.ColumnWindow.make`).
+    contrast : float
+        Contrast of the laser panes, in :data:`CONTRAST_RANGE`.
+    loupe_shows : str
+        What the BA loupe shows: :data:`AS_CLICKED` or a name of the scene's laser images.
+    edge_opacity : float
+        Opacity of the BA-edge overlay, in :data:`EDGE_OPACITY_RANGE` (0 hides it).
+    """
+
+    panorama: bool = True
+    show_reprojection: bool = True
+    show_edges: bool = True
+    snap: bool = False
+    up_axis: str = "+z"
+    ba_window_mode: str = "all"
+    ba_window_start: int = 0
+    ba_window_width: int = 0
+    contrast: float = 1.0
+    loupe_shows: str = AS_CLICKED
+    edge_opacity: float = 0.8
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            object.__setattr__(self, f.name, _checked(f.name, getattr(self, f.name)))
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any] | None, default: "ViewSettings | None" = None) -> "ViewSettings":
+        """Settings from a session file's ``view`` mapping; missing, unknown or bad values take ``default``'s."""
+        base = cls() if default is None else default
+        good = {}
+        for name, value in dict(data or {}).items():
+            if name in _FIELDS:
+                try:
+                    good[name] = _checked(name, value)
+                except CalibError:
+                    pass
+        return replace(base, **good)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Every setting as plain YAML-able data (what the session file holds)."""
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+    def changed(self, **changes: Any) -> "ViewSettings":
+        """A copy with ``changes``; CalibError names an unknown setting or a bad value."""
+        unknown = sorted(set(changes) - set(_FIELDS))
+        if unknown:
+            raise CalibError(f"unknown view setting {unknown[0]!r}; known: {', '.join(_FIELDS)}")
+        return replace(self, **changes)
+
+
+def _checked(name: str, value: Any) -> Any:
+    """``value`` as setting ``name`` holds it (numbers clipped to their range), or CalibError."""
+    kind = _FIELDS[name]
+    if kind is bool:
+        if isinstance(value, bool):
+            return value
+    elif kind is str:
+        if isinstance(value, str) and (name not in _CHOICES or value in _CHOICES[name]):
+            return value
+    elif kind is int:
+        if isinstance(value, int) and not isinstance(value, bool) and value >= 0:
+            return int(value)
+    elif isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value):
+        lo, hi = _RANGES[name]
+        return float(min(max(float(value), lo), hi))
+    raise CalibError(f"view setting {name!r} cannot be {value!r}")
+
+
+_FIELDS = {"panorama": bool, "show_reprojection": bool, "show_edges": bool, "snap": bool, "up_axis": str,
+           "ba_window_mode": str, "ba_window_start": int, "ba_window_width": int, "contrast": float,
+           "loupe_shows": str, "edge_opacity": float}
+_CHOICES = {"up_axis": tuple(UP_AXES), "ba_window_mode": tuple(BA_WINDOW_MODES)}
+_RANGES = {"contrast": CONTRAST_RANGE, "edge_opacity": EDGE_OPACITY_RANGE}
+assert tuple(_FIELDS) == tuple(f.name for f in fields(ViewSettings)), "ViewSettings and _FIELDS disagree"
