@@ -87,5 +87,3 @@ class ActionQueue:
                 pass
 
     # The old private names, still used by app/testing.py.
-    _guard = guard
-    _notify = notify

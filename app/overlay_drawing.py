@@ -164,4 +164,3 @@ class OverlayDrawing:
         return [p.id for p, good in zip(pending, ok) if good], uv[ok]
 
     # Old private names, still used by app/testing.py.
-    _display_from_pixels = display_from_pixels

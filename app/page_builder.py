@@ -94,7 +94,6 @@ class PageBuilder:
             self._btn_pairs = gui.add_button("Download pairs YAML", icon=viser.Icon.DOWNLOAD)
             self._btn_pairs.on_click(self.guard(self._on_download_pairs))
         self.calibration_panel = CalibrationPanel(gui)
-        self._md_result, self._md_table = self.calibration_panel.md_result, self.calibration_panel.md_table  # testing.py
         self._view_folder = gui.add_folder("View")
         with self._view_folder:
             self._bg_loupe_zoom = gui.add_button_group("Loupe zoom", ("BA +", "BA -", "Camera +", "Camera -"))

@@ -323,5 +323,3 @@ class PairsPanel:
                      color="yellow")
 
     # Old private names, still used by app/testing.py.
-    _make_click_handler = make_click_handler
-    _make_select_handler = make_select_handler

@@ -214,10 +214,6 @@ class CalibrationApp(PairsPanel, ViewPanel, LiveSolveCoordinator, OverlayDrawing
         """:meth:`app.export_panel.ExportPanel.export_extrinsics`."""
         return self.export_panel.export_extrinsics()
 
-    @property
-    def _on_download_yaml(self):  # the handler app/testing.py fires
-        return self.export_panel.on_download_yaml
-
     def stop(self) -> None:
         """Stop the solver thread and the server; returns once the session file holds every change.
 

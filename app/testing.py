@@ -48,7 +48,7 @@ class AppDriver:
 
     def click(self, key: str, uv: tuple[float, float]) -> list[tuple[str, str]]:
         """Click display pixel ``uv`` of image ``key`` (a BA key, ``raw`` or ``panorama``)."""
-        return self._fire(self.app._make_click_handler(key), self._ray(key, uv))
+        return self._fire(self.app.make_click_handler(key), self._ray(key, uv))
 
     def click_cell(self, key: str, row: int, col: int) -> list[tuple[str, str]]:
         """Click the centre of scan cell ``(row, col)`` on BA image ``key`` (it must be in the shown columns)."""
@@ -60,7 +60,7 @@ class AppDriver:
     def click_camera(self, u: float, v: float) -> list[tuple[str, str]]:
         """Click original camera pixel ``(u, v)`` in the visible camera view."""
         key = self.camera_key
-        disp, ok = self.app._display_from_pixels(np.array([[u, v]], dtype=np.float64))
+        disp, ok = self.app.display_from_pixels(np.array([[u, v]], dtype=np.float64))
         if not ok[0]:
             raise ValueError(f"pixel ({u}, {v}) is not shown")
         return self.click(key, (float(disp[0, 0]), float(disp[0, 1])))
@@ -93,24 +93,24 @@ class AppDriver:
 
     def press_loupe_zoom(self, label: str) -> list[tuple[str, str]]:
         """Press a "Loupe zoom" button: ``"BA +"``, ``"BA -"``, ``"Camera +"`` or ``"Camera -"``."""
-        return self._fire(self.app._guard(self.app._on_loupe_zoom), SimpleNamespace(
+        return self._fire(self.app.guard(self.app._on_loupe_zoom), SimpleNamespace(
             client=self.tab, target=SimpleNamespace(value=label)))
 
     def upload_initial_extrinsics(self, name: str, content: bytes) -> list[tuple[str, str]]:
         """Upload an extrinsics file through this tab's "Import initial extrinsics" button."""
-        handler = self.app._guard(lambda action: self.app.receive_initial_extrinsics(action.client, name, content))
+        handler = self.app.guard(lambda action: self.app.receive_initial_extrinsics(action.client, name, content))
         return self._fire(handler, SimpleNamespace(client=self.tab, target=None))
 
     def choose_loupe_source(self, name: str) -> list[tuple[str, str]]:
         """Choose what the BA loupe shows in its dropdown (see ``app.loupe_sources()``)."""
-        return self._fire(self.app._guard(self.app._on_loupe_source), SimpleNamespace(
+        return self._fire(self.app.guard(self.app._on_loupe_source), SimpleNamespace(
             client=self.tab, target=SimpleNamespace(value=name)))
 
     def set_slider(self, label: str, value: float) -> list[tuple[str, str]]:
         """Move a slider of the View folder: ``"Laser contrast"`` or ``"BA-edge opacity"``."""
         handler = {"Laser contrast": self.app._on_contrast, "BA-edge opacity": self.app._on_edge_opacity}[label]
         target = SimpleNamespace(value=value)
-        return self._fire(self.app._guard(handler), SimpleNamespace(client=self.tab, target=target))
+        return self._fire(self.app.guard(handler), SimpleNamespace(client=self.tab, target=target))
 
     def loupe_texture(self, kind: str) -> np.ndarray:
         """The texture the loupe shows now (a nearest-neighbour enlarged crop)."""
@@ -135,13 +135,13 @@ class AppDriver:
     # ---------------------------------------------------------------- view folder
     def choose_ba_columns(self, label: str) -> list[tuple[str, str]]:
         """Choose in the "BA columns" dropdown: ``"All columns"``, ``"Facing the camera"`` or ``"Custom"``."""
-        return self._fire(self.app._guard(self.app._on_ba_window_mode), SimpleNamespace(
+        return self._fire(self.app.guard(self.app._on_ba_window_mode), SimpleNamespace(
             client=self.tab, target=SimpleNamespace(value=label)))
 
     def set_ba_columns(self, start: int, width: int) -> list[tuple[str, str]]:
         """Move the "BA first column" and "BA columns shown" sliders to ``start`` and ``width``."""
         self.app._sl_ba_start.value, self.app._sl_ba_width.value = int(start), int(width)
-        return self._fire(self.app._guard(self.app._on_ba_window_slider), SimpleNamespace(
+        return self._fire(self.app.guard(self.app._on_ba_window_slider), SimpleNamespace(
             client=self.tab, target=self.app._sl_ba_width))
 
     @property
@@ -155,12 +155,12 @@ class AppDriver:
 
     def press_zoom(self, name: str) -> list[tuple[str, str]]:
         """Press a "Zoom" button of the 2-D view: ``"In"``, ``"Out"`` or ``"On last click"``."""
-        return self._fire(self.app._guard(self.app._on_magnify), SimpleNamespace(
+        return self._fire(self.app.guard(self.app._on_magnify), SimpleNamespace(
             client=self.tab, target=SimpleNamespace(value=name)))
 
     def show(self, view: str) -> list[tuple[str, str]]:
         """Press "Show": ``"2D annotation"`` or ``"3D cloud"``."""
-        return self._fire(self.app._guard(self.app._on_view_mode), SimpleNamespace(
+        return self._fire(self.app.guard(self.app._on_view_mode), SimpleNamespace(
             client=self.tab, target=SimpleNamespace(value=view)))
 
     @property
@@ -175,18 +175,18 @@ class AppDriver:
 
     def shift_click(self, key: str, uv: tuple[float, float]) -> list[tuple[str, str]]:
         """Shift+click display pixel ``uv`` of image ``key`` (selects the pair whose marker is there)."""
-        return self._fire(self.app._make_select_handler(key), self._ray(key, uv))
+        return self._fire(self.app.make_select_handler(key), self._ray(key, uv))
 
     def select_in_dropdown(self, pick_id: int | None) -> list[tuple[str, str]]:
         """Choose a pair (or ``None``) in the "Selected pair" dropdown."""
         # The value the tab sent (setting the handle's value from Python would fire the callback itself).
         chosen = SimpleNamespace(value="none" if pick_id is None else f"#{pick_id}")
-        return self._fire(self.app._guard(self.app._on_select_dropdown), SimpleNamespace(client=self.tab,
+        return self._fire(self.app.guard(self.app._on_select_dropdown), SimpleNamespace(client=self.tab,
                                                                                          target=chosen))
 
     def press_edit(self, name: str) -> list[tuple[str, str]]:
         """Press one of the Edit buttons: ``Undo``, ``Redo``, ``Deselect``, ``Delete``."""
-        return self._fire(self.app._guard(self.app._on_edit), SimpleNamespace(client=self.tab,
+        return self._fire(self.app.guard(self.app._on_edit), SimpleNamespace(client=self.tab,
                                                                               target=SimpleNamespace(value=name)))
 
     def upload_pairs(self, name: str, content: bytes, answer: str | None = "Append") -> list[tuple[str, str]]:
@@ -220,7 +220,7 @@ class AppDriver:
 
     def press_clear_all(self) -> list[tuple[str, str]]:
         """Press "Clear all pairs"."""
-        return self._fire(self.app._guard(self.app._on_clear), SimpleNamespace(client=self.tab, target=None))
+        return self._fire(self.app.guard(self.app._on_clear), SimpleNamespace(client=self.tab, target=None))
 
     def wait_idle(self, timeout: float = 60.0) -> bool:
         """Wait for the live solve and cloud work the last actions started."""
@@ -239,14 +239,14 @@ class AppDriver:
 
     def camera_display_pixel(self, u: float, v: float) -> tuple[float, float] | None:
         """Where original camera pixel ``(u, v)`` is shown in the visible camera view (None: not shown)."""
-        disp, ok = self.app._display_from_pixels(np.array([[u, v]], dtype=np.float64))
+        disp, ok = self.app.display_from_pixels(np.array([[u, v]], dtype=np.float64))
         return (float(disp[0, 0]), float(disp[0, 1])) if ok[0] else None
 
     # ------------------------------------------------------------------ reading
     @property
     def camera_key(self) -> str:
         """The camera view the page shows (``raw`` or ``panorama``)."""
-        return self.app._camera_slot().key
+        return self.app.camera_slot().key
 
     def marker_ids(self, key: str) -> list[int]:
         """Pair ids whose markers are drawn on image ``key``."""
@@ -274,12 +274,12 @@ class AppDriver:
     @property
     def residual_table(self) -> str:
         """The per-pair residual table (markdown) of the Calibration panel."""
-        return str(self.app._md_table.content)
+        return self.app.calibration_panel.table_text
 
     @property
     def result_panel(self) -> str:
         """The text of the Calibration panel (errors, solve failures)."""
-        return str(self.app._md_result.content)
+        return self.app.calibration_panel.result_text
 
     # ------------------------------------------------ guided picking (guided helper; app/guide_panel.py)
     def press_guide(self, name: str) -> list[tuple[str, str]]:
@@ -322,7 +322,7 @@ class AppDriver:
         option = next((o for o in panel._dd_pair.options if o.split()[0] == f"#{pick_id}"), f"#{pick_id}")
         panel._dd_pair.value = option
         label = "Make check pair" if check else "Put back in fit"
-        return self._fire(self.app._guard(panel._on_check_button),
+        return self._fire(self.app.guard(panel._on_check_button),
                           SimpleNamespace(client=self.tab, target=SimpleNamespace(value=label)))
 
     def download_format(self, fmt: str, parent: str = "lidar", child: str = "camera") -> tuple[str, bytes]:
@@ -331,9 +331,9 @@ class AppDriver:
         panel._dd_format.value, panel._tx_parent.value, panel._tx_child.value = fmt, parent, child
         # The widgets' own update callbacks arrive from viser's event loop at their own pace: refresh once more
         # after all three values are set, as the last of those callbacks would.
-        self._fire(self.app._guard(lambda action: panel._refresh()), SimpleNamespace(client=self.tab, target=None))
+        self._fire(self.app.guard(lambda action: panel._refresh()), SimpleNamespace(client=self.tab, target=None))
         before = len(self.tab.downloads)
-        notes = self._fire(self.app._guard(panel._on_download), SimpleNamespace(client=self.tab, target=None))
+        notes = self._fire(self.app.guard(panel._on_download), SimpleNamespace(client=self.tab, target=None))
         if len(self.tab.downloads) == before:
             raise ValueError(f"no download: {notes}")
         return self.tab.downloads[-1]
@@ -347,7 +347,7 @@ class AppDriver:
     def download_extrinsics_yaml(self) -> bytes:
         """Press "Download extrinsics YAML"; the bytes the tab receives."""
         before = len(self.tab.downloads)
-        self._fire(self.app._guard(self.app._on_download_yaml), SimpleNamespace(client=self.tab, target=None))
+        self._fire(self.app.guard(self.app.export_panel.on_download_yaml), SimpleNamespace(client=self.tab, target=None))
         if len(self.tab.downloads) == before:
             raise ValueError("no download")
         return self.tab.downloads[-1][1]

@@ -382,4 +382,3 @@ class ViewPanel:
         return float(xy[0, 0]) / cam.image_width, float(xy[0, 1]) / cam.image_height
 
     # Old private names, still used by app/testing.py.
-    _camera_slot = camera_slot
