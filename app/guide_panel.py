@@ -207,7 +207,9 @@ class GuidePanel:
                 watch[1] = pick.pixel
                 self._pending_posts += 1
                 self._post(lambda: self._after_click(pick.id))
-            if key != self._submitted:
+            # Proposals cost a core: they are computed only while someone is guided (or auto-accepts).
+            wanted = self._guiding or self._auto
+            if key != self._submitted and (wanted or not self._active(len(pairs))):
                 self._submitted = key
                 if self._active(len(pairs)):
                     self._busy = True
@@ -362,6 +364,8 @@ class GuidePanel:
         self._refresh()
 
     def _on_button(self, label: str) -> None:
+        if label != "Stop" and self._active(len(self.state.complete_picks())):
+            self._guiding = True  # from now on the proposals follow every change
         self.update()  # an initial extrinsic imported since the last change is used from now on
         if label == "Stop":
             self._guiding = self._want_next = False
@@ -416,6 +420,8 @@ class GuidePanel:
             lines.append(f"Proposals failed: {md_escape(error)}")
         elif busy:
             lines.append("Computing proposals…")
+        elif not props and not (self._guiding or self._auto):
+            lines.append("Press **Next pair**: the tool proposes where to click next and frames it in the loupes.")
         elif not props:
             lines.append("No proposal left.")
         else:
