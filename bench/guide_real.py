@@ -18,6 +18,7 @@ import numpy as np
 from calib_core.cameras import load_camera
 from calib_core.guide.session import GuidedSession
 from calib_core.io.images import load_image_rgb
+from calib_core.io.kitti_calib import read_kitti_camera2
 from calib_core.io.scan_readers import load_scan
 from calib_core.pairs import Pair, load_pairs_yaml
 from calib_core.transforms import rotation_angle_deg, transform_points
@@ -51,20 +52,9 @@ def kitti_available() -> bool:
 def load_kitti() -> RealScene:
     """KITTI object 000002: the rectified left colour camera; the published pose is
     ``[I | K^-1 P2[:, 3]] @ R0_rect @ Tr_velo_to_cam`` parsed from calib/000002.txt."""
-    values = {}
-    for line in (KITTI / "calib" / "000002.txt").read_text().splitlines():
-        if ":" in line:
-            key, rest = line.split(":", 1)
-            values[key] = np.array(rest.split(), dtype=float)
-    P2 = values["P2"].reshape(3, 4)
-    T = np.eye(4)
-    T[:3, :] = values["Tr_velo_to_cam"].reshape(3, 4)
-    R0 = np.eye(4)
-    R0[:3, :3] = values["R0_rect"].reshape(3, 3)
-    shift = np.eye(4)
-    shift[:3, 3] = np.linalg.inv(P2[:, :3]) @ P2[:, 3]
+    _, T = read_kitti_camera2(KITTI / "calib" / "000002.txt")
     return RealScene(load_scan(KITTI / "velodyne" / "000002.bin"), load_camera(KITTI_CAMERA),
-                     load_image_rgb(KITTI / "image_2" / "000002.png"), shift @ R0 @ T, load_pairs_yaml(KITTI_PAIRS))
+                     load_image_rgb(KITTI / "image_2" / "000002.png"), T, load_pairs_yaml(KITTI_PAIRS))
 
 
 def load_pjlab() -> RealScene:

@@ -17,6 +17,7 @@ import pytest
 
 from app.cli import main as cli_main
 from calib_core.errors import CalibError
+from calib_core.io.kitti_calib import read_kitti_camera2
 from calib_core.io.point_clouds.float_bin import read_float_records
 from calib_core.io.scan_readers import load_scan
 from calib_core.lidar.organize_cloud import organize_cloud
@@ -212,7 +213,7 @@ def test_kitti_cropped_to_the_camera_view_keeps_64_rows(tmp_path):
 
     # As KITTI's velodyne_reduced is made: the points the published calibration
     # projects into the 1242 x 375 image.  The lowest lasers see below it.
-    P = kitti_published_T()
+    P = read_kitti_camera2(KITTI / "calib" / "000002.txt")[1]
     K = np.array([[721.5377, 0.0, 609.5593], [0.0, 721.5377, 172.854], [0.0, 0.0, 1.0]])  # calib P2[:, :3]
     camera_points = cloud[:, :3].astype(float) @ P[:3, :3].T + P[:3, 3]
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -287,23 +288,6 @@ def test_sensor_origin_moves_a_world_frame_scan_to_the_lidar(tmp_path, capsys):
 # --------------------------------------------------------------------------
 
 
-def kitti_published_T() -> np.ndarray:
-    """``[I | K^-1 P2[:, 3]] @ R0_rect @ Tr_velo_to_cam`` from calib/000002.txt (README)."""
-    values = {}
-    for line in (KITTI / "calib" / "000002.txt").read_text().splitlines():
-        if ":" in line:
-            key, rest = line.split(":", 1)
-            values[key] = np.array(rest.split(), dtype=float)
-    P2 = values["P2"].reshape(3, 4)
-    T = np.eye(4)
-    T[:3, :] = values["Tr_velo_to_cam"].reshape(3, 4)
-    R0 = np.eye(4)
-    R0[:3, :3] = values["R0_rect"].reshape(3, 3)
-    shift = np.eye(4)
-    shift[:3, 3] = np.linalg.inv(P2[:, :3]) @ P2[:, 3]
-    return shift @ R0 @ T
-
-
 @needs_kitti
 def test_kitti_solve_from_pairs_agrees_with_published_calibration(tmp_path, capsys):
     import yaml
@@ -318,7 +302,7 @@ def test_kitti_solve_from_pairs_agrees_with_published_calibration(tmp_path, caps
     assert parse_report(stdout).group(2) == "64"
     written = yaml.safe_load(out.read_text())
     T = np.array(written["T_camera_lidar"]["matrix"], dtype=float)
-    T_ref = kitti_published_T()
+    T_ref = read_kitti_camera2(KITTI / "calib" / "000002.txt")[1]
     cos_angle = (np.trace(T_ref[:3, :3].T @ T[:3, :3]) - 1.0) / 2.0
     rotation_deg = float(np.degrees(np.arccos(np.clip(cos_angle, -1.0, 1.0))))
     translation_m = float(np.linalg.norm(T[:3, 3] - T_ref[:3, 3]))

@@ -23,7 +23,9 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "tools"))
 
-from make_real_pairs import KITTI, KITTI_IMAGE_SIZE, kitti_calibration  # noqa: E402
+from make_real_pairs import KITTI, KITTI_IMAGE_SIZE  # noqa: E402
+
+from calib_core.io.kitti_calib import read_kitti_camera2  # noqa: E402
 
 from calib_core.bearing_angle import BA_DIRECTIONS, ba_to_display, bearing_angle_images  # noqa: E402
 from calib_core.io.scan_readers import load_scan  # noqa: E402
@@ -44,7 +46,7 @@ def camera_columns(depth, K: np.ndarray, T: np.ndarray) -> tuple[int, int]:
 def main() -> int:
     out = REPO / "docs" / "real"
     out.mkdir(parents=True, exist_ok=True)
-    K, T = kitti_calibration(KITTI / "calib" / "000002.txt")
+    K, T = read_kitti_camera2(KITTI / "calib" / "000002.txt")
     depth = load_scan(KITTI / "velodyne" / "000002.bin")
     first, last = camera_columns(depth, K, T)
     lo, hi = max(first - 4, 0), min(last + 5, depth.shape[1])

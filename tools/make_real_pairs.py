@@ -59,6 +59,7 @@ sys.path.insert(0, str(REPO))
 from calib_core.cameras import load_camera  # noqa: E402
 from calib_core.cameras.io import save_camera_yaml  # noqa: E402
 from calib_core.cameras.pinhole import PinholeCamera  # noqa: E402
+from calib_core.io.kitti_calib import read_kitti_camera2  # noqa: E402
 from calib_core.io.scan_readers import load_scan  # noqa: E402
 from calib_core.lidar.depth_matrix import DepthMatrix  # noqa: E402
 from calib_core.transforms import transform_points  # noqa: E402
@@ -87,27 +88,6 @@ def published_T_camera_lidar(scene_dir: Path) -> np.ndarray:
     """The dataset's lidar -> camera 4x4 transform (metres)."""
     data = json.loads((scene_dir / "top_center_lidar-to-center_camera-extrinsic.json").read_text())
     return np.array(data["top_center_lidar-to-center_camera-extrinsic"]["param"]["sensor_calib"]["data"], dtype=float)
-
-
-def kitti_calibration(calib_path: Path) -> tuple[np.ndarray, np.ndarray]:
-    """``K`` (3x3) of rectified camera 2 and the published ``T_camera_lidar`` (4x4, metres).
-
-    ``x = P2 @ R0_rect @ Tr_velo_to_cam @ X`` with ``P2 = K @ [I | K^-1 P2[:, 3]]``.
-    """
-    rows = {}
-    for line in calib_path.read_text().splitlines():
-        if ":" in line:
-            key, values = line.split(":", 1)
-            rows[key.strip()] = np.array(values.split(), dtype=float)
-    P2 = rows["P2"].reshape(3, 4)
-    R0 = np.eye(4)
-    R0[:3, :3] = rows["R0_rect"].reshape(3, 3)
-    Tr = np.eye(4)
-    Tr[:3, :] = rows["Tr_velo_to_cam"].reshape(3, 4)
-    K = P2[:, :3]
-    offset = np.eye(4)
-    offset[:3, 3] = np.linalg.solve(K, P2[:, 3])
-    return K, offset @ R0 @ Tr
 
 
 def _shifted(range_m: np.ndarray, d_row: int, d_col: int) -> np.ndarray:
@@ -208,7 +188,7 @@ KITTI_HEADER = """\
 
 
 def make_kitti(out_dir: Path) -> None:
-    K, T = kitti_calibration(KITTI / "calib" / "000002.txt")
+    K, T = read_kitti_camera2(KITTI / "calib" / "000002.txt")
     camera = PinholeCamera(K, [], *KITTI_IMAGE_SIZE)
     save_camera_yaml(camera, REPO / "real_data" / "kitti_000002_camera.yaml")
     depth = load_scan(KITTI / "velodyne" / "000002.bin")
