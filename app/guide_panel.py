@@ -369,11 +369,7 @@ class GuidePanel:
         self.update()  # an initial extrinsic imported since the last change is used from now on
         if label == "Stop":
             self._guiding = self._want_next = False
-            self._end_reclick()
-            half = self._guided_half()
-            if half is not None:
-                self.state.delete(half.id)
-            self._refresh()
+            self._drop_unfinished()
             return
         if not self._active(len(self.state.complete_picks())):
             raise CalibError(f"guided picking starts after {MIN_PAIRS} pairs or an imported initial extrinsic")
@@ -389,19 +385,22 @@ class GuidePanel:
                     del self._proposals[self._index]
                     if self._index >= len(self._proposals):
                         self._index = 0
-        self._guiding = True
         if not ready:  # framed as soon as the proposals are in
             self._want_next = True
             self._refresh()
             return
         if self.current is None:
-            self._end_reclick()
-            half = self._guided_half()
-            if half is not None:
-                self.state.delete(half.id)
-            self._refresh()
+            self._drop_unfinished()
             return
         self._start_current()
+
+    def _drop_unfinished(self) -> None:
+        """End a re-click and delete the guided pair still waiting for its camera click."""
+        self._end_reclick()
+        half = self._guided_half()
+        if half is not None:
+            self.state.delete(half.id)
+        self._refresh()
 
     def _on_auto(self, on: bool) -> None:
         self._auto = on
