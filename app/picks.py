@@ -12,7 +12,7 @@ from typing import Any, Callable, Sequence
 
 from calib_core.errors import CalibError
 from calib_core.io.yaml_files import finite_vector
-from calib_core.pairs import PAIR_SOURCES, Pair, load_pairs_yaml
+from calib_core.pairs import PAIR_SOURCES, Pair, load_pairs_yaml, tag_fields
 
 SESSION_FORMAT = "ba-calib-session"
 SESSION_VERSION = 1
@@ -81,13 +81,7 @@ class Pick:
         out["laser_rc"] = None if self.laser_rc is None else [int(v) for v in self.laser_rc]
         out["laser_xyz"] = None if self.laser_xyz is None else [float(v) for v in self.laser_xyz]
         out["pixel"] = None if self.pixel is None else [float(v) for v in self.pixel]
-        # Written only when not the default, so files of unguided sessions stay as they were.
-        if self.source != "clicked":
-            out["source"] = self.source
-        if self.precision_px is not None:
-            out["precision_px"] = float(self.precision_px)
-        if self.check:
-            out["check"] = True
+        out.update(tag_fields(self.source, self.precision_px, self.check))
         return out
 
 

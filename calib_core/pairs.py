@@ -30,6 +30,19 @@ from .io.atomic import write_yaml_atomic
 from .io.yaml_files import finite_vector, read_yaml_mapping
 
 
+def tag_fields(source: str, precision_px: float | None, check: bool) -> dict[str, Any]:
+    """A pair's tags as file fields, each written only when not the default (so files of
+    unguided, all-fit pairs stay as they were): ``source``, ``precision_px`` (px), ``check``."""
+    out: dict[str, Any] = {}
+    if source != "clicked":
+        out["source"] = source
+    if precision_px is not None:
+        out["precision_px"] = float(precision_px)
+    if check:
+        out["check"] = True
+    return out
+
+
 @dataclass(frozen=True)
 class Pair:
     """One correspondence.  Exactly one of ``laser_rc`` / ``laser_xyz`` is set.
@@ -69,12 +82,7 @@ class Pair:
         out["pixel"] = [float(self.pixel[0]), float(self.pixel[1])]
         if self.id is not None:
             out["id"] = int(self.id)
-        if self.source != "clicked":
-            out["source"] = self.source
-        if self.precision_px is not None:
-            out["precision_px"] = float(self.precision_px)
-        if self.check:
-            out["check"] = True
+        out.update(tag_fields(self.source, self.precision_px, self.check))
         return out
 
     @staticmethod
