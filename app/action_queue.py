@@ -3,6 +3,8 @@ turns a CalibError into a notification for the tab that caused it (the app keeps
 
 from __future__ import annotations
 
+import queue
+import threading
 import time
 import traceback
 from types import SimpleNamespace
@@ -15,13 +17,37 @@ from calib_core.errors import CalibError
 from .ui_common import _Action
 
 
-class ActionQueue:
-    """Part of :class:`app.server.CalibrationApp` (a mixin: it uses the app's attributes).
+def notify_tabs(server: Any, client: Any, title: str, body: str, color: str = "red") -> None:
+    """Show a notification in one tab (``client``) or, with None, in every tab of ``server`` (the text as is)."""
+    body = " ".join(str(body).split())
+    targets = [client] if client is not None else list(server.get_clients().values())
+    for c in targets:
+        try:
+            c.add_notification(title, body, color=color, auto_close_seconds=8.0, with_close_button=True)
+        except Exception:
+            pass
 
-    ``last_action_timing`` is ``(wall seconds, thread CPU seconds)`` of the last applied action (None before).
+
+class ActionQueue:
+    """The app's one ordered worker for user actions (its thread starts here; :meth:`stop` ends it).
+
+    Parameters
+    ----------
+    notify : callable
+        ``notify(client, title, body)``: how a refused or failed action is told to its tab.
+
+    Attributes
+    ----------
+    last_action_timing : tuple of float or None
+        ``(wall seconds, thread CPU seconds)`` of the last applied action (None before).
     """
 
-    last_action_timing: tuple[float, float] | None = None
+    def __init__(self, notify: Callable[[Any, str, str], None]) -> None:
+        self._notify = notify
+        self._queue: queue.Queue = queue.Queue()
+        self.last_action_timing: tuple[float, float] | None = None
+        self._thread = threading.Thread(target=self._run, name="ba-calib-actions", daemon=True)
+        self._thread.start()
 
     def guard(self, fn: Callable) -> Callable:
         """Wrap a callback: queue it for the ordered action worker.
@@ -35,7 +61,7 @@ class ActionQueue:
         async def enqueue(event: Any) -> None:
             target = getattr(event, "target", None)
             value = getattr(target, "value", None) if not isinstance(target, viser.SceneNodeHandle) else None
-            self._actions.put((fn, _Action(event, value)))
+            self._queue.put((fn, _Action(event, value)))
 
         return enqueue
 
@@ -45,14 +71,29 @@ class ActionQueue:
         A CalibError it raises becomes a notification for ``client`` (every tab
         if None).  With ``wait``, return once the queue is drained.
         """
-        self._actions.put((lambda action: fn(), _Action(SimpleNamespace(client=client), None)))
+        self._queue.put((lambda action: fn(), _Action(SimpleNamespace(client=client), None)))
         if wait:
-            self._actions.join()
+            self._queue.join()
 
-    def _run_actions(self) -> None:
+    def join(self) -> None:
+        """Return once every queued action is applied."""
+        self._queue.join()
+
+    @property
+    def busy(self) -> bool:
+        """True while queued actions are not all applied."""
+        return bool(self._queue.unfinished_tasks)
+
+    def stop(self, timeout: float = 5.0) -> None:
+        """Apply what is queued, then end the worker thread."""
+        self._queue.put(None)
+        if threading.current_thread() is not self._thread:
+            self._thread.join(timeout=timeout)
+
+    def _run(self) -> None:
         """The action worker: applies queued user actions one by one; errors become notifications."""
         while True:
-            item = self._actions.get()
+            item = self._queue.get()
             try:
                 if item is None:
                     return
@@ -61,29 +102,12 @@ class ActionQueue:
                 try:
                     fn(action)
                 except CalibError as exc:
-                    self.notify(action.client, "Not accepted", str(exc))
+                    self._notify(action.client, "Not accepted", str(exc))
                 except Exception as exc:  # never let a click kill anything
                     traceback.print_exc()
-                    self.notify(action.client, "Internal error", f"{type(exc).__name__}: {exc}")
+                    self._notify(action.client, "Internal error", f"{type(exc).__name__}: {exc}")
             finally:
                 if item is not None:
                     # The worker's own share: wall time, and CPU time of this thread (immune to other processes).
                     self.last_action_timing = (time.perf_counter() - t0, time.thread_time() - c0)
-                self._actions.task_done()
-
-    def _on_save_error(self, message: str) -> None:
-        # On the compactor's thread; the journal holds every change, the compaction is retried.
-        if hasattr(self, "server") and not getattr(self, "_stopped", True):
-            self.notify(None, "Session file not updated (retrying; no change lost)", message)
-
-    def notify(self, client: Any, title: str, body: str, color: str = "red") -> None:
-        """Show a notification in one tab (``client``) or, with None, in every tab (the text is shown as is)."""
-        body = " ".join(str(body).split())
-        targets = [client] if client is not None else list(self.server.get_clients().values())
-        for c in targets:
-            try:
-                c.add_notification(title, body, color=color, auto_close_seconds=8.0, with_close_button=True)
-            except Exception:
-                pass
-
-    # The old private names, still used by app/testing.py.
+                self._queue.task_done()

@@ -187,7 +187,7 @@ class LiveSolveCoordinator:
         """Block until queued user actions are applied and the live solver and the cloud worker are idle."""
         deadline = time.monotonic() + timeout
         while True:
-            while self._actions.unfinished_tasks:
+            while self.actions.busy:
                 if time.monotonic() > deadline:
                     return False
                 time.sleep(0.01)
@@ -195,7 +195,7 @@ class LiveSolveCoordinator:
                 if not worker.wait_idle(max(0.0, deadline - time.monotonic())):
                     return False
             # A finished solve queues cloud work, finished cloud work may queue a view update.
-            if not self._actions.unfinished_tasks and self._solver.idle and self._cloud_worker.idle:
+            if not self.actions.busy and self._solver.idle and self._cloud_worker.idle:
                 return True
 
     def last_click_to_update(self) -> float | None:

@@ -14,9 +14,9 @@ Start and stop :class:`CalibrationApp` from Python (tests) or through ``ba-calib
 from __future__ import annotations
 
 import os
-import queue
 import threading
 from pathlib import Path
+from typing import Any, Callable
 
 import numpy as np
 
@@ -26,7 +26,7 @@ from .live_solver import LiveSolver
 from .loupes import Loupes
 from .loupe_support import LoupeSupport
 from .display_panel import DisplayPanel
-from .action_queue import ActionQueue
+from .action_queue import ActionQueue, notify_tabs
 from .page_builder import PageBuilder
 from .view_panel import ViewPanel
 from .pairs_panel import PairsPanel
@@ -48,7 +48,7 @@ from .view_settings import ViewSettings
 # CalibrationPanel, ExportPanel, FormatExportPanel, Loupes, GuidePanel, VerifyPanel.  The bases below are
 # still mixins (one concern and module each) that share the app's attributes.
 class CalibrationApp(PairsPanel, ViewPanel, LiveSolveCoordinator, OverlayDrawing,
-                     PageBuilder, ActionQueue, LoupeSupport, DisplayPanel):
+                     PageBuilder, LoupeSupport, DisplayPanel):
     """The annotation app on one scene; the viser server runs from construction.
 
     Parameters
@@ -162,9 +162,7 @@ class CalibrationApp(PairsPanel, ViewPanel, LiveSolveCoordinator, OverlayDrawing
         self._stopped = False
 
         # -- server -------------------------------------------------------------------
-        self._actions: queue.Queue = queue.Queue()
-        self._action_thread = threading.Thread(target=self._run_actions, name="ba-calib-actions", daemon=True)
-        self._action_thread.start()
+        self.actions = ActionQueue(self.notify)  # the ordered worker every user action runs on
         # Every request must name this server (Host, Origin) and, off loopback, carry the token.
         self.access = AccessPolicy.for_bind(host, token=token, extra_hosts=tuple(allowed_hosts))
         self._refusals = RefusalLog()
@@ -172,7 +170,7 @@ class CalibrationApp(PairsPanel, ViewPanel, LiveSolveCoordinator, OverlayDrawing
             self.server = start_guarded_viser(self.access, on_refused=self._refusals, host=host, port=port,
                                               label=self.title, verbose=False)
         except BaseException:
-            self._actions.put(None)
+            self.actions.stop()
             raise
         self.host = host
         self.port = self.server.get_port()
@@ -199,7 +197,7 @@ class CalibrationApp(PairsPanel, ViewPanel, LiveSolveCoordinator, OverlayDrawing
             self._on_state_change(self.state)
             self.verify_panel = VerifyPanel(self)  # verify: check pairs, leave-one-out, heat map, reference, plots
         except BaseException:
-            self._actions.put(None)
+            self.actions.stop()
             self.server.stop()
             self.state.close()
             raise
@@ -209,6 +207,24 @@ class CalibrationApp(PairsPanel, ViewPanel, LiveSolveCoordinator, OverlayDrawing
     def ba_window(self) -> ColumnWindow:
         """The scan columns the BA images show."""
         return self._ba_window
+
+    # ================================================================ services (app/app_services.py)
+    def guard(self, fn: Callable) -> Callable:
+        """A viser callback that queues ``fn(action)`` on the ordered action worker (:meth:`ActionQueue.guard`)."""
+        return self.actions.guard(fn)
+
+    def post(self, fn: Callable[[], Any], client: Any = None, wait: bool = False) -> None:
+        """Run ``fn()`` on the action worker after the actions queued before it (:meth:`ActionQueue.post`)."""
+        self.actions.post(fn, client, wait)
+
+    def notify(self, client: Any, title: str, body: str, color: str = "red") -> None:
+        """A notification in tab ``client`` (None: every tab); the text is shown as is."""
+        notify_tabs(self.server, client, title, body, color)
+
+    def _on_save_error(self, message: str) -> None:
+        # On the compactor's thread; the journal holds every change, the compaction is retried.
+        if hasattr(self, "server") and not getattr(self, "_stopped", True):
+            self.notify(None, "Session file not updated (retrying; no change lost)", message)
 
     def export_extrinsics(self) -> tuple[bytes, Path | None]:
         """:meth:`app.export_panel.ExportPanel.export_extrinsics`."""
@@ -223,8 +239,7 @@ class CalibrationApp(PairsPanel, ViewPanel, LiveSolveCoordinator, OverlayDrawing
             The session file cannot be written (the server is stopped anyway).
         """
         self._stopped = True
-        self._actions.put(None)
-        self._action_thread.join(timeout=5.0)
+        self.actions.stop()
         self._solver.stop()
         self._cloud_worker.stop()
         self.guide.stop()

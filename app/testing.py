@@ -38,7 +38,7 @@ class AppDriver:
         """Deliver ``event`` to a guarded handler as viser does, wait until applied; new notifications."""
         before = len(self.tab.notifications)
         asyncio.run(handler(event))
-        self.app._actions.join()
+        self.app.actions.join()
         return self.tab.notifications[before:]
 
     def _ray(self, key: str, uv: tuple[float, float], **extra: Any) -> Any:
@@ -301,7 +301,7 @@ class AppDriver:
             left = max(0.0, deadline - time.monotonic())
             if not (self.app.guide.wait_idle(left) and self.app.wait_idle(left)):
                 return False
-            if self.app.guide.idle and not self.app._actions.unfinished_tasks:
+            if self.app.guide.idle and not self.app.actions.busy:
                 return True
 
     @property

@@ -12,7 +12,7 @@ A real :class:`app.server.CalibrationApp` (viser on a free local port, no browse
 Each action's time is from the handler's call to the action applied (the page would show it).  The target
 is <= 20 ms per action.  The machine is shared: the wall-time medians are printed, with the minimum, and
 beside them CPU times, which other processes' load hardly changes: the click handler's own thread
-(``app.last_action_timing``; the camera click's solve runs in the solver thread after it) and the whole
+(``app.actions.last_action_timing``; the camera click's solve runs in the solver thread after it) and the whole
 server process (all threads, including the live solve and the follow-up projection for predictions).
 """
 
@@ -51,10 +51,10 @@ def run(reps: int = 12) -> dict[str, list[float]]:
                 c0, t0 = time.process_time(), time.perf_counter()
                 d.click_cell(key, min(row + 2, app.depth.shape[0] - 1), col - 3)
                 c1, t1 = time.process_time(), time.perf_counter()
-                w1 = app.last_action_timing[1]
+                w1 = app.actions.last_action_timing[1]
                 d.click_loupe_cell(row, col)
                 c2, t2 = time.process_time(), time.perf_counter()
-                w2 = app.last_action_timing[1]
+                w2 = app.actions.last_action_timing[1]
                 if app.pose() is None:
                     d.click_camera(*pair.pixel)
                     d.wait_idle()
@@ -64,7 +64,7 @@ def run(reps: int = 12) -> dict[str, list[float]]:
                 c3 = time.process_time()
                 worker["BA full click"].append(w1)
                 worker["BA loupe click"].append(w2)
-                worker["camera loupe click (to solve shown)"].append(app.last_action_timing[1])
+                worker["camera loupe click (to solve shown)"].append(app.actions.last_action_timing[1])
                 cpu["BA full click"].append(c1 - c0)
                 cpu["BA loupe click"].append(c2 - c1)
                 cpu["camera loupe click (to solve shown)"].append(c3 - c2)  # includes the cloud worker's follow-up
