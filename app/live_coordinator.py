@@ -44,7 +44,7 @@ class LiveSolveCoordinator:
                     self._solving = False
                     self._show_solved_camera()
         try:
-            self._refresh_scene()
+            self.overlays.refresh()
         finally:
             self._refresh_panel()  # the panel and the dropdown follow the state even if a drawing failed
 
@@ -78,7 +78,7 @@ class LiveSolveCoordinator:
                 self._bundle = bundle
                 self._solve_error = None
                 self._show_solved_camera()
-            self._refresh_scene()
+            self.overlays.refresh()
             self._refresh_panel()
             change_job, change_time = self._change_time
             if job == change_job:

@@ -107,8 +107,8 @@ class LoupeSupport:
         if self.state.view.ba_window_mode == "camera" and self._bundle is None:
             self._ensure_facing()
             self._apply_ba_window()
-        self._overlay_inputs = None
-        self._refresh_scene()
+        self.overlays.invalidate()
+        self.overlays.refresh()
         self._refresh_panel()
         guide = getattr(self, "guide", None)
         if guide is not None:  # proposals can start from the imported pose

@@ -4,6 +4,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from calib_core.overlays import project_lidar_points
@@ -14,84 +16,118 @@ from .ui_common import MARKER_SIZE, RING_CELLS, RING_MIN_RADIUS, EDGE_MIN_SIZE, 
 
 
 class OverlayDrawing:
-    """Part of :class:`app.server.CalibrationApp` (a mixin: it uses the app's attributes)."""
+    """What is drawn over the annotation images of one :class:`app.server.CalibrationApp` (``app.overlays``).
 
-    def display_from_pixels(self, pixels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Display coordinates (visible camera view) of original-image pixels."""
-        return self.camera_view.display_from_pixels(pixels)
+    It owns what it last drew from (so a redraw only sends what changed) and
+    where the pick ends are drawn (:meth:`pick_ends`, also what Shift+click and
+    drags hit).  :meth:`refresh` redraws; :meth:`invalidate` forces the next
+    redraw of the camera-view overlays.
+    """
 
-    def _display_from_camera_points(self, points_camera: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Display coordinates (visible camera view) of points in the camera frame."""
-        return self.camera_view.display_from_camera_points(points_camera)
+    def __init__(self, app: Any) -> None:
+        self.app = app
+        self._marker_cache: dict[str, tuple[tuple, dict]] = {}  # slot key -> (inputs, number labels) last drawn
+        self._overlay_inputs: tuple | None = None  # (solve, inputs) the overlays were last drawn from
 
-    def _refresh_scene(self) -> None:
+    def invalidate(self) -> None:
+        """Redraw the camera-view overlays on the next :meth:`refresh` even if their inputs look unchanged."""
+        self._overlay_inputs = None
+
+    def refresh(self) -> None:
         """Redraw markers, labels, selection and the reprojection overlays (only what changed is sent)."""
-        with self.ui_lock, self.server.atomic():
-            picks = {p.id: p for p in self.state.picks}
-            selected = self.state.selected
+        app = self.app
+        with app.ui_lock, app.server.atomic():
+            picks = {p.id: p for p in app.state.picks}
+            selected = app.state.selected
             labels: dict[str, tuple[str, np.ndarray]] = {}
-            cam_slot = self.camera_slot()
-            for key in (*self.ba_keys, cam_slot.key):
+            cam_slot = app.camera_slot()
+            for key in (*app.ba_keys, cam_slot.key):
                 labels.update(self._draw_markers(key, picks, selected))
-            predictions = self._predictions(picks)
+            predictions = self.predictions(picks)
             for pid, uv in predictions:
                 w = cam_slot.world_from_pixel(uv[None], z_offset=-0.015)[0]
                 labels[f"/annot/labels/predicted/{pid}"] = (f"{pid}?", w + np.array([0.06, -0.06, 0.0]))
             for other in ("raw", "panorama"):
-                if other in self.slots and other != cam_slot.key:
+                if other in app.slots and other != cam_slot.key:
                     self._marker_cache.pop(other, None)
                     for name in (f"/annot/markers/{other}/halo", f"/annot/markers/{other}/ring",
                                  f"/annot/selected/{other}"):
-                        self.nodes.lines(name, np.empty((0, 2, 3)), (0, 0, 0))
-            for name in [n for n in self.nodes.label_names() if n not in labels]:
-                self.nodes.remove(name)
+                        app.nodes.lines(name, np.empty((0, 2, 3)), (0, 0, 0))
+            for name in [n for n in app.nodes.label_names() if n not in labels]:
+                app.nodes.remove(name)
             for name, (text, pos) in labels.items():
-                self.nodes.label(name, text, pos)
+                app.nodes.label(name, text, pos)
             self._draw_overlays(picks, predictions)
-            if getattr(self, "loupes", None) is not None:
-                self.loupes.draw_marks()
+            if getattr(app, "loupes", None) is not None:  # None while the page is being built
+                app.loupes.draw_marks()
+
+    def pick_ends(self, key: str) -> tuple[list[int], np.ndarray]:
+        """Ids and display pixels of the pick ends drawn on slot ``key`` (a BA key, camera view or ``loupe_*``)."""
+        app = self.app
+        picks = app.state.picks
+        if key.startswith("loupe_"):
+            kind = key[len("loupe_"):]
+            sel = [p for p in picks if (p.laser_rc if kind == "ba" else p.pixel) is not None]
+            shown = [app.loupes.display_of(kind, (p.laser_rc[1], p.laser_rc[0]) if kind == "ba" else p.pixel)
+                     for p in sel]
+            keep = [(p.id, xy) for p, xy in zip(sel, shown) if xy is not None]
+            return [i for i, _ in keep], np.array([xy for _, xy in keep], np.float64).reshape(-1, 2)
+        if key in app.ba_keys:
+            # Only cells inside the shown column window have a place on the BA image.
+            sel = [p for p in picks if p.laser_rc is not None]
+            rc = np.array([p.laser_rc for p in sel], dtype=np.int64).reshape(-1, 2)
+            u, shown = app.ba_window.display_cols(rc[:, 1])
+            uv = np.stack([u, rc[:, 0].astype(np.float64)], axis=1)[shown]
+            return [p.id for p, ok in zip(sel, shown) if ok], uv
+        sel = [p for p in picks if p.pixel is not None]
+        uv, ok = app.display_from_pixels(np.array([p.pixel for p in sel], dtype=np.float64).reshape(-1, 2))
+        return [p.id for p, good in zip(sel, ok) if good], uv[ok]
 
     def _draw_markers(self, key: str, picks: dict[int, Pick], selected: int | None) -> dict[str, tuple[str, np.ndarray]]:
         """Draw the pick markers of slot ``key``; returns its number labels.  Skipped when nothing on it changed."""
-        slot = self.slots[key]
-        ids, uv = self._pick_ends(key)
+        app = self.app
+        slot = app.slots[key]
+        ids, uv = self.pick_ends(key)
         inputs = (slot, tuple(ids), uv.tobytes(), selected if selected in ids else None)
         cached = self._marker_cache.get(key)
         if cached is not None and cached[0] == inputs:
             return cached[1]
         world = slot.world_from_pixel(uv, z_offset=-0.01)
         colors = np.array([picks[i].color for i in ids], np.uint8).reshape(-1, 3)
-        r = self._ring_radius(slot)
+        r = self.ring_radius(slot)
         # Hollow rings with ticks pointing at the clicked spot, and on BA images the
         # outline of the picked cell: they mark the spot without hiding it.
-        outline = (0.5 * slot.units_per_px, 0.5 * slot.units_per_px_y) if key in self.ba_keys else None
+        outline = (0.5 * slot.units_per_px, 0.5 * slot.units_per_px_y) if key in app.ba_keys else None
         segs = marker_segments(world, r, cell_half_size=outline)
         per = len(segs) // max(len(ids), 1)
         seg_colors = np.repeat(colors, per * 2, axis=0).reshape(-1, 2, 3)
-        self.nodes.lines(f"/annot/markers/{key}/halo", segs + np.array([0.0, 0.0, 0.002]),
+        app.nodes.lines(f"/annot/markers/{key}/halo", segs + np.array([0.0, 0.0, 0.002]),
                         np.full(seg_colors.shape, 25, np.uint8), thickness=4.5)
-        self.nodes.lines(f"/annot/markers/{key}/ring", segs, seg_colors, thickness=2.0)
+        app.nodes.lines(f"/annot/markers/{key}/ring", segs, seg_colors, thickness=2.0)
         sel = [k for k, i in enumerate(ids) if i == selected]
         # One colour per segment of whatever the ring is made of (ticks included).
         sel_segs = marker_segments(world[sel] + [0.0, 0.0, 0.003], 1.5 * r)
-        self.nodes.lines(f"/annot/selected/{key}", sel_segs, np.full(sel_segs.shape, 255, np.uint8), thickness=4.0)
+        app.nodes.lines(f"/annot/selected/{key}", sel_segs, np.full(sel_segs.shape, 255, np.uint8), thickness=4.0)
         labels = {f"/annot/labels/{key}/{i}": (str(i), w + np.array([0.75 * r, -0.75 * r, -0.005]))
                   for i, w in zip(ids, world)}
         self._marker_cache[key] = (inputs, labels)
         return labels
 
-    def _ring_radius(self, slot: ImageSlot) -> float:
+    @staticmethod
+    def ring_radius(slot: ImageSlot) -> float:
         """Pick-marker ring radius on ``slot`` (world units): a few cells, never vanishingly small."""
         return max(RING_CELLS * max(slot.units_per_px, slot.units_per_px_y), RING_MIN_RADIUS)
 
     def _draw_overlays(self, picks: dict[int, Pick], predictions: list[tuple[int, np.ndarray]]) -> None:
         """Reprojected pairs, residual lines, BA-edge points and predicted-pixel crosses on the camera view."""
-        slot = self.camera_slot()
-        bundle = self._bundle
+        app = self.app
+        slot = app.camera_slot()
+        bundle = app.solve_bundle
+        camera, cview = app.camera, app.camera_view
         # Skipped when neither the solve, the view nor the picks it colours changed (e.g. a click on a BA image).
         self._draw_predictions(slot, predictions)  # cheap, changes with every BA click
-        view = self.state.view
-        inputs = (slot, self.camera_view.key, view.show_reprojection, view.show_edges, view.edge_opacity,
+        view = app.state.view
+        inputs = (slot, cview.key, view.show_reprojection, view.show_edges, view.edge_opacity,
                   () if bundle is None else tuple(picks[i].color if i in picks else None for i in bundle.pick_ids))
         if self._overlay_inputs is not None and self._overlay_inputs[0] is bundle and self._overlay_inputs[1] == inputs:
             return
@@ -101,8 +137,8 @@ class OverlayDrawing:
         edge_world, edge_cols = np.empty((0, 3)), np.empty((0, 3), np.uint8)
         if bundle is not None:
             if view.show_reprojection and len(bundle.pick_ids):
-                clicked, ok_c = self.display_from_pixels(bundle.pixels)
-                proj, ok_p = self._display_from_camera_points(bundle.points_camera)
+                clicked, ok_c = app.display_from_pixels(bundle.pixels)
+                proj, ok_p = cview.display_from_camera_points(bundle.points_camera)
                 colors = np.array([picks[pid].color if pid in picks else (255, 255, 0) for pid in bundle.pick_ids],
                                   np.uint8).reshape(-1, 3)
                 reproj_pts = slot.world_from_pixel(proj[ok_p], z_offset=-0.012)
@@ -111,20 +147,20 @@ class OverlayDrawing:
                 segs = np.stack([slot.world_from_pixel(clicked[both], z_offset=-0.008),
                                  slot.world_from_pixel(proj[both], z_offset=-0.008)], axis=1)
             if view.show_edges and view.edge_opacity > 0 and len(bundle.edges_camera):
-                uv, ok = self._display_from_camera_points(bundle.edges_camera)
+                uv, ok = cview.display_from_camera_points(bundle.edges_camera)
                 # Only where the camera sees (inside a fisheye circle); blended with the image under each point.
-                raw, ok_raw = self.camera.project(bundle.edges_camera)
+                raw, ok_raw = camera.project(bundle.edges_camera)
                 ij = np.clip(np.nan_to_num(np.round(raw), nan=0.0, posinf=0.0, neginf=0.0), 0,
-                             [self.camera.width - 1, self.camera.height - 1]).astype(np.int64)
-                ok &= ok_raw & self.scene_data.image_valid[ij[:, 1], ij[:, 0]]
+                             [camera.width - 1, camera.height - 1]).astype(np.int64)
+                ok &= ok_raw & app.scene_data.image_valid[ij[:, 1], ij[:, 0]]
                 edge_world = slot.world_from_pixel(uv[ok], z_offset=-0.004)
-                under = self.image[ij[ok, 1], ij[ok, 0]].astype(np.float64)
+                under = app.image[ij[ok, 1], ij[ok, 0]].astype(np.float64)
                 a = view.edge_opacity
                 edge_cols = np.round(a * np.array([0.0, 190.0, 255.0]) + (1.0 - a) * under).astype(np.uint8)
-        self.nodes.points("/annot/overlay/reprojected", reproj_pts, reproj_cols, MARKER_SIZE * 0.55, shape="diamond")
-        self.nodes.lines("/annot/overlay/residuals", segs, np.full(segs.shape, (255, 230, 0), np.uint8), thickness=2.0)
+        app.nodes.points("/annot/overlay/reprojected", reproj_pts, reproj_cols, MARKER_SIZE * 0.55, shape="diamond")
+        app.nodes.lines("/annot/overlay/residuals", segs, np.full(segs.shape, (255, 230, 0), np.uint8), thickness=2.0)
         # At least EDGE_MIN_SIZE: one pixel of a 1920 px image is too small to see in the full view.
-        self.nodes.points("/annot/overlay/edges", edge_world, edge_cols, max(slot.units_per_px * 1.6, EDGE_MIN_SIZE),
+        app.nodes.points("/annot/overlay/edges", edge_world, edge_cols, max(slot.units_per_px * 1.6, EDGE_MIN_SIZE),
                          shape="square")
 
     def _draw_predictions(self, slot: ImageSlot, predictions: list[tuple[int, np.ndarray]]) -> None:
@@ -142,25 +178,25 @@ class OverlayDrawing:
                 pred_segs.append(np.stack([c + 0.45 * r * d, c + 1.8 * r * d]))
             pred_cols += [(255, 255, 255)] * (len(ring) + 4)
         pred = np.array(pred_segs).reshape(-1, 2, 3)
-        self.nodes.lines("/annot/overlay/predicted_halo", pred + [0.0, 0.0, 0.001], np.zeros(pred.shape, np.uint8),
+        self.app.nodes.lines("/annot/overlay/predicted_halo", pred + [0.0, 0.0, 0.001], np.zeros(pred.shape, np.uint8),
                          thickness=5.0)
-        self.nodes.lines("/annot/overlay/predicted", pred,
+        self.app.nodes.lines("/annot/overlay/predicted", pred,
                          np.repeat(np.array(pred_cols, np.uint8).reshape(-1, 1, 3), 2, axis=1), thickness=2.0)
 
-    def _predictions(self, picks: dict[int, Pick]) -> list[tuple[int, np.ndarray]]:
+    def predictions(self, picks: dict[int, Pick]) -> list[tuple[int, np.ndarray]]:
         """Display pixels where the last good calibration expects picks that have only a BA end."""
-        ids, pixels = self._predicted_pixels(picks)
-        uv, ok = self.display_from_pixels(pixels)
+        ids, pixels = self.predicted_pixels(picks)
+        uv, ok = self.app.display_from_pixels(pixels)
         return [(pid, uv[k]) for k, pid in enumerate(ids) if ok[k]]
 
-    def _predicted_pixels(self, picks: dict[int, Pick]) -> tuple[list[int], np.ndarray]:
+    def predicted_pixels(self, picks: dict[int, Pick]) -> tuple[list[int], np.ndarray]:
         """Camera pixels where the last good calibration expects the picks that have only a laser cell."""
-        T = self.pose()  # the last good solve, else the imported initial extrinsic
+        app = self.app
+        T = app.pose()  # the last good solve, else the imported initial extrinsic
         pending = [p for p in picks.values() if p.laser_rc is not None and p.pixel is None]
         if T is None or not pending:
             return [], np.empty((0, 2))
-        points = self.depth.cell_points(np.array([p.laser_rc for p in pending]))
-        uv, ok = project_lidar_points(T, self.camera, points)
+        points = app.depth.cell_points(np.array([p.laser_rc for p in pending]))
+        uv, ok = project_lidar_points(T, app.camera, points)
         return [p.id for p, good in zip(pending, ok) if good], uv[ok]
 
-    # Old private names, still used by app/testing.py.

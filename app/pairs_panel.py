@@ -38,7 +38,7 @@ class PairsPanel:
             if pending is not None:
                 need = "camera" if pending.pixel is None else "BA"
                 lines.append(f"Pair {pending.id} waits for a {need} click.")
-                ids, uv = self._predicted_pixels({pending.id: pending})
+                ids, uv = self.overlays.predicted_pixels({pending.id: pending})
                 if ids:
                     lines.append(f"Predicted camera pixel: ({uv[0, 0]:.1f}, {uv[0, 1]:.1f}) (cross in the image).")
             if selected is not None:
@@ -164,36 +164,15 @@ class PairsPanel:
             raise CalibError("the camera does not see that part of the panorama; click inside the picture")
         return float(raw[0, 0]), float(raw[0, 1])
 
-    def _pick_ends(self, key: str) -> tuple[list[int], np.ndarray]:
-        """Ids and display pixels of the pick ends drawn on slot ``key``."""
-        picks = self.state.picks
-        if key.startswith("loupe_"):
-            kind = key[len("loupe_"):]
-            sel = [p for p in picks if (p.laser_rc if kind == "ba" else p.pixel) is not None]
-            shown = [self.loupes.display_of(kind, (p.laser_rc[1], p.laser_rc[0]) if kind == "ba" else p.pixel)
-                     for p in sel]
-            keep = [(p.id, xy) for p, xy in zip(sel, shown) if xy is not None]
-            return [i for i, _ in keep], np.array([xy for _, xy in keep], np.float64).reshape(-1, 2)
-        if key in self.ba_keys:
-            # Only cells inside the shown column window have a place on the BA image.
-            sel = [p for p in picks if p.laser_rc is not None]
-            rc = np.array([p.laser_rc for p in sel], dtype=np.int64).reshape(-1, 2)
-            u, shown = self._ba_window.display_cols(rc[:, 1])
-            uv = np.stack([u, rc[:, 0].astype(np.float64)], axis=1)[shown]
-            return [p.id for p, ok in zip(sel, shown) if ok], uv
-        sel = [p for p in picks if p.pixel is not None]
-        uv, ok = self.display_from_pixels(np.array([p.pixel for p in sel], dtype=np.float64).reshape(-1, 2))
-        return [p.id for p, good in zip(sel, ok) if good], uv[ok]
-
     def _nearest_pick(self, key: str, uv: tuple[float, float]) -> int | None:
-        ids, ends = self._pick_ends(key)
+        ids, ends = self.overlays.pick_ends(key)
         if not ids:
             return None
         slot = self._slot_of(key)
         delta = ends - np.asarray(uv, dtype=np.float64)
         d = np.hypot(delta[:, 0] * slot.units_per_px, delta[:, 1] * slot.units_per_px_y)  # world units
         k = int(np.argmin(d))
-        return ids[k] if d[k] <= PICK_RADII * self._ring_radius(slot) else None
+        return ids[k] if d[k] <= PICK_RADII * self.overlays.ring_radius(slot) else None
 
     def make_select_handler(self, key: str) -> Callable:
         """The Shift+click callback of image slot ``key``: selects the pair whose marker is nearest."""

@@ -47,7 +47,7 @@ from .view_settings import ViewSettings
 # Panels that are classes own their widgets and use only the app's public services (app/app_services.py):
 # CalibrationPanel, ExportPanel, FormatExportPanel, Loupes, GuidePanel, VerifyPanel.  The bases below are
 # still mixins (one concern and module each) that share the app's attributes.
-class CalibrationApp(PairsPanel, ViewPanel, LiveSolveCoordinator, OverlayDrawing,
+class CalibrationApp(PairsPanel, ViewPanel, LiveSolveCoordinator,
                      PageBuilder, LoupeSupport, DisplayPanel):
     """The annotation app on one scene; the viser server runs from construction.
 
@@ -154,8 +154,6 @@ class CalibrationApp(PairsPanel, ViewPanel, LiveSolveCoordinator, OverlayDrawing
         self._client_mode: dict[int, str] = {}
         self._last_click: dict[int, tuple] = {}  # client id -> ("ba", key, row, col) or ("camera", u, v)
         self._view_target: dict[int, tuple[np.ndarray, np.ndarray, float]] = {}
-        self._marker_cache: dict[str, tuple[tuple, dict]] = {}  # slot key -> (inputs, number labels) last drawn
-        self._overlay_inputs: tuple | None = None  # (solve, inputs) the overlays were last drawn from
         self._cloud_shows: SolveBundle | None = None  # the solve whose colours the 3-D cloud shows (None: grey)
         self._change_time: tuple[int, float] = (0, 0.0)  # (job, perf_counter) of the last change of the pairs
         self._last_update: tuple[float, float] | None = None  # (click-to-update seconds, perf_counter published)
@@ -182,6 +180,7 @@ class CalibrationApp(PairsPanel, ViewPanel, LiveSolveCoordinator, OverlayDrawing
         # Redraws diff against what the scene shows, so a click only sends the nodes it changed.
         self.nodes = SceneNodes(self.server.scene)
         self.nodes.fill_label_pool()
+        self.overlays = OverlayDrawing(self)  # markers, labels, selection, reprojection overlays
         try:
             self._build_scene()
             self._build_gui()
@@ -220,6 +219,13 @@ class CalibrationApp(PairsPanel, ViewPanel, LiveSolveCoordinator, OverlayDrawing
     def notify(self, client: Any, title: str, body: str, color: str = "red") -> None:
         """A notification in tab ``client`` (None: every tab); the text is shown as is."""
         notify_tabs(self.server, client, title, body, color)
+
+    def display_from_pixels(self, pixels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Display pixels (visible camera view) of original camera pixels, and which are shown."""
+        return self.camera_view.display_from_pixels(pixels)
+
+    def _refresh_scene(self) -> None:  # the view and display mixins' name for it, until they are objects
+        self.overlays.refresh()
 
     def _on_save_error(self, message: str) -> None:
         # On the compactor's thread; the journal holds every change, the compaction is retried.

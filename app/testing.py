@@ -250,11 +250,11 @@ class AppDriver:
 
     def marker_ids(self, key: str) -> list[int]:
         """Pair ids whose markers are drawn on image ``key``."""
-        return list(self.app._pick_ends(key)[0])
+        return list(self.app.overlays.pick_ends(key)[0])
 
     def marker_display_pixel(self, key: str, pick_id: int) -> tuple[float, float]:
         """Display pixel of pair ``pick_id``'s marker on image ``key``."""
-        ids, uv = self.app._pick_ends(key)
+        ids, uv = self.app.overlays.pick_ends(key)
         return tuple(float(x) for x in uv[ids.index(pick_id)])
 
     def selection_drawn(self, key: str) -> int:
