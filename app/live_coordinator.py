@@ -7,32 +7,81 @@ from __future__ import annotations
 import time
 import traceback
 
+from typing import Any
+
 import numpy as np
-import viser.transforms as vtf
 
 from calib_core.errors import CalibError
 from calib_core.overlays import colorize_points, columns_seen_by_camera
 from calib_core.pairs import Pair, resolve_pairs
 from calib_core.solve import calibrate
-from calib_core.transforms import invert_T, transform_points
+from calib_core.transforms import transform_points
 
 from .ba_view import ColumnWindow, covering_window
 from .state import AnnotationState
+from .live_solver import LiveSolver
 from .ui_common import MIN_PAIRS, SolveBundle, CloudUpdate
 
 
 class LiveSolveCoordinator:
-    """Part of :class:`app.server.CalibrationApp` (a mixin: it uses the app's attributes)."""
+    """The live solve of one :class:`app.server.CalibrationApp` (``app.live``): it owns the solve shown.
 
-    def _on_state_change(self, state: AnnotationState) -> None:
+    Public: :attr:`bundle` (the last good solve), :attr:`solve_error`,
+    :attr:`solving`, :attr:`facing` (the scan columns the camera sees),
+    :meth:`on_state_change` (subscribed to the state), :meth:`wait_idle`,
+    :meth:`last_click_to_update`.  :meth:`start` starts its two worker
+    threads, :meth:`stop` ends them.
+    """
+
+    def __init__(self, app: Any) -> None:
+        self.app = app
+        self._bundle: SolveBundle | None = None
+        self.solve_error: str | None = None  # the last solve's failure (the last good bundle stays shown)
+        self.solving = False
+        self._submitted: tuple | None = None
+        self._job = 0
+        self._result_floor = 0
+        self._change_time: tuple[int, float] = (0, 0.0)  # (job, perf_counter) of the last change of the pairs
+        self._last_update: tuple[float, float] | None = None  # (click-to-update seconds, perf_counter published)
+        self._facing: ColumnWindow | None = None  # from the last good solve it was computed for
+        self._facing_of: SolveBundle | None = None  # the solve ``_facing`` was computed for
+        self._stopped = False
+        self._solver: LiveSolver | None = None
+        self._cloud_worker: LiveSolver | None = None
+
+    def start(self) -> None:
+        """Start the solver thread and, after each solve shown, the cloud colours' and facing window's thread."""
+        self._solver = LiveSolver(self._solve_job, self._on_solved)
+        self._cloud_worker = LiveSolver(self._cloud_job, self._on_cloud_done, name="ba-calib-cloud")
+
+    def stop(self) -> None:
+        """Stop both worker threads; results that arrive later are dropped."""
+        self._stopped = True
+        for worker in (self._solver, self._cloud_worker):
+            if worker is not None:
+                worker.stop()
+
+    @property
+    def bundle(self) -> SolveBundle | None:
+        """The last good solve with what was solved (pick ids, pairs), or None."""
+        return self._bundle
+
+    @property
+    def facing(self) -> ColumnWindow | None:
+        """The scan columns whose points the current pose projects into the camera image (None: not known)."""
+        return self._facing
+
+    def on_state_change(self, state: AnnotationState) -> None:
+        """Submit the complete pairs for solving when they changed, then redraw (subscribed to the state)."""
+        app = self.app
         picks = [p for p in state.picks if p.complete]
         key = tuple((p.id, p.to_pair()) for p in picks)
-        with self.ui_lock:
+        with app.ui_lock:
             if key != self._submitted:
                 self._submitted = key
                 self._job += 1
                 if len(picks) >= MIN_PAIRS:
-                    self._solving = True
+                    self.solving = True
                     self._solver.submit(self._job, ([p.id for p in picks], [p.to_pair() for p in picks]))
                     # From the start of the change, its disk write included.
                     self._change_time = (self._job, state.last_change_started or time.perf_counter())
@@ -40,67 +89,79 @@ class LiveSolveCoordinator:
                     # Too few pairs: results of older jobs no longer describe these pairs.
                     self._result_floor = self._job
                     self._bundle = None
-                    self._solve_error = None
-                    self._solving = False
-                    self._show_solved_camera()
+                    self.solve_error = None
+                    self.solving = False
+                    app.cloud.show_camera(None)
         try:
-            self.overlays.refresh()
+            app.overlays.refresh()
         finally:
-            self._refresh_panel()  # the panel and the dropdown follow the state even if a drawing failed
+            self.show_panels()  # the panels follow the state even if a drawing failed
+
+    def show_panels(self) -> None:
+        """Show the pairs panel and the calibration panel as they are now."""
+        app = self.app
+        with app.ui_lock:
+            app._refresh_panel()
+            n_complete = sum(1 for p in app.state.picks if p.complete)
+            app.calibration_panel.show(self._bundle, self.solve_error, self.solving, n_complete)
 
     def _solve_job(self, payload: tuple[list[int], list[Pair]]) -> SolveBundle:
         """The solve and what the error display and the 2-D overlays need (the cloud comes later)."""
+        app = self.app
         ids, pairs = payload
         t0 = time.perf_counter()
-        points, _, pixels = resolve_pairs(pairs, self.depth, self.camera)
+        points, _, pixels = resolve_pairs(pairs, app.depth, app.camera)
         # The pairs carry their pick ids, so the solve names outliers and warnings by the ids the page shows.
-        result = calibrate(pairs, self.depth, self.camera)
+        result = calibrate(pairs, app.depth, app.camera)
         T = result.T_camera_lidar
+        edges = app.edge_points_lidar
         return SolveBundle(
             pick_ids=ids, pairs=pairs, result=result, pixels=pixels,
             points_camera=transform_points(T, points),
-            edges_camera=transform_points(T, self.edge_points_lidar) if len(self.edge_points_lidar) else np.empty((0, 3)),
+            edges_camera=transform_points(T, edges) if len(edges) else np.empty((0, 3)),
             seconds=time.perf_counter() - t0,
         )
 
     def _on_solved(self, job: int, bundle: SolveBundle | None, error: BaseException | None) -> None:
         """Show a finished solve: errors, table, 2-D overlays first; then queue the cloud work."""
-        with self.ui_lock:
+        app = self.app
+        with app.ui_lock:
             if job < self._result_floor or self._stopped:
                 return
-            self._solving = job < self._job
+            self.solving = job < self._job
             if error is not None:
                 msg = str(error) if isinstance(error, CalibError) else f"{type(error).__name__}: {error}"
-                self._solve_error = " ".join(msg.split())
+                self.solve_error = " ".join(msg.split())
                 if not isinstance(error, CalibError):
                     traceback.print_exception(error)
             else:
                 self._bundle = bundle
-                self._solve_error = None
-                self._show_solved_camera()
-            self.overlays.refresh()
-            self._refresh_panel()
+                self.solve_error = None
+                app.cloud.show_camera(bundle.result.T_camera_lidar)
+            app.overlays.refresh()
+            self.show_panels()
             change_job, change_time = self._change_time
             if job == change_job:
                 now = time.perf_counter()
                 self._last_update = (now - change_time, now)
-        self._request_cloud()
+        self.request_cloud()
 
-    def _cloud_shown(self) -> bool:
+    def cloud_shown(self) -> bool:
         """True while some tab shows the 3-D view."""
-        return any(m == "3d" for m in list(self._client_mode.values()))
+        return any(m == "3d" for m in list(self.app._client_mode.values()))
 
-    def _request_cloud(self) -> None:
-        """Queue what the current solve still owes: cloud colours if a tab shows 3-D, the facing window in camera mode."""
+    def request_cloud(self) -> None:
+        """Queue what the current solve still owes: cloud colours if a tab shows 3-D, the facing window in camera
+        mode, the scan projected for the loupes' camera-to-cell predictions."""
         bundle = self._bundle
         if bundle is None or self._stopped:
             return
-        # The loupes' camera-to-cell predictions need the scan projected under the new pose: always owed.
         self._cloud_worker.submit(0, bundle)
 
     def _cloud_colors(self, T_camera_lidar: np.ndarray) -> np.ndarray:
         """Display-cloud colours ``(K, 3)`` uint8 from the camera image; grey where the camera does not see."""
-        colors, has_color = colorize_points(self.cloud_points_lidar, self.image, self.camera, T_camera_lidar,
+        app = self.app
+        colors, has_color = colorize_points(app.cloud_points_lidar, app.image, app.camera, T_camera_lidar,
                                             occlusion=True)
         # Pure black is the unlit border of a fisheye image, not scene colour: show it grey too.
         has_color &= colors.any(axis=1)
@@ -108,86 +169,64 @@ class LiveSolveCoordinator:
 
     def _facing_window(self, T_camera_lidar: np.ndarray) -> ColumnWindow | None:
         """The scan columns whose points project into the camera image, or None."""
-        seen = columns_seen_by_camera(self.depth, self.camera, T_camera_lidar)
+        seen = columns_seen_by_camera(self.app.depth, self.app.camera, T_camera_lidar)
         n_cols = len(seen)
         # A margin and coarse ends, so that the next solve usually keeps the same window.
         step = max(1, round(n_cols / 225))
-        return covering_window(seen, self.wrap_cols, margin=step, quantum=step)
+        return covering_window(seen, self.app.wrap_cols, margin=step, quantum=step)
 
     def _set_facing(self, bundle: SolveBundle, facing: ColumnWindow | None) -> None:
-        with self.ui_lock:
+        with self.app.ui_lock:
             if bundle is not self._bundle:
                 return  # a newer solve is shown; its own window comes with it
             self._facing_of = bundle
             if facing is not None:  # the camera sees no column: keep the last window
-                self._ba_facing = facing
+                self._facing = facing
 
-    def _ensure_facing(self) -> None:
-        """Compute the camera-facing window of the current solve now, if not done yet (switch to camera mode)."""
+    def ensure_facing(self) -> None:
+        """Compute the camera-facing window of the current pose now, if not done yet (switch to camera mode)."""
         bundle = self._bundle
+        initial = self.app.initial_T_camera_lidar
         if bundle is not None and self._facing_of is not bundle:
             self._set_facing(bundle, self._facing_window(bundle.result.T_camera_lidar))
-        elif bundle is None and self.initial_T_camera_lidar is not None:
-            facing = self._facing_window(self.initial_T_camera_lidar)  # before any solve: the imported pose
+        elif bundle is None and initial is not None:
+            facing = self._facing_window(initial)  # before any solve: the imported pose
             if facing is not None:
-                self._ba_facing = facing
+                self._facing = facing
 
     def _cloud_job(self, bundle: SolveBundle) -> CloudUpdate:
         # Decided when the job runs: a tab may have left or entered the 3-D view meanwhile.
+        app = self.app
         t0 = time.perf_counter()
         T = bundle.result.T_camera_lidar
-        colors = self._cloud_colors(T) if self._cloud_shown() and self._cloud_shows is not bundle else None
-        facing_done = self.state.view.ba_window_mode == "camera" and self._facing_of is not bundle
+        colors = self._cloud_colors(T) if self.cloud_shown() and app.cloud.shows is not bundle else None
+        facing_done = app.state.view.ba_window_mode == "camera" and self._facing_of is not bundle
         facing = self._facing_window(T) if facing_done else None
-        self._projection(T)  # the loupes' camera-to-cell predictions, ready before the next click
+        app._projection(T)  # the loupes' camera-to-cell predictions, ready before the next click
         return CloudUpdate(bundle, colors, facing_done, facing, time.perf_counter() - t0)
 
     def _on_cloud_done(self, job: int, update: CloudUpdate | None, error: BaseException | None) -> None:
         if error is not None:
             traceback.print_exception(error)
             return
-        with self.ui_lock:
+        app = self.app
+        with app.ui_lock:
             if self._stopped or update.bundle is not self._bundle:
                 return  # superseded: the newer solve queued its own
             if update.colors is not None:
-                self._cloud.colors = update.colors
-                self._cloud_shows = update.bundle
+                app.cloud.show_colors(update.bundle, update.colors)
             if update.facing_done:
                 self._set_facing(update.bundle, update.facing)
-        if update.facing_done and self.state.view.ba_window_mode == "camera" and not self._stopped:
+        if update.facing_done and app.state.view.ba_window_mode == "camera" and not self._stopped:
             # In the action worker, so a click is never mapped through a window that changed under it.
-            self.post(self._apply_ba_window)
-
-    def _show_solved_camera(self) -> None:
-        """The solved camera's frame in the 3-D pane; without a solve no frame and a grey cloud."""
-        bundle = self._bundle
-        if bundle is None:
-            self._camera_frame.visible = False
-            if self._cloud_shows is not None:
-                self._cloud.colors = np.full((len(self.cloud_points_lidar), 3), 150, np.uint8)
-                self._cloud_shows = None
-            return
-        T_lidar_camera = invert_T(bundle.result.T_camera_lidar)
-        self._camera_frame.wxyz = vtf.SO3.from_matrix(T_lidar_camera[:3, :3]).wxyz
-        self._camera_frame.position = T_lidar_camera[:3, 3]
-        self._camera_frame.visible = True
-
-    @property
-    def solve_bundle(self) -> SolveBundle | None:
-        """The last good solve with what was solved (pick ids, pairs), or None."""
-        return self._bundle
-
-    @property
-    def result(self):
-        """The last good :class:`calib_core.solve.CalibrationResult`, or None."""
-        bundle = self._bundle
-        return None if bundle is None else bundle.result
+            app.post(app._apply_ba_window)
 
     def wait_idle(self, timeout: float = 30.0) -> bool:
         """Block until queued user actions are applied and the live solver and the cloud worker are idle."""
         deadline = time.monotonic() + timeout
+        actions = self.app.actions
         while True:
-            while self.actions.busy:
+            while actions.busy:
                 if time.monotonic() > deadline:
                     return False
                 time.sleep(0.01)
@@ -195,7 +234,7 @@ class LiveSolveCoordinator:
                 if not worker.wait_idle(max(0.0, deadline - time.monotonic())):
                     return False
             # A finished solve queues cloud work, finished cloud work may queue a view update.
-            if not self.actions.busy and self._solver.idle and self._cloud_worker.idle:
+            if not actions.busy and self._solver.idle and self._cloud_worker.idle:
                 return True
 
     def last_click_to_update(self) -> float | None:

@@ -46,7 +46,7 @@ class LoupeSupport:
     # ------------------------------------------------------------------ pose and predictions
     def pose(self) -> np.ndarray | None:
         """``T_camera_lidar`` predictions use: the last good solve, else the imported initial extrinsic, else None."""
-        bundle = self._bundle
+        bundle = self.live.bundle
         if bundle is not None:
             return bundle.result.T_camera_lidar
         return self.initial_T_camera_lidar
@@ -104,12 +104,12 @@ class LoupeSupport:
 
     def _after_initial_extrinsics(self) -> None:
         """Redraw predictions and the facing window once an initial extrinsic is imported."""
-        if self.state.view.ba_window_mode == "camera" and self._bundle is None:
-            self._ensure_facing()
+        if self.state.view.ba_window_mode == "camera" and self.live.bundle is None:
+            self.live.ensure_facing()
             self._apply_ba_window()
         self.overlays.invalidate()
         self.overlays.refresh()
-        self._refresh_panel()
+        self.live.show_panels()
         guide = getattr(self, "guide", None)
         if guide is not None:  # proposals can start from the imported pose
             guide.update()

@@ -11,7 +11,7 @@ import viser
 
 from .calibration_panel import CalibrationPanel
 from .export_panel import ExportPanel
-from .ui_common import CLOUD_ORIGIN, md_escape
+from .ui_common import md_escape
 from .view_settings import BA_WINDOW_MODES, UP_AXES
 
 
@@ -50,18 +50,6 @@ class PageBuilder:
         self._camera_title = scene.add_label("/annot/titles/camera", "", position=(0, 0, -0.01), anchor="bottom-left",
                                              font_screen_scale=0.9)
         self._update_camera_title()
-
-        # 3-D pane: cloud and frames, far from the annotation plane.
-        self._cloud_root = scene.add_frame("/cloud", show_axes=False, position=CLOUD_ORIGIN, visible=False)
-        grey = np.full((len(self.cloud_points_lidar), 3), 150, np.uint8)
-        self._cloud = scene.add_point_cloud(
-            "/cloud/points", self.cloud_points_lidar.astype(np.float32), grey, point_size=0.015,
-            precision="float32", point_shape="rounded", point_shading="flat",
-        )
-        scene.add_frame("/cloud/lidar", axes_length=0.25, axes_radius=0.01)
-        scene.add_label("/cloud/lidar/label", "lidar", position=(0.0, 0.0, 0.0), anchor="top-right")
-        self._camera_frame = scene.add_frame("/cloud/camera", axes_length=0.2, axes_radius=0.008, visible=False)
-        scene.add_label("/cloud/camera/label", "camera", position=(0.0, 0.0, 0.0))
 
     # ------------------------------------------------------------ BA display
     def _build_gui(self) -> None:

@@ -53,7 +53,6 @@ class PairsPanel:
             want = "none" if selected is None else f"#{selected}"
             if self._dd_selected.value != want:
                 self._dd_selected.value = want
-            self.calibration_panel.show(self._bundle, self._solve_error, self._solving, len(complete))
 
     def _on_download_pairs(self, event: Any) -> None:
         with tempfile.TemporaryDirectory() as tmp:

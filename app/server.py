@@ -22,7 +22,7 @@ import numpy as np
 
 from .ba_view import ColumnWindow
 from .camera_view import camera_views
-from .live_solver import LiveSolver
+from .cloud_pane import CloudPane
 from .loupes import Loupes
 from .loupe_support import LoupeSupport
 from .display_panel import DisplayPanel
@@ -47,7 +47,7 @@ from .view_settings import ViewSettings
 # Panels that are classes own their widgets and use only the app's public services (app/app_services.py):
 # CalibrationPanel, ExportPanel, FormatExportPanel, Loupes, GuidePanel, VerifyPanel.  The bases below are
 # still mixins (one concern and module each) that share the app's attributes.
-class CalibrationApp(PairsPanel, ViewPanel, LiveSolveCoordinator,
+class CalibrationApp(PairsPanel, ViewPanel,
                      PageBuilder, LoupeSupport, DisplayPanel):
     """The annotation app on one scene; the viser server runs from construction.
 
@@ -125,7 +125,6 @@ class CalibrationApp(PairsPanel, ViewPanel, LiveSolveCoordinator,
             sd.edge_points_lidar, sd.all_points_lidar, sd.all_rows_cols)
         self.ba_cell_aspect, self.wrap_cols, self.cloud_points_lidar = (
             sd.ba_cell_aspect, sd.wrap_cols, sd.cloud_points_lidar)
-        self._bundle: SolveBundle | None = None
         self._init_loupe_support(initial_extrinsics_path)  # CalibError on a bad file, before any server starts
 
         # -- state ------------------------------------------------------------------
@@ -137,24 +136,20 @@ class CalibrationApp(PairsPanel, ViewPanel, LiveSolveCoordinator,
                                      on_save_error=self._on_save_error, default_view=default_view)
         self._init_display()  # the laser panes' grey levels, with the saved contrast
         self.camera_views = camera_views(sd)  # raw, and panorama for ocam / fisheye (app.camera_view)
-        self._ba_facing: ColumnWindow | None = None  # from the last good solve it was computed for
-        self._facing_of: SolveBundle | None = None  # the solve ``_ba_facing`` was computed for
-        self._ensure_facing()  # from the imported initial extrinsic, if any
+        self.live = LiveSolveCoordinator(self)  # the solve shown; its threads start with the page
+        self.live.ensure_facing()  # from the imported initial extrinsic, if any
         self._ba_window = self._wanted_ba_window()
         self.camera_sizes = {k: (v.image.shape[1], v.image.shape[0]) for k, v in self.camera_views.items()}
         self.slots = self._layout()
 
         self.ui_lock = threading.RLock()  # public: held while the scene and the panels are redrawn
         self._upload_lock = threading.Lock()
-        self._solve_error: str | None = None
         self._submitted: tuple | None = None
         self._job = 0
         self._result_floor = 0
-        self._solving = False
         self._client_mode: dict[int, str] = {}
         self._last_click: dict[int, tuple] = {}  # client id -> ("ba", key, row, col) or ("camera", u, v)
         self._view_target: dict[int, tuple[np.ndarray, np.ndarray, float]] = {}
-        self._cloud_shows: SolveBundle | None = None  # the solve whose colours the 3-D cloud shows (None: grey)
         self._change_time: tuple[int, float] = (0, 0.0)  # (job, perf_counter) of the last change of the pairs
         self._last_update: tuple[float, float] | None = None  # (click-to-update seconds, perf_counter published)
         self._stopped = False
@@ -181,6 +176,7 @@ class CalibrationApp(PairsPanel, ViewPanel, LiveSolveCoordinator,
         self.nodes = SceneNodes(self.server.scene)
         self.nodes.fill_label_pool()
         self.overlays = OverlayDrawing(self)  # markers, labels, selection, reprojection overlays
+        self.cloud = CloudPane(self.server.scene, self.cloud_points_lidar)  # the 3-D pane
         try:
             self._build_scene()
             self._build_gui()
@@ -188,12 +184,10 @@ class CalibrationApp(PairsPanel, ViewPanel, LiveSolveCoordinator,
             self.format_export = FormatExportPanel(self)  # verify: its own widgets (formats, reference import)
             self.server.on_client_connect(self._on_connect)
             self.server.on_client_disconnect(self._on_disconnect)
-            self._solver = LiveSolver(self._solve_job, self._on_solved)
-            # Cloud colours and the camera-facing window: after the solve is shown, in their own thread.
-            self._cloud_worker = LiveSolver(self._cloud_job, self._on_cloud_done, name="ba-calib-cloud")
+            self.live.start()
             self.guide = attach_guide_panel(self)  # guided picking (app/guide_panel.py)
-            self.state.subscribe(self._on_state_change)
-            self._on_state_change(self.state)
+            self.state.subscribe(self.live.on_state_change)
+            self.live.on_state_change(self.state)
             self.verify_panel = VerifyPanel(self)  # verify: check pairs, leave-one-out, heat map, reference, plots
         except BaseException:
             self.actions.stop()
@@ -227,6 +221,44 @@ class CalibrationApp(PairsPanel, ViewPanel, LiveSolveCoordinator,
     def _refresh_scene(self) -> None:  # the view and display mixins' name for it, until they are objects
         self.overlays.refresh()
 
+    # Names the view mixin still uses, until it is an object.
+    _bundle = property(lambda self: self.live.bundle)
+    _ba_facing = property(lambda self: self.live.facing)
+    _cloud_root = property(lambda self: self.cloud)
+
+    def _ensure_facing(self) -> None:
+        self.live.ensure_facing()
+
+    def _cloud_shown(self) -> bool:
+        return self.live.cloud_shown()
+
+    def _request_cloud(self) -> None:
+        self.live.request_cloud()
+
+    @property
+    def solve_bundle(self) -> SolveBundle | None:
+        """The last good solve with what was solved (pick ids, pairs), or None (:attr:`LiveSolveCoordinator.bundle`)."""
+        return self.live.bundle
+
+    @property
+    def result(self):
+        """The last good :class:`calib_core.solve.CalibrationResult`, or None."""
+        bundle = self.live.bundle
+        return None if bundle is None else bundle.result
+
+    def last_click_to_update(self) -> float | None:
+        """:meth:`LiveSolveCoordinator.last_click_to_update` (seconds from the last change to its solve shown)."""
+        return self.live.last_click_to_update()
+
+    @property
+    def last_update_time(self) -> float | None:
+        """:attr:`LiveSolveCoordinator.last_update_time` (``perf_counter`` when that solve was shown)."""
+        return self.live.last_update_time
+
+    def wait_idle(self, timeout: float = 30.0) -> bool:
+        """Block until queued user actions are applied and the live solve and its follow-up work are idle."""
+        return self.live.wait_idle(timeout)
+
     def _on_save_error(self, message: str) -> None:
         # On the compactor's thread; the journal holds every change, the compaction is retried.
         if hasattr(self, "server") and not getattr(self, "_stopped", True):
@@ -246,8 +278,7 @@ class CalibrationApp(PairsPanel, ViewPanel, LiveSolveCoordinator,
         """
         self._stopped = True
         self.actions.stop()
-        self._solver.stop()
-        self._cloud_worker.stop()
+        self.live.stop()
         self.guide.stop()
         self.verify_panel.stop()
         try:

@@ -166,12 +166,13 @@ class AppDriver:
     @property
     def cloud_colors(self) -> np.ndarray:
         """The 3-D cloud's colours ``(K, 3)`` as the page shows them."""
-        return np.asarray(self.app._cloud.colors)
+        return self.app.cloud.colors
 
     @property
     def cloud_shows_current_solve(self) -> bool:
         """True when the 3-D cloud's colours come from the newest solve."""
-        return self.app._cloud_shows is not None and self.app._cloud_shows is self.app._bundle
+        shows = self.app.cloud.shows
+        return shows is not None and shows is self.app.live.bundle
 
     def shift_click(self, key: str, uv: tuple[float, float]) -> list[tuple[str, str]]:
         """Shift+click display pixel ``uv`` of image ``key`` (selects the pair whose marker is there)."""

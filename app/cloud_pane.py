@@ -1,0 +1,72 @@
+"""The 3-D pane: the scan's display cloud (grey, or coloured from the camera by a solve), the lidar frame and the
+solved camera's frame, far from the annotation plane (:data:`app.ui_common.CLOUD_ORIGIN`)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import viser.transforms as vtf
+
+from calib_core.transforms import invert_T
+
+from .ui_common import CLOUD_ORIGIN
+
+GREY = 150  # the cloud's colour before any solve
+
+
+class CloudPane:
+    """The scene nodes of the 3-D pane; it remembers which solve its colours come from (:attr:`shows`).
+
+    Parameters
+    ----------
+    scene : viser.SceneApi
+        Where the nodes go.
+    points_lidar : ndarray, shape (K, 3)
+        The display cloud, lidar frame (metres).
+    """
+
+    def __init__(self, scene: Any, points_lidar: np.ndarray) -> None:
+        self._n = len(points_lidar)
+        self._root = scene.add_frame("/cloud", show_axes=False, position=CLOUD_ORIGIN, visible=False)
+        self._points = scene.add_point_cloud(
+            "/cloud/points", points_lidar.astype(np.float32), np.full((self._n, 3), GREY, np.uint8), point_size=0.015,
+            precision="float32", point_shape="rounded", point_shading="flat",
+        )
+        scene.add_frame("/cloud/lidar", axes_length=0.25, axes_radius=0.01)
+        scene.add_label("/cloud/lidar/label", "lidar", position=(0.0, 0.0, 0.0), anchor="top-right")
+        self._camera_frame = scene.add_frame("/cloud/camera", axes_length=0.2, axes_radius=0.008, visible=False)
+        scene.add_label("/cloud/camera/label", "camera", position=(0.0, 0.0, 0.0))
+        self.shows: Any = None  # the solve whose colours the cloud shows (None: grey)
+
+    @property
+    def colors(self) -> np.ndarray:
+        """The cloud's colours ``(K, 3)`` uint8 as the page shows them."""
+        return np.asarray(self._points.colors)
+
+    @property
+    def visible(self) -> bool:
+        """Whether the pane is shown (some tab is in the 3-D view)."""
+        return bool(self._root.visible)
+
+    @visible.setter
+    def visible(self, on: bool) -> None:
+        self._root.visible = bool(on)
+
+    def show_colors(self, solve: Any, colors: np.ndarray) -> None:
+        """Colour the cloud with ``colors`` ``(K, 3)`` uint8, computed from ``solve``."""
+        self._points.colors = colors
+        self.shows = solve
+
+    def show_camera(self, T_camera_lidar: np.ndarray | None) -> None:
+        """The solved camera's frame at ``T_camera_lidar``; None hides it and greys the cloud."""
+        if T_camera_lidar is None:
+            self._camera_frame.visible = False
+            if self.shows is not None:
+                self._points.colors = np.full((self._n, 3), GREY, np.uint8)
+                self.shows = None
+            return
+        T_lidar_camera = invert_T(T_camera_lidar)
+        self._camera_frame.wxyz = vtf.SO3.from_matrix(T_lidar_camera[:3, :3]).wxyz
+        self._camera_frame.position = T_lidar_camera[:3, 3]
+        self._camera_frame.visible = True
