@@ -202,7 +202,7 @@ class LiveSolveCoordinator:
         colors = self._cloud_colors(T) if self.cloud_shown() and app.cloud.shows is not bundle else None
         facing_done = app.state.view.ba_window_mode == "camera" and self._facing_of is not bundle
         facing = self._facing_window(T) if facing_done else None
-        app._projection(T)  # the loupes' camera-to-cell predictions, ready before the next click
+        app.loupe_support.projection(T)  # the loupes' camera-to-cell predictions, ready before the next click
         return CloudUpdate(bundle, colors, facing_done, facing, time.perf_counter() - t0)
 
     def _on_cloud_done(self, job: int, update: CloudUpdate | None, error: BaseException | None) -> None:

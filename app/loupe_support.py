@@ -21,32 +21,45 @@ from .loupes import ZOOM_FACTOR
 from .security import upload_display_name
 
 
-class LoupeSupport:
-    """Part of :class:`app.server.CalibrationApp` (a mixin: it uses the app's attributes)."""
+def read_extrinsics(path: Path, shown: str | None = None) -> np.ndarray:
+    """``T_camera_lidar`` (4x4) from any extrinsics file ba-calib reads; errors name ``shown`` instead of ``path``."""
+    from calib_core.io.extrinsic_formats import load_extrinsics_any
 
-    def _init_loupe_support(self, initial_extrinsics_path) -> None:
+    try:
+        return np.asarray(load_extrinsics_any(path), dtype=np.float64)
+    except CalibError as exc:
+        if shown is None:
+            raise
+        raise CalibError(str(exc).replace(str(path), shown)) from None
+
+
+class LoupeSupport:
+    """The pose the loupes predict with, of one :class:`app.server.CalibrationApp` (``app.loupe_support``).
+
+    It owns the imported initial extrinsic (:attr:`initial_T_camera_lidar`)
+    and the scan projected under the current pose (cached per pose).  The
+    solve shown comes from ``app.live``.
+
+    Parameters
+    ----------
+    app : CalibrationApp
+        The app (its ``live``, ``camera``, ``depth``, ``all_points_lidar``, ``all_rows_cols`` ...).
+    initial_T_camera_lidar : ndarray, shape (4, 4), optional
+        A rough pose to predict with until a solve exists.
+    """
+
+    def __init__(self, app: Any, initial_T_camera_lidar: np.ndarray | None = None) -> None:
+        self.app = app
         self.initial_T_camera_lidar: np.ndarray | None = None
-        self._last_pick: dict[Any, tuple] = {}  # client id -> (kind, pick id, "full" | "loupe")
         self._projected: tuple[bytes, ProjectedScan] | None = None
         self._projected_lock = threading.Lock()
-        if initial_extrinsics_path is not None:
-            self.set_initial_extrinsics(self._read_extrinsics(Path(initial_extrinsics_path)))
-
-    def camera_click_source(self, pick_id: int) -> str | None:
-        """Where the last camera click on pick ``pick_id`` landed in its tab: ``"loupe"``, ``"full"`` or None."""
-        for kind, pid, where in list(self._last_pick.values()):
-            if kind == "camera" and pid == pick_id:
-                return where
-        return None
-
-    def forget_last_picks(self) -> None:
-        """Forget the last click of every tab, so that the next loupe click adds an end instead of refining one."""
-        self._last_pick.clear()
+        if initial_T_camera_lidar is not None:
+            self.set_initial_extrinsics(initial_T_camera_lidar)
 
     # ------------------------------------------------------------------ pose and predictions
     def pose(self) -> np.ndarray | None:
         """``T_camera_lidar`` predictions use: the last good solve, else the imported initial extrinsic, else None."""
-        bundle = self.live.bundle
+        bundle = self.app.live.bundle
         if bundle is not None:
             return bundle.result.T_camera_lidar
         return self.initial_T_camera_lidar
@@ -56,41 +69,33 @@ class LoupeSupport:
         T = self.pose()
         if T is None:
             return None
-        return predict_pixel(T, self.camera, self.depth, row, col)
+        return predict_pixel(T, self.app.camera, self.app.depth, row, col)
 
     def predict_cell(self, u: float, v: float) -> tuple[int, int] | None:
         """Scan cell ``(row, col)`` the camera sees at original pixel ``(u, v)`` under :meth:`pose`; None if unknown."""
         T = self.pose()
         if T is None:
             return None
-        return self._projection(T).cell_at(float(u), float(v))
+        return self.projection(T).cell_at(float(u), float(v))
 
-    def _projection(self, T: np.ndarray) -> ProjectedScan:
+    def projection(self, T: np.ndarray) -> ProjectedScan:
         """Every scan point projected under ``T`` (cached per pose; built off the click path after a solve)."""
         key = np.asarray(T, np.float64).tobytes()
         with self._projected_lock:
             cached = self._projected
             if cached is not None and cached[0] == key:
                 return cached[1]
-            proj = ProjectedScan.build(T, self.camera, self.all_points_lidar, self.all_rows_cols)
+            app = self.app
+            proj = ProjectedScan.build(T, app.camera, app.all_points_lidar, app.all_rows_cols)
             self._projected = (key, proj)
             return proj
 
     def _warm_projection(self) -> None:
         T = self.pose()
         if T is not None:
-            self._projection(T)
+            self.projection(T)
 
     # ------------------------------------------------------------------ initial extrinsics
-    def _read_extrinsics(self, path: Path, shown: str | None = None) -> np.ndarray:
-        from calib_core.io.extrinsic_formats import load_extrinsics_any
-
-        try:
-            return np.asarray(load_extrinsics_any(path), dtype=np.float64)
-        except CalibError as exc:
-            if shown is None:
-                raise
-            raise CalibError(str(exc).replace(str(path), shown)) from None
 
     def set_initial_extrinsics(self, T_camera_lidar: np.ndarray | None) -> None:
         """Use ``T_camera_lidar`` (4x4) for predictions and "facing the camera" until a solve exists (None: forget it)."""
@@ -104,25 +109,27 @@ class LoupeSupport:
 
     def _after_initial_extrinsics(self) -> None:
         """Redraw predictions and the facing window once an initial extrinsic is imported."""
-        if self.state.view.ba_window_mode == "camera" and self.live.bundle is None:
-            self.live.ensure_facing()
-            self._apply_ba_window()
-        self.overlays.invalidate()
-        self.overlays.refresh()
-        self.live.show_panels()
-        guide = getattr(self, "guide", None)
+        app = self.app
+        if app.state.view.ba_window_mode == "camera" and app.live.bundle is None:
+            app.live.ensure_facing()
+            app._apply_ba_window()
+        app.overlays.invalidate()
+        app.overlays.refresh()
+        app.live.show_panels()
+        guide = getattr(app, "guide", None)
         if guide is not None:  # proposals can start from the imported pose
             guide.update()
 
-    def _add_extrinsics_upload_button(self, client: Any) -> None:
-        """This tab's "Import initial extrinsics" button, in the View folder."""
-        with self._upload_lock:
-            with self._view_folder:
+    def add_upload_button(self, client: Any) -> None:
+        """This tab's "Import initial extrinsics" button, in the View folder (each tab gets its own)."""
+        app = self.app
+        with app._upload_lock:
+            with app._view_folder:
                 button = client.gui.add_upload_button(
                     "Import initial extrinsics", icon=viser.Icon.UPLOAD, mime_type="*/*",
                     hint="A rough pose (any extrinsics format ba-calib reads): predictions and 'Facing the camera' "
                          "work before 4 pairs")
-        button.on_upload(self.guard(lambda event: self.receive_initial_extrinsics(
+        button.on_upload(app.guard(lambda event: self.receive_initial_extrinsics(
             event.client, getattr(event.value, "name", ""), getattr(event.value, "content", b""))))
 
     def receive_initial_extrinsics(self, client: Any, name: str, content: bytes) -> None:
@@ -135,13 +142,15 @@ class LoupeSupport:
         with tempfile.TemporaryDirectory() as tmp:
             path = Path(tmp) / f"upload{suffix}"
             path.write_bytes(content)
-            T = self._read_extrinsics(path, shown)
+            T = read_extrinsics(path, shown)
         self.set_initial_extrinsics(T)
         self._after_initial_extrinsics()
-        self.notify(client, "Initial extrinsics imported",
+        app = self.app
+        app.notify(client, "Initial extrinsics imported",
                      f"{shown}: predictions use it until {4} pairs are solved", color="green")
 
-    def _on_loupe_zoom(self, event: Any) -> None:
+    def on_loupe_zoom(self, event: Any) -> None:
+        """The "Loupe zoom" buttons: magnify or widen one loupe around the same centre."""
         kind, step = {"BA +": ("ba", ZOOM_FACTOR), "BA -": ("ba", 1 / ZOOM_FACTOR),
                       "Camera +": ("camera", ZOOM_FACTOR), "Camera -": ("camera", 1 / ZOOM_FACTOR)}[str(event.value)]
-        self.loupes.zoom(kind, step)
+        self.app.loupes.zoom(kind, step)

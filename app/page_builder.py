@@ -85,7 +85,7 @@ class PageBuilder:
         self._view_folder = gui.add_folder("View")
         with self._view_folder:
             self._bg_loupe_zoom = gui.add_button_group("Loupe zoom", ("BA +", "BA -", "Camera +", "Camera -"))
-            self._bg_loupe_zoom.on_click(self.guard(self._on_loupe_zoom))
+            self._bg_loupe_zoom.on_click(self.guard(self.loupe_support.on_loupe_zoom))
             self._dd_loupe_source = gui.add_dropdown(
                 "BA loupe shows", self.loupe_sources(), initial_value=self.loupe_source,
                 hint="The BA image last clicked, one BA direction, the scan's intensity (if it has one) or range")

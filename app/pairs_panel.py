@@ -27,6 +27,17 @@ class PairsPanel:
             return self.loupes.slot(key[len("loupe_"):])
         return self.slots[key]
 
+    def camera_click_source(self, pick_id: int) -> str | None:
+        """Where the last camera click on pick ``pick_id`` landed in its tab: ``"loupe"``, ``"full"`` or None."""
+        for kind, pid, where in list(self._last_pick.values()):
+            if kind == "camera" and pid == pick_id:
+                return where
+        return None
+
+    def forget_last_picks(self) -> None:
+        """Forget the last click of every tab, so that the next loupe click adds an end instead of refining one."""
+        self._last_pick.clear()
+
     def _refresh_panel(self) -> None:
         """Show the pairs summary, the selection dropdown and the calibration panel as they are now."""
         with self.ui_lock:
@@ -143,7 +154,7 @@ class PairsPanel:
             if pick is not None and pick.pixel is not None:
                 self.loupes.frame_camera(*pick.pixel)
             else:
-                predicted = self.predict_pixel(target[2], target[3])
+                predicted = self.loupe_support.predict_pixel(target[2], target[3])
                 if predicted is not None:
                     self.loupes.frame_camera(*predicted)
         else:
@@ -152,7 +163,7 @@ class PairsPanel:
             if pick is not None and pick.laser_rc is not None:
                 self.loupes.frame_ba(self.loupes.ba_crop.key, *pick.laser_rc)
             else:
-                cell = self.predict_cell(target[1], target[2])
+                cell = self.loupe_support.predict_cell(target[1], target[2])
                 if cell is not None:
                     self.loupes.frame_ba(self.loupes.ba_crop.key, *cell)
 

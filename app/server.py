@@ -24,7 +24,7 @@ from .ba_view import ColumnWindow
 from .camera_view import camera_views
 from .cloud_pane import CloudPane
 from .loupes import Loupes
-from .loupe_support import LoupeSupport
+from .loupe_support import LoupeSupport, read_extrinsics
 from .display_panel import DisplayPanel
 from .action_queue import ActionQueue, notify_tabs
 from .page_builder import PageBuilder
@@ -48,7 +48,7 @@ from .view_settings import ViewSettings
 # CalibrationPanel, ExportPanel, FormatExportPanel, Loupes, GuidePanel, VerifyPanel.  The bases below are
 # still mixins (one concern and module each) that share the app's attributes.
 class CalibrationApp(PairsPanel, ViewPanel,
-                     PageBuilder, LoupeSupport, DisplayPanel):
+                     PageBuilder, DisplayPanel):
     """The annotation app on one scene; the viser server runs from construction.
 
     Parameters
@@ -125,7 +125,7 @@ class CalibrationApp(PairsPanel, ViewPanel,
             sd.edge_points_lidar, sd.all_points_lidar, sd.all_rows_cols)
         self.ba_cell_aspect, self.wrap_cols, self.cloud_points_lidar = (
             sd.ba_cell_aspect, sd.wrap_cols, sd.cloud_points_lidar)
-        self._init_loupe_support(initial_extrinsics_path)  # CalibError on a bad file, before any server starts
+        initial_T = None if initial_extrinsics_path is None else read_extrinsics(Path(initial_extrinsics_path))
 
         # -- state ------------------------------------------------------------------
         # Every change is on disk (an fsync'd journal line) before the UI shows it; the journal is
@@ -137,6 +137,8 @@ class CalibrationApp(PairsPanel, ViewPanel,
         self._init_display()  # the laser panes' grey levels, with the saved contrast
         self.camera_views = camera_views(sd)  # raw, and panorama for ocam / fisheye (app.camera_view)
         self.live = LiveSolveCoordinator(self)  # the solve shown; its threads start with the page
+        self.loupe_support = LoupeSupport(self, initial_T)  # the pose predictions use (solved, else imported)
+        self._last_pick: dict[Any, tuple] = {}  # client id -> (kind, pick id, "full" | "loupe")
         self.live.ensure_facing()  # from the imported initial extrinsic, if any
         self._ba_window = self._wanted_ba_window()
         self.camera_sizes = {k: (v.image.shape[1], v.image.shape[0]) for k, v in self.camera_views.items()}
@@ -226,6 +228,9 @@ class CalibrationApp(PairsPanel, ViewPanel,
     _ba_facing = property(lambda self: self.live.facing)
     _cloud_root = property(lambda self: self.cloud)
 
+    def _add_extrinsics_upload_button(self, client: Any) -> None:
+        self.loupe_support.add_upload_button(client)
+
     def _ensure_facing(self) -> None:
         self.live.ensure_facing()
 
@@ -245,6 +250,15 @@ class CalibrationApp(PairsPanel, ViewPanel,
         """The last good :class:`calib_core.solve.CalibrationResult`, or None."""
         bundle = self.live.bundle
         return None if bundle is None else bundle.result
+
+    def pose(self) -> np.ndarray | None:
+        """``T_camera_lidar`` predictions use: the last good solve, else the imported initial extrinsic, else None."""
+        return self.loupe_support.pose()
+
+    @property
+    def initial_T_camera_lidar(self) -> np.ndarray | None:
+        """The imported rough ``T_camera_lidar`` predictions use before a solve (None: none imported)."""
+        return self.loupe_support.initial_T_camera_lidar
 
     def last_click_to_update(self) -> float | None:
         """:meth:`LiveSolveCoordinator.last_click_to_update` (seconds from the last change to its solve shown)."""
