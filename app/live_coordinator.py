@@ -101,7 +101,7 @@ class LiveSolveCoordinator:
         """Show the pairs panel and the calibration panel as they are now."""
         app = self.app
         with app.ui_lock:
-            app._refresh_panel()
+            app.pairs_panel.refresh()
             n_complete = sum(1 for p in app.state.picks if p.complete)
             app.calibration_panel.show(self._bundle, self.solve_error, self.solving, n_complete)
 

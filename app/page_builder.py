@@ -6,11 +6,11 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-import viser
 
 
 from .calibration_panel import CalibrationPanel
 from .export_panel import ExportPanel
+from .pairs_panel import PairsPanel
 from .ui_common import md_escape
 from .view_settings import BA_WINDOW_MODES, UP_AXES
 
@@ -46,7 +46,7 @@ class PageBuilder:
         for key, handle in self._image_handles.items():
             handle.on_click(self.make_click_handler(key))
             handle.on_click(modifier="shift")(self.make_select_handler(key))
-            handle.on_drag(self._make_drag_handler(key))
+            handle.on_drag(self.pairs_panel.make_drag_handler(key))
         self._camera_title = scene.add_label("/annot/titles/camera", "", position=(0, 0, -0.01), anchor="bottom-left",
                                              font_screen_scale=0.9)
         self._update_camera_title()
@@ -65,22 +65,7 @@ class PageBuilder:
             "**BA columns** shows only part of a wide scan, e.g. the part facing the camera."
         )
         view = self.state.view
-        self.pairs_folder = gui.add_folder("Pairs")
-        with self.pairs_folder:
-            self._md_pairs = gui.add_markdown("")
-            self._dd_selected = gui.add_dropdown("Selected pair", ("none",), initial_value="none")
-            self._dd_selected.on_update(self.guard(self._on_select_dropdown))
-            self._bg_edit = gui.add_button_group("Edit", ("Undo", "Redo", "Deselect", "Delete"))
-            self._bg_edit.on_click(self.guard(self._on_edit))
-            self._btn_clear = gui.add_button("Clear all pairs (undoable)", color="red", icon=viser.Icon.TRASH)
-            self._btn_clear.on_click(self.guard(self._on_clear))
-            self._cb_snap = gui.add_checkbox("Snap clicks to corners", initial_value=view.snap,
-                                             hint="Refine each click to the strongest corner within 4 pixels")
-            self._cb_snap.on_update(self.guard(self._on_view_checkbox))
-            # Each tab gets its own upload button (see _on_connect): viser keeps one value per button,
-            # which two tabs uploading at once would overwrite.
-            self._btn_pairs = gui.add_button("Download pairs YAML", icon=viser.Icon.DOWNLOAD)
-            self._btn_pairs.on_click(self.guard(self._on_download_pairs))
+        self.pairs_panel = PairsPanel(self)  # the "Pairs" folder
         self.calibration_panel = CalibrationPanel(gui)
         self._view_folder = gui.add_folder("View")
         with self._view_folder:

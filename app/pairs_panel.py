@@ -19,13 +19,55 @@ from .ui_common import MIN_PAIRS, PICK_RADII, SNAP_RADIUS_PX, IMPORT_CHOICES, md
 
 
 class PairsPanel:
-    """Part of :class:`app.server.CalibrationApp` (a mixin: it uses the app's attributes)."""
+    """The "Pairs" folder of one :class:`app.server.CalibrationApp` (``app.pairs_panel``) and the clicks on the images.
 
-    def _slot_of(self, key: str):
-        """The image slot of click key ``key``: a BA key, ``raw``, ``panorama``, ``loupe_ba`` or ``loupe_camera``."""
-        if key.startswith("loupe_"):
-            return self.loupes.slot(key[len("loupe_"):])
-        return self.slots[key]
+    It owns its widgets (built here, where the folder goes on the page) and
+    what each tab clicked last (:meth:`last_click`, :meth:`camera_click_source`).
+    Every change goes through ``app.state``; the clicks are mapped through the
+    app's page layout, loupes and predictions (``app.loupe_support``).
+    """
+
+    def __init__(self, app: Any) -> None:
+        self.app = app
+        self._last_click: dict[int, tuple] = {}  # client id -> ("ba", key, row, col) or ("camera", u, v)
+        self._last_pick: dict[Any, tuple] = {}  # client id -> (kind, pick id, "full" | "loupe")
+        gui, guard = app.server.gui, app.guard
+        self.folder = gui.add_folder("Pairs")
+        with self.folder:
+            self._md_pairs = gui.add_markdown("")
+            self._dd_selected = gui.add_dropdown("Selected pair", ("none",), initial_value="none")
+            self._dd_selected.on_update(guard(self.on_select_dropdown))
+            self._bg_edit = gui.add_button_group("Edit", ("Undo", "Redo", "Deselect", "Delete"))
+            self._bg_edit.on_click(guard(self.on_edit))
+            self._btn_clear = gui.add_button("Clear all pairs (undoable)", color="red", icon=viser.Icon.TRASH)
+            self._btn_clear.on_click(guard(self.on_clear))
+            self.snap_checkbox = gui.add_checkbox("Snap clicks to corners", initial_value=app.state.view.snap,
+                                                  hint="Refine each click to the strongest corner within 4 pixels")
+            self.snap_checkbox.on_update(guard(self.on_snap))
+            # Each tab gets its own upload button (see add_upload_button): viser keeps one value per button,
+            # which two tabs uploading at once would overwrite.
+            self._btn_pairs = gui.add_button("Download pairs YAML", icon=viser.Icon.DOWNLOAD)
+            self._btn_pairs.on_click(guard(self.on_download_pairs))
+
+    # ------------------------------------------------------------------ what the panel shows
+    @property
+    def text(self) -> str:
+        """The panel's summary as shown (markdown)."""
+        return str(self._md_pairs.content)
+
+    @property
+    def dropdown_value(self) -> str:
+        """What the "Selected pair" dropdown shows."""
+        return str(self._dd_selected.value)
+
+    # ------------------------------------------------------------------ per-tab memory
+    def last_click(self, client_id: int) -> tuple | None:
+        """Tab ``client_id``'s last click: ``("ba", key, row, col)`` or ``("camera", u, v)``, or None."""
+        return self._last_click.get(client_id)
+
+    def forget_tab(self, client_id: int) -> None:
+        """Forget what a closed tab clicked."""
+        self._last_click.pop(client_id, None)
 
     def camera_click_source(self, pick_id: int) -> str | None:
         """Where the last camera click on pick ``pick_id`` landed in its tab: ``"loupe"``, ``"full"`` or None."""
@@ -38,25 +80,37 @@ class PairsPanel:
         """Forget the last click of every tab, so that the next loupe click adds an end instead of refining one."""
         self._last_pick.clear()
 
-    def _refresh_panel(self) -> None:
-        """Show the pairs summary, the selection dropdown and the calibration panel as they are now."""
-        with self.ui_lock:
-            picks = self.state.picks
+    def slot_of(self, key: str):
+        """The image slot of click key ``key``: a BA key, ``raw``, ``panorama``, ``loupe_ba`` or ``loupe_camera``."""
+        if key.startswith("loupe_"):
+            return self.app.loupes.slot(key[len("loupe_"):])
+        return self.app.slots[key]
+
+    def on_snap(self, event: Any) -> None:
+        """The "Snap clicks to corners" checkbox."""
+        self.app.state.set_view(snap=bool(self.snap_checkbox.value))
+
+    def refresh(self) -> None:
+        """Show the pairs summary and the selection dropdown as they are now."""
+        app = self.app
+        state = app.state
+        with app.ui_lock:
+            picks = state.picks
             complete = [p for p in picks if p.complete]
-            pending = self.state.pending()
-            selected = self.state.selected
+            pending = state.pending()
+            selected = state.selected
             lines = [f"**Pairs:** {len(complete)} complete"]
             if pending is not None:
                 need = "camera" if pending.pixel is None else "BA"
                 lines.append(f"Pair {pending.id} waits for a {need} click.")
-                ids, uv = self.overlays.predicted_pixels({pending.id: pending})
+                ids, uv = app.overlays.predicted_pixels({pending.id: pending})
                 if ids:
                     lines.append(f"Predicted camera pixel: ({uv[0, 0]:.1f}, {uv[0, 1]:.1f}) (cross in the image).")
             if selected is not None:
                 lines.append(f"**Pair {selected} selected:** clicks now move its ends (Deselect to add pairs).")
             if len(complete) < MIN_PAIRS:
                 lines.append(f"Pick {MIN_PAIRS - len(complete)} more to calibrate.")
-            lines.append(f"Undo: {'yes' if self.state.can_undo else 'no'}, redo: {'yes' if self.state.can_redo else 'no'}")
+            lines.append(f"Undo: {'yes' if state.can_undo else 'no'}, redo: {'yes' if state.can_redo else 'no'}")
             self._md_pairs.content = "  \n".join(lines)
             options = ("none",) + tuple(f"#{p.id}" for p in picks)
             if tuple(self._dd_selected.options) != options:
@@ -65,50 +119,50 @@ class PairsPanel:
             if self._dd_selected.value != want:
                 self._dd_selected.value = want
 
-    def _on_download_pairs(self, event: Any) -> None:
+    def on_download_pairs(self, event: Any) -> None:
         with tempfile.TemporaryDirectory() as tmp:
             path = Path(tmp) / "pairs.yaml"
-            n = self.state.export_pairs_file(path)
+            n = self.app.state.export_pairs_file(path)
             data = path.read_bytes()
         if event.client is not None:
             event.client.send_file_download("pairs.yaml", data, save_immediately=True)
-        self.notify(event.client, "Pairs", f"{n} complete pairs downloaded", color="green")
+        self.app.notify(event.client, "Pairs", f"{n} complete pairs downloaded", color="green")
 
     def make_click_handler(self, key: str) -> Callable:
         """The on-click callback of image slot ``key`` (a BA key, a camera view or ``loupe_*``): adds or moves an end."""
         def on_click(event: Any) -> None:
-            slot = self._slot_of(key)
+            slot = self.slot_of(key)
             uv = slot.pixel_from_ray(event.ray_origin, event.ray_direction)
             if uv is None or not slot.contains(uv):
                 raise CalibError("click landed outside the image")
             self._click(key, uv, client=event.client)
 
-        return self.guard(on_click)
+        return self.app.guard(on_click)
 
     def cell_from_display(self, key: str, uv: tuple[float, float]) -> tuple[int, int]:
         """Scan cell ``(row, col)`` under display pixel ``uv`` of BA slot ``key`` (window applied)."""
-        return self._ba_window.cell_at(uv, self.depth.shape[0])
+        return self.app.ba_window.cell_at(uv, self.app.depth.shape[0])
 
     def _target_of_click(self, key: str, uv: tuple[float, float]) -> tuple:
         """``("ba", key, row, col)`` or ``("camera", u, v)`` (original pixel) under display pixel ``uv`` of ``key``."""
         if key.startswith("loupe_"):
-            target = self.loupes.target_at(key[len("loupe_"):], uv)
-            if self.state.view.snap and target[0] == "ba":
-                col, row = refine_click_to_corner(self.ba_display(target[1]), (target[3], target[2]), 3.0)
-                target = ("ba", target[1], int(np.clip(round(row), 0, self.depth.shape[0] - 1)),
-                          int(round(col)) % self.depth.shape[1])
-            elif self.state.view.snap:
-                target = ("camera", *map(float, refine_click_to_corner(self.image_gray, target[1:], SNAP_RADIUS_PX)))
+            target = self.app.loupes.target_at(key[len("loupe_"):], uv)
+            if self.app.state.view.snap and target[0] == "ba":
+                col, row = refine_click_to_corner(self.app.ba_display(target[1]), (target[3], target[2]), 3.0)
+                target = ("ba", target[1], int(np.clip(round(row), 0, self.app.depth.shape[0] - 1)),
+                          int(round(col)) % self.app.depth.shape[1])
+            elif self.app.state.view.snap:
+                target = ("camera", *map(float, refine_click_to_corner(self.app.image_gray, target[1:], SNAP_RADIUS_PX)))
             return target
-        if key in self.ba_keys:
-            if self.state.view.snap:
-                shown = self.ba_display(key)[:, self._ba_window.columns]
+        if key in self.app.ba_keys:
+            if self.app.state.view.snap:
+                shown = self.app.ba_display(key)[:, self.app.ba_window.columns]
                 uv = tuple(refine_click_to_corner(shown, uv, 3.0))
             return ("ba", key, *self.cell_from_display(key, uv))
-        if key != self.camera_view.key:
+        if key != self.app.camera_view.key:
             raise CalibError("that camera view is hidden; click the visible one")
-        if self.state.view.snap:
-            uv = tuple(refine_click_to_corner(self.camera_view.gray, uv, SNAP_RADIUS_PX))
+        if self.app.state.view.snap:
+            uv = tuple(refine_click_to_corner(self.app.camera_view.gray, uv, SNAP_RADIUS_PX))
         return ("camera", *self._original_from_display(uv))
 
     def _click(self, key: str, uv: tuple[float, float], pick_id: int | None = None, client: Any = None) -> int:
@@ -123,21 +177,21 @@ class PairsPanel:
         cid = None if client is None else client.client_id
         last = self._last_pick.get(cid)
         if pick_id is None and source == "loupe" and last is not None and last[0] == kind and last[2] == "full":
-            ids = {p.id: p for p in self.state.picks}
-            if last[1] in ids and self.state.selected is None:
+            ids = {p.id: p for p in self.app.state.picks}
+            if last[1] in ids and self.app.state.selected is None:
                 pick_id = last[1]  # refine the end the full-image click just made
         if kind == "ba":
             _, ba_key, row, col = target
             try:
-                out = self.state.move_laser(pick_id, row, col) if pick_id is not None else self.state.click_laser(row, col)
+                out = self.app.state.move_laser(pick_id, row, col) if pick_id is not None else self.app.state.click_laser(row, col)
             except CalibError:
                 if source == "full":  # e.g. a cell with no return: still bring the loupe there to pick a good one
-                    self.loupes.frame_ba(ba_key, row, col)
+                    self.app.loupes.frame_ba(ba_key, row, col)
                 raise
             last_click: tuple = ("ba", ba_key, row, col)
         else:
             _, u, v = target
-            out = self.state.move_pixel(pick_id, u, v) if pick_id is not None else self.state.click_pixel(u, v)
+            out = self.app.state.move_pixel(pick_id, u, v) if pick_id is not None else self.app.state.click_pixel(u, v)
             last_click = ("camera", u, v)
         if client is not None:
             self._last_click[cid] = last_click
@@ -147,57 +201,57 @@ class PairsPanel:
 
     def _frame_loupes(self, target: tuple, pick_id: int, recentre: bool) -> None:
         """After a click: the clicked loupe on the click, the other loupe on the pair's other end or its prediction."""
-        pick = next((p for p in self.state.picks if p.id == pick_id), None)
+        pick = next((p for p in self.app.state.picks if p.id == pick_id), None)
         if target[0] == "ba":
             if recentre:
-                self.loupes.frame_ba(*target[1:])
+                self.app.loupes.frame_ba(*target[1:])
             if pick is not None and pick.pixel is not None:
-                self.loupes.frame_camera(*pick.pixel)
+                self.app.loupes.frame_camera(*pick.pixel)
             else:
-                predicted = self.loupe_support.predict_pixel(target[2], target[3])
+                predicted = self.app.loupe_support.predict_pixel(target[2], target[3])
                 if predicted is not None:
-                    self.loupes.frame_camera(*predicted)
+                    self.app.loupes.frame_camera(*predicted)
         else:
             if recentre:
-                self.loupes.frame_camera(target[1], target[2])
+                self.app.loupes.frame_camera(target[1], target[2])
             if pick is not None and pick.laser_rc is not None:
-                self.loupes.frame_ba(self.loupes.ba_crop.key, *pick.laser_rc)
+                self.app.loupes.frame_ba(self.app.loupes.ba_crop.key, *pick.laser_rc)
             else:
-                cell = self.loupe_support.predict_cell(target[1], target[2])
+                cell = self.app.loupe_support.predict_cell(target[1], target[2])
                 if cell is not None:
-                    self.loupes.frame_ba(self.loupes.ba_crop.key, *cell)
+                    self.app.loupes.frame_ba(self.app.loupes.ba_crop.key, *cell)
 
     def _original_from_display(self, uv: tuple[float, float]) -> tuple[float, float]:
         """Original camera pixel of a click on the visible camera view."""
-        raw, valid = self.camera_view.pixels_from_display(np.array([uv], dtype=np.float64))
+        raw, valid = self.app.camera_view.pixels_from_display(np.array([uv], dtype=np.float64))
         if not valid[0]:
             raise CalibError("the camera does not see that part of the panorama; click inside the picture")
         return float(raw[0, 0]), float(raw[0, 1])
 
     def _nearest_pick(self, key: str, uv: tuple[float, float]) -> int | None:
-        ids, ends = self.overlays.pick_ends(key)
+        ids, ends = self.app.overlays.pick_ends(key)
         if not ids:
             return None
-        slot = self._slot_of(key)
+        slot = self.slot_of(key)
         delta = ends - np.asarray(uv, dtype=np.float64)
         d = np.hypot(delta[:, 0] * slot.units_per_px, delta[:, 1] * slot.units_per_px_y)  # world units
         k = int(np.argmin(d))
-        return ids[k] if d[k] <= PICK_RADII * self.overlays.ring_radius(slot) else None
+        return ids[k] if d[k] <= PICK_RADII * self.app.overlays.ring_radius(slot) else None
 
     def make_select_handler(self, key: str) -> Callable:
         """The Shift+click callback of image slot ``key``: selects the pair whose marker is nearest."""
         def on_shift_click(event: Any) -> None:
-            uv = self._slot_of(key).pixel_from_ray(event.ray_origin, event.ray_direction)
+            uv = self.slot_of(key).pixel_from_ray(event.ray_origin, event.ray_direction)
             pick_id = None if uv is None else self._nearest_pick(key, uv)
-            self.state.select(pick_id)
+            self.app.state.select(pick_id)
 
-        return self.guard(on_shift_click)
+        return self.app.guard(on_shift_click)
 
-    def _make_drag_handler(self, key: str) -> Callable:
+    def make_drag_handler(self, key: str) -> Callable:
         def on_drag(event: Any) -> None:
             if event.phase != "end":
                 return
-            slot = self.slots[key]
+            slot = self.app.slots[key]
             start = slot.pixel_from_world(np.asarray(event.start_position)[None])[0]
             end = slot.pixel_from_world(np.asarray(event.end_position)[None])[0]
             pick_id = self._nearest_pick(key, tuple(start))
@@ -210,37 +264,37 @@ class PairsPanel:
                 raise CalibError("dropped outside the image; the pair was not moved")
             self._click(key, (float(end[0]), float(end[1])), pick_id=pick_id, client=event.client)
 
-        return self.guard(on_drag)
+        return self.app.guard(on_drag)
 
-    def _on_select_dropdown(self, event: Any) -> None:
+    def on_select_dropdown(self, event: Any) -> None:
         if event.client is None:  # our own update of the widget
             return
         value = str(event.value)
-        self.state.select(None if value == "none" else int(value.split()[0].lstrip("#")))
+        self.app.state.select(None if value == "none" else int(value.split()[0].lstrip("#")))
 
-    def _on_edit(self, event: Any) -> None:
+    def on_edit(self, event: Any) -> None:
         action = event.value
         if action == "Undo":
-            if not self.state.undo():
+            if not self.app.state.undo():
                 raise CalibError("nothing to undo")
         elif action == "Redo":
-            if not self.state.redo():
+            if not self.app.state.redo():
                 raise CalibError("nothing to redo")
         elif action == "Deselect":
-            self.state.select(None)
+            self.app.state.select(None)
         elif action == "Delete":
-            sel = self.state.selected
+            sel = self.app.state.selected
             if sel is None:
                 raise CalibError("select a pair first (shift+click its marker or use the dropdown)")
-            self.state.delete(sel)
+            self.app.state.delete(sel)
 
-    def _add_upload_button(self, client: Any) -> None:
+    def add_upload_button(self, client: Any) -> None:
         """This tab's own "Import pairs YAML" button, in the shared Pairs folder above "Download pairs YAML"."""
-        with self._upload_lock:  # a folder is one GUI context at a time
-            with self.pairs_folder:
+        with self.app._upload_lock:  # a folder is one GUI context at a time
+            with self.folder:
                 button = client.gui.add_upload_button("Import pairs YAML", icon=viser.Icon.UPLOAD, mime_type="*/*",
                                                       order=self._btn_pairs.order - 0.5)
-        button.on_upload(self.guard(self._on_upload))
+        button.on_upload(self.app.guard(self._on_upload))
 
     def _on_upload(self, event: Any) -> None:
         f = event.value  # this tab's button: no other tab's upload can have replaced it
@@ -251,7 +305,7 @@ class PairsPanel:
 
         The outcome is notified to ``client``; with ``wait``, returns once it is applied.
         """
-        self.post(lambda: self._import_upload(client, name, content), client=client, wait=wait)
+        self.app.post(lambda: self._import_upload(client, name, content), client=client, wait=wait)
 
     def _import_upload(self, client: Any, name: str, content: bytes) -> None:
         # The client's file name is only ever shown, never used as a path.
@@ -263,21 +317,21 @@ class PairsPanel:
             path.write_bytes(content)
             try:
                 pairs = load_pairs_yaml(path)
-                self.state.check_import(pairs)  # a file not of this scene is refused before asking anything
+                self.app.state.check_import(pairs)  # a file not of this scene is refused before asking anything
             except CalibError as exc:
                 raise CalibError(str(exc).replace(str(path), shown)) from None
-        if not self.state.picks or client is None or not hasattr(client, "gui"):
+        if not self.app.state.picks or client is None or not hasattr(client, "gui"):
             self._finish_import(client, shown, pairs, "Append")
             return
         self._ask_import(client, shown, pairs)
 
     def _ask_import(self, client: Any, shown: str, pairs: list[Pair]) -> None:
         """Ask this tab whether the uploaded pairs replace the current ones or are added to them."""
-        duplicates = self.state.count_duplicates(pairs)
+        duplicates = self.app.state.count_duplicates(pairs)
         modal = client.gui.add_modal("Import pairs")
         with modal:
             client.gui.add_markdown(
-                f"{md_escape(shown)} has {len(pairs)} pairs; there are {len(self.state.picks)} pairs now.  \n"
+                f"{md_escape(shown)} has {len(pairs)} pairs; there are {len(self.app.state.picks)} pairs now.  \n"
                 f"**Append** adds them ({duplicates} exact duplicates are skipped); **Replace all** removes the "
                 f"current pairs first. Undo reverses either.")
             for label in IMPORT_CHOICES:
@@ -287,28 +341,28 @@ class PairsPanel:
                     modal.close()
                     self._finish_import(event.client, shown, pairs, label)
 
-                button.on_click(self.guard(answer))
+                button.on_click(self.app.guard(answer))
 
     def _finish_import(self, client: Any, shown: str, pairs: list[Pair], choice: str) -> None:
         if choice not in ("Append", "Replace all"):
             return  # Cancel
         replace = choice == "Replace all"
-        before = len(self.state.picks)
-        ids = self.state.import_pairs(pairs, replace_existing=replace)
+        before = len(self.app.state.picks)
+        ids = self.app.state.import_pairs(pairs, replace_existing=replace)
         skipped = len(pairs) - len(ids)
         what = f"{len(ids)} pairs added from {shown}"
         if replace:
             what = f"{before} pairs replaced by {len(ids)} from {shown}"
         if skipped:
             what += f", {skipped} exact duplicates skipped"
-        self.notify(client, "Pairs imported", what + " (undo reverses this)", color="green")
+        self.app.notify(client, "Pairs imported", what + " (undo reverses this)", color="green")
 
-    def _on_clear(self, event: Any) -> None:
-        n = len(self.state.picks)
+    def on_clear(self, event: Any) -> None:
+        n = len(self.app.state.picks)
         if n == 0:
             raise CalibError("there are no pairs to clear")
-        self.state.clear()
-        self.notify(event.client, "Pairs cleared", f"{n} pairs removed. Undo (in Edit) brings them back.",
+        self.app.state.clear()
+        self.app.notify(event.client, "Pairs cleared", f"{n} pairs removed. Undo (in Edit) brings them back.",
                      color="yellow")
 
     # Old private names, still used by app/testing.py.

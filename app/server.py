@@ -29,7 +29,6 @@ from .display_panel import DisplayPanel
 from .action_queue import ActionQueue, notify_tabs
 from .page_builder import PageBuilder
 from .view_panel import ViewPanel
-from .pairs_panel import PairsPanel
 from .export_panel import FormatExportPanel
 from .guide_panel import attach_guide_panel
 from .verify_panel import VerifyPanel
@@ -47,7 +46,7 @@ from .view_settings import ViewSettings
 # Panels that are classes own their widgets and use only the app's public services (app/app_services.py):
 # CalibrationPanel, ExportPanel, FormatExportPanel, Loupes, GuidePanel, VerifyPanel.  The bases below are
 # still mixins (one concern and module each) that share the app's attributes.
-class CalibrationApp(PairsPanel, ViewPanel,
+class CalibrationApp(ViewPanel,
                      PageBuilder, DisplayPanel):
     """The annotation app on one scene; the viser server runs from construction.
 
@@ -138,7 +137,6 @@ class CalibrationApp(PairsPanel, ViewPanel,
         self.camera_views = camera_views(sd)  # raw, and panorama for ocam / fisheye (app.camera_view)
         self.live = LiveSolveCoordinator(self)  # the solve shown; its threads start with the page
         self.loupe_support = LoupeSupport(self, initial_T)  # the pose predictions use (solved, else imported)
-        self._last_pick: dict[Any, tuple] = {}  # client id -> (kind, pick id, "full" | "loupe")
         self.live.ensure_facing()  # from the imported initial extrinsic, if any
         self._ba_window = self._wanted_ba_window()
         self.camera_sizes = {k: (v.image.shape[1], v.image.shape[0]) for k, v in self.camera_views.items()}
@@ -150,7 +148,6 @@ class CalibrationApp(PairsPanel, ViewPanel,
         self._job = 0
         self._result_floor = 0
         self._client_mode: dict[int, str] = {}
-        self._last_click: dict[int, tuple] = {}  # client id -> ("ba", key, row, col) or ("camera", u, v)
         self._view_target: dict[int, tuple[np.ndarray, np.ndarray, float]] = {}
         self._change_time: tuple[int, float] = (0, 0.0)  # (job, perf_counter) of the last change of the pairs
         self._last_update: tuple[float, float] | None = None  # (click-to-update seconds, perf_counter published)
@@ -180,8 +177,9 @@ class CalibrationApp(PairsPanel, ViewPanel,
         self.overlays = OverlayDrawing(self)  # markers, labels, selection, reprojection overlays
         self.cloud = CloudPane(self.server.scene, self.cloud_points_lidar)  # the 3-D pane
         try:
-            self._build_scene()
             self._build_gui()
+            self.pairs_folder = self.pairs_panel.folder  # guided picking goes below it
+            self._build_scene()
             self.loupes = Loupes(self)  # the magnified BA and camera panes (public: frame_ba, frame_camera)
             self.format_export = FormatExportPanel(self)  # verify: its own widgets (formats, reference import)
             self.server.on_client_connect(self._on_connect)
@@ -227,6 +225,29 @@ class CalibrationApp(PairsPanel, ViewPanel,
     _bundle = property(lambda self: self.live.bundle)
     _ba_facing = property(lambda self: self.live.facing)
     _cloud_root = property(lambda self: self.cloud)
+
+    def make_click_handler(self, key: str) -> Callable:
+        """The on-click callback of image slot ``key`` (:meth:`PairsPanel.make_click_handler`)."""
+        return self.pairs_panel.make_click_handler(key)
+
+    def make_select_handler(self, key: str) -> Callable:
+        """The Shift+click callback of image slot ``key`` (:meth:`PairsPanel.make_select_handler`)."""
+        return self.pairs_panel.make_select_handler(key)
+
+    def camera_click_source(self, pick_id: int) -> str | None:
+        """Where the last camera click on pick ``pick_id`` landed: ``"loupe"``, ``"full"`` or None."""
+        return self.pairs_panel.camera_click_source(pick_id)
+
+    def forget_last_picks(self) -> None:
+        """Forget every tab's last click (the next loupe click adds an end)."""
+        self.pairs_panel.forget_last_picks()
+
+    # Names the view mixin still uses, until it is an object.
+    _last_click = property(lambda self: self.pairs_panel._last_click)
+    _cb_snap = property(lambda self: self.pairs_panel.snap_checkbox)
+
+    def _add_upload_button(self, client: Any) -> None:
+        self.pairs_panel.add_upload_button(client)
 
     def _add_extrinsics_upload_button(self, client: Any) -> None:
         self.loupe_support.add_upload_button(client)

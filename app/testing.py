@@ -42,7 +42,7 @@ class AppDriver:
         return self.tab.notifications[before:]
 
     def _ray(self, key: str, uv: tuple[float, float], **extra: Any) -> Any:
-        world = self.app._slot_of(key).world_from_pixel(np.asarray(uv, dtype=np.float64).reshape(1, 2))[0]
+        world = self.app.pairs_panel.slot_of(key).world_from_pixel(np.asarray(uv, dtype=np.float64).reshape(1, 2))[0]
         return SimpleNamespace(ray_origin=tuple(world - [0.0, 0.0, 1.0]), ray_direction=(0.0, 0.0, 1.0),
                                client=self.tab, target=None, **extra)
 
@@ -183,12 +183,12 @@ class AppDriver:
         """Choose a pair (or ``None``) in the "Selected pair" dropdown."""
         # The value the tab sent (setting the handle's value from Python would fire the callback itself).
         chosen = SimpleNamespace(value="none" if pick_id is None else f"#{pick_id}")
-        return self._fire(self.app.guard(self.app._on_select_dropdown), SimpleNamespace(client=self.tab,
+        return self._fire(self.app.guard(self.app.pairs_panel.on_select_dropdown), SimpleNamespace(client=self.tab,
                                                                                          target=chosen))
 
     def press_edit(self, name: str) -> list[tuple[str, str]]:
         """Press one of the Edit buttons: ``Undo``, ``Redo``, ``Deselect``, ``Delete``."""
-        return self._fire(self.app.guard(self.app._on_edit), SimpleNamespace(client=self.tab,
+        return self._fire(self.app.guard(self.app.pairs_panel.on_edit), SimpleNamespace(client=self.tab,
                                                                               target=SimpleNamespace(value=name)))
 
     def upload_pairs(self, name: str, content: bytes, answer: str | None = "Append") -> list[tuple[str, str]]:
@@ -199,7 +199,7 @@ class AppDriver:
         """
         before = len(self.tab.notifications)
         asked = len(self.tab.gui.modals)
-        self.app.receive_upload(self.tab, name, content, wait=True)
+        self.app.pairs_panel.receive_upload(self.tab, name, content, wait=True)
         if answer is not None and len(self.tab.gui.modals) > asked:
             self.answer_question(answer)
         return self.tab.notifications[before:]
@@ -222,7 +222,7 @@ class AppDriver:
 
     def press_clear_all(self) -> list[tuple[str, str]]:
         """Press "Clear all pairs"."""
-        return self._fire(self.app.guard(self.app._on_clear), SimpleNamespace(client=self.tab, target=None))
+        return self._fire(self.app.guard(self.app.pairs_panel.on_clear), SimpleNamespace(client=self.tab, target=None))
 
     def wait_idle(self, timeout: float = 60.0) -> bool:
         """Wait for the live solve and cloud work the last actions started."""
@@ -266,12 +266,12 @@ class AppDriver:
     @property
     def dropdown_value(self) -> str:
         """What the "Selected pair" dropdown shows."""
-        return str(self.app._dd_selected.value)
+        return self.app.pairs_panel.dropdown_value
 
     @property
     def pairs_panel(self) -> str:
         """The text of the Pairs panel."""
-        return str(self.app._md_pairs.content)
+        return self.app.pairs_panel.text
 
     @property
     def residual_table(self) -> str:
