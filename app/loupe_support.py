@@ -123,7 +123,7 @@ class LoupeSupport:
     def add_upload_button(self, client: Any) -> None:
         """This tab's "Import initial extrinsics" button, in the View folder (each tab gets its own)."""
         app = self.app
-        with app._upload_lock:
+        with app.page.folder_lock:
             with app._view_folder:
                 button = client.gui.add_upload_button(
                     "Import initial extrinsics", icon=viser.Icon.UPLOAD, mime_type="*/*",

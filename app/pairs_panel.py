@@ -290,7 +290,7 @@ class PairsPanel:
 
     def add_upload_button(self, client: Any) -> None:
         """This tab's own "Import pairs YAML" button, in the shared Pairs folder above "Download pairs YAML"."""
-        with self.app._upload_lock:  # a folder is one GUI context at a time
+        with self.app.page.folder_lock:  # a folder is one GUI context at a time
             with self.folder:
                 button = client.gui.add_upload_button("Import pairs YAML", icon=viser.Icon.UPLOAD, mime_type="*/*",
                                                       order=self._btn_pairs.order - 0.5)

@@ -27,7 +27,10 @@ from .loupes import Loupes
 from .loupe_support import LoupeSupport, read_extrinsics
 from .display_panel import DisplayPanel
 from .action_queue import ActionQueue, notify_tabs
-from .page_builder import PageBuilder
+from .calibration_panel import CalibrationPanel
+from .export_panel import ExportPanel
+from .pairs_panel import PairsPanel
+from .page_builder import PageBuilder, build_view_folder
 from .view_panel import ViewPanel
 from .export_panel import FormatExportPanel
 from .guide_panel import attach_guide_panel
@@ -46,8 +49,7 @@ from .view_settings import ViewSettings
 # Panels that are classes own their widgets and use only the app's public services (app/app_services.py):
 # CalibrationPanel, ExportPanel, FormatExportPanel, Loupes, GuidePanel, VerifyPanel.  The bases below are
 # still mixins (one concern and module each) that share the app's attributes.
-class CalibrationApp(ViewPanel,
-                     PageBuilder, DisplayPanel):
+class CalibrationApp(ViewPanel, DisplayPanel):
     """The annotation app on one scene; the viser server runs from construction.
 
     Parameters
@@ -133,6 +135,7 @@ class CalibrationApp(ViewPanel,
         default_view = ViewSettings(up_axis="+y" if self.depth.meta.get("model") == "rotating_2d" else "+z")
         self.state = AnnotationState(self.depth.valid, (self.camera.width, self.camera.height), self.session_path,
                                      on_save_error=self._on_save_error, default_view=default_view)
+        self.ui_lock = threading.RLock()  # public: held while the scene and the panels are redrawn
         self._init_display()  # the laser panes' grey levels, with the saved contrast
         self.camera_views = camera_views(sd)  # raw, and panorama for ocam / fisheye (app.camera_view)
         self.live = LiveSolveCoordinator(self)  # the solve shown; its threads start with the page
@@ -142,15 +145,8 @@ class CalibrationApp(ViewPanel,
         self.camera_sizes = {k: (v.image.shape[1], v.image.shape[0]) for k, v in self.camera_views.items()}
         self.slots = self._layout()
 
-        self.ui_lock = threading.RLock()  # public: held while the scene and the panels are redrawn
-        self._upload_lock = threading.Lock()
-        self._submitted: tuple | None = None
-        self._job = 0
-        self._result_floor = 0
         self._client_mode: dict[int, str] = {}
         self._view_target: dict[int, tuple[np.ndarray, np.ndarray, float]] = {}
-        self._change_time: tuple[int, float] = (0, 0.0)  # (job, perf_counter) of the last change of the pairs
-        self._last_update: tuple[float, float] | None = None  # (click-to-update seconds, perf_counter published)
         self._stopped = False
 
         # -- server -------------------------------------------------------------------
@@ -177,9 +173,17 @@ class CalibrationApp(ViewPanel,
         self.overlays = OverlayDrawing(self)  # markers, labels, selection, reprojection overlays
         self.cloud = CloudPane(self.server.scene, self.cloud_points_lidar)  # the 3-D pane
         try:
-            self._build_gui()
+            # The control panel's folders in page order; each panel builds its own widgets.
+            self.page = PageBuilder(self)  # theme, intro text, backdrop
+            self.pairs_panel = PairsPanel(self)  # "Pairs" folder and the clicks on the images
             self.pairs_folder = self.pairs_panel.folder  # guided picking goes below it
-            self._build_scene()
+            self.calibration_panel = CalibrationPanel(self.server.gui)
+            build_view_folder(self)
+            self.export_panel = ExportPanel(self)
+            self._sync_window_widgets()
+            self.page.add_images({k: self._ba_texture(k) for k in self.ba_keys},
+                                 {k: self._ba_title(k) for k in self.ba_keys})
+            self._update_camera_title()
             self.loupes = Loupes(self)  # the magnified BA and camera panes (public: frame_ba, frame_camera)
             self.format_export = FormatExportPanel(self)  # verify: its own widgets (formats, reference import)
             self.server.on_client_connect(self._on_connect)
@@ -245,6 +249,9 @@ class CalibrationApp(ViewPanel,
     # Names the view mixin still uses, until it is an object.
     _last_click = property(lambda self: self.pairs_panel._last_click)
     _cb_snap = property(lambda self: self.pairs_panel.snap_checkbox)
+    _image_handles = property(lambda self: self.page.image_handles)
+    _ba_titles = property(lambda self: self.page.ba_titles)
+    _camera_title = property(lambda self: self.page.camera_title)
 
     def _add_upload_button(self, client: Any) -> None:
         self.pairs_panel.add_upload_button(client)

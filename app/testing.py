@@ -152,7 +152,7 @@ class AppDriver:
 
     def ba_texture(self, key: str) -> np.ndarray:
         """The texture BA image ``key`` shows now (cells enlarged by nearest neighbour)."""
-        return np.asarray(self.app._image_handles[key].image)
+        return self.app.page.texture(key)
 
     def press_zoom(self, name: str) -> list[tuple[str, str]]:
         """Press a "Zoom" button of the 2-D view: ``"In"``, ``"Out"`` or ``"On last click"``."""
