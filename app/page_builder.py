@@ -102,6 +102,11 @@ class PageBuilder:
                 "BA loupe shows", self.loupe_sources(), initial_value=self.loupe_source,
                 hint="The BA image last clicked, one BA direction, the scan's intensity (if it has one) or range")
             self._dd_loupe_source.on_update(self.guard(self._on_loupe_source))
+            self._dd_last_pane = gui.add_dropdown(
+                "Last laser pane", self.last_pane_sources(), initial_value=self.last_pane_source,
+                hint="What the bottom laser pane shows: its BA direction, the scan's intensity (if it has one) or "
+                     "range; clicks on it pick the same cells")
+            self._dd_last_pane.on_update(self.guard(self._on_last_pane_source))
             self._sl_contrast = gui.add_slider("Laser contrast", 0.5, 3.0, 0.25, initial_value=view.contrast,
                                                hint="Contrast of the BA images and the BA loupe")
             self._sl_contrast.on_update(self.guard(self._on_contrast))

@@ -53,7 +53,7 @@ class ViewPanel:
 
     def _ba_title(self, key: str) -> str:
         w = self._ba_window
-        title = BA_TITLES.get(key, key)
+        title = self.ba_title(key)
         if w.is_full:
             return title
         last = (w.start + w.width - 1) % w.n_cols
