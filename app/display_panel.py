@@ -1,5 +1,6 @@
-"""What the laser panes show: the BA loupe's image (BA as clicked, one BA direction, intensity, range), a contrast
-control for the BA panes and the loupe, and the BA-edge overlay's opacity.  Grey levels come from
+"""What the laser panes show: the BA loupe's image (BA as clicked, one BA direction, intensity, range), the last
+pane's image (its BA direction, intensity or range), a contrast control for the laser panes and the loupe, and the
+BA-edge overlay's opacity.  Grey levels come from
 :mod:`calib_core.display_images` and :func:`calib_core.bearing_angle.ba_to_display`."""
 
 from __future__ import annotations
@@ -32,12 +33,31 @@ class DisplayPanel:
         contrast = self.state.view.contrast
         self._shown_gray = {k: apply_contrast(g, contrast) for k, g in images.items()}
 
+    def last_pane_sources(self) -> tuple[str, ...]:
+        """The choices of what the last laser pane shows: its BA direction, then the scene's other laser images."""
+        return (BA_TITLES.get(self.ba_keys[-1], self.ba_keys[-1]), *self.scene_data.laser_images)
+
+    @property
+    def last_pane_source(self) -> str:
+        """What the last laser pane shows (the saved choice if this scene has that image, else its BA direction)."""
+        source = self.state.view.last_pane_shows
+        return source if source in self.scene_data.laser_images else self.last_pane_sources()[0]
+
+    def _pane_image_name(self, key: str) -> str:
+        """The name of the grey image pane ``key`` shows: ``key`` itself, or a laser image on the last pane."""
+        if key == self.ba_keys[-1] and self.last_pane_source in self.scene_data.laser_images:
+            return self.last_pane_source
+        return key
+
     def ba_display(self, key: str) -> np.ndarray:
-        """The grey image shown for BA direction ``key`` ``(rows, cols)`` uint8 (contrast applied)."""
-        return self._shown_gray[key]
+        """The grey image shown in laser pane ``key`` ``(rows, cols)`` uint8 (contrast applied): its BA
+        direction, or on the last pane the chosen laser image.  Clicks on it pick the same cells either way."""
+        return self._shown_gray[self._pane_image_name(key)]
 
     def ba_title(self, key: str) -> str:
-        return BA_TITLES.get(key, key)
+        """The name of what laser pane ``key`` shows (e.g. ``BA +45 deg``, ``Intensity``)."""
+        name = self._pane_image_name(key) if key in self.ba_keys else key
+        return BA_TITLES.get(name, name)
 
     def loupe_image(self, key: str) -> tuple[np.ndarray, str]:
         """The BA loupe's grey image and its name, when the last BA click was on direction ``key``."""
@@ -46,7 +66,7 @@ class DisplayPanel:
             return self.ba_display(key), self.ba_title(key)
         for k in self.ba_keys:
             if BA_TITLES.get(k, k) == source:
-                return self.ba_display(k), source
+                return self._shown_gray[k], source
         return self._shown_gray[source], source
 
     @property
@@ -67,6 +87,19 @@ class DisplayPanel:
         if source not in self.loupe_sources():
             return
         self.state.set_view(loupe_shows=source)
+        self.loupes.refresh()
+
+    def _on_last_pane_source(self, event: Any) -> None:
+        if event.client is None:
+            return
+        source = str(event.value)
+        if source not in self.last_pane_sources():
+            return
+        self.state.set_view(last_pane_shows=source if source in self.scene_data.laser_images else "")
+        key = self.ba_keys[-1]
+        with self.ui_lock:
+            self._image_handles[key].image = self._ba_texture(key)
+            self._ba_titles[key].text = self._ba_title(key)
         self.loupes.refresh()
 
     def _on_contrast(self, event: Any) -> None:

@@ -94,6 +94,11 @@ def build_view_folder(app: Any) -> None:
             "BA loupe shows", app.loupe_sources(), initial_value=app.loupe_source,
             hint="The BA image last clicked, one BA direction, the scan's intensity (if it has one) or range")
         app._dd_loupe_source.on_update(app.guard(app._on_loupe_source))
+        app._dd_last_pane = gui.add_dropdown(
+            "Last laser pane", app.last_pane_sources(), initial_value=app.last_pane_source,
+            hint="What the bottom laser pane shows: its BA direction, the scan's intensity (if it has one) or "
+                 "range; clicks on it pick the same cells")
+        app._dd_last_pane.on_update(app.guard(app._on_last_pane_source))
         app._sl_contrast = gui.add_slider("Laser contrast", 0.5, 3.0, 0.25, initial_value=view.contrast,
                                            hint="Contrast of the BA images and the BA loupe")
         app._sl_contrast.on_update(app.guard(app._on_contrast))

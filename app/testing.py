@@ -107,6 +107,11 @@ class AppDriver:
         return self._fire(self.app.guard(self.app._on_loupe_source), SimpleNamespace(
             client=self.tab, target=SimpleNamespace(value=name)))
 
+    def choose_last_pane_source(self, name: str) -> list[tuple[str, str]]:
+        """Choose what the last laser pane shows in its dropdown (see ``app.last_pane_sources()``)."""
+        return self._fire(self.app.guard(self.app._on_last_pane_source), SimpleNamespace(
+            client=self.tab, target=SimpleNamespace(value=name)))
+
     def set_slider(self, label: str, value: float) -> list[tuple[str, str]]:
         """Move a slider of the View folder: ``"Laser contrast"`` or ``"BA-edge opacity"``."""
         handler = {"Laser contrast": self.app._on_contrast, "BA-edge opacity": self.app._on_edge_opacity}[label]

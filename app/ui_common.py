@@ -31,8 +31,8 @@ RING_MIN_RADIUS = 0.03
 RING_SEGMENTS = 20
 #: Shift+click / drag this many ring radii from a marker selects it.
 PICK_RADII = 2.5
-#: "Zoom: on last click" magnifies to this many screen pixels per BA cell
-#: (narrow side) or per camera-image pixel.
+#: "Zoom: on last click" magnifies by ZOOM_STEP per press, up to this many
+#: screen pixels per BA cell (narrow side) or per camera-image pixel.
 ZOOM_PX_PER_CELL = 14.0
 ZOOM_PX_PER_IMAGE_PX = 4.0
 ZOOM_STEP = 2.0

@@ -53,7 +53,7 @@ class ViewPanel:
 
     def _ba_title(self, key: str) -> str:
         w = self._ba_window
-        title = BA_TITLES.get(key, key)
+        title = self.ba_title(key)
         if w.is_full:
             return title
         last = (w.start + w.width - 1) % w.n_cols
@@ -248,12 +248,13 @@ class ViewPanel:
         self._apply_camera(client, look + np.array([0.0, 0.0, -dist]), look, np.array([0.0, -1.0, 0.0]), fov)
 
     def _zoom(self, client: Any, factor: float = 1.0, centre: np.ndarray | None = None,
-              units_per_screen_px: float | None = None) -> None:
+              units_per_screen_px: float | None = None, min_units: float = 0.0) -> None:
         """Magnify one tab's flat 2-D view by ``factor`` (or to ``units_per_screen_px``).
 
         The point shown at the middle of the free canvas area (left of the
         control panel) stays put, or ``centre`` (world) moves there.  The view
-        is squared up to face the image plane again.
+        is squared up to face the image plane again.  ``min_units`` (world
+        units per screen pixel) caps the magnification; a view beyond it keeps its own.
         """
         cam = client.camera
         try:
@@ -268,6 +269,7 @@ class ViewPanel:
         if centre is None:
             centre = look - np.array([shift_px * units, 0.0, 0.0])
         new_units = units / factor if units_per_screen_px is None else units_per_screen_px
+        new_units = max(new_units, min(units, min_units))  # at the cap already: only re-centre
         new_units = float(np.clip(new_units, 1e-6, 0.2))  # 0.2 units/px: the whole layout is tiny
         new_look = np.array([centre[0] + shift_px * new_units, centre[1], 0.0])
         new_dist = new_units * h_px / (2 * tan)
@@ -275,6 +277,8 @@ class ViewPanel:
                            fov)
 
     def _zoom_on_last(self, client: Any) -> None:
+        """Centre the last click and magnify one step (``ZOOM_STEP``), up to ``ZOOM_PX_PER_CELL`` per BA cell
+        or ``ZOOM_PX_PER_IMAGE_PX`` per camera pixel: each press keeps the surroundings in view."""
         last = self._last_click.get(client.client_id)
         if last is None:
             raise CalibError("nothing clicked yet in this tab: click a BA or camera image first")
@@ -294,7 +298,7 @@ class ViewPanel:
                     raise CalibError("the last clicked camera pixel is not shown in this camera view")
                 centre = slot.world_from_pixel(uv)[0]
                 units = slot.units_per_px / ZOOM_PX_PER_IMAGE_PX
-        self._zoom(client, centre=centre, units_per_screen_px=units)
+        self._zoom(client, factor=ZOOM_STEP, centre=centre, min_units=units)
 
     def _apply_camera(self, client: Any, position: np.ndarray, look_at: np.ndarray, up: np.ndarray, fov: float) -> None:
         cam = client.camera

@@ -52,6 +52,9 @@ class ViewSettings:
         Contrast of the laser panes, in :data:`CONTRAST_RANGE`.
     loupe_shows : str
         What the BA loupe shows: :data:`AS_CLICKED` or a name of the scene's laser images.
+    last_pane_shows : str
+        What the last (bottom) laser pane shows instead of its BA direction: a name of the scene's
+        laser images (``Intensity``, ``Range``), or ``""`` for its BA direction.
     edge_opacity : float
         Opacity of the BA-edge overlay, in :data:`EDGE_OPACITY_RANGE` (0 hides it).
     """
@@ -66,6 +69,7 @@ class ViewSettings:
     ba_window_width: int = 0
     contrast: float = 1.0
     loupe_shows: str = AS_CLICKED
+    last_pane_shows: str = ""
     edge_opacity: float = 0.8
 
     def __post_init__(self) -> None:
@@ -117,7 +121,7 @@ def _checked(name: str, value: Any) -> Any:
 
 _FIELDS = {"panorama": bool, "show_reprojection": bool, "show_edges": bool, "snap": bool, "up_axis": str,
            "ba_window_mode": str, "ba_window_start": int, "ba_window_width": int, "contrast": float,
-           "loupe_shows": str, "edge_opacity": float}
+           "loupe_shows": str, "last_pane_shows": str, "edge_opacity": float}
 _CHOICES = {"up_axis": tuple(UP_AXES), "ba_window_mode": tuple(BA_WINDOW_MODES)}
 _RANGES = {"contrast": CONTRAST_RANGE, "edge_opacity": EDGE_OPACITY_RANGE}
 assert tuple(_FIELDS) == tuple(f.name for f in fields(ViewSettings)), "ViewSettings and _FIELDS disagree"

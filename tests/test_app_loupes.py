@@ -206,3 +206,42 @@ def test_bad_initial_extrinsics_and_bad_frames_are_one_line_errors(tmp_path):
             app.loupes.frame_camera(10.0, 10.0, cov_px2=np.eye(3))
     finally:
         app.stop()
+
+
+def test_last_laser_pane_shows_range_picks_the_same_cells_and_is_saved(tmp_path):
+    from app.server import CalibrationApp
+    from app.testing import AppDriver
+
+    session = tmp_path / "session.yaml"
+    app = CalibrationApp(SAMPLE / "scan.npz", SAMPLE / "image.png", SAMPLE / "camera.yaml", session_path=session,
+                         port=0)
+    try:
+        d = AppDriver(app)
+        last, first = app.ba_keys[-1], app.ba_keys[0]
+        assert app.last_pane_sources()[0] == app.ba_title(last) and "Range" in app.last_pane_sources()
+        ba_tex, other_tex = d.ba_texture(last).copy(), d.ba_texture(first).copy()
+        assert d.choose_last_pane_source("Range") == []
+        tex = d.ba_texture(last)
+        f = tex.shape[0] // app.depth.shape[0]  # texels per cell
+        grey = tex[::f, ::f][..., 0] if tex.ndim == 3 else tex[::f, ::f]
+        valid = app.depth.valid
+        # Nearer is darker: the grey order follows the scan's range order.
+        order = np.argsort(app.depth.range_m[valid])
+        assert np.all(np.diff(grey[valid][order].astype(int)) >= 0)
+        assert not np.array_equal(tex, ba_tex) and np.array_equal(d.ba_texture(first), other_tex)
+        assert app.ba_title(last) == "Range"
+        # A click on the range pane picks the cell under it, as on a BA pane.
+        assert d.click(last, (301.3, 80.4)) == []  # cell centres at whole display pixels
+        assert app.state.picks[-1].laser_rc == (80, 301)
+    finally:
+        app.stop()
+
+    app = CalibrationApp(SAMPLE / "scan.npz", SAMPLE / "image.png", SAMPLE / "camera.yaml", session_path=session,
+                         port=0)
+    try:
+        d = AppDriver(app)
+        assert app.last_pane_source == "Range" and np.array_equal(d.ba_texture(last), tex)
+        assert d.choose_last_pane_source(app.last_pane_sources()[0]) == []
+        assert np.array_equal(d.ba_texture(last), ba_tex) and app.state.view.last_pane_shows == ""
+    finally:
+        app.stop()

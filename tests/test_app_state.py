@@ -601,15 +601,26 @@ def test_app_column_window_clicks_markers_and_zoom_on_the_sample(tmp_path):
         assert d.marker_ids("vertical") == [pid] and other not in d.marker_ids("vertical")
         assert d.marker_display_pixel("vertical", pid) == (25.0, 10.0)
 
-        # Zoom on that click: the cell comes to the middle of the canvas left of the panel, 14 px wide.
+        # Zoom on that click: the cell comes to the middle of the canvas left of the panel, one step (x2)
+        # larger per press, so the surroundings stay in view, until a cell is 14 px wide.
         d.click("diag_neg45", (25.0, 10.0))  # the same cell, re-clicked on another trace
-        assert d.press_zoom("On last click") == []
         cam = d.tab.camera
         centre = app.slots["diag_neg45"].world_from_pixel([[25.0, 10.0]])[0]
-        x, y = cam.screen_of(centre)
-        assert (x, y) == pytest.approx(((cam.image_width - PANEL_PX) / 2, cam.image_height / 2))
         right = app.slots["diag_neg45"].world_from_pixel([[26.0, 10.0]])[0]
-        assert cam.screen_of(right)[0] - x == pytest.approx(ZOOM_PX_PER_CELL)
+        for _ in range(2):  # start from an overview, several steps below the cap
+            assert d.press_zoom("Out") == []
+        cell_px = cam.screen_of(right)[0] - cam.screen_of(centre)[0]
+        assert cell_px < ZOOM_PX_PER_CELL / 4
+        widths = []
+        for _ in range(8):
+            assert d.press_zoom("On last click") == []
+            x, y = cam.screen_of(centre)
+            assert (x, y) == pytest.approx(((cam.image_width - PANEL_PX) / 2, cam.image_height / 2))
+            widths.append(cam.screen_of(right)[0] - x)
+        assert widths[0] == pytest.approx(2 * cell_px)  # one step, not a jump to the cap
+        assert widths[1] == pytest.approx(4 * cell_px)
+        assert widths[-1] == pytest.approx(ZOOM_PX_PER_CELL) and widths[-2] == pytest.approx(ZOOM_PX_PER_CELL)
+        assert all(b >= a - 1e-9 for a, b in zip(widths, widths[1:]))
         assert d.press_zoom("Out") == []  # half the magnification, same point in the middle
         assert cam.screen_of(right)[0] - cam.screen_of(centre)[0] == pytest.approx(ZOOM_PX_PER_CELL / 2)
         assert cam.screen_of(centre)[0] == pytest.approx(x)

@@ -33,7 +33,7 @@ def free_port() -> int:
 # Every field set away from its default (checked below), so a round trip that drops one is caught.
 CHANGED = dict(panorama=False, show_reprojection=False, show_edges=False, snap=True, up_axis="-y",
                ba_window_mode="custom", ba_window_start=12, ba_window_width=40, contrast=2.25,
-               loupe_shows="Range", edge_opacity=0.3)
+               loupe_shows="Range", last_pane_shows="Intensity", edge_opacity=0.3)
 
 
 def test_changed_covers_every_field_with_a_non_default_value():
@@ -45,7 +45,7 @@ def test_changed_covers_every_field_with_a_non_default_value():
 def test_bad_or_unknown_values_fall_back_to_the_default():
     default = ViewSettings(up_axis="+y")
     data = {"panorama": "yes", "show_edges": 1, "snap": None, "up_axis": "sideways", "ba_window_mode": "some",
-            "ba_window_start": -3, "ba_window_width": 2.5, "contrast": "high", "loupe_shows": 7,
+            "ba_window_start": -3, "ba_window_width": 2.5, "contrast": "high", "loupe_shows": 7, "last_pane_shows": 3,
             "edge_opacity": float("nan"), "an_old_setting": True}
     assert ViewSettings.from_dict(data, default=default) == default
     assert ViewSettings.from_dict(None) == ViewSettings()
