@@ -11,41 +11,72 @@ import numpy as np
 
 from calib_core.display_images import apply_contrast
 
-from .ba_view import ba_texture, texture_factor
 from .ui_common import BA_TITLES
 from .view_settings import AS_CLICKED
 
 
-
 class DisplayPanel:
-    """Part of :class:`app.server.CalibrationApp` (a mixin: it uses the app's attributes)."""
+    """What the laser panes of one :class:`app.server.CalibrationApp` show (``app.display``).
 
-    def _init_display(self) -> None:
+    It owns the grey images as shown (contrast applied) and its widgets, which
+    the view panel places in the View folder (:meth:`add_pane_controls`,
+    :meth:`add_edge_control`).  Public: :meth:`ba_display`, :meth:`ba_title`,
+    :meth:`loupe_image`, :meth:`loupe_sources`, :attr:`loupe_source`,
+    :meth:`last_pane_sources`, :attr:`last_pane_source`, :attr:`edge_opacity`
+    and the widgets' handlers (``on_*``).
+    """
+
+    def __init__(self, app: Any) -> None:
+        self.app = app
         self._shown_gray: dict[str, np.ndarray] = {}
         self._recontrast()
 
+    def add_pane_controls(self, gui: Any) -> None:
+        """The "BA loupe shows", "Last laser pane" and "Laser contrast" widgets, where ``gui`` adds now."""
+        guard, view = self.app.guard, self.app.state.view
+        self._dd_loupe_source = gui.add_dropdown(
+            "BA loupe shows", self.loupe_sources(), initial_value=self.loupe_source,
+            hint="The BA image last clicked, one BA direction, the scan's intensity (if it has one) or range")
+        self._dd_loupe_source.on_update(guard(self.on_loupe_source))
+        self._dd_last_pane = gui.add_dropdown(
+            "Last laser pane", self.last_pane_sources(), initial_value=self.last_pane_source,
+            hint="What the bottom laser pane shows: its BA direction, the scan's intensity (if it has one) or "
+                 "range; clicks on it pick the same cells")
+        self._dd_last_pane.on_update(guard(self.on_last_pane_source))
+        self._sl_contrast = gui.add_slider("Laser contrast", 0.5, 3.0, 0.25, initial_value=view.contrast,
+                                           hint="Contrast of the BA images and the BA loupe")
+        self._sl_contrast.on_update(guard(self.on_contrast))
+
+    def add_edge_control(self, gui: Any) -> None:
+        """The "BA-edge opacity" slider, where ``gui`` adds now."""
+        self._sl_edge_opacity = gui.add_slider("BA-edge opacity", 0.0, 1.0, 0.1,
+                                               initial_value=self.app.state.view.edge_opacity)
+        self._sl_edge_opacity.on_update(self.app.guard(self.on_edge_opacity))
+
     def loupe_sources(self) -> tuple[str, ...]:
         """The choices of what the BA loupe shows."""
-        return (AS_CLICKED, *(BA_TITLES.get(k, k) for k in self.ba_keys), *self.scene_data.laser_images)
+        app = self.app
+        return (AS_CLICKED, *(BA_TITLES.get(k, k) for k in app.ba_keys), *app.scene_data.laser_images)
 
     def _recontrast(self) -> None:
-        images = {k: self.ba_gray[k] for k in self.ba_keys} | dict(self.scene_data.laser_images)
-        contrast = self.state.view.contrast
+        app = self.app
+        images = {k: app.ba_gray[k] for k in app.ba_keys} | dict(app.scene_data.laser_images)
+        contrast = app.state.view.contrast
         self._shown_gray = {k: apply_contrast(g, contrast) for k, g in images.items()}
 
     def last_pane_sources(self) -> tuple[str, ...]:
         """The choices of what the last laser pane shows: its BA direction, then the scene's other laser images."""
-        return (BA_TITLES.get(self.ba_keys[-1], self.ba_keys[-1]), *self.scene_data.laser_images)
+        return (BA_TITLES.get(self.app.ba_keys[-1], self.app.ba_keys[-1]), *self.app.scene_data.laser_images)
 
     @property
     def last_pane_source(self) -> str:
         """What the last laser pane shows (the saved choice if this scene has that image, else its BA direction)."""
-        source = self.state.view.last_pane_shows
-        return source if source in self.scene_data.laser_images else self.last_pane_sources()[0]
+        source = self.app.state.view.last_pane_shows
+        return source if source in self.app.scene_data.laser_images else self.last_pane_sources()[0]
 
     def _pane_image_name(self, key: str) -> str:
         """The name of the grey image pane ``key`` shows: ``key`` itself, or a laser image on the last pane."""
-        if key == self.ba_keys[-1] and self.last_pane_source in self.scene_data.laser_images:
+        if key == self.app.ba_keys[-1] and self.last_pane_source in self.app.scene_data.laser_images:
             return self.last_pane_source
         return key
 
@@ -56,7 +87,7 @@ class DisplayPanel:
 
     def ba_title(self, key: str) -> str:
         """The name of what laser pane ``key`` shows (e.g. ``BA +45 deg``, ``Intensity``)."""
-        name = self._pane_image_name(key) if key in self.ba_keys else key
+        name = self._pane_image_name(key) if key in self.app.ba_keys else key
         return BA_TITLES.get(name, name)
 
     def loupe_image(self, key: str) -> tuple[np.ndarray, str]:
@@ -64,7 +95,7 @@ class DisplayPanel:
         source = self.loupe_source
         if source == AS_CLICKED:
             return self.ba_display(key), self.ba_title(key)
-        for k in self.ba_keys:
+        for k in self.app.ba_keys:
             if BA_TITLES.get(k, k) == source:
                 return self._shown_gray[k], source
         return self._shown_gray[source], source
@@ -72,52 +103,55 @@ class DisplayPanel:
     @property
     def loupe_source(self) -> str:
         """What the BA loupe shows (the saved choice if this scene has it, else :data:`AS_CLICKED`)."""
-        source = self.state.view.loupe_shows
+        source = self.app.state.view.loupe_shows
         return source if source in self.loupe_sources() else AS_CLICKED
 
     @property
     def edge_opacity(self) -> float:
         """Opacity of the BA-edge overlay on the camera view (0 hides it)."""
-        return self.state.view.edge_opacity
+        return self.app.state.view.edge_opacity
 
-    def _on_loupe_source(self, event: Any) -> None:
+    def on_loupe_source(self, event: Any) -> None:
+        """The "BA loupe shows" dropdown."""
         if event.client is None:
             return
         source = str(event.value)
         if source not in self.loupe_sources():
             return
-        self.state.set_view(loupe_shows=source)
-        self.loupes.refresh()
+        self.app.state.set_view(loupe_shows=source)
+        self.app.loupes.refresh()
 
-    def _on_last_pane_source(self, event: Any) -> None:
+    def on_last_pane_source(self, event: Any) -> None:
+        """The "Last laser pane" dropdown: the bottom pane's image (its texture, title and the loupe follow)."""
         if event.client is None:
             return
         source = str(event.value)
         if source not in self.last_pane_sources():
             return
-        self.state.set_view(last_pane_shows=source if source in self.scene_data.laser_images else "")
-        key = self.ba_keys[-1]
-        with self.ui_lock:
-            self._image_handles[key].image = self._ba_texture(key)
-            self._ba_titles[key].text = self._ba_title(key)
-        self.loupes.refresh()
+        self.app.state.set_view(last_pane_shows=source if source in self.app.scene_data.laser_images else "")
+        app = self.app
+        key = app.ba_keys[-1]
+        with app.ui_lock:
+            app.page.set_ba(key, texture=app.view.ba_texture(key), title=app.view.ba_title(key))
+        app.loupes.refresh()
 
-    def _on_contrast(self, event: Any) -> None:
+    def on_contrast(self, event: Any) -> None:
+        """The "Laser contrast" slider: new grey levels for the laser panes and the BA loupe."""
         if event.client is None or event.value != event.target.value:
             return  # our own update, or a newer slider position is queued behind this one
-        self.state.set_view(contrast=float(event.value))  # clipped to CONTRAST_RANGE
-        with self.ui_lock:
+        self.app.state.set_view(contrast=float(event.value))  # clipped to CONTRAST_RANGE
+        app = self.app
+        with app.ui_lock:
             self._recontrast()
-            window = self._ba_window
-            k = texture_factor(window.width, self.depth.shape[0])
-            with self.server.atomic():
-                for key in self.ba_keys:
-                    self._image_handles[key].image = ba_texture(self.ba_display(key), window, k)
-            self.loupes.refresh()
+            with app.server.atomic():
+                for key in app.ba_keys:
+                    app.page.set_ba(key, texture=app.view.ba_texture(key))
+            app.loupes.refresh()
 
-    def _on_edge_opacity(self, event: Any) -> None:
+    def on_edge_opacity(self, event: Any) -> None:
+        """The "BA-edge opacity" slider."""
         if event.client is None or event.value != event.target.value:
             return
-        self.state.set_view(edge_opacity=float(event.value))  # clipped to EDGE_OPACITY_RANGE
-        self._overlay_inputs = None  # redraw the overlays with the new blend
-        self._refresh_scene()
+        self.app.state.set_view(edge_opacity=float(event.value))  # clipped to EDGE_OPACITY_RANGE
+        self.app.overlays.invalidate()  # redraw the overlays with the new blend
+        self.app.overlays.refresh()

@@ -114,7 +114,7 @@ class LiveSolveCoordinator:
         # The pairs carry their pick ids, so the solve names outliers and warnings by the ids the page shows.
         result = calibrate(pairs, app.depth, app.camera)
         T = result.T_camera_lidar
-        edges = app.edge_points_lidar
+        edges = app.scene_data.edge_points_lidar
         return SolveBundle(
             pick_ids=ids, pairs=pairs, result=result, pixels=pixels,
             points_camera=transform_points(T, points),
@@ -145,10 +145,6 @@ class LiveSolveCoordinator:
                 now = time.perf_counter()
                 self._last_update = (now - change_time, now)
         self.request_cloud()
-
-    def cloud_shown(self) -> bool:
-        """True while some tab shows the 3-D view."""
-        return any(m == "3d" for m in list(self.app._client_mode.values()))
 
     def request_cloud(self) -> None:
         """Queue what the current solve still owes: cloud colours if a tab shows 3-D, the facing window in camera
@@ -199,7 +195,7 @@ class LiveSolveCoordinator:
         app = self.app
         t0 = time.perf_counter()
         T = bundle.result.T_camera_lidar
-        colors = self._cloud_colors(T) if self.cloud_shown() and app.cloud.shows is not bundle else None
+        colors = self._cloud_colors(T) if app.view.any_tab_in_3d() and app.cloud.shows is not bundle else None
         facing_done = app.state.view.ba_window_mode == "camera" and self._facing_of is not bundle
         facing = self._facing_window(T) if facing_done else None
         app.loupe_support.projection(T)  # the loupes' camera-to-cell predictions, ready before the next click
@@ -219,7 +215,7 @@ class LiveSolveCoordinator:
                 self._set_facing(update.bundle, update.facing)
         if update.facing_done and app.state.view.ba_window_mode == "camera" and not self._stopped:
             # In the action worker, so a click is never mapped through a window that changed under it.
-            app.post(app._apply_ba_window)
+            app.post(app.view.apply_ba_window)
 
     def wait_idle(self, timeout: float = 30.0) -> bool:
         """Block until queued user actions are applied and the live solver and the cloud worker are idle."""

@@ -43,7 +43,7 @@ class LoupeSupport:
     Parameters
     ----------
     app : CalibrationApp
-        The app (its ``live``, ``camera``, ``depth``, ``all_points_lidar``, ``all_rows_cols`` ...).
+        The app (its ``live``, ``camera``, ``depth``, ``all_points_lidar``, ``scene_data`` ...).
     initial_T_camera_lidar : ndarray, shape (4, 4), optional
         A rough pose to predict with until a solve exists.
     """
@@ -86,7 +86,7 @@ class LoupeSupport:
             if cached is not None and cached[0] == key:
                 return cached[1]
             app = self.app
-            proj = ProjectedScan.build(T, app.camera, app.all_points_lidar, app.all_rows_cols)
+            proj = ProjectedScan.build(T, app.camera, app.all_points_lidar, app.scene_data.all_rows_cols)
             self._projected = (key, proj)
             return proj
 
@@ -112,7 +112,7 @@ class LoupeSupport:
         app = self.app
         if app.state.view.ba_window_mode == "camera" and app.live.bundle is None:
             app.live.ensure_facing()
-            app._apply_ba_window()
+            app.view.apply_ba_window()
         app.overlays.invalidate()
         app.overlays.refresh()
         app.live.show_panels()
@@ -124,7 +124,7 @@ class LoupeSupport:
         """This tab's "Import initial extrinsics" button, in the View folder (each tab gets its own)."""
         app = self.app
         with app.page.folder_lock:
-            with app._view_folder:
+            with app.view.folder:
                 button = client.gui.add_upload_button(
                     "Import initial extrinsics", icon=viser.Icon.UPLOAD, mime_type="*/*",
                     hint="A rough pose (any extrinsics format ba-calib reads): predictions and 'Facing the camera' "

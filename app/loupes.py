@@ -318,7 +318,7 @@ class Loupes:
 
     def _ba_texture(self) -> np.ndarray:
         c = self.ba_crop
-        gray = self.app.loupe_image(c.key)[0]
+        gray = self.app.display.loupe_image(c.key)[0]
         n_rows, n_cols = gray.shape
         rows = c.row0 + np.arange(c.n_rows)
         cols = c.col0 + np.arange(c.n_cols)
@@ -373,7 +373,7 @@ class Loupes:
             row, col = c.center
             rng = self.app.depth.range_m[row, col]
             shown = f"{rng:.2f} m" if self.app.depth.valid[row, col] and np.isfinite(rng) else "no return"
-            name = self.app.loupe_image(c.key)[1]
+            name = self.app.display.loupe_image(c.key)[1]
             return f"{name} loupe: row {row}, column {col}, range {shown} ({c.n_cols} columns shown)"
         c = self.camera_crop
         return f"Camera loupe (original image): ({c.center[0]:.1f}, {c.center[1]:.1f}), {c.n} x {c.n} px shown"

@@ -123,7 +123,7 @@ class OverlayDrawing:
         app = self.app
         slot = app.camera_slot()
         bundle = app.solve_bundle
-        camera, cview = app.camera, app.camera_view
+        camera, cview = app.camera, app.view.camera_view
         # Skipped when neither the solve, the view nor the picks it colours changed (e.g. a click on a BA image).
         self._draw_predictions(slot, predictions)  # cheap, changes with every BA click
         view = app.state.view

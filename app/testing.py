@@ -42,7 +42,7 @@ class AppDriver:
         return self.tab.notifications[before:]
 
     def _ray(self, key: str, uv: tuple[float, float], **extra: Any) -> Any:
-        world = self.app.pairs_panel.slot_of(key).world_from_pixel(np.asarray(uv, dtype=np.float64).reshape(1, 2))[0]
+        world = self.app.view.slot_of(key).world_from_pixel(np.asarray(uv, dtype=np.float64).reshape(1, 2))[0]
         return SimpleNamespace(ray_origin=tuple(world - [0.0, 0.0, 1.0]), ray_direction=(0.0, 0.0, 1.0),
                                client=self.tab, target=None, **extra)
 
@@ -73,8 +73,8 @@ class AppDriver:
 
     def loupe_page_position(self, client_id: int, kind: str, uv: tuple[float, float]) -> tuple[float, float]:
         """Where loupe ``kind`` shows ``uv`` (a cell ``(col, row)`` or an original pixel) in a real tab's canvas,
-        as fractions of its width and height (see :meth:`app.server.CalibrationApp.page_position`)."""
-        return self.app.page_position(client_id, f"loupe_{kind}", uv)
+        as fractions of its width and height (see :meth:`app.view_panel.ViewPanel.page_position`)."""
+        return self.app.view.page_position(client_id, f"loupe_{kind}", uv)
 
     def click_loupe(self, kind: str, uv: tuple[float, float]) -> list[tuple[str, str]]:
         """Click *through* loupe ``kind`` at ``uv``: ``(col, row)`` of a scan cell or an original pixel ``(u, v)``."""
@@ -103,18 +103,18 @@ class AppDriver:
         return self._fire(handler, SimpleNamespace(client=self.tab, target=None))
 
     def choose_loupe_source(self, name: str) -> list[tuple[str, str]]:
-        """Choose what the BA loupe shows in its dropdown (see ``app.loupe_sources()``)."""
-        return self._fire(self.app.guard(self.app._on_loupe_source), SimpleNamespace(
+        """Choose what the BA loupe shows in its dropdown (see ``app.display.loupe_sources()``)."""
+        return self._fire(self.app.guard(self.app.display.on_loupe_source), SimpleNamespace(
             client=self.tab, target=SimpleNamespace(value=name)))
 
     def choose_last_pane_source(self, name: str) -> list[tuple[str, str]]:
-        """Choose what the last laser pane shows in its dropdown (see ``app.last_pane_sources()``)."""
-        return self._fire(self.app.guard(self.app._on_last_pane_source), SimpleNamespace(
+        """Choose what the last laser pane shows in its dropdown (see ``app.display.last_pane_sources()``)."""
+        return self._fire(self.app.guard(self.app.display.on_last_pane_source), SimpleNamespace(
             client=self.tab, target=SimpleNamespace(value=name)))
 
     def set_slider(self, label: str, value: float) -> list[tuple[str, str]]:
         """Move a slider of the View folder: ``"Laser contrast"`` or ``"BA-edge opacity"``."""
-        handler = {"Laser contrast": self.app._on_contrast, "BA-edge opacity": self.app._on_edge_opacity}[label]
+        handler = {"Laser contrast": self.app.display.on_contrast, "BA-edge opacity": self.app.display.on_edge_opacity}[label]
         target = SimpleNamespace(value=value)
         return self._fire(self.app.guard(handler), SimpleNamespace(client=self.tab, target=target))
 
@@ -141,19 +141,20 @@ class AppDriver:
     # ---------------------------------------------------------------- view folder
     def choose_ba_columns(self, label: str) -> list[tuple[str, str]]:
         """Choose in the "BA columns" dropdown: ``"All columns"``, ``"Facing the camera"`` or ``"Custom"``."""
-        return self._fire(self.app.guard(self.app._on_ba_window_mode), SimpleNamespace(
+        return self._fire(self.app.guard(self.app.view.on_ba_window_mode), SimpleNamespace(
             client=self.tab, target=SimpleNamespace(value=label)))
 
     def set_ba_columns(self, start: int, width: int) -> list[tuple[str, str]]:
         """Move the "BA first column" and "BA columns shown" sliders to ``start`` and ``width``."""
-        self.app._sl_ba_start.value, self.app._sl_ba_width.value = int(start), int(width)
-        return self._fire(self.app.guard(self.app._on_ba_window_slider), SimpleNamespace(
-            client=self.tab, target=self.app._sl_ba_width))
+        view = self.app.view
+        view.ba_start_slider.value, view.ba_width_slider.value = int(start), int(width)
+        return self._fire(self.app.guard(view.on_ba_window_slider), SimpleNamespace(
+            client=self.tab, target=view.ba_width_slider))
 
     @property
     def ba_columns_choice(self) -> str:
         """What the "BA columns" dropdown shows."""
-        return str(self.app._dd_ba_window.value)
+        return str(self.app.view.ba_columns_dropdown.value)
 
     def ba_texture(self, key: str) -> np.ndarray:
         """The texture BA image ``key`` shows now (cells enlarged by nearest neighbour)."""
@@ -161,12 +162,12 @@ class AppDriver:
 
     def press_zoom(self, name: str) -> list[tuple[str, str]]:
         """Press a "Zoom" button of the 2-D view: ``"In"``, ``"Out"`` or ``"On last click"``."""
-        return self._fire(self.app.guard(self.app._on_magnify), SimpleNamespace(
+        return self._fire(self.app.guard(self.app.view.on_magnify), SimpleNamespace(
             client=self.tab, target=SimpleNamespace(value=name)))
 
     def show(self, view: str) -> list[tuple[str, str]]:
         """Press "Show": ``"2D annotation"`` or ``"3D cloud"``."""
-        return self._fire(self.app.guard(self.app._on_view_mode), SimpleNamespace(
+        return self._fire(self.app.guard(self.app.view.on_view_mode), SimpleNamespace(
             client=self.tab, target=SimpleNamespace(value=view)))
 
     @property

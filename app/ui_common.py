@@ -50,6 +50,16 @@ QUALITY_BADGES = {
 }
 
 
+def page_url(host: str, port: int, token: str | None) -> str:
+    """The address to open for a server bound to ``host:port`` (a wildcard bind is shown as loopback)."""
+    from .security import TOKEN_QUERY
+
+    shown = "127.0.0.1" if host in ("0.0.0.0", "", "::") else host
+    if ":" in shown:
+        shown = f"[{shown}]"
+    return f"http://{shown}:{port}" + ("" if token is None else f"/?{TOKEN_QUERY}={token}")
+
+
 def md_escape(text: str) -> str:
     """Text safe to show literally inside viser markdown (no HTML, no markup)."""
     out = []

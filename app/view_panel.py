@@ -1,11 +1,11 @@
-"""The view panel and the per-tab cameras: camera image raw or unwrapped, overlays on/off, the BA column window,
-the 2-D / 3-D views, zoom, and where a view's pixel is on the page (for real-browser tests)."""
+"""The view panel and the per-tab cameras: camera image raw or unwrapped, overlays on/off, the BA column window and
+the page layout that follows from it, the 2-D / 3-D views, zoom, and where a view's pixel is on the page (for
+real-browser tests).  The View folder also holds the display panel's widgets and the loupe zoom buttons."""
 
 from __future__ import annotations
 
 import math
 import time
-import traceback
 from typing import Any
 
 import numpy as np
@@ -19,133 +19,190 @@ from .ba_view import ColumnWindow, ba_texture, texture_factor
 from .camera_view import CameraView
 from .layout import ImageSlot, annotation_layout, bounds_of
 from .ui_common import (
-    BA_TITLES, MIN_PAIRS, CLOUD_ORIGIN, PANEL_PX, ZOOM_PX_PER_CELL, ZOOM_PX_PER_IMAGE_PX, ZOOM_STEP,
+    MIN_PAIRS, CLOUD_ORIGIN, PANEL_PX, ZOOM_PX_PER_CELL, ZOOM_PX_PER_IMAGE_PX, ZOOM_STEP,
 )
 from .view_settings import BA_WINDOW_MODES, UP_AXES
 
 
 class ViewPanel:
-    """Part of :class:`app.server.CalibrationApp` (a mixin: it uses the app's attributes)."""
+    """The "View" folder of one :class:`app.server.CalibrationApp` and the per-tab cameras (``app.view``).
+
+    It owns the BA column window and the page layout that follows from it
+    (:attr:`ba_window`, :attr:`slots`), which camera view is shown
+    (:attr:`camera_view`), what each tab looks at, and the View folder (the
+    display panel's and the loupe zoom widgets are placed in it).  Built where
+    the folder goes on the page.
+    """
+
+    def __init__(self, app: Any) -> None:
+        self.app = app
+        self._client_mode: dict[int, str] = {}  # client id -> "all" | "camera" | "ba" | "3d"
+        self._view_target: dict[int, tuple[np.ndarray, np.ndarray, float]] = {}
+        self._ba_window = self._wanted_ba_window()
+        self.slots: dict[str, ImageSlot] = self._layout()
+        self._build_folder(app.server.gui)
+        self.sync_window_widgets()
+
+    def _build_folder(self, gui: Any) -> None:
+        app, guard, view = self.app, self.app.guard, self.app.state.view
+        self.folder = gui.add_folder("View")
+        with self.folder:
+            loupe_zoom = gui.add_button_group("Loupe zoom", ("BA +", "BA -", "Camera +", "Camera -"))
+            loupe_zoom.on_click(guard(app.loupe_support.on_loupe_zoom))
+            app.display.add_pane_controls(gui)
+            gui.add_button_group("Show", ("2D annotation", "3D cloud")).on_click(guard(self.on_view_mode))
+            gui.add_button_group("Frame", ("All", "Camera", "BA images")).on_click(guard(self.on_zoom))
+            gui.add_button_group("Zoom", ("In", "Out", "On last click")).on_click(guard(self.on_magnify))
+            n_cols = app.depth.shape[1]
+            self.ba_columns_dropdown = gui.add_dropdown(
+                "BA columns", tuple(BA_WINDOW_MODES.values()), initial_value=BA_WINDOW_MODES[view.ba_window_mode],
+                hint="Show all scan columns, the ones whose points the current calibration projects into the "
+                     "camera image, or the range set below",
+            )
+            self.ba_columns_dropdown.on_update(guard(self.on_ba_window_mode))
+            self.ba_start_slider = gui.add_slider("BA first column", 0, max(n_cols - 1, 1), 1,
+                                                  initial_value=self._ba_window.start)
+            self.ba_start_slider.on_update(guard(self.on_ba_window_slider))
+            self.ba_width_slider = gui.add_slider("BA columns shown", min(16, n_cols), n_cols, 1,
+                                                  initial_value=max(self._ba_window.width, min(16, n_cols)))
+            self.ba_width_slider.on_update(guard(self.on_ba_window_slider))
+            self._cb_pano = gui.add_checkbox(
+                "Unwrapped panorama", initial_value=self.camera_view.key == "panorama",
+                disabled="panorama" not in app.camera_views,
+                hint="Show the camera image unwrapped (azimuth x elevation); clicks still give original-image pixels",
+            )
+            self._cb_pano.on_update(guard(self.on_view_checkbox))
+            self._cb_reproj = gui.add_checkbox("Reprojected pairs and residuals", initial_value=view.show_reprojection)
+            self._cb_reproj.on_update(guard(self.on_view_checkbox))
+            self._cb_edges = gui.add_checkbox("Reprojected BA-edge points", initial_value=view.show_edges)
+            self._cb_edges.on_update(guard(self.on_view_checkbox))
+            app.display.add_edge_control(gui)
+            up = gui.add_dropdown("3D up axis (lidar)", tuple(UP_AXES), initial_value=view.up_axis)
+            up.on_update(guard(self.on_up_axis))
+
+    @property
+    def ba_window(self) -> ColumnWindow:
+        """The scan columns the BA images show."""
+        return self._ba_window
 
     def _layout(self) -> dict[str, ImageSlot]:
+        app = self.app
         window = self._ba_window
-        return annotation_layout(self.camera_sizes, (window.width, self.depth.shape[0]), self.ba_keys,
-                                 cell_aspect=self.ba_cell_aspect)
+        return annotation_layout(app.camera_sizes, (window.width, app.depth.shape[0]), app.ba_keys,
+                                 cell_aspect=app.ba_cell_aspect)
+
+    def slot_of(self, key: str) -> ImageSlot:
+        """The image slot of click key ``key``: a BA key, ``raw``, ``panorama``, ``loupe_ba`` or ``loupe_camera``."""
+        if key.startswith("loupe_"):
+            return self.app.loupes.slot(key[len("loupe_"):])
+        return self.slots[key]
 
     def _wanted_ba_window(self) -> ColumnWindow:
         """The column window the current mode asks for (custom until a solve says what the camera sees)."""
-        mode = self.state.view.ba_window_mode
+        mode = self.app.state.view.ba_window_mode
         if mode == "all":
-            return ColumnWindow.full(self.depth.shape[1], self.wrap_cols)
-        if mode == "camera" and self._ba_facing is not None:
-            return self._ba_facing
+            return ColumnWindow.full(self.app.depth.shape[1], self.app.wrap_cols)
+        if mode == "camera" and self.app.live.facing is not None:
+            return self.app.live.facing
         return self._ba_custom
 
     @property
     def _ba_custom(self) -> ColumnWindow:
         """The saved custom column window, fitted to the scan (width 0: every column)."""
-        view, n_cols = self.state.view, self.depth.shape[1]
-        return ColumnWindow.make(view.ba_window_start, view.ba_window_width or n_cols, n_cols, self.wrap_cols)
+        view, n_cols = self.app.state.view, self.app.depth.shape[1]
+        return ColumnWindow.make(view.ba_window_start, view.ba_window_width or n_cols, n_cols, self.app.wrap_cols)
 
-    def _ba_texture(self, key: str) -> np.ndarray:
+    def ba_texture(self, key: str) -> np.ndarray:
+        """The texture of BA image ``key``: its shown grey image, cut to the column window and enlarged."""
         window = self._ba_window
-        return ba_texture(self.ba_display(key), window, texture_factor(window.width, self.depth.shape[0]))
+        return ba_texture(self.app.display.ba_display(key), window, texture_factor(window.width, self.app.depth.shape[0]))
 
-    def _ba_title(self, key: str) -> str:
+    def ba_title(self, key: str) -> str:
+        """The title of BA image ``key`` (with the shown columns when they are not all)."""
         w = self._ba_window
-        title = self.ba_title(key)
+        title = self.app.display.ba_title(key)
         if w.is_full:
             return title
         last = (w.start + w.width - 1) % w.n_cols
         return f"{title} (columns {w.start}-{last} of {w.n_cols})"
 
-    def _apply_ba_window(self) -> None:
+    def apply_ba_window(self) -> None:
         """Show the window the mode asks for: new textures, slots, markers; re-frame 2-D tabs."""
-        with self.ui_lock:
+        with self.app.ui_lock:
             window = self._wanted_ba_window()
             if window == self._ba_window:
                 return
             self._ba_window = window
             old_slots, self.slots = self.slots, self._layout()
-            with self.server.atomic():
-                for key in self.ba_keys:
-                    s, handle = self.slots[key], self._image_handles[key]
-                    handle.image = self._ba_texture(key)
-                    handle.render_width = s.render_width
-                    handle.render_height = s.render_height
-                    handle.position = s.center
-                    x0, y0, _, _ = s.bounds()
-                    self._ba_titles[key].position = (x0, y0 - 0.03, -0.01)
-                    self._ba_titles[key].text = self._ba_title(key)
-            self._sync_window_widgets()
-        self._refresh_scene()
+            with self.app.server.atomic():
+                for key in self.app.ba_keys:
+                    self.app.page.set_ba(key, texture=self.ba_texture(key), slot=self.slots[key],
+                                         title=self.ba_title(key))
+            self.sync_window_widgets()
+        self.app.overlays.refresh()
         if self.slots == old_slots:
             return  # same size (only the first column moved): keep every tab's zoom and pan
-        clients = self.server.get_clients()
+        clients = self.app.server.get_clients()
         for cid, mode in list(self._client_mode.items()):
             if mode != "3d" and cid in clients:
-                self._set_view(clients[cid], mode)
+                self.set_view(clients[cid], mode)
 
-    def _sync_window_widgets(self) -> None:
+    def sync_window_widgets(self) -> None:
         """Show the current window in the GUI (server-side updates; their callbacks ignore them)."""
         w = self._ba_window
-        want = BA_WINDOW_MODES[self.state.view.ba_window_mode]
-        if self._dd_ba_window.value != want:
-            self._dd_ba_window.value = want
-        if self._sl_ba_start.value != w.start:
-            self._sl_ba_start.value = w.start
-        if self._sl_ba_width.value != w.width:
-            self._sl_ba_width.value = max(w.width, self._sl_ba_width.min)
+        want = BA_WINDOW_MODES[self.app.state.view.ba_window_mode]
+        if self.ba_columns_dropdown.value != want:
+            self.ba_columns_dropdown.value = want
+        if self.ba_start_slider.value != w.start:
+            self.ba_start_slider.value = w.start
+        if self.ba_width_slider.value != w.width:
+            self.ba_width_slider.value = max(w.width, self.ba_width_slider.min)
 
     @property
     def camera_view(self) -> CameraView:
         """The camera view the page shows (raw image or panorama)."""
-        panorama = self.state.view.panorama and "panorama" in self.camera_views  # saved choice, if this camera has one
-        return self.camera_views["panorama" if panorama else "raw"]
+        panorama = self.app.state.view.panorama and "panorama" in self.app.camera_views  # saved choice, if this camera has one
+        return self.app.camera_views["panorama" if panorama else "raw"]
 
     def camera_slot(self) -> ImageSlot:
         """Where the visible camera view (raw or panorama) lies on the page."""
         return self.slots[self.camera_view.key]
 
-    def _update_camera_title(self) -> None:
-        s = self.camera_slot()
-        x0, y0, _, _ = s.bounds()
-        self._camera_title.position = (x0, y0 - 0.03, -0.01)
-        self._camera_title.text = self.camera_view.title()
+    def update_camera_title(self) -> None:
+        """Show the visible camera view and its title on the page."""
+        self.app.page.show_camera_view(self.camera_view.key, self.camera_slot(), self.camera_view.title())
 
-    def _on_view_checkbox(self, event: Any) -> None:
-        with self.ui_lock:  # a drawing on another thread sees the old or the new camera view, never a mix
+    def on_view_checkbox(self, event: Any) -> None:
+        with self.app.ui_lock:  # a drawing on another thread sees the old or the new camera view, never a mix
             was = self.camera_view.key
-            self.state.set_view(panorama=bool(self._cb_pano.value), show_reprojection=bool(self._cb_reproj.value),
-                                show_edges=bool(self._cb_edges.value), snap=bool(self._cb_snap.value))
-            for key in self.camera_views:
-                self._image_handles[key].visible = key == self.camera_view.key
-            self._update_camera_title()
-        self._refresh_scene()
+            self.app.state.set_view(panorama=bool(self._cb_pano.value), show_reprojection=bool(self._cb_reproj.value),
+                                    show_edges=bool(self._cb_edges.value))
+            self.update_camera_title()
+        self.app.overlays.refresh()
         if was != self.camera_view.key:
             # The camera view changed size: re-frame every tab that shows the 2-D view.
-            clients = self.server.get_clients()
+            clients = self.app.server.get_clients()
             for cid, mode in list(self._client_mode.items()):
                 if mode != "3d" and cid in clients:
-                    self._set_view(clients[cid], mode)
+                    self.set_view(clients[cid], mode)
 
-    def _on_up_axis(self, event: Any) -> None:
-        self.state.set_view(up_axis=str(event.value))
+    def on_up_axis(self, event: Any) -> None:
+        self.app.state.set_view(up_axis=str(event.value))
         for cid, mode in list(self._client_mode.items()):
             if mode == "3d":
-                client = self.server.get_clients().get(cid)
+                client = self.app.server.get_clients().get(cid)
                 if client is not None:
-                    self._set_view(client, "3d")
+                    self.set_view(client, "3d")
 
-    def _on_view_mode(self, event: Any) -> None:
+    def on_view_mode(self, event: Any) -> None:
         if event.client is not None:
-            self._set_view(event.client, "3d" if event.value == "3D cloud" else "all")
+            self.set_view(event.client, "3d" if event.value == "3D cloud" else "all")
 
-    def _on_zoom(self, event: Any) -> None:
+    def on_zoom(self, event: Any) -> None:
         if event.client is not None:
-            self._set_view(event.client, {"All": "all", "Camera": "camera", "BA images": "ba"}[event.value])
+            self.set_view(event.client, {"All": "all", "Camera": "camera", "BA images": "ba"}[event.value])
 
-    def _on_magnify(self, event: Any) -> None:
+    def on_magnify(self, event: Any) -> None:
         if event.client is None:
             return
         if self._client_mode.get(event.client.client_id) == "3d":
@@ -157,52 +214,48 @@ class ViewPanel:
         else:
             self._zoom_on_last(event.client)
 
-    def _on_ba_window_mode(self, event: Any) -> None:
+    def on_ba_window_mode(self, event: Any) -> None:
         if event.client is None:  # our own update of the widget
             return
         mode = {label: m for m, label in BA_WINDOW_MODES.items()}.get(str(event.value), "all")
         self._set_ba_mode(mode)
-        if mode == "camera" and self._ba_facing is None:
-            self.notify(event.client, "No calibration yet",
-                         f"Showing the columns set by the sliders; once {MIN_PAIRS} pairs are solved the BA images "
-                         "show the columns the camera sees.", color="yellow")
+        if mode == "camera" and self.app.live.facing is None:
+            self.app.notify(event.client, "No calibration yet",
+                            f"Showing the columns set by the sliders; once {MIN_PAIRS} pairs are solved the BA images "
+                            "show the columns the camera sees.", color="yellow")
 
-    def _on_ba_window_slider(self, event: Any) -> None:
+    def on_ba_window_slider(self, event: Any) -> None:
         if event.client is None:
             return
         if event.value != event.target.value:
             return  # a newer slider position is queued behind this one
-        self._set_ba_mode("custom", ColumnWindow.make(int(self._sl_ba_start.value), int(self._sl_ba_width.value),
-                                                      self.depth.shape[1], self.wrap_cols))
+        self._set_ba_mode("custom", ColumnWindow.make(int(self.ba_start_slider.value), int(self.ba_width_slider.value),
+                                                      self.app.depth.shape[1], self.app.wrap_cols))
 
     def _set_ba_mode(self, mode: str, custom: ColumnWindow | None = None) -> None:
         """Save the BA column mode (and the custom window, if given), then show it."""
         w = self._ba_custom if custom is None else custom
-        self.state.set_view(ba_window_mode=mode, ba_window_start=int(w.start), ba_window_width=int(w.width))
+        self.app.state.set_view(ba_window_mode=mode, ba_window_start=int(w.start), ba_window_width=int(w.width))
         if mode == "camera":
-            self._ensure_facing()
-        self._apply_ba_window()
-        self._sync_window_widgets()
+            self.app.live.ensure_facing()
+        self.apply_ba_window()
+        self.sync_window_widgets()
 
-    def _on_connect(self, client: Any) -> None:
-        try:
-            self._add_upload_button(client)
-            self._add_extrinsics_upload_button(client)
-            self._set_view(client, "all")
-        except Exception:
-            traceback.print_exc()
-
-    def _on_disconnect(self, client: Any) -> None:
-        self._client_mode.pop(client.client_id, None)
-        self._view_target.pop(client.client_id, None)
-        self._last_click.pop(client.client_id, None)
+    def forget_tab(self, client_id: int) -> None:
+        """Forget a closed tab (the 3-D pane hides when no tab shows it)."""
+        self._client_mode.pop(client_id, None)
+        self._view_target.pop(client_id, None)
         self._update_cloud_visibility()
 
-    def _update_cloud_visibility(self) -> None:
-        self._cloud_root.visible = self._cloud_shown()
-        self._request_cloud()  # a tab that switches to 3-D gets the current solve's colours
+    def any_tab_in_3d(self) -> bool:
+        """True while some tab shows the 3-D view."""
+        return any(m == "3d" for m in list(self._client_mode.values()))
 
-    def _set_view(self, client: Any, mode: str) -> None:
+    def _update_cloud_visibility(self) -> None:
+        self.app.cloud.visible = self.any_tab_in_3d()
+        self.app.live.request_cloud()  # a tab that switches to 3-D gets the current solve's colours
+
+    def set_view(self, client: Any, mode: str) -> None:
         """Point one client's camera at the annotation images (``all``, ``camera``, ``ba``) or the 3-D cloud."""
         cam = client.camera
         fov = math.radians(30.0)
@@ -210,7 +263,7 @@ class ViewPanel:
             self._client_mode[client.client_id] = "3d"
             self._update_cloud_visibility()
             up = self._up_vector()
-            bundle = self._bundle
+            bundle = self.app.live.bundle
             if bundle is not None:
                 # Stand a little behind and above the solved camera, look where it looks (paper Fig. 9).
                 T_lidar_camera = invert_T(bundle.result.T_camera_lidar)
@@ -230,11 +283,11 @@ class ViewPanel:
         if mode == "camera":
             slots = [self.camera_slot()]
         elif mode == "ba":
-            slots = [self.slots[k] for k in self.ba_keys]
+            slots = [self.slots[k] for k in self.app.ba_keys]
         else:
-            slots = [self.camera_slot()] + [self.slots[k] for k in self.ba_keys]
-            if getattr(self, "loupes", None) is not None:  # the loupes are part of the page
-                slots += [self.loupes.slot("ba"), self.loupes.slot("camera")]
+            slots = [self.camera_slot()] + [self.slots[k] for k in self.app.ba_keys]
+            if getattr(self.app, "loupes", None) is not None:  # the loupes are part of the page
+                slots += [self.app.loupes.slot("ba"), self.app.loupes.slot("camera")]
         x0, y0, x1, y1 = bounds_of(slots)
         y0 -= 0.3  # room for the titles
         w_px, h_px = max(cam.image_width, 1), max(cam.image_height, 1)
@@ -279,10 +332,10 @@ class ViewPanel:
     def _zoom_on_last(self, client: Any) -> None:
         """Centre the last click and magnify one step (``ZOOM_STEP``), up to ``ZOOM_PX_PER_CELL`` per BA cell
         or ``ZOOM_PX_PER_IMAGE_PX`` per camera pixel: each press keeps the surroundings in view."""
-        last = self._last_click.get(client.client_id)
+        last = self.app.pairs_panel.last_click(client.client_id)
         if last is None:
             raise CalibError("nothing clicked yet in this tab: click a BA or camera image first")
-        with self.ui_lock:
+        with self.app.ui_lock:
             if last[0] == "ba":
                 _, key, row, col = last
                 slot = self.slots[key]
@@ -293,7 +346,7 @@ class ViewPanel:
                 units = min(slot.units_per_px, slot.units_per_px_y) / ZOOM_PX_PER_CELL
             else:
                 slot = self.camera_slot()
-                uv, ok = self.display_from_pixels(np.array([[last[1], last[2]]]))
+                uv, ok = self.app.display_from_pixels(np.array([[last[1], last[2]]]))
                 if not ok[0]:
                     raise CalibError("the last clicked camera pixel is not shown in this camera view")
                 centre = slot.world_from_pixel(uv)[0]
@@ -311,9 +364,9 @@ class ViewPanel:
         self._view_target[client.client_id] = (np.asarray(position, float), np.asarray(look_at, float), time.time())
 
     def _up_vector(self) -> np.ndarray:
-        axis = UP_AXES.get(self.state.view.up_axis)
+        axis = UP_AXES.get(self.app.state.view.up_axis)
         if axis is None:
-            bundle = self._bundle
+            bundle = self.app.live.bundle
             if bundle is None:
                 return np.array([0.0, 0.0, 1.0])
             R_lidar_camera = bundle.result.T_camera_lidar[:3, :3].T
@@ -322,7 +375,7 @@ class ViewPanel:
 
     def client_ids(self) -> list[int]:
         """Ids of the connected browser tabs."""
-        return sorted(self.server.get_clients())
+        return sorted(self.app.server.get_clients())
 
     def view_set_time(self, client_id: int) -> float:
         """``time.time()`` when this app last set the tab's camera (0.0: never)."""
@@ -331,7 +384,7 @@ class ViewPanel:
 
     def view_settled(self, client_id: int) -> bool:
         """True once the tab reported a camera at the pose this app last set."""
-        client = self.server.get_clients().get(client_id)
+        client = self.app.server.get_clients().get(client_id)
         target = self._view_target.get(client_id)
         if client is None or target is None:
             return False
@@ -357,14 +410,14 @@ class ViewPanel:
         """
         disp = np.asarray(uv, dtype=np.float64).reshape(1, 2)
         if target.startswith("loupe_"):
-            slot = self.loupes.slot(target[len("loupe_"):])
-            shown = self.loupes.display_of(target[len("loupe_"):], (disp[0, 0], disp[0, 1]))
+            slot = self.app.loupes.slot(target[len("loupe_"):])
+            shown = self.app.loupes.display_of(target[len("loupe_"):], (disp[0, 0], disp[0, 1]))
             if shown is None:
                 raise CalibError(f"{uv} is not shown in the {target[len('loupe_'):]} loupe")
             disp = np.array([shown])
         elif target == "camera":
             slot = self.camera_slot()
-            disp, ok = self.display_from_pixels(disp)
+            disp, ok = self.app.display_from_pixels(disp)
             if not ok[0]:
                 raise CalibError(f"pixel {uv} is not shown in the camera view")
         else:
@@ -374,7 +427,7 @@ class ViewPanel:
                 raise CalibError(f"BA column {uv[0]} is outside the shown columns")
             disp = np.array([[u[0] + disp[0, 0] - round(disp[0, 0]), disp[0, 1]]])
         world = slot.world_from_pixel(disp)
-        cam = self.server.get_clients()[client_id].camera
+        cam = self.app.server.get_clients()[client_id].camera
         # The tab's view as a distortion-free pinhole (viser's camera frame is OpenCV's: +z forward, +y down).
         T_world_view = np.eye(4)
         T_world_view[:3, :3] = vtf.SO3(np.asarray(cam.wxyz)).as_matrix()

@@ -70,7 +70,7 @@ def run(reps: int = 12) -> dict[str, list[float]]:
                 cpu["camera loupe click (to solve shown)"].append(c3 - c2)  # includes the cloud worker's follow-up
                 times["BA full click"].append(t1 - t0)
                 times["BA loupe click"].append(t2 - t1)
-                times["camera loupe click (to solve shown)"].append(app.last_click_to_update())
+                times["camera loupe click (to solve shown)"].append(app.live.last_click_to_update())
         finally:
             app.stop()
     return times, cpu, worker

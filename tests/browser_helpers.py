@@ -74,8 +74,8 @@ class AnnotationTab:
         self.browser = playwright.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS)
         self.page = self.browser.new_page(viewport=viewport, **page_options)
         self.page.goto(app.url)
-        self.cid = wait_for(lambda: app.client_ids(), "the tab to connect")[0]
-        wait_for(lambda: app.view_settled(self.cid), "the annotation view to be set")
+        self.cid = wait_for(lambda: app.view.client_ids(), "the tab to connect")[0]
+        wait_for(lambda: app.view.view_settled(self.cid), "the annotation view to be set")
         # The software-WebGL notice swallows clicks at the top left: close it.
         notice = self.page.locator(".mantine-Notification-root", has_text="Software WebGL")
         notice.first.wait_for(timeout=TIMEOUT_S * 1000)
@@ -85,7 +85,7 @@ class AnnotationTab:
         assert self.box is not None
 
     def screen(self, target: str, uv) -> tuple[float, float]:
-        fx, fy = self.app.page_position(self.cid, target, uv)
+        fx, fy = self.app.view.page_position(self.cid, target, uv)
         assert 0.0 < fx < 1.0 and 0.0 < fy < 1.0, f"{target} {uv} is off screen"
         return self.box["x"] + fx * self.box["width"], self.box["y"] + fy * self.box["height"]
 

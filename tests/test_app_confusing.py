@@ -114,7 +114,7 @@ def test_one_pair_id_in_the_table_the_files_and_the_messages(driver, tmp_path):
     out = tmp_path / "export.yaml"
     app.state.export_pairs_file(out)
     assert [p.id for p in load_pairs_yaml(out)] == ids
-    data, written = driver.app.export_extrinsics()
+    data, written = driver.app.export_panel.export_extrinsics()
     doc = yaml.safe_load(data)
     assert [int(e["id"]) for e in doc["pairs"]] == ids
     # Messages about a pair name its id.
@@ -135,7 +135,7 @@ def test_camera_file_is_referenced_from_the_yaml_folder_and_the_download_is_self
     old = os.getcwd()
     os.chdir(elsewhere)  # the process's folder must not matter
     try:
-        data, written = app.export_extrinsics()
+        data, written = app.export_panel.export_extrinsics()
     finally:
         os.chdir(old)
     assert written == tmp_path / "out" / "extrinsics.yaml"

@@ -164,10 +164,10 @@ def test_pick_exact_cells_on_the_real_scan_in_headless_chromium(tmp_path):
                 return tab.shows_image_at(((target, uv),))
 
             def set_view(button: str) -> None:
-                before = app.view_set_time(cid)
+                before = app.view.view_set_time(cid)
                 page.get_by_role("button", name=button, exact=True).click()
-                wait_for(lambda: app.view_set_time(cid) > before, f"'{button}' to apply")
-                wait_for(lambda: app.view_settled(cid), f"the view after '{button}'")
+                wait_for(lambda: app.view.view_set_time(cid) > before, f"'{button}' to apply")
+                wait_for(lambda: app.view.view_settled(cid), f"the view after '{button}'")
 
             def click_ba(key: str, row: int, col: int, offset=(0.0, 0.0)) -> tuple[int, int]:
                 """Click display position cell + offset (in cells); return the cell the app recorded."""
@@ -186,7 +186,7 @@ def test_pick_exact_cells_on_the_real_scan_in_headless_chromium(tmp_path):
             page.get_by_label("BA columns").click()
             page.get_by_role("option", name="Facing the camera").click()
             wait_for(lambda: not app.ba_window.is_full, "the BA images to show the camera-facing columns")
-            wait_for(lambda: app.view_settled(cid), "the view to re-frame")
+            wait_for(lambda: app.view.view_settled(cid), "the view to re-frame")
             set_view("BA images")
             wait_for(lambda: drawn(key, (col, row)), "the windowed BA image to be drawn", interval=0.2)
             w = app.ba_window

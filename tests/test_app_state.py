@@ -655,7 +655,7 @@ def test_a_click_updates_only_what_it_changed_in_place(tmp_path):
     app = CalibrationApp(sample / "scan.npz", sample / "image.png", sample / "camera.yaml", session_path=session,
                          port=port)
     try:
-        assert app.last_click_to_update() is None and app.last_update_time is None  # nothing solved yet
+        assert app.live.last_click_to_update() is None and app.last_update_time is None  # nothing solved yet
         ids = app.state.import_pairs(load_pairs_yaml(sample / "pairs.yaml")[:5])
         assert app.wait_idle(60) and app.result is not None
         node = lambda name: app.nodes.drawn[name][0]  # noqa: E731
@@ -673,7 +673,7 @@ def test_a_click_updates_only_what_it_changed_in_place(tmp_path):
         assert app.wait_idle(60)
         # The timing hook: this click's solve was shown after the click, and the duration counts from the change.
         assert t0 < app.last_update_time <= time.perf_counter()
-        assert 0.0 < app.last_click_to_update() <= app.last_update_time - t0
+        assert 0.0 < app.live.last_click_to_update() <= app.last_update_time - t0
         # The same scene nodes, updated in place, not re-created.
         assert node("/annot/markers/horizontal/ring") is ba_ring and node("/annot/markers/raw/ring") is cam_ring
         assert node(f"/annot/labels/raw/{ids[1]}") is label and node("/annot/overlay/residuals") is residuals
