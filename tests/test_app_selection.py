@@ -87,3 +87,28 @@ def test_dropdown_selects_and_a_ba_click_moves_the_laser_end(driver):
     other = app.state.picks[0].id
     notes = driver.shift_click("horizontal", driver.marker_display_pixel("horizontal", other))
     assert no_errors(notes) and app.state.selected == other and driver.dropdown_value == f"#{other}"
+
+
+def test_snap_refines_ba_clicks_on_the_full_image_and_in_the_loupe_alike(driver):
+    """With "Snap clicks to corners", a BA click lands on the strongest corner near it (calib_core's refinement of
+    the grey image the pane shows), whether it is made on the full BA image or through the BA loupe."""
+    from calib_core.panorama import refine_click_to_corner
+
+    app = driver.app
+    key = app.ba_keys[0]
+    app.state.set_view(snap=True)
+    assert driver.press_edit("Deselect") == []
+    for row, col in [(45, 262), (83, 256), (105, 480)]:
+        corner = refine_click_to_corner(app.display.ba_display(key), (float(col), float(row)), 3.0)
+        want = (int(round(corner[1])), int(round(corner[0])) % app.depth.shape[1])
+        n = len(app.state.picks)
+        assert driver.click_cell(key, row, col) == []
+        full = app.state.picks[-1]
+        assert len(app.state.picks) == n + 1 and full.laser_rc == want
+        assert driver.press_edit("Undo") == []
+        app.loupes.frame_ba(key, row, col)
+        assert driver.click_loupe_cell(row, col) == []
+        assert app.state.picks[-1].laser_rc == want
+        assert driver.press_edit("Undo") == []
+    app.state.set_view(snap=False)
+    assert driver.click_cell(key, 45, 262) == [] and app.state.picks[-1].laser_rc == (45, 262)
