@@ -38,6 +38,27 @@ class AppServices(Protocol):
         ``(width, height)`` of each camera view (``raw``, ``panorama``), by key.
     wrap_cols : bool
         The scan's last column is next to its first (a 360 degree scan).
+    ba_cell_aspect : float
+        Drawn height / width of one BA cell.
+    ba_window : app.ba_view.ColumnWindow
+        The scan columns the BA images show.
+    all_points_lidar : ndarray, shape (N, 3)
+        Every valid scan point, lidar frame (metres).
+    nodes : app.scene_nodes.SceneNodes
+        The scene's diffed line, point and label nodes (a redraw sends only what changed).
+    pairs_folder
+        The "Pairs" folder (panels place themselves relative to its ``order``).
+    display : app.display_panel.DisplayPanel
+        What the laser panes show (``loupe_image(key)``: the BA loupe's grey image and its name).
+    loupes : app.loupes.Loupes
+        The two loupes (``frame_ba``, ``frame_camera``); absent while the page is being built.
+    output_path, session_path : Path or None
+        Where "Download extrinsics YAML" also writes; the session file.
+    solve_bundle, result
+        The last good solve (:class:`app.ui_common.SolveBundle`) and its
+        :class:`calib_core.solve.CalibrationResult`, or None.
+    initial_T_camera_lidar : ndarray, shape (4, 4), or None
+        The imported rough extrinsic predictions use before a solve.
     """
 
     server: Any
@@ -50,6 +71,18 @@ class AppServices(Protocol):
     slots: dict
     camera_sizes: dict[str, tuple[int, int]]
     wrap_cols: bool
+    ba_cell_aspect: float
+    ba_window: Any
+    all_points_lidar: np.ndarray
+    nodes: Any
+    pairs_folder: Any
+    display: Any
+    loupes: Any
+    output_path: Any
+    session_path: Any
+    solve_bundle: Any
+    result: Any
+    initial_T_camera_lidar: np.ndarray | None
 
     def guard(self, fn: Callable[[Any], None]) -> Callable:
         """A viser callback that queues ``fn(action)`` on the ordered action worker (errors become notifications)."""
@@ -77,3 +110,6 @@ class AppServices(Protocol):
 
     def forget_last_picks(self) -> None:
         """Forget every tab's last click (the next loupe click adds an end)."""
+
+    def wait_idle(self, timeout: float = 30.0) -> bool:
+        """Block until queued user actions are applied and the live solve and its follow-up work are idle."""
