@@ -71,11 +71,6 @@ class AppDriver:
         original camera pixel ``(u, v)``; loupe pixel coordinates, None when the loupe does not show it."""
         return self.app.loupes.display_of(kind, uv)
 
-    def loupe_page_position(self, client_id: int, kind: str, uv: tuple[float, float]) -> tuple[float, float]:
-        """Where loupe ``kind`` shows ``uv`` (a cell ``(col, row)`` or an original pixel) in a real tab's canvas,
-        as fractions of its width and height (see :meth:`app.view_panel.ViewPanel.page_position`)."""
-        return self.app.view.page_position(client_id, f"loupe_{kind}", uv)
-
     def click_loupe(self, kind: str, uv: tuple[float, float]) -> list[tuple[str, str]]:
         """Click *through* loupe ``kind`` at ``uv``: ``(col, row)`` of a scan cell or an original pixel ``(u, v)``."""
         shown = self.loupe_display_pixel(kind, uv)
