@@ -4,7 +4,8 @@
 
 from __future__ import annotations
 
-from typing import Any
+import contextlib
+from typing import Any, Iterator
 
 import numpy as np
 
@@ -28,6 +29,7 @@ class OverlayDrawing:
         self.app = app
         self._marker_cache: dict[str, tuple[tuple, dict]] = {}  # slot key -> (inputs, number labels) last drawn
         self._overlay_inputs: tuple | None = None  # (solve, inputs) the overlays were last drawn from
+        self._loupe_marks_held = 0  # > 0: refresh() leaves the loupes' marks to loupe_marks_after()
 
     def invalidate(self) -> None:
         """Redraw the camera-view overlays on the next :meth:`refresh` even if their inputs look unchanged."""
@@ -58,8 +60,26 @@ class OverlayDrawing:
             for name, (text, pos) in labels.items():
                 app.nodes.label(name, text, pos)
             self._draw_overlays(picks, predictions)
-            if getattr(app, "loupes", None) is not None:  # None while the page is being built
+            if getattr(app, "loupes", None) is not None and not self._loupe_marks_held:  # None while building
                 app.loupes.draw_marks()
+
+    @contextlib.contextmanager
+    def loupe_marks_after(self) -> Iterator[None]:
+        """Within the block, :meth:`refresh` leaves the loupes' marks alone; they are drawn once at its end.
+
+        For a click, which changes the pairs and then re-frames the loupes:
+        their marks are drawn for the new view only, not also for the old one.
+        """
+        app = self.app
+        with app.ui_lock:
+            self._loupe_marks_held += 1
+        try:
+            yield
+        finally:
+            with app.ui_lock, app.server.atomic():
+                self._loupe_marks_held -= 1
+                if not self._loupe_marks_held:
+                    app.loupes.draw_marks()  # nothing is sent for a loupe whose marks are up to date
 
     def pick_ends(self, key: str) -> tuple[list[int], np.ndarray]:
         """Ids and display pixels of the pick ends drawn on slot ``key`` (a BA key, camera view or ``loupe_*``)."""

@@ -167,6 +167,11 @@ class PairsPanel:
         Then the loupes frame the click and the other end (clicked or predicted).
         """
         target = self._target_of_click(key, uv)
+        # The loupes are re-framed right after the change: their marks are drawn once, for the new view.
+        with self.app.overlays.loupe_marks_after():
+            return self._apply_click(key, target, pick_id, client)
+
+    def _apply_click(self, key: str, target: tuple, pick_id: int | None, client: Any) -> int:
         kind, source = target[0], ("loupe" if key.startswith("loupe_") else "full")
         cid = None if client is None else client.client_id
         last = self._last_pick.get(cid)
