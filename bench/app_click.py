@@ -7,7 +7,7 @@ A real :class:`app.server.CalibrationApp` (viser on a free local port, no browse
   loupe on the click, the camera loupe on the predicted pixel);
 * ``BA loupe click``: the wanted cell in the BA loupe (replaces the rough cell, re-frames the camera loupe);
 * ``camera loupe click``: the pixel in the camera loupe, which completes the pair; its time runs to the
-  new solve shown (errors, table, 2-D overlays: :meth:`CalibrationApp.last_click_to_update`).
+  new solve shown (errors, table, 2-D overlays: :meth:`LiveSolveCoordinator.last_click_to_update`).
 
 Each action's time is from the handler's call to the action applied (the page would show it).  The target
 is <= 20 ms per action.  The machine is shared: the wall-time medians are printed, with the minimum, and

@@ -66,7 +66,7 @@ class AnnotationTab:
     """A headless-Chromium tab on a running app, connected, its annotation view set, the WebGL notice closed.
 
     ``screen(target, uv)`` is the page position of pixel ``uv`` of a view (``"camera"``, a BA key,
-    ``"loupe_ba"``, ``"loupe_camera"``), from the camera the tab reported (:meth:`CalibrationApp.page_position`).
+    ``"loupe_ba"``, ``"loupe_camera"``), from the camera the tab reported (:meth:`app.view_panel.ViewPanel.page_position`).
     """
 
     def __init__(self, playwright, app, viewport: dict, **page_options) -> None:
