@@ -1,12 +1,11 @@
 """The live-solve coordinator: every change of the pairs is solved in a worker thread (:class:`app.live_solver.LiveSolver`),
-shown when done, then the 3-D cloud colours and the camera-facing column window are computed in their own thread.
-The maths is :func:`calib_core.solve.calibrate` and :mod:`calib_core.overlays`."""
+shown when done, then the 3-D cloud colours (:class:`app.cloud_pane.CloudPane`), the camera-facing column window and
+the scan projected for the loupes' predictions are computed in their own thread.  The maths is :func:`calib_core.solve.calibrate` and :mod:`calib_core.overlays`."""
 
 from __future__ import annotations
 
 import time
 import traceback
-
 from typing import Any
 
 import numpy as np
@@ -18,8 +17,8 @@ from calib_core.solve import calibrate
 from calib_core.transforms import transform_points
 
 from .ba_view import ColumnWindow, covering_window
-from .state import AnnotationState
 from .live_solver import LiveSolver
+from .state import AnnotationState
 from .ui_common import MIN_PAIRS, SolveBundle, CloudUpdate
 
 
