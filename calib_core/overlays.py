@@ -147,21 +147,32 @@ def sample_bilinear(image: np.ndarray, pixels: np.ndarray) -> np.ndarray:
     cols, rows, _ = _cell_tables(packed.shape[1], packed.shape[0], 1 << 30)
     np.clip(uv, -0.5, np.array([packed.shape[1] - 0.5, packed.shape[0] - 0.5], np.float32), out=uv)
     _colour_visible(uv, np.isfinite(uv).all(axis=1), np.zeros(uv.shape[0], np.float32), cols, rows,
-                    np.zeros(1, np.float32), packed, colors)
+                    np.zeros(1, np.float32), packed, colors, np.empty(uv.shape[0], np.bool_))
     return colors
 
 
 def _packed_rgbx(image) -> np.ndarray:
-    """``image`` (H, W, 3 or 4) uint8 as (H, W) uint32, one pixel per item: one load per pixel in the sampler."""
+    """``image`` (H, W, 3 or 4) uint8 as (H, W) int32, one pixel per item: one load per pixel in the sampler."""
     img = np.asarray(image)
     if img.ndim != 3 or img.shape[2] not in (3, 4) or img.dtype != np.uint8:
         raise CalibError(f"camera image must be an (H, W, 3) uint8 array, got {img.shape} {img.dtype}")
     if img.shape[2] == 3:
         img = cv2.cvtColor(np.ascontiguousarray(img), cv2.COLOR_RGB2RGBA)
-    return np.ascontiguousarray(img).view(np.uint32)[..., 0]
+    return np.ascontiguousarray(img).view(np.int32)[..., 0]
 
 
-_FINE_CELL_PX = 4  # occupancy grid of the automatic z-buffer cell size
+_FINE_CELL_PX = 4  # occupancy grid of the automatic z-buffer cell size (even: a min-pool of 2-pixel cells)
+
+
+@kernel
+def _min_pool(grid, k):
+    """Minimum over ``k`` x ``k`` blocks of a 2-D float32 grid, the last block row/column partial."""
+    h, w = grid.shape
+    out = np.full((-(-h // k), -(-w // k)), np.inf, np.float32)
+    for r in range(h):
+        for c in range(w):
+            out[r // k, c // k] = min(out[r // k, c // k], grid[r, c])
+    return out
 
 
 def _cell_px_from_occupancy(occupied_cells: int, n_points: int) -> int:
@@ -212,103 +223,105 @@ def _to_camera(points, M, xyz, dist):
 
 
 @kernel
-def _count_occupied(pixels, valid, cols, rows, n_cells):
-    """Number of grid cells (see :func:`_cell_tables`) that hold a valid pixel, and the number of valid pixels."""
-    occupied = np.zeros(n_cells, np.bool_)
-    half = np.float32(0.5)
-    n_valid = 0
-    for i in range(pixels.shape[0]):
-        if valid[i]:
-            occupied[rows[int(pixels[i, 1] + half)] + cols[int(pixels[i, 0] + half)]] = True
-            n_valid += 1
-    return np.count_nonzero(occupied), n_valid
-
-
-@kernel
 def _zbuffer(pixels, valid, dist, cols, rows, n_cells):
     """Z-buffer of the valid pixels: the smallest ``dist`` per grid cell (see :func:`_cell_tables`).
 
-    Returns (n_cells,) float32, inf where empty.  (Marking the density grid
-    in this pass too measured slower than the separate count.)
+    Returns (n_cells,) float32, inf where empty.
     """
     zbuf = np.full(n_cells, np.inf, np.float32)
     half = np.float32(0.5)
     for i in range(pixels.shape[0]):
         if valid[i]:
-            k = rows[int(pixels[i, 1] + half)] + cols[int(pixels[i, 0] + half)]
-            zbuf[k] = min(zbuf[k], dist[i])  # a store every time: a branch here is mispredicted
+            k = rows[_U(np.int32(pixels[i, 1] + half))] + cols[_U(np.int32(pixels[i, 0] + half))]
+            zbuf[_U(k)] = min(zbuf[_U(k)], dist[i])  # a store every time: a branch here is mispredicted
     return zbuf
 
 
 #: Points per chunk of :func:`_colour_visible`: its buffers stay in L1 cache.
-_CHUNK = 512
+_CHUNK = 256
+#: Unsigned array indices: numba adds a negative-index wrap-around to every
+#: signed index, which costs instructions and keeps loops off SIMD lanes.
+_U = np.uintp
 
 
 @kernel
-def _lerp_channel(top_left, top_right, bottom_left, bottom_right, frac_u, frac_v, shift, out):
-    """Bilinear value of one 8-bit channel (at bit ``shift``) of packed pixels, + 0.5 for rounding."""
-    mask = np.uint32(255)
-    for j in range(out.shape[0]):  # runs on SIMD lanes
-        a = np.float32((top_left[j] >> shift) & mask)
-        b = np.float32((top_right[j] >> shift) & mask)
-        c = np.float32((bottom_left[j] >> shift) & mask)
-        d = np.float32((bottom_right[j] >> shift) & mask)
-        top = a + frac_u[j] * (b - a)
-        bottom = c + frac_u[j] * (d - c)
-        out[j] = top + frac_v[j] * (bottom - top) + np.float32(0.5)
-
-
-@kernel
-def _colour_visible(pixels, valid, dist, cols, rows, limit, image, colors):
+def _colour_visible(pixels, valid, dist, cols, rows, limit, image, colors, coloured):
     """Colour the valid points no farther than the depth ``limit`` of their grid cell (see :func:`_cell_tables`).
 
-    Bilinear colours of the packed RGBX ``image`` (H, W) uint32 (channel 0
-    in the low byte) at ``pixels`` (N, 2) ``(u, v)`` into ``colors`` (N, 3)
-    uint8, rounded to nearest; the border pixels repeat outside the image
-    (OpenCV's BORDER_REPLICATE).  Returns which points were coloured, (N,)
-    bool.  By chunks: the gathers one point at a time, the arithmetic of a
-    whole chunk on SIMD lanes.
+    Bilinear colours of the packed RGBX ``image`` (H, W) int32 (channel 0
+    in the low byte) at ``pixels`` (N, 2) float32 ``(u, v)`` into ``colors``
+    (N, 3) uint8, rounded to nearest, zero where not coloured; the border
+    pixels repeat outside the image (OpenCV's BORDER_REPLICATE).  Writes
+    which points were coloured into ``coloured`` (N,) bool.
+
+    By chunks, every point alike (no branch on visibility): indices and
+    fractions (SIMD lanes), the gathers alone, then the depth test and the
+    arithmetic (SIMD lanes; int32, not uint32, channels: x86 converts
+    signed integers to float on SIMD lanes, unsigned ones one at a time).
     """
     height, width = image.shape
     flat = image.ravel()
     n = pixels.shape[0]
-    coloured = np.empty(n, np.bool_)
-    corners = np.empty((4, _CHUNK), np.uint32)
-    frac = np.empty((2, _CHUNK), np.float32)
-    point = np.empty(_CHUNK, np.int64)
-    value = np.empty((3, _CHUNK), np.float32)
+    cell = np.empty(_CHUNK, np.int32)
+    index = np.empty(_CHUNK, np.int32)
+    down = np.empty(_CHUNK, np.int32)
+    right = np.empty(_CHUNK, np.int32)
+    frac_u = np.empty(_CHUNK, np.float32)
+    frac_v = np.empty(_CHUNK, np.float32)
+    lim = np.empty(_CHUNK, np.float32)
+    q0, q1 = np.empty(_CHUNK, np.int32), np.empty(_CHUNK, np.int32)
+    q2, q3 = np.empty(_CHUNK, np.int32), np.empty(_CHUNK, np.int32)
+    out = np.empty((3, _CHUNK), np.uint8)
     u_max, v_max = np.float32(width - 1), np.float32(height - 1)
-    half = np.float32(0.5)
+    half, zero, one = np.float32(0.5), np.float32(0.0), np.float32(1.0)
+    w32, last_row, last_col = np.int32(width), np.int32(height - 1), np.int32(width - 1)
+    mask = np.int32(255)
     for start in range(0, n, _CHUNK):
-        m = 0
-        for i in range(start, min(start + _CHUNK, n)):
-            # Branch-free: every point is sampled into slot m, and only a
-            # visible one advances m (a skip would be a mispredicted branch).
-            ok = valid[i]
-            u = pixels[i, 0] if ok else np.float32(0.0)  # NaN pixels: never an index
-            v = pixels[i, 1] if ok else np.float32(0.0)
-            visible = ok and dist[i] <= limit[rows[int(v + half)] + cols[int(u + half)]]
-            coloured[i] = visible
-            u = min(max(u, np.float32(0.0)), u_max)
-            v = min(max(v, np.float32(0.0)), v_max)
-            c0, r0 = int(u), int(v)
-            top = r0 * width
-            bottom = top + width if r0 + 1 < height else top
-            right = 1 if c0 + 1 < width else 0
-            corners[0, m], corners[1, m] = flat[top + c0], flat[top + c0 + right]
-            corners[2, m], corners[3, m] = flat[bottom + c0], flat[bottom + c0 + right]
-            frac[0, m], frac[1, m] = u - np.float32(c0), v - np.float32(r0)
-            point[m] = i
-            m += 1 if visible else 0
-        for channel in range(3):
-            _lerp_channel(corners[0, :m], corners[1, :m], corners[2, :m], corners[3, :m], frac[0, :m], frac[1, :m],
-                          np.uint32(8 * channel), value[channel, :m])
-        for j in range(m):
-            i = point[j]
-            colors[i, 0] = np.uint8(value[0, j])
-            colors[i, 1] = np.uint8(value[1, j])
-            colors[i, 2] = np.uint8(value[2, j])
-    return coloured
+        count = min(_CHUNK, n - start)
+        for k in range(count):
+            i, k_ = _U(start + k), _U(k)
+            u, v = pixels[i, 0], pixels[i, 1]
+            # Into the image; NaN (invalid points) -> 0: never an index.
+            u = u if u > zero else zero
+            v = v if v > zero else zero
+            u = u if u < u_max else u_max
+            v = v if v < v_max else v_max
+            cell[k_] = rows[_U(np.int32(v + half))] + cols[_U(np.int32(u + half))]
+            c0, r0 = np.int32(u), np.int32(v)
+            index[k_] = r0 * w32 + c0
+            down[k_] = w32 if r0 < last_row else np.int32(0)
+            right[k_] = np.int32(1) if c0 < last_col else np.int32(0)
+            frac_u[k_] = u - np.float32(c0)
+            frac_v[k_] = v - np.float32(r0)
+        for k in range(count):  # random reads alone: many in flight
+            k_ = _U(k)
+            j = index[k_]
+            lim[k_] = limit[_U(cell[k_])]
+            q0[k_] = flat[_U(j)]
+            q1[k_] = flat[_U(j + right[k_])]
+            q2[k_] = flat[_U(j + down[k_])]
+            q3[k_] = flat[_U(j + down[k_] + right[k_])]
+        for k in range(count):
+            i, k_ = _U(start + k), _U(k)
+            ok = valid[i] & (dist[i] <= lim[k_])
+            coloured[i] = ok
+            keep = one if ok else zero
+            x, y = frac_u[k_], frac_v[k_]
+            a0, a1, a2, a3 = q0[k_], q1[k_], q2[k_], q3[k_]
+            for c in range(3):  # unrolled by LLVM
+                shift = np.int32(8 * c)
+                a = np.float32((a0 >> shift) & mask)
+                b = np.float32((a1 >> shift) & mask)
+                d = np.float32((a2 >> shift) & mask)
+                e = np.float32((a3 >> shift) & mask)
+                top = a + x * (b - a)
+                bottom = d + x * (e - d)
+                out[c, k_] = np.uint8(np.int32((top + y * (bottom - top) + half) * keep))
+        for k in range(count):
+            i, k_ = _U(start + k), _U(k)
+            colors[i, 0] = out[0, k_]
+            colors[i, 1] = out[1, k_]
+            colors[i, 2] = out[2, k_]
 
 
 def colorize_points(
@@ -381,17 +394,29 @@ def colorize_points(
         cols, rows, _ = _cell_tables(w, h, max(w, h) + 1)
         limit = np.full(1, np.inf, np.float32)
     else:
+        # One z-buffer pass at the finest cell; the occupancy that sets the
+        # cell size, and any even cell size, are min-pools of it (a cell of
+        # 2k pixels is exactly k x k cells of 2 pixels, edges included).
+        fine = _FINE_CELL_PX // 2
+        cols, rows, grid = _cell_tables(w, h, fine)
+        zbuf = _zbuffer(pixels, valid, dist, cols, rows, grid[0] * grid[1]).reshape(grid)
         cell = cell_px
         if cell is None:
-            cols, rows, grid = _cell_tables(w, h, _FINE_CELL_PX)
-            cell = _cell_px_from_occupancy(*_count_occupied(pixels, valid, cols, rows, grid[0] * grid[1]))
-        cols, rows, grid = _cell_tables(w, h, int(cell))
-        zbuf = _zbuffer(pixels, valid, dist, cols, rows, grid[0] * grid[1]).reshape(grid)
+            occupied = np.count_nonzero(_min_pool(zbuf, _FINE_CELL_PX // fine) < np.inf)
+            cell = _cell_px_from_occupancy(occupied, int(np.count_nonzero(valid)))
+        cell = int(cell)
+        if cell != fine:
+            cols, rows, grid = _cell_tables(w, h, cell)
+            if cell % fine == 0:
+                zbuf = _min_pool(zbuf, cell // fine)
+            else:
+                zbuf = _zbuffer(pixels, valid, dist, cols, rows, grid[0] * grid[1]).reshape(grid)
         # Min over 3x3 cells: a gap in a sparse foreground must not let the background through.
         limit = cv2.erode(zbuf, np.ones((3, 3), np.uint8), borderType=cv2.BORDER_REPLICATE).ravel()
         limit = limit * np.float32(1.0 + depth_tolerance) + np.float32(0.05)
-    colors = np.zeros((n, 3), np.uint8)
-    has_color = _colour_visible(pixels, valid, dist, cols, rows, limit, packed, colors)
+    colors = np.empty((n, 3), np.uint8)
+    has_color = np.empty(n, np.bool_)
+    _colour_visible(pixels, valid, dist, cols, rows, limit, packed, colors, has_color)
     return colors, has_color
 
 
