@@ -144,9 +144,8 @@ def sample_bilinear(image: np.ndarray, pixels: np.ndarray) -> np.ndarray:
     colors = np.zeros((uv.shape[0], 3), np.uint8)
     packed = _packed_rgbx(image)
     # Every pixel in one cell without a depth limit; NaN pixels get no colour.
-    cols, rows, _ = _cell_tables(packed.shape[1], packed.shape[0], 1 << 30)
     np.clip(uv, -0.5, np.array([packed.shape[1] - 0.5, packed.shape[0] - 0.5], np.float32), out=uv)
-    _colour_visible(uv, np.isfinite(uv).all(axis=1), np.zeros(uv.shape[0], np.float32), cols, rows,
+    _colour_visible(uv, np.isfinite(uv).all(axis=1), np.zeros(uv.shape[0], np.float32), 1 << 20, 1,
                     np.zeros(1, np.float32), packed, colors, np.empty(uv.shape[0], np.bool_))
     return colors
 
@@ -187,21 +186,15 @@ def _cell_px_from_occupancy(occupied_cells: int, n_points: int) -> int:
     return int(np.clip(np.ceil(1.5 * spacing), 2, 32))
 
 
-def _cell_tables(width: int, height: int, cell: int) -> tuple[np.ndarray, np.ndarray, tuple[int, int]]:
-    """Lookup tables of the ``cell``-pixel grid: column and row offset of each pixel edge index.
+def _grid_shape(width: int, height: int, cell: int) -> tuple[int, int]:
+    """Shape ``(grid_h, grid_w)`` of the grid of ``cell``-pixel cells over a ``width`` x ``height`` image.
 
     A pixel ``(u, v)`` (centres at integers, inside the image) lies in cell
-    ``rows[int(v + 0.5)] + cols[int(u + 0.5)]`` of the row-major grid:
-    truncation from the top-left edge is the floor inside the image, and the
-    edge pixels at ``width - 0.5`` join the last cell.  Tables instead of
-    ``// cell``: an integer division per point costs more than the rest of
-    the z-buffer.  Returns ``cols (width + 1,)``, ``rows (height + 1,)``
-    int32 and the grid shape ``(grid_h, grid_w)``.
+    ``(int(v + 0.5) // cell, int(u + 0.5) // cell)``: truncation from the
+    top-left edge, and the edge pixels at ``width - 0.5`` join the last
+    column (their ``u`` is clamped to ``width - 1`` first).
     """
-    grid_w, grid_h = -(-width // cell), -(-height // cell)
-    cols = np.minimum(np.arange(width + 1) // cell, grid_w - 1).astype(np.int32)
-    rows = (np.minimum(np.arange(height + 1) // cell, grid_h - 1) * grid_w).astype(np.int32)
-    return cols, rows, (grid_h, grid_w)
+    return -(-height // cell), -(-width // cell)
 
 
 # ------------------------------------------------------------------ kernels
@@ -223,16 +216,31 @@ def _to_camera(points, M, xyz, dist):
 
 
 @kernel
-def _zbuffer(pixels, valid, dist, cols, rows, n_cells):
-    """Z-buffer of the valid pixels: the smallest ``dist`` per grid cell (see :func:`_cell_tables`).
+def _cell_of(u, v, cell, grid_w):
+    """Row-major index of the grid cell (see :func:`_grid_shape`) of a pixel clamped into the image.
+
+    ``float32`` division, not integer division (one instruction for 8 points
+    on SIMD lanes): exact here, as the quotient of two integers below 2^24
+    is rounded correctly and is never within rounding of the next integer.
+    """
+    half = np.float32(0.5)
+    col = np.float32(np.int32(u + half)) / cell
+    row = np.float32(np.int32(v + half)) / cell
+    return np.int32(row) * grid_w + np.int32(col)
+
+
+@kernel
+def _zbuffer(pixels, valid, dist, width, height, cell, grid_w, n_cells):
+    """Z-buffer of the valid pixels: the smallest ``dist`` per grid cell (see :func:`_grid_shape`).
 
     Returns (n_cells,) float32, inf where empty.
     """
     zbuf = np.full(n_cells, np.inf, np.float32)
-    half = np.float32(0.5)
+    fcell, gw = np.float32(cell), np.int32(grid_w)
+    u_max, v_max = np.float32(width - 1), np.float32(height - 1)
     for i in range(pixels.shape[0]):
         if valid[i]:
-            k = rows[_U(np.int32(pixels[i, 1] + half))] + cols[_U(np.int32(pixels[i, 0] + half))]
+            k = _cell_of(min(pixels[i, 0], u_max), min(pixels[i, 1], v_max), fcell, gw)
             zbuf[_U(k)] = min(zbuf[_U(k)], dist[i])  # a store every time: a branch here is mispredicted
     return zbuf
 
@@ -245,8 +253,9 @@ _U = np.uintp
 
 
 @kernel
-def _colour_visible(pixels, valid, dist, cols, rows, limit, image, colors, coloured):
-    """Colour the valid points no farther than the depth ``limit`` of their grid cell (see :func:`_cell_tables`).
+def _colour_visible(pixels, valid, dist, cell_px, grid_w, limit, image, colors, coloured):
+    """Colour the valid points no farther than the depth ``limit`` of their ``cell_px`` grid cell (see
+    :func:`_grid_shape`; ``grid_w`` cells a row).
 
     Bilinear colours of the packed RGBX ``image`` (H, W) int32 (channel 0
     in the low byte) at ``pixels`` (N, 2) float32 ``(u, v)`` into ``colors``
@@ -275,6 +284,7 @@ def _colour_visible(pixels, valid, dist, cols, rows, limit, image, colors, colou
     u_max, v_max = np.float32(width - 1), np.float32(height - 1)
     half, zero, one = np.float32(0.5), np.float32(0.0), np.float32(1.0)
     w32, last_row, last_col = np.int32(width), np.int32(height - 1), np.int32(width - 1)
+    fcell, gw = np.float32(cell_px), np.int32(grid_w)
     mask = np.int32(255)
     for start in range(0, n, _CHUNK):
         count = min(_CHUNK, n - start)
@@ -286,7 +296,7 @@ def _colour_visible(pixels, valid, dist, cols, rows, limit, image, colors, colou
             v = v if v > zero else zero
             u = u if u < u_max else u_max
             v = v if v < v_max else v_max
-            cell[k_] = rows[_U(np.int32(v + half))] + cols[_U(np.int32(u + half))]
+            cell[k_] = _cell_of(u, v, fcell, gw)
             c0, r0 = np.int32(u), np.int32(v)
             index[k_] = r0 * w32 + c0
             down[k_] = w32 if r0 < last_row else np.int32(0)
@@ -391,32 +401,33 @@ def colorize_points(
     pixels = np.ascontiguousarray(pixels, dtype=np.float32)
     valid = np.ascontiguousarray(valid, dtype=np.bool_)
     if not occlusion:  # one cell over the whole image, without a depth limit
-        cols, rows, _ = _cell_tables(w, h, max(w, h) + 1)
+        cell, grid_w = max(w, h) + 1, 1
         limit = np.full(1, np.inf, np.float32)
     else:
         # One z-buffer pass at the finest cell; the occupancy that sets the
         # cell size, and any even cell size, are min-pools of it (a cell of
         # 2k pixels is exactly k x k cells of 2 pixels, edges included).
         fine = _FINE_CELL_PX // 2
-        cols, rows, grid = _cell_tables(w, h, fine)
-        zbuf = _zbuffer(pixels, valid, dist, cols, rows, grid[0] * grid[1]).reshape(grid)
+        grid = _grid_shape(w, h, fine)
+        zbuf = _zbuffer(pixels, valid, dist, w, h, fine, grid[1], grid[0] * grid[1]).reshape(grid)
         cell = cell_px
         if cell is None:
             occupied = np.count_nonzero(_min_pool(zbuf, _FINE_CELL_PX // fine) < np.inf)
             cell = _cell_px_from_occupancy(occupied, int(np.count_nonzero(valid)))
         cell = int(cell)
         if cell != fine:
-            cols, rows, grid = _cell_tables(w, h, cell)
+            grid = _grid_shape(w, h, cell)
             if cell % fine == 0:
                 zbuf = _min_pool(zbuf, cell // fine)
             else:
-                zbuf = _zbuffer(pixels, valid, dist, cols, rows, grid[0] * grid[1]).reshape(grid)
+                zbuf = _zbuffer(pixels, valid, dist, w, h, cell, grid[1], grid[0] * grid[1]).reshape(grid)
         # Min over 3x3 cells: a gap in a sparse foreground must not let the background through.
         limit = cv2.erode(zbuf, np.ones((3, 3), np.uint8), borderType=cv2.BORDER_REPLICATE).ravel()
         limit = limit * np.float32(1.0 + depth_tolerance) + np.float32(0.05)
+        grid_w = grid[1]
     colors = np.empty((n, 3), np.uint8)
     has_color = np.empty(n, np.bool_)
-    _colour_visible(pixels, valid, dist, cols, rows, limit, packed, colors, has_color)
+    _colour_visible(pixels, valid, dist, cell, grid_w, limit, packed, colors, has_color)
     return colors, has_color
 
 
