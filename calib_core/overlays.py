@@ -198,21 +198,30 @@ def _grid_shape(width: int, height: int, cell: int) -> tuple[int, int]:
 
 
 # ------------------------------------------------------------------ kernels
+#: Unsigned array indices: numba adds a negative-index wrap-around to every
+#: signed index, which costs instructions and keeps loops off SIMD lanes.
+_U = np.uintp
+
+
 @kernel
 def _to_camera(points, M, xyz, dist):
     """``xyz (3, N) = M[:, :3] @ p + M[:, 3]`` per point ``p`` of ``points (N, 3)``, and ``dist = |xyz|``.
 
-    Arithmetic in float64, stored float32 (the projection of the whole
-    cloud runs in float32).  NaN points give NaN; coordinates beyond float32
-    give inf.
+    The transform in float64, stored float32 (the projection of the whole
+    cloud runs in float32); the distance from the stored float32 values.
+    NaN points give NaN; coordinates beyond float32 give inf.
     """
-    for i in range(points.shape[0]):
-        px, py, pz = points[i, 0], points[i, 1], points[i, 2]
-        x = M[0, 0] * px + M[0, 1] * py + M[0, 2] * pz + M[0, 3]
-        y = M[1, 0] * px + M[1, 1] * py + M[1, 2] * pz + M[1, 3]
-        z = M[2, 0] * px + M[2, 1] * py + M[2, 2] * pz + M[2, 3]
-        xyz[0, i], xyz[1, i], xyz[2, i] = np.float32(x), np.float32(y), np.float32(z)
-        dist[i] = np.float32(np.sqrt(x * x + y * y + z * z))
+    m00, m01, m02, m03 = M[0, 0], M[0, 1], M[0, 2], M[0, 3]
+    m10, m11, m12, m13 = M[1, 0], M[1, 1], M[1, 2], M[1, 3]
+    m20, m21, m22, m23 = M[2, 0], M[2, 1], M[2, 2], M[2, 3]
+    for i_ in range(points.shape[0]):
+        i = _U(i_)
+        px, py, pz = np.float64(points[i, 0]), np.float64(points[i, 1]), np.float64(points[i, 2])
+        x = np.float32(m00 * px + m01 * py + m02 * pz + m03)
+        y = np.float32(m10 * px + m11 * py + m12 * pz + m13)
+        z = np.float32(m20 * px + m21 * py + m22 * pz + m23)
+        xyz[0, i], xyz[1, i], xyz[2, i] = x, y, z
+        dist[i] = np.sqrt(x * x + y * y + z * z)
 
 
 @kernel
@@ -247,9 +256,6 @@ def _zbuffer(pixels, valid, dist, width, height, cell, grid_w, n_cells):
 
 #: Points per chunk of :func:`_colour_visible`: its buffers stay in L1 cache.
 _CHUNK = 256
-#: Unsigned array indices: numba adds a negative-index wrap-around to every
-#: signed index, which costs instructions and keeps loops off SIMD lanes.
-_U = np.uintp
 
 
 @kernel
