@@ -257,6 +257,8 @@ def _markdown(*, quick, scenes, pin_scenes, n_values, trials, omni_res, pin_res,
               compare_n, crb_rows, crb_sets, crb_draws, sp,
               targets, profiles, have_plots, run_s, cv2_version, cores, load, vs_md) -> str:
     from . import report
+    from calib_core.solve.whiten import PICK_CELL_SIGMA, PICK_RANGE_SIGMA_M
+
     from .accuracy import RANGE_NOISE_M
     from .compare import PINHOLE_F_PX, PINHOLE_SIZE
 
@@ -297,8 +299,8 @@ def _markdown(*, quick, scenes, pin_scenes, n_values, trials, omni_res, pin_res,
       f"{1e3 * pure.noise_rad:.1f} mrad ({np.degrees(pure.noise_rad):.2f} deg) at the clicked corners. The "
       "Cramer-Rao bound (`python -m bench.crb`), for 10 corners spread by farthest-point sampling, gives mean errors "
       f"of {b10['exact'][0]:.3f} deg and {100 * b10['exact'][1]:.2f} cm with exact laser points, and "
-      f"**{b10['cell'][0]:.3f} deg and {100 * b10['cell'][1]:.2f} cm with the whole-cell laser pick** (plus 1 cm range "
-      "noise), which is what a user clicking cells gets; the laser term alone (noise-free clicks) gives "
+      f"**{b10['cell'][0]:.3f} deg and {100 * b10['cell'][1]:.2f} cm with the whole-cell laser pick** (the pick model "
+      "fitted to ground truth: 0.45 cells across the beam, 1.5 cm along it), which is what a user clicking cells gets; the laser term alone (noise-free clicks) gives "
       f"{b10['laser only'][0]:.3f} deg and {100 * b10['laser only'][1]:.2f} cm. The estimator itself wastes nothing: "
       "its spread matches the bound (the Cramer-Rao row, PASS). More pairs help less than 1/sqrt(n) promises, "
       f"because added corners are less spread than the first ones: even all {ball['n']} corners of the scene give "
@@ -307,7 +309,7 @@ def _markdown(*, quick, scenes, pin_scenes, n_values, trials, omni_res, pin_res,
       "and whole-cell picks at any n. It takes more precise clicks and laser picks (e.g. sub-pixel corners), or a "
       "camera with a finer angular resolution.\n")
     a("Cramer-Rao mean errors on the sample, 1 px clicks (rotation / translation; `python -m bench.crb`):\n")
-    a("| n | exact laser | whole-cell laser (+1 cm range) | laser term alone |\n|---:|---|---|---|")
+    a("| n | exact laser | whole-cell laser pick (pick model) | laser term alone |\n|---:|---|---|---|")
     for r in bt.values():
         a(f"| {r['n']} | " + " | ".join(f"{r[k][0]:.3f} deg / {100 * r[k][1]:.2f} cm"
                                      for k in ("exact", "cell", "laser only")) + " |")
@@ -363,8 +365,10 @@ def _markdown(*, quick, scenes, pin_scenes, n_values, trials, omni_res, pin_res,
       f"{crb_sets} fixed sets of 10 pairs on the sample x {crb_draws} noise draws each. Here the bound is the exact "
       "first-order bound, so an efficient estimator's spread must match it.\n"
       f"2. **Realistic picking** (the n = 10 trials above): S_i = (1 px)^2 I + J_X S_L J_X^T, where S_L models the "
-      f"laser pick: uniform over one cell along the row and the column (variance step^2 / 12 each, step = the beam's "
-      f"angular step times the range) plus ({100 * RANGE_NOISE_M:.0f} cm)^2 along the beam, mapped to pixels by "
+      f"laser pick (`calib_core.solve.whiten.cell_pick_covariance`, the model the solve and the guide use): "
+      f"{PICK_CELL_SIGMA} cells 1-sigma along the row and the column (a cell = the beam's angular step times the range) "
+      f"plus ({100 * PICK_RANGE_SIGMA_M:.1f} cm)^2 along the beam, fitted to the picks' errors against the true corners "
+      f"of the sample and seeds 1-3 (`python -m bench.pick_model`), mapped to pixels by "
       "J_X = d pixel / d X. This is a Gaussian stand-in for the real laser error, which is neither Gaussian nor "
       "independent between trials: a corner's picked cell and its range noise are fixed in the scan, and the "
       "farthest-point sampling reuses the same corners in many trials.\n")
