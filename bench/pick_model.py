@@ -97,7 +97,59 @@ def fit(data, model) -> tuple[float, float]:
     return float(np.exp(x[0])), float(np.exp(x[1]))
 
 
+def coverage_by_scene(trials: int, cell_sigma: float = PICK_CELL_SIGMA, range_sigma_m: float = PICK_RANGE_SIGMA_M,
+                      n: int = 10) -> None:
+    """Share of ``calibrate`` trials (``simulate_pairs``, n pairs) within 1 and 2 reported sigma, per scene.
+
+    The picked cells and their errors are fixed in each scan, and trials reuse the same corners: the
+    scene-to-scene spread shows how far one scene's coverage can be from nominal for that reason alone.
+    """
+    import calib_core.solve.whiten as whiten
+    from calib_core.solve import calibrate
+    from calib_core.synthetic import simulate_pairs
+    from calib_core.transforms import rpy_deg_from_R
+
+    from .common import BENCH_SEED, wrap_deg
+
+    defaults = whiten.cell_pick_covariance.__defaults__
+    whiten.cell_pick_covariance.__defaults__ = (cell_sigma, range_sigma_m)  # the model calibrate() uses
+    try:
+        print(f"Coverage, {trials} trials per scene, n = {n}, pick model {cell_sigma:.3f} cells, "
+              f"{100 * range_sigma_m:.1f} cm (roll pitch yaw tx ty tz; nominal 68.3 / 95.4 %):")
+        for bs in load_scenes((1, 2, 3)):
+            sc = bs.scene
+            T_true = sc.T_camera_lidar
+            rpy_true = rpy_deg_from_R(T_true[:3, :3])
+            within, used = np.zeros((2, 6)), 0
+            for k in range(trials):
+                pairs = simulate_pairs(sc, n, np.random.default_rng([BENCH_SEED, 179, n, k]), pixel_noise_px=1.0)
+                res = calibrate(pairs, sc.depth, sc.camera)
+                if res.quality.status == "unreliable":
+                    continue
+                err = np.concatenate([wrap_deg(rpy_deg_from_R(res.T_camera_lidar[:3, :3]) - rpy_true),
+                                      res.T_camera_lidar[:3, 3] - T_true[:3, 3]])
+                sig = np.concatenate([res.sigma_rpy_deg, res.sigma_translation_m])
+                within += np.abs(err) <= np.array([[1.0], [2.0]]) * sig
+                used += 1
+            one, two = 100 * within / used
+            print(f"  {bs.name} ({used} trials): 1 sigma " + " ".join(f"{v:.1f}" for v in one)
+                  + " | 2 sigma " + " ".join(f"{v:.1f}" for v in two))
+    finally:
+        whiten.cell_pick_covariance.__defaults__ = defaults
+
+
 def main() -> None:
+    import argparse
+
+    p = argparse.ArgumentParser(prog="python -m bench.pick_model", description=__doc__.splitlines()[0])
+    p.add_argument("--coverage", type=int, default=0, metavar="TRIALS",
+                   help="also the sigma coverage of calibrate() per scene, this many trials each")
+    p.add_argument("--cell-sigma", type=float, default=PICK_CELL_SIGMA, help="pick model for --coverage, cells")
+    p.add_argument("--range-sigma", type=float, default=PICK_RANGE_SIGMA_M, help="pick model for --coverage, metres")
+    args = p.parse_args()
+    if args.coverage:
+        coverage_by_scene(args.coverage, args.cell_sigma, args.range_sigma)
+        return
     scenes = load_scenes((1, 2, 3))
     data = [(bs.scene,) + pick_errors(bs.scene) for bs in scenes]
     names = [bs.name for bs in scenes]

@@ -11,6 +11,7 @@ over -2..2 cells, sqrt((5^2 - 1) / 12) = 1.41.
 
 from __future__ import annotations
 
+import numpy as np
 
 from ..solve.whiten import PICK_CELL_SIGMA, PICK_RANGE_SIGMA_M, cell_pick_covariance
 
