@@ -235,11 +235,12 @@ def colorize_section(bs: BenchScene, rep: "SpeedReport", rng: np.random.Generato
     """Colourise with the occlusion test, 100k to 2M points; at 1M also the camera projection alone.
 
     The same code on the same input measured 31-51 ms at 1M points from one
-    process to the next on the shared 2-core machine at a load average of
-    about 1 (steady within each process): other guests' jobs on the host's
-    cores, which the load average does not count.  Each row therefore also
-    gives the hypervisor's steal time during the row and the CPU time of this
-    process per call (``time.process_time``).
+    process to the next on the shared 2-core virtual machine at a load
+    average of about 1 (steady within each process, with no page faults and
+    with or without huge pages): something outside this machine's load
+    average, e.g. other guests on the host's cores or caches.  Each row
+    therefore also gives the hypervisor's steal time during the row and the
+    CPU time of this process per call (``time.process_time``).
     """
     from calib_core.overlays import colorize_points
 
