@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import os
+import threading
+from concurrent.futures import ThreadPoolExecutor
 
 import cv2
 import numpy as np
@@ -340,6 +342,29 @@ def _colour_visible(pixels, valid, dist, cell_px, grid_w, limit, image, colors, 
             colors[i, 2] = out[2, k_]
 
 
+#: Clouds of at least this many points are coloured on two threads (below, the hand-over costs more).
+_THREADED_POINTS = 200_000
+_POOL = None
+_POOL_LOCK = threading.Lock()
+
+
+def _threads(n: int) -> int:
+    return 2 if n >= _THREADED_POINTS and (os.cpu_count() or 1) >= 2 else 1
+
+
+def _run(fn, items) -> list:
+    """``[fn(x) for x in items]``, the first on this thread and the others on a worker thread."""
+    global _POOL
+    items = list(items)
+    if len(items) == 1:
+        return [fn(items[0])]
+    with _POOL_LOCK:
+        if _POOL is None:
+            _POOL = ThreadPoolExecutor(max_workers=1, thread_name_prefix="ba-calib-colour")
+    rest = [_POOL.submit(fn, x) for x in items[1:]]
+    return [fn(items[0])] + [f.result() for f in rest]
+
+
 def colorize_points(
     points_lidar: np.ndarray,
     image: np.ndarray,
@@ -357,6 +382,10 @@ def colorize_points(
     surrounding z-buffer cells (3x3 cells of ``cell_px`` pixels).  Camera and
     lidar see from different places, so a projection alone would paint
     background points with the colour of the object in front of them.
+
+    Clouds of at least 200k points are split in two halves on two threads
+    (results identical); under load from other processes that gains nothing
+    and loses up to about 10 %, on an idle second core it saves a third.
 
     The points are transformed in float64 and projected in float32
     (``camera.project`` on float32 points): pixels are within about 5e-4 px
@@ -399,13 +428,22 @@ def colorize_points(
     pts = np.ascontiguousarray(pts.reshape(-1, 3))
     n = pts.shape[0]
 
-    # Camera frame as three contiguous float32 rows (the camera's element-wise
-    # maths runs on contiguous data), and the distance of every point.
-    xyz, dist = np.empty((3, n), np.float32), np.empty(n, np.float32)
-    _to_camera(pts, np.ascontiguousarray(T[:3]), xyz, dist)
-    pixels, valid = camera.project(xyz.T)
-    pixels = np.ascontiguousarray(pixels, dtype=np.float32)
-    valid = np.ascontiguousarray(valid, dtype=np.bool_)
+    # Large clouds in two halves on two threads (the kernels release the GIL);
+    # each half keeps its own contiguous arrays, the z-buffers are merged.
+    bounds = np.linspace(0, n, _threads(n) + 1).astype(np.int64)
+    parts = list(zip(bounds[:-1], bounds[1:]))
+    M = np.ascontiguousarray(T[:3])
+
+    def project(part):
+        a, b = part
+        # Camera frame as three contiguous float32 rows (the camera's element-wise
+        # maths runs on contiguous data), and the distance of every point.
+        xyz, dist = np.empty((3, b - a), np.float32), np.empty(b - a, np.float32)
+        _to_camera(pts[a:b], M, xyz, dist)
+        pixels, valid = camera.project(xyz.T)
+        return np.ascontiguousarray(pixels, dtype=np.float32), np.ascontiguousarray(valid, dtype=np.bool_), dist
+
+    projected = _run(project, parts)
     if not occlusion:  # one cell over the whole image, without a depth limit
         cell, grid_w = max(w, h) + 1, 1
         limit = np.full(1, np.inf, np.float32)
@@ -413,27 +451,32 @@ def colorize_points(
         # One z-buffer pass at the finest cell; the occupancy that sets the
         # cell size, and any even cell size, are min-pools of it (a cell of
         # 2k pixels is exactly k x k cells of 2 pixels, edges included).
+        def zbuffer(c):
+            g = _grid_shape(w, h, c)
+            bufs = _run(lambda pvd: _zbuffer(*pvd, w, h, c, g[1], g[0] * g[1]), projected)
+            return np.minimum.reduce(bufs).reshape(g) if len(bufs) > 1 else bufs[0].reshape(g)
+
         fine = _FINE_CELL_PX // 2
-        grid = _grid_shape(w, h, fine)
-        zbuf = _zbuffer(pixels, valid, dist, w, h, fine, grid[1], grid[0] * grid[1]).reshape(grid)
+        zbuf = zbuffer(fine)
         cell = cell_px
         if cell is None:
             occupied = np.count_nonzero(_min_pool(zbuf, _FINE_CELL_PX // fine) < np.inf)
-            cell = _cell_px_from_occupancy(occupied, int(np.count_nonzero(valid)))
+            cell = _cell_px_from_occupancy(occupied, sum(int(np.count_nonzero(v)) for _, v, _ in projected))
         cell = int(cell)
         if cell != fine:
-            grid = _grid_shape(w, h, cell)
-            if cell % fine == 0:
-                zbuf = _min_pool(zbuf, cell // fine)
-            else:
-                zbuf = _zbuffer(pixels, valid, dist, w, h, cell, grid[1], grid[0] * grid[1]).reshape(grid)
+            zbuf = _min_pool(zbuf, cell // fine) if cell % fine == 0 else zbuffer(cell)
         # Min over 3x3 cells: a gap in a sparse foreground must not let the background through.
         limit = cv2.erode(zbuf, np.ones((3, 3), np.uint8), borderType=cv2.BORDER_REPLICATE).ravel()
         limit = limit * np.float32(1.0 + depth_tolerance) + np.float32(0.05)
-        grid_w = grid[1]
+        grid_w = zbuf.shape[1]
     colors = np.empty((n, 3), np.uint8)
     has_color = np.empty(n, np.bool_)
-    _colour_visible(pixels, valid, dist, cell, grid_w, limit, packed, colors, has_color)
+
+    def colour(k):
+        (a, b), (pixels, valid, dist) = parts[k], projected[k]
+        _colour_visible(pixels, valid, dist, cell, grid_w, limit, packed, colors[a:b], has_color[a:b])
+
+    _run(colour, range(len(parts)))
     return colors, has_color
 
 
