@@ -28,7 +28,7 @@ from calib_core.errors import CalibError
 from calib_core.pairs import resolve_pairs
 
 from .common import BENCH_SEED, BenchScene, PoseError, log, parallel_map, pose_error
-from .crb import cell_rounding_covariance, cramer_rao, radians_per_pixel
+from .crb import cell_pick_covariance, cramer_rao, radians_per_pixel
 
 N_VALUES = tuple(range(4, 21))
 PIXEL_NOISE_PX = 1.0
@@ -358,7 +358,7 @@ def cramer_rao_check(
             true_px, _ = cam.project(transform_points(T_true, tr.points_lidar))
             cov_l = None
             if tr.laser_rc is not None:
-                cov_l = cell_rounding_covariance(scene.depth, tr.laser_rc, RANGE_NOISE_M)
+                cov_l = cell_pick_covariance(scene.depth, tr.laser_rc)
             b = cramer_rao(cam, T_true, tr.points_lidar, PIXEL_NOISE_PX, cov_l)
             covs.append(b.covariance)
             bounds.append(np.concatenate([b.sigma_rpy_deg, b.sigma_translation_m]) ** 2)
@@ -379,7 +379,7 @@ def cramer_rao_check(
         for m, res_list in realistic_results.items():
             E = np.array([np.concatenate([r.error.rpy_deg, r.error.translation_m]) for r in res_list if r.ok])
             std, rms = _stats(E)
-            rows.append(CrbRow(f"realistic picking: 1 px clicks + cell rounding + {100 * RANGE_NOISE_M:.0f} cm range noise "
+            rows.append(CrbRow(f"realistic picking: 1 px clicks + whole-cell laser picks (pick model) "
                                f"({len(realistic_trials)} trials, n={n})", m, len(E), std, rms, bound, ssig,
                                float(np.mean(noise)), floor))
     return rows

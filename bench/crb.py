@@ -26,6 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from calib_core.solve.whiten import cell_pick_covariance
 from calib_core.transforms import R_from_rpy_deg, rpy_deg_from_R
 
 _H_ROT_RAD = 1e-6
@@ -59,34 +60,6 @@ def point_jacobian_px(camera, T_camera_lidar: np.ndarray, points_lidar: np.ndarr
         d[k] = _H_POS_M
         J[:, :, k] = (camera.project((points_lidar + d) @ R.T + t)[0] - camera.project((points_lidar - d) @ R.T + t)[0]) / (2 * _H_POS_M)
     return J
-
-
-def cell_rounding_covariance(depth, rows_cols: np.ndarray, range_sigma_m: float) -> np.ndarray:
-    """Laser-point covariance ``(N, 3, 3)`` (metres^2) of picks rounded to whole cells.
-
-    The true corner lies anywhere in the picked cell: uniform over one step of
-    the beam direction along the row and along the column (variance
-    ``rho^2 |d dir|^2 / 12`` each, ``d dir`` the central difference of the
-    beam directions), plus ``range_sigma_m^2`` along the beam.  The surface
-    slope and the far side of a depth edge are ignored: this is the
-    first-order size of the error, not its exact law.
-    """
-    rc = np.asarray(rows_cols, dtype=np.int64).reshape(-1, 2)
-    H, W = depth.shape
-    r = np.clip(rc[:, 0], 1, H - 2)
-    c = rc[:, 1]
-    wrap = bool(depth.meta.get("wrap_cols", False))
-    cp = (c + 1) % W if wrap else np.clip(c + 1, 0, W - 1)
-    cm = (c - 1) % W if wrap else np.clip(c - 1, 0, W - 1)
-    dirs = depth.directions
-    g_row = (dirs[r + 1, c] - dirs[r - 1, c]) / 2.0
-    # One column step: the central difference spans two steps except at a clipped border.
-    col_span = ((cp - cm) % W) if wrap else np.maximum(cp - cm, 1)
-    g_col = (dirs[rc[:, 0], cp] - dirs[rc[:, 0], cm]) / col_span[:, None]
-    rho = depth.range_m[rc[:, 0], rc[:, 1]]
-    beam = dirs[rc[:, 0], rc[:, 1]]
-    outer = lambda a: a[:, :, None] * a[:, None, :]  # noqa: E731
-    return (rho**2 / 12.0)[:, None, None] * (outer(g_row) + outer(g_col)) + range_sigma_m**2 * outer(beam)
 
 
 @dataclass(frozen=True)
@@ -160,8 +133,8 @@ def bound_table(ns=(10, 30, 50, 125), starts: int = 20, seed: int = 0) -> list[d
 
     For each n, ``starts`` sets (farthest-point order from a random first corner, as
     ``simulate_pairs`` picks them); 1 px clicks; three laser models: exact corners, the
-    whole-cell pick (``cell_rounding_covariance`` with 1 cm range noise, at the picked
-    cells' points) and the laser term alone (clicks without noise).
+    whole-cell pick (the package's pick model,
+    :func:`calib_core.solve.whiten.cell_pick_covariance`, at the picked cells' points) and the laser term alone (clicks without noise).
     """
     from calib_core.synthetic.picks import MAX_LASER_PICK_ERROR_M, laser_picks
     from calib_core.transforms import transform_points
@@ -190,7 +163,7 @@ def bound_table(ns=(10, 30, 50, 125), starts: int = 20, seed: int = 0) -> list[d
             idx = usable[chosen]
             rc = rc_all[idx]
             cell_pts = sc.depth.points[rc[:, 0], rc[:, 1]]
-            cov_l = cell_rounding_covariance(sc.depth, rc, 0.01)
+            cov_l = cell_pick_covariance(sc.depth, rc)
             for key, pts, sig, cov in (("exact", corners[idx], 1.0, None), ("cell", cell_pts, 1.0, cov_l),
                                        ("laser only", cell_pts, 1e-3, cov_l)):
                 bd = cramer_rao(sc.camera, sc.T_camera_lidar, pts, sig, cov)
@@ -201,7 +174,7 @@ def bound_table(ns=(10, 30, 50, 125), starts: int = 20, seed: int = 0) -> list[d
 
 if __name__ == "__main__":
     print("Cramer-Rao mean errors on the sample (1 px clicks): rotation deg / translation cm")
-    print("| n | exact laser | whole-cell laser (+1 cm range) | laser term alone |")
+    print("| n | exact laser | whole-cell laser pick (pick model) | laser term alone |")
     print("|---:|---|---|---|")
     for r in bound_table():
         print(f"| {r['n']} | " + " | ".join(f"{r[k][0]:.3f} deg / {100 * r[k][1]:.2f} cm"

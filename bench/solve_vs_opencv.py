@@ -179,7 +179,7 @@ def accuracy(quick: bool) -> tuple[list[dict], list[dict]]:
 
     from .common import load_scenes, pose_error
     from .compare import pinhole_variant
-    from .crb import cell_rounding_covariance, cramer_rao, mean_error_of_bound
+    from .crb import cell_pick_covariance, cramer_rao, mean_error_of_bound
 
     trials = 20 if quick else 100
     scenes = load_scenes(())
@@ -219,7 +219,7 @@ def accuracy(quick: bool) -> tuple[list[dict], list[dict]]:
             rc = np.array([p.laser_rc for p in pairs])
             pts = omni.scene.depth.points[rc[:, 0], rc[:, 1]]
             bound = cramer_rao(omni.scene.camera, omni.scene.T_camera_lidar, pts, 1.0,
-                               cell_rounding_covariance(omni.scene.depth, rc, 0.01))
+                               cell_pick_covariance(omni.scene.depth, rc))
             errs["bound"].append(mean_error_of_bound(bound.covariance, rpy_true, rng_b, 1000 if quick else 4000))
             # Clicks only: the picked cells' points are the laser points (exact), clicks = their true
             # projections + 1 px noise; the bound without a laser term.  Tests the estimator alone.
@@ -251,12 +251,12 @@ def accuracy(quick: bool) -> tuple[list[dict], list[dict]]:
 
 def laser_model_check() -> tuple[float, float, int]:
     """RMS (m) of the real whole-cell laser pick error across the camera's line of sight, against the
-    RMS the bound's laser model (``cell_rounding_covariance``, 1 cm range) predicts; over every
+    RMS the bound's laser model (the package's pick model, ``cell_pick_covariance``) predicts; over every
     corner of the sample with a pick.  A bound whose model understates the error cannot be reached."""
     from calib_core.synthetic.picks import laser_picks
 
     from .common import load_scenes
-    from .crb import cell_rounding_covariance
+    from .crb import cell_pick_covariance
 
     sc = load_scenes(())[0].scene
     rc, err = laser_picks(sc.depth, sc.corners_lidar)
@@ -268,7 +268,7 @@ def laser_model_check() -> tuple[float, float, int]:
     across = np.eye(3)[None] - u[:, :, None] * u[:, None, :]  # projector across the line of sight
     d = (sc.depth.points[rc[:, 0], rc[:, 1]] - corners) @ R.T
     actual = np.einsum("nij,nj->ni", across, d)
-    S = np.einsum("ij,njk,lk->nil", R, cell_rounding_covariance(sc.depth, rc, 0.01), R)
+    S = np.einsum("ij,njk,lk->nil", R, cell_pick_covariance(sc.depth, rc), R)
     modelled = np.einsum("nij,njk,nkl->nil", across, S, across)
     return (float(np.sqrt(np.mean(np.sum(actual**2, axis=1)))),
             float(np.sqrt(np.mean(np.trace(modelled, axis1=1, axis2=2)))), int(ok.sum()))
@@ -371,8 +371,8 @@ def markdown(jit, sp, pin_rows, omni_rows, cov, load, quick, cmd, laser=None) ->
                  f"{100 * c[1]:.3f} | {o[1] / c[1]:.3f} |")
     L.append("\n## Accuracy on the OCam sample: ours vs the Cramer-Rao bound\n")
     L.append("*realistic*: `simulate_pairs` (1 px clicks, whole-cell laser picks) solved with `calibrate`; bound: "
-             "`bench.crb.cramer_rao` at the true pose for each trial's pairs, 1 px clicks plus the whole-cell laser "
-             "model with 1 cm range noise (`cell_rounding_covariance`). *clicks only*: the same picked cells' points "
+             "`bench.crb.cramer_rao` at the true pose for each trial's pairs, 1 px clicks plus the package's laser "
+             "pick model (`cell_pick_covariance`, the one the solve whitens with). *clicks only*: the same picked cells' points "
              "as exact laser points, clicks = their true projections + 1 px noise, solved with `solve_extrinsics`; "
              "bound without a laser term. Mean errors of a bound by sampling its Gaussian.\n")
     L.append("| n | trials | realistic: ours rot / bound | ratio | ours trans / bound (cm) | ratio | clicks only: "
@@ -384,12 +384,10 @@ def markdown(jit, sp, pin_rows, omni_rows, cov, load, quick, cmd, laser=None) ->
                  f"{100 * b[1]:.3f} | {o[1] / b[1]:.3f} | {r['clicks_trials']} | {oc[0]:.4f} / {bc[0]:.4f} | "
                  f"{oc[0] / bc[0]:.3f} | {100 * oc[1]:.3f} / {100 * bc[1]:.3f} | {oc[1] / bc[1]:.3f} |")
     if laser is not None:
-        L.append(f"\nThe realistic bound's laser model understates the sample's real pick error: across the camera's "
-                 f"line of sight the whole-cell picks of the sample's {laser[2]} pickable corners are off by "
-                 f"{100 * laser[0]:.2f} cm RMS, the model predicts {100 * laser[1]:.2f} cm (it leaves out surface slope "
-                 "and the far side of depth edges). No estimator reaches a bound built on a smaller error than the "
-                 "data carry; the clicks-only rows, where the bound's noise model is the data's, test the "
-                 "estimator itself.\n")
+        L.append(f"\nThe laser pick model against the sample's real pick error: across the camera's line of sight "
+                 f"the whole-cell picks of the sample's {laser[2]} pickable corners are off by {100 * laser[0]:.2f} cm "
+                 f"RMS, the model predicts {100 * laser[1]:.2f} cm. The clicks-only rows, where the bound's noise "
+                 "model is the data's by construction, test the estimator alone.\n")
     L.append(f"\n## Sigma coverage (OCam sample, n = {cov['n']})\n")
     L.append("Share of trials whose error is within the reported sigma (Student-t widened, see "
              "`CalibrationResult.sigma_rpy_deg`). Nominal: 68.3 % and 95.4 %. *realistic*: `simulate_pairs` "

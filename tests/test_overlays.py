@@ -177,3 +177,63 @@ def test_no_edges_where_beams_are_closer_than_the_noise():
     spacing = depth.range_m * np.radians(0.5) * np.cos(np.radians(np.arange(60, -60, -1.0)))[:, None]
     np.testing.assert_array_equal(ok[:, 1:], (spacing >= 0.025)[:, 1:])
     assert not ok[:, 0].any() or depth.meta.get("wrap_cols")
+
+
+def _reference_colours(points, image, camera, T, cell, tol=0.05):
+    """colorize_points written out the plain way, in float64: project, z-buffer per
+    ``cell``-pixel cell, 3x3 minimum, depth test, bilinear sampling rounded half up."""
+    from scipy.ndimage import minimum_filter
+
+    xyz = points @ T[:3, :3].T + T[:3, 3]
+    uv, valid = camera.project(xyz)
+    dist = np.linalg.norm(xyz, axis=1)
+    h, w = image.shape[:2]
+    gh, gw = -(-h // cell), -(-w // cell)
+    col = np.minimum(np.floor(uv[valid, 0] + 0.5) // cell, gw - 1).astype(int)
+    row = np.minimum(np.floor(uv[valid, 1] + 0.5) // cell, gh - 1).astype(int)
+    zbuf = np.full((gh, gw), np.inf)
+    np.minimum.at(zbuf, (row, col), dist[valid])
+    limit = minimum_filter(zbuf, size=3, mode="nearest") * (1 + tol) + 0.05
+    visible = valid.copy()
+    visible[valid] = dist[valid] <= limit[row, col]
+    u = np.clip(uv[:, 0], 0, w - 1)
+    v = np.clip(uv[:, 1], 0, h - 1)
+    c0 = np.floor(np.nan_to_num(u)).astype(int)
+    r0 = np.floor(np.nan_to_num(v)).astype(int)
+    c1, r1 = np.minimum(c0 + 1, w - 1), np.minimum(r0 + 1, h - 1)
+    fu, fv = (u - c0)[:, None], (v - r0)[:, None]
+    img = image.astype(float)
+    top = img[r0, c0] * (1 - fu) + img[r0, c1] * fu
+    bottom = img[r1, c0] * (1 - fu) + img[r1, c1] * fu
+    colours = np.floor(top * (1 - fv) + bottom * fv + 0.5)
+    colours[~visible] = 0
+    return colours.astype(np.uint8), visible, dist, limit, row, col, valid
+
+
+@pytest.mark.parametrize("cell, n", [(2, 250_000), (3, 60_000), (4, 60_000)])
+def test_matches_a_plain_computation_on_the_ocam_sample(cell, n):
+    """Against an independent float64 computation on the sample's OCam camera, image and scan,
+    seen from the true pose, with the scan points in random order plus jitter (as a dense cloud);
+    250k points are coloured on two threads."""
+    from pathlib import Path
+
+    from calib_core.synthetic import load_sample
+
+    sample = Path(__file__).resolve().parents[1] / "sample_data"
+    if not (sample / "corners.yaml").exists():
+        pytest.skip("sample_data/ is not present")
+    sc = load_sample(sample)
+    rng = np.random.default_rng(3)
+    pts = sc.depth.points[sc.depth.valid]
+    pts = pts[rng.integers(0, len(pts), n)] + rng.normal(0, 0.01, (n, 3))
+    colours, has = colorize_points(pts, sc.image, sc.camera, sc.T_camera_lidar, cell_px=cell)
+    ref, visible, dist, limit, row, col, valid = _reference_colours(pts, sc.image, sc.camera, sc.T_camera_lidar, cell)
+    assert 0.2 < visible.mean() < 0.98, "the scene must have both visible and hidden points"
+    # float32 inside colorize_points: decisions may differ only for points at the depth limit
+    # or on a cell border (pixels within about 1e-3 px of the float64 ones).
+    differ = has != visible
+    assert differ.sum() <= 0.001 * len(pts), f"{differ.sum()} points decided differently"
+    same = has & visible
+    delta = np.abs(colours[same].astype(int) - ref[same])
+    assert delta.max() <= 1 and (delta > 0).any(axis=1).mean() < 0.01
+    assert not colours[~has].any(), "points without colour are zero"

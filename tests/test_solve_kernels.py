@@ -68,7 +68,7 @@ def test_cell_pick_covariance_of_a_regular_grid():
     d = np.stack([np.cos(E) * np.cos(A), np.cos(E) * np.sin(A), np.sin(E)], axis=-1)
     rng_m = np.full(E.shape, 4.0)
     depth = DepthMatrix(rng_m, d, d * 4.0, np.ones(E.shape, bool), {})
-    cov = cell_pick_covariance(depth, np.array([[10, 20]]), range_sigma_m=0.02)[0]
+    cov = cell_pick_covariance(depth, np.array([[10, 20]]), cell_sigma=12**-0.5, range_sigma_m=0.02)[0]
     w = np.sort(np.linalg.eigvalsh(cov))
     # Hand-computed: uniform over one cell, variance (rho * step)^2 / 12 per axis; range noise along the beam.
     e10 = E[10, 20]

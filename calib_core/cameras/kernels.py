@@ -2,8 +2,9 @@
 
 One fused pass per point (transform to the model's variables, the model,
 the in-image test, the stores), arithmetic in float64 whatever the storage
-type; no temporaries, so the same kernel serves a 10-pair solve (a few
-microseconds per call) and a million-point colouring.  The models
+type (except OCam on float32 points: see :func:`ocam_project`); no
+temporaries, so the same kernel serves a 10-pair solve (a few microseconds
+per call) and a million-point colouring.  The models
 (:mod:`.pinhole`, :mod:`.fisheye`, :mod:`.ocam`) hold the parameters and
 pack the scalars into one float64 vector per call (one argument to type-check
 instead of a dozen); the layouts of those vectors are the ``_P_*`` / ``_F_*``
@@ -117,6 +118,9 @@ def _store_chunk(pixels, valid, start, count, u_buf, v_buf, u_hi, v_hi):
 
 #: Points per chunk of the chunked ``project`` kernels: their buffers stay in L1 cache.
 _CHUNK = 256
+#: Unsigned indices: numba wraps every signed index around (negative = from
+#: the end), which costs instructions and keeps loops off SIMD lanes.
+_U = np.uintp
 
 
 @kernel
@@ -299,54 +303,63 @@ def ocam_project(points, p, table, pixels, valid):
     behind; no arctan).  Not projectable: the zero vector, a non-finite
     coordinate, or ``s`` beyond the field of view.
 
+    Arithmetic in the table's type: float64 for the solve, float32 for bulk
+    colouring (float32 points and table: 8 points per SIMD instruction
+    instead of 4, and square roots and divisions are the cost; pixels within
+    about 2e-4 px of float64).
+
     By chunks, in branch-free loops: the table position of every point
     (SIMD lanes), the table reads alone (random reads into a table larger
-    than L2: a loop of nothing else keeps many of them in flight), the
+    than L1: a loop of nothing else keeps many of them in flight), the
     pixels into chunk buffers (SIMD lanes), then the stores.
     """
-    s_max, inv_step = p[_O_SMAX], p[_O_INVSTEP]
-    c, d, e, xc, yc = p[_O_C], p[_O_D], p[_O_E], p[_O_XC], p[_O_YC]
+    F = table.dtype.type
+    one, zero = F(1.0), F(0.0)
+    s_max, inv_step = F(p[_O_SMAX]), F(p[_O_INVSTEP])
+    c, d, e, xc, yc = F(p[_O_C]), F(p[_O_D]), F(p[_O_E]), F(p[_O_XC]), F(p[_O_YC])
     u_hi, v_hi = p[_O_W] - 0.5, p[_O_H] - 0.5
-    last = np.float64(table.shape[0] - 1)
+    last = F(table.shape[0] - 1)
     n_points = points.shape[0]
     m = min(n_points, _CHUNK)
     index = np.empty(m, np.int32)  # int32: converts on SIMD lanes (int64 does not without AVX-512)
-    frac = np.empty(m, np.float64)
-    dist = np.empty(m, np.float64)
+    frac = np.empty(m, table.dtype)
+    dist = np.empty(m, table.dtype)
     ok = np.empty(m, np.bool_)
-    rho = np.empty(m, np.float64)
-    u_buf = np.empty(m, np.float64)
-    v_buf = np.empty(m, np.float64)
+    rho = np.empty(m, table.dtype)
+    u_buf = np.empty(m, table.dtype)
+    v_buf = np.empty(m, table.dtype)
+    nan = F(np.nan)
     for start in range(0, n_points, _CHUNK):
         count = min(_CHUNK, n_points - start)
-        for k in range(count):
-            i = start + k
-            X, Y, Z = np.float64(points[i, 0]), np.float64(points[i, 1]), np.float64(points[i, 2])
+        for k_ in range(count):
+            i, k = _U(start + k_), _U(k_)
+            X, Y, Z = F(points[i, 0]), F(points[i, 1]), F(points[i, 2])
             n2 = X * X + Y * Y
-            n = math.sqrt(n2)  # distance from the optical axis
-            r = math.sqrt(Z * Z + n2)
+            n = np.sqrt(n2)  # distance from the optical axis
+            r = np.sqrt(Z * Z + n2)
             # tan(alpha / 2) in front (Z >= 0), tan((pi - alpha) / 2) behind: free of cancellation.
-            s = 1.0 - math.copysign(1.0 - n / (abs(Z) + r), Z)
+            s = one - np.copysign(one - n / (abs(Z) + r), Z)
             good = (s <= s_max) & (r < np.inf)  # NaN (zero vector, NaN input) fails
             pos = s * inv_step
             pos = pos if pos < last else last  # NaN -> the last entry (masked by ok)
             j = np.int32(pos)
             index[k] = j
-            frac[k] = pos - np.float64(j)
+            frac[k] = pos - F(j)
             dist[k] = n
             ok[k] = good
-        for k in range(count):
-            j = index[k]
+        for k_ in range(count):
+            k = _U(k_)
+            j = _U(index[k])
             rho[k] = table[j, 0] + frac[k] * table[j, 1]
-        for k in range(count):
-            i = start + k
-            X, Y = np.float64(points[i, 0]), np.float64(points[i, 1])
+        for k_ in range(count):
+            i, k = _U(start + k_), _U(k_)
+            X, Y = F(points[i, 0]), F(points[i, 1])
             n = dist[k]
-            scale = rho[k] / n if n > 0.0 else 0.0  # on the axis rho = n = 0: the centre
+            scale = rho[k] / n if n > zero else zero  # on the axis rho = n = 0: the centre
             u = (e * Y + X) * scale + yc
             v = (c * Y + d * X) * scale + xc
-            u_buf[k] = u if ok[k] else np.nan
-            v_buf[k] = v if ok[k] else np.nan
+            u_buf[k] = u if ok[k] else nan
+            v_buf[k] = v if ok[k] else nan
         _store_chunk(pixels, valid, start, count, u_buf, v_buf, u_hi, v_hi)
 
 

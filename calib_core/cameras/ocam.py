@@ -237,8 +237,9 @@ class OCamCamera:
         vector and for rays beyond :attr:`max_angle_rad`; ``valid`` also
         requires the pixel inside the image.  Rays behind the image plane
         (``Z <= 0``) are fine as long as they are within the field of view.
-        float32 points give float32 pixels (within about 1e-4 px of the
-        float64 result, for bulk colouring); anything else float64.
+        float32 points give float32 pixels, computed in float32 (within
+        about 2e-4 px of the float64 result, for bulk colouring); anything
+        else float64.
         """
         P = as_points_keep_float32(points)
         pixels, valid = empty_projection(P)

@@ -14,8 +14,11 @@ import numpy as np
 
 __all__ = ["calibrate", "pair_ids_and_sigmas", "RANGE_SIGMA_M"]
 
-#: Range noise assumed for laser cells, metres (1-sigma); a cell pick's angular error dominates.
-RANGE_SIGMA_M = 0.02
+from .whiten import PICK_RANGE_SIGMA_M
+
+#: Error of a picked cell's point along its beam, metres (1-sigma): the pick model's
+#: (:data:`calib_core.solve.whiten.PICK_RANGE_SIGMA_M`).
+RANGE_SIGMA_M = PICK_RANGE_SIGMA_M
 
 
 def pair_ids_and_sigmas(pairs: Sequence[Any]) -> tuple[list[int], np.ndarray | None]:
@@ -70,7 +73,7 @@ def calibrate(pairs: Sequence[Any], depth: Any, camera: Any, *, cost: str = "ang
     if cells and depth is not None:
         laser_cov = np.zeros((len(fit_pairs), 3, 3))
         rc = np.array([fit_pairs[k].laser_rc for k in cells], dtype=np.int64)
-        laser_cov[cells] = cell_pick_covariance(depth, rc, RANGE_SIGMA_M)
+        laser_cov[cells] = cell_pick_covariance(depth, rc)
     result = solve_extrinsics(
         points, bearings, camera=camera, pixels=pixels, cost=cost, pair_ids=[all_ids[i] for i in fit],
         pixel_sigma=sigmas, laser_cov_m2=laser_cov, **options,

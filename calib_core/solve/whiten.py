@@ -13,7 +13,8 @@ has unit covariance (when ``sigma_i`` is the true noise) and eq. 7 with
 cost's speed.  ``J_i`` is computed once per solve, at the clicked pixels.
 
 The laser side has its own error: a pick lands on a whole depth-matrix cell
-(:func:`cell_pick_covariance`, metres^2 in the lidar frame).  Seen from the
+(:func:`cell_pick_covariance`, metres^2 in the lidar frame, the package's one
+pick-error model).  Seen from the
 camera it moves the bearing by ``Sigma_L,i`` (:func:`laser_tangent_covariance`,
 which needs the pose), added to the click's covariance:
 ``C_i = sigma_i^2 A_i^-1 A_i^-T + Sigma_L,i`` and ``W_i = chol(C_i)^-1``.
@@ -29,7 +30,7 @@ from ..errors import CalibError
 from . import kernels
 
 __all__ = ["tangent_to_pixel", "whitening", "check_pixel_sigma", "cell_pick_covariance",
-           "laser_tangent_covariance"]
+           "laser_tangent_covariance", "PICK_CELL_SIGMA", "PICK_RANGE_SIGMA_M"]
 
 #: Central-difference step on the sphere, radians (a fraction of a pixel for any real camera).
 STEP_RAD = 1e-4
@@ -50,47 +51,68 @@ def check_pixel_sigma(pixel_sigma: object, n: int) -> np.ndarray | None:
     return s
 
 
-def cell_pick_covariance(depth: Any, rows_cols: np.ndarray, range_sigma_m: float = 0.0) -> np.ndarray:
-    """Laser-point covariance ``(N, 3, 3)`` (metres^2, lidar frame) of picks on whole cells.
+#: Offset of a picked cell's point from the feature, across the beam, in cells (1-sigma per axis).
+#: A careful pick takes, among the 3x3 cells around the feature, the one whose point is nearest it
+#: (:func:`calib_core.synthetic.picks.laser_picks`), often not the cell that contains it: wider than
+#: uniform within one cell (``1/sqrt(12) = 0.29``).  Fitted by maximum likelihood to the 3-D pick
+#: errors against the true corners of the synthetic scenes (sample and seeds 1-3, 494 corners;
+#: two-scene folds gave 0.44-0.46 and predicted the held-out scenes' errors, see bench/pick_model.py).
+PICK_CELL_SIGMA = 0.45
+#: Error of a picked cell's point along its beam, metres (1-sigma): the range noise (1 cm in the
+#: synthetic scans) plus the slope of the surface the nearest cell lies on.  Same fit (folds 1.49-1.54 cm).
+PICK_RANGE_SIGMA_M = 0.015
 
-    The true corner lies anywhere in the picked cell: uniform over one beam
-    step along the row and along the column (variance ``rho^2 |d dir|^2 / 12``
-    each, ``d dir`` the central difference of the neighbouring beam
-    directions), plus ``range_sigma_m^2`` along the beam.
+
+def cell_pick_covariance(depth: Any, rows_cols: np.ndarray, cell_sigma: float = PICK_CELL_SIGMA,
+                         range_sigma_m: float = PICK_RANGE_SIGMA_M) -> np.ndarray:
+    """Laser-point covariance ``(N, 3, 3)`` (metres^2, lidar frame) of picks of whole cells.
+
+    The one pick-error model of the package (the solve's whitening and
+    sigma, the guide's information, the benchmark's Cramer-Rao bound):
+
+        Sigma = cell_sigma^2 rho^2 (g_row g_row^T + g_col g_col^T) + range_sigma_m^2 b b^T
+
+    ``g_row``, ``g_col`` the change of the beam direction over one row and
+    one column (central differences of the depth matrix's directions,
+    one-sided at the borders, wrapping the columns of a 360 deg scan; a
+    missing direction takes the other axis' step), ``rho`` the range and
+    ``b`` the beam.  (Propagating the offset along the scanned surface, the
+    3-D differences of neighbouring points, fitted the same errors worse on
+    held-out scenes: at a corner the neighbours lie on different surfaces.)
 
     Parameters
     ----------
     depth : DepthMatrix
     rows_cols : (N, 2) int array_like
         Picked ``(row, col)`` cells (valid).
+    cell_sigma : float
+        1-sigma offset across the beam, in cells (:data:`PICK_CELL_SIGMA`).
     range_sigma_m : float
-        1-sigma of the range, metres.
+        1-sigma along the beam, metres (:data:`PICK_RANGE_SIGMA_M`).
     """
     rc = np.asarray(rows_cols, dtype=np.int64).reshape(-1, 2)
     H, W = depth.shape
+    r, c = rc[:, 0], rc[:, 1]
     dirs = np.asarray(depth.directions, dtype=np.float64)
     wrap = bool(depth.meta.get("wrap_cols", False))
-
-    def step(r_lo, c_lo, r_hi, c_hi, span):
-        g = (dirs[r_hi, c_hi] - dirs[r_lo, c_lo]) / span[:, None]
-        return np.where(np.isfinite(g), g, 0.0)
-
-    r, c = rc[:, 0], rc[:, 1]
     r_lo, r_hi = np.clip(r - 1, 0, H - 1), np.clip(r + 1, 0, H - 1)
-    g_row = step(r_lo, c, r_hi, c, np.maximum(r_hi - r_lo, 1).astype(float))
     if wrap:
-        c_lo, c_hi, span = (c - 1) % W, (c + 1) % W, np.full(len(c), 2.0)
+        c_lo, c_hi, c_span = (c - 1) % W, (c + 1) % W, np.full(len(c), 2)
     else:
         c_lo, c_hi = np.clip(c - 1, 0, W - 1), np.clip(c + 1, 0, W - 1)
-        span = np.maximum(c_hi - c_lo, 1).astype(float)
-    g_col = step(r, c_lo, r, c_hi, span)
+        c_span = np.maximum(c_hi - c_lo, 1)
+    r_span = np.maximum(r_hi - r_lo, 1)
+    g_row = (dirs[r_hi, c] - dirs[r_lo, c]) / r_span[:, None]
+    g_col = (dirs[r, c_hi] - dirs[r, c_lo]) / c_span[:, None]
+    g_row = np.where(np.isfinite(g_row), g_row, np.nan_to_num(g_col))
+    g_col = np.where(np.isfinite(g_col), g_col, np.nan_to_num(g_row))
     rho = np.asarray(depth.range_m, dtype=np.float64)[r, c]
-    beam = dirs[r, c]
+    beam = np.nan_to_num(dirs[r, c])
 
     def outer(a):
         return a[:, :, None] * a[:, None, :]
 
-    return (rho**2 / 12.0)[:, None, None] * (outer(g_row) + outer(g_col)) + range_sigma_m**2 * outer(beam)
+    return (cell_sigma**2 * rho**2)[:, None, None] * (outer(g_row) + outer(g_col)) + range_sigma_m**2 * outer(beam)
 
 
 def laser_tangent_covariance(T_camera_lidar: np.ndarray, points_lidar: np.ndarray, frames: np.ndarray,

@@ -1,0 +1,61 @@
+"""The laser pick model (calib_core.solve.whiten.cell_pick_covariance) against the true pick errors of the sample."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from calib_core.solve.whiten import cell_pick_covariance
+
+SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
+
+
+@pytest.fixture(scope="module")
+def picks():
+    from calib_core.synthetic import load_sample
+    from calib_core.synthetic.picks import MAX_LASER_PICK_ERROR_M, laser_picks
+
+    if not (SAMPLE / "corners.yaml").exists():
+        pytest.skip("sample_data/ is not present")
+    sc = load_sample(SAMPLE)
+    corners = np.asarray(sc.corners_lidar, dtype=np.float64)
+    rc, err = laser_picks(sc.depth, corners)  # the cells a careful user picks
+    ok = err <= MAX_LASER_PICK_ERROR_M
+    return sc, rc[ok], corners[ok]
+
+
+def _camera_plane_d2(sc, corners, errors, cov):
+    """Squared Mahalanobis distance of each error's part across the camera's line of sight (2 dof)."""
+    R, t = sc.T_camera_lidar[:3, :3], sc.T_camera_lidar[:3, 3]
+    pc = corners @ R.T + t
+    u = pc / np.linalg.norm(pc, axis=1, keepdims=True)
+    # Two unit vectors across the line of sight, rotated into the lidar frame.
+    a = np.where(np.abs(u[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    e1 = np.cross(u, a)
+    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
+    E = np.stack([e1, np.cross(u, e1)], axis=1) @ R  # (N, 2, 3)
+    r = np.einsum("nij,nj->ni", E, errors)
+    C = np.einsum("nij,njk,nlk->nil", E, cov, E)
+    return np.einsum("ni,ni->n", r, np.linalg.solve(C, r[:, :, None])[:, :, 0])
+
+
+def test_pick_model_matches_the_true_pick_errors(picks):
+    sc, rc, corners = picks
+    errors = sc.depth.points[rc[:, 0], rc[:, 1]] - corners  # against the ground-truth corners
+    d2 = _camera_plane_d2(sc, corners, errors, cell_pick_covariance(sc.depth, rc))
+    assert len(d2) > 100
+    # Chi-square with 2 degrees of freedom: mean 2, 68.3 % below 2.30, 95.4 % below 6.18;
+    # binomial standard error with ~125 corners: 4 points at 1 sigma, 2 at 2 sigma.
+    assert 1.6 < d2.mean() < 2.4
+    assert 0.60 < np.mean(d2 <= 2.296) < 0.77
+    assert np.mean(d2 <= 6.18) > 0.91
+
+
+def test_uniform_within_the_cell_understates_the_error(picks):
+    """A pick is often not the cell containing the corner: uniform within one cell is too narrow."""
+    sc, rc, corners = picks
+    errors = sc.depth.points[rc[:, 0], rc[:, 1]] - corners
+    d2 = _camera_plane_d2(sc, corners, errors, cell_pick_covariance(sc.depth, rc, cell_sigma=12**-0.5))
+    assert d2.mean() > 3.0
