@@ -135,6 +135,21 @@ class FormatExportPanel:
     def _frames(self) -> tuple[str, str]:
         return str(self._tx_parent.value).strip(), str(self._tx_child.value).strip()
 
+    @property
+    def chosen_format(self) -> str:
+        """The export format the Format dropdown shows."""
+        return str(self._dd_format.value)
+
+    @property
+    def frame_names(self) -> tuple[str, str]:
+        """The parent and child frame names as typed (unstripped)."""
+        return str(self._tx_parent.value), str(self._tx_child.value)
+
+    @property
+    def direction_text(self) -> str:
+        """The direction line under the frame fields (markdown)."""
+        return str(self._md_direction.content)
+
     def _refresh(self) -> None:
         """The direction line under the frame fields."""
         fmt = str(self._dd_format.value)

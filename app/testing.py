@@ -376,7 +376,7 @@ class AppDriver:
     @property
     def export_direction(self) -> str:
         """The direction line of the format export panel."""
-        return str(self.app.format_export._md_direction.content)
+        return self.app.format_export.direction_text
     # ------------------------------------------------ end of the verify helper's block
 
 

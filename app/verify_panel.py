@@ -332,6 +332,11 @@ class VerifyPanel:
         """The per-pair table (markdown)."""
         return str(self._md_table.content)
 
+    @property
+    def heat_text(self) -> str:
+        """The text under the expected-error heat map (markdown)."""
+        return str(self._md_heat.content)
+
     def plot_data(self) -> dict[str, tuple[np.ndarray, ...]]:
         """The data the three plots show: ``pairs``, ``count``, ``sigma``."""
         return {"pairs": tuple(self._plot_pairs.data), "count": tuple(self._plot_count.data),

@@ -460,10 +460,10 @@ def click_time(bs: BenchScene, rep: SpeedReport, reps: Callable[[int], int]) -> 
                 sync_s.append(time.perf_counter() - t0)
                 if not app.wait_idle(60):
                     raise RuntimeError("the app's live solver did not finish within 60 s")
-                shown = getattr(app, "last_update_time", None)
-                # The app's hook: when the solve of this click was handed to viser; else (an older app) now.
+                shown = app.last_update_time
+                # The app's hook: when the solve of this click was handed to viser (None: not yet timed, then now).
                 click_s.append((shown if shown is not None and shown > t0 else time.perf_counter()) - t0)
-                bundle = getattr(app, "_bundle", None)
+                bundle = app.solve_bundle  # the solve this click produced
                 if bundle is not None and hasattr(bundle, "seconds"):
                     job_s.append(bundle.seconds)
                 if app.result is None:

@@ -153,7 +153,7 @@ def test_heat_map_in_the_app(app, driver):
     cur = app.verify_panel.current
     assert cur is not None and np.isfinite(cur.heat_px).mean() > 0.05
     assert cur.heat_image.shape[1] == 480 and cur.heat_image.dtype == np.uint8
-    assert "Expected reprojection error" in str(app.verify_panel._md_heat.content)
+    assert "Expected reprojection error" in app.verify_panel.heat_text
 
 
 def test_reference_comparison_in_degrees_cm_and_pixels(app, driver):

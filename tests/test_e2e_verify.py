@@ -54,15 +54,14 @@ def test_export_two_formats_and_see_the_verify_plots(tmp_path):
                 select = page.get_by_label("Format", exact=True)
                 select.click()
                 page.get_by_role("option", name=fmt, exact=True).click()
-                wait_for(lambda: app.format_export._dd_format.value == fmt, f"the format {fmt} to reach the app")
+                wait_for(lambda: app.format_export.chosen_format == fmt, f"the format {fmt} to reach the app")
                 for label, value in (("Parent frame", parent), ("Child frame", child)):
                     # viser's text inputs carry no id for their label: the row holding both.
                     row = page.locator(f'div:has(label:text-is("{label}")):has(input)').last
                     box = row.locator("input")
                     box.fill(value)
                     box.press("Tab")
-                wait_for(lambda: (str(app.format_export._tx_parent.value), str(app.format_export._tx_child.value))
-                         == (parent, child), "the frames to reach the app")
+                wait_for(lambda: app.format_export.frame_names == (parent, child), "the frames to reach the app")
                 with page.expect_download(timeout=TIMEOUT_S * 1000) as info:
                     page.get_by_role("button", name="Download in this format").click()
                 d = info.value
