@@ -14,6 +14,7 @@ import viser.transforms as vtf
 from calib_core.errors import CalibError
 from calib_core.cameras.pinhole import PinholeCamera
 from calib_core.transforms import invert_T, transform_points
+from calib_core.viewpoint import viewpoint_behind_camera
 
 from .ba_view import ColumnWindow, ba_texture, texture_factor
 from .camera_view import CameraView
@@ -264,18 +265,9 @@ class ViewPanel:
             self._update_cloud_visibility()
             up = self._up_vector()
             bundle = self.app.live.bundle
-            if bundle is not None:
-                # Stand a little behind and above the solved camera, look where it looks (paper Fig. 9).
-                T_lidar_camera = invert_T(bundle.result.T_camera_lidar)
-                eye, forward = T_lidar_camera[:3, 3], T_lidar_camera[:3, :3] @ np.array([0.0, 0.0, 1.0])
-            else:
-                eye, forward = np.zeros(3), np.array([1.0, 0.0, 0.0])
-            level = forward - float(forward @ up) * up
-            if np.linalg.norm(level) < 0.1:
-                level = np.cross(up, [0.0, 0.0, 1.0]) if abs(up[2]) < 0.9 else np.cross(up, [1.0, 0.0, 0.0])
-            level /= np.linalg.norm(level)
-            pos = CLOUD_ORIGIN + eye - 1.5 * level + 0.7 * up
-            look = CLOUD_ORIGIN + eye + 3.0 * level
+            # Stand a little behind and above the solved camera, look where it looks (paper Fig. 9).
+            eye, look = viewpoint_behind_camera(None if bundle is None else bundle.result.T_camera_lidar, up)
+            pos, look = CLOUD_ORIGIN + eye, CLOUD_ORIGIN + look
             self._apply_camera(client, pos, look, up, math.radians(70.0))
             return
         self._client_mode[client.client_id] = mode
