@@ -74,6 +74,14 @@ def test_cell_pick_covariance_of_a_regular_grid():
     e10 = E[10, 20]
     expected = np.sort([(4 * np.radians(1.0)) ** 2 / 12, (4 * np.radians(0.5) * np.cos(e10)) ** 2 / 12, 0.02**2])
     np.testing.assert_allclose(w, expected, rtol=2e-3)
+    # One sigma per axis: rows (elevation, vertical here) and columns (azimuth, horizontal).
+    cov2 = cell_pick_covariance(depth, np.array([[10, 20]]), cell_sigma=(0.3, 0.7), range_sigma_m=0.02)[0]
+    up = np.array([-np.sin(e10) * np.cos(A[10, 20]), -np.sin(e10) * np.sin(A[10, 20]), np.cos(e10)])
+    side = np.array([-np.sin(A[10, 20]), np.cos(A[10, 20]), 0.0])
+    np.testing.assert_allclose(up @ cov2 @ up, (0.3 * 4 * np.radians(1.0)) ** 2, rtol=2e-3)
+    np.testing.assert_allclose(side @ cov2 @ side, (0.7 * 4 * np.radians(0.5) * np.cos(e10)) ** 2, rtol=2e-3)
+    np.testing.assert_allclose(d[10, 20] @ cov2 @ d[10, 20], 0.02**2, rtol=2e-3)
+    np.testing.assert_allclose(up @ cov2 @ side, 0.0, atol=1e-9)
 
 
 def test_student_t_sigma_covers_68_and_95_percent():

@@ -51,32 +51,35 @@ def check_pixel_sigma(pixel_sigma: object, n: int) -> np.ndarray | None:
     return s
 
 
-#: Offset of a picked cell's point from the feature, across the beam, in cells (1-sigma per axis).
-#: A careful pick takes, among the 3x3 cells around the feature, the one whose point is nearest it
-#: (:func:`calib_core.synthetic.picks.laser_picks`), often not the cell that contains it: wider than
-#: uniform within one cell (``1/sqrt(12) = 0.29``).  Fitted by maximum likelihood to the 3-D pick
-#: errors against the true corners of the synthetic scenes (sample and seeds 1-3, 494 corners;
-#: two-scene folds gave 0.44-0.46 and predicted the held-out scenes' errors, see bench/pick_model.py).
-PICK_CELL_SIGMA = 0.45
+#: Offset of a picked cell's point from the feature, across the beam, in cells (1-sigma along the
+#: row axis, then along the column axis).  A careful pick takes, among the 3x3 cells around the
+#: feature, the one whose point is nearest it (:func:`calib_core.synthetic.picks.laser_picks`),
+#: often not the cell that contains it: wider than uniform within one cell (``1/sqrt(12) = 0.29``),
+#: and wider along the finer axis (the synthetic scans' cells are 1 deg tall and 0.5 deg wide, so
+#: a neighbour in the row is more often the nearest point).  Fitted by maximum likelihood to the
+#: 3-D pick errors against the true corners of the sample and seeds 1-3 (494 corners), checked on
+#: held-out scenes; see bench/pick_model.py.  One value per axis: a single value over-stated the
+#: vertical error and under-stated the horizontal one (sigma coverage of ty too high, tx too low).
+PICK_CELL_SIGMA = (0.37, 0.52)
 #: Error of a picked cell's point along its beam, metres (1-sigma): the range noise (1 cm in the
 #: synthetic scans) plus the slope of the surface the nearest cell lies on.  Same fit (folds 1.49-1.54 cm).
 PICK_RANGE_SIGMA_M = 0.015
 
 
-def cell_pick_covariance(depth: Any, rows_cols: np.ndarray, cell_sigma: float = PICK_CELL_SIGMA,
+def cell_pick_covariance(depth: Any, rows_cols: np.ndarray, cell_sigma: float | tuple[float, float] = PICK_CELL_SIGMA,
                          range_sigma_m: float = PICK_RANGE_SIGMA_M) -> np.ndarray:
     """Laser-point covariance ``(N, 3, 3)`` (metres^2, lidar frame) of picks of whole cells.
 
     The one pick-error model of the package (the solve's whitening and
     sigma, the guide's information, the benchmark's Cramer-Rao bound):
 
-        Sigma = cell_sigma^2 rho^2 (g_row g_row^T + g_col g_col^T) + range_sigma_m^2 b b^T
+        Sigma = rho^2 (s_row^2 g_row g_row^T + s_col^2 g_col g_col^T) + range_sigma_m^2 b b^T
 
     ``g_row``, ``g_col`` the change of the beam direction over one row and
     one column (central differences of the depth matrix's directions,
     one-sided at the borders, wrapping the columns of a 360 deg scan; a
     missing direction takes the other axis' step), ``rho`` the range and
-    ``b`` the beam.  (Propagating the offset along the scanned surface, the
+    ``b`` the beam, ``(s_row, s_col) = cell_sigma``.  (Propagating the offset along the scanned surface, the
     3-D differences of neighbouring points, fitted the same errors worse on
     held-out scenes: at a corner the neighbours lie on different surfaces.)
 
@@ -85,8 +88,9 @@ def cell_pick_covariance(depth: Any, rows_cols: np.ndarray, cell_sigma: float = 
     depth : DepthMatrix
     rows_cols : (N, 2) int array_like
         Picked ``(row, col)`` cells (valid).
-    cell_sigma : float
-        1-sigma offset across the beam, in cells (:data:`PICK_CELL_SIGMA`).
+    cell_sigma : float or (float, float)
+        1-sigma offset across the beam, in cells: one value for both axes, or
+        ``(along the row axis, along the column axis)`` (:data:`PICK_CELL_SIGMA`).
     range_sigma_m : float
         1-sigma along the beam, metres (:data:`PICK_RANGE_SIGMA_M`).
     """
@@ -108,11 +112,12 @@ def cell_pick_covariance(depth: Any, rows_cols: np.ndarray, cell_sigma: float = 
     g_col = np.where(np.isfinite(g_col), g_col, np.nan_to_num(g_row))
     rho = np.asarray(depth.range_m, dtype=np.float64)[r, c]
     beam = np.nan_to_num(dirs[r, c])
+    s_row, s_col = np.broadcast_to(np.asarray(cell_sigma, dtype=np.float64), (2,))
 
     def outer(a):
         return a[:, :, None] * a[:, None, :]
 
-    return (cell_sigma**2 * rho**2)[:, None, None] * (outer(g_row) + outer(g_col)) + range_sigma_m**2 * outer(beam)
+    return (rho**2)[:, None, None] * (s_row**2 * outer(g_row) + s_col**2 * outer(g_col)) + range_sigma_m**2 * outer(beam)
 
 
 def laser_tangent_covariance(T_camera_lidar: np.ndarray, points_lidar: np.ndarray, frames: np.ndarray,
