@@ -52,8 +52,8 @@ COVERAGE_MODELS = ("clicks only", "model laser", "realistic")
 #: Trials per noise model of the coverage check: the binomial standard error of a 68 % share is
 #: 1.5 points at 1000 trials (2.7 at 300, as large as the +-3 point tolerance).
 COVERAGE_TRIALS = 1000
-#: Trials per held-out scene of the pooled checks (8 scenes: 2000 trials).
-COVERAGE_TRIALS_PER_SCENE = 250
+#: Trials per held-out scene of the pooled checks (20 scenes: 2000 trials).
+COVERAGE_TRIALS_PER_SCENE = 100
 
 
 # ------------------------------------------------------------------ JIT
@@ -286,7 +286,7 @@ def coverage(quick: bool, n: int = 10) -> dict:
 
     * *clicks only* -- the sample; the picked cells' points taken as exact, clicks = their true
       projections + 1 px noise, solved with ``solve_extrinsics``: the estimator's sigma alone.
-    * *model laser* -- the held-out scenes (seeds 4-11, not used to fit the pick model), 1 px
+    * *model laser* -- the held-out scenes (seeds 4-23, not used to fit the pick model), 1 px
       clicks, each laser point the true corner plus a draw of the pick model's Gaussian: the full
       noise the reported sigma assumes (:func:`bench.pick_model.coverage`, ``laser="model"``).
     * *realistic* -- the same scenes and clicks with the careful whole-cell picks themselves
@@ -407,7 +407,7 @@ def markdown(jit, sp, pin_rows, omni_rows, cov, load, quick, cmd, laser=None) ->
              "`CalibrationResult.sigma_rpy_deg`). Nominal: 68.3 % and 95.4 %; tolerance of the target +-3 points "
              "(65.3-71.3 % and 92.4-98.4 %). 1 px clicks in all three. *clicks only*: the sample, the picked cells' "
              "points as exact laser points, clicks = their true projections + 1 px noise (`solve_extrinsics`): the "
-             "estimator's sigma alone. *model laser*: the held-out scenes (seeds 4-11, none used to fit the pick "
+             "estimator's sigma alone. *model laser*: the held-out scenes (seeds 4-23, none used to fit the pick "
              "model), each laser point the true corner plus a draw of the pick model's Gaussian "
              "(`cell_pick_covariance`), solved with that covariance: the noise the sigma assumes. *realistic*: the "
              "same scenes, corners and clicks with the careful whole-cell picks themselves (`simulate_pairs`, "
