@@ -5,3 +5,24 @@ import os
 # Before numpy loads: see calib_core/__init__.py (single-threaded BLAS).
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
+
+
+def pytest_sessionstart(session):
+    """Compile every numba kernel once, before the first test.
+
+    On a fresh checkout numba's disk cache is empty and compiling all kernels
+    takes about a minute (longer on a loaded machine).  The app compiles them
+    in a background thread, so without this the first app test's wait for its
+    live solve would also wait for the compiler, and could time out.  With a
+    warm cache this loads the kernels in about a second.
+    """
+    import sys
+    import time
+
+    from calib_core import _jit
+    from calib_core import solve
+
+    t0 = time.perf_counter()
+    _jit.warm_up()
+    solve.warm_up()
+    print(f"numba kernels compiled or loaded from the cache in {time.perf_counter() - t0:.1f} s", file=sys.stderr)
