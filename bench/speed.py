@@ -549,3 +549,34 @@ def click_time(bs: BenchScene, rep: SpeedReport, reps: Callable[[int], int]) -> 
         rep.timings.append(Timing("click", "click to updated error and overlays", total, 1,
                                   "sum of the core steps below (the app could not be started)", total))
     log(f"  click to update: {1e3 * rep.get('click', 'click to updated error and overlays').median_s:.1f} ms")
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m bench.speed --click``: only the click-to-update section, printed as a table."""
+    import argparse
+
+    from .common import SAMPLE_DIR, BenchScene, _check_points
+
+    p = argparse.ArgumentParser(prog="python -m bench.speed", description="Speed of the live steps (use bench for all).")
+    p.add_argument("--click", action="store_true", help="time only the server-side click to update on the app")
+    p.add_argument("--quick", action="store_true", help="fewer repeats")
+    args = p.parse_args(argv)
+    if not args.click:
+        p.error("only --click is runnable on its own; `python -m bench` runs every section")
+    from calib_core.synthetic import load_sample
+
+    scene = load_sample(SAMPLE_DIR)
+    rep = SpeedReport()
+    scale = 0.3 if args.quick else 1.0
+    load0 = _load()
+    click_time(BenchScene("sample", scene, _check_points(scene)), rep, lambda n: max(3, int(n * scale)))
+    print(f"load average (1 min) {load0:.1f} -> {_load():.1f} on {os.cpu_count()} cores")
+    for t in rep.timings + rep.click_breakdown:
+        print(f"{t.label:110s} median {1e3 * t.median_s:7.2f} ms, fastest {1e3 * t.min_s:7.2f} ms ({t.runs} runs)")
+    for title, text in rep.click_profiles.items():
+        print(f"\n### {title}\n\n{text}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
