@@ -93,6 +93,7 @@ class Loupes:
         self.camera_crop = self._make_camera_crop((cam_w - 1) / 2.0, (cam_h - 1) / 2.0, None)
         self._slots: dict[str, ImageSlot] = {}
         self._marks_of: dict[str, tuple] = {}  # kind -> inputs its marks were last drawn from
+        self._outline_of: dict[str, tuple] = {}  # kind -> inputs its outline on the main image was drawn from
         scene = app.server.scene
         self._handles: dict[str, Any] = {}
         self._titles: dict[str, Any] = {}
@@ -215,7 +216,9 @@ class Loupes:
         picks = app.state.picks
         crop = self.ba_crop if kind == "ba" else self.camera_crop
         main = app.slots.get(crop.key) if kind == "ba" else app.camera_slot()
-        inputs = (crop, self._slots[kind], picks, main, app.ba_window)
+        # Only the ends this loupe draws: moving a pixel leaves the BA loupe's marks alone, and vice versa.
+        ends = tuple((p.id, p.laser_rc if kind == "ba" else p.pixel) for p in picks)
+        inputs = (crop, self._slots[kind], ends, main, app.ba_window)
         if self._marks_of.get(kind) == inputs:
             return
         self._marks_of[kind] = inputs
@@ -223,6 +226,13 @@ class Loupes:
             self._draw_ba_marks(list(picks))
         else:
             self._draw_camera_marks(list(picks))
+        outline = (crop, main, app.ba_window)  # the outline on the main image does not depend on the picks
+        if self._outline_of.get(kind) != outline:
+            self._outline_of[kind] = outline
+            if kind == "ba":
+                self._draw_ba_outline()
+            else:
+                self._draw_camera_outline()
 
     def _draw_ba_marks(self, picks: list) -> None:
         nodes = self.app.nodes
@@ -240,7 +250,6 @@ class Loupes:
                                cell_half_size=(hx, hy), ticks=True)
         seg_cols = np.repeat(cols[inside], len(segs) // max(int(inside.sum()), 1) * 2, axis=0).reshape(-1, 2, 3)
         nodes.lines("/annot/loupe/ba_marks", segs, seg_cols, thickness=2.5)
-        self._draw_ba_outline()
 
     def _draw_camera_marks(self, picks: list) -> None:
         nodes = self.app.nodes
@@ -266,7 +275,6 @@ class Loupes:
             w = s.world_from_pixel(pts, z_offset=-0.011)
             ell = np.stack([w[:-1], w[1:]], axis=1)
         nodes.lines("/annot/loupe/ellipse", ell, np.full(ell.shape, (255, 200, 0), np.uint8), thickness=1.0)
-        self._draw_camera_outline()
 
     def _draw_ba_outline(self) -> None:
         """Where the BA loupe looks, as a thin rectangle on its main BA image (context)."""
