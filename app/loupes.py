@@ -93,7 +93,7 @@ class Loupes:
         self.camera_crop = self._make_camera_crop((cam_w - 1) / 2.0, (cam_h - 1) / 2.0, None)
         self._slots: dict[str, ImageSlot] = {}
         self._marks_of: dict[str, tuple] = {}  # kind -> inputs its marks were last drawn from
-        self._outline_of: dict[str, tuple] = {}  # kind -> inputs its outline on the main image was drawn from
+        self._framing_of: dict[str, tuple] = {}  # kind -> inputs its outline (and centre marker) were drawn from
         scene = app.server.scene
         self._handles: dict[str, Any] = {}
         self._titles: dict[str, Any] = {}
@@ -226,12 +226,14 @@ class Loupes:
             self._draw_ba_marks(list(picks))
         else:
             self._draw_camera_marks(list(picks))
-        outline = (crop, main, app.ba_window)  # the outline on the main image does not depend on the picks
-        if self._outline_of.get(kind) != outline:
-            self._outline_of[kind] = outline
+        # The outline on the main image (and the camera loupe's centre marker) follow the crop, not the picks.
+        framing = (crop, self._slots[kind], main, app.ba_window)
+        if self._framing_of.get(kind) != framing:
+            self._framing_of[kind] = framing
             if kind == "ba":
                 self._draw_ba_outline()
             else:
+                self._draw_camera_centre()
                 self._draw_camera_outline()
 
     def _draw_ba_marks(self, picks: list) -> None:
@@ -263,6 +265,11 @@ class Loupes:
         segs = marker_segments(s.world_from_pixel(xy[inside], z_offset=-0.01), r)
         seg_cols = np.repeat(cols[inside], len(segs) // max(int(inside.sum()), 1) * 2, axis=0).reshape(-1, 2, 3)
         nodes.lines("/annot/loupe/camera_marks", segs, seg_cols, thickness=2.5)
+
+    def _draw_camera_centre(self) -> None:
+        """The camera loupe's framed centre (hollow black-white marker) and its 3-sigma ellipse: they follow the crop."""
+        nodes = self.app.nodes
+        s, c = self._slots["camera"], self.camera_crop
         centre = s.world_from_pixel(np.array([c.center]) - [c.u0, c.v0], z_offset=-0.012)
         rr = max(2.0, 0.05 * c.n) * s.units_per_px
         hollow = marker_segments(centre, rr, ticks=True)

@@ -31,11 +31,13 @@ class OverlayDrawing:
         self._overlay_inputs: tuple | None = None  # (solve, inputs) the overlays were last drawn from
         self._loupe_marks_held = 0  # > 0: refresh() leaves the loupes' marks to loupe_marks_after()
         self._labels_drawn: dict[str, tuple[str, tuple]] | None = None  # number labels as last sent
+        self._camera_view_drawn: str | None = None  # the camera view whose markers are drawn
 
     def invalidate(self) -> None:
         """Redraw the camera-view overlays on the next :meth:`refresh` even if their inputs look unchanged."""
         self._overlay_inputs = None
         self._labels_drawn = None
+        self._camera_view_drawn = None
 
     def refresh(self) -> None:
         """Redraw markers, labels, selection and the reprojection overlays (only what changed is sent)."""
@@ -51,12 +53,14 @@ class OverlayDrawing:
             for pid, uv in predictions:
                 w = cam_slot.world_from_pixel(uv[None], z_offset=-0.015)[0] + np.array([0.06, -0.06, 0.0])
                 labels[f"/annot/labels/predicted/{pid}"] = (f"{pid}?", tuple(float(x) for x in w))
-            for other in ("raw", "panorama"):
-                if other in app.slots and other != cam_slot.key:
-                    self._marker_cache.pop(other, None)
-                    for name in (f"/annot/markers/{other}/halo", f"/annot/markers/{other}/ring",
-                                 f"/annot/selected/{other}"):
-                        app.nodes.lines(name, np.empty((0, 2, 3)), (0, 0, 0))
+            if self._camera_view_drawn != cam_slot.key:  # the camera view changed: hide the other one's markers
+                for other in ("raw", "panorama"):
+                    if other in app.slots and other != cam_slot.key:
+                        self._marker_cache.pop(other, None)
+                        for name in (f"/annot/markers/{other}/halo", f"/annot/markers/{other}/ring",
+                                     f"/annot/selected/{other}"):
+                            app.nodes.lines(name, np.empty((0, 2, 3)), (0, 0, 0))
+                self._camera_view_drawn = cam_slot.key
             drawn = self._labels_drawn
             if labels != drawn:  # usually one slot's labels moved, or none: only those are touched
                 for name in [n for n in app.nodes.label_names() if n not in labels]:
