@@ -1,5 +1,6 @@
 """The live-solve coordinator: every change of the pairs is solved in a worker thread (:class:`app.live_solver.LiveSolver`),
-shown when done, then the 3-D cloud colours (:class:`app.cloud_pane.CloudPane`), the camera-facing column window and
+shown when done (one redraw, which also draws the change itself), then the 3-D pane's camera frame and cloud colours
+(:class:`app.cloud_pane.CloudPane`; at once only while a tab shows 3-D), the camera-facing column window and
 the scan projected for the loupes' predictions are computed in their own thread.  The maths is :func:`calib_core.solve.calibrate` and :mod:`calib_core.overlays`."""
 
 from __future__ import annotations
@@ -173,7 +174,8 @@ class LiveSolveCoordinator:
                 else:
                     self._bundle = bundle
                     self.solve_error = None
-                    app.cloud.show_camera(bundle.result.T_camera_lidar)
+                    if app.view.any_tab_in_3d():  # else the hidden 3-D pane gets it with its colours (cloud job)
+                        app.cloud.show_camera(bundle.result.T_camera_lidar)
                 self.redraw()
             change_job, change_time = self._change_time
             if job == change_job:  # after the batch was handed to viser
@@ -247,8 +249,10 @@ class LiveSolveCoordinator:
         with app.ui_lock:
             if self._stopped or update.bundle is not self._bundle:
                 return  # superseded: the newer solve queued its own
-            if update.colors is not None:
-                app.cloud.show_colors(update.bundle, update.colors)
+            with app.server.atomic():  # the 3-D pane in one batch: the solved camera's frame and the colours
+                app.cloud.show_camera(update.bundle.result.T_camera_lidar)
+                if update.colors is not None:
+                    app.cloud.show_colors(update.bundle, update.colors)
             if update.facing_done:
                 self._set_facing(update.bundle, update.facing)
         if update.facing_done and app.state.view.ba_window_mode == "camera" and not self._stopped:

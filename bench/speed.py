@@ -418,8 +418,9 @@ def click_time(bs: BenchScene, rep: SpeedReport, reps: Callable[[int], int]) -> 
     residual table and 2-D overlays to viser (``app.last_update_time``, the
     app's timing hook; the click waits for ``app.wait_idle()`` before the
     next one).  Sending them to a browser is not counted, nor is the 3-D
-    cloud recolouring, which the app does after the update and only while a
-    tab shows the 3-D view.  The core steps the app runs are also timed one
+    pane (the solved camera's frame and the cloud colours), which the app
+    updates after the 2-D views unless a tab shows the 3-D view (no tab is
+    connected here).  The core steps the app runs are also timed one
     by one for the breakdown.  If the app cannot be started, only the core
     steps are timed.
     """
@@ -493,10 +494,9 @@ def click_time(bs: BenchScene, rep: SpeedReport, reps: Callable[[int], int]) -> 
                 rep.click_profiles["click handler on the calling thread (state change, redraw)"] = \
                     profile_text(lambda: (sync_only(), app.wait_idle(60)), runs=5)
             if sync_s:
-                rep.click_breakdown.append(Timing("click", "in the click handler: state change, redraw of the "
-                                                  "changed markers and the panel (the session file is written "
-                                                  "by a background thread)", float(np.median(sync_s)),
-                                                  len(sync_s), "", float(np.min(sync_s))))
+                rep.click_breakdown.append(Timing("click", "`move_pixel` returns: the change in the session journal, "
+                                                  "then its solve's redraw (which draws the moved marker too) awaited",
+                                                  float(np.median(sync_s)), len(sync_s), "", float(np.min(sync_s))))
             if job_s:
                 rep.click_breakdown.append(Timing("click", "live-solver job (`SolveBundle.seconds`): resolve, solve, "
                                                   "move the pair and BA-edge points",
@@ -537,8 +537,9 @@ def click_time(bs: BenchScene, rep: SpeedReport, reps: Callable[[int], int]) -> 
             "Measured on the real app: `CalibrationApp` on the committed sample (viser server on a local port, no "
             "browser), a click = `app.state.move_pixel` on one of the 10 pairs (what the click handler calls), "
             "stopped when the new solve's error display, residual table and 2-D overlays are handed to viser "
-            "(`CalibrationApp.last_update_time`). The app recolours the 3-D cloud after that, and only while a tab "
-            "shows the 3-D view; it writes the session file from a background thread."
+            "(`CalibrationApp.last_update_time`). The app updates the 3-D pane (camera frame, cloud colours) after "
+            "that unless a tab shows the 3-D view. The change is in the session journal (fsync'd) before the solve "
+            "starts; a background thread compacts the journal into the session YAML."
         )
     else:
         rep.click_note = (
