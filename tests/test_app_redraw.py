@@ -114,3 +114,43 @@ def test_click_shows_moved_marker_and_the_new_solve(driver):
     e_drawn = driver.drawn_display_pixels("/annot/overlay/edges", key)
     assert len(e_drawn) > 0.5 * len(e_want)
     assert cKDTree(e_want).query(e_drawn)[0].max() < 1e-2
+
+
+def test_click_during_a_slow_solve_shows_the_marker_before_the_solve(driver, monkeypatch):
+    """A solve that takes longer than the click waits for: the click draws the moved marker itself and says it is
+    solving; the overlays follow when the solve is done."""
+    import threading
+
+    import app.live_coordinator as live_module
+
+    app = driver.app
+    key = driver.camera_key
+    release = threading.Event()
+
+    def held_calibrate(*args, **kwargs):
+        release.wait(30.0)  # the solve cannot finish before the test has looked at the page
+        return calibrate(*args, **kwargs)
+
+    monkeypatch.setattr(live_module, "calibrate", held_calibrate)
+    pick = app.state.picks[5]
+    old = pick.pixel
+    new = (old[0] - 5.0, old[1] + 2.0)
+    before = driver.drawn_display_pixels("/annot/overlay/reprojected", key)
+    driver.select_in_dropdown(pick.id)
+    try:
+        notes = driver.click_camera(*new)
+        assert [n for n in notes if n[0] in ("Internal error", "Not accepted")] == [], notes
+        _moved_marker_check(driver, key, old, new)  # drawn while the solve is still held
+        assert "Solving 10 pairs" in driver.result_panel
+        assert np.array_equal(driver.drawn_display_pixels("/annot/overlay/reprojected", key), before)
+    finally:
+        release.set()
+    assert driver.wait_idle()
+    _moved_marker_check(driver, key, old, new)
+    assert "Solving" not in driver.result_panel
+    ref = calibrate(app.state.pairs(), app.depth, app.camera)
+    points, _, _ = resolve_pairs(app.state.pairs(), app.depth, app.camera)
+    T = ref.T_camera_lidar
+    want = _display(driver, app.camera.project(points @ T[:3, :3].T + T[:3, 3])[0])
+    drawn = driver.drawn_display_pixels("/annot/overlay/reprojected", key)
+    assert len(drawn) == len(want) and cKDTree(drawn).query(want)[0].max() < 1e-2
