@@ -83,9 +83,9 @@ class LiveSolveCoordinator:
     def on_state_change(self, state: AnnotationState) -> None:
         """Submit the complete pairs for solving when they changed, then redraw (subscribed to the state).
 
-        When a solve was submitted, the redraw that shows it (markers, overlays, panels from the state as it is
-        then) also shows this change: it is awaited for up to :data:`SHOW_WAIT_S`, and only if it is later than
-        that is the change drawn here first.  A click thus costs one redraw, not two.
+        When a solve was submitted to an idle solver, the redraw that shows it (markers, overlays, panels from the
+        state as it is then) also shows this change: it is awaited for up to :data:`SHOW_WAIT_S`, and only if it
+        is later than that is the change drawn here first.  A click thus costs one redraw, not two.
         """
         app = self.app
         picks = [p for p in state.picks if p.complete]
@@ -97,10 +97,12 @@ class LiveSolveCoordinator:
                 self._job += 1
                 if len(picks) >= MIN_PAIRS:
                     self.solving = True
+                    # Worth awaiting only if the solver is free: else it first finishes (and shows) an older job.
+                    solver_free = self._solver.idle
                     self._solver.submit(self._job, ([p.id for p in picks], [p.to_pair() for p in picks]))
                     # From the start of the change, its disk write included.
                     self._change_time = (self._job, state.last_change_started or time.perf_counter())
-                    solve_job = self._job
+                    solve_job = self._job if solver_free else None
                 else:
                     # Too few pairs: results of older jobs no longer describe these pairs.
                     self._result_floor = self._job
