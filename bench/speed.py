@@ -487,11 +487,11 @@ def click_time(bs: BenchScene, rep: SpeedReport, reps: Callable[[int], int]) -> 
             rep.timings.append(t)
             app_ok = np.isfinite(t.median_s)
             if app_ok and t.median_s > CLICK_TARGET_S:
-                # cProfile sees only the calling thread: the click handler's own work (the live-solver
-                # job on its worker thread shows up as waiting; its steps are profiled below).
+                # cProfile sees only the calling thread: the state change and its journal write; the solve and
+                # the one redraw run on the solver thread and show up here as waiting (its steps are profiled below).
                 sync_only = lambda: (counter.__setitem__(0, counter[0] + 1),  # noqa: E731
                                      app.state.move_pixel(pick, u0 + 0.25 * (counter[0] % 2), v0))
-                rep.click_profiles["click handler on the calling thread (state change, redraw)"] = \
+                rep.click_profiles["calling thread (state change, journal write, waiting for the solver's redraw)"] = \
                     profile_text(lambda: (sync_only(), app.wait_idle(60)), runs=5)
             if sync_s:
                 rep.click_breakdown.append(Timing("click", "`move_pixel` returns: the change in the session journal, "
