@@ -1,9 +1,11 @@
 """The live-solve coordinator: every change of the pairs is solved in a worker thread (:class:`app.live_solver.LiveSolver`),
-shown when done, then the 3-D cloud colours (:class:`app.cloud_pane.CloudPane`), the camera-facing column window and
+shown when done (one redraw, which also draws the change itself), then the 3-D pane's camera frame and cloud colours
+(:class:`app.cloud_pane.CloudPane`; at once only while a tab shows 3-D), the camera-facing column window and
 the scan projected for the loupes' predictions are computed in their own thread.  The maths is :func:`calib_core.solve.calibrate` and :mod:`calib_core.overlays`."""
 
 from __future__ import annotations
 
+import threading
 import time
 import traceback
 from typing import Any
@@ -20,6 +22,10 @@ from .ba_view import ColumnWindow, covering_window
 from .live_solver import LiveSolver
 from .state import AnnotationState
 from .ui_common import MIN_PAIRS, SolveBundle, CloudUpdate
+
+#: How long a change of the pairs waits for its solve's redraw (which draws the change too) before the changing
+#: thread redraws it itself: one redraw per click when the solve is quick, the moved marker never later than this.
+SHOW_WAIT_S = 0.03
 
 
 class LiveSolveCoordinator:
@@ -45,6 +51,8 @@ class LiveSolveCoordinator:
         self._facing: ColumnWindow | None = None  # from the last good solve it was computed for
         self._facing_of: SolveBundle | None = None  # the solve ``_facing`` was computed for
         self._stopped = False
+        self._shown = threading.Condition()  # notified when a solve has been shown (redrawn)
+        self._shown_job = 0  # the newest job whose solve was shown
         self._solver: LiveSolver | None = None
         self._cloud_worker: LiveSolver | None = None
 
@@ -56,6 +64,8 @@ class LiveSolveCoordinator:
     def stop(self) -> None:
         """Stop both worker threads; results that arrive later are dropped."""
         self._stopped = True
+        with self._shown:
+            self._shown.notify_all()
         for worker in (self._solver, self._cloud_worker):
             if worker is not None:
                 worker.stop()
@@ -71,19 +81,28 @@ class LiveSolveCoordinator:
         return self._facing
 
     def on_state_change(self, state: AnnotationState) -> None:
-        """Submit the complete pairs for solving when they changed, then redraw (subscribed to the state)."""
+        """Submit the complete pairs for solving when they changed, then redraw (subscribed to the state).
+
+        When a solve was submitted to an idle solver, the redraw that shows it (markers, overlays, panels from the
+        state as it is then) also shows this change: it is awaited for up to :data:`SHOW_WAIT_S`, and only if it
+        is later than that is the change drawn here first.  A click thus costs one redraw, not two.
+        """
         app = self.app
         picks = [p for p in state.picks if p.complete]
         key = tuple((p.id, p.to_pair()) for p in picks)
+        solve_job = None
         with app.ui_lock:
             if key != self._submitted:
                 self._submitted = key
                 self._job += 1
                 if len(picks) >= MIN_PAIRS:
                     self.solving = True
+                    # Worth awaiting only if the solver is free: else it first finishes (and shows) an older job.
+                    solver_free = self._solver.idle
                     self._solver.submit(self._job, ([p.id for p in picks], [p.to_pair() for p in picks]))
                     # From the start of the change, its disk write included.
                     self._change_time = (self._job, state.last_change_started or time.perf_counter())
+                    solve_job = self._job if solver_free else None
                 else:
                     # Too few pairs: results of older jobs no longer describe these pairs.
                     self._result_floor = self._job
@@ -91,10 +110,29 @@ class LiveSolveCoordinator:
                     self.solve_error = None
                     self.solving = False
                     app.cloud.show_camera(None)
-        try:
-            app.overlays.refresh()
-        finally:
-            self.show_panels()  # the panels follow the state even if a drawing failed
+        # Not while this thread holds the UI lock: the solver could not redraw before the wait ends.
+        if solve_job is not None and not self._owns_ui_lock() and self._wait_shown(solve_job, SHOW_WAIT_S):
+            return
+        self.redraw()
+
+    def redraw(self) -> None:
+        """Redraw markers, overlays and both panels from the state as it is now."""
+        app = self.app
+        with app.ui_lock, app.server.atomic():
+            try:
+                app.overlays.refresh()
+            finally:
+                self.show_panels()  # the panels follow the state even if a drawing failed
+
+    def _owns_ui_lock(self) -> bool:
+        # RLock's ownership test (what threading.Condition uses); a lock without one counts as not held.
+        owned = getattr(self.app.ui_lock, "_is_owned", None)
+        return bool(owned()) if owned is not None else False
+
+    def _wait_shown(self, job: int, timeout: float) -> bool:
+        """Wait until the solve of ``job`` (or a newer one) has been shown; False on timeout."""
+        with self._shown:
+            return self._shown.wait_for(lambda: self._shown_job >= job or self._stopped, timeout) and not self._stopped
 
     def show_panels(self) -> None:
         """Show the pairs panel and the calibration panel as they are now."""
@@ -128,21 +166,26 @@ class LiveSolveCoordinator:
             if job < self._result_floor or self._stopped:
                 return
             self.solving = job < self._job
-            if error is not None:
-                msg = str(error) if isinstance(error, CalibError) else f"{type(error).__name__}: {error}"
-                self.solve_error = " ".join(msg.split())
-                if not isinstance(error, CalibError):
-                    traceback.print_exception(error)
-            else:
-                self._bundle = bundle
-                self.solve_error = None
-                app.cloud.show_camera(bundle.result.T_camera_lidar)
-            app.overlays.refresh()
-            self.show_panels()
+            # One message batch: viser's event loop is woken once, when all of it is queued.
+            with app.server.atomic():
+                if error is not None:
+                    msg = str(error) if isinstance(error, CalibError) else f"{type(error).__name__}: {error}"
+                    self.solve_error = " ".join(msg.split())
+                    if not isinstance(error, CalibError):
+                        traceback.print_exception(error)
+                else:
+                    self._bundle = bundle
+                    self.solve_error = None
+                    if app.view.any_tab_in_3d():  # else the hidden 3-D pane gets it with its colours (cloud job)
+                        app.cloud.show_camera(bundle.result.T_camera_lidar)
+                self.redraw()
             change_job, change_time = self._change_time
-            if job == change_job:
+            if job == change_job:  # after the batch was handed to viser
                 now = time.perf_counter()
                 self._last_update = (now - change_time, now)
+        with self._shown:
+            self._shown_job = max(self._shown_job, job)
+            self._shown.notify_all()
         self.request_cloud()
 
     def request_cloud(self) -> None:
@@ -208,8 +251,10 @@ class LiveSolveCoordinator:
         with app.ui_lock:
             if self._stopped or update.bundle is not self._bundle:
                 return  # superseded: the newer solve queued its own
-            if update.colors is not None:
-                app.cloud.show_colors(update.bundle, update.colors)
+            with app.server.atomic():  # the 3-D pane in one batch: the solved camera's frame and the colours
+                app.cloud.show_camera(update.bundle.result.T_camera_lidar)
+                if update.colors is not None:
+                    app.cloud.show_colors(update.bundle, update.colors)
             if update.facing_done:
                 self._set_facing(update.bundle, update.facing)
         if update.facing_done and app.state.view.ba_window_mode == "camera" and not self._stopped:

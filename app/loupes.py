@@ -93,6 +93,7 @@ class Loupes:
         self.camera_crop = self._make_camera_crop((cam_w - 1) / 2.0, (cam_h - 1) / 2.0, None)
         self._slots: dict[str, ImageSlot] = {}
         self._marks_of: dict[str, tuple] = {}  # kind -> inputs its marks were last drawn from
+        self._framing_of: dict[str, tuple] = {}  # kind -> inputs its outline (and centre marker) were drawn from
         scene = app.server.scene
         self._handles: dict[str, Any] = {}
         self._titles: dict[str, Any] = {}
@@ -215,7 +216,9 @@ class Loupes:
         picks = app.state.picks
         crop = self.ba_crop if kind == "ba" else self.camera_crop
         main = app.slots.get(crop.key) if kind == "ba" else app.camera_slot()
-        inputs = (crop, self._slots[kind], picks, main, app.ba_window)
+        # Only the ends this loupe draws: moving a pixel leaves the BA loupe's marks alone, and vice versa.
+        ends = tuple((p.id, p.laser_rc if kind == "ba" else p.pixel) for p in picks)
+        inputs = (crop, self._slots[kind], ends, main, app.ba_window)
         if self._marks_of.get(kind) == inputs:
             return
         self._marks_of[kind] = inputs
@@ -223,6 +226,15 @@ class Loupes:
             self._draw_ba_marks(list(picks))
         else:
             self._draw_camera_marks(list(picks))
+        # The outline on the main image (and the camera loupe's centre marker) follow the crop, not the picks.
+        framing = (crop, self._slots[kind], main, app.ba_window)
+        if self._framing_of.get(kind) != framing:
+            self._framing_of[kind] = framing
+            if kind == "ba":
+                self._draw_ba_outline()
+            else:
+                self._draw_camera_centre()
+                self._draw_camera_outline()
 
     def _draw_ba_marks(self, picks: list) -> None:
         nodes = self.app.nodes
@@ -240,7 +252,6 @@ class Loupes:
                                cell_half_size=(hx, hy), ticks=True)
         seg_cols = np.repeat(cols[inside], len(segs) // max(int(inside.sum()), 1) * 2, axis=0).reshape(-1, 2, 3)
         nodes.lines("/annot/loupe/ba_marks", segs, seg_cols, thickness=2.5)
-        self._draw_ba_outline()
 
     def _draw_camera_marks(self, picks: list) -> None:
         nodes = self.app.nodes
@@ -254,6 +265,11 @@ class Loupes:
         segs = marker_segments(s.world_from_pixel(xy[inside], z_offset=-0.01), r)
         seg_cols = np.repeat(cols[inside], len(segs) // max(int(inside.sum()), 1) * 2, axis=0).reshape(-1, 2, 3)
         nodes.lines("/annot/loupe/camera_marks", segs, seg_cols, thickness=2.5)
+
+    def _draw_camera_centre(self) -> None:
+        """The camera loupe's framed centre (hollow black-white marker) and its 3-sigma ellipse: they follow the crop."""
+        nodes = self.app.nodes
+        s, c = self._slots["camera"], self.camera_crop
         centre = s.world_from_pixel(np.array([c.center]) - [c.u0, c.v0], z_offset=-0.012)
         rr = max(2.0, 0.05 * c.n) * s.units_per_px
         hollow = marker_segments(centre, rr, ticks=True)
@@ -266,7 +282,6 @@ class Loupes:
             w = s.world_from_pixel(pts, z_offset=-0.011)
             ell = np.stack([w[:-1], w[1:]], axis=1)
         nodes.lines("/annot/loupe/ellipse", ell, np.full(ell.shape, (255, 200, 0), np.uint8), thickness=1.0)
-        self._draw_camera_outline()
 
     def _draw_ba_outline(self) -> None:
         """Where the BA loupe looks, as a thin rectangle on its main BA image (context)."""

@@ -30,10 +30,14 @@ class OverlayDrawing:
         self._marker_cache: dict[str, tuple[tuple, dict]] = {}  # slot key -> (inputs, number labels) last drawn
         self._overlay_inputs: tuple | None = None  # (solve, inputs) the overlays were last drawn from
         self._loupe_marks_held = 0  # > 0: refresh() leaves the loupes' marks to loupe_marks_after()
+        self._labels_drawn: dict[str, tuple[str, tuple]] | None = None  # number labels as last sent
+        self._camera_view_drawn: str | None = None  # the camera view whose markers are drawn
 
     def invalidate(self) -> None:
         """Redraw the camera-view overlays on the next :meth:`refresh` even if their inputs look unchanged."""
         self._overlay_inputs = None
+        self._labels_drawn = None
+        self._camera_view_drawn = None
 
     def refresh(self) -> None:
         """Redraw markers, labels, selection and the reprojection overlays (only what changed is sent)."""
@@ -41,24 +45,30 @@ class OverlayDrawing:
         with app.ui_lock, app.server.atomic():
             picks = {p.id: p for p in app.state.picks}
             selected = app.state.selected
-            labels: dict[str, tuple[str, np.ndarray]] = {}
+            labels: dict[str, tuple[str, tuple]] = {}
             cam_slot = app.camera_slot()
             for key in (*app.ba_keys, cam_slot.key):
                 labels.update(self._draw_markers(key, picks, selected))
             predictions = self.predictions(picks)
             for pid, uv in predictions:
-                w = cam_slot.world_from_pixel(uv[None], z_offset=-0.015)[0]
-                labels[f"/annot/labels/predicted/{pid}"] = (f"{pid}?", w + np.array([0.06, -0.06, 0.0]))
-            for other in ("raw", "panorama"):
-                if other in app.slots and other != cam_slot.key:
-                    self._marker_cache.pop(other, None)
-                    for name in (f"/annot/markers/{other}/halo", f"/annot/markers/{other}/ring",
-                                 f"/annot/selected/{other}"):
-                        app.nodes.lines(name, np.empty((0, 2, 3)), (0, 0, 0))
-            for name in [n for n in app.nodes.label_names() if n not in labels]:
-                app.nodes.remove(name)
-            for name, (text, pos) in labels.items():
-                app.nodes.label(name, text, pos)
+                w = cam_slot.world_from_pixel(uv[None], z_offset=-0.015)[0] + np.array([0.06, -0.06, 0.0])
+                labels[f"/annot/labels/predicted/{pid}"] = (f"{pid}?", tuple(float(x) for x in w))
+            if self._camera_view_drawn != cam_slot.key:  # the camera view changed: hide the other one's markers
+                for other in ("raw", "panorama"):
+                    if other in app.slots and other != cam_slot.key:
+                        self._marker_cache.pop(other, None)
+                        for name in (f"/annot/markers/{other}/halo", f"/annot/markers/{other}/ring",
+                                     f"/annot/selected/{other}"):
+                            app.nodes.lines(name, np.empty((0, 2, 3)), (0, 0, 0))
+                self._camera_view_drawn = cam_slot.key
+            drawn = self._labels_drawn
+            if labels != drawn:  # usually one slot's labels moved, or none: only those are touched
+                for name in [n for n in app.nodes.label_names() if n not in labels]:
+                    app.nodes.remove(name)
+                for name, (text, pos) in labels.items():
+                    if drawn is None or drawn.get(name) != (text, pos):
+                        app.nodes.label(name, text, pos)
+                self._labels_drawn = labels
             self._draw_overlays(picks, predictions)
             if getattr(app, "loupes", None) is not None and not self._loupe_marks_held:  # None while building
                 app.loupes.draw_marks()
@@ -103,15 +113,19 @@ class OverlayDrawing:
         uv, ok = app.display_from_pixels(np.array([p.pixel for p in sel], dtype=np.float64).reshape(-1, 2))
         return [p.id for p, good in zip(sel, ok) if good], uv[ok]
 
-    def _draw_markers(self, key: str, picks: dict[int, Pick], selected: int | None) -> dict[str, tuple[str, np.ndarray]]:
+    def _draw_markers(self, key: str, picks: dict[int, Pick], selected: int | None) -> dict[str, tuple[str, tuple]]:
         """Draw the pick markers of slot ``key``; returns its number labels.  Skipped when nothing on it changed."""
         app = self.app
         slot = app.slots[key]
-        ids, uv = self.pick_ends(key)
-        inputs = (slot, tuple(ids), uv.tobytes(), selected if selected in ids else None)
+        # What the drawing depends on, known before mapping any end: the ends of this slot's kind, the slot,
+        # and the BA column window (BA) or the camera view (its slot key).
+        is_ba = key in app.ba_keys
+        ends = tuple((p.id, p.laser_rc if is_ba else p.pixel) for p in picks.values())
+        inputs = (slot, app.ba_window if is_ba else None, ends, selected)
         cached = self._marker_cache.get(key)
         if cached is not None and cached[0] == inputs:
             return cached[1]
+        ids, uv = self.pick_ends(key)
         world = slot.world_from_pixel(uv, z_offset=-0.01)
         colors = np.array([picks[i].color for i in ids], np.uint8).reshape(-1, 3)
         r = self.ring_radius(slot)
@@ -128,8 +142,8 @@ class OverlayDrawing:
         # One colour per segment of whatever the ring is made of (ticks included).
         sel_segs = marker_segments(world[sel] + [0.0, 0.0, 0.003], 1.5 * r)
         app.nodes.lines(f"/annot/selected/{key}", sel_segs, np.full(sel_segs.shape, 255, np.uint8), thickness=4.0)
-        labels = {f"/annot/labels/{key}/{i}": (str(i), w + np.array([0.75 * r, -0.75 * r, -0.005]))
-                  for i, w in zip(ids, world)}
+        offset = np.array([0.75 * r, -0.75 * r, -0.005])
+        labels = {f"/annot/labels/{key}/{i}": (str(i), tuple(float(x) for x in w + offset)) for i, w in zip(ids, world)}
         self._marker_cache[key] = (inputs, labels)
         return labels
 

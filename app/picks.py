@@ -6,6 +6,7 @@ Pure Python plus numpy; no maths, no viser.
 from __future__ import annotations
 
 import colorsys
+import functools
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Sequence
@@ -18,6 +19,7 @@ SESSION_FORMAT = "ba-calib-session"
 SESSION_VERSION = 1
 
 
+@functools.lru_cache(maxsize=4096)  # called per pick and redraw
 def pair_color(pick_id: int) -> tuple[int, int, int]:
     """A stable, well-separated RGB colour for a pick id (golden-ratio hues)."""
     hue = (0.08 + 0.61803398875 * int(pick_id)) % 1.0

@@ -70,12 +70,16 @@ class SceneNodes:
         if old is not None and old[1][0] == "points" and old[1][4] == shape:
             handle, (_, old_pts, old_cols, old_size, _) = old
             if old_pts.shape == pts.shape and old_cols.shape == cols.shape:
-                if old_size == size and np.array_equal(old_pts, pts) and np.array_equal(old_cols, cols):
+                same_pts, same_cols = np.array_equal(old_pts, pts), np.array_equal(old_cols, cols)
+                if old_size == size and same_pts and same_cols:
                     return
-                # In place: viser sends only the properties that differ.
-                handle.points = pts
-                handle.colors = cols
-                handle.point_size = size
+                # In place, setting only what differs (each assignment costs viser a type cast and a compare).
+                if not same_pts:
+                    handle.points = pts
+                if not same_cols:
+                    handle.colors = cols
+                if old_size != size:
+                    handle.point_size = size
                 self.drawn[name] = (handle, ("points", pts, cols, size, shape))
                 return
         handle = self.scene.add_point_cloud(
@@ -110,11 +114,14 @@ class SceneNodes:
         if old is not None and old[1][0] == "lines" and old[1][3] == thickness:
             handle, (_, old_segs, old_cols, _) = old
             if old_segs.shape == segs.shape and old_cols.shape == cols.shape:
-                if np.array_equal(old_segs, segs) and np.array_equal(old_cols, cols):
+                same_segs, same_cols = np.array_equal(old_segs, segs), np.array_equal(old_cols, cols)
+                if same_segs and same_cols:
                     return
-                # Same number of segments: update in place (viser skips unchanged arrays).
-                handle.points = segs
-                handle.colors = cols
+                # Same number of segments: update in place, only what differs.
+                if not same_segs:
+                    handle.points = segs
+                if not same_cols:
+                    handle.colors = cols
                 self.drawn[name] = (handle, ("lines", segs, cols, thickness))
                 return
         # A new node, or a different number of segments (points and colours must change together).

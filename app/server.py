@@ -16,6 +16,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from . import blas_threads
 from .action_queue import ActionQueue, notify_tabs
 from .calibration_panel import CalibrationPanel
 from .camera_view import camera_views
@@ -129,6 +130,8 @@ class CalibrationApp:
         self.actions = ActionQueue(self.notify)  # the ordered worker every user action runs on
         self.host, self.port = host, self.server.get_port()
         self.url = page_url(host, self.port, self.access.token)
+        blas_threads.limit()  # BLAS's spinning threads would take a core from the clicks' solves and redraws
+        self._blas_limited = True
         try:
             # Redraws diff against what the scene shows, so a click only sends the nodes it changed.
             self.nodes = SceneNodes(self.server.scene)
@@ -159,6 +162,7 @@ class CalibrationApp:
             self.live.stop()
             self.server.stop()
             self.state.close()
+            blas_threads.unlimit()
             raise
 
     def _on_connect(self, client: Any) -> None:
@@ -247,3 +251,6 @@ class CalibrationApp:
             self.state.close()
         finally:
             self.server.stop()
+            if self._blas_limited:  # once per app, however often stop() is called
+                self._blas_limited = False
+                blas_threads.unlimit()

@@ -124,6 +124,25 @@ class AppDriver:
             return np.empty((0, 3)), np.empty((0, 3), np.uint8)
         return np.asarray(entry[1][1]), np.asarray(entry[1][2])
 
+    def drawn_display_pixels(self, name: str, key: str) -> np.ndarray:
+        """Display pixels ``(N, 2)`` on image ``key`` of the points scene node ``name`` draws (as sent to viser)."""
+        world, _ = self.drawn_points(name)
+        return self.app.view.slot_of(key).pixel_from_world(world)
+
+    def drawn_segment_pixels(self, name: str, key: str) -> np.ndarray:
+        """Display pixels ``(N, 2, 2)`` on image ``key`` of the line segments node ``name`` draws (padding dropped)."""
+        segs = self.app.nodes.segments(name)
+        return self.app.view.slot_of(key).pixel_from_world(segs.reshape(-1, 3)).reshape(-1, 2, 2)
+
+    def drawn_marker_pixels(self, key: str) -> np.ndarray:
+        """Display pixels ``(N, 2)`` on image ``key`` of the pick markers drawn there: the centres of the rings as sent."""
+        from .ui_common import RING_SEGMENTS, marker_segments
+
+        segs = self.app.nodes.segments(f"/annot/markers/{key}/ring")
+        per = len(marker_segments(np.zeros((1, 3)), 1.0, cell_half_size=(1.0, 1.0) if key in self.app.ba_keys else None))
+        rings = segs.reshape(-1, per, 2, 3)[:, :RING_SEGMENTS, 0, :].astype(np.float64)
+        return self.app.view.slot_of(key).pixel_from_world(rings.mean(axis=1))
+
     def loupe_view(self, kind: str) -> dict:
         """What loupe ``kind`` shows: ``{"center", "size"}`` (+ ``"key"`` for BA): its centre cell ``(row, col)``
         or pixel ``(u, v)`` and its width in cells or pixels."""

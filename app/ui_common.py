@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import Any
 
@@ -115,6 +116,14 @@ def marker_segments(centres: np.ndarray, radius: float, cell_half_size: tuple[fl
     around the centre (the picked cell).  Lines lie in the plane z = const.
     """
     c = np.asarray(centres, dtype=np.float64).reshape(-1, 3)
+    hs = None if cell_half_size is None else (float(cell_half_size[0]), float(cell_half_size[1]))
+    segs = _marker_shape(float(radius), hs, bool(ticks))  # (K, 2, 3)
+    return (c[:, None, None, :] + segs[None]).reshape(-1, 2, 3)
+
+
+@functools.lru_cache(maxsize=64)
+def _marker_shape(radius: float, cell_half_size: tuple[float, float] | None, ticks: bool) -> np.ndarray:
+    """The segments ``(K, 2, 3)`` of one marker around the origin (read-only; a redraw reuses it)."""
     a = np.linspace(0.0, 2.0 * np.pi, RING_SEGMENTS + 1)
     circle = radius * np.stack([np.cos(a), np.sin(a), np.zeros_like(a)], axis=1)
     shape = [np.stack([circle[:-1], circle[1:]], axis=1)]
@@ -125,8 +134,9 @@ def marker_segments(centres: np.ndarray, radius: float, cell_half_size: tuple[fl
         hx, hy = cell_half_size
         corners = np.array([[-hx, -hy, 0], [hx, -hy, 0], [hx, hy, 0], [-hx, hy, 0]])
         shape.append(np.stack([corners, np.roll(corners, -1, axis=0)], axis=1))
-    segs = np.concatenate(shape)  # (K, 2, 3)
-    return (c[:, None, None, :] + segs[None]).reshape(-1, 2, 3)
+    segs = np.concatenate(shape)
+    segs.flags.writeable = False
+    return segs
 
 
 class _Action:

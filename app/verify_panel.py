@@ -198,9 +198,14 @@ class VerifyPanel:
         if n_fit < MIN_PAIRS:
             raise CalibError(f"{n_fit} fit pairs; verification needs at least {MIN_PAIRS}")
         result = calibrate(pairs, app.depth, app.camera)
+        # Between the steps too: a click that arrives meanwhile should not share the cores with stale work.
+        if key != self._wanted or self._stopped:
+            return None
         report = verify_pairs(pairs, app.depth, app.camera, result=result,
                               T_reference=None if ref is None else ref[0],
                               scene_points_lidar=self._scene_points)
+        if key != self._wanted or self._stopped:
+            return None
         cell = max(4, int(np.ceil(app.camera.width / 64)))
         heat = expected_error_map(result.T_camera_lidar, result.covariance_6x6, app.camera, self._scene_points,
                                   cell_px=cell)

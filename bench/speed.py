@@ -395,8 +395,8 @@ def solve_parts(bs: BenchScene, rep: SpeedReport, reps: Callable[[int], int], n:
         rep.solve_breakdown.append(timed(sub, "solve parts", label, fn, reps(40), warmup=2))
 
 
-#: Issue 5 target for the server-side click-to-update time, seconds.
-CLICK_TARGET_S = 0.05
+#: Issue 12 target for the server-side click-to-update time, seconds (issue 5 asked for 50 ms).
+CLICK_TARGET_S = 0.010
 
 
 def _free_port() -> int:
@@ -418,8 +418,9 @@ def click_time(bs: BenchScene, rep: SpeedReport, reps: Callable[[int], int]) -> 
     residual table and 2-D overlays to viser (``app.last_update_time``, the
     app's timing hook; the click waits for ``app.wait_idle()`` before the
     next one).  Sending them to a browser is not counted, nor is the 3-D
-    cloud recolouring, which the app does after the update and only while a
-    tab shows the 3-D view.  The core steps the app runs are also timed one
+    pane (the solved camera's frame and the cloud colours), which the app
+    updates after the 2-D views unless a tab shows the 3-D view (no tab is
+    connected here).  The core steps the app runs are also timed one
     by one for the breakdown.  If the app cannot be started, only the core
     steps are timed.
     """
@@ -486,17 +487,16 @@ def click_time(bs: BenchScene, rep: SpeedReport, reps: Callable[[int], int]) -> 
             rep.timings.append(t)
             app_ok = np.isfinite(t.median_s)
             if app_ok and t.median_s > CLICK_TARGET_S:
-                # cProfile sees only the calling thread: the click handler's own work (the live-solver
-                # job on its worker thread shows up as waiting; its steps are profiled below).
+                # cProfile sees only the calling thread: the state change and its journal write; the solve and
+                # the one redraw run on the solver thread and show up here as waiting (its steps are profiled below).
                 sync_only = lambda: (counter.__setitem__(0, counter[0] + 1),  # noqa: E731
                                      app.state.move_pixel(pick, u0 + 0.25 * (counter[0] % 2), v0))
-                rep.click_profiles["click handler on the calling thread (state change, redraw)"] = \
+                rep.click_profiles["calling thread (state change, journal write, waiting for the solver's redraw)"] = \
                     profile_text(lambda: (sync_only(), app.wait_idle(60)), runs=5)
             if sync_s:
-                rep.click_breakdown.append(Timing("click", "in the click handler: state change, redraw of the "
-                                                  "changed markers and the panel (the session file is written "
-                                                  "by a background thread)", float(np.median(sync_s)),
-                                                  len(sync_s), "", float(np.min(sync_s))))
+                rep.click_breakdown.append(Timing("click", "`move_pixel` returns: the change in the session journal, "
+                                                  "then its solve's redraw (which draws the moved marker too) awaited",
+                                                  float(np.median(sync_s)), len(sync_s), "", float(np.min(sync_s))))
             if job_s:
                 rep.click_breakdown.append(Timing("click", "live-solver job (`SolveBundle.seconds`): resolve, solve, "
                                                   "move the pair and BA-edge points",
@@ -537,8 +537,9 @@ def click_time(bs: BenchScene, rep: SpeedReport, reps: Callable[[int], int]) -> 
             "Measured on the real app: `CalibrationApp` on the committed sample (viser server on a local port, no "
             "browser), a click = `app.state.move_pixel` on one of the 10 pairs (what the click handler calls), "
             "stopped when the new solve's error display, residual table and 2-D overlays are handed to viser "
-            "(`CalibrationApp.last_update_time`). The app recolours the 3-D cloud after that, and only while a tab "
-            "shows the 3-D view; it writes the session file from a background thread."
+            "(`CalibrationApp.last_update_time`). The app updates the 3-D pane (camera frame, cloud colours) after "
+            "that unless a tab shows the 3-D view. The change is in the session journal (fsync'd) before the solve "
+            "starts; a background thread compacts the journal into the session YAML."
         )
     else:
         rep.click_note = (
@@ -549,3 +550,34 @@ def click_time(bs: BenchScene, rep: SpeedReport, reps: Callable[[int], int]) -> 
         rep.timings.append(Timing("click", "click to updated error and overlays", total, 1,
                                   "sum of the core steps below (the app could not be started)", total))
     log(f"  click to update: {1e3 * rep.get('click', 'click to updated error and overlays').median_s:.1f} ms")
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m bench.speed --click``: only the click-to-update section, printed as a table."""
+    import argparse
+
+    from .common import SAMPLE_DIR, BenchScene, _check_points
+
+    p = argparse.ArgumentParser(prog="python -m bench.speed", description="Speed of the live steps (use bench for all).")
+    p.add_argument("--click", action="store_true", help="time only the server-side click to update on the app")
+    p.add_argument("--quick", action="store_true", help="fewer repeats")
+    args = p.parse_args(argv)
+    if not args.click:
+        p.error("only --click is runnable on its own; `python -m bench` runs every section")
+    from calib_core.synthetic import load_sample
+
+    scene = load_sample(SAMPLE_DIR)
+    rep = SpeedReport()
+    scale = 0.3 if args.quick else 1.0
+    load0 = _load()
+    click_time(BenchScene("sample", scene, _check_points(scene)), rep, lambda n: max(3, int(n * scale)))
+    print(f"load average (1 min) {load0:.1f} -> {_load():.1f} on {os.cpu_count()} cores")
+    for t in rep.timings + rep.click_breakdown:
+        print(f"{t.label:110s} median {1e3 * t.median_s:7.2f} ms, fastest {1e3 * t.min_s:7.2f} ms ({t.runs} runs)")
+    for title, text in rep.click_profiles.items():
+        print(f"\n### {title}\n\n{text}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
