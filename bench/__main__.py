@@ -237,7 +237,9 @@ def issue12_targets(sp, vs: dict, su: dict | None) -> list[tuple]:
         "realistic": "held-out scenes, the whole-cell picks themselves, pooled over the scenes (one scan's pick "
                      "errors are fixed); per scene in the coverage section",
     }
-    for model in solve_vs_opencv.COVERAGE_MODELS:
+    from .solve_vs_opencv import COVERAGE_MODELS
+
+    for model in COVERAGE_MODELS:
         c = cov.get(model)
         if not c:
             continue
