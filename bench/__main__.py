@@ -214,10 +214,17 @@ def issue12_targets(sp, vs: dict, su: dict | None) -> list[tuple]:
         clicks = max(max(r["ours_clicks"][0] / r["bound_clicks"][0], r["ours_clicks"][1] / r["bound_clicks"][1])
                      for r in omni)
         ns = ", ".join(str(r["n"]) for r in omni)
-        rows.append((f"accuracy, OCam, realistic picks: mean errors / Cramer-Rao bound, n = {ns}", "<= 1.05",
+        rows.append((f"accuracy, OCam, realistic picks on the sample: mean errors / Cramer-Rao bound, n = {ns}", "<= 1.05",
                      f"worst {real:.3f}", real <= 1.05, None,
                      "the laser pick model fitted to ground truth (bench/pick_model.py); the pick errors are fixed "
                      "per corner of the one scene, so ratios scatter on both sides of 1"))
+        pooled = vs.get("pooled_rows") or []
+        if pooled:
+            worst = max(max(r["ours"][0] / r["bound"][0], r["ours"][1] / r["bound"][1]) for r in pooled)
+            rows.append((f"accuracy, OCam, realistic picks on {pooled[0]['scenes']} held-out scenes: / bound, "
+                         f"n = {', '.join(str(r['n']) for r in pooled)}", "<= 1.05", f"worst {worst:.3f}",
+                         worst <= 1.05, None, f"{pooled[0]['trials']} trials per n, a few on each scene (seeds 4-23, "
+                         "not used to fit the pick model)"))
         rows.append((f"accuracy, OCam, clicks only (exact laser points): / bound, n = {ns}", "<= 1.05",
                      f"worst {clicks:.3f}", clicks <= 1.05, None, "the estimator alone"))
     for label, key, limit in (("BA images, 4 directions, 128x2048", "128x2048", 2e-3),
