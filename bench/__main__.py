@@ -189,6 +189,8 @@ PARAM_NAMES = ("roll", "pitch", "yaw", "tx", "ty", "tz")
 
 def issue12_targets(sp, vs: dict, su: dict | None) -> list[tuple]:
     """Rows ``(target, required, measured, ok, profile step or None, note)`` of issue 12's targets."""
+    from .solve_vs_opencv import COVERAGE_MODELS, worst_ratio
+
     rows: list[tuple] = []
     by = {(r["camera"], r["n"]): r for r in vs["speed"]}
     for n, limit in ((10, 1e-4), (100, 2e-4), (1000, 1e-3)):
@@ -210,9 +212,8 @@ def issue12_targets(sp, vs: dict, su: dict | None) -> list[tuple]:
                      "<= 1.02", f"worst {worst:.3f}", worst <= 1.02, None, "rotation and translation"))
     omni = vs["omni_rows"]
     if omni:
-        real = max(max(r["ours"][0] / r["bound"][0], r["ours"][1] / r["bound"][1]) for r in omni)
-        clicks = max(max(r["ours_clicks"][0] / r["bound_clicks"][0], r["ours_clicks"][1] / r["bound_clicks"][1])
-                     for r in omni)
+        real = worst_ratio(omni)
+        clicks = worst_ratio(omni, "ours_clicks", "bound_clicks")
         ns = ", ".join(str(r["n"]) for r in omni)
         rows.append((f"accuracy, OCam, realistic picks on the sample: mean errors / Cramer-Rao bound, n = {ns}", "<= 1.05",
                      f"worst {real:.3f}", real <= 1.05, None,
@@ -220,7 +221,7 @@ def issue12_targets(sp, vs: dict, su: dict | None) -> list[tuple]:
                      "per corner of the one scene, so ratios scatter on both sides of 1"))
         pooled = vs.get("pooled_rows") or []
         if pooled:
-            worst = max(max(r["ours"][0] / r["bound"][0], r["ours"][1] / r["bound"][1]) for r in pooled)
+            worst = worst_ratio(pooled)
             rows.append((f"accuracy, OCam, realistic picks on {pooled[0]['scenes']} held-out scenes: / bound, "
                          f"n = {', '.join(str(r['n']) for r in pooled)}", "<= 1.05", f"worst {worst:.3f}",
                          worst <= 1.05, None, f"{pooled[0]['trials']} trials per n, a few on each scene (seeds 4-23, "
@@ -244,8 +245,6 @@ def issue12_targets(sp, vs: dict, su: dict | None) -> list[tuple]:
         "realistic": "held-out scenes, the whole-cell picks themselves, pooled over the scenes (one scan's pick "
                      "errors are fixed); per scene in the coverage section",
     }
-    from .solve_vs_opencv import COVERAGE_MODELS
-
     for model in COVERAGE_MODELS:
         c = cov.get(model)
         if not c:

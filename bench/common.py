@@ -156,6 +156,15 @@ def pose_error(T_est: np.ndarray, T_true: np.ndarray, camera=None, check_points_
     return PoseError(d_rpy, d_t, rotation_angle_deg(T_est[:3, :3], T_true[:3, :3]), float(np.linalg.norm(d_t)), px)
 
 
+def within_sigma(result, T_true: np.ndarray) -> np.ndarray:
+    """``(2, 6)`` bool: is each error (roll, pitch, yaw, tx, ty, tz of :func:`pose_error`) within 1 and 2 of
+    ``result``'s reported sigma (``sigma_rpy_deg``, ``sigma_translation_m``)?  One trial of a coverage check."""
+    e = pose_error(result.T_camera_lidar, T_true)
+    err = np.abs(np.concatenate([e.rpy_deg, e.translation_m]))
+    sig = np.concatenate([result.sigma_rpy_deg, result.sigma_translation_m])
+    return err <= np.array([[1.0], [2.0]]) * sig
+
+
 # ---------------------------------------------------------------------- timing
 def time_median(fn: Callable[[], Any], repeats: int, warmup: int = 1, min_total_s: float = 0.0) -> tuple[float, int, float]:
     """Median and minimum wall time of ``fn()`` in seconds, and the number of timed runs.

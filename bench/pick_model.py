@@ -138,9 +138,8 @@ def coverage(seeds: tuple[int, ...], trials: int, n: int = 10, cell_sigma=PICK_C
     from calib_core.solve import calibrate, solve_extrinsics
     from calib_core.synthetic import simulate_pairs
     from calib_core.synthetic.picks import laser_picks
-    from calib_core.transforms import rpy_deg_from_R
 
-    from .common import BENCH_SEED, wrap_deg
+    from .common import BENCH_SEED, within_sigma
 
     if laser not in ("picks", "model"):
         raise ValueError(f"laser must be 'picks' or 'model', got {laser!r}")
@@ -153,7 +152,6 @@ def coverage(seeds: tuple[int, ...], trials: int, n: int = 10, cell_sigma=PICK_C
         for bs in scenes:
             sc = bs.scene
             T_true = sc.T_camera_lidar
-            rpy_true = rpy_deg_from_R(T_true[:3, :3])
             within, used = np.zeros((2, 6)), 0
             if laser == "model":
                 corners = np.asarray(sc.corners_lidar, dtype=np.float64).reshape(-1, 3)
@@ -173,10 +171,7 @@ def coverage(seeds: tuple[int, ...], trials: int, n: int = 10, cell_sigma=PICK_C
                     res = calibrate(pairs, sc.depth, sc.camera)
                 if res.quality.status == "unreliable":
                     continue
-                err = np.concatenate([wrap_deg(rpy_deg_from_R(res.T_camera_lidar[:3, :3]) - rpy_true),
-                                      res.T_camera_lidar[:3, 3] - T_true[:3, 3]])
-                sig = np.concatenate([res.sigma_rpy_deg, res.sigma_translation_m])
-                within += np.abs(err) <= np.array([[1.0], [2.0]]) * sig
+                within += within_sigma(res, T_true)
                 used += 1
             rows.append((bs.name, used, within[0] / max(used, 1), within[1] / max(used, 1)))
             total += within
