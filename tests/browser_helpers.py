@@ -1,4 +1,4 @@
-"""Helpers shared by the headless-Chromium tests (not a test module)."""
+"""Helpers shared by the app and headless-Chromium tests (not a test module)."""
 
 from __future__ import annotations
 
@@ -28,6 +28,32 @@ def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
+
+
+def start_sample_app(tmp_path: Path, pairs, session_path: Path | None = None):
+    """``(app, AppDriver)``: the app on the committed sample, ``pairs`` imported through the pairs upload.
+
+    The import must be acknowledged ("Pairs imported") and solved before this returns; the caller
+    stops the app (it is stopped here if the import fails).
+    """
+    from app.server import CalibrationApp
+    from app.testing import AppDriver
+    from calib_core.pairs import save_pairs_yaml
+
+    sample = Path(__file__).resolve().parents[1] / "sample_data"
+    app = CalibrationApp(sample / "scan.npz", sample / "image.png", sample / "camera.yaml",
+                         session_path=session_path or tmp_path / "session.yaml", port=free_port())
+    try:
+        driver = AppDriver(app)
+        pairs_file = tmp_path / "pairs.yaml"
+        save_pairs_yaml(pairs_file, pairs)
+        notes = driver.upload_pairs("pairs.yaml", pairs_file.read_bytes())
+        assert [t for t, _ in notes] == ["Pairs imported"], notes
+        assert driver.wait_idle() and app.result is not None
+    except BaseException:
+        app.stop()
+        raise
+    return app, driver
 
 
 def wait_for(condition, what: str, timeout: float = TIMEOUT_S, interval: float = 0.05):

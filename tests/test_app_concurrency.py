@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import asyncio
 import http.client
-import socket
 import threading
 import time
 from pathlib import Path
@@ -17,17 +16,13 @@ import numpy as np
 import pytest
 
 from app.testing import AppDriver
-from calib_core.pairs import Pair, load_pairs_yaml, save_pairs_yaml
+from calib_core.pairs import load_pairs_yaml, save_pairs_yaml
 from viser_wire import WireClient
+from browser_helpers import free_port
 
 SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
 UPLOAD_LABEL = "Import pairs YAML"
 
-
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
 
 
 @pytest.fixture

@@ -16,15 +16,11 @@ import yaml
 from app.testing import AppDriver
 from calib_core.errors import CalibError
 from calib_core.pairs import Pair, load_pairs_yaml, resolve_pairs, save_pairs_yaml
+from browser_helpers import free_port
 
 SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
 ROOT = SAMPLE.parent
 
-
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
 
 
 @pytest.fixture

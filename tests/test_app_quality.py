@@ -3,36 +3,15 @@
 from __future__ import annotations
 
 import re
-import socket
 from pathlib import Path
 
-import pytest
 
 from app.ui_common import md_escape
-from app.testing import AppDriver
-from calib_core.pairs import Pair, load_pairs_yaml, save_pairs_yaml
+from calib_core.pairs import Pair, load_pairs_yaml
+from browser_helpers import start_sample_app
 
 SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
 
-
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
-
-
-def run_app(tmp_path, pairs):
-    from app.server import CalibrationApp
-
-    app = CalibrationApp(SAMPLE / "scan.npz", SAMPLE / "image.png", SAMPLE / "camera.yaml",
-                         session_path=tmp_path / "session.yaml", port=free_port())
-    d = AppDriver(app)
-    pairs_file = tmp_path / "pairs.yaml"
-    save_pairs_yaml(pairs_file, pairs)
-    notes = d.upload_pairs("pairs.yaml", pairs_file.read_bytes())
-    assert [t for t, _ in notes] == ["Pairs imported"], notes
-    assert d.wait_idle() and app.result is not None
-    return app, d
 
 
 def table_rows(table: str) -> dict[int, str]:
@@ -51,7 +30,7 @@ def test_a_wrong_pair_is_shown_excluded_by_its_id_with_the_verdict(tmp_path):
     bad = 3  # its pixel moved 60 px: far beyond click noise, the solve must leave it out
     u, v = pairs[bad].pixel
     pairs[bad] = Pair(pairs[bad].laser_rc, None, (u + 60.0, v))
-    app, d = run_app(tmp_path, pairs)
+    app, d = start_sample_app(tmp_path, pairs)
     try:
         bad_id = app.state.picks[bad].id
         r = app.result
@@ -71,7 +50,7 @@ def test_a_wrong_pair_is_shown_excluded_by_its_id_with_the_verdict(tmp_path):
 
 
 def test_clean_pairs_show_ok_and_every_pair_in_the_fit(tmp_path):
-    app, d = run_app(tmp_path, load_pairs_yaml(SAMPLE / "pairs.yaml"))
+    app, d = start_sample_app(tmp_path, load_pairs_yaml(SAMPLE / "pairs.yaml"))
     try:
         assert app.result.outlier_ids == []
         rows = table_rows(d.residual_table)

@@ -5,43 +5,28 @@ one redraw draws everything, against a solve computed here with calib_core on th
 from __future__ import annotations
 
 import re
-import socket
 from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from app.testing import AppDriver
-from calib_core.pairs import load_pairs_yaml, resolve_pairs, save_pairs_yaml
+from calib_core.pairs import load_pairs_yaml, resolve_pairs
 from calib_core.solve import calibrate
+from browser_helpers import start_sample_app
 
 SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
 
-
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
 
 
 @pytest.fixture(params=["panorama", "raw"])
 def driver(request, tmp_path):
     """The app on the sample with its 10 pairs, showing the camera as a panorama or as recorded."""
-    from app.server import CalibrationApp
-
     session = tmp_path / "session.yaml"
     session.write_text("format: ba-calib-session\nversion: 1\nnext_id: 1\npairs: []\n"
                        f"view: {{panorama: {'true' if request.param == 'panorama' else 'false'}}}\n")
-    app = CalibrationApp(SAMPLE / "scan.npz", SAMPLE / "image.png", SAMPLE / "camera.yaml",
-                         session_path=session, port=free_port())
-    d = AppDriver(app)
+    app, d = start_sample_app(tmp_path, load_pairs_yaml(SAMPLE / "pairs.yaml"), session_path=session)
     try:
-        pairs_file = tmp_path / "pairs.yaml"
-        save_pairs_yaml(pairs_file, load_pairs_yaml(SAMPLE / "pairs.yaml"))
-        notes = d.upload_pairs("pairs.yaml", pairs_file.read_bytes())
-        assert [t for t, _ in notes] == ["Pairs imported"], notes
-        assert d.wait_idle() and app.result is not None
         yield d
     finally:
         app.stop()

@@ -18,6 +18,7 @@ from websockets.exceptions import InvalidStatus
 
 from app.security import AccessPolicy, cookie_name, is_loopback, split_host
 from calib_core.errors import CalibError
+from browser_helpers import free_port
 
 SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
 SUBPROTOCOL = f"viser-v{viser.__version__}"
@@ -83,13 +84,6 @@ def test_non_loopback_bind_requires_the_token():
 
 
 # ------------------------------------------------------------------ the served app
-def free_port() -> int:
-    import socket
-
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
-
 
 @pytest.fixture(scope="module")
 def app(tmp_path_factory):

@@ -2,37 +2,22 @@
 
 from __future__ import annotations
 
-import socket
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from app.testing import AppDriver
-from calib_core.pairs import load_pairs_yaml, save_pairs_yaml
+from calib_core.pairs import load_pairs_yaml
+from browser_helpers import start_sample_app
 
 SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
 
 
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
-
 
 @pytest.fixture
 def driver(tmp_path):
-    from app.server import CalibrationApp
-
-    app = CalibrationApp(SAMPLE / "scan.npz", SAMPLE / "image.png", SAMPLE / "camera.yaml",
-                         session_path=tmp_path / "session.yaml", port=free_port())
-    d = AppDriver(app)
+    app, d = start_sample_app(tmp_path, load_pairs_yaml(SAMPLE / "pairs.yaml")[:6])
     try:
-        pairs_file = tmp_path / "pairs.yaml"
-        save_pairs_yaml(pairs_file, load_pairs_yaml(SAMPLE / "pairs.yaml")[:6])
-        notes = d.upload_pairs("pairs.yaml", pairs_file.read_bytes())
-        assert [t for t, _ in notes] == ["Pairs imported"], notes
-        assert d.wait_idle() and app.result is not None
         yield d
     finally:
         app.stop()

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import inspect
-import socket
 from pathlib import Path
 
 import pytest
@@ -11,14 +10,10 @@ import pytest
 from app.app_services import AppServices
 from app.testing import AppDriver, FakeTab
 from calib_core.errors import CalibError
+from browser_helpers import free_port
 
 SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
 
-
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
 
 
 @pytest.fixture(scope="module")

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import socket
 from dataclasses import fields
 from pathlib import Path
 
@@ -14,6 +13,7 @@ from app.state import AnnotationState
 from app.testing import AppDriver
 from app.view_settings import AS_CLICKED, ViewSettings
 from calib_core.errors import CalibError
+from browser_helpers import free_port
 
 SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
 IMG = (640, 480)
@@ -23,11 +23,6 @@ def make_state(path, **kwargs) -> AnnotationState:
     valid = np.ones((16, 32), dtype=bool)
     return AnnotationState(valid, IMG, session_path=path, **kwargs)
 
-
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
 
 
 # Every field set away from its default (checked below), so a round trip that drops one is caught.

@@ -3,19 +3,14 @@
 from __future__ import annotations
 
 import http.client
-import socket
 import threading
 from pathlib import Path
 
 import calib_core.solve
+from browser_helpers import free_port
 
 SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
 
-
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
 
 
 def test_first_page_is_served_while_the_warm_up_still_runs(tmp_path, monkeypatch):
