@@ -17,12 +17,11 @@ def pytest_sessionstart(session):
     warm cache this loads the kernels in about a second.
     """
     import sys
-    import time
 
-    from calib_core import _jit
-    from calib_core import solve
+    from app.warm_up import WarmUp  # what the app runs at start-up, here run to the end first
 
-    t0 = time.perf_counter()
-    _jit.warm_up()
-    solve.warm_up()
-    print(f"numba kernels compiled or loaded from the cache in {time.perf_counter() - t0:.1f} s", file=sys.stderr)
+    warm = WarmUp()
+    warm.wait()
+    if warm.error is not None:
+        raise warm.error
+    print(f"numba kernels compiled or loaded from the cache in {sum(warm.seconds.values()):.1f} s", file=sys.stderr)
