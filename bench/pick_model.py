@@ -24,7 +24,7 @@ from scipy.optimize import minimize
 
 from calib_core.solve.whiten import PICK_CELL_SIGMA, PICK_RANGE_SIGMA_M, cell_pick_covariance
 
-from .common import load_scenes
+from .common import load_scenes, nominal_coverage
 
 #: chi-square quantiles, 2 degrees of freedom, of 68.27 % and 95.45 %.
 CHI2_1S, CHI2_2S = 2.296, 6.180
@@ -131,10 +131,9 @@ def coverage(seeds: tuple[int, ...], trials: int, n: int = 10, cell_sigma=PICK_C
     share over many scenes is the coverage a user meets; the per-scene spread shows how far a
     single scene can stray from it.
 
-    Returns ``{"scenes": [(name, trials, one (6,), two (6,))], "trials": int, "one": (6,), "two": (6,)}``
+    Returns ``{"n": n, "scenes": [(name, trials, one (6,), two (6,))], "trials": int, "one": (6,), "two": (6,)}``
     with the shares as fractions, parameters roll, pitch, yaw, tx, ty, tz.
     """
-    import calib_core.solve.whiten as whiten
     from calib_core.solve import calibrate, solve_extrinsics
     from calib_core.synthetic import simulate_pairs
     from calib_core.synthetic.picks import laser_picks
@@ -143,47 +142,46 @@ def coverage(seeds: tuple[int, ...], trials: int, n: int = 10, cell_sigma=PICK_C
 
     if laser not in ("picks", "model"):
         raise ValueError(f"laser must be 'picks' or 'model', got {laser!r}")
-    defaults = whiten.cell_pick_covariance.__defaults__
-    whiten.cell_pick_covariance.__defaults__ = (cell_sigma, range_sigma_m)  # the model calibrate() uses
-    try:
-        scenes = load_scenes(tuple(seeds))
-        scenes = scenes if sample else scenes[1:]
-        rows, total, total_used = [], np.zeros((2, 6)), 0
-        for bs in scenes:
-            sc = bs.scene
-            T_true = sc.T_camera_lidar
-            within, used = np.zeros((2, 6)), 0
+    scenes = load_scenes(tuple(seeds))
+    scenes = scenes if sample else scenes[1:]
+    rows, total, total_used = [], np.zeros((2, 6)), 0
+    for si, bs in enumerate(scenes):
+        sc = bs.scene
+        T_true = sc.T_camera_lidar
+        within, used = np.zeros((2, 6)), 0
+        if laser == "model":
+            corners = np.asarray(sc.corners_lidar, dtype=np.float64).reshape(-1, 3)
+            corner_of = {tuple(rc): i for i, rc in enumerate(laser_picks(sc.depth, corners)[0])}
+        for k in range(trials):
+            # One stream per scene and trial: the same stream on every scene would give every scene's
+            # k-th trial the same start corner and the same click noise, and the pooled trials would not
+            # be independent.
+            rng = np.random.default_rng([BENCH_SEED, 179, n, si, k])
+            pairs = simulate_pairs(sc, n, rng, pixel_noise_px=1.0)
             if laser == "model":
-                corners = np.asarray(sc.corners_lidar, dtype=np.float64).reshape(-1, 3)
-                corner_of = {tuple(rc): i for i, rc in enumerate(laser_picks(sc.depth, corners)[0])}
-            for k in range(trials):
-                rng = np.random.default_rng([BENCH_SEED, 179, n, k])
-                pairs = simulate_pairs(sc, n, rng, pixel_noise_px=1.0)
-                if laser == "model":
-                    rc = np.array([p.laser_rc for p in pairs])
-                    pix = np.array([p.pixel for p in pairs], dtype=np.float64)
-                    S = cell_pick_covariance(sc.depth, rc)
-                    L = np.linalg.cholesky(S + 1e-12 * np.eye(3))
-                    pts = corners[[corner_of[tuple(r)] for r in rc]] + np.einsum("nij,nj->ni", L,
-                                                                                 rng.normal(size=(len(rc), 3)))
-                    res = solve_extrinsics(pts, sc.camera.bearing(pix), camera=sc.camera, pixels=pix, laser_cov_m2=S)
-                else:
-                    res = calibrate(pairs, sc.depth, sc.camera)
-                if res.quality.status == "unreliable":
-                    continue
-                within += within_sigma(res, T_true)
-                used += 1
-            rows.append((bs.name, used, within[0] / max(used, 1), within[1] / max(used, 1)))
-            total += within
-            total_used += used
-    finally:
-        whiten.cell_pick_covariance.__defaults__ = defaults
-    return {"scenes": rows, "trials": total_used, "one": total[0] / max(total_used, 1),
+                rc = np.array([p.laser_rc for p in pairs])
+                pix = np.array([p.pixel for p in pairs], dtype=np.float64)
+                S = cell_pick_covariance(sc.depth, rc, cell_sigma, range_sigma_m)
+                L = np.linalg.cholesky(S + 1e-12 * np.eye(3))
+                pts = corners[[corner_of[tuple(r)] for r in rc]] + np.einsum("nij,nj->ni", L,
+                                                                             rng.normal(size=(len(rc), 3)))
+                res = solve_extrinsics(pts, sc.camera.bearing(pix), camera=sc.camera, pixels=pix, laser_cov_m2=S)
+            else:
+                res = calibrate(pairs, sc.depth, sc.camera, cell_sigma=cell_sigma, range_sigma_m=range_sigma_m)
+            if res.quality.status == "unreliable":
+                continue
+            within += within_sigma(res, T_true)
+            used += 1
+        rows.append((bs.name, used, within[0] / max(used, 1), within[1] / max(used, 1)))
+        total += within
+        total_used += used
+    return {"n": n, "scenes": rows, "trials": total_used, "one": total[0] / max(total_used, 1),
             "two": total[1] / max(total_used, 1)}
 
 
 def print_coverage(cov: dict, label: str) -> None:
-    print(f"Coverage, {label} (roll pitch yaw tx ty tz; nominal 68.3 / 95.4 %):")
+    one, two = nominal_coverage(cov["n"])
+    print(f"Coverage, {label} (roll pitch yaw tx ty tz; nominal {100 * one:.1f} / {100 * two:.1f} %):")
     for name, used, one, two in cov["scenes"]:
         print(f"  {name} ({used} trials): 1 sigma " + " ".join(f"{100 * v:.1f}" for v in one)
               + " | 2 sigma " + " ".join(f"{100 * v:.1f}" for v in two))

@@ -79,3 +79,28 @@ def test_pick_error_per_axis_matches_the_model(picks):
     # ~125 corners: the RMS has a sampling error of about 6 %.
     np.testing.assert_allclose(rms, [*PICK_CELL_SIGMA, PICK_RANGE_SIGMA_M], rtol=0.15)
     assert rms[1] > 1.2 * rms[0]  # the finer column axis errs by more cells
+
+
+def test_calibrate_uses_the_pick_model_it_is_given(picks):
+    """calibrate(cell_sigma=..., range_sigma_m=...) solves with that model: the same pose and sigma as
+    solve_extrinsics given the model's covariance; the defaults are the package's model."""
+    from calib_core.pairs import resolve_pairs
+    from calib_core.solve import calibrate, solve_extrinsics
+    from calib_core.synthetic import simulate_pairs
+
+    sc = picks[0]
+    pairs = simulate_pairs(sc, 10, np.random.default_rng(5), pixel_noise_px=1.0)
+    rc = np.array([p.laser_rc for p in pairs])
+    pts, b, px = resolve_pairs(pairs, sc.depth, sc.camera)
+    results = {}
+    for model in (((0.37, 0.52), 0.015), ((1.0, 1.5), 0.05)):
+        got = calibrate(pairs, sc.depth, sc.camera, cell_sigma=model[0], range_sigma_m=model[1])
+        ref = solve_extrinsics(pts, b, camera=sc.camera, pixels=px, pair_ids=list(range(10)),
+                               laser_cov_m2=cell_pick_covariance(sc.depth, rc, *model))
+        np.testing.assert_allclose(got.T_camera_lidar, ref.T_camera_lidar, atol=1e-12)
+        np.testing.assert_allclose(got.sigma_translation_m, ref.sigma_translation_m, rtol=1e-12)
+        results[model[0]] = got
+    default = calibrate(pairs, sc.depth, sc.camera)
+    np.testing.assert_allclose(default.T_camera_lidar, results[(0.37, 0.52)].T_camera_lidar, atol=1e-12)
+    # The model weighs the pairs: another model, another pose (the argument is not ignored).
+    assert np.abs(results[(1.0, 1.5)].T_camera_lidar - default.T_camera_lidar).max() > 1e-6

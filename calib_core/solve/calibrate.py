@@ -14,7 +14,7 @@ import numpy as np
 
 __all__ = ["calibrate", "pair_ids_and_sigmas", "RANGE_SIGMA_M"]
 
-from .whiten import PICK_RANGE_SIGMA_M
+from .whiten import PICK_CELL_SIGMA, PICK_RANGE_SIGMA_M
 
 #: Error of a picked cell's point along its beam, metres (1-sigma): the pick model's
 #: (:data:`calib_core.solve.whiten.PICK_RANGE_SIGMA_M`).
@@ -36,7 +36,9 @@ def pair_ids_and_sigmas(pairs: Sequence[Any]) -> tuple[list[int], np.ndarray | N
     return ids, np.array([p.precision_px if p.precision_px is not None else 1.0 for p in pairs], dtype=np.float64)
 
 
-def calibrate(pairs: Sequence[Any], depth: Any, camera: Any, *, cost: str = "angular", **options: Any):
+def calibrate(pairs: Sequence[Any], depth: Any, camera: Any, *, cost: str = "angular",
+              cell_sigma: float | tuple[float, float] = PICK_CELL_SIGMA, range_sigma_m: float = PICK_RANGE_SIGMA_M,
+              **options: Any):
     """Solve ``T_camera_lidar`` from :class:`calib_core.pairs.Pair` objects.
 
     Parameters
@@ -47,6 +49,10 @@ def calibrate(pairs: Sequence[Any], depth: Any, camera: Any, *, cost: str = "ang
         Needed when a pair names a cell.
     camera : CameraModel
     cost : {"angular", "geodesic", "pixel"}
+    cell_sigma, range_sigma_m : optional
+        The laser pick model of the pairs that name a cell (cells across the beam, rows then
+        columns; metres along it): :func:`calib_core.solve.whiten.cell_pick_covariance`'s
+        defaults unless a study of the model asks for others.
     **options
         Passed to :func:`calib_core.solve.solve_extrinsics` (e.g. ``robust``).
 
@@ -73,7 +79,7 @@ def calibrate(pairs: Sequence[Any], depth: Any, camera: Any, *, cost: str = "ang
     if cells and depth is not None:
         laser_cov = np.zeros((len(fit_pairs), 3, 3))
         rc = np.array([fit_pairs[k].laser_rc for k in cells], dtype=np.int64)
-        laser_cov[cells] = cell_pick_covariance(depth, rc)
+        laser_cov[cells] = cell_pick_covariance(depth, rc, cell_sigma, range_sigma_m)
     result = solve_extrinsics(
         points, bearings, camera=camera, pixels=pixels, cost=cost, pair_ids=[all_ids[i] for i in fit],
         pixel_sigma=sigmas, laser_cov_m2=laser_cov, **options,
