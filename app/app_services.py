@@ -17,6 +17,45 @@ import numpy as np
 from .state import AnnotationState
 
 
+class UiLock:
+    """A re-entrant lock that knows whether the calling thread holds it.
+
+    The redraw lock of the app: a thread that holds it must not wait for another thread's redraw
+    (:meth:`app.live_coordinator.LiveSolveCoordinator.on_change`), so it asks :meth:`held_here` first.
+    """
+
+    def __init__(self) -> None:
+        self._lock = threading.RLock()
+        self._owner: int | None = None  # written only by the holder, so a reader sees its own id or another
+        self._depth = 0
+
+    def acquire(self, blocking: bool = True, timeout: float = -1) -> bool:
+        got = self._lock.acquire(blocking, timeout)
+        if got:
+            self._owner = threading.get_ident()
+            self._depth += 1
+        return got
+
+    def release(self) -> None:
+        if self._owner != threading.get_ident():
+            raise RuntimeError("UiLock released by a thread that does not hold it")
+        self._depth -= 1
+        if self._depth == 0:
+            self._owner = None
+        self._lock.release()
+
+    def held_here(self) -> bool:
+        """Does the calling thread hold the lock?"""
+        return self._owner == threading.get_ident()
+
+    def __enter__(self) -> "UiLock":
+        self.acquire()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
+
+
 class AppServices(Protocol):
     """The services of the app that panels use.
 
@@ -26,7 +65,7 @@ class AppServices(Protocol):
         The running server (its ``gui`` and ``scene``).
     state : AnnotationState
         The pairs and the view settings (``state.view``); every change goes through it.
-    ui_lock : threading.RLock
+    ui_lock : UiLock
         Held while the scene and the panels are redrawn; hold it to read or change several widgets at once.
     depth, camera, image
         The scan's depth matrix, the camera model and the camera image (original pixels).
@@ -63,7 +102,7 @@ class AppServices(Protocol):
 
     server: Any
     state: AnnotationState
-    ui_lock: threading.RLock
+    ui_lock: "UiLock"
     depth: Any
     camera: Any
     image: np.ndarray

@@ -111,7 +111,7 @@ class LiveSolveCoordinator:
                     self.solving = False
                     app.cloud.show_camera(None)
         # Not while this thread holds the UI lock: the solver could not redraw before the wait ends.
-        if solve_job is not None and not self._owns_ui_lock() and self._wait_shown(solve_job, SHOW_WAIT_S):
+        if solve_job is not None and not app.ui_lock.held_here() and self._wait_shown(solve_job, SHOW_WAIT_S):
             return
         self.redraw()
 
@@ -123,11 +123,6 @@ class LiveSolveCoordinator:
                 app.overlays.refresh()
             finally:
                 self.show_panels()  # the panels follow the state even if a drawing failed
-
-    def _owns_ui_lock(self) -> bool:
-        # RLock's ownership test (what threading.Condition uses); a lock without one counts as not held.
-        owned = getattr(self.app.ui_lock, "_is_owned", None)
-        return bool(owned()) if owned is not None else False
 
     def _wait_shown(self, job: int, timeout: float) -> bool:
         """Wait until the solve of ``job`` (or a newer one) has been shown; False on timeout."""

@@ -9,7 +9,6 @@ loupes.  A BA click and a camera click, in either order, make a pair; from 4 pai
 from __future__ import annotations
 
 import os
-import threading
 import traceback
 from pathlib import Path
 from typing import Any, Callable
@@ -18,6 +17,7 @@ import numpy as np
 
 from . import blas_threads
 from .action_queue import ActionQueue, notify_tabs
+from .app_services import UiLock
 from .calibration_panel import CalibrationPanel
 from .camera_view import camera_views
 from .cloud_pane import CloudPane
@@ -116,7 +116,7 @@ class CalibrationApp:
         default_view = ViewSettings(up_axis="+y" if self.depth.meta.get("model") == "rotating_2d" else "+z")
         self.state = AnnotationState(self.depth.valid, (self.camera.width, self.camera.height), self.session_path,
                                      on_save_error=self._on_save_error, default_view=default_view)
-        self.ui_lock = threading.RLock()  # public: held while the scene and the panels are redrawn
+        self.ui_lock = UiLock()  # public: held while the scene and the panels are redrawn
         self.display = DisplayPanel(self)  # the laser panes' grey levels, with the saved contrast
         self.live = LiveSolveCoordinator(self)  # the solve shown; its threads start with the page
         self.loupe_support = LoupeSupport(self, initial_T)  # the pose predictions use (solved, else imported)

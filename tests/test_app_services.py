@@ -62,3 +62,34 @@ def test_the_last_camera_click_source_is_reported_and_can_be_forgotten(app):
     assert pick.complete and app.camera_click_source(pick.id) == "full"
     app.forget_last_picks()
     assert app.camera_click_source(pick.id) is None
+
+
+def test_the_ui_lock_knows_which_thread_holds_it():
+    """app.ui_lock is re-entrant and tells its holder from other threads (a holder must not wait for a redraw)."""
+    import threading
+
+    from app.app_services import UiLock
+
+    lock = UiLock()
+    seen = {}
+
+    def other():
+        seen["held_here"] = lock.held_here()
+        seen["acquired"] = lock.acquire(timeout=0.05)
+        try:
+            lock.release()
+        except RuntimeError as exc:
+            seen["release"] = str(exc)
+
+    assert not lock.held_here()
+    with lock:
+        with lock:  # re-entrant
+            assert lock.held_here()
+        assert lock.held_here()  # still held after the inner exit
+        t = threading.Thread(target=other)
+        t.start()
+        t.join()
+    assert not lock.held_here()
+    assert seen == {"held_here": False, "acquired": False, "release": "UiLock released by a thread that does not hold it"}
+    assert lock.acquire(blocking=False)  # free again
+    lock.release()
