@@ -181,6 +181,15 @@ def nominal_coverage(n_pairs: int) -> tuple[float, float]:
     return float(2 * stdtr(dof, f) - 1), float(2 * stdtr(dof, 2 * f) - 1)
 
 
+def free_port() -> int:
+    """A TCP port on 127.0.0.1 that was free a moment ago (for a server the bench starts)."""
+    import socket
+
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
 # ---------------------------------------------------------------------- timing
 def time_median(fn: Callable[[], Any], repeats: int, warmup: int = 1, min_total_s: float = 0.0) -> tuple[float, int, float]:
     """Median and minimum wall time of ``fn()`` in seconds, and the number of timed runs.

@@ -25,7 +25,7 @@ import numpy as np
 
 from calib_core.transforms import transform_points
 
-from .common import BENCH_SEED, BenchScene, log, time_median
+from .common import BENCH_SEED, BenchScene, free_port, log, time_median
 
 
 @dataclass
@@ -399,14 +399,6 @@ def solve_parts(bs: BenchScene, rep: SpeedReport, reps: Callable[[int], int], n:
 CLICK_TARGET_S = 0.010
 
 
-def _free_port() -> int:
-    import socket
-
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return int(sock.getsockname()[1])
-
-
 def click_time(bs: BenchScene, rep: SpeedReport, reps: Callable[[int], int]) -> None:
     """Server-side time from a click to the updated error and overlays.
 
@@ -438,7 +430,7 @@ def click_time(bs: BenchScene, rep: SpeedReport, reps: Callable[[int], int]) -> 
         from app.server import CalibrationApp
 
         app = CalibrationApp(SAMPLE_DIR / "scan.npz", SAMPLE_DIR / "image.png", SAMPLE_DIR / "camera.yaml",
-                             session_path=tmp / "session.yaml", port=_free_port())
+                             session_path=tmp / "session.yaml", port=free_port())
     except Exception as exc:  # noqa: BLE001 -- fall back to the core steps, and say why
         app = None
         reason = f"{type(exc).__name__}: {str(exc).strip().splitlines()[-1] if str(exc).strip() else ''}"

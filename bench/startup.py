@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import socket
 import subprocess
 import sys
 import tempfile
@@ -28,22 +27,16 @@ from pathlib import Path
 
 import numpy as np
 
-from .common import REPO, log
+from .common import REPO, free_port, log
 
 #: Target of issue 12: first page within this many seconds, warm cache.
 TARGET_S = 3.0
 _CODE = "import sys; from app.cli import main; sys.exit(main(sys.argv[1:]))"
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def first_page_seconds(cache_dir: str, timeout_s: float = 300.0) -> float:
     """Seconds from starting ``ba-calib serve`` on the sample to its first HTTP 200 on ``/``."""
-    port = _free_port()
+    port = free_port()
     with tempfile.TemporaryDirectory(prefix="ba-calib-startup-") as work:
         env = dict(os.environ, NUMBA_CACHE_DIR=cache_dir,
                    PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))

@@ -23,18 +23,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from browser_helpers import free_port
 
 REPO = Path(__file__).resolve().parents[1]
 
 pytestmark = pytest.mark.install
-
-
-def _free_port() -> int:
-    import socket
-
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def _run(cmd, **kw) -> subprocess.CompletedProcess:
@@ -79,7 +72,7 @@ def test_wheel_install_serves_the_sample_from_another_folder(tmp_path):
     version = _run([str(exe), "--version"], cwd=elsewhere, env=env)
     assert version.returncode == 0 and version.stdout.startswith("ba-calib "), version.stderr
 
-    port = _free_port()
+    port = free_port()
     server = subprocess.Popen(
         [str(exe), "serve", "--port", str(port)], cwd=elsewhere, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
     )
