@@ -224,7 +224,7 @@ def issue12_targets(sp, vs: dict, su: dict | None) -> list[tuple]:
             worst = worst_ratio(pooled)
             rows.append((f"accuracy, OCam, realistic picks on {pooled[0]['scenes']} held-out scenes: / bound, "
                          f"n = {', '.join(str(r['n']) for r in pooled)}", "<= 1.05", f"worst {worst:.3f}",
-                         worst <= 1.05, None, f"{pooled[0]['trials']} trials per n, a few on each scene (seeds 4-23, "
+                         worst <= 1.05, None, f"{pooled[0]['trials']} trials per n, {pooled[0]['trials'] // pooled[0]['scenes']} on each scene (seeds 4-23, "
                          "not used to fit the pick model)"))
         rows.append((f"accuracy, OCam, clicks only (exact laser points): / bound, n = {ns}", "<= 1.05",
                      f"worst {clicks:.3f}", clicks <= 1.05, None, "the estimator alone"))
