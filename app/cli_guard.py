@@ -102,6 +102,18 @@ class Noise:
 
     def __init__(self) -> None:
         self.lines: list[str] = []
+        self._saved_fd: int | None = None
+
+    def say(self, line: str) -> None:
+        """Write ``line`` to the real standard error now, also while fd 2 is being collected."""
+        fd = self._saved_fd
+        if fd is None:
+            print(line, file=sys.stderr, flush=True)
+            return
+        try:
+            os.write(fd, (line + "\n").encode("utf-8", "backslashreplace"))
+        except OSError:
+            pass
 
     def __enter__(self) -> "Noise":
         import tempfile
@@ -121,8 +133,9 @@ class Noise:
             sys.stderr.flush()
         except (OSError, ValueError):
             pass
-        os.dup2(self._saved_fd, 2)
-        os.close(self._saved_fd)
+        saved, self._saved_fd = self._saved_fd, None
+        os.dup2(saved, 2)
+        os.close(saved)
         self._file.seek(0)
         text = self._file.read(1 << 20).decode("utf-8", "backslashreplace")
         self._file.close()

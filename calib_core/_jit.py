@@ -25,11 +25,15 @@ from __future__ import annotations
 
 import os
 import tempfile
+import threading
 import time
 import warnings
 from typing import Callable
 
 import numba
+import numba.core.event
+
+from . import compile_events
 
 #: numba options shared by all kernels.  numba keys its disk cache by the
 #: kernel's own source file: after changing these options, delete the
@@ -59,6 +63,32 @@ def kernel(fn: Callable) -> Callable:
             pass
     warnings.warn(f"no writable numba cache directory: {fn.__name__} is compiled at every start", stacklevel=2)
     return numba.njit(**{**_OPTIONS, "cache": False})(fn)
+
+
+class _FirstCompile(numba.core.event.Listener):
+    """Reports the process's first compile of one of the package's kernels to :mod:`.compile_events`."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._fired = False
+
+    def on_start(self, event) -> None:
+        data = event.data if isinstance(event.data, dict) else {}
+        func = getattr(data.get("dispatcher"), "py_func", None)
+        if func is None or not getattr(func, "__module__", "").startswith("calib_core."):
+            return
+        with self._lock:
+            if self._fired:
+                return
+            self._fired = True
+        compile_events.first_compile(f"{func.__module__}.{func.__qualname__}")
+
+    def on_end(self, event) -> None:
+        pass
+
+
+# numba fires "numba:compile" only on a disk-cache miss, around the compile itself.
+numba.core.event.register("numba:compile", _FirstCompile())
 
 
 def warm_up() -> dict[str, float]:
