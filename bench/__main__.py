@@ -18,8 +18,10 @@ from pathlib import Path
 
 import numpy as np
 
+from calib_core.solve import sigma_coverage
+
 from . import startup
-from .common import REPO, fmt_ms, log, nominal_coverage
+from .common import REPO, fmt_ms, log
 
 #: Pair counts of the side-by-side comparison (a subset of the accuracy sweep, to keep the run short).
 COMPARE_N = (4, 6, 10, 15, 20)
@@ -249,7 +251,7 @@ def issue12_targets(sp, vs: dict, su: dict | None) -> list[tuple]:
         c = cov.get(model)
         if not c:
             continue
-        one_nominal, two_nominal = nominal_coverage(cov["n"])
+        one_nominal, two_nominal = sigma_coverage(cov["n"])
         d1 = 100 * (c["one"] - one_nominal)
         d2 = 100 * (c["two"] - two_nominal)
         worst1, worst2 = d1[np.argmax(np.abs(d1))], d2[np.argmax(np.abs(d2))]

@@ -165,22 +165,6 @@ def within_sigma(result, T_true: np.ndarray) -> np.ndarray:
     return err <= np.array([[1.0], [2.0]]) * sig
 
 
-def nominal_coverage(n_pairs: int) -> tuple[float, float]:
-    """Expected shares within 1 and 2 reported sigma of a solve on ``n_pairs`` pairs, noise estimated.
-
-    The solve widens sigma by the Student-t factor of ``2 n - 6`` degrees of freedom so that +-1
-    sigma covers 68.27 %; +-2 such sigmas cover ``P(|t| < 2 factor)``, less than the normal
-    95.45 % (94.30 % at n = 10): the t distribution's tails are heavier.
-    """
-    from scipy.special import stdtr
-
-    from calib_core.solve import student_t_factor
-
-    dof = 2 * int(n_pairs) - 6
-    f = student_t_factor(dof)
-    return float(2 * stdtr(dof, f) - 1), float(2 * stdtr(dof, 2 * f) - 1)
-
-
 def free_port() -> int:
     """A TCP port on 127.0.0.1 that was free a moment ago (for a server the bench starts)."""
     import socket

@@ -24,7 +24,9 @@ from scipy.optimize import minimize
 
 from calib_core.solve.whiten import PICK_CELL_SIGMA, PICK_RANGE_SIGMA_M, cell_pick_covariance
 
-from .common import load_scenes, nominal_coverage
+from calib_core.solve import sigma_coverage
+
+from .common import load_scenes
 
 #: chi-square quantiles, 2 degrees of freedom, of 68.27 % and 95.45 %.
 CHI2_1S, CHI2_2S = 2.296, 6.180
@@ -180,8 +182,8 @@ def coverage(seeds: tuple[int, ...], trials: int, n: int = 10, cell_sigma=PICK_C
 
 
 def print_coverage(cov: dict, label: str) -> None:
-    one, two = nominal_coverage(cov["n"])
-    print(f"Coverage, {label} (roll pitch yaw tx ty tz; nominal {100 * one:.1f} / {100 * two:.1f} %):")
+    one_nominal, two_nominal = sigma_coverage(cov["n"])
+    print(f"Coverage, {label} (roll pitch yaw tx ty tz; nominal {100 * one_nominal:.1f} / {100 * two_nominal:.1f} %):")
     for name, used, one, two in cov["scenes"]:
         print(f"  {name} ({used} trials): 1 sigma " + " ".join(f"{100 * v:.1f}" for v in one)
               + " | 2 sigma " + " ".join(f"{100 * v:.1f}" for v in two))

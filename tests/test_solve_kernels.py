@@ -5,11 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
-from scipy.special import stdtr
 from scipy.stats import norm
 
 from calib_core.lidar.depth_matrix import DepthMatrix
-from calib_core.solve import kernels, solve_extrinsics, student_t_factor, warm_up
+from calib_core.solve import kernels, sigma_coverage, solve_extrinsics, warm_up
 from calib_core.solve.whiten import cell_pick_covariance, whitening
 
 from test_solver import TinyPinhole, perturb, pinhole_scene, pose_error, random_scene
@@ -102,8 +101,9 @@ def test_student_t_sigma_covers_68_and_95_percent():
     cover = inside / trials
     # Binomial standard error at 600 trials: 1.9 points at 68 %, 0.9 at 95 %.
     assert np.all(np.abs(cover[0] - (2 * norm.cdf(1) - 1)) < 0.06), cover
-    two = 2 * stdtr(14, 2 * student_t_factor(14)) - 1
-    assert abs(two - 0.943) < 5e-4  # scipy.stats.t(14).cdf(2 * 1.0370) = 0.97150: 2 * 0.97150 - 1
+    one, two = sigma_coverage(10)
+    # scipy.stats.t(14).cdf(2 * 1.0370) = 0.97150: 2 * 0.97150 - 1; and 68.27 % by the factor's construction.
+    assert abs(two - 0.943) < 5e-4 and abs(one - (2 * norm.cdf(1) - 1)) < 1e-9
     assert np.all(np.abs(cover[1] - two) < 0.03), cover
 
 

@@ -69,6 +69,7 @@ __all__ = [
     "Quality",
     "warm_up",
     "calibrate",
+    "sigma_coverage",
 ]
 
 
@@ -209,6 +210,21 @@ def student_t_factor(dof: int) -> float:
     from scipy.special import stdtrit  # (scipy.stats would add 1.4 s to the first solve's imports)
 
     return float(stdtrit(dof, 0.5 * (1.0 + math.erf(1.0 / math.sqrt(2.0)))))
+
+
+def sigma_coverage(n_pairs: int) -> tuple[float, float]:
+    """Shares of solves whose error lies within 1 and 2 reported sigma, when the noise is estimated.
+
+    The reported sigma is widened by :func:`student_t_factor` of ``2 n - 6`` degrees of freedom, so
+    +-1 sigma covers 68.27 %; +-2 such sigmas cover ``P(|t| < 2 factor)``, less than the normal
+    95.45 % because the t distribution's tails are heavier (94.30 % at 10 pairs, 92.8 % at 6).
+    With known noise (``noise_rad``) the shares are the normal ones.
+    """
+    from scipy.special import stdtr
+
+    dof = 2 * int(n_pairs) - 6
+    f = student_t_factor(dof)
+    return float(2 * stdtr(dof, f) - 1), float(2 * stdtr(dof, 2 * f) - 1)
 
 
 def _check_pair_ids(pair_ids: object, n: int) -> list[int]:
