@@ -447,12 +447,12 @@ def _zygote(control_fd: int) -> int:
     import signal
     import socket
 
-    from calib_core import _jit, solve
-
     from . import server  # noqa: F401 - imported once, inherited by every child
+    from .warm_up import WarmUp
 
-    _jit.warm_up()  # compiled code is inherited too: a child's own warm-up finds every kernel ready
-    solve.warm_up()
+    # Compiled code is inherited too: a child's own warm-up finds every kernel ready.  wait() returns
+    # once the warm-up's thread has ended, so no thread runs at the forks.
+    WarmUp().wait()
     signal.signal(signal.SIGCHLD, signal.SIG_IGN)  # the kernel reaps the children
     control = socket.socket(fileno=control_fd)
     control.sendall(b"ready\n")

@@ -43,5 +43,8 @@ class WarmUp:
         return self._done.is_set()
 
     def wait(self, timeout: float | None = None) -> bool:
-        """Block until the warm-up has finished (or failed); False on timeout."""
-        return self._done.wait(timeout)
+        """Block until the warm-up has finished (or failed) and its thread has ended; False on timeout."""
+        if not self._done.wait(timeout):
+            return False
+        self._thread.join()  # it only returns after setting the event: a moment at most
+        return True
