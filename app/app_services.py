@@ -102,7 +102,7 @@ class AppServices(Protocol):
 
     server: Any
     state: AnnotationState
-    ui_lock: "UiLock"
+    ui_lock: UiLock
     depth: Any
     camera: Any
     image: np.ndarray

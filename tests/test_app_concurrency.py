@@ -24,7 +24,6 @@ SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
 UPLOAD_LABEL = "Import pairs YAML"
 
 
-
 @pytest.fixture
 def app(tmp_path):
     from app.server import CalibrationApp

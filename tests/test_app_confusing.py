@@ -22,7 +22,6 @@ SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
 ROOT = SAMPLE.parent
 
 
-
 @pytest.fixture
 def driver(tmp_path):
     from app.server import CalibrationApp

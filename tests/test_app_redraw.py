@@ -18,7 +18,6 @@ from browser_helpers import start_sample_app
 SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
 
 
-
 @pytest.fixture(params=["panorama", "raw"])
 def driver(request, tmp_path):
     """The app on the sample with its 10 pairs, showing the camera as a panorama or as recorded."""

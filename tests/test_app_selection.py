@@ -13,7 +13,6 @@ from browser_helpers import start_sample_app
 SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
 
 
-
 @pytest.fixture
 def driver(tmp_path):
     app, d = start_sample_app(tmp_path, load_pairs_yaml(SAMPLE / "pairs.yaml")[:6])

@@ -15,7 +15,6 @@ from browser_helpers import free_port
 SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
 
 
-
 @pytest.fixture(scope="module")
 def app(tmp_path_factory):
     from app.server import CalibrationApp

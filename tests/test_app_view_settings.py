@@ -24,7 +24,6 @@ def make_state(path, **kwargs) -> AnnotationState:
     return AnnotationState(valid, IMG, session_path=path, **kwargs)
 
 
-
 # Every field set away from its default (checked below), so a round trip that drops one is caught.
 CHANGED = dict(panorama=False, show_reprojection=False, show_edges=False, snap=True, up_axis="-y",
                ba_window_mode="custom", ba_window_start=12, ba_window_width=40, contrast=2.25,

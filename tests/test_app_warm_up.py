@@ -12,7 +12,6 @@ from browser_helpers import free_port
 SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
 
 
-
 def test_first_page_is_served_while_the_warm_up_still_runs(tmp_path, monkeypatch):
     from app.server import CalibrationApp
 

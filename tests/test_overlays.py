@@ -220,8 +220,6 @@ def test_matches_a_plain_computation_on_the_ocam_sample(cell, n):
     from calib_core.synthetic import load_sample
 
     sample = Path(__file__).resolve().parents[1] / "sample_data"
-    if not (sample / "corners.yaml").exists():
-        pytest.skip("sample_data/ is not present")
     sc = load_sample(sample)
     rng = np.random.default_rng(3)
     pts = sc.depth.points[sc.depth.valid]

@@ -17,8 +17,6 @@ def picks():
     from calib_core.synthetic import load_sample
     from calib_core.synthetic.picks import MAX_LASER_PICK_ERROR_M, laser_picks
 
-    if not (SAMPLE / "corners.yaml").exists():
-        pytest.skip("sample_data/ is not present")
     sc = load_sample(SAMPLE)
     corners = np.asarray(sc.corners_lidar, dtype=np.float64)
     rc, err = laser_picks(sc.depth, corners)  # the cells a careful user picks
