@@ -107,6 +107,10 @@ def parse_yaml_text(text: str, where: str, max_values: int = MAX_VALUES, limit_h
         hint = f"; {limit_hint}" if limit_hint and "values" in str(exc) else ""
         raise CalibError(f"{where}: YAML {exc}{hint}") from None
     except yaml.YAMLError as exc:
+        if "nesting depth" in str(getattr(exc, "problem", "")):
+            # PyYAML >= 6.0.4 stops deep flow nesting itself, before our event walk does:
+            # the promise is one message whichever layer notices first.
+            raise CalibError(f"{where}: YAML nested deeper than {MAX_DEPTH} levels") from None
         mark = getattr(exc, "problem_mark", None)
         at = f" at line {mark.line + 1}" if mark is not None else ""
         problem = getattr(exc, "problem", None) or "invalid YAML"
