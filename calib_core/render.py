@@ -1,0 +1,328 @@
+"""The scan seen from the camera: a z-buffered render of the depth matrix in the camera image's geometry.
+
+A 64-beam scan is hard to read as a 64-row image; rendered from the camera's
+own viewpoint, beside the photo, its corners are recognisable.  Every image
+pixel shows the nearest laser return projecting there, each return filling
+a small rectangle of pixels (its *footprint*) so that the rings close into a
+surface.
+
+Frames and units: ``T_camera_lidar`` maps lidar points (metres) into the
+OpenCV camera frame (x right, y down, z forward).  Pixels are ``(u, v)`` =
+(column, row), the top-left pixel's centre at ``(0, 0)``; pixel ``(u, v)``
+belongs to image cell ``(floor(v + 0.5), floor(u + 0.5))``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from ._jit import kernel
+from .arrays import as_transform
+from .errors import CalibError
+
+#: Two neighbouring pixels whose returns differ in camera distance by more than this share of the nearer one
+#: form a depth edge.
+EDGE_RELATIVE_JUMP = 0.1
+#: The automatic footprint's half-width is capped at this many times its median over the scan (and 64 px):
+#: where a neighbour's projection is stretched (image borders of a wide-angle lens) the footprint may not bleed.
+FOOTPRINT_CAP_FACTOR = 3.0
+FOOTPRINT_MAX_HALF_PX = 64
+
+
+@dataclass(frozen=True)
+class CameraRender:
+    """The scan rendered in the camera's own geometry under one pose.
+
+    Attributes
+    ----------
+    range_m : (H, W) float32
+        Lidar range of the return shown at each pixel: its distance from the lidar origin, metres.  NaN where
+        no return is shown.
+    cell_rc : (H, W, 2) int32
+        Depth-matrix ``(row, col)`` of the return shown; -1 where none.
+    camera_depth_m : (H, W) float32
+        Distance of that return from the camera centre, metres (the z-buffer key); NaN where none.
+    edge : (H, W) bool
+        Depth edges: a pixel with a return whose 4-neighbour has no return, or a return more than
+        :data:`EDGE_RELATIVE_JUMP` nearer or farther (relative to the nearer of the two).
+    """
+
+    range_m: np.ndarray
+    cell_rc: np.ndarray
+    camera_depth_m: np.ndarray
+    edge: np.ndarray
+
+    @property
+    def has_return(self) -> np.ndarray:
+        """(H, W) bool: the pixel shows a return."""
+        return self.cell_rc[..., 0] >= 0
+
+
+# ------------------------------------------------------------------ kernel
+@kernel
+def _splat_nearest(col, row, half_u, half_v, key, width, height, best_key, best_index):
+    """Nearest-wins z-buffer with footprints, in place.
+
+    Point ``i`` covers the pixels ``|c - col[i]| <= half_u[i]``, ``|r - row[i]| <= half_v[i]`` inside the
+    image; each pixel keeps the smallest ``key`` (ties: the lower index) in ``best_key`` (H, W) float32
+    and that point's index in ``best_index`` (H, W) int32.
+
+    (``overlays._zbuffer`` keeps only the minimum per coarse cell for the colouring's depth test; here every
+    pixel needs the index of its winner, over a per-point rectangle.)
+    """
+    for i in range(col.shape[0]):
+        k = key[i]
+        r0, r1 = max(row[i] - half_v[i], 0), min(row[i] + half_v[i] + 1, height)
+        c0, c1 = max(col[i] - half_u[i], 0), min(col[i] + half_u[i] + 1, width)
+        for r in range(r0, r1):
+            for c in range(c0, c1):
+                if k < best_key[r, c]:
+                    best_key[r, c] = k
+                    best_index[r, c] = i
+
+
+def warm_up() -> None:
+    """Compile (or load from numba's disk cache) this module's kernel on a few points."""
+    key = np.full((2, 2), np.inf, np.float32)
+    index = np.full((2, 2), -1, np.int32)
+    one = np.zeros(1, np.int32)
+    _splat_nearest(one, one, one, one, np.ones(1, np.float32), 2, 2, key, index)
+
+
+# ------------------------------------------------------------------ geometry
+def _project_cells(camera, T: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pixels ``(N, 2)`` (NaN where not projectable, finite outside the image too) and camera distances."""
+    p_cam = points @ T[:3, :3].T + T[:3, 3]
+    pixels, _ = camera.project(p_cam)
+    return np.asarray(pixels, np.float64), np.linalg.norm(p_cam, axis=1)
+
+
+def _neighbour(a: np.ndarray, d_row: int, d_col: int, wrap: bool) -> np.ndarray:
+    """``a[r + d_row, c + d_col]`` over the grid (the first two axes of a float array); NaN off the grid.
+
+    Columns wrap around when ``wrap`` (a full-turn spinning scan).
+    """
+    h, w = a.shape[:2]
+    r, c = np.arange(h) + d_row, np.arange(w) + d_col
+    if wrap:
+        c %= w
+    out = a[np.clip(r, 0, h - 1)][:, np.clip(c, 0, w - 1)]
+    out[(r < 0) | (r >= h)] = np.nan
+    out[:, (c < 0) | (c >= w)] = np.nan
+    return out
+
+
+def _footprint_half_px(depth, camera, T, pixels, norm, rows, cols, cap_half):
+    """Automatic half-widths ``(half_u, half_v)`` (N,) int32 of the footprints of the valid cells.
+
+    Each cell's footprint spans half the way to the projections of its four grid neighbours, where each
+    neighbour is taken along its own beam direction but at *this* cell's range: the angular spacing of the
+    scan at this cell, in pixels, independent of what the neighbour hit (a neighbour across a depth edge
+    gives no larger footprint).  Half-width ``ceil(spacing / 2)`` closes the gap between two rounded
+    centres.  Capped at ``FOOTPRINT_CAP_FACTOR`` times the median (at least 2 px) and ``cap_half``.
+    """
+    h, w = depth.shape
+    wrap = bool(depth.meta.get("wrap_cols", False))
+    dirs = np.asarray(depth.directions, np.float64)
+    pts = np.asarray(depth.points, np.float64)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        from_points = pts / np.linalg.norm(pts, axis=2, keepdims=True)
+    unit = np.where(np.isfinite(dirs).all(axis=2, keepdims=True), dirs, from_points)
+    spread_u = np.zeros(rows.size)
+    spread_v = np.zeros(rows.size)
+    for d_row, d_col in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+        nb_unit = _neighbour(unit, d_row, d_col, wrap)[rows, cols]
+        nb_pixels, _ = _project_cells(camera, T, nb_unit * norm[:, None])
+        delta = np.abs(nb_pixels - pixels)
+        spread_u = np.fmax(spread_u, delta[:, 0])
+        spread_v = np.fmax(spread_v, delta[:, 1])
+    half = np.stack([spread_u, spread_v], axis=1) / 2.0
+    finite = np.isfinite(half)
+    if not finite.any():
+        return np.zeros(rows.size, np.int32), np.zeros(rows.size, np.int32)
+    cap = min(cap_half, max(2.0, FOOTPRINT_CAP_FACTOR * float(np.median(half[finite]))))
+    median = np.median(np.where(finite, half, np.nan), axis=0)
+    half = np.where(finite, half, np.nan_to_num(median, nan=0.0))
+    half = np.clip(np.ceil(half - 1e-6), 0, np.floor(cap)).astype(np.int32)
+    return half[:, 0].copy(), half[:, 1].copy()
+
+
+def _depth_edges(camera_depth: np.ndarray) -> np.ndarray:
+    """Pixels with a return next to (4-neighbour) no return or a return more than EDGE_RELATIVE_JUMP away."""
+    d = camera_depth
+    has = np.isfinite(d)
+    edge = np.zeros(d.shape, bool)
+    for axis in (0, 1):
+        a = d[:-1] if axis == 0 else d[:, :-1]
+        b = d[1:] if axis == 0 else d[:, 1:]
+        ha, hb = np.isfinite(a), np.isfinite(b)
+        with np.errstate(invalid="ignore"):
+            jump = np.abs(a - b) > EDGE_RELATIVE_JUMP * np.fmin(a, b)
+        pair = (ha != hb) | (ha & hb & jump)
+        if axis == 0:
+            edge[:-1] |= pair
+            edge[1:] |= pair
+        else:
+            edge[:, :-1] |= pair
+            edge[:, 1:] |= pair
+    return edge & has
+
+
+def render_from_camera(depth, camera, T_camera_lidar, *, footprint_px=None, max_range_m=None) -> CameraRender:
+    """Render the scan from the camera's viewpoint: per pixel the nearest return, with filled footprints.
+
+    Parameters
+    ----------
+    depth : DepthMatrix
+        The scan: ``points`` (H_d, W_d, 3) in the lidar frame (metres) and the ``valid`` mask.
+    camera : CameraModel
+        Any registered camera model (pinhole with distortion, fisheye, OCam); the render has its image size
+        and framing, ``(camera.height, camera.width)``.
+    T_camera_lidar : (4, 4) array_like
+        Maps lidar points (metres) into the camera frame (OpenCV: x right, y down, z forward).
+    footprint_px : int, optional
+        Side in pixels of the square every return covers (1: its own pixel only; even sides are taken as the
+        next odd one).  None (default): automatic, per return, from the angular spacing of the scan's cells
+        there -- the rectangle spans half the way to where the four grid neighbours' beams would project at
+        this return's range -- capped at 3 times the median half-width (at least 2 px, at most 64 px), so a
+        return does not bleed past a depth edge by more than about half the beam spacing.
+    max_range_m : float, optional
+        Returns farther than this from the lidar origin (metres) are left out.
+
+    Returns
+    -------
+    CameraRender
+        The nearest return per pixel by distance from the camera centre (a far return never paints over a
+        near one).  Pixels with no return: NaN ranges and ``-1`` cells.
+    """
+    T = as_transform(T_camera_lidar)
+    width, height = int(camera.width), int(camera.height)
+    if width <= 0 or height <= 0:
+        raise CalibError(f"camera image size must be positive, got {width}x{height}")
+    if footprint_px is not None and int(footprint_px) < 1:
+        raise CalibError(f"footprint_px must be at least 1 pixel, got {footprint_px}")
+    if max_range_m is not None and not float(max_range_m) > 0:
+        raise CalibError(f"max_range_m must be positive, got {max_range_m}")
+    valid = np.asarray(depth.valid, bool)
+    points_all = np.asarray(depth.points, np.float64)
+    rows, cols = np.nonzero(valid & np.isfinite(points_all).all(axis=2))
+    points = points_all[rows, cols]
+    norm = np.linalg.norm(points, axis=1)
+    if max_range_m is not None:
+        keep = norm <= float(max_range_m)
+        rows, cols, points, norm = rows[keep], cols[keep], points[keep], norm[keep]
+    pixels, cam_dist = _project_cells(camera, T, points)
+    if footprint_px is None:
+        half_u, half_v = _footprint_half_px(depth, camera, T, pixels, norm, rows, cols, FOOTPRINT_MAX_HALF_PX)
+    else:
+        half = np.int32(int(footprint_px) // 2)
+        half_u = half_v = np.full(rows.size, half, np.int32)
+    # Returns whose footprint reaches into the image (centres just outside close the border too).
+    with np.errstate(invalid="ignore"):
+        col_c = np.floor(pixels[:, 0] + 0.5)
+        row_c = np.floor(pixels[:, 1] + 0.5)
+        inside = (np.isfinite(col_c) & np.isfinite(row_c) & (cam_dist > 0)
+                  & (col_c + half_u >= 0) & (col_c - half_u <= width - 1)
+                  & (row_c + half_v >= 0) & (row_c - half_v <= height - 1))
+    idx = np.nonzero(inside)[0]
+    best_key = np.full((height, width), np.inf, np.float32)
+    best_index = np.full((height, width), -1, np.int32)
+    _splat_nearest(col_c[idx].astype(np.int32), row_c[idx].astype(np.int32),
+                   np.ascontiguousarray(half_u[idx], np.int32), np.ascontiguousarray(half_v[idx], np.int32),
+                   cam_dist[idx].astype(np.float32), width, height, best_key, best_index)
+    shown = best_index >= 0
+    winner = idx[best_index[shown]]
+    range_img = np.full((height, width), np.nan, np.float32)
+    range_img[shown] = norm[winner]
+    cam_img = np.full((height, width), np.nan, np.float32)
+    cam_img[shown] = cam_dist[winner]
+    cell_rc = np.full((height, width, 2), -1, np.int32)
+    cell_rc[shown, 0] = rows[winner]
+    cell_rc[shown, 1] = cols[winner]
+    return CameraRender(range_m=range_img, cell_rc=cell_rc, camera_depth_m=cam_img, edge=_depth_edges(cam_img))
+
+
+# ------------------------------------------------------------------ shading
+SHADE_MODES = ("range", "intensity", "ba")
+
+
+def _sample_cells(render: CameraRender, cell_image: np.ndarray) -> np.ndarray:
+    """Values of a per-cell (H_d, W_d) image at the render's cells; pixels without a return get 0."""
+    rc = render.cell_rc
+    shown = rc[..., 0] >= 0
+    out = np.zeros(rc.shape[:2], cell_image.dtype)
+    out[shown] = cell_image[rc[shown, 0], rc[shown, 1]]
+    return out
+
+
+def shade_render(render: CameraRender, depth, mode: str = "range", *, intensity=None, ba_image=None) -> np.ndarray:
+    """The render as an RGBA picture for display beside the photo.
+
+    Parameters
+    ----------
+    render : CameraRender
+        From :func:`render_from_camera` on ``depth``.
+    depth : DepthMatrix
+        The scan rendered (its per-cell intensity, when it has one, is read from ``meta["field_images"]``).
+    mode : {"range", "intensity", "ba"}
+        ``range``: cv2's TURBO colour map of log range (blue near, red far), stretched over the 1st..99th
+        percentile of the shown returns.  ``intensity``: grey from the scan's per-cell intensity
+        (:func:`calib_core.display_images.find_intensity` / ``field_to_gray``, as the app's laser panes).
+        ``ba``: grey from ``ba_image`` (:func:`calib_core.bearing_angle.ba_to_display`).
+    intensity : (H_d, W_d) float, optional
+        Per-cell intensity to use instead of the scan's own field.
+    ba_image : (H_d, W_d) float, optional
+        A BA image of ``depth`` in radians (NaN invalid); required for ``mode="ba"``.
+
+    Returns
+    -------
+    (H, W, 4) uint8
+        RGBA; depth edges white; pixels with no return fully transparent (alpha 0, RGB 0).
+    """
+    from .display_images import field_to_gray, find_intensity
+
+    shown = render.has_return
+    h, w = shown.shape
+    shape_d = tuple(depth.shape)
+    if mode == "range":
+        with np.errstate(invalid="ignore", divide="ignore"):
+            log_r = np.log(np.where(render.range_m > 0, render.range_m, np.nan))
+        ok = shown & np.isfinite(log_r)
+        level = np.zeros((h, w), np.uint8)
+        if ok.any():
+            lo, hi = np.percentile(log_r[ok], [1.0, 99.0])
+            scaled = np.clip((log_r[ok] - lo) / (hi - lo if hi > lo else 1.0), 0.0, 1.0)
+            level[ok] = np.round(scaled * 255).astype(np.uint8)
+        rgb = cv2.cvtColor(cv2.applyColorMap(level, cv2.COLORMAP_TURBO), cv2.COLOR_BGR2RGB)
+    elif mode == "intensity":
+        if intensity is None:
+            found = find_intensity(depth.meta.get("field_images"))
+            if found is None:
+                raise CalibError("the scan has no intensity field; shade by range or ba instead")
+            intensity = found[1]
+        values = np.asarray(intensity, np.float64)
+        if values.shape != shape_d:
+            raise CalibError(f"intensity image shape {values.shape} does not match the depth matrix {shape_d}")
+        gray = _sample_cells(render, field_to_gray(np.where(depth.valid, values, np.nan)))
+        rgb = np.repeat(gray[..., None], 3, axis=2)
+    elif mode == "ba":
+        from .bearing_angle import ba_to_display
+
+        if ba_image is None:
+            raise CalibError("mode 'ba' needs a BA image (ba_image=...)")
+        ba = np.asarray(ba_image)
+        if ba.shape != shape_d:
+            raise CalibError(f"BA image shape {ba.shape} does not match the depth matrix {shape_d}")
+        gray = _sample_cells(render, ba_to_display(ba))
+        rgb = np.repeat(gray[..., None], 3, axis=2)
+    else:
+        raise CalibError(f"unknown shading mode {mode!r}; use one of {', '.join(SHADE_MODES)}")
+    out = np.zeros((h, w, 4), np.uint8)
+    out[..., :3] = rgb
+    out[render.edge & shown, :3] = 255
+    out[..., 3] = np.where(shown, 255, 0).astype(np.uint8)
+    out[~shown, :3] = 0
+    return out
