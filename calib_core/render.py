@@ -29,6 +29,9 @@ EDGE_RELATIVE_JUMP = 0.1
 #: The automatic footprint's half-width is capped at this many times its median over the scan (and 64 px):
 #: where a neighbour's projection is stretched (image borders of a wide-angle lens) the footprint may not bleed.
 FOOTPRINT_CAP_FACTOR = 3.0
+#: A range step between neighbouring cells is part of a smooth surface when it is at most this many times
+#: the smaller of the steps just before and after it along the same direction (see ``_ramp_pairs``).
+RAMP_STEP_RATIO = 2.5
 FOOTPRINT_MAX_HALF_PX = 64
 
 
@@ -121,53 +124,103 @@ def _footprint_half_px(depth, camera, T, pixels, norm, rows, cols, cap_half):
     Each cell's footprint spans half the way to the projections of its four grid neighbours, where each
     neighbour is taken along its own beam direction but at *this* cell's range: the angular spacing of the
     scan at this cell, in pixels, independent of what the neighbour hit (a neighbour across a depth edge
-    gives no larger footprint).  Half-width ``ceil(spacing / 2)`` closes the gap between two rounded
-    centres.  Capped at ``FOOTPRINT_CAP_FACTOR`` times the median (at least 2 px) and ``cap_half``.
+    gives no larger footprint).  Where the neighbour has no return but the cell beyond it has, that one is
+    taken: two returns around a single missing cell meet in its middle.  Half-width ``ceil(spacing / 2)``
+    closes the gap between two rounded centres.  Capped per axis at ``FOOTPRINT_CAP_FACTOR`` times the
+    axis's median (at least 2 px) and at ``cap_half``.
     """
-    h, w = depth.shape
     wrap = bool(depth.meta.get("wrap_cols", False))
-    dirs = np.asarray(depth.directions, np.float64)
-    pts = np.asarray(depth.points, np.float64)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        from_points = pts / np.linalg.norm(pts, axis=2, keepdims=True)
-    unit = np.where(np.isfinite(dirs).all(axis=2, keepdims=True), dirs, from_points)
-    spread_u = np.zeros(rows.size)
-    spread_v = np.zeros(rows.size)
+    h, w = depth.shape
+    valid = np.asarray(depth.valid, bool)
+    dirs = np.asarray(depth.directions)
+    pts = np.asarray(depth.points)
+
+    def cell_of(step_row, step_col):
+        """Flat index of the cell ``step`` away from every valid cell, and whether it exists (and has a return)."""
+        r, c = rows + step_row, cols + step_col
+        if wrap:
+            c = c % w
+        inside = (r >= 0) & (r < h) & (c >= 0) & (c < w)
+        flat = np.clip(r, 0, h - 1) * w + np.clip(c, 0, w - 1)
+        return flat, inside, inside & valid.ravel()[flat]
+
+    spread = np.full((rows.size, 2), np.nan)
     for d_row, d_col in ((1, 0), (-1, 0), (0, 1), (0, -1)):
-        nb_unit = _neighbour(unit, d_row, d_col, wrap)[rows, cols]
-        nb_pixels, _ = _project_cells(camera, T, nb_unit * norm[:, None])
-        delta = np.abs(nb_pixels - pixels)
-        spread_u = np.fmax(spread_u, delta[:, 0])
-        spread_v = np.fmax(spread_v, delta[:, 1])
-    half = np.stack([spread_u, spread_v], axis=1) / 2.0
+        flat1, inside1, has1 = cell_of(d_row, d_col)
+        flat2, _, has2 = cell_of(2 * d_row, 2 * d_col)
+        flat = np.where(~has1 & has2, flat2, flat1)
+        nb_dir = dirs.reshape(-1, 3)[flat]
+        lost = ~np.isfinite(nb_dir).all(axis=1)  # direction unknown: the neighbour's own point, if any
+        if lost.any():
+            p = pts.reshape(-1, 3)[flat[lost]]
+            with np.errstate(invalid="ignore", divide="ignore"):
+                nb_dir[lost] = p / np.linalg.norm(p, axis=1, keepdims=True)
+        nb_dir[~inside1 & ~(~has1 & has2)] = np.nan
+        nb_pixels, _ = _project_cells(camera, T, nb_dir * norm[:, None])
+        spread = np.fmax(spread, np.abs(nb_pixels - pixels))
+    half = spread / 2.0
     finite = np.isfinite(half)
-    if not finite.any():
-        return np.zeros(rows.size, np.int32), np.zeros(rows.size, np.int32)
-    cap = min(cap_half, max(2.0, FOOTPRINT_CAP_FACTOR * float(np.median(half[finite]))))
-    median = np.median(np.where(finite, half, np.nan), axis=0)
-    half = np.where(finite, half, np.nan_to_num(median, nan=0.0))
+    median = np.array([np.median(half[finite[:, k], k]) if finite[:, k].any() else 0.0 for k in (0, 1)])
+    cap = np.minimum(cap_half, np.maximum(2.0, FOOTPRINT_CAP_FACTOR * median))
+    half = np.where(finite, half, median)
     half = np.clip(np.ceil(half - 1e-6), 0, np.floor(cap)).astype(np.int32)
-    return half[:, 0].copy(), half[:, 1].copy()
+    return np.ascontiguousarray(half[:, 0]), np.ascontiguousarray(half[:, 1])
 
 
-def _depth_edges(camera_depth: np.ndarray) -> np.ndarray:
-    """Pixels with a return next to (4-neighbour) no return or a return more than EDGE_RELATIVE_JUMP away."""
+def _ramp_pairs(range_cells: np.ndarray, wrap: bool, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Which pairs of grid-neighbour cells ``a``, ``b`` ((N, 2) row, col) lie on one smooth surface.
+
+    The step ``s1 = r(b) - r(a)`` is compared with the steps one cell before and after along the same
+    direction ``d = b - a``: ``s0 = r(a) - r(a - d)``, ``s2 = r(b + d) - r(b)``.  On a surface seen at a
+    grazing angle (the ground far away) consecutive steps are alike, however large; at an occlusion edge
+    the step stands alone.  A ramp: ``|s1| <= RAMP_STEP_RATIO * min(|s0|, |s2|)``; a missing cell makes
+    no ramp.
+    """
+    h, w = range_cells.shape
+    d = b - a
+    if wrap:
+        d[:, 1] = (d[:, 1] + w // 2) % w - w // 2
+
+    def r_at(rc):
+        rows, cols = rc[:, 0], (rc[:, 1] % w) if wrap else rc[:, 1]
+        inside = (rows >= 0) & (rows < h) & (cols >= 0) & (cols < w)
+        out = np.full(rc.shape[0], np.nan)
+        out[inside] = range_cells[rows[inside], cols[inside]]
+        return out
+
+    ra, rb = r_at(a), r_at(b)
+    s0, s1, s2 = ra - r_at(a - d), rb - ra, r_at(b + d) - rb
+    with np.errstate(invalid="ignore"):
+        return np.abs(s1) <= RAMP_STEP_RATIO * np.minimum(np.abs(s0), np.abs(s2))
+
+
+def _depth_edges(camera_depth: np.ndarray, cell_rc: np.ndarray, range_cells: np.ndarray, wrap: bool) -> np.ndarray:
+    """Depth-edge pixels: a return whose 4-neighbour pixel has no return, or one more than
+    ``EDGE_RELATIVE_JUMP`` nearer or farther from the camera -- unless the two pixels show neighbouring
+    cells of the scan on one smooth surface (:func:`_ramp_pairs`), as between the rings on the ground."""
     d = camera_depth
     has = np.isfinite(d)
     edge = np.zeros(d.shape, bool)
     for axis in (0, 1):
-        a = d[:-1] if axis == 0 else d[:, :-1]
-        b = d[1:] if axis == 0 else d[:, 1:]
+        cut = (slice(None, -1), slice(None)) if axis == 0 else (slice(None), slice(None, -1))
+        nxt = (slice(1, None), slice(None)) if axis == 0 else (slice(None), slice(1, None))
+        a, b = d[cut], d[nxt]
         ha, hb = np.isfinite(a), np.isfinite(b)
         with np.errstate(invalid="ignore"):
-            jump = np.abs(a - b) > EDGE_RELATIVE_JUMP * np.fmin(a, b)
-        pair = (ha != hb) | (ha & hb & jump)
-        if axis == 0:
-            edge[:-1] |= pair
-            edge[1:] |= pair
-        else:
-            edge[:, :-1] |= pair
-            edge[:, 1:] |= pair
+            jump = ha & hb & (np.abs(a - b) > EDGE_RELATIVE_JUMP * np.fmin(a, b))
+        ja, jb = np.nonzero(jump)
+        if ja.size:
+            ca, cb = cell_rc[cut][ja, jb].astype(np.int64), cell_rc[nxt][ja, jb].astype(np.int64)
+            gap = np.abs(cb - ca)
+            if wrap:
+                gap[:, 1] = np.minimum(gap[:, 1], range_cells.shape[1] - gap[:, 1])
+            near = (gap.max(axis=1) <= 1)
+            smooth = np.zeros(ja.size, bool)
+            smooth[near] = _ramp_pairs(range_cells, wrap, ca[near], cb[near])
+            jump[ja[smooth], jb[smooth]] = False
+        pair = (ha != hb) | jump
+        edge[cut] |= pair
+        edge[nxt] |= pair
     return edge & has
 
 
@@ -215,18 +268,23 @@ def render_from_camera(depth, camera, T_camera_lidar, *, footprint_px=None, max_
         keep = norm <= float(max_range_m)
         rows, cols, points, norm = rows[keep], cols[keep], points[keep], norm[keep]
     pixels, cam_dist = _project_cells(camera, T, points)
+    # Only returns whose largest possible footprint can reach into the image go on (half a scan is behind).
+    margin = FOOTPRINT_MAX_HALF_PX if footprint_px is None else int(footprint_px) // 2
+    with np.errstate(invalid="ignore"):
+        near_image = ((pixels[:, 0] >= -0.5 - margin) & (pixels[:, 0] <= width - 0.5 + margin)
+                      & (pixels[:, 1] >= -0.5 - margin) & (pixels[:, 1] <= height - 0.5 + margin))
+    keep = np.nonzero(near_image & (cam_dist > 0))[0]
+    rows, cols, norm, pixels, cam_dist = rows[keep], cols[keep], norm[keep], pixels[keep], cam_dist[keep]
     if footprint_px is None:
         half_u, half_v = _footprint_half_px(depth, camera, T, pixels, norm, rows, cols, FOOTPRINT_MAX_HALF_PX)
     else:
         half = np.int32(int(footprint_px) // 2)
         half_u = half_v = np.full(rows.size, half, np.int32)
     # Returns whose footprint reaches into the image (centres just outside close the border too).
-    with np.errstate(invalid="ignore"):
-        col_c = np.floor(pixels[:, 0] + 0.5)
-        row_c = np.floor(pixels[:, 1] + 0.5)
-        inside = (np.isfinite(col_c) & np.isfinite(row_c) & (cam_dist > 0)
-                  & (col_c + half_u >= 0) & (col_c - half_u <= width - 1)
-                  & (row_c + half_v >= 0) & (row_c - half_v <= height - 1))
+    col_c = np.floor(pixels[:, 0] + 0.5)
+    row_c = np.floor(pixels[:, 1] + 0.5)
+    inside = ((col_c + half_u >= 0) & (col_c - half_u <= width - 1)
+              & (row_c + half_v >= 0) & (row_c - half_v <= height - 1))
     idx = np.nonzero(inside)[0]
     best_key = np.full((height, width), np.inf, np.float32)
     best_index = np.full((height, width), -1, np.int32)
@@ -242,7 +300,13 @@ def render_from_camera(depth, camera, T_camera_lidar, *, footprint_px=None, max_
     cell_rc = np.full((height, width, 2), -1, np.int32)
     cell_rc[shown, 0] = rows[winner]
     cell_rc[shown, 1] = cols[winner]
-    return CameraRender(range_m=range_img, cell_rc=cell_rc, camera_depth_m=cam_img, edge=_depth_edges(cam_img))
+    return CameraRender(range_m=range_img, cell_rc=cell_rc, camera_depth_m=cam_img, edge=_depth_edges(cam_img, cell_rc, _cell_ranges(depth), bool(depth.meta.get("wrap_cols", False))))
+
+
+def _cell_ranges(depth) -> np.ndarray:
+    """(H_d, W_d) float64: distance of every cell's point from the lidar origin, metres; NaN where invalid."""
+    pts = np.asarray(depth.points, np.float64)
+    return np.where(np.asarray(depth.valid, bool), np.linalg.norm(pts, axis=2), np.nan)
 
 
 # ------------------------------------------------------------------ shading
