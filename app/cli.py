@@ -268,6 +268,27 @@ def cmd_colorize(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_render(args: argparse.Namespace) -> int:
+    from calib_core.io.extrinsic_formats import load_extrinsics_any
+    from calib_core.render import check_render_path, render_from_camera, shade_render, write_render
+
+    check_render_path(args.output)
+    T = load_extrinsics_any(args.extrinsics)
+    camera = load_camera_from_args(args)
+    depth = load_scan_from_args(args)
+    ba = None
+    if args.mode == "ba":
+        from calib_core.bearing_angle import bearing_angle_images
+
+        ba = bearing_angle_images(depth, directions=(args.ba_direction,))[args.ba_direction]
+    render = render_from_camera(depth, camera, T)
+    rgba = shade_render(render, depth, args.mode, ba_image=ba) if args.output.suffix.lower() == ".png" else None
+    write_render(args.output, render, rgba)
+    shown = int(render.has_return.sum())
+    print(f"{shown} of {render.range_m.size} pixels show a return; wrote {args.output}")
+    return 0
+
+
 def cmd_sample(args: argparse.Namespace) -> int:
     import time
 
@@ -356,6 +377,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-occlusion", action="store_true", help="skip the depth test (colours occluded points too)")
     p.add_argument("-o", "--output", required=True, type=Path)
     p.set_defaults(func=cmd_colorize)
+
+    p = sub.add_parser("render", help="render the scan from the camera's viewpoint (PNG picture or NPZ arrays)")
+    _add_scan_args(p)
+    _add_camera_arg(p)
+    p.add_argument("--extrinsics", required=True, type=Path, help="T_camera_lidar: ba-calib YAML, KITTI calib txt or any 'export' format")
+    p.add_argument("--mode", choices=["range", "intensity", "ba"], default="range", help="shading of the PNG (default range)")
+    p.add_argument("--ba-direction", choices=["horizontal", "vertical", "diag_pos45", "diag_neg45"], default="horizontal",
+                   help="BA image of --mode ba (default horizontal)")
+    p.add_argument("-o", "--output", required=True, type=Path, help="view.png (shaded RGBA) or view.npz (range_m, cell_rc, camera_depth_m)")
+    p.set_defaults(func=cmd_render)
 
     p = sub.add_parser("sample", help="generate a synthetic scene with ground truth")
     p.add_argument("-o", "--output", required=True, type=Path)

@@ -390,3 +390,40 @@ def shade_render(render: CameraRender, depth, mode: str = "range", *, intensity=
     out[..., 3] = np.where(shown, 255, 0).astype(np.uint8)
     out[~shown, :3] = 0
     return out
+
+
+# ------------------------------------------------------------------ files
+RENDER_SUFFIXES = (".png", ".npz")
+
+
+def check_render_path(path) -> None:
+    """Refuse an output path whose suffix is neither ``.png`` nor ``.npz`` (one-line :class:`CalibError`)."""
+    from pathlib import Path
+
+    if Path(path).suffix.lower() not in RENDER_SUFFIXES:
+        raise CalibError(f"{path}: the render is written as .png (shaded RGBA) or .npz (arrays); got suffix "
+                         f"{Path(path).suffix or '(none)'!r}")
+
+
+def write_render(path, render: CameraRender, rgba: np.ndarray | None = None) -> None:
+    """Write a render atomically: ``.png`` the shaded RGBA picture ``rgba`` (from :func:`shade_render`), ``.npz``
+    the arrays ``range_m`` (H, W) float32 metres (NaN: no return), ``cell_rc`` (H, W, 2) int32 (-1: none) and
+    ``camera_depth_m`` (H, W) float32 metres (NaN: none)."""
+    import io
+    from pathlib import Path
+
+    from .io.atomic import write_bytes_atomic
+
+    check_render_path(path)
+    if Path(path).suffix.lower() == ".npz":
+        buf = io.BytesIO()
+        np.savez_compressed(buf, range_m=render.range_m.astype(np.float32), cell_rc=render.cell_rc.astype(np.int32),
+                            camera_depth_m=render.camera_depth_m.astype(np.float32))
+        write_bytes_atomic(path, buf.getvalue())
+        return
+    if rgba is None or np.asarray(rgba).shape != render.range_m.shape + (4,):
+        raise CalibError("a .png render needs the shaded (H, W, 4) RGBA picture")
+    ok, data = cv2.imencode(".png", cv2.cvtColor(np.ascontiguousarray(rgba, np.uint8), cv2.COLOR_RGBA2BGRA))
+    if not ok:
+        raise CalibError(f"{path}: cannot encode the render as PNG")
+    write_bytes_atomic(path, data.tobytes())
