@@ -109,12 +109,16 @@ class ImageSlot:
         return (cx - self.render_width / 2, cy - self.render_height / 2, cx + self.render_width / 2, cy + self.render_height / 2)
 
 
-def ba_grid_columns(ba_aspect: float, n_images: int = 4, view_aspect: float = VIEW_ASPECT) -> int:
+def ba_grid_columns(ba_aspect: float, n_images: int = 4, view_aspect: float = VIEW_ASPECT,
+                    above_height: float = 0.0) -> int:
     """Images per row for ``n_images`` BA images of width / height ``ba_aspect``.
 
     Picks, from :data:`BA_GRID_COLUMNS`, the grid whose images are widest once
     the whole block (images, gaps, titles) is fitted into a view of width /
-    height ``view_aspect``.  Ties keep the earlier candidate (2 x 2).
+    height ``view_aspect``.  Ties keep the earlier candidate (2 x 2).  With
+    ``above_height`` (world units of images above the block: the camera view
+    and the camera-view render), the whole column is fitted, and the score is
+    the BA images' width times the camera image's (both as shown).
     """
     best, best_score = BA_GRID_COLUMNS[0], -1.0
     for n_cols in BA_GRID_COLUMNS:
@@ -122,7 +126,8 @@ def ba_grid_columns(ba_aspect: float, n_images: int = 4, view_aspect: float = VI
         n_rows = -(-n_images // n_cols)
         slot_w = (CAMERA_WIDTH - (n_cols - 1) * GAP) / n_cols
         block_h = n_rows * (slot_w / ba_aspect + GAP + LABEL_HEIGHT)
-        score = slot_w / max(CAMERA_WIDTH / view_aspect, block_h)
+        fit = max(CAMERA_WIDTH / view_aspect, above_height + block_h)
+        score = slot_w / fit * (CAMERA_WIDTH / fit if above_height > 0 else 1.0)
         if score > best_score * (1 + 1e-9):
             best, best_score = n_cols, score
     return best
@@ -133,6 +138,7 @@ def annotation_layout(
     ba_size: tuple[int, int],
     ba_keys: tuple[str, ...],
     cell_aspect: float = 1.0,
+    above_height: float = 0.0,
 ) -> dict[str, ImageSlot]:
     """Slots for the camera image variants and the four BA images.
 
@@ -147,11 +153,14 @@ def annotation_layout(
         Keys of the four BA images, in reading order.
     cell_aspect : float
         Drawn height / width of one cell (1 = square).
+    above_height : float
+        World units of images above the BA block besides the camera views (:func:`ba_grid_columns`).
     """
     slots: dict[str, ImageSlot] = {}
     bw, bh = ba_size
     ba_aspect = bw / (bh * cell_aspect)
-    n_cols = ba_grid_columns(ba_aspect, len(ba_keys))
+    camera_h = max(CAMERA_WIDTH * h / w for w, h in camera_sizes.values())
+    n_cols = ba_grid_columns(ba_aspect, len(ba_keys), above_height=above_height and above_height + camera_h + GAP)
     cell_w = (CAMERA_WIDTH - (n_cols - 1) * GAP) / n_cols
     cell_h = cell_w / ba_aspect
     for i, key in enumerate(ba_keys):

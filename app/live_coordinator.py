@@ -182,6 +182,7 @@ class LiveSolveCoordinator:
             self._shown_job = max(self._shown_job, job)
             self._shown.notify_all()
         self.request_cloud()
+        app.render_pane.request()  # the camera-view render follows the solve shown
 
     def request_cloud(self) -> None:
         """Queue what the current solve still owes: cloud colours if a tab shows 3-D, the facing window in camera
@@ -219,11 +220,11 @@ class LiveSolveCoordinator:
     def ensure_facing(self) -> None:
         """Compute the camera-facing window of the current pose now, if not done yet (switch to camera mode)."""
         bundle = self._bundle
-        initial = self.app.initial_T_camera_lidar
         if bundle is not None and self._facing_of is not bundle:
             self._set_facing(bundle, self._facing_window(bundle.result.T_camera_lidar))
-        elif bundle is None and initial is not None:
-            facing = self._facing_window(initial)  # before any solve: the imported pose
+        elif bundle is None:
+            # Before any solve: the rough pose, else the "+x" preset (app.loupe_support.view_pose).
+            facing = self._facing_window(self.app.loupe_support.view_pose()[0])
             if facing is not None:
                 self._facing = facing
 

@@ -14,11 +14,15 @@ from typing import Any
 import numpy as np
 import viser
 
+from calib_core.alignment import preset_T
 from calib_core.errors import CalibError
 from calib_core.predict import ProjectedScan, predict_pixel
 
 from .loupes import ZOOM_FACTOR
 from .security import upload_display_name
+
+#: The pose the render and the BA columns assume before any pose exists.
+DEFAULT_PRESET = "+x"
 
 
 def read_extrinsics(path: Path, shown: str | None = None) -> np.ndarray:
@@ -53,8 +57,14 @@ class LoupeSupport:
         self.initial_T_camera_lidar: np.ndarray | None = None
         self._projected: tuple[bytes, ProjectedScan] | None = None
         self._projected_lock = threading.Lock()
+        # The extrinsic given at start (file, bag's /tf_static); a rough pose saved in the session wins over it.
+        self.imported_T_camera_lidar: np.ndarray | None = None
         if initial_T_camera_lidar is not None:
             self.set_initial_extrinsics(initial_T_camera_lidar)
+            self.imported_T_camera_lidar = self.initial_T_camera_lidar
+        saved = app.state.view.rough_T_camera_lidar
+        if saved:
+            self.set_initial_extrinsics(np.array(saved, np.float64).reshape(4, 4))
 
     # ------------------------------------------------------------------ pose and predictions
     def pose(self) -> np.ndarray | None:
@@ -63,6 +73,16 @@ class LoupeSupport:
         if bundle is not None:
             return bundle.result.T_camera_lidar
         return self.initial_T_camera_lidar
+
+    def view_pose(self) -> tuple[np.ndarray, str]:
+        """The pose the camera-view render and the BA columns use, and where it comes from: the last good solve
+        (``"solve"``), else the rough pose (``"rough"``), else the "+x" mounting preset (``"default"``)."""
+        bundle = self.app.live.bundle
+        if bundle is not None:
+            return bundle.result.T_camera_lidar, "solve"
+        if self.initial_T_camera_lidar is not None:
+            return self.initial_T_camera_lidar, "rough"
+        return preset_T(DEFAULT_PRESET), "default"
 
     def predict_pixel(self, row: int, col: int) -> tuple[float, float] | None:
         """Original camera pixel where :meth:`pose` expects scan cell ``(row, col)``; None without a pose or unseen."""
@@ -107,12 +127,22 @@ class LoupeSupport:
         self.initial_T_camera_lidar = T_camera_lidar
         threading.Thread(target=self._warm_projection, name="ba-calib-projection", daemon=True).start()
 
+    def adopt_rough_pose(self, T_camera_lidar: np.ndarray | None) -> None:
+        """Make ``T_camera_lidar`` the rough pose (None: none), save it in the session and redraw what uses it."""
+        self.set_initial_extrinsics(T_camera_lidar)
+        saved = () if self.initial_T_camera_lidar is None else tuple(self.initial_T_camera_lidar.reshape(-1))
+        self.app.state.set_view(rough_T_camera_lidar=saved)
+        self._after_initial_extrinsics()
+
     def _after_initial_extrinsics(self) -> None:
         """Redraw predictions and the facing window once an initial extrinsic is imported."""
         app = self.app
         if app.state.view.ba_window_mode == "camera" and app.live.bundle is None:
             app.live.ensure_facing()
             app.view.apply_ba_window()
+        if getattr(app, "render_pane", None) is not None:
+            app.render_pane.request()
+            app.align.show()
         app.overlays.invalidate()
         app.overlays.refresh()
         app.live.show_panels()
@@ -124,7 +154,7 @@ class LoupeSupport:
         """This tab's "Import initial extrinsics" button, in the View folder (each tab gets its own)."""
         app = self.app
         with app.page.folder_lock:
-            with app.view.folder:
+            with app.align.folder:
                 button = client.gui.add_upload_button(
                     "Import initial extrinsics", icon=viser.Icon.UPLOAD, mime_type="*/*",
                     hint="A rough pose (any extrinsics format ba-calib reads): predictions and 'Facing the camera' "
@@ -143,8 +173,7 @@ class LoupeSupport:
             path = Path(tmp) / f"upload{suffix}"
             path.write_bytes(content)
             T = read_extrinsics(path, shown)
-        self.set_initial_extrinsics(T)
-        self._after_initial_extrinsics()
+        self.app.align.adopt(T)
         app = self.app
         app.notify(client, "Initial extrinsics imported",
                      f"{shown}: predictions use it until {4} pairs are solved", color="green")

@@ -82,7 +82,7 @@ class Loupes:
 
     def __init__(self, app: Any) -> None:
         self.app = app
-        main = [app.slots[k] for k in app.ba_keys] + [app.slots[k] for k in app.camera_sizes]
+        main = list(app.slots.values())  # camera views, the camera-view render, BA images
         self.areas: dict[str, LoupeArea] = loupe_areas(bounds_of(main))
         n_rows, n_cols = app.depth.shape
         self._ba_cols = min(BA_LOUPE_COLUMNS, n_cols)
@@ -94,6 +94,7 @@ class Loupes:
         self._slots: dict[str, ImageSlot] = {}
         self._marks_of: dict[str, tuple] = {}  # kind -> inputs its marks were last drawn from
         self._framing_of: dict[str, tuple] = {}  # kind -> inputs its outline (and centre marker) were drawn from
+        self.shows_render = False  # the laser loupe shows the camera-view render's crop (after a click on it)
         scene = app.server.scene
         self._handles: dict[str, Any] = {}
         self._titles: dict[str, Any] = {}
@@ -142,8 +143,27 @@ class Loupes:
                 self.camera_crop = crop
                 self._show("camera")
 
+    def show_render(self, on: bool) -> None:
+        """Let the laser loupe show the camera-view render's crop (the camera loupe's crop), or the BA image's."""
+        with self.app.ui_lock:
+            if bool(on) != self.shows_render:
+                self.shows_render = bool(on)
+                self._show("ba")
+
+    def refresh_ba(self) -> None:
+        """Re-send the laser loupe (e.g. a new render arrived)."""
+        with self.app.ui_lock:
+            self._show("ba")
+
+    def _render_on(self) -> bool:
+        """Does the laser loupe show the render now (asked for, and a render exists)?"""
+        pane = getattr(self.app, "render_pane", None)
+        return self.shows_render and pane is not None and pane.current is not None
+
     def zoom(self, kind: str, factor: float) -> None:
         """Magnify loupe ``kind`` by ``factor`` (> 1 shows less, bigger) around the same centre."""
+        if kind == "ba" and self._render_on():
+            kind = "camera"  # the laser loupe shows the camera loupe's crop: zoom both
         with self.app.ui_lock:
             if kind == "ba":
                 lo, hi = BA_COLUMN_LIMITS
@@ -171,6 +191,9 @@ class Loupes:
         Raises CalibError outside the scan or the image.
         """
         x, y = float(uv[0]), float(uv[1])
+        if kind == "ba" and self._render_on():
+            c = self.camera_crop
+            return self.app.render_pane.target_at((c.u0 + x, c.v0 + y))
         if kind == "ba":
             c = self.ba_crop
             n_rows, n_cols = self.app.depth.shape
@@ -191,7 +214,11 @@ class Loupes:
     def display_of(self, kind: str, target: tuple[float, float]) -> tuple[float, float] | None:
         """Loupe pixel showing ``target``: ``(col, row)`` of a scan cell (fractions aim off its centre) or an
         original-image pixel ``(u, v)``; None when the loupe does not show it."""
-        if kind == "ba":
+        if kind == "ba" and self._render_on():  # where the render's pose draws the cell
+            c = self.camera_crop
+            uv = self.app.render_pane.pixel_of_cells(np.array([[round(target[1]), round(target[0])]]))[0]
+            x, y = float(uv[0]) - c.u0, float(uv[1]) - c.v0
+        elif kind == "ba":
             c = self.ba_crop
             n_cols = self.app.depth.shape[1]
             x = float(target[0]) - c.col0
@@ -219,6 +246,8 @@ class Loupes:
         # Only the ends this loupe draws: moving a pixel leaves the BA loupe's marks alone, and vice versa.
         ends = tuple((p.id, p.laser_rc if kind == "ba" else p.pixel) for p in picks)
         inputs = (crop, self._slots[kind], ends, main, app.ba_window)
+        if kind == "ba" and self._render_on():
+            inputs += (self.camera_crop, id(app.render_pane.current))
         if self._marks_of.get(kind) == inputs:
             return
         self._marks_of[kind] = inputs
@@ -246,10 +275,14 @@ class Loupes:
         xy = np.stack([rc[:, 1] - c.col0, rc[:, 0] - c.row0], axis=1)
         if app.wrap_cols and len(xy):
             xy[:, 0] = (xy[:, 0] + 0.5) % app.depth.shape[1] - 0.5
-        inside = np.array([s.contains(p) for p in xy], bool)
         hx, hy = 0.5 * s.units_per_px, 0.5 * s.units_per_px_y
-        segs = marker_segments(s.world_from_pixel(xy[inside], z_offset=-0.01), 1.6 * max(hx, hy),
-                               cell_half_size=(hx, hy), ticks=True)
+        radius, cell = 1.6 * max(hx, hy), (hx, hy)
+        if self._render_on():  # the render's crop: rings where the render's pose draws the cells
+            xy = app.render_pane.pixel_of_cells(rc) - [self.camera_crop.u0, self.camera_crop.v0]
+            radius, cell = max(3.0, 0.06 * self.camera_crop.n) * s.units_per_px, None
+        inside = np.array([s.contains(p) for p in xy], bool)
+        segs = marker_segments(s.world_from_pixel(xy[inside], z_offset=-0.01), radius, cell_half_size=cell,
+                               ticks=True)
         seg_cols = np.repeat(cols[inside], len(segs) // max(int(inside.sum()), 1) * 2, axis=0).reshape(-1, 2, 3)
         nodes.lines("/annot/loupe/ba_marks", segs, seg_cols, thickness=2.5)
 
@@ -332,6 +365,9 @@ class Loupes:
         return CameraCrop(int(round(u)) - n // 2, int(round(v)) - n // 2, n, (float(u), float(v)), cov)
 
     def _ba_texture(self) -> np.ndarray:
+        if self._render_on():
+            cc = self.camera_crop
+            return self.app.render_pane.loupe_texture(cc.u0, cc.v0, cc.n)
         c = self.ba_crop
         gray = self.app.display.loupe_image(c.key)[0]
         n_rows, n_cols = gray.shape
@@ -360,14 +396,14 @@ class Loupes:
     def _place(self, kind: str) -> None:
         """Fit the crop into the loupe's area (cells keep their drawn aspect), top-left aligned."""
         area = self.areas[kind]
-        if kind == "ba":
+        if kind == "ba" and not self._render_on():
             c = self.ba_crop
             unit_x = area.width / c.n_cols
             unit_y = unit_x * self.app.ba_cell_aspect
             if unit_y * c.n_rows > area.height:
                 unit_y = area.height / c.n_rows
             w_px, h_px, rw, rh = c.n_cols, c.n_rows, area.width, unit_y * c.n_rows
-        else:
+        else:  # the camera loupe, or the laser loupe showing the render's crop of the same pixels
             n = self.camera_crop.n
             w_px = h_px = n
             rw = rh = min(area.width, area.height)
@@ -383,6 +419,8 @@ class Loupes:
 
     def title(self, kind: str) -> str:
         """The loupe's title as the page shows it."""
+        if kind == "ba" and self._render_on():
+            return self.app.render_pane.loupe_title(self.camera_crop.center, self.camera_crop.n)
         if kind == "ba":
             c = self.ba_crop
             row, col = c.center
@@ -401,6 +439,8 @@ class Loupes:
             self._place(kind)
             self._titles[kind].text = self.title(kind)
             self._draw_marks(kind)
+            if kind == "camera" and self._render_on():
+                self._show("ba")  # the laser loupe shows the same crop of the render
 
     def refresh(self) -> None:
         """Re-send both loupes (e.g. after the BA display changed)."""

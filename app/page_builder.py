@@ -76,6 +76,10 @@ class PageBuilder:
         self._camera_title = scene.add_label("/annot/titles/camera", "", position=(0, 0, -0.01), anchor="bottom-left",
                                             font_screen_scale=0.9)
 
+    def image_handle(self, key: str) -> Any:
+        """The scene image of ``key`` (a BA key or camera view), e.g. to add a drag handler."""
+        return self._handles[key]
+
     def texture(self, key: str) -> np.ndarray:
         """The texture image ``key`` (a BA key or camera view) shows now."""
         return np.asarray(self._handles[key].image)

@@ -14,6 +14,7 @@ from calib_core.errors import CalibError
 from calib_core.pairs import Pair, load_pairs_yaml
 from calib_core.panorama import refine_click_to_corner
 
+from .render_pane import RENDER_KEY
 from .security import upload_display_name
 from .ui_common import MIN_PAIRS, PICK_RADII, SNAP_RADIUS_PX, IMPORT_CHOICES, md_escape
 
@@ -148,6 +149,8 @@ class PairsPanel:
             elif self.app.state.view.snap:
                 target = ("camera", *map(float, refine_click_to_corner(self.app.image_gray, target[1:], SNAP_RADIUS_PX)))
             return target
+        if key == RENDER_KEY:  # the camera-view render: the laser cell drawn there, an ordinary laser end
+            return self.app.render_pane.target_at(uv)
         if key in self.app.ba_keys:
             if self.app.state.view.snap:
                 shown = self.app.display.ba_display(key)[:, self.app.ba_window.columns]
@@ -171,6 +174,10 @@ class PairsPanel:
         with self.app.overlays.loupe_marks_after():
             return self._apply_click(key, target, pick_id, client)
 
+    def click_at(self, key: str, uv: tuple[float, float], client: Any = None) -> int:
+        """A click at display pixel ``uv`` of slot ``key``, as an on-click event makes it (e.g. a shaky drag)."""
+        return self._click(key, uv, client=client)
+
     def _apply_click(self, key: str, target: tuple, pick_id: int | None, client: Any) -> int:
         kind, source = target[0], ("loupe" if key.startswith("loupe_") else "full")
         cid = None if client is None else client.client_id
@@ -188,6 +195,9 @@ class PairsPanel:
                     self.app.loupes.frame_ba(ba_key, row, col)
                 raise
             last_click: tuple = ("ba", ba_key, row, col)
+            # The laser loupe shows the render's crop after a click on the render (or in that loupe), else the BA's.
+            from_render = key == RENDER_KEY or (key == "loupe_ba" and self.app.loupes.shows_render)
+            self.app.loupes.show_render(from_render)
         else:
             _, u, v = target
             out = self.app.state.move_pixel(pick_id, u, v) if pick_id is not None else self.app.state.click_pixel(u, v)
@@ -195,17 +205,22 @@ class PairsPanel:
         if client is not None:
             self._last_click[cid] = last_click
         self._last_pick[cid] = (kind, out, source)
-        self._frame_loupes(target, out, recentre=source == "full")
+        self._frame_loupes(target, out, recentre=source == "full",
+                           render_uv=self.app.render_pane.last_pixel if key == RENDER_KEY else None)
         return out
 
-    def _frame_loupes(self, target: tuple, pick_id: int, recentre: bool) -> None:
-        """After a click: the clicked loupe on the click, the other loupe on the pair's other end or its prediction."""
+    def _frame_loupes(self, target: tuple, pick_id: int, recentre: bool,
+                      render_uv: tuple[float, float] | None = None) -> None:
+        """After a click: the clicked loupe on the click, the other loupe on the pair's other end or its prediction
+        (a click on the render: the camera loupe on the clicked pixel, the laser loupe showing the same crop)."""
         pick = next((p for p in self.app.state.picks if p.id == pick_id), None)
         if target[0] == "ba":
             if recentre:
                 self.app.loupes.frame_ba(*target[1:])
             if pick is not None and pick.pixel is not None:
                 self.app.loupes.frame_camera(*pick.pixel)
+            elif render_uv is not None:
+                self.app.loupes.frame_camera(*render_uv)
             else:
                 predicted = self.app.loupe_support.predict_pixel(target[2], target[3])
                 if predicted is not None:
@@ -248,7 +263,7 @@ class PairsPanel:
 
     def make_drag_handler(self, key: str) -> Callable:
         def on_drag(event: Any) -> None:
-            if event.phase != "end":
+            if event.phase != "end" or self.app.align.drag_enabled:  # aligning: the Align panel has this drag
                 return
             slot = self.app.view.slots[key]
             start = slot.pixel_from_world(np.asarray(event.start_position)[None])[0]

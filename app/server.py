@@ -17,6 +17,7 @@ import numpy as np
 
 from . import blas_threads
 from .action_queue import ActionQueue, notify_tabs
+from .align_panel import AlignPanel
 from .app_services import UiLock
 from .calibration_panel import CalibrationPanel
 from .camera_view import camera_views
@@ -31,6 +32,7 @@ from .overlay_drawing import OverlayDrawing
 from .page_builder import PageBuilder
 from .pairs_panel import PairsPanel
 from .prepared_scene import MAX_CLOUD_POINTS, PreparedScene
+from .render_pane import RenderPane
 from .scene_nodes import SceneNodes
 from .security import AccessPolicy, RefusalLog, start_guarded_viser
 from .state import AnnotationState
@@ -113,14 +115,16 @@ class CalibrationApp:
         # Every change is on disk (an fsync'd journal line) before the UI shows it; the journal is compacted into
         # the session YAML in the background and by stop().  The view settings live in ``state.view`` only.
         self._stopped = False
-        default_view = ViewSettings(up_axis="+y" if self.depth.meta.get("model") == "rotating_2d" else "+z")
+        # The BA panes show the columns the camera sees (under the rough pose, else the "+x" preset) by default.
+        default_view = ViewSettings(up_axis="+y" if self.depth.meta.get("model") == "rotating_2d" else "+z",
+                                    ba_window_mode="camera")
         self.state = AnnotationState(self.depth.valid, (self.camera.width, self.camera.height), self.session_path,
                                      on_save_error=self._on_save_error, default_view=default_view)
         self.ui_lock = UiLock()  # public: held while the scene and the panels are redrawn
         self.display = DisplayPanel(self)  # the laser panes' grey levels, with the saved contrast
         self.live = LiveSolveCoordinator(self)  # the solve shown; its threads start with the page
-        self.loupe_support = LoupeSupport(self, initial_T)  # the pose predictions use (solved, else imported)
-        self.live.ensure_facing()  # from the imported initial extrinsic, if any
+        self.loupe_support = LoupeSupport(self, initial_T)  # the pose predictions use (solved, else rough)
+        self.live.ensure_facing()  # from the rough pose, else the "+x" preset
 
         # -- server -------------------------------------------------------------------
         # Every request must name this server (Host, Origin) and, off loopback, carry the token.
@@ -148,6 +152,8 @@ class CalibrationApp:
             self.page.add_images({k: self.view.ba_texture(k) for k in self.ba_keys},
                                  {k: self.view.ba_title(k) for k in self.ba_keys})
             self.view.update_camera_title()
+            self.render_pane = RenderPane(self)  # the scan seen from the camera, below the camera image
+            self.align = AlignPanel(self, order=self.pairs_folder.order - 0.5)  # rough pose; first folder
             self.loupes = Loupes(self)  # the magnified BA and camera panes (public: frame_ba, frame_camera)
             self.format_export = FormatExportPanel(self)  # verify: its own widgets (formats, reference import)
             self.server.on_client_connect(self._on_connect)
@@ -156,9 +162,13 @@ class CalibrationApp:
             self.guide = attach_guide_panel(self)  # guided picking (app/guide_panel.py)
             self.state.subscribe(self.live.on_state_change)
             self.live.on_state_change(self.state)
+            self.state.subscribe(self.render_pane.on_state_change)  # after the live solve's: sees its bundle
+            self.render_pane.request()
             self.verify_panel = VerifyPanel(self)  # verify: check pairs, leave-one-out, heat map, reference, plots
         except BaseException:
             self.actions.stop()
+            if hasattr(self, "render_pane"):
+                self.render_pane.stop()
             self.live.stop()
             self.server.stop()
             self.state.close()
@@ -245,6 +255,7 @@ class CalibrationApp:
         self._stopped = True
         self.actions.stop()
         self.live.stop()
+        self.render_pane.stop()
         self.guide.stop()
         self.verify_panel.stop()
         try:

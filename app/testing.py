@@ -31,9 +31,10 @@ from typing import Any
 import numpy as np
 
 from .testing_fakes import FakeTab
+from .testing_render import RenderDriver
 
 
-class AppDriver:
+class AppDriver(RenderDriver):
     """Drive one :class:`app.server.CalibrationApp` as a user in one tab (``tab``) would."""
 
     def __init__(self, app: Any, tab: FakeTab | None = None) -> None:

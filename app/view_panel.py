@@ -18,7 +18,8 @@ from calib_core.viewpoint import viewpoint_behind_camera
 
 from .ba_view import ColumnWindow, ba_texture, texture_factor
 from .camera_view import CameraView
-from .layout import ImageSlot, annotation_layout, bounds_of
+from .layout import CAMERA_WIDTH, GAP, LABEL_HEIGHT, ImageSlot, annotation_layout, bounds_of
+from .render_pane import RENDER_KEY, with_render_slot
 from .ui_common import (
     MIN_PAIRS, CLOUD_ORIGIN, PANEL_PX, ZOOM_PX_PER_CELL, ZOOM_PX_PER_IMAGE_PX, ZOOM_STEP,
 )
@@ -89,8 +90,10 @@ class ViewPanel:
     def _layout(self) -> dict[str, ImageSlot]:
         app = self.app
         window = self._ba_window
-        return annotation_layout(app.camera_sizes, (window.width, app.depth.shape[0]), app.ba_keys,
-                                 cell_aspect=app.ba_cell_aspect)
+        raw_w, raw_h = app.camera_sizes["raw"]
+        render_band = CAMERA_WIDTH * raw_h / raw_w + GAP + LABEL_HEIGHT  # the camera-view render, below the camera
+        return with_render_slot(annotation_layout(app.camera_sizes, (window.width, app.depth.shape[0]), app.ba_keys,
+                                                  cell_aspect=app.ba_cell_aspect, above_height=render_band))
 
     def slot_of(self, key: str) -> ImageSlot:
         """The image slot of click key ``key``: a BA key, ``raw``, ``panorama``, ``loupe_ba`` or ``loupe_camera``."""
@@ -273,11 +276,11 @@ class ViewPanel:
         self._client_mode[client.client_id] = mode
         self._update_cloud_visibility()
         if mode == "camera":
-            slots = [self.camera_slot()]
+            slots = [self.camera_slot(), self.slots[RENDER_KEY]]
         elif mode == "ba":
             slots = [self.slots[k] for k in self.app.ba_keys]
         else:
-            slots = [self.camera_slot()] + [self.slots[k] for k in self.app.ba_keys]
+            slots = [self.camera_slot(), self.slots[RENDER_KEY]] + [self.slots[k] for k in self.app.ba_keys]
             if getattr(self.app, "loupes", None) is not None:  # the loupes are part of the page
                 slots += [self.app.loupes.slot("ba"), self.app.loupes.slot("camera")]
         x0, y0, x1, y1 = bounds_of(slots)
@@ -407,6 +410,8 @@ class ViewPanel:
             if shown is None:
                 raise CalibError(f"{uv} is not shown in the {target[len('loupe_'):]} loupe")
             disp = np.array([shown])
+        elif target == RENDER_KEY:  # ``uv``: a render pixel (the camera image's pixels)
+            slot = self.slots[RENDER_KEY]
         elif target == "camera":
             slot = self.camera_slot()
             disp, ok = self.app.display_from_pixels(disp)

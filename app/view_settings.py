@@ -17,6 +17,8 @@ import math
 from dataclasses import dataclass, fields, replace
 from typing import Any, Mapping
 
+import numpy as np
+
 from calib_core.errors import CalibError
 
 #: What the BA images show: every column, the columns the camera sees, or the sliders' window.
@@ -27,6 +29,9 @@ UP_AXES = {"+z": (0.0, 0.0, 1.0), "+y": (0.0, 1.0, 0.0), "-y": (0.0, -1.0, 0.0),
 AS_CLICKED = "BA as clicked"
 CONTRAST_RANGE = (0.5, 3.0)
 EDGE_OPACITY_RANGE = (0.0, 1.0)
+#: How the camera-view laser render is shaded (key: what the session saves; value: what the page shows).
+RENDER_MODES = {"range": "Range", "intensity": "Intensity", "ba": "Bearing angle"}
+RENDER_BLEND_RANGE = (0.0, 1.0)
 
 
 @dataclass(frozen=True)
@@ -57,6 +62,14 @@ class ViewSettings:
         laser images (``Intensity``, ``Range``), or ``""`` for its BA direction.
     edge_opacity : float
         Opacity of the BA-edge overlay, in :data:`EDGE_OPACITY_RANGE` (0 hides it).
+    render_mode : str
+        Key of :data:`RENDER_MODES`: how the scan seen from the camera is shaded.
+    render_blend : float
+        Opacity of that render drawn over the camera image, in :data:`RENDER_BLEND_RANGE` (0 hides it).
+    rough_T_camera_lidar : tuple of float
+        The rough pose set in the Align folder or imported (predictions use it until a solve exists):
+        ``T_camera_lidar`` (maps lidar points into the camera frame, metres) as 16 numbers, row by row;
+        empty: none set.
     """
 
     panorama: bool = True
@@ -71,6 +84,9 @@ class ViewSettings:
     loupe_shows: str = AS_CLICKED
     last_pane_shows: str = ""
     edge_opacity: float = 0.8
+    render_mode: str = "range"
+    render_blend: float = 0.0
+    rough_T_camera_lidar: tuple = ()
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -91,7 +107,7 @@ class ViewSettings:
 
     def to_dict(self) -> dict[str, Any]:
         """Every setting as plain YAML-able data (what the session file holds)."""
-        return {f.name: getattr(self, f.name) for f in fields(self)}
+        return {f.name: list(v) if isinstance(v := getattr(self, f.name), tuple) else v for f in fields(self)}
 
     def changed(self, **changes: Any) -> "ViewSettings":
         """A copy with ``changes``; CalibError names an unknown setting or a bad value."""
@@ -110,6 +126,10 @@ def _checked(name: str, value: Any) -> Any:
     elif kind is str:
         if isinstance(value, str) and (name not in _CHOICES or value in _CHOICES[name]):
             return value
+    elif kind is tuple:
+        pose = _checked_pose(value)
+        if pose is not None:
+            return pose
     elif kind is int:
         if isinstance(value, int) and not isinstance(value, bool) and value >= 0:
             return int(value)
@@ -119,9 +139,27 @@ def _checked(name: str, value: Any) -> Any:
     raise CalibError(f"view setting {name!r} cannot be {value!r}")
 
 
+def _checked_pose(value: Any) -> tuple | None:
+    """16 finite numbers of a rigid transform (rotation orthonormal to 1e-6, last row 0 0 0 1) as a tuple of
+    floats, or the empty tuple; None when ``value`` is neither."""
+    if not isinstance(value, (list, tuple)):
+        return None
+    if len(value) == 0:
+        return ()
+    if len(value) != 16 or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in value):
+        return None
+    T = np.asarray(value, dtype=np.float64).reshape(4, 4)
+    if not np.isfinite(T).all() or not np.allclose(T[3], [0.0, 0.0, 0.0, 1.0]):
+        return None
+    if not np.allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3), atol=1e-6) or np.linalg.det(T[:3, :3]) < 0:
+        return None
+    return tuple(float(x) for x in T.reshape(-1))
+
+
 _FIELDS = {"panorama": bool, "show_reprojection": bool, "show_edges": bool, "snap": bool, "up_axis": str,
            "ba_window_mode": str, "ba_window_start": int, "ba_window_width": int, "contrast": float,
-           "loupe_shows": str, "last_pane_shows": str, "edge_opacity": float}
-_CHOICES = {"up_axis": tuple(UP_AXES), "ba_window_mode": tuple(BA_WINDOW_MODES)}
-_RANGES = {"contrast": CONTRAST_RANGE, "edge_opacity": EDGE_OPACITY_RANGE}
+           "loupe_shows": str, "last_pane_shows": str, "edge_opacity": float, "render_mode": str,
+           "render_blend": float, "rough_T_camera_lidar": tuple}
+_CHOICES = {"up_axis": tuple(UP_AXES), "ba_window_mode": tuple(BA_WINDOW_MODES), "render_mode": tuple(RENDER_MODES)}
+_RANGES = {"contrast": CONTRAST_RANGE, "edge_opacity": EDGE_OPACITY_RANGE, "render_blend": RENDER_BLEND_RANGE}
 assert tuple(_FIELDS) == tuple(f.name for f in fields(ViewSettings)), "ViewSettings and _FIELDS disagree"

@@ -583,9 +583,9 @@ def test_app_column_window_clicks_markers_and_zoom_on_the_sample(tmp_path):
         s = app.slots["horizontal"]
         assert s.units_per_px_y / s.units_per_px == pytest.approx(2.0, rel=1e-3)
 
-        # "Facing the camera" before any calibration: the slider window (all columns) stays.
-        notes = d.choose_ba_columns("Facing the camera")
-        assert app.ba_window.is_full and [t for t, _ in notes] == ["No calibration yet"]
+        # Before any pose the BA panes face the camera as the '+x' preset puts it (the default); this
+        # catadioptric camera sees all round, so every column is shown.
+        assert d.ba_columns_choice == "Facing the camera" and app.ba_window.is_full
         # The user sets a custom window across column 0 with the sliders.
         d.set_ba_columns(700, 60)
         assert app.ba_window == ColumnWindow(700, 60, 720, True)

@@ -27,7 +27,9 @@ def make_state(path, **kwargs) -> AnnotationState:
 # Every field set away from its default (checked below), so a round trip that drops one is caught.
 CHANGED = dict(panorama=False, show_reprojection=False, show_edges=False, snap=True, up_axis="-y",
                ba_window_mode="custom", ba_window_start=12, ba_window_width=40, contrast=2.25,
-               loupe_shows="Range", last_pane_shows="Intensity", edge_opacity=0.3)
+               loupe_shows="Range", last_pane_shows="Intensity", edge_opacity=0.3, render_mode="ba",
+               render_blend=0.4, rough_T_camera_lidar=(0.0, -1.0, 0.0, 0.1, 0.0, 0.0, -1.0, 0.2, 1.0, 0.0, 0.0, 0.3,
+                                                       0.0, 0.0, 0.0, 1.0))
 
 
 def test_changed_covers_every_field_with_a_non_default_value():
@@ -81,7 +83,7 @@ def test_a_session_round_trip_keeps_every_field_and_view_changes_are_not_undo_st
     assert s.view == ViewSettings(**CHANGED)  # undo/redo move pairs only
     s.close()
     on_disk = yaml.safe_load(path.read_text())["view"]
-    assert on_disk == CHANGED
+    assert on_disk == {k: list(v) if isinstance(v, tuple) else v for k, v in CHANGED.items()}  # YAML lists
     t = make_state(path)
     assert t.view == ViewSettings(**CHANGED)
     assert [(p.laser_rc, p.pixel) for p in t.picks] == [((3, 4), (10.0, 20.0))]
@@ -137,3 +139,25 @@ def test_the_app_shows_the_saved_settings_and_ignores_bad_ones(tmp_path):
         app.stop()
     saved = yaml.safe_load(session.read_text())["view"]
     assert saved["loupe_shows"] == "Range" and saved["ba_window_start"] == 100 and saved["panorama"] is False
+
+
+def test_a_rough_pose_is_kept_only_as_a_rigid_transform():
+    """The saved rough pose: 16 numbers of a rotation (orthonormal, det +1) and translation; anything else in a
+    session file falls back to "none" (old files have no such key at all)."""
+    R = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])  # camera looking along lidar +x
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R, (0.06, -0.08, -0.27)
+    good = [float(x) for x in T.reshape(-1)]
+    assert ViewSettings.from_dict({"rough_T_camera_lidar": good}).rough_T_camera_lidar == tuple(good)
+    assert ViewSettings.from_dict({}).rough_T_camera_lidar == ()
+    reflected = T.copy()
+    reflected[:3, 0] *= -1.0
+    scaled = T.copy()
+    scaled[:3, :3] *= 2.0
+    bottom = T.copy()
+    bottom[3, 0] = 1.0
+    for bad in (good[:15], good[:15] + [float("nan")], reflected.reshape(-1).tolist(), scaled.reshape(-1).tolist(),
+                bottom.reshape(-1).tolist(), ["1"] * 16, [True] * 16, 5.0, "identity"):
+        assert ViewSettings.from_dict({"rough_T_camera_lidar": bad}).rough_T_camera_lidar == (), bad
+        with pytest.raises(CalibError, match="rough_T_camera_lidar"):
+            ViewSettings(rough_T_camera_lidar=bad)  # type: ignore[arg-type]

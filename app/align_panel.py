@@ -1,0 +1,265 @@
+"""The Align folder: a rough pose before any pair, in under a minute.
+
+Start from a mounting preset (the camera looks along lidar +x, -y, +y or -x) or the imported extrinsic (the
+``--initial-extrinsics`` file, a bag's ``/tf_static``, or the per-tab "Import initial extrinsics" button), then, with
+"Align by drag" on, drag the camera image or the camera-view render: the view turns about the camera centre so that
+the laser content follows the mouse (Shift+drag rolls it about the principal point).  Step buttons turn by 0.5 deg and
+move the camera by 5 cm.  The render (and its copy over the photo) follows every drag at once; the rest of the page
+(predictions, BA columns, proposals, the session file) takes the new pose when the drag ends.
+
+The result is an ordinary initial extrinsic (``app.loupe_support``): predictions, loupes and proposals use it until
+4 pairs are solved.  The maths is :mod:`calib_core.alignment`; this panel only maps widgets and drags to it.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from calib_core.alignment import (
+    MOUNTING_PRESETS, drag_to_rotation, focal_px_estimate, preset_T, rotate_about_camera, translate_in_camera,
+)
+from calib_core.errors import CalibError
+from calib_core.transforms import invert_T, rotation_angle_deg
+
+from .render_pane import RENDER_KEY
+from .ui_common import MIN_PAIRS
+
+#: One press of a turn button turns the view this much (degrees); a move button moves the camera this far (metres).
+TURN_STEP_DEG = 0.5
+MOVE_STEP_M = 0.05
+#: Rough poses the "Undo align step" button can go back through.
+MAX_HISTORY = 100
+#: Labels of the buttons (what the render does on the page): turn left / right / up / down, roll.
+TURN_LABELS = ("◀", "▶", "▲", "▼", "⟲", "⟳")
+MOVE_LABELS = ("x-", "x+", "y-", "y+", "z-", "z+")
+HELP = (
+    "Before any pair: pick the preset nearest the mounting, then tick **Align by drag** and drag the camera "
+    "image or the **camera-view laser** render below it so that the laser's corners fall on the photo's "
+    "(**Shift**+drag rolls). The buttons nudge: the turn buttons move the render by 0.5°, the move buttons move "
+    "the camera 5 cm along its own x (right), y (down), z (forward)."
+)
+
+
+class AlignPanel:
+    """The "Align" folder of one :class:`app.server.CalibrationApp` (``app.align``) and the alignment drags.
+
+    It owns its widgets, the undo history of the rough pose and the drag in progress.  Public:
+    :attr:`folder`, :attr:`drag_enabled`, :meth:`apply_preset`, :meth:`turn`, :meth:`move`, :meth:`on_drag`,
+    :meth:`undo`, :attr:`text`.
+    """
+
+    def __init__(self, app: Any, order: float | None = None) -> None:
+        self.app = app
+        self._history: list[np.ndarray | None] = []
+        self._drag: dict | None = None  # the drag in progress: its start pose and pixel, and its slot
+        gui, guard = app.server.gui, app.guard
+        self.folder = gui.add_folder("Align (rough pose)", order=order)
+        with self.folder:
+            gui.add_markdown(HELP)
+            self._md_pose = gui.add_markdown("")
+            self._bg_preset = gui.add_button_group("Camera looks along lidar", tuple(MOUNTING_PRESETS))
+            self._bg_preset.on_click(guard(self.on_preset))
+            self._bt_imported = gui.add_button("Back to the imported extrinsic",
+                                               disabled=app.loupe_support.imported_T_camera_lidar is None,
+                                               hint="The extrinsic given at start (file or the bag's /tf_static)")
+            self._bt_imported.on_click(guard(self.on_imported))
+            self._cb_drag = gui.add_checkbox("Align by drag", initial_value=False,
+                                             hint="A left-drag on the camera image or the render turns the view "
+                                                  "about the camera centre; Shift+drag rolls it")
+            self._cb_drag.on_update(guard(self.on_drag_checkbox))
+            self._bg_turn = gui.add_button_group(f"Turn render {TURN_STEP_DEG:g}°", TURN_LABELS)
+            self._bg_turn.on_click(guard(self.on_turn))
+            self._bg_move = gui.add_button_group(f"Move camera {MOVE_STEP_M * 100:g} cm", MOVE_LABELS)
+            self._bg_move.on_click(guard(self.on_move))
+            self._bt_undo = gui.add_button("Undo align step", disabled=True)
+            self._bt_undo.on_click(guard(self.on_undo))
+            app.render_pane.add_controls(gui)
+        # Every drag callback on the nodes a drag may turn the view on, by (slot key, modifier), as registered.
+        self._callbacks: dict[tuple[str, str | None], list] = {}
+        for key, node in self.drag_nodes().items():
+            shift = guard(self._on_shift_drag)
+            node.on_drag(modifier="shift")(shift)
+            self._callbacks[(key, "shift")] = [shift]
+            if key == RENDER_KEY:  # the render's own drag handler hands plain drags over (a click stays a click)
+                self._callbacks[(key, None)] = [app.render_pane.plain_drag_callback]
+                continue
+            plain = guard(lambda event, key=key: self.on_drag(key, event) if self.drag_enabled else None)
+            node.on_drag(plain)
+            # The pairs panel's marker drag (registered with the node) stands aside while aligning.
+            self._callbacks[(key, None)] = [app.pairs_panel.make_drag_handler("raw"), plain]
+        self.show()
+
+    # ------------------------------------------------------------------ what the panel shows
+    @property
+    def drag_enabled(self) -> bool:
+        """True while "Align by drag" is ticked: left-drags on the camera image and the render turn the view."""
+        return bool(self._cb_drag.value)
+
+    @property
+    def text(self) -> str:
+        """The pose line as shown (markdown)."""
+        return str(self._md_pose.content)
+
+    def show(self) -> None:
+        """Show the rough pose and what the render uses."""
+        app = self.app
+        T, source = app.loupe_support.view_pose()
+        if source == "solve":
+            line = (f"A calibration from {MIN_PAIRS}+ pairs is shown; the rough pose is used only with fewer pairs.")
+        elif source == "default":
+            line = "No pose yet: the render and the BA panes assume the camera looks along lidar +x."
+        else:
+            # In words a person can check: the nearest mounting preset, how far the pose is turned from it,
+            # and where the camera centre sits in the lidar frame.
+            turned = {name: rotation_angle_deg(T[:3, :3], preset_T(name)[:3, :3]) for name in MOUNTING_PRESETS}
+            nearest = min(turned, key=turned.get)
+            centre = invert_T(T)[:3, 3]
+            line = (f"Rough pose: {turned[nearest]:.1f}° from '{nearest}'; camera centre at "
+                    f"({centre[0]:.2f}, {centre[1]:.2f}, {centre[2]:.2f}) m in the lidar frame.")
+        self._md_pose.content = line
+        self._bt_undo.disabled = not self._history
+
+    # ------------------------------------------------------------------ changes of the rough pose
+    def _check_unsolved(self) -> None:
+        if self.app.live.bundle is not None:
+            raise CalibError(f"{MIN_PAIRS}+ pairs are solved: the page shows that calibration, not the rough pose "
+                             f"(the rough pose is for starting; delete pairs to go back to it)")
+
+    def _start_pose(self) -> np.ndarray:
+        """The pose a step starts from: the rough pose, else the assumed '+x' view."""
+        return np.array(self.app.loupe_support.view_pose()[0], np.float64)
+
+    def adopt(self, T_camera_lidar: np.ndarray | None) -> None:
+        """Make ``T_camera_lidar`` the rough pose (None: none), remembering the old one for "Undo align step"."""
+        old = self.app.loupe_support.initial_T_camera_lidar
+        self._history.append(None if old is None else np.array(old))
+        del self._history[:-MAX_HISTORY]
+        self.app.loupe_support.adopt_rough_pose(T_camera_lidar)
+        self.show()
+
+    def apply_preset(self, name: str) -> None:
+        """Start from mounting preset ``name`` (a key of :data:`calib_core.alignment.MOUNTING_PRESETS`)."""
+        self._check_unsolved()
+        self.adopt(preset_T(name))
+
+    def turn(self, label: str) -> None:
+        """One press of a turn button (:data:`TURN_LABELS`): the render moves or rolls by :data:`TURN_STEP_DEG`."""
+        self._check_unsolved()
+        f = focal_px_estimate(self.app.camera)
+        step_px = f * math.tan(math.radians(TURN_STEP_DEG))
+        T0 = self._start_pose()
+        if label in ("⟲", "⟳"):
+            T = rotate_about_camera(T0, 0.0, 0.0, math.radians(TURN_STEP_DEG) * (1.0 if label == "⟳" else -1.0))
+        else:
+            du, dv = {"◀": (-step_px, 0.0), "▶": (step_px, 0.0), "▲": (0.0, -step_px), "▼": (0.0, step_px)}[label]
+            T = rotate_about_camera(T0, *drag_to_rotation(du, dv, f), 0.0)
+        self.adopt(T)
+
+    def move(self, label: str) -> None:
+        """One press of a move button (:data:`MOVE_LABELS`): the camera moves :data:`MOVE_STEP_M` along its axis."""
+        self._check_unsolved()
+        axis, sign = "xyz".index(label[0]), (1.0 if label[1] == "+" else -1.0)
+        d = [0.0, 0.0, 0.0]
+        d[axis] = sign * MOVE_STEP_M
+        self.adopt(translate_in_camera(self._start_pose(), *d))
+
+    def undo(self) -> None:
+        """Go back to the rough pose before the last align step."""
+        if not self._history:
+            raise CalibError("no align step to undo")
+        self._check_unsolved()
+        self.app.loupe_support.adopt_rough_pose(self._history.pop())
+        self.show()
+
+    # ------------------------------------------------------------------ widget handlers
+    def on_preset(self, event: Any) -> None:
+        self.apply_preset(str(event.value))
+
+    def on_imported(self, event: Any) -> None:
+        T = self.app.loupe_support.imported_T_camera_lidar
+        if T is None:
+            raise CalibError("no extrinsic was imported at start")
+        self._check_unsolved()
+        self.adopt(T)
+
+    def on_turn(self, event: Any) -> None:
+        self.turn(str(event.value))
+
+    def on_move(self, event: Any) -> None:
+        self.move(str(event.value))
+
+    def on_undo(self, event: Any) -> None:
+        self.undo()
+
+    def on_drag_checkbox(self, event: Any) -> None:
+        """"Align by drag": while on, show the render over the photo (half opaque) if it was hidden."""
+        if event.client is None:
+            return
+        if bool(event.value) and self.app.state.view.render_blend == 0.0:
+            self.app.render_pane.set_blend(0.5)
+
+    # ------------------------------------------------------------------ drags
+    def drag_callbacks(self, key: str, modifier: str | None) -> list:
+        """The drag callbacks node ``key`` (``"raw"``, ``"render"``, ``"raw_overlay"``) has for ``modifier``."""
+        return list(self._callbacks[(key, modifier)])
+
+    def drag_nodes(self) -> dict[str, Any]:
+        """The scene nodes a drag turns the view on, by the slot their pixels are in."""
+        nodes = {"raw": self.app.page.image_handle("raw")}
+        nodes.update(self.app.render_pane.drag_nodes)
+        return nodes
+
+    def _on_shift_drag(self, event: Any) -> None:
+        if not self.drag_enabled:
+            return
+        key = next((k for k, node in self.drag_nodes().items() if node is event.target), "raw")
+        self.on_drag(key, event)
+
+    def on_drag(self, key: str, event: Any) -> None:
+        """One phase of a left-drag (``event.phase``: start, update, end) on slot ``key`` while "Align by drag" is
+        on (called on the action worker, in order).  Plain drags turn the view, Shift+drags roll it."""
+        pane = self.app.render_pane
+        if event.phase == "start":
+            self._drag = None
+            self._check_unsolved()  # refused once, at the start; the rest of that drag is ignored
+            self._drag = {"T0": self._start_pose(), "start": self._pixel(key, event.start_position),
+                          "key": key}
+        drag = self._drag
+        if drag is None:
+            return
+        T = self._dragged(drag, self._pixel(drag["key"], event.end_position), event.modifier)
+        if event.phase != "end":
+            pane.drag_pose = T  # only the render follows each move; the rest waits for the drop
+            pane.request()
+            return
+        self._drag = None
+        pane.drag_pose = None
+        if np.allclose(T, drag["T0"]):
+            pane.request()
+            return
+        self.adopt(T)
+
+    def _pixel(self, key: str, world: Any) -> np.ndarray:
+        """Original camera pixel (the render's and the raw image's) of a world point on slot ``key``."""
+        slot = self.app.view.slot_of(RENDER_KEY if key == RENDER_KEY else "raw")
+        return slot.pixel_from_world(np.asarray(world, np.float64)[None])[0]
+
+    def _dragged(self, drag: dict, pixel: np.ndarray, modifier: Any) -> np.ndarray:
+        """The pose after dragging from the drag's start pixel to ``pixel``: turned so that the laser content
+        follows the mouse, or with Shift rolled by the angle swept about the principal point."""
+        T0, start = drag["T0"], drag["start"]
+        camera = self.app.camera
+        if modifier == "shift":  # the image turns about the principal point (where the optical axis projects)
+            axis_px, ok = camera.project(np.array([[0.0, 0.0, 1.0]]))
+            centre = np.asarray(axis_px, np.float64).reshape(2)
+            if not (bool(np.asarray(ok).reshape(-1)[0]) and np.isfinite(centre).all()):
+                centre = np.array([(camera.width - 1) / 2.0, (camera.height - 1) / 2.0])
+            a0 = math.atan2(*(start - centre)[::-1])
+            a1 = math.atan2(*(pixel - centre)[::-1])
+            swept = (a1 - a0 + math.pi) % (2.0 * math.pi) - math.pi
+            return rotate_about_camera(T0, 0.0, 0.0, swept)
+        du, dv = pixel - start
+        return rotate_about_camera(T0, *drag_to_rotation(float(du), float(dv), focal_px_estimate(camera)), 0.0)

@@ -1,0 +1,404 @@
+"""The camera-view laser pane: the scan rendered from the camera under the current pose, below the camera image.
+
+The render has the camera image's size and framing (:func:`calib_core.render.render_from_camera`), so a corner
+sits at nearly the same pixel in the photo and in the render once the pose is roughly right.  The pose is the solve
+if there is one, else the rough pose (Align folder, imported or saved), else the "+x" preset
+(:meth:`app.loupe_support.LoupeSupport.view_pose`).  A click on the render picks the laser cell drawn there: an
+ordinary laser end, through the pairs panel like a BA click.  The same render can be drawn over the photo
+("Render over photo"), and the laser loupe shows a crop of it after a click on it (:class:`app.loupes.Loupes`).
+
+Rendering runs in one background thread that always renders the newest pose (:class:`app.live_solver.LiveSolver`);
+clicks never wait for it.  Display plumbing only: the render and its shading come from :mod:`calib_core.render`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+import traceback
+from typing import Any
+
+import numpy as np
+
+from calib_core.display_images import find_intensity
+from calib_core.errors import CalibError
+from calib_core.overlays import project_lidar_points
+from calib_core.render import render_from_camera, shade_render
+
+from .layout import GAP, LABEL_HEIGHT, ImageSlot
+from .live_solver import LiveSolver
+from .ui_common import marker_segments
+from .view_settings import RENDER_MODES
+
+#: The render's page slot and click key, its scene nodes.
+RENDER_KEY = "render"
+NODE = "/annot/render"
+OVERLAY_NODE = "/annot/render_over"
+#: What the pane shows where the scan has no return (dark, so range colours and white depth edges stand out).
+NO_RETURN_RGB = (30, 30, 34)
+#: Outside the render in a loupe crop.
+PAD_RGB = (60, 60, 60)
+#: A click on a pixel without a return takes the nearest rendered pixel this close (render pixels).
+NEAREST_PX = 4
+TEXTURE_TEXELS = 320  # as app.loupes: texels along a loupe texture's side
+#: Where the pose the render uses comes from, as its title says it.
+POSE_NAMES = {"solve": "solved pose", "rough": "rough pose", "default": "'+x' preset (no pose yet)",
+              "drag": "rough pose (dragging)"}
+
+
+def with_render_slot(slots: dict[str, ImageSlot], raw_key: str = "raw") -> dict[str, ImageSlot]:
+    """``slots`` with the render's slot right below the camera views, the same size as the raw camera image;
+    the images below the camera views (the BA panes) move down to make room.
+
+    Stacked rather than side by side: with the loupe column on the right, the camera image gets more screen
+    for any image wider than about 3:4, and a corner in the photo lies straight above the same corner in the render.
+    """
+    raw = slots[raw_key]
+    camera_keys = [k for k, s in slots.items() if s.center[1] < 0.0]  # the camera views sit above y = 0
+    shift = raw.render_height + GAP + LABEL_HEIGHT
+    out = {}
+    for key, s in slots.items():
+        if key in camera_keys:
+            out[key] = s
+        else:
+            out[key] = dataclasses.replace(s, center=(s.center[0], s.center[1] + shift, s.center[2]))
+    out[RENDER_KEY] = ImageSlot(RENDER_KEY, raw.width_px, raw.height_px,
+                                (raw.center[0], LABEL_HEIGHT + raw.render_height / 2, 0.0), raw.render_width,
+                                raw.render_height)
+    return out
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class ShownRender:
+    """A finished render: the pose and shading it was made with, the :class:`calib_core.render.CameraRender`,
+    its RGBA shading (alpha 0 where no return) and how long it took (seconds)."""
+
+    T_camera_lidar: np.ndarray
+    mode: str
+    source: str
+    render: Any
+    rgba: np.ndarray
+    seconds: float
+
+
+class RenderPane:
+    """The camera-view laser pane of one :class:`app.server.CalibrationApp` (``app.render_pane``).
+
+    It owns its scene nodes (the pane, its title, the copy drawn over the photo, the markers on it), the render
+    worker, and the widgets it adds to the Align folder (:meth:`add_controls`).  Public: :attr:`current` (the
+    render the page shows), :meth:`request`, :meth:`target_at`, :meth:`pixel_of_cells` and the loupe helpers.
+    """
+
+    def __init__(self, app: Any) -> None:
+        self.app = app
+        self.current: ShownRender | None = None
+        self.last_pixel: tuple[float, float] | None = None  # the render pixel of the last pick on it
+        self.drag_pose: np.ndarray | None = None  # while "Align by drag" turns the view: the pose being dragged
+        self._requested: tuple | None = None
+        self._job = 0
+        self._marks_of: tuple | None = None
+        self._stopped = False
+        scene = app.server.scene
+        slot, raw = app.slots[RENDER_KEY], app.slots["raw"]
+        self._handle = scene.add_image(NODE, np.full((2, 2, 3), NO_RETURN_RGB, np.uint8), slot.render_width,
+                                       slot.render_height, format="png", position=slot.center)
+        x0, y0, _, _ = slot.bounds()
+        self._title = scene.add_label("/annot/titles/render", "Camera-view laser: rendering ...",
+                                      position=(x0, y0 - 0.03, -0.01), anchor="bottom-left", font_screen_scale=0.9)
+        # Over the raw camera image, a little towards the viewer; hidden while the blend is 0 (clicks reach the photo).
+        self._overlay = scene.add_image(OVERLAY_NODE, np.zeros((2, 2, 4), np.uint8), raw.render_width,
+                                        raw.render_height, format="png",
+                                        position=(raw.center[0], raw.center[1], raw.center[2] - 0.002), visible=False)
+        self._handle.on_click(app.make_click_handler(RENDER_KEY))
+        self._handle.on_click(modifier="shift")(app.guard(self._on_shift_click))
+        self.plain_drag_callback = app.guard(self._on_plain_drag)
+        self._handle.on_drag(self.plain_drag_callback)
+        # The copy over the photo answers as the photo does (same place, same pixels).
+        self._overlay.on_click(app.make_click_handler("raw"))
+        self._overlay.on_click(modifier="shift")(app.make_select_handler("raw"))
+        self._overlay.on_drag(app.pairs_panel.make_drag_handler("raw"))
+        self._worker = LiveSolver(self._render_job, self._on_rendered, name="ba-calib-render")
+
+    # ------------------------------------------------------------------ nodes the Align panel drags on
+    @property
+    def drag_nodes(self) -> dict[str, Any]:
+        """Scene nodes a drag may turn the view on, by the slot key their pixels are in."""
+        return {RENDER_KEY: self._handle, "raw_overlay": self._overlay}
+
+    # ------------------------------------------------------------------ widgets
+    def add_controls(self, gui: Any) -> None:
+        """The render's shading, its opacity over the photo and a blink button, where ``gui`` adds now."""
+        app, view = self.app, self.app.state.view
+        self._dd_mode = gui.add_dropdown("Render shading", tuple(RENDER_MODES.values()),
+                                         initial_value=RENDER_MODES[view.render_mode],
+                                         hint="How the scan seen from the camera is coloured: range, the laser's "
+                                              "intensity, or the bearing angle; depth edges are white")
+        self._dd_mode.on_update(app.guard(self.on_mode))
+        self._sl_blend = gui.add_slider("Render over photo", 0.0, 1.0, 0.05, initial_value=view.render_blend,
+                                        hint="Draw the render over the camera image (0: photo only, 1: render "
+                                             "wherever the scan has a return)")
+        self._sl_blend.on_update(app.guard(self.on_blend))
+        self._bt_blink = gui.add_button("Blink render / photo",
+                                        hint="Swap between the photo alone and the render over it")
+        self._bt_blink.on_click(app.guard(self.on_blink))
+
+    def on_mode(self, event: Any) -> None:
+        """The "Render shading" dropdown."""
+        if event.client is None:
+            return
+        mode = {label: k for k, label in RENDER_MODES.items()}.get(str(event.value))
+        if mode is None:
+            return
+        if mode == "intensity" and "Intensity" not in self.app.scene_data.laser_images:
+            self.app.notify(event.client, "No intensity", "this scan has no intensity field; shading by range",
+                            color="yellow")
+        self.app.state.set_view(render_mode=mode)
+        self.request()
+
+    def on_blend(self, event: Any) -> None:
+        """The "Render over photo" slider."""
+        if event.client is None or event.value != event.target.value:
+            return  # our own update, or a newer position is queued behind this one
+        self.set_blend(float(event.value))
+
+    def on_blink(self, event: Any) -> None:
+        """Swap between the photo alone and the render fully over it (back to the last blend on the next press)."""
+        blend = self.app.state.view.render_blend
+        self.set_blend(0.0 if blend > 0.0 else max(getattr(self, "_blink_back", 1.0), 0.05))
+        if blend > 0.0:
+            self._blink_back = blend
+
+    def set_blend(self, blend: float) -> None:
+        """Draw the render over the photo with opacity ``blend`` (0 hides it), and save it."""
+        view = self.app.state.set_view(render_blend=float(blend))  # clipped to RENDER_BLEND_RANGE
+        with self.app.ui_lock:
+            if abs(float(self._sl_blend.value) - view.render_blend) > 1e-9:
+                self._sl_blend.value = view.render_blend
+            self._show_overlay()
+
+    # ------------------------------------------------------------------ rendering
+    def view_pose(self) -> tuple[np.ndarray, str]:
+        """The pose the render shows and where it comes from (a key of :data:`POSE_NAMES`)."""
+        if self.drag_pose is not None and self.app.live.bundle is None:
+            return self.drag_pose, "drag"
+        return self.app.loupe_support.view_pose()
+
+    def on_state_change(self, state: Any) -> None:
+        """After any change of the state: a new render if the pose or the shading changed, the markers redrawn."""
+        self.request()
+        self.draw_marks()
+
+    def request(self) -> None:
+        """Render the current pose in the background if the page does not show it yet (never waits)."""
+        if self._stopped:
+            return
+        T, source = self.view_pose()
+        mode = self.app.state.view.render_mode
+        key = (np.asarray(T, np.float64).tobytes(), mode, source)
+        if key == self._requested:
+            return
+        self._requested = key
+        self._job += 1
+        self._worker.submit(self._job, (np.array(T, np.float64), mode, source))
+
+    def _shade_inputs(self, mode: str) -> tuple[str, dict]:
+        """The shading mode that applies to this scan and the images it needs."""
+        app = self.app
+        if mode == "intensity":
+            found = find_intensity(app.depth.meta.get("field_images"))
+            if found is None:
+                return "range", {}
+            return mode, {"intensity": found[1]}
+        if mode == "ba":
+            return mode, {"ba_image": app.scene_data.ba_rad[app.ba_keys[0]]}
+        return "range", {}
+
+    def _render_job(self, payload: tuple) -> ShownRender:
+        T, mode, source = payload
+        t0 = time.perf_counter()
+        render = render_from_camera(self.app.depth, self.app.camera, T)
+        shade_mode, images = self._shade_inputs(mode)
+        rgba = np.asarray(shade_render(render, self.app.depth, mode=shade_mode, **images), np.uint8)
+        return ShownRender(T, mode, source, render, rgba, time.perf_counter() - t0)
+
+    def _on_rendered(self, job: int, shown: ShownRender | None, error: BaseException | None) -> None:
+        app = self.app
+        if self._stopped:
+            return
+        if error is not None:
+            if not isinstance(error, CalibError):
+                traceback.print_exception(error)
+            self._title.text = f"Camera-view laser: not rendered ({' '.join(str(error).split())})"
+            return
+        with app.ui_lock, app.server.atomic():
+            self.current = shown
+            self._handle.image = self.pane_texture(shown.rgba)
+            self._title.text = self.title()
+            self._show_overlay()
+            self.draw_marks()
+            loupes = getattr(app, "loupes", None)
+            if loupes is not None and loupes.shows_render:
+                loupes.refresh_ba()
+
+    @staticmethod
+    def pane_texture(rgba: np.ndarray) -> np.ndarray:
+        """The pane's RGB texture: the shading over :data:`NO_RETURN_RGB` where there is no return."""
+        a = rgba[..., 3:4].astype(np.uint16)
+        bg = np.asarray(NO_RETURN_RGB, np.uint16)
+        return ((rgba[..., :3].astype(np.uint16) * a + bg * (255 - a) + 127) // 255).astype(np.uint8)
+
+    def _show_overlay(self) -> None:
+        """The render over the photo at the saved opacity; hidden at 0, without a render, or on a panorama."""
+        blend = self.app.state.view.render_blend
+        shown = self.current
+        visible = blend > 0.0 and shown is not None and self.app.view.camera_view.key == "raw"
+        if visible:
+            rgba = shown.rgba.copy()
+            rgba[..., 3] = np.round(rgba[..., 3] * blend).astype(np.uint8)
+            self._overlay.image = rgba
+        if self._overlay.visible != visible:
+            self._overlay.visible = visible
+
+    def title(self) -> str:
+        """The pane's title as the page shows it."""
+        shown = self.current
+        if shown is None:
+            return "Camera-view laser: rendering ..."
+        mode = RENDER_MODES[shown.mode]
+        return (f"Camera-view laser ({mode}) under the {POSE_NAMES[shown.source]}: click a point to pick its "
+                f"laser cell")
+
+    def wait_idle(self, timeout: float = 30.0) -> bool:
+        """Block until the newest requested render is shown."""
+        return self._worker.wait_idle(timeout)
+
+    def stop(self) -> None:
+        self._stopped = True
+        self._worker.stop()
+
+    # ------------------------------------------------------------------ clicks
+    def cell_at_pixel(self, u: float, v: float) -> tuple[int, int] | None:
+        """Scan cell ``(row, col)`` the render draws at original-size pixel ``(u, v)``, or at the nearest rendered
+        pixel within :data:`NEAREST_PX`; None if none."""
+        shown = self.current
+        if shown is None:
+            return None
+        cells = shown.render.cell_rc
+        h, w = cells.shape[:2]
+        iu, iv = int(math.floor(u + 0.5)), int(math.floor(v + 0.5))
+        r = NEAREST_PX
+        u0, u1, v0, v1 = max(iu - r, 0), min(iu + r + 1, w), max(iv - r, 0), min(iv + r + 1, h)
+        if u0 >= u1 or v0 >= v1:
+            return None
+        window = cells[v0:v1, u0:u1]
+        vv, uu = np.mgrid[v0:v1, u0:u1]
+        d2 = np.where(window[..., 0] >= 0, (uu - u) ** 2 + (vv - v) ** 2, np.inf)
+        k = int(np.argmin(d2))
+        if not np.isfinite(d2.flat[k]) or d2.flat[k] > r * r:
+            return None
+        row, col = window.reshape(-1, 2)[k]
+        return int(row), int(col)
+
+    def target_at(self, uv: tuple[float, float]) -> tuple:
+        """``("ba", key, row, col)``: the laser cell under pixel ``uv`` of the render (``key``: the BA image the
+        laser loupe falls back to).  CalibError when the render shows no return there."""
+        if self.current is None:
+            raise CalibError("the camera-view render is not ready yet; try again in a moment")
+        cell = self.cell_at_pixel(float(uv[0]), float(uv[1]))
+        if cell is None:
+            raise CalibError("no laser return here: click where the camera-view render shows the scan")
+        self.last_pixel = (float(uv[0]), float(uv[1]))
+        return ("ba", self.app.loupes.ba_crop.key, *cell)
+
+    def pixel_of_cells(self, rows_cols: np.ndarray) -> np.ndarray:
+        """Render pixels ``(N, 2)`` of scan cells ``(N, 2)`` under the shown render's pose (NaN: not in view)."""
+        rc = np.asarray(rows_cols, np.int64).reshape(-1, 2)
+        out = np.full((len(rc), 2), np.nan)
+        shown = self.current
+        if shown is None or not len(rc):
+            return out
+        uv, ok = project_lidar_points(shown.T_camera_lidar, self.app.camera, self.app.depth.cell_points(rc))
+        out[ok] = uv[ok]
+        return out
+
+    def _on_shift_click(self, event: Any) -> None:
+        """Shift+click on the render: select the pair whose laser end is drawn nearest (as on the BA images)."""
+        slot = self.app.view.slot_of(RENDER_KEY)
+        uv = slot.pixel_from_ray(event.ray_origin, event.ray_direction)
+        picks = [p for p in self.app.state.picks if p.laser_rc is not None]
+        if uv is None or not picks:
+            self.app.state.select(None)
+            return
+        xy = self.pixel_of_cells(np.array([p.laser_rc for p in picks]))
+        d = np.hypot(xy[:, 0] - uv[0], xy[:, 1] - uv[1])
+        d = np.where(np.isfinite(d), d, np.inf)
+        k = int(np.argmin(d))
+        self.app.state.select(picks[k].id if d[k] * slot.units_per_px <= 2.5 * self._ring_radius(slot) else None)
+
+    def _on_plain_drag(self, event: Any) -> None:
+        """A left-drag on the render: turns the view while "Align by drag" is on; a shaky click is a click."""
+        align = getattr(self.app, "align", None)
+        if align is not None and align.drag_enabled:
+            align.on_drag(RENDER_KEY, event)
+            return
+        if event.phase != "end":
+            return
+        moved = np.hypot(*(np.asarray(event.end_screen_pos) - np.asarray(event.start_screen_pos)))
+        slot = self.app.view.slot_of(RENDER_KEY)
+        start = slot.pixel_from_world(np.asarray(event.start_position)[None])[0]
+        if moved < 0.01 and slot.contains(start):
+            self.app.pairs_panel.click_at(RENDER_KEY, (float(start[0]), float(start[1])), event.client)
+
+    # ------------------------------------------------------------------ markers
+    @staticmethod
+    def _ring_radius(slot: ImageSlot) -> float:
+        return max(6.0 * slot.units_per_px, 0.05)
+
+    def draw_marks(self) -> None:
+        """The picked laser ends on the render, as rings in their pair's colour where the render's pose puts them."""
+        app = self.app
+        shown = self.current
+        picks = tuple((p.id, p.laser_rc, p.color) for p in app.state.picks if p.laser_rc is not None)
+        slot = app.slots[RENDER_KEY]
+        inputs = (id(shown), picks, slot, app.state.selected)
+        if inputs == self._marks_of:
+            return
+        self._marks_of = inputs
+        xy = self.pixel_of_cells(np.array([rc for _, rc, _ in picks]).reshape(-1, 2))
+        ok = np.isfinite(xy).all(axis=1)
+        world = slot.world_from_pixel(xy[ok], z_offset=-0.01)
+        colors = np.array([c for _, _, c in picks], np.uint8).reshape(-1, 3)[ok]
+        segs = marker_segments(world, self._ring_radius(slot))
+        per = len(segs) // max(int(ok.sum()), 1)
+        seg_colors = np.repeat(colors, per * 2, axis=0).reshape(-1, 2, 3)
+        app.nodes.lines("/annot/markers/render/halo", segs + np.array([0.0, 0.0, 0.002]),
+                        np.full(seg_colors.shape, 25, np.uint8), thickness=4.5)
+        app.nodes.lines("/annot/markers/render/ring", segs, seg_colors, thickness=2.0)
+        sel = [k for k, (pid, _, _) in enumerate(p for p, good in zip(picks, ok) if good) if pid == app.state.selected]
+        sel_segs = marker_segments(world[sel] + [0.0, 0.0, 0.003], 1.5 * self._ring_radius(slot))
+        app.nodes.lines("/annot/selected/render", sel_segs, np.full(sel_segs.shape, 255, np.uint8), thickness=4.0)
+
+    # ------------------------------------------------------------------ the laser loupe's render crop
+    def loupe_texture(self, u0: int, v0: int, n: int) -> np.ndarray:
+        """The render's pixels ``[u0, u0 + n) x [v0, v0 + n)`` (the camera loupe's crop), enlarged by nearest
+        neighbour as the camera loupe is; :data:`PAD_RGB` outside the image."""
+        shown = self.current
+        h, w = self.app.camera.height, self.app.camera.width
+        pane = (np.full((h, w, 3), NO_RETURN_RGB, np.uint8) if shown is None else self.pane_texture(shown.rgba))
+        us, vs = u0 + np.arange(n), v0 + np.arange(n)
+        ok = ((vs >= 0) & (vs < h))[:, None] & ((us >= 0) & (us < w))[None, :]
+        crop = pane[np.clip(vs, 0, h - 1)][:, np.clip(us, 0, w - 1)]
+        crop = np.where(ok[..., None], crop, np.asarray(PAD_RGB, np.uint8)).astype(np.uint8)
+        k = max(1, TEXTURE_TEXELS // n)
+        return np.repeat(np.repeat(crop, k, axis=0), k, axis=1)
+
+    def loupe_title(self, center: tuple[float, float], n: int) -> str:
+        """The laser loupe's title while it shows the render: the cell at the crop's centre and its range."""
+        cell = self.cell_at_pixel(*center)
+        if cell is None:
+            what = "no return at the centre"
+        else:
+            rng = self.app.depth.range_m[cell]
+            what = f"row {cell[0]}, column {cell[1]}, range {rng:.2f} m"
+        return f"Camera-view laser loupe (same crop as the camera loupe): {what}, {n} x {n} px shown"
