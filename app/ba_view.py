@@ -179,6 +179,8 @@ def covering_window(columns_seen: np.ndarray, wrap: bool, margin: int = 0, quant
     end = -(-(last + 1) // q) * q  # exclusive, rounded up
     if not wrap:
         first, end = max(first, 0), min(end, n)
+    if end - first >= n:  # every column: from column 0, as "All columns" shows them
+        return ColumnWindow.full(n, wrap)
     return ColumnWindow.make(first, end - first, n, wrap)
 
 

@@ -42,6 +42,9 @@ PAD_RGB = (60, 60, 60)
 #: A click on a pixel without a return takes the nearest rendered pixel this close (render pixels).
 NEAREST_PX = 4
 TEXTURE_TEXELS = 320  # as app.loupes: texels along a loupe texture's side
+#: A new solve is rendered at most this often (seconds): a burst of clicks solves many times, each render costs a
+#: core for 0.1-0.3 s.  Drags and the Align buttons render at once.
+SOLVE_RENDER_INTERVAL_S = 0.5
 #: Where the pose the render uses comes from, as its title says it.
 POSE_NAMES = {"solve": "solved pose", "rough": "rough pose", "default": "'+x' preset (no pose yet)",
               "drag": "rough pose (dragging)"}
@@ -96,6 +99,8 @@ class RenderPane:
         self.last_pixel: tuple[float, float] | None = None  # the render pixel of the last pick on it
         self.drag_pose: np.ndarray | None = None  # while "Align by drag" turns the view: the pose being dragged
         self._requested: tuple | None = None
+        self._wanted: tuple | None = None  # (T, mode, source) the page should show; the worker renders the newest
+        self._last_done = 0.0  # time.monotonic() when the last render finished
         self._job = 0
         self._marks_of: tuple | None = None
         self._stopped = False
@@ -199,8 +204,9 @@ class RenderPane:
         if key == self._requested:
             return
         self._requested = key
+        self._wanted = (np.array(T, np.float64), mode, source)
         self._job += 1
-        self._worker.submit(self._job, (np.array(T, np.float64), mode, source))
+        self._worker.submit(self._job, None)
 
     def _shade_inputs(self, mode: str) -> tuple[str, dict]:
         """The shading mode that applies to this scan and the images it needs."""
@@ -214,8 +220,10 @@ class RenderPane:
             return mode, {"ba_image": app.scene_data.ba_rad[app.ba_keys[0]]}
         return "range", {}
 
-    def _render_job(self, payload: tuple) -> ShownRender:
-        T, mode, source = payload
+    def _render_job(self, _: Any) -> ShownRender:
+        if self._wanted[2] == "solve":  # new solves: one render per interval, of the newest pose then
+            time.sleep(max(0.0, self._last_done + SOLVE_RENDER_INTERVAL_S - time.monotonic()))
+        T, mode, source = self._wanted
         t0 = time.perf_counter()
         render = render_from_camera(self.app.depth, self.app.camera, T)
         shade_mode, images = self._shade_inputs(mode)
@@ -224,6 +232,7 @@ class RenderPane:
 
     def _on_rendered(self, job: int, shown: ShownRender | None, error: BaseException | None) -> None:
         app = self.app
+        self._last_done = time.monotonic()
         if self._stopped:
             return
         if error is not None:
