@@ -89,7 +89,9 @@ class AlignPanel:
             plain = guard(lambda event, key=key: self.on_drag(key, event) if self.drag_enabled else None)
             node.on_drag(plain)
             # The pairs panel's marker drag (registered with the node) stands aside while aligning.
-            self._callbacks[(key, None)] = [app.pairs_panel.make_drag_handler("raw"), plain]
+            marker = (app.render_pane.overlay_drag_callback if key == "camera_overlay"
+                      else app.pairs_panel.make_drag_handler(key))
+            self._callbacks[(key, None)] = [marker, plain]
         self.show()
 
     # ------------------------------------------------------------------ what the panel shows
@@ -203,19 +205,19 @@ class AlignPanel:
 
     # ------------------------------------------------------------------ drags
     def drag_callbacks(self, key: str, modifier: str | None) -> list:
-        """The drag callbacks node ``key`` (``"raw"``, ``"render"``, ``"raw_overlay"``) has for ``modifier``."""
+        """The drag callbacks node ``key`` (a camera view, ``"render"``, ``"camera_overlay"``) has for ``modifier``."""
         return list(self._callbacks[(key, modifier)])
 
     def drag_nodes(self) -> dict[str, Any]:
-        """The scene nodes a drag turns the view on, by the slot their pixels are in."""
-        nodes = {"raw": self.app.page.image_handle("raw")}
+        """The scene nodes a drag turns the view on: the camera views, the render and its copy over the photo."""
+        nodes = {key: self.app.page.image_handle(key) for key in self.app.camera_views}
         nodes.update(self.app.render_pane.drag_nodes)
         return nodes
 
     def _on_shift_drag(self, event: Any) -> None:
         if not self.drag_enabled:
             return
-        key = next((k for k, node in self.drag_nodes().items() if node is event.target), "raw")
+        key = next((k for k, node in self.drag_nodes().items() if node is event.target), self.app.view.camera_view.key)
         self.on_drag(key, event)
 
     def on_drag(self, key: str, event: Any) -> None:
@@ -225,12 +227,16 @@ class AlignPanel:
         if event.phase == "start":
             self._drag = None
             self._check_unsolved()  # refused once, at the start; the rest of that drag is ignored
-            self._drag = {"T0": self._start_pose(), "start": self._pixel(key, event.start_position),
-                          "key": key}
+            start = self._pixel(key, event.start_position)
+            if start is None:
+                raise CalibError("start the drag inside the picture")
+            self._drag = {"T0": self._start_pose(), "start": start, "key": key, "last": self._start_pose()}
         drag = self._drag
         if drag is None:
             return
-        T = self._dragged(drag, self._pixel(drag["key"], event.end_position), event.modifier)
+        pixel = self._pixel(drag["key"], event.end_position)
+        T = drag["last"] if pixel is None else self._dragged(drag, pixel, event.modifier)  # off the picture: hold
+        drag["last"] = T
         if event.phase != "end":
             pane.drag_pose = T  # only the render follows each move; the rest waits for the drop
             pane.request()
@@ -242,10 +248,13 @@ class AlignPanel:
             return
         self.adopt(T)
 
-    def _pixel(self, key: str, world: Any) -> np.ndarray:
-        """Original camera pixel (the render's and the raw image's) of a world point on slot ``key``."""
-        slot = self.app.view.slot_of(RENDER_KEY if key == RENDER_KEY else "raw")
-        return slot.pixel_from_world(np.asarray(world, np.float64)[None])[0]
+    def _pixel(self, key: str, world: Any) -> np.ndarray | None:
+        """Original camera pixel of a world point on the render or the camera view (None: the camera does not
+        see there, e.g. the edge of a panorama)."""
+        slot = self.app.view.slot_of(RENDER_KEY) if key == RENDER_KEY else self.app.camera_slot()
+        display = slot.pixel_from_world(np.asarray(world, np.float64)[None])
+        raw, ok = self.app.view.camera_view.pixels_from_display(display)
+        return raw[0] if ok[0] else None
 
     def _dragged(self, drag: dict, pixel: np.ndarray, modifier: Any) -> np.ndarray:
         """The pose after dragging from the drag's start pixel to ``pixel``: turned so that the laser content

@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Protocol
 
+import cv2
 import numpy as np
 
 
@@ -32,6 +33,10 @@ class CameraView(Protocol):
     def display_from_camera_points(self, points_camera: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Display pixels of points in the camera frame (metres), and which the camera sees."""
 
+    def shown(self, raw: np.ndarray) -> np.ndarray:
+        """An array of the original image's shape ``(H, W[, C])`` (e.g. a render) as this view shows it: each
+        display pixel takes the nearest original pixel; 0 where the camera sees nothing."""
+
 
 @dataclass(eq=False)
 class RawView:
@@ -51,6 +56,9 @@ class RawView:
 
     def pixels_from_display(self, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return self.display_from_pixels(uv)
+
+    def shown(self, raw: np.ndarray) -> np.ndarray:
+        return raw
 
     def display_from_camera_points(self, points_camera: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         pts = np.asarray(points_camera, dtype=np.float64).reshape(-1, 3)
@@ -80,6 +88,9 @@ class PanoramaView:
 
     def pixels_from_display(self, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return self.panorama.to_camera_pixels(np.asarray(uv, dtype=np.float64).reshape(-1, 2))
+
+    def shown(self, raw: np.ndarray) -> np.ndarray:
+        return self.panorama.render(raw, interpolation=cv2.INTER_NEAREST)  # crisp cells and edges
 
     def display_from_camera_points(self, points_camera: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         pts = np.asarray(points_camera, dtype=np.float64).reshape(-1, 3)

@@ -193,7 +193,7 @@ class Loupes:
         x, y = float(uv[0]), float(uv[1])
         if kind == "ba" and self._render_on():
             c = self.camera_crop
-            return self.app.render_pane.target_at((c.u0 + x, c.v0 + y))
+            return self.app.render_pane.target_at((c.u0 + x, c.v0 + y), display=False)
         if kind == "ba":
             c = self.ba_crop
             n_rows, n_cols = self.app.depth.shape

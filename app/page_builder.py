@@ -12,8 +12,10 @@ import numpy as np
 from .ui_common import md_escape
 
 INTRO = (
-    "Click a point in any **BA image** and the same point in the **camera image** (either order) "
-    "to make a pair. **Shift+click** a marker to select its pair; then clicks move it. "
+    "Click a point in any **BA image** or in the **camera-view laser** render (the scan seen from the camera, "
+    "below the photo) and the same point in the **camera image** (either order) "
+    "to make a pair. No pose yet? **Align** first: a preset, then drag the render onto the photo. "
+    "**Shift+click** a marker to select its pair; then clicks move it. "
     "**Drag** a marker to move it. The two **loupes** on the right magnify the last click and the "
     "predicted other end; click in them for exact cells and sub-pixel points (a loupe click right after a "
     "click on the full image refines it). Wheel zooms on the view centre, right-drag pans. "

@@ -1,7 +1,8 @@
 """The camera-view laser pane: the scan rendered from the camera under the current pose, below the camera image.
 
-The render has the camera image's size and framing (:func:`calib_core.render.render_from_camera`), so a corner
-sits at nearly the same pixel in the photo and in the render once the pose is roughly right.  The pose is the solve
+The render has the camera image's size and framing (:func:`calib_core.render.render_from_camera`), and is shown
+as the camera image is (raw, or unwrapped into the same panorama), so a corner sits at nearly the same place in
+the photo and in the render once the pose is roughly right.  The pose is the solve
 if there is one, else the rough pose (Align folder, imported or saved), else the "+x" preset
 (:meth:`app.loupe_support.LoupeSupport.view_pose`).  A click on the render picks the laser cell drawn there: an
 ordinary laser end, through the pairs panel like a BA click.  The same render can be drawn over the photo
@@ -50,14 +51,14 @@ POSE_NAMES = {"solve": "solved pose", "rough": "rough pose", "default": "'+x' pr
               "drag": "rough pose (dragging)"}
 
 
-def with_render_slot(slots: dict[str, ImageSlot], raw_key: str = "raw") -> dict[str, ImageSlot]:
-    """``slots`` with the render's slot right below the camera views, the same size as the raw camera image;
-    the images below the camera views (the BA panes) move down to make room.
+def with_render_slot(slots: dict[str, ImageSlot], view_key: str = "raw") -> dict[str, ImageSlot]:
+    """``slots`` with the render's slot right below the camera views, the same size as the camera view shown
+    (``view_key``: ``raw`` or ``panorama``); the images below the camera views (the BA panes) move down to make room.
 
     Stacked rather than side by side: with the loupe column on the right, the camera image gets more screen
     for any image wider than about 3:4, and a corner in the photo lies straight above the same corner in the render.
     """
-    raw = slots[raw_key]
+    raw = slots[view_key]
     camera_keys = [k for k, s in slots.items() if s.center[1] < 0.0]  # the camera views sit above y = 0
     shift = raw.render_height + GAP + LABEL_HEIGHT
     out = {}
@@ -104,32 +105,59 @@ class RenderPane:
         self._job = 0
         self._marks_of: tuple | None = None
         self._stopped = False
+        self._placed: tuple | None = None  # (render slot, camera slot, camera view) the nodes were placed for
         scene = app.server.scene
-        slot, raw = app.slots[RENDER_KEY], app.slots["raw"]
-        self._handle = scene.add_image(NODE, np.full((2, 2, 3), NO_RETURN_RGB, np.uint8), slot.render_width,
-                                       slot.render_height, format="png", position=slot.center)
-        x0, y0, _, _ = slot.bounds()
+        self._handle = scene.add_image(NODE, np.full((2, 2, 3), NO_RETURN_RGB, np.uint8), 1.0, 1.0, format="png")
         self._title = scene.add_label("/annot/titles/render", "Camera-view laser: rendering ...",
-                                      position=(x0, y0 - 0.03, -0.01), anchor="bottom-left", font_screen_scale=0.9)
-        # Over the raw camera image, a little towards the viewer; hidden while the blend is 0 (clicks reach the photo).
-        self._overlay = scene.add_image(OVERLAY_NODE, np.zeros((2, 2, 4), np.uint8), raw.render_width,
-                                        raw.render_height, format="png",
-                                        position=(raw.center[0], raw.center[1], raw.center[2] - 0.002), visible=False)
+                                      position=(0.0, 0.0, -0.01), anchor="bottom-left", font_screen_scale=0.9)
+        # Over the camera view, a little towards the viewer; hidden while the blend is 0 (clicks reach the photo).
+        self._overlay = scene.add_image(OVERLAY_NODE, np.zeros((2, 2, 4), np.uint8), 1.0, 1.0, format="png",
+                                        visible=False)
+        self.place()
         self._handle.on_click(app.make_click_handler(RENDER_KEY))
         self._handle.on_click(modifier="shift")(app.guard(self._on_shift_click))
         self.plain_drag_callback = app.guard(self._on_plain_drag)
         self._handle.on_drag(self.plain_drag_callback)
-        # The copy over the photo answers as the photo does (same place, same pixels).
-        self._overlay.on_click(app.make_click_handler("raw"))
-        self._overlay.on_click(modifier="shift")(app.make_select_handler("raw"))
-        self._overlay.on_drag(app.pairs_panel.make_drag_handler("raw"))
+        # The copy over the photo answers as the camera view under it does (same place, same pixels).
+        self._overlay.on_click(self._as_camera_view(app.make_click_handler))
+        self._overlay.on_click(modifier="shift")(self._as_camera_view(app.make_select_handler))
+        self.overlay_drag_callback = self._as_camera_view(app.pairs_panel.make_drag_handler)
+        self._overlay.on_drag(self.overlay_drag_callback)
         self._worker = LiveSolver(self._render_job, self._on_rendered, name="ba-calib-render")
 
     # ------------------------------------------------------------------ nodes the Align panel drags on
     @property
     def drag_nodes(self) -> dict[str, Any]:
-        """Scene nodes a drag may turn the view on, by the slot key their pixels are in."""
-        return {RENDER_KEY: self._handle, "raw_overlay": self._overlay}
+        """The render's scene nodes a drag may turn the view on: the pane and its copy over the camera view."""
+        return {RENDER_KEY: self._handle, "camera_overlay": self._overlay}
+
+    def _as_camera_view(self, make_handler: Any) -> Any:
+        """A viser callback that hands the event to ``make_handler(key)`` of the camera view shown at that moment."""
+        async def handler(event: Any) -> None:
+            await make_handler(self.app.view.camera_view.key)(event)
+
+        return handler
+
+    def place(self) -> None:
+        """Put the pane where the layout says, in the camera view's framing, and the copy over the camera view."""
+        app = self.app
+        slot, cam = app.slots[RENDER_KEY], app.camera_slot()
+        placed = (slot, cam, app.view.camera_view.key)
+        if placed == self._placed:
+            return
+        self._placed = placed
+        with app.ui_lock, app.server.atomic():
+            self._handle.render_width, self._handle.render_height = slot.render_width, slot.render_height
+            self._handle.position = slot.center
+            x0, y0, _, _ = slot.bounds()
+            self._title.position = (x0, y0 - 0.03, -0.01)
+            self._overlay.render_width, self._overlay.render_height = cam.render_width, cam.render_height
+            self._overlay.position = (cam.center[0], cam.center[1], cam.center[2] - 0.002)
+            if self.current is not None:
+                self._handle.image = self._shown_texture(self.current)
+            self._show_overlay()
+            self._marks_of = None
+            self.draw_marks()
 
     # ------------------------------------------------------------------ widgets
     def add_controls(self, gui: Any) -> None:
@@ -242,13 +270,23 @@ class RenderPane:
             return
         with app.ui_lock, app.server.atomic():
             self.current = shown
-            self._handle.image = self.pane_texture(shown.rgba)
+            self._handle.image = self._shown_texture(shown)
             self._title.text = self.title()
             self._show_overlay()
             self.draw_marks()
             loupes = getattr(app, "loupes", None)
             if loupes is not None and loupes.shows_render:
                 loupes.refresh_ba()
+            align = getattr(app, "align", None)
+            if align is not None:  # its pose line says which pose the render shows
+                align.show()
+
+    def _shown_texture(self, shown: ShownRender) -> np.ndarray:
+        """The pane's texture: the render in the camera view's framing, over :data:`NO_RETURN_RGB`."""
+        view = self.app.view.camera_view
+        if view.key == "raw":
+            return self.pane_texture(shown.rgba)
+        return self.pane_texture(view.shown(shown.rgba))  # alpha 0 where the panorama sees past the camera
 
     @staticmethod
     def pane_texture(rgba: np.ndarray) -> np.ndarray:
@@ -258,12 +296,12 @@ class RenderPane:
         return ((rgba[..., :3].astype(np.uint16) * a + bg * (255 - a) + 127) // 255).astype(np.uint8)
 
     def _show_overlay(self) -> None:
-        """The render over the photo at the saved opacity; hidden at 0, without a render, or on a panorama."""
+        """The render over the photo at the saved opacity (hidden at 0 and without a render)."""
         blend = self.app.state.view.render_blend
         shown = self.current
-        visible = blend > 0.0 and shown is not None and self.app.view.camera_view.key == "raw"
+        visible = blend > 0.0 and shown is not None
         if visible:
-            rgba = shown.rgba.copy()
+            rgba = self.app.view.camera_view.shown(shown.rgba).copy()
             rgba[..., 3] = np.round(rgba[..., 3] * blend).astype(np.uint8)
             self._overlay.image = rgba
         if self._overlay.visible != visible:
@@ -309,11 +347,17 @@ class RenderPane:
         row, col = window.reshape(-1, 2)[k]
         return int(row), int(col)
 
-    def target_at(self, uv: tuple[float, float]) -> tuple:
-        """``("ba", key, row, col)``: the laser cell under pixel ``uv`` of the render (``key``: the BA image the
-        laser loupe falls back to).  CalibError when the render shows no return there."""
+    def target_at(self, uv: tuple[float, float], display: bool = True) -> tuple:
+        """``("ba", key, row, col)``: the laser cell under pixel ``uv`` of the pane (``display``: in the camera
+        view's framing; else an original camera pixel).  ``key``: the BA image the laser loupe falls back to.
+        CalibError when the render shows no return there."""
         if self.current is None:
             raise CalibError("the camera-view render is not ready yet; try again in a moment")
+        if display:
+            raw, ok = self.app.view.camera_view.pixels_from_display(np.array([uv], np.float64))
+            if not ok[0]:
+                raise CalibError("the camera does not see that part of the panorama; click inside the picture")
+            uv = (float(raw[0, 0]), float(raw[0, 1]))
         cell = self.cell_at_pixel(float(uv[0]), float(uv[1]))
         if cell is None:
             raise CalibError("no laser return here: click where the camera-view render shows the scan")
@@ -321,7 +365,8 @@ class RenderPane:
         return ("ba", self.app.loupes.ba_crop.key, *cell)
 
     def pixel_of_cells(self, rows_cols: np.ndarray) -> np.ndarray:
-        """Render pixels ``(N, 2)`` of scan cells ``(N, 2)`` under the shown render's pose (NaN: not in view)."""
+        """Original camera pixels ``(N, 2)`` of scan cells ``(N, 2)`` under the shown render's pose (NaN: not in
+        view)."""
         rc = np.asarray(rows_cols, np.int64).reshape(-1, 2)
         out = np.full((len(rc), 2), np.nan)
         shown = self.current
@@ -339,8 +384,8 @@ class RenderPane:
         if uv is None or not picks:
             self.app.state.select(None)
             return
-        xy = self.pixel_of_cells(np.array([p.laser_rc for p in picks]))
-        d = np.hypot(xy[:, 0] - uv[0], xy[:, 1] - uv[1])
+        xy, shown = self.app.display_from_pixels(self.pixel_of_cells(np.array([p.laser_rc for p in picks])))
+        d = np.where(shown, np.hypot(xy[:, 0] - uv[0], xy[:, 1] - uv[1]), np.inf)
         d = np.where(np.isfinite(d), d, np.inf)
         k = int(np.argmin(d))
         self.app.state.select(picks[k].id if d[k] * slot.units_per_px <= 2.5 * self._ring_radius(slot) else None)
@@ -356,7 +401,7 @@ class RenderPane:
         moved = np.hypot(*(np.asarray(event.end_screen_pos) - np.asarray(event.start_screen_pos)))
         slot = self.app.view.slot_of(RENDER_KEY)
         start = slot.pixel_from_world(np.asarray(event.start_position)[None])[0]
-        if moved < 0.01 and slot.contains(start):
+        if moved < 0.01 and slot.contains(start):  # display pixels, as a click gives them
             self.app.pairs_panel.click_at(RENDER_KEY, (float(start[0]), float(start[1])), event.client)
 
     # ------------------------------------------------------------------ markers
@@ -374,8 +419,8 @@ class RenderPane:
         if inputs == self._marks_of:
             return
         self._marks_of = inputs
-        xy = self.pixel_of_cells(np.array([rc for _, rc, _ in picks]).reshape(-1, 2))
-        ok = np.isfinite(xy).all(axis=1)
+        xy, ok = app.display_from_pixels(self.pixel_of_cells(np.array([rc for _, rc, _ in picks]).reshape(-1, 2)))
+        ok &= np.isfinite(xy).all(axis=1)
         world = slot.world_from_pixel(xy[ok], z_offset=-0.01)
         colors = np.array([c for _, _, c in picks], np.uint8).reshape(-1, 3)[ok]
         segs = marker_segments(world, self._ring_radius(slot))

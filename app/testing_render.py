@@ -60,8 +60,11 @@ class RenderDriver:
 
     # ------------------------------------------------------------------ clicks and widgets
     def click_render(self, u: float, v: float) -> list[tuple[str, str]]:
-        """Click pixel ``(u, v)`` of the camera-view render (its pixels are the camera image's)."""
-        return self.click(RENDER_KEY, (float(u), float(v)))
+        """Click the camera-view render where it shows original camera pixel ``(u, v)``."""
+        disp, ok = self.app.display_from_pixels(np.array([[u, v]], dtype=np.float64))
+        if not ok[0]:
+            raise ValueError(f"pixel ({u}, {v}) is not shown")
+        return self.click(RENDER_KEY, (float(disp[0, 0]), float(disp[0, 1])))
 
     def _press(self, handler: Any, value: Any) -> list[tuple[str, str]]:
         return self._fire(self.app.guard(handler), SimpleNamespace(client=self.tab, target=SimpleNamespace(value=value)))
@@ -101,23 +104,36 @@ class RenderDriver:
         return self._fire(self.app.guard(self.app.render_pane.on_blend), SimpleNamespace(
             client=self.tab, target=self.app.render_pane._sl_blend))
 
+    def set_panorama(self, on: bool) -> list[tuple[str, str]]:
+        """Tick or clear View -> "Unwrapped panorama" (the camera view and the render follow)."""
+        view = self.app.view
+        view._cb_pano.value = bool(on)
+        return self._fire(self.app.guard(view.on_view_checkbox), SimpleNamespace(client=self.tab, target=view._cb_pano))
+
     # ------------------------------------------------------------------ drags
     def drag(self, key: str, start_uv: tuple[float, float], end_uv: tuple[float, float], *, shift: bool = False,
              steps: int = 4) -> list[tuple[str, str]]:
-        """Left-drag (``shift``: Shift+left) on ``key`` (``"render"`` or ``"raw"``) from pixel ``start_uv`` to
-        ``end_uv`` in ``steps`` moves: the start, update and end events viser sends, to every handler the node
-        has for that button and modifier."""
+        """Left-drag (``shift``: Shift+left) on ``key`` (``"render"``, ``"camera_overlay"`` or a camera view)
+        from original camera pixel ``start_uv`` to ``end_uv`` in ``steps`` moves: the start, update and end
+        events viser sends, to every handler the node has for that button and modifier."""
         app = self.app
-        slot = app.view.slot_of(RENDER_KEY if key == RENDER_KEY else "raw")
+        slot = app.view.slot_of(RENDER_KEY) if key == RENDER_KEY else app.camera_slot()
         node = app.align.drag_nodes()[key]
+
+        def world(uv: Any) -> np.ndarray:
+            disp, ok = app.display_from_pixels(np.asarray(uv, np.float64).reshape(1, 2))
+            if not ok[0]:
+                raise ValueError(f"pixel {tuple(uv)} is not shown")
+            return slot.world_from_pixel(disp)[0]
+
         modifier = "shift" if shift else None
         handlers = app.align.drag_callbacks(key, modifier)
-        start = slot.world_from_pixel(np.asarray(start_uv, np.float64).reshape(1, 2))[0]
+        start = world(start_uv)
         before = len(self.tab.notifications)
         for k in range(steps + 1):
             phase = "start" if k == 0 else ("end" if k == steps else "update")
             uv = np.asarray(start_uv) + (np.asarray(end_uv) - np.asarray(start_uv)) * max(k, 1) / steps
-            end = slot.world_from_pixel(uv.reshape(1, 2))[0]
+            end = world(uv)
             event = SimpleNamespace(client=self.tab, client_id=getattr(self.tab, "client_id", 0), target=node,
                                     phase=phase, start_position=tuple(start), end_position=tuple(end),
                                     start_screen_pos=(0.0, 0.0), end_screen_pos=(0.1, 0.1), modifier=modifier,

@@ -90,10 +90,12 @@ class ViewPanel:
     def _layout(self) -> dict[str, ImageSlot]:
         app = self.app
         window = self._ba_window
-        raw_w, raw_h = app.camera_sizes["raw"]
-        render_band = CAMERA_WIDTH * raw_h / raw_w + GAP + LABEL_HEIGHT  # the camera-view render, below the camera
+        # The camera-view render goes below the camera view, as large and in the same framing.
+        view_w, view_h = app.camera_sizes[self.camera_view.key]
+        render_band = CAMERA_WIDTH * view_h / view_w + GAP + LABEL_HEIGHT
         return with_render_slot(annotation_layout(app.camera_sizes, (window.width, app.depth.shape[0]), app.ba_keys,
-                                                  cell_aspect=app.ba_cell_aspect, above_height=render_band))
+                                                  cell_aspect=app.ba_cell_aspect, above_height=render_band),
+                                self.camera_view.key)
 
     def slot_of(self, key: str) -> ImageSlot:
         """The image slot of click key ``key``: a BA key, ``raw``, ``panorama``, ``loupe_ba`` or ``loupe_camera``."""
@@ -130,11 +132,12 @@ class ViewPanel:
         last = (w.start + w.width - 1) % w.n_cols
         return f"{title} (columns {w.start}-{last} of {w.n_cols})"
 
-    def apply_ba_window(self) -> None:
-        """Show the window the mode asks for: new textures, slots, markers; re-frame 2-D tabs."""
+    def apply_ba_window(self, relayout: bool = False) -> None:
+        """Show the window the mode asks for: new textures, slots, markers; re-frame 2-D tabs.  ``relayout``: lay
+        the page out again even if the window is the same (the camera view changed)."""
         with self.app.ui_lock:
             window = self._wanted_ba_window()
-            if window == self._ba_window:
+            if window == self._ba_window and not relayout:
                 return
             self._ba_window = window
             old_slots, self.slots = self.slots, self._layout()
@@ -142,6 +145,8 @@ class ViewPanel:
                 for key in self.app.ba_keys:
                     self.app.page.set_ba(key, texture=self.ba_texture(key), slot=self.slots[key],
                                          title=self.ba_title(key))
+                if getattr(self.app, "render_pane", None) is not None:
+                    self.app.render_pane.place()
             self.sync_window_widgets()
         self.app.overlays.refresh()
         if self.slots == old_slots:
@@ -182,13 +187,10 @@ class ViewPanel:
             self.app.state.set_view(panorama=bool(self._cb_pano.value), show_reprojection=bool(self._cb_reproj.value),
                                     show_edges=bool(self._cb_edges.value))
             self.update_camera_title()
-        self.app.overlays.refresh()
         if was != self.camera_view.key:
-            # The camera view changed size: re-frame every tab that shows the 2-D view.
-            clients = self.app.server.get_clients()
-            for cid, mode in list(self._client_mode.items()):
-                if mode != "3d" and cid in clients:
-                    self.set_view(clients[cid], mode)
+            # The camera view changed size: the render follows its framing, the page is laid out and re-framed.
+            self.apply_ba_window(relayout=True)
+        self.app.overlays.refresh()
 
     def on_up_axis(self, event: Any) -> None:
         self.app.state.set_view(up_axis=str(event.value))
@@ -410,8 +412,11 @@ class ViewPanel:
             if shown is None:
                 raise CalibError(f"{uv} is not shown in the {target[len('loupe_'):]} loupe")
             disp = np.array([shown])
-        elif target == RENDER_KEY:  # ``uv``: a render pixel (the camera image's pixels)
+        elif target == RENDER_KEY:  # ``uv``: an original camera pixel, shown in the camera view's framing
             slot = self.slots[RENDER_KEY]
+            disp, ok = self.app.display_from_pixels(disp)
+            if not ok[0]:
+                raise CalibError(f"pixel {uv} is not shown in the camera-view render")
         elif target == "camera":
             slot = self.camera_slot()
             disp, ok = self.app.display_from_pixels(disp)

@@ -94,10 +94,12 @@ def test_camera_facing_window_shows_what_the_published_calibration_projects(tmp_
         assert app.depth.shape == (64, 1800)
         # 40 deg of beams over 360 deg of columns: cells drawn about 3.2x taller than wide.
         assert 2.5 < app.ba_cell_aspect < 4.5
-        assert app.ba_window.is_full  # default: every column
+        driver = AppDriver(app)
+        # Default: the columns facing the camera, before any pose as the '+x' preset puts it (the camera looks ahead).
+        assert driver.ba_columns_choice == "Facing the camera" and not app.ba_window.is_full
+        assert driver.choose_ba_columns("All columns") == [] and app.ba_window.is_full
         app.state.import_pairs_file(PAIRS)
         assert app.wait_idle(60) and app.result is not None
-        driver = AppDriver(app)
         assert driver.choose_ba_columns("Facing the camera") == []
         assert app.wait_idle(10)
         window = app.ba_window
@@ -179,6 +181,11 @@ def test_pick_exact_cells_on_the_real_scan_in_headless_chromium(tmp_path):
             key = "diag_pos45"  # the trace where poles and the block stand out most
             target = pairs[N_PRELOADED]  # a real foreground corner (a pole or block edge)
             row, col = target.laser_rc
+            # The page opens on the columns facing the camera; the user first looks at all 1800.
+            page.get_by_label("BA columns").click()
+            page.get_by_role("option", name="All columns").click()
+            wait_for(lambda: app.ba_window.is_full, "the BA images to show every column")
+            wait_for(lambda: app.view.view_settled(cid), "the view to re-frame")
             assert app.ba_window.is_full
             report.append(f"all 1800 columns: {'x'.join(f'{s:.2f}' for s in px_per_cell(key, row, col))} px per cell")
 

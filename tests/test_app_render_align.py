@@ -244,3 +244,32 @@ def test_an_imported_extrinsic_is_the_start_the_rough_pose_is_refused_once_solve
         assert np.allclose(d.rough_pose, truth)
     finally:
         app.stop()
+
+
+def test_on_a_panorama_the_render_is_unwrapped_like_the_photo_and_clicks_map_back(tmp_path):
+    """The sample's OCam image is shown unwrapped: the render is shown the same way, same size, and a click on it
+    picks the cell the render draws at the original pixel under the click; as recorded, likewise."""
+    from app.render_pane import RENDER_KEY
+    from app.server import CalibrationApp
+    from app.testing import AppDriver
+
+    app = CalibrationApp(SAMPLE / "scan.npz", SAMPLE / "image.png", SAMPLE / "camera.yaml",
+                         session_path=tmp_path / "session.yaml", port=0)
+    d = AppDriver(app)
+    try:
+        assert d.camera_key == "panorama" and d.wait_render()
+        expected = render_from_camera(app.depth, app.camera, preset_T("+x"))  # no pose yet: the '+x' preset
+        vs, us = np.nonzero(expected.cell_rc[..., 0] >= 0)
+        for view in ("panorama", "raw"):
+            if view == "raw":
+                assert d.set_panorama(False) == [] and d.camera_key == "raw"
+            slot, cam = app.slots[RENDER_KEY], app.slots[view]
+            assert (slot.width_px, slot.height_px, slot.render_width, slot.render_height) == (
+                cam.width_px, cam.height_px, cam.render_width, cam.render_height)
+            assert d.render_texture().shape == app.camera_views[view].image.shape
+            for goal in ((200.0, 240.0), (450.0, 300.0)):
+                k = int(np.argmin(np.hypot(us - goal[0], vs - goal[1])))
+                assert d.click_render(float(us[k]), float(vs[k])) == []
+                assert app.state.picks[-1].laser_rc == tuple(int(x) for x in expected.cell_rc[vs[k], us[k]])
+    finally:
+        app.stop()
