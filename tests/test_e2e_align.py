@@ -5,7 +5,10 @@ then, with "Align by drag" ticked, three drags with the mouse on the camera-view
 Shift+drag that rolls, a plain drag again) bring it back.  Each drag grabs a far scan point where the rough pose
 draws it and drops it where KITTI's published calibration puts it (as a person drops a laser corner on the
 photo's corner).  The truth is that calibration (``calib/000002.txt``), read with the project's KITTI reader;
-the result must be within 2 degrees of it.  A screenshot is saved in ``docs/img/align_kitti.png``.
+the result must be within 2 degrees of it.  Then a click on the render picks the cell it draws there and the
+laser loupe shows the render's crop of the camera loupe's pixels.  The page (images and loupes) must stay left of
+the control panel at 1400 x 900 and 1920 x 1080.  Screenshots: ``docs/img/render_preset_kitti.png`` (the "+x"
+preset), ``docs/img/align_kitti.png`` (after the drags), ``docs/img/render_pick_kitti.png`` (a pick on the render).
 """
 
 from __future__ import annotations
@@ -44,6 +47,7 @@ def test_a_rough_alignment_by_drag_on_kitti(tmp_path):
     sync_api = pytest.importorskip("playwright.sync_api", reason="the playwright package is not installed")
     from app.render_pane import RENDER_KEY
     from app.server import CalibrationApp
+    from app.ui_common import PANEL_PX
 
     _, truth = read_kitti_camera2(KITTI / "calib" / "000002.txt")
     app = CalibrationApp(KITTI / "velodyne" / "000002.bin", KITTI / "image_2" / "000002.png", CAMERA_YAML,
@@ -56,11 +60,13 @@ def test_a_rough_alignment_by_drag_on_kitti(tmp_path):
     uv_true = np.array([project(truth, p) for p in points])
     far = np.linalg.norm(points, axis=1) > 25.0
 
-    def far_point_near(goal) -> np.ndarray:
-        d = np.where(far, np.hypot(uv_true[:, 0] - goal[0], uv_true[:, 1] - goal[1]), np.inf)
+    def point_near(goal, among: np.ndarray) -> np.ndarray:
+        d = np.where(among, np.hypot(uv_true[:, 0] - goal[0], uv_true[:, 1] - goal[1]), np.inf)
         return points[int(np.argmin(d))]
 
-    centre_point, side_point = far_point_near((640.0, 175.0)), far_point_near((150.0, 200.0))
+    centre_point, side_point = point_near((640.0, 175.0), far), point_near((150.0, 200.0), far)
+    # The top-left corner of the trailer's tarp (about 8 m away), for the pick on the render.
+    corner_point = point_near((818.0, 190.0), np.linalg.norm(points, axis=1) < 15.0)
     try:
         with sync_api.sync_playwright() as p:
             tab = AnnotationTab(p, app, VIEWPORT)
@@ -103,8 +109,19 @@ def test_a_rough_alignment_by_drag_on_kitti(tmp_path):
                 log.append(f"{'Shift+' if shift else ''}drag {np.hypot(*(goal - start)):.0f} px: "
                            f"{rotation_angle_deg(rough()[:3, :3], truth[:3, :3]):.2f} deg from KITTI")
 
+            def loupes_left_of_panel(t: AnnotationTab, width: int) -> float:
+                """Screen x of the loupe column's right edge (both loupes are as wide); left of the control panel."""
+                c = app.loupes.camera_crop
+                right = t.screen("loupe_camera", (c.u0 + c.n - 0.5, c.v0 + c.n - 0.5))[0]
+                assert right < width - PANEL_PX, (right, width)
+                return right
+
             press("+x")
             np.testing.assert_array_equal(rough(), preset_T("+x"))
+            wait_for(lambda: np.array_equal(app.render_pane.current.T_camera_lidar, rough()), "the preset's render")
+            time.sleep(1.0)
+            save_small_png(page.screenshot(), SCREENSHOTS / "render_preset_kitti.png")
+            log.append(f"loupes end at x = {loupes_left_of_panel(tab, VIEWPORT['width']):.0f} px (1400 x 900)")
             log.append(f"'+x' preset: {rotation_angle_deg(rough()[:3, :3], truth[:3, :3]):.2f} deg from KITTI")
             for name, times in (("▶", 8), ("▲", 5), ("⟳", 6)):  # 4 deg right, 2.5 deg up, 3 deg clockwise
                 for _ in range(times):
@@ -125,7 +142,25 @@ def test_a_rough_alignment_by_drag_on_kitti(tmp_path):
                      and np.array_equal(app.render_pane.current.T_camera_lidar, rough()), "the final render")
             time.sleep(1.0)
             size = save_small_png(page.screenshot(), SCREENSHOTS / "align_kitti.png")
+
+            # A click on the render (the trailer's corner) picks the cell drawn there.
+            shown = app.render_pane.current.render
+            target = np.round(project(rough(), corner_point))
+            vs, us = np.nonzero(shown.cell_rc[..., 0] >= 0)
+            k = int(np.argmin(np.hypot(us - target[0], vs - target[1])))
+            uv = (float(us[k]), float(vs[k]))
+            before = app.state.version
+            page.mouse.click(*tab.screen(RENDER_KEY, uv))
+            wait_for(lambda: app.state.version > before and app.loupes.shows_render, "the click on the render")
+            assert app.wait_idle(TIMEOUT_S)
+            assert app.state.picks[-1].laser_rc == tuple(int(x) for x in shown.cell_rc[vs[k], us[k]])
+            assert app.loupes.camera_crop.center == pytest.approx(uv, abs=0.01)
+            time.sleep(1.0)
+            save_small_png(page.screenshot(), SCREENSHOTS / "render_pick_kitti.png")
             tab.browser.close()
+            big = AnnotationTab(p, app, {"width": 1920, "height": 1080})
+            log.append(f"loupes end at x = {loupes_left_of_panel(big, 1920):.0f} px (1920 x 1080)")
+            big.browser.close()
     finally:
         app.stop()
     print(f"\nalignment by drag on KITTI ({time.monotonic() - t_start:.0f} s): " + "; ".join(log)
