@@ -118,45 +118,56 @@ def _neighbour(a: np.ndarray, d_row: int, d_col: int, wrap: bool) -> np.ndarray:
     return out
 
 
-def _footprint_half_px(depth, camera, T, pixels, norm, rows, cols, cap_half):
+def _footprint_half_px(depth, camera, T, pixels, rows, cols, cap_half):
     """Automatic half-widths ``(half_u, half_v)`` (N,) int32 of the footprints of the valid cells.
 
     Each cell's footprint spans half the way to the projections of its four grid neighbours, where each
-    neighbour is taken along its own beam direction but at *this* cell's range: the angular spacing of the
-    scan at this cell, in pixels, independent of what the neighbour hit (a neighbour across a depth edge
-    gives no larger footprint).  Where the neighbour has no return but the cell beyond it has, that one is
-    taken: two returns around a single missing cell meet in its middle.  Half-width ``ceil(spacing / 2)``
-    closes the gap between two rounded centres.  Capped per axis at ``FOOTPRINT_CAP_FACTOR`` times the
-    axis's median (at least 2 px) and at ``cap_half``.
+    neighbour is taken along its own beam direction but at *this* cell's range, from this cell's beam
+    origin: ``p + rho * (d_neighbour - d)``.  That is the angular spacing of the scan at this cell, in
+    pixels, independent of what the neighbour hit (a neighbour across a depth edge gives no larger
+    footprint) and of the scanner's axis offsets.  Where the neighbour has no return but the cell beyond it
+    has, that one is taken: two returns around a single missing cell meet in its middle.  Half-width
+    ``ceil(spacing / 2)`` closes the gap between two rounded centres.  Capped per axis at
+    ``FOOTPRINT_CAP_FACTOR`` times the axis's median (at least 2 px) and at ``cap_half``.
     """
     wrap = bool(depth.meta.get("wrap_cols", False))
     h, w = depth.shape
-    valid = np.asarray(depth.valid, bool)
-    dirs = np.asarray(depth.directions)
-    pts = np.asarray(depth.points)
+    valid = np.asarray(depth.valid, bool).ravel()
+    dirs = np.asarray(depth.directions, np.float64).reshape(-1, 3)
+    pts = np.asarray(depth.points, np.float64).reshape(-1, 3)
+    rho = np.asarray(depth.range_m, np.float64).ravel()
+
+    def beams(flat):
+        """Unit beam direction and range of cells: the depth matrix's own, else from the point."""
+        d, r = dirs[flat], rho[flat]
+        p = pts[flat]
+        norm = np.linalg.norm(p, axis=1)
+        lost = ~np.isfinite(d).all(axis=1)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            d[lost] = p[lost] / norm[lost, None]
+        r = np.where(lost | ~np.isfinite(r), norm, r)
+        return d, r
 
     def cell_of(step_row, step_col):
-        """Flat index of the cell ``step`` away from every valid cell, and whether it exists (and has a return)."""
+        """Flat index of the cell ``step`` away from every valid cell, whether it exists, and has a return."""
         r, c = rows + step_row, cols + step_col
         if wrap:
             c = c % w
         inside = (r >= 0) & (r < h) & (c >= 0) & (c < w)
         flat = np.clip(r, 0, h - 1) * w + np.clip(c, 0, w - 1)
-        return flat, inside, inside & valid.ravel()[flat]
+        return flat, inside, inside & valid[flat]
 
+    own = rows * w + cols
+    own_dir, own_rho = beams(own)
+    origin_shift = pts[own] - own_rho[:, None] * own_dir  # the beam's origin (0 without axis offsets)
     spread = np.full((rows.size, 2), np.nan)
     for d_row, d_col in ((1, 0), (-1, 0), (0, 1), (0, -1)):
         flat1, inside1, has1 = cell_of(d_row, d_col)
         flat2, _, has2 = cell_of(2 * d_row, 2 * d_col)
-        flat = np.where(~has1 & has2, flat2, flat1)
-        nb_dir = dirs.reshape(-1, 3)[flat]
-        lost = ~np.isfinite(nb_dir).all(axis=1)  # direction unknown: the neighbour's own point, if any
-        if lost.any():
-            p = pts.reshape(-1, 3)[flat[lost]]
-            with np.errstate(invalid="ignore", divide="ignore"):
-                nb_dir[lost] = p / np.linalg.norm(p, axis=1, keepdims=True)
-        nb_dir[~inside1 & ~(~has1 & has2)] = np.nan
-        nb_pixels, _ = _project_cells(camera, T, nb_dir * norm[:, None])
+        skip = ~has1 & has2
+        nb_dir, _ = beams(np.where(skip, flat2, flat1))
+        nb_dir[~inside1 & ~skip] = np.nan
+        nb_pixels, _ = _project_cells(camera, T, origin_shift + own_rho[:, None] * nb_dir)
         spread = np.fmax(spread, np.abs(nb_pixels - pixels))
     half = spread / 2.0
     finite = np.isfinite(half)
@@ -276,7 +287,7 @@ def render_from_camera(depth, camera, T_camera_lidar, *, footprint_px=None, max_
     keep = np.nonzero(near_image & (cam_dist > 0))[0]
     rows, cols, norm, pixels, cam_dist = rows[keep], cols[keep], norm[keep], pixels[keep], cam_dist[keep]
     if footprint_px is None:
-        half_u, half_v = _footprint_half_px(depth, camera, T, pixels, norm, rows, cols, FOOTPRINT_MAX_HALF_PX)
+        half_u, half_v = _footprint_half_px(depth, camera, T, pixels, rows, cols, FOOTPRINT_MAX_HALF_PX)
     else:
         half = np.int32(int(footprint_px) // 2)
         half_u = half_v = np.full(rows.size, half, np.int32)
