@@ -22,6 +22,7 @@ import numpy as np
 from ._jit import kernel
 from .arrays import as_transform
 from .errors import CalibError
+from .overlays import _to_camera
 
 #: Two neighbouring pixels whose returns differ in camera distance by more than this share of the nearer one
 #: form a depth edge.
@@ -97,25 +98,22 @@ def warm_up() -> None:
 
 # ------------------------------------------------------------------ geometry
 def _project_cells(camera, T: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Pixels ``(N, 2)`` (NaN where not projectable, finite outside the image too) and camera distances."""
-    p_cam = points @ T[:3, :3].T + T[:3, 3]
-    pixels, _ = camera.project(p_cam)
-    return np.asarray(pixels, np.float64), np.linalg.norm(p_cam, axis=1)
+    """Pixels ``(N, 2)`` of lidar points (NaN where not projectable, finite outside the image too) and their
+    distances from the camera centre ``(N,)``, metres.
 
-
-def _neighbour(a: np.ndarray, d_row: int, d_col: int, wrap: bool) -> np.ndarray:
-    """``a[r + d_row, c + d_col]`` over the grid (the first two axes of a float array); NaN off the grid.
-
-    Columns wrap around when ``wrap`` (a full-turn spinning scan).
+    The transform runs in the colouring's compiled kernel (float64 maths, float32 results: pixels within
+    about 1e-3 px of float64, and no BLAS call, whose threads stall on a busy machine).
     """
-    h, w = a.shape[:2]
-    r, c = np.arange(h) + d_row, np.arange(w) + d_col
-    if wrap:
-        c %= w
-    out = a[np.clip(r, 0, h - 1)][:, np.clip(c, 0, w - 1)]
-    out[(r < 0) | (r >= h)] = np.nan
-    out[:, (c < 0) | (c >= w)] = np.nan
-    return out
+    pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+    xyz, dist = np.empty((3, pts.shape[0]), np.float32), np.empty(pts.shape[0], np.float32)
+    _to_camera(pts, np.ascontiguousarray(T[:3], dtype=np.float64), xyz, dist)
+    pixels, _ = camera.project(xyz.T)
+    return np.asarray(pixels, np.float64), dist.astype(np.float64)
+
+
+def _norm(v: np.ndarray) -> np.ndarray:
+    """Euclidean norms of the rows of ``v`` (N, 3)."""
+    return np.sqrt(np.einsum("ij,ij->i", v, v))
 
 
 def _footprint_half_px(depth, camera, T, pixels, rows, cols, cap_half):
@@ -133,20 +131,18 @@ def _footprint_half_px(depth, camera, T, pixels, rows, cols, cap_half):
     wrap = bool(depth.meta.get("wrap_cols", False))
     h, w = depth.shape
     valid = np.asarray(depth.valid, bool).ravel()
-    dirs = np.asarray(depth.directions, np.float64).reshape(-1, 3)
+    # Unit beam direction and range of every cell: the depth matrix's own, else from the point.
+    unit = np.array(depth.directions, dtype=np.float64).reshape(-1, 3)
     pts = np.asarray(depth.points, np.float64).reshape(-1, 3)
-    rho = np.asarray(depth.range_m, np.float64).ravel()
-
-    def beams(flat):
-        """Unit beam direction and range of cells: the depth matrix's own, else from the point."""
-        d, r = dirs[flat], rho[flat]
-        p = pts[flat]
-        norm = np.linalg.norm(p, axis=1)
-        lost = ~np.isfinite(d).all(axis=1)
+    rho = np.array(depth.range_m, dtype=np.float64).ravel()
+    lost = ~np.isfinite(unit).all(axis=1)
+    if lost.any():
+        norm = _norm(pts[lost])
         with np.errstate(invalid="ignore", divide="ignore"):
-            d[lost] = p[lost] / norm[lost, None]
-        r = np.where(lost | ~np.isfinite(r), norm, r)
-        return d, r
+            unit[lost] = pts[lost] / norm[:, None]
+        rho[lost] = norm
+    bad_rho = ~np.isfinite(rho) & valid
+    rho[bad_rho] = _norm(pts[bad_rho])
 
     def cell_of(step_row, step_col):
         """Flat index of the cell ``step`` away from every valid cell, whether it exists, and has a return."""
@@ -158,16 +154,16 @@ def _footprint_half_px(depth, camera, T, pixels, rows, cols, cap_half):
         return flat, inside, inside & valid[flat]
 
     own = rows * w + cols
-    own_dir, own_rho = beams(own)
-    origin_shift = pts[own] - own_rho[:, None] * own_dir  # the beam's origin (0 without axis offsets)
+    own_rho = rho[own][:, None]
+    origin = pts[own] - own_rho * unit[own]  # the beam's origin (0 without axis offsets)
     spread = np.full((rows.size, 2), np.nan)
     for d_row, d_col in ((1, 0), (-1, 0), (0, 1), (0, -1)):
         flat1, inside1, has1 = cell_of(d_row, d_col)
         flat2, _, has2 = cell_of(2 * d_row, 2 * d_col)
         skip = ~has1 & has2
-        nb_dir, _ = beams(np.where(skip, flat2, flat1))
+        nb_dir = unit[np.where(skip, flat2, flat1)]
         nb_dir[~inside1 & ~skip] = np.nan
-        nb_pixels, _ = _project_cells(camera, T, origin_shift + own_rho[:, None] * nb_dir)
+        nb_pixels, _ = _project_cells(camera, T, origin + own_rho * nb_dir)
         spread = np.fmax(spread, np.abs(nb_pixels - pixels))
     half = spread / 2.0
     finite = np.isfinite(half)
@@ -274,7 +270,7 @@ def render_from_camera(depth, camera, T_camera_lidar, *, footprint_px=None, max_
     points_all = np.asarray(depth.points, np.float64)
     rows, cols = np.nonzero(valid & np.isfinite(points_all).all(axis=2))
     points = points_all[rows, cols]
-    norm = np.linalg.norm(points, axis=1)
+    norm = _norm(points)
     if max_range_m is not None:
         keep = norm <= float(max_range_m)
         rows, cols, points, norm = rows[keep], cols[keep], points[keep], norm[keep]
@@ -317,7 +313,7 @@ def render_from_camera(depth, camera, T_camera_lidar, *, footprint_px=None, max_
 def _cell_ranges(depth) -> np.ndarray:
     """(H_d, W_d) float64: distance of every cell's point from the lidar origin, metres; NaN where invalid."""
     pts = np.asarray(depth.points, np.float64)
-    return np.where(np.asarray(depth.valid, bool), np.linalg.norm(pts, axis=2), np.nan)
+    return np.where(np.asarray(depth.valid, bool), np.sqrt(np.einsum("ijk,ijk->ij", pts, pts)), np.nan)
 
 
 # ------------------------------------------------------------------ shading

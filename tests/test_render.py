@@ -183,7 +183,8 @@ def test_footprint_px_fixed_and_bad_arguments():
     pts = depth.points[rc[:, 0], rc[:, 1]]
     px, _ = camera.project(pts @ T[:3, :3].T + T[:3, 3])
     rr, cc = np.nonzero(one.has_return)
-    assert np.abs(px - np.stack([cc, rr], axis=1)).max() <= 0.5 + 1e-6
+    # (The renderer projects float32 camera-frame points: pixels within 1e-3 px of this float64 projection.)
+    assert np.abs(px - np.stack([cc, rr], axis=1)).max() <= 0.5 + 1e-3
     # Far returns dropped by max_range_m.
     capped = render_from_camera(depth, camera, T, max_range_m=6.5)
     assert np.nanmax(capped.range_m) <= 6.5
@@ -327,7 +328,7 @@ def test_kitti_render_against_an_independent_zbuffer(kitti):
     r5 = render_from_camera(depth, camera, T, footprint_px=5)
     w5 = lut[r5.cell_rc[r5.has_return, 0], r5.cell_rc[r5.has_return, 1]]
     pr5, pc5 = np.nonzero(r5.has_return)
-    assert np.abs(uv[w5] - np.stack([pc5, pr5], axis=1)).max() <= 2.5 + 1e-6
+    assert np.abs(uv[w5] - np.stack([pc5, pr5], axis=1)).max() <= 2.5 + 1e-3
 
     # One pixel per return: exactly the independent z-buffer.
     r1 = render_from_camera(depth, camera, T, footprint_px=1)
