@@ -51,7 +51,9 @@ class CameraRender:
         Distance of that return from the camera centre, metres (the z-buffer key); NaN where none.
     edge : (H, W) bool
         Depth edges: a pixel with a return whose 4-neighbour has no return, or a return more than
-        :data:`EDGE_RELATIVE_JUMP` nearer or farther (relative to the nearer of the two).
+        :data:`EDGE_RELATIVE_JUMP` nearer or farther (relative to the nearer of the two) -- unless the two
+        show neighbouring cells on one smooth surface (consecutive range steps alike, as between the rings
+        on the ground far away).
     """
 
     range_m: np.ndarray
@@ -307,7 +309,8 @@ def render_from_camera(depth, camera, T_camera_lidar, *, footprint_px=None, max_
     cell_rc = np.full((height, width, 2), -1, np.int32)
     cell_rc[shown, 0] = rows[winner]
     cell_rc[shown, 1] = cols[winner]
-    return CameraRender(range_m=range_img, cell_rc=cell_rc, camera_depth_m=cam_img, edge=_depth_edges(cam_img, cell_rc, _cell_ranges(depth), bool(depth.meta.get("wrap_cols", False))))
+    edge = _depth_edges(cam_img, cell_rc, _cell_ranges(depth), bool(depth.meta.get("wrap_cols", False)))
+    return CameraRender(range_m=range_img, cell_rc=cell_rc, camera_depth_m=cam_img, edge=edge)
 
 
 def _cell_ranges(depth) -> np.ndarray:

@@ -205,7 +205,8 @@ def test_shade_render_modes():
     camera, T = CAMERAS["pinhole"](), preset_T("+x")
     r = render_from_camera(depth, camera, T)
     shown = r.has_return
-    for mode, kwargs in (("range", {}), ("intensity", {}), ("ba", {"ba_image": bearing_angle_images(depth)["vertical"]})):
+    ba = bearing_angle_images(depth)["vertical"]
+    for mode, kwargs in (("range", {}), ("intensity", {}), ("ba", {"ba_image": ba})):
         rgba = shade_render(r, depth, mode, **kwargs)
         assert rgba.shape == (camera.height, camera.width, 4) and rgba.dtype == np.uint8
         assert (rgba[~shown] == 0).all()  # fully transparent, never grey
@@ -302,7 +303,8 @@ def test_kitti_render_against_an_independent_zbuffer(kitti):
     coverage = both.sum() / covered.sum()
     print(f"\nKITTI 000002: {covered.sum()} pixels hold a projected point, {shown.sum()} shown by the render "
           f"({100 * shown.mean():.1f} % of the image); coverage of the projected pixels {100 * coverage:.2f} %; "
-          f"median relative range difference {100 * np.median(rel):.3f} % (90th pct {100 * np.percentile(rel, 90):.2f} %);"
+          f"median relative range difference {100 * np.median(rel):.3f} % "
+          f"(90th pct {100 * np.percentile(rel, 90):.2f} %);"
           f" render {1000 * seconds:.0f} ms")
     assert coverage >= 0.90
     assert np.median(rel) < 0.02
@@ -374,7 +376,7 @@ def test_kitti_cli_npz_png_and_errors(kitti, tmp_path):
     assert run.returncode == 0, run.stderr
 
     for bad, fragment in ((["-o", str(tmp_path / "view.jpg")], ".png"),
-                          (["--mode", "range", "-o", str(tmp_path / "v.npz"), "--extrinsics", str(tmp_path / "none.yaml")],
+                          (["-o", str(tmp_path / "v.npz"), "--extrinsics", str(tmp_path / "none.yaml")],
                            "not found")):
         run = run_cli(*common, *bad)
         assert run.returncode == 2, run.stderr
