@@ -90,14 +90,6 @@ def _splat_nearest(col, row, half_u, half_v, key, width, height, best_key, best_
                     best_index[r, c] = i
 
 
-def warm_up() -> None:
-    """Compile (or load from numba's disk cache) this module's kernel on a few points."""
-    key = np.full((2, 2), np.inf, np.float32)
-    index = np.full((2, 2), -1, np.int32)
-    one = np.zeros(1, np.int32)
-    _splat_nearest(one, one, one, one, np.ones(1, np.float32), 2, 2, key, index)
-
-
 # ------------------------------------------------------------------ geometry
 def _project_cells(camera, T: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Pixels ``(N, 2)`` of lidar points (NaN where not projectable, finite outside the image too) and their
@@ -176,61 +168,86 @@ def _footprint_half_px(depth, camera, T, pixels, rows, cols, cap_half):
     return np.ascontiguousarray(half[:, 0]), np.ascontiguousarray(half[:, 1])
 
 
-def _ramp_pairs(range_cells: np.ndarray, wrap: bool, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Which pairs of grid-neighbour cells ``a``, ``b`` ((N, 2) row, col) lie on one smooth surface.
+@kernel
+def _cell_range_at(cell_range, row, col, wrap):
+    """Range of cell ``(row, col)``; columns wrap when ``wrap``; NaN off the grid."""
+    h, w = cell_range.shape
+    if wrap:
+        col = col % w
+    if row < 0 or row >= h or col < 0 or col >= w:
+        return np.nan
+    return cell_range[row, col]
+
+
+@kernel
+def _is_ramp(cell_range, wrap, ra, ca, rb, cb, ratio):
+    """Cells ``a = (ra, ca)`` and ``b = (rb, cb)`` are grid neighbours on one smooth surface.
 
     The step ``s1 = r(b) - r(a)`` is compared with the steps one cell before and after along the same
     direction ``d = b - a``: ``s0 = r(a) - r(a - d)``, ``s2 = r(b + d) - r(b)``.  On a surface seen at a
     grazing angle (the ground far away) consecutive steps are alike, however large; at an occlusion edge
-    the step stands alone.  A ramp: ``|s1| <= RAMP_STEP_RATIO * min(|s0|, |s2|)``; a missing cell makes
-    no ramp.
+    the step stands alone.  A ramp: ``|s1| <= ratio * min(|s0|, |s2|)``; a missing cell makes no ramp.
     """
-    h, w = range_cells.shape
-    d = b - a
+    w = cell_range.shape[1]
+    dr, dc = rb - ra, cb - ca
     if wrap:
-        d[:, 1] = (d[:, 1] + w // 2) % w - w // 2
-
-    def r_at(rc):
-        rows, cols = rc[:, 0], (rc[:, 1] % w) if wrap else rc[:, 1]
-        inside = (rows >= 0) & (rows < h) & (cols >= 0) & (cols < w)
-        out = np.full(rc.shape[0], np.nan)
-        out[inside] = range_cells[rows[inside], cols[inside]]
-        return out
-
-    ra, rb = r_at(a), r_at(b)
-    s0, s1, s2 = ra - r_at(a - d), rb - ra, r_at(b + d) - rb
-    with np.errstate(invalid="ignore"):
-        return np.abs(s1) <= RAMP_STEP_RATIO * np.minimum(np.abs(s0), np.abs(s2))
+        dc = (dc + w // 2) % w - w // 2
+    if abs(dr) > 1 or abs(dc) > 1:
+        return False
+    r_a = _cell_range_at(cell_range, ra, ca, wrap)
+    r_b = _cell_range_at(cell_range, rb, cb, wrap)
+    s0 = r_a - _cell_range_at(cell_range, ra - dr, ca - dc, wrap)
+    s2 = _cell_range_at(cell_range, rb + dr, cb + dc, wrap) - r_b
+    return abs(r_b - r_a) <= ratio * min(abs(s0), abs(s2))  # NaN compares False
 
 
-def _depth_edges(camera_depth: np.ndarray, cell_rc: np.ndarray, range_cells: np.ndarray, wrap: bool) -> np.ndarray:
-    """Depth-edge pixels: a return whose 4-neighbour pixel has no return, or one more than
-    ``EDGE_RELATIVE_JUMP`` nearer or farther from the camera -- unless the two pixels show neighbouring
-    cells of the scan on one smooth surface (:func:`_ramp_pairs`), as between the rings on the ground."""
-    d = camera_depth
-    has = np.isfinite(d)
-    edge = np.zeros(d.shape, bool)
-    for axis in (0, 1):
-        cut = (slice(None, -1), slice(None)) if axis == 0 else (slice(None), slice(None, -1))
-        nxt = (slice(1, None), slice(None)) if axis == 0 else (slice(None), slice(1, None))
-        a, b = d[cut], d[nxt]
-        ha, hb = np.isfinite(a), np.isfinite(b)
-        with np.errstate(invalid="ignore"):
-            jump = ha & hb & (np.abs(a - b) > EDGE_RELATIVE_JUMP * np.fmin(a, b))
-        ja, jb = np.nonzero(jump)
-        if ja.size:
-            ca, cb = cell_rc[cut][ja, jb].astype(np.int64), cell_rc[nxt][ja, jb].astype(np.int64)
-            gap = np.abs(cb - ca)
-            if wrap:
-                gap[:, 1] = np.minimum(gap[:, 1], range_cells.shape[1] - gap[:, 1])
-            near = (gap.max(axis=1) <= 1)
-            smooth = np.zeros(ja.size, bool)
-            smooth[near] = _ramp_pairs(range_cells, wrap, ca[near], cb[near])
-            jump[ja[smooth], jb[smooth]] = False
-        pair = (ha != hb) | jump
-        edge[cut] |= pair
-        edge[nxt] |= pair
-    return edge & has
+@kernel
+def _depth_edges(cam_depth, cell_rc, cell_range, wrap, jump_ratio, ramp_ratio):
+    """Depth-edge pixels (H, W) bool: a return whose 4-neighbour pixel has no return, or one more than
+    ``jump_ratio`` nearer or farther from the camera (relative to the nearer) -- unless the two pixels show
+    neighbouring cells of the scan on one smooth surface (:func:`_is_ramp`), as between the rings on the
+    ground far away."""
+    h, w = cam_depth.shape
+    edge = np.zeros((h, w), np.bool_)
+    for r in range(h):
+        for c in range(w):
+            a = cam_depth[r, c]
+            for k in range(2):
+                r2, c2 = (r + 1, c) if k == 0 else (r, c + 1)
+                if r2 >= h or c2 >= w:
+                    continue
+                b = cam_depth[r2, c2]
+                ha, hb = a == a, b == b
+                if ha != hb:
+                    cut = True
+                elif ha and abs(a - b) > jump_ratio * min(a, b):
+                    cut = not _is_ramp(cell_range, wrap, cell_rc[r, c, 0], cell_rc[r, c, 1],
+                                       cell_rc[r2, c2, 0], cell_rc[r2, c2, 1], ramp_ratio)
+                else:
+                    cut = False
+                if cut:
+                    edge[r, c] |= ha
+                    edge[r2, c2] |= hb
+    return edge
+
+
+@kernel
+def _fill_render(best_index, rows, cols, norm, cam_dist, range_img, cam_img, cell_rc):
+    """Write the winner ``best_index`` (H, W) of every pixel (-1: none) into the render's arrays."""
+    h, w = best_index.shape
+    for r in range(h):
+        for c in range(w):
+            i = best_index[r, c]
+            if i >= 0:
+                range_img[r, c] = norm[i]
+                cam_img[r, c] = cam_dist[i]
+                cell_rc[r, c, 0] = rows[i]
+                cell_rc[r, c, 1] = cols[i]
+            else:
+                range_img[r, c] = np.nan
+                cam_img[r, c] = np.nan
+                cell_rc[r, c, 0] = -1
+                cell_rc[r, c, 1] = -1
 
 
 def render_from_camera(depth, camera, T_camera_lidar, *, footprint_px=None, max_range_m=None) -> CameraRender:
@@ -300,16 +317,13 @@ def render_from_camera(depth, camera, T_camera_lidar, *, footprint_px=None, max_
     _splat_nearest(col_c[idx].astype(np.int32), row_c[idx].astype(np.int32),
                    np.ascontiguousarray(half_u[idx], np.int32), np.ascontiguousarray(half_v[idx], np.int32),
                    cam_dist[idx].astype(np.float32), width, height, best_key, best_index)
-    shown = best_index >= 0
-    winner = idx[best_index[shown]]
-    range_img = np.full((height, width), np.nan, np.float32)
-    range_img[shown] = norm[winner]
-    cam_img = np.full((height, width), np.nan, np.float32)
-    cam_img[shown] = cam_dist[winner]
-    cell_rc = np.full((height, width, 2), -1, np.int32)
-    cell_rc[shown, 0] = rows[winner]
-    cell_rc[shown, 1] = cols[winner]
-    edge = _depth_edges(cam_img, cell_rc, _cell_ranges(depth), bool(depth.meta.get("wrap_cols", False)))
+    range_img = np.empty((height, width), np.float32)
+    cam_img = np.empty((height, width), np.float32)
+    cell_rc = np.empty((height, width, 2), np.int32)
+    _fill_render(best_index, rows[idx].astype(np.int32), cols[idx].astype(np.int32), norm[idx].astype(np.float32),
+                 cam_dist[idx].astype(np.float32), range_img, cam_img, cell_rc)
+    edge = _depth_edges(cam_img, cell_rc, _cell_ranges(depth), bool(depth.meta.get("wrap_cols", False)),
+                        np.float32(EDGE_RELATIVE_JUMP), RAMP_STEP_RATIO)
     return CameraRender(range_m=range_img, cell_rc=cell_rc, camera_depth_m=cam_img, edge=edge)
 
 
@@ -343,7 +357,7 @@ def shade_render(render: CameraRender, depth, mode: str = "range", *, intensity=
         The scan rendered (its per-cell intensity, when it has one, is read from ``meta["field_images"]``).
     mode : {"range", "intensity", "ba"}
         ``range``: cv2's TURBO colour map of log range (blue near, red far), stretched over the 1st..99th
-        percentile of the shown returns.  ``intensity``: grey from the scan's per-cell intensity
+        percentile of the shown returns (of an even sample of at most 200,000).  ``intensity``: grey from the scan's per-cell intensity
         (:func:`calib_core.display_images.find_intensity` / ``field_to_gray``, as the app's laser panes).
         ``ba``: grey from ``ba_image`` (:func:`calib_core.bearing_angle.ba_to_display`).
     intensity : (H_d, W_d) float, optional
@@ -358,48 +372,102 @@ def shade_render(render: CameraRender, depth, mode: str = "range", *, intensity=
     """
     from .display_images import field_to_gray, find_intensity
 
-    shown = render.has_return
-    h, w = shown.shape
+    h, w = render.range_m.shape
     shape_d = tuple(depth.shape)
+    levels = np.empty((h, w), np.uint8)
     if mode == "range":
+        shown_ranges = render.range_m[render.has_return]
+        shown_ranges = shown_ranges[::max(1, shown_ranges.size // 200_000)]  # percentiles of a sample suffice
         with np.errstate(invalid="ignore", divide="ignore"):
-            log_r = np.log(np.where(render.range_m > 0, render.range_m, np.nan))
-        ok = shown & np.isfinite(log_r)
-        level = np.zeros((h, w), np.uint8)
-        if ok.any():
-            lo, hi = np.percentile(log_r[ok], [1.0, 99.0])
-            scaled = np.clip((log_r[ok] - lo) / (hi - lo if hi > lo else 1.0), 0.0, 1.0)
-            level[ok] = np.round(scaled * 255).astype(np.uint8)
-        rgb = cv2.cvtColor(cv2.applyColorMap(level, cv2.COLORMAP_TURBO), cv2.COLOR_BGR2RGB)
-    elif mode == "intensity":
-        if intensity is None:
-            found = find_intensity(depth.meta.get("field_images"))
-            if found is None:
-                raise CalibError("the scan has no intensity field; shade by range or ba instead")
-            intensity = found[1]
-        values = np.asarray(intensity, np.float64)
-        if values.shape != shape_d:
-            raise CalibError(f"intensity image shape {values.shape} does not match the depth matrix {shape_d}")
-        gray = _sample_cells(render, field_to_gray(np.where(depth.valid, values, np.nan)))
-        rgb = np.repeat(gray[..., None], 3, axis=2)
-    elif mode == "ba":
-        from .bearing_angle import ba_to_display
+            log_r = np.log(shown_ranges[shown_ranges > 0])
+        lo, hi = np.percentile(log_r, [1.0, 99.0]) if log_r.size else (0.0, 1.0)
+        _levels_from_log_range(render.range_m, np.float32(lo), np.float32(1.0 / (hi - lo) if hi > lo else 1.0),
+                               levels)
+        lut = cv2.cvtColor(cv2.applyColorMap(np.arange(256, dtype=np.uint8).reshape(-1, 1), cv2.COLORMAP_TURBO),
+                           cv2.COLOR_BGR2RGB).reshape(256, 3)
+    elif mode in ("intensity", "ba"):
+        if mode == "intensity":
+            if intensity is None:
+                found = find_intensity(depth.meta.get("field_images"))
+                if found is None:
+                    raise CalibError("the scan has no intensity field; shade by range or ba instead")
+                intensity = found[1]
+            values = np.asarray(intensity, np.float64)
+            if values.shape != shape_d:
+                raise CalibError(f"intensity image shape {values.shape} does not match the depth matrix {shape_d}")
+            cell_gray = field_to_gray(np.where(depth.valid, values, np.nan))
+        else:
+            from .bearing_angle import ba_to_display
 
-        if ba_image is None:
-            raise CalibError("mode 'ba' needs a BA image (ba_image=...)")
-        ba = np.asarray(ba_image)
-        if ba.shape != shape_d:
-            raise CalibError(f"BA image shape {ba.shape} does not match the depth matrix {shape_d}")
-        gray = _sample_cells(render, ba_to_display(ba))
-        rgb = np.repeat(gray[..., None], 3, axis=2)
+            if ba_image is None:
+                raise CalibError("mode 'ba' needs a BA image (ba_image=...)")
+            ba = np.asarray(ba_image)
+            if ba.shape != shape_d:
+                raise CalibError(f"BA image shape {ba.shape} does not match the depth matrix {shape_d}")
+            cell_gray = ba_to_display(ba)
+        _levels_from_cells(render.cell_rc, np.ascontiguousarray(cell_gray, np.uint8), levels)
+        lut = np.repeat(np.arange(256, dtype=np.uint8)[:, None], 3, axis=1)
     else:
         raise CalibError(f"unknown shading mode {mode!r}; use one of {', '.join(SHADE_MODES)}")
-    out = np.zeros((h, w, 4), np.uint8)
-    out[..., :3] = rgb
-    out[render.edge & shown, :3] = 255
-    out[..., 3] = np.where(shown, 255, 0).astype(np.uint8)
-    out[~shown, :3] = 0
+    out = np.empty((h, w, 4), np.uint8)
+    _compose_rgba(levels, np.ascontiguousarray(lut), render.cell_rc, render.edge, out)
     return out
+
+
+@kernel
+def _levels_from_log_range(range_m, lo, scale, levels):
+    """``round(255 * clip((log(range) - lo) * scale, 0, 1))`` per pixel; 0 where no range."""
+    h, w = range_m.shape
+    for r in range(h):
+        for c in range(w):
+            v = range_m[r, c]
+            if v > 0:  # NaN compares False
+                x = min(max((np.log(v) - lo) * scale, np.float32(0.0)), np.float32(1.0))
+                levels[r, c] = np.uint8(x * np.float32(255.0) + np.float32(0.5))
+            else:
+                levels[r, c] = 0
+
+
+@kernel
+def _levels_from_cells(cell_rc, cell_gray, levels):
+    """The grey level of the cell shown at every pixel (0 where none)."""
+    h, w = levels.shape
+    for r in range(h):
+        for c in range(w):
+            i = cell_rc[r, c, 0]
+            levels[r, c] = cell_gray[i, cell_rc[r, c, 1]] if i >= 0 else 0
+
+
+@kernel
+def _compose_rgba(levels, lut, cell_rc, edge, out):
+    """RGBA: ``lut[level]`` opaque, white on edges, (0, 0, 0, 0) where no return."""
+    h, w = levels.shape
+    for r in range(h):
+        for c in range(w):
+            if cell_rc[r, c, 0] < 0:
+                out[r, c, 0] = out[r, c, 1] = out[r, c, 2] = out[r, c, 3] = 0
+            elif edge[r, c]:
+                out[r, c, 0] = out[r, c, 1] = out[r, c, 2] = out[r, c, 3] = 255
+            else:
+                k = levels[r, c]
+                out[r, c, 0], out[r, c, 1], out[r, c, 2] = lut[k, 0], lut[k, 1], lut[k, 2]
+                out[r, c, 3] = 255
+
+
+def warm_up() -> None:
+    """Compile (or load from numba's disk cache) this module's kernels on a tiny scene."""
+    from .cameras.pinhole import PinholeCamera
+    from .lidar.depth_matrix import DepthMatrix
+
+    el, az = np.meshgrid(np.radians([2.0, 0.0, -2.0]), np.radians([2.0, 0.0, -2.0]), indexing="ij")
+    dirs = np.stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)], axis=2)
+    rng = np.full(el.shape, 5.0)
+    depth = DepthMatrix(rng, dirs, dirs * 5.0, np.ones(el.shape, bool), {"wrap_cols": False})
+    camera = PinholeCamera(np.array([[100.0, 0, 4], [0, 100.0, 4], [0, 0, 1]]), np.zeros(0), 9, 9)
+    T = np.array([[0.0, -1, 0, 0], [0, 0, -1, 0], [1, 0, 0, 0], [0, 0, 0, 1]])
+    render = render_from_camera(depth, camera, T)
+    shade_render(render, depth, "range")
+    shade_render(render, depth, "intensity", intensity=rng)
 
 
 # ------------------------------------------------------------------ files
