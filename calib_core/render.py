@@ -27,13 +27,14 @@ from .overlays import _to_camera
 #: Two neighbouring pixels whose returns differ in camera distance by more than this share of the nearer one
 #: form a depth edge.
 EDGE_RELATIVE_JUMP = 0.1
-#: The automatic footprint's half-width is capped at this many times its median over the scan (and 64 px):
-#: where a neighbour's projection is stretched (image borders of a wide-angle lens) the footprint may not bleed.
+#: The automatic footprint's half-width is capped per axis at this many times its median over the returns
+#: near the image (at least 2 px) and at FOOTPRINT_MAX_HALF_PX: where a neighbour's projection is stretched
+#: (image borders of a wide-angle lens, a lidar's sparse outer beams) the footprint may not bleed.
 FOOTPRINT_CAP_FACTOR = 3.0
-#: A range step between neighbouring cells is part of a smooth surface when it is at most this many times
-#: the smaller of the steps just before and after it along the same direction (see ``_ramp_pairs``).
-RAMP_STEP_RATIO = 2.5
 FOOTPRINT_MAX_HALF_PX = 64
+#: A range step between neighbouring cells is part of a smooth surface when it is at most this many times
+#: the smaller of the steps just before and after it along the same direction (see ``_is_ramp``).
+RAMP_STEP_RATIO = 2.5
 
 
 @dataclass(frozen=True)
@@ -67,7 +68,7 @@ class CameraRender:
         return self.cell_rc[..., 0] >= 0
 
 
-# ------------------------------------------------------------------ kernel
+# ------------------------------------------------------------------ z-buffer
 @kernel
 def _splat_nearest(col, row, half_u, half_v, key, width, height, best_key, best_index):
     """Nearest-wins z-buffer with footprints, in place.
