@@ -188,5 +188,6 @@ def focal_px_estimate(camera) -> float:
         if np.isfinite(angle) and angle > 0:
             focals.append(1.0 / np.tan(angle / 2.0))
     if not focals:
-        raise CalibError(f"cannot estimate a focal length: the camera model has no rays at the image centre ({camera!r})")
+        raise CalibError(f"cannot estimate a focal length: the camera model has no rays at the image centre "
+                         f"({camera!r})")
     return float(np.mean(focals))
