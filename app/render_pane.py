@@ -102,6 +102,7 @@ class RenderPane:
         self._requested: tuple | None = None
         self._wanted: tuple | None = None  # (T, mode, source) the page should show; the worker renders the newest
         self._last_done = 0.0  # time.monotonic() when the last render finished
+        self._blink_back = 1.0  # the opacity "Blink" goes back to
         self._job = 0
         self._marks_of: tuple | None = None
         self._stopped = False
@@ -198,9 +199,9 @@ class RenderPane:
     def on_blink(self, event: Any) -> None:
         """Swap between the photo alone and the render fully over it (back to the last blend on the next press)."""
         blend = self.app.state.view.render_blend
-        self.set_blend(0.0 if blend > 0.0 else max(getattr(self, "_blink_back", 1.0), 0.05))
         if blend > 0.0:
             self._blink_back = blend
+        self.set_blend(0.0 if blend > 0.0 else self._blink_back)
 
     def set_blend(self, blend: float) -> None:
         """Draw the render over the photo with opacity ``blend`` (0 hides it), and save it."""

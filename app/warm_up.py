@@ -13,7 +13,8 @@ import traceback
 
 
 class WarmUp:
-    """One daemon thread running :func:`calib_core._jit.warm_up` and :func:`calib_core.solve.warm_up`."""
+    """One daemon thread running :func:`calib_core._jit.warm_up`, :func:`calib_core.solve.warm_up` and
+    :func:`calib_core.render.warm_up` (the camera-view render's kernels)."""
 
     def __init__(self) -> None:
         self.seconds: dict[str, float] = {}
@@ -24,9 +25,12 @@ class WarmUp:
 
     def _run(self) -> None:
         try:
-            from calib_core import _jit, solve
+            from calib_core import _jit, render, solve
 
             self.seconds.update(_jit.warm_up())
+            t0 = time.perf_counter()
+            render.warm_up()  # the first render of the page comes right after start-up
+            self.seconds["calib_core.render"] = time.perf_counter() - t0
             warm_solve = getattr(solve, "warm_up", None)
             if warm_solve is not None:
                 t0 = time.perf_counter()
