@@ -79,7 +79,8 @@ def test_inverse_and_independent_construction_agree():
         np.testing.assert_allclose(viewing_direction(R).direction_lidar, R.T @ [0, 0, 1], atol=1e-15)
 
 
-@pytest.mark.parametrize("az, el, roll", [(0.0, 0.0, 0.0), (12.0, -3.4, 0.6), (-150.0, 40.0, 100.0), (30.0, -86.0, 5.0)])
+@pytest.mark.parametrize("az, el, roll", [(0.0, 0.0, 0.0), (12.0, -3.4, 0.6), (-150.0, 40.0, 100.0),
+                                          (30.0, -86.0, 5.0)])
 def test_sigma_matches_finite_differences(az, el, roll):
     """sqrt(diag(J cov J^T)) with J from central differences of the angles under exp([delta]) R."""
     R = built(az, el, roll)
@@ -247,5 +248,6 @@ def test_yaml_of_a_camera_looking_straight_up(tmp_path):
     T[:3, :3] = built(0.0, 90.0, 0.0)
     save_extrinsics_yaml(tmp_path / "up.yaml", T)
     doc = load_extrinsics_yaml(tmp_path / "up.yaml")
-    assert doc["T_camera_lidar_block"]["viewing_deg"][0] is None and doc["T_camera_lidar_block"]["viewing_deg"][2] is None
+    az, _, roll = doc["T_camera_lidar_block"]["viewing_deg"]
+    assert az is None and roll is None
     np.testing.assert_allclose(doc["T_camera_lidar"], T, atol=1e-15)

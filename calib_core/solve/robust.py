@@ -44,8 +44,8 @@ from .bearing_pnp import _spread_order, p3p_grunert
 from .kernels import lm_refine, score_poses, whitened_residuals
 
 __all__ = [
-    "RobustFit", "INLIER_K", "inlier_k", "robust_fit", "robust_scale", "inlier_scale", "cluster_width_rad", "pair_kernel",
-    "spread_votes", "support",
+    "RobustFit", "INLIER_K", "inlier_k", "robust_fit", "robust_scale", "inlier_scale", "cluster_width_rad",
+    "pair_kernel", "spread_votes", "support",
 ]
 
 #: Smallest inlier threshold, in sigmas of the whitened residual.
