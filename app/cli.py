@@ -126,7 +126,8 @@ def format_summary(result, pairs_count: int, pair_ids: Sequence[int] | None = No
     """The solve summary table (paper Table I layout) with the quality verdict, as text."""
     import numpy as np
 
-    from calib_core.transforms import rpy_deg_from_R
+    from calib_core.solve.quality import NO_ERROR_ESTIMATE, error_estimate_reason, pairs_in_fit
+    from calib_core.transforms import rpy_deg_from_R, viewing_direction
 
     T = result.T_camera_lidar
     rpy = rpy_deg_from_R(T[:3, :3])
@@ -150,9 +151,16 @@ def format_summary(result, pairs_count: int, pair_ids: Sequence[int] | None = No
         lines.append(f"{name:14}{v:12.4f}{s:10.4f}")
     for name, v, s in zip(("roll [deg]", "pitch [deg]", "yaw [deg]"), rpy, result.sigma_rpy_deg):
         lines.append(f"{name:14}{v:12.3f}{s:10.3f}")
+    view = viewing_direction(T[:3, :3], np.asarray(result.covariance_6x6)[:3, :3])  # optical axis, lidar frame
+    for name, v, s in zip(("view az [deg]", "view el [deg]", "view roll[deg]"), (view.azimuth_deg, view.elevation_deg,
+                                                                           view.roll_deg), view.sigma_deg):
+        lines.append(f"{name:14}{v:12.3f}{s:10.3f}")
     lines.append("")
     fit = "" if not n_out else " (pairs in the fit)"
-    if np.isfinite(result.mean_px):
+    no_error = error_estimate_reason(pairs_in_fit(result))
+    if no_error is not None:  # a near-exact fit is the likeliest outcome: its residuals are no error figure
+        lines.append(f"reprojection error{fit}: {NO_ERROR_ESTIMATE} ({no_error})")
+    elif np.isfinite(result.mean_px):
         lines.append(f"reprojection error{fit}: {result.mean_px:.3f} +/- {result.std_px:.3f} px, {result.mean_deg:.4f} +/- {result.std_deg:.4f} deg")
     else:
         lines.append(f"reprojection error{fit}: {result.mean_deg:.4f} +/- {result.std_deg:.4f} deg")
