@@ -212,6 +212,23 @@ def _rows(shots: Sequence[Shot], use: Sequence[int], ids: list[list[int]]) -> _R
     )
 
 
+def _refuse_shared_points(rows: _Rows) -> None:
+    """Two pairs of different shots with the same laser point: the same scan given twice (the solve
+    would count that point twice); named by shot and position, which the solve's message cannot do."""
+    if len(np.unique(rows.shot)) < 2:
+        return
+    _, group, counts = np.unique(rows.points, axis=0, return_inverse=True, return_counts=True)
+    group = np.ravel(group)
+    dup = np.flatnonzero(counts[group] > 1)
+    if dup.size:
+        i = int(dup[0])
+        j = int(np.flatnonzero(group == group[i])[1])
+        if rows.shot[i] != rows.shot[j]:
+            raise CalibError(
+                f"shot {rows.shot[i]} pair {rows.position[i]} and shot {rows.shot[j]} pair {rows.position[j]} use the "
+                "same laser point: is one scan given for two shots? Each shot needs its own scan")
+
+
 def _solve_rows(rows: _Rows, camera, cost: str, options: dict) -> CalibrationResult:
     return solve_extrinsics(rows.points, rows.bearings, camera=camera, pixels=rows.pixels, cost=cost,
                             pair_ids=rows.ids, pixel_sigma=rows.sigmas, laser_cov_m2=rows.laser_cov, **options)
@@ -610,6 +627,7 @@ def solve_shots(
     if len(rows.points) < MIN_PAIRS:
         counts = ", ".join(str(len(s.fit_positions)) for s in shots)
         raise CalibError(f"{len(rows.points)} fit pairs in all ({counts} per shot); the solve needs at least {MIN_PAIRS}")
+    _refuse_shared_points(rows)
     joint = _solve_rows(rows, camera, cost, options)
     result, kept = joint, everyone
     tests: dict[int, ShotTest] = {}
