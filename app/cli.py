@@ -178,7 +178,10 @@ def format_summary(result, pairs_count: int, pair_ids: Sequence[int] | None = No
 
 def cmd_solve(args: argparse.Namespace) -> int | Outcome:
     if check_shot_form(args, "solve"):
-        return cmd_solve_shots(args)
+        quality = cmd_solve_shots(args)
+        if quality.status == "unreliable":
+            return Outcome(EXIT_UNRELIABLE, f"unreliable: {quality.reasons[0]} (exit code {EXIT_UNRELIABLE})")
+        return 0
     from calib_core.io.atomic import write_yaml_atomic
     from calib_core.verify import extrinsics_document
     from calib_core.pairs import load_pairs_yaml

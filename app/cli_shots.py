@@ -61,11 +61,14 @@ def load_shots(args: argparse.Namespace, camera):
 
 
 def cmd_solve_shots(args: argparse.Namespace):
-    """``solve --shot SCAN PAIRS ...``: the joint solve, its per-shot report and the extrinsics YAML."""
+    """``solve --shot SCAN PAIRS ...``: the joint solve, its per-shot report and the extrinsics YAML.
+
+    Returns the result's :class:`calib_core.solve.Quality` (the caller turns ``unreliable`` into exit code 3).
+    """
     from calib_core.io.atomic import write_yaml_atomic
     from calib_core.shots import format_shots, shots_extrinsics_document, solve_shots
 
-    from .cli import EXIT_UNRELIABLE, Outcome, format_summary, load_camera_from_args
+    from .cli import format_summary, load_camera_from_args
 
     camera = load_camera_from_args(args)
     shots = load_shots(args, camera)
@@ -85,10 +88,7 @@ def cmd_solve_shots(args: argparse.Namespace):
     for note in notes:
         print(f"note: {note}")
     print(f"\nwrote {args.output}")
-    result = solved.result
-    if result.quality.status == "unreliable":
-        return Outcome(EXIT_UNRELIABLE, f"unreliable: {result.quality.reasons[0]} (exit code {EXIT_UNRELIABLE})")
-    return 0
+    return solved.result.quality
 
 
 def cmd_propose_shots(args: argparse.Namespace) -> int:
