@@ -43,6 +43,7 @@ def check_shot_form(args: argparse.Namespace, command: str) -> bool:
 
 def load_shots(args: argparse.Namespace, camera):
     """Each ``--shot``'s scan and pairs, resolved (the organisation report of each scan is printed)."""
+    from calib_core.errors import CalibError
     from calib_core.io.scan_readers import load_scan
     from calib_core.pairs import load_pairs_yaml
     from calib_core.shots import Shot
@@ -56,7 +57,10 @@ def load_shots(args: argparse.Namespace, camera):
         report = depth.organize_report
         if report is not None:
             print(f"shot {k}: {report.line()}", flush=True)
-        shots.append(Shot.from_pairs(pairs, depth, camera, name=f"{scan_path} + {pairs_path}"))
+        try:
+            shots.append(Shot.from_pairs(pairs, depth, camera, name=f"{scan_path} + {pairs_path}"))
+        except CalibError as exc:  # name the shot: the same pair number exists in every shot
+            raise CalibError(f"shot {k} ({pairs_path}): {exc}") from None
     return shots
 
 
@@ -113,7 +117,8 @@ def cmd_propose_shots(args: argparse.Namespace) -> int:
             raise CalibError(f"--image-for-shot {k}: there are {len(shots)} shots, numbered 0 to {len(shots) - 1}")
         images[k] = load_image_rgb(image_path)
     T0 = load_extrinsics_yaml(args.extrinsics)["T_camera_lidar"] if args.extrinsics is not None else None
-    proposals, state = propose_shots(shots, camera, args.n, T_initial=T0, images=images, click_sigma_px=args.click_sigma)
+    proposals, state = propose_shots(shots, camera, args.n, T_initial=T0, images=images,
+                                     click_sigma_px=args.click_sigma)
     write_yaml_atomic(args.output, shot_proposals_to_dict(proposals, state, [s.name for s in shots]))
     print(f"pose from {state.source} ({state.n_pairs} pairs in {len(shots)} shots); {len(proposals)} proposals")
     for i, sp in enumerate(proposals):

@@ -36,6 +36,7 @@ With two shots or more:
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -626,7 +627,8 @@ def solve_shots(
     rows = _rows(shots, everyone, ids)
     if len(rows.points) < MIN_PAIRS:
         counts = ", ".join(str(len(s.fit_positions)) for s in shots)
-        raise CalibError(f"{len(rows.points)} fit pairs in all ({counts} per shot); the solve needs at least {MIN_PAIRS}")
+        raise CalibError(
+            f"{len(rows.points)} fit pairs in all ({counts} per shot); the solve needs at least {MIN_PAIRS}")
     _refuse_shared_points(rows)
     joint = _solve_rows(rows, camera, cost, options)
     result, kept = joint, everyone
@@ -730,7 +732,8 @@ def _with_checks(result: CalibrationResult, shots: Sequence[Shot], kept: list[in
     return result
 
 
-def leave_one_shot_out(shots: Sequence[Shot], camera, *, cost: str = "angular", **options: Any) -> list[LeaveOneShotOut]:
+def leave_one_shot_out(shots: Sequence[Shot], camera, *, cost: str = "angular",
+                       **options: Any) -> list[LeaveOneShotOut]:
     """Each shot's errors under the pose fitted to the other shots alone (two shots or more).
 
     Pairs the fit of the other shots would call outliers are not special-cased here: every fit
@@ -849,7 +852,15 @@ def joint_pose_state(shots: Sequence[Shot], camera, T_initial: np.ndarray | None
             F = F + fisher_information(J_pose, pair_noise(sig, J_point, rows.laser_cov_full))
         return PoseState(T, information_inverse(F), 1.0, n, "extrinsics")
     opts = {} if T_initial is None else {"initial_T_camera_lidar": T_initial}
-    T = solve_shots(shots, camera, **opts).result.T_camera_lidar
+    solved = solve_shots(shots, camera, **opts)
+    T = solved.result.T_camera_lidar
+    # The information of the pairs in the fit: a disagreeing shot and outlier pairs left out.
+    rows = _rows(shots, [k for k in range(len(shots)) if k not in solved.disagreeing], ids)
+    if solved.result.inliers is not None and len(solved.result.inliers) == len(rows.points):
+        keep = np.asarray(solved.result.inliers, dtype=bool)
+        rows = dataclasses.replace(rows, points=rows.points[keep], pixels=rows.pixels[keep],
+                                   sigma_full=rows.sigma_full[keep], laser_cov_full=rows.laser_cov_full[keep])
+    n = len(rows.points)
     predicted, J_pose, J_point = pixel_jacobians(camera, T, rows.points)
     S = pair_noise(rows.sigma_full, J_point, rows.laser_cov_full)
     F = fisher_information(J_pose, S)
@@ -1028,8 +1039,11 @@ def format_shots(shots_result: ShotsResult) -> str:
         e, t = loso.get(rep.index), tests.get(rep.index)
         flag = ("  <- disagrees, left out of the fit" if rep.index in shots_result.disagreeing else
                 "  <- disagrees with the other shot" if rep.index in shots_result.undecided else "")
-        lines.append(
-            f"{rep.index:4d}{rep.n_pairs:7d}{rep.n_fit - len(rep.outliers) if rep.in_fit else 0:5d}"
-            f"{f(rep.mean_px, '12.3f'):>12}{f(e.mean_px, '11.3f') if e else '-':>11}{f(e.mean_deg, '12.4f') if e else '-':>12}"
-            f"{f(t.rotation_deg, '14.3f') if t else '-':>14}{format(t.p_value, '10.1e') if t else '-':>10}  {rep.name}{flag}")
+        loso_px = f(e.mean_px, "11.3f") if e else "-"
+        loso_deg = f(e.mean_deg, "12.4f") if e else "-"
+        offset = f(t.rotation_deg, "14.3f") if t else "-"
+        p_value = format(t.p_value, "10.1e") if t else "-"
+        n_in_fit = rep.n_fit - len(rep.outliers) if rep.in_fit else 0
+        lines.append(f"{rep.index:4d}{rep.n_pairs:7d}{n_in_fit:5d}{f(rep.mean_px, '12.3f'):>12}{loso_px:>11}"
+                     f"{loso_deg:>12}{offset:>14}{p_value:>10}  {rep.name}{flag}")
     return "\n".join(lines)

@@ -93,7 +93,8 @@ def test_solve_two_shots_writes_per_shot_residuals_and_leave_one_shot_out(shot_f
         loso = shots[k]["leave_one_shot_out"]
         assert loso["n_pairs"] == 12 and len(loso["per_pair"]) == 12
         alone = tmp_path / f"alone{k}.yaml"
-        assert run_cli("solve", "--camera", CAMERA, "--scan", SCAN, "--pairs", str(other), "-o", str(alone)).returncode == 0
+        solved = run_cli("solve", "--camera", CAMERA, "--scan", SCAN, "--pairs", str(other), "-o", str(alone))
+        assert solved.returncode == 0
         T_other = load_extrinsics_yaml(alone)["T_camera_lidar"]
         from calib_core.io.scan_readers import load_scan
         from calib_core.pairs import resolve_pairs
@@ -142,14 +143,15 @@ def test_two_shots_that_disagree_exit_3(shot_files, tmp_path):
 def test_bad_shot_arguments_are_one_line_exit_2(shot_files, tmp_path):
     (p0, p1, _, _), _ = shot_files
     out = str(tmp_path / "e.yaml")
-    assert_one_line_error(run_cli("solve", "--camera", CAMERA, "--shot", SCAN, "-o", out), "--shot", "expected 2 arguments")
+    assert_one_line_error(run_cli("solve", "--camera", CAMERA, "--shot", SCAN, "-o", out),
+                          "--shot", "expected 2 arguments")
     assert_one_line_error(run_cli("solve", "--camera", CAMERA, "--shot", SCAN, str(p0), str(p1), "-o", out),
                           "unrecognized arguments")
     assert_one_line_error(run_cli("solve", "--camera", CAMERA, "--shot", SCAN, str(p0), "--pairs", str(p1), "-o", out),
                           "either --shot")
     assert_one_line_error(run_cli("solve", "--camera", CAMERA, "-o", out), "--pairs", "--shot")
-    assert_one_line_error(run_cli("solve", "--camera", CAMERA, "--shot", SCAN, str(tmp_path / "missing.yaml"), "-o", out),
-                          "missing.yaml")
+    missing = str(tmp_path / "missing.yaml")
+    assert_one_line_error(run_cli("solve", "--camera", CAMERA, "--shot", SCAN, missing, "-o", out), "missing.yaml")
     assert_one_line_error(run_cli("propose", "--camera", CAMERA, "--shot", SCAN, str(p0), "--image-for-shot", "1",
                                   str(SAMPLE / "image.png"), "-o", out), "--image-for-shot 1", "1 shots")
 

@@ -15,6 +15,7 @@ Layout::
     residuals: {n_pairs, n_inliers, mean_px, std_px, mean_deg, std_deg, per_pair: [...], warnings: [...]}
     camera: {...}                                           # the camera description
     pairs: [...]                                            # the pairs that were solved
+    shots: [{index, name, residuals, leave_one_shot_out, test, ...}]  # several shots: calib_core.shots.shots_to_dict
 
 Floats are written with Python's shortest round-trip representation, so
 saving and loading again reproduces every number exactly.
