@@ -295,7 +295,10 @@ def report(acc, loso, det, command: str, seconds: float, pjlab: dict | None = No
         lines += [
             f"3 pairs per scene, laser cells by `tools/make_real_pairs.py`'s fixed rule (the first three of its "
             "farthest-point order), pixels = the published calibration's projection + N(0, 1 px), "
-            f"{pjlab['draws']} noise draws (seeds fixed in advance; also `tests/test_shots.py`).  Each scene alone: "
+            f"{pjlab['draws']} noise draws (`default_rng(1000 + 2 draw + scene)`; also `tests/test_shots.py`).  "
+            "The target is met by the joint solve's distribution, not by every draw: a first single draw tried "
+            "while writing the test (seeds 21 and 22) came out at 0.16 deg and 11.5 cm, which is why the test "
+            "and this table use many draws.  Each scene alone: "
             + "; ".join(f"`{e}`" for e in pjlab["alone"]) + ".", "",
             "| joint solve, 3 + 3 pairs | rotation median (max), deg | translation median (max), cm | "
             "within 0.5 deg and 10 cm |", "|---|---:|---:|---:|",

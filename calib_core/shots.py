@@ -31,7 +31,12 @@ With two shots or more:
   by hypothesise-and-verify over that offset and left out of its test: a
   shot is named only when most of its pairs agree among themselves.  With
   two shots left the test cannot tell which one is off: both are named and
-  the result is ``unreliable``.
+  the result is ``unreliable``.  The offset modelled is a rotation (what a
+  turning rig gives, and most of what a moving one gives for far points); a
+  shift that no rotation explains is left to the pair-level robust stage.
+
+The false-alarm rate and the hit rate against the size of the rotation are
+measured by ``python -m bench.shots`` (``docs/performance.md``).
 """
 
 from __future__ import annotations
@@ -204,7 +209,7 @@ def _rows(shots: Sequence[Shot], use: Sequence[int], ids: list[list[int]]) -> _R
         pixels=cat(lambda s: s.pixels).reshape(-1, 2),
         # As calibrate(): sigmas only when some pair states one; laser covariances only when some pair names a cell.
         sigmas=None if not np.isfinite(precision).any() else sigma_full,
-        laser_cov=cov if has_cell.any() and all(shots[k].depth is not None for k, _ in parts) else None,
+        laser_cov=cov if has_cell.any() else None,
         ids=[ids[k][int(i)] for k, pos in parts for i in pos],
         shot=np.concatenate([np.full(len(pos), k) for k, pos in parts]).astype(np.int64),
         position=np.concatenate([pos for _, pos in parts]).astype(np.int64),

@@ -314,7 +314,8 @@ def test_pjlab_two_scenes_three_pairs_each_solve_together_not_alone():
     camera = scenes[0][1]
     rot, trans = [], []
     # 3 pairs per scene: the first three of the rule's farthest-point order, pixel = projection with the
-    # published T + N(0, 1 px) from default_rng(seed); 40 noise draws, seeds fixed in advance.
+    # published T + N(0, 1 px) from default_rng(seed); 40 noise draws.  The target holds for the distribution,
+    # not every draw (a single draw with seeds 21 and 22 gave 0.16 deg and 11.5 cm), hence the share asserted.
     for draw in range(40):
         shots = []
         for k, (depth, cam, T) in enumerate(scenes):
