@@ -29,6 +29,7 @@ from .cli_guard import (  # noqa: F401  (with_default_command: public, used by t
     with_default_command,
 )
 from .cli_serve import add_serve_parser
+from .cli_shots import add_shot_args, check_shot_form, cmd_propose_shots, cmd_solve_shots
 from .cli_toolchain import cmd_bag_extract, cmd_bag_info, cmd_export
 
 #: ``solve`` wrote the file but the calibration's quality status is ``unreliable``.
@@ -68,8 +69,8 @@ def default_sample_dir() -> Path:
 # --- scan options shared by every command that reads a scan -----------------
 
 
-def _add_scan_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--scan", required=True, type=Path, help="scan file: .npz (native), .pcd, .ply, .bin (KITTI), .las/.laz, .npy")
+def _add_scan_args(p: argparse.ArgumentParser, required: bool = True) -> None:
+    p.add_argument("--scan", required=required, type=Path, help="scan file: .npz (native), .pcd, .ply, .bin (KITTI), .las/.laz, .npy")
     p.add_argument(
         "--organize",
         choices=["auto", "ring", "elevation", "firing", "spherical"],
@@ -184,6 +185,11 @@ def format_summary(result, pairs_count: int, pair_ids: Sequence[int] | None = No
 
 
 def cmd_solve(args: argparse.Namespace) -> int | Outcome:
+    if check_shot_form(args, "solve"):
+        quality = cmd_solve_shots(args)
+        if quality.status == "unreliable":
+            return Outcome(EXIT_UNRELIABLE, f"unreliable: {quality.reasons[0]} (exit code {EXIT_UNRELIABLE})")
+        return 0
     from calib_core.io.atomic import write_yaml_atomic
     from calib_core.verify import extrinsics_document
     from calib_core.pairs import load_pairs_yaml
@@ -217,6 +223,8 @@ def cmd_solve(args: argparse.Namespace) -> int | Outcome:
 
 
 def cmd_propose(args: argparse.Namespace) -> int:
+    if check_shot_form(args, "propose"):
+        return cmd_propose_shots(args)
     from calib_core.guide.session import GuidedSession
     from calib_core.guide.propose import save_proposals_yaml
     from calib_core.io.extrinsics import load_extrinsics_yaml
@@ -346,7 +354,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--h-res-deg", type=float, default=None)
     p.add_argument("--v-res-deg", type=float, default=None)
     _add_camera_arg(p)
-    p.add_argument("--pairs", required=True, type=Path, help="pairs YAML")
+    p.add_argument("--pairs", type=Path, default=None, help="pairs YAML (one shot; or give --shot)")
+    add_shot_args(p)
     p.add_argument("--max-pairs", type=int, default=1_000, help="refuse pairs files with more pairs than this (default 1000)")
     p.add_argument(
         "--cost",
@@ -362,9 +371,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_solve)
 
     p = sub.add_parser("propose", help="propose the next pairs to click (guided picking), best first")
-    _add_scan_args(p)
+    _add_scan_args(p, required=False)
     _add_camera_arg(p)
-    p.add_argument("--pairs", required=True, type=Path, help="pairs so far (>= 4, or give --extrinsics)")
+    p.add_argument("--pairs", type=Path, default=None, help="pairs so far (>= 4, or give --extrinsics; or give --shot)")
+    add_shot_args(p, images=True)
     p.add_argument("--extrinsics", type=Path, default=None, help="initial extrinsics YAML (imported calibration)")
     p.add_argument("--image", type=Path, default=None, help="camera image: propose only cells with an image corner near their pixel")
     p.add_argument("-n", type=int, default=20, help="number of proposals (default 20)")

@@ -25,6 +25,7 @@ where undefined (a camera looking exactly along lidar +-z).  On reading, it and
 estimate the error (:func:`calib_core.solve.quality.error_estimate_reason`).
     camera: {...}                                           # the camera description
     pairs: [...]                                            # the pairs that were solved
+    shots: [{index, name, residuals, leave_one_shot_out, test, ...}]  # several shots: calib_core.shots.shots_to_dict
 
 Floats are written with Python's shortest round-trip representation, so
 saving and loading again reproduces every number exactly.
