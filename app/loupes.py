@@ -38,6 +38,12 @@ PAD_GRAY = 60  # outside the scan or the image
 KINDS = ("ba", "camera")
 
 
+def default_camera_crop_px(width: int, height: int) -> int:
+    """The camera loupe's crop side (original-image px) at zoom 1: bigger images get a wider crop,
+    so a rough prediction still falls inside it."""
+    return int(min(max(CAMERA_LOUPE_PX, round(CAMERA_LOUPE_PX * max(width, height) / 640 / 1.5)), 160))
+
+
 def node_name(kind: str) -> str:
     """Scene node of loupe ``kind`` (``"ba"`` or ``"camera"``)."""
     return f"/annot/loupe_{kind}"
@@ -87,8 +93,7 @@ class Loupes:
         n_rows, n_cols = app.depth.shape
         self._ba_cols = min(BA_LOUPE_COLUMNS, n_cols)
         cam_w, cam_h = app.camera.width, app.camera.height
-        # Bigger images get a wider default crop, so a rough prediction still falls inside it.
-        self._cam_n = int(min(max(CAMERA_LOUPE_PX, round(CAMERA_LOUPE_PX * max(cam_w, cam_h) / 640 / 1.5)), 160))
+        self._cam_n = default_camera_crop_px(cam_w, cam_h)
         self.ba_crop = self._make_ba_crop(app.ba_keys[0], n_rows // 2, n_cols // 2)
         self.camera_crop = self._make_camera_crop((cam_w - 1) / 2.0, (cam_h - 1) / 2.0, None)
         self._slots: dict[str, ImageSlot] = {}
