@@ -53,7 +53,7 @@ class GuidedSession:
     def __init__(self, depth, camera, pairs: Sequence[Pair] = (), T_initial: np.ndarray | None = None,
                  image: np.ndarray | None = None, click_sigma_px: float = GUIDED_CLICK_SIGMA_PX,
                  reclicks: bool = True, **propose_options) -> None:
-        self.depth, self.camera = depth, camera
+        self.depth, self.camera, self.image = depth, camera, image
         self.pairs: list[Pair] = list(pairs)
         self.T_initial = T_initial
         self.click_sigma_px = float(click_sigma_px)
