@@ -338,7 +338,9 @@ def markdown(results: dict, trials: int, seconds: float, load: tuple) -> str:
         "projection under the published calibration; *strong* = `lam_min >= 0.01` there; *vegetation* = fewer "
         f"than {100 * MIN_EXPLAINED:.0f} % of the window's near-side points within {PLANE_TOL_NOISE:.0f} range "
         f"noise of at most two RANSAC planes; *far* = range > {FAR_M:.0f} m. Re-clicks of the rough pairs are "
-        "proposals too and are counted.",
+        "proposals too and are counted; the screen keeps them even beyond its range limit (the person chose "
+        "those corners, and a rough pair left as it was biases the solve), which is all that is left on far "
+        "background after it.",
         "",
     ]
     lines += table(results, trials)
