@@ -225,6 +225,7 @@ def cmd_solve(args: argparse.Namespace) -> int | Outcome:
 def cmd_propose(args: argparse.Namespace) -> int:
     if check_shot_form(args, "propose"):
         return cmd_propose_shots(args)
+    from calib_core.guide.evidence import ProposalScreen
     from calib_core.guide.session import GuidedSession
     from calib_core.guide.propose import save_proposals_yaml
     from calib_core.io.extrinsics import load_extrinsics_yaml
@@ -236,7 +237,9 @@ def cmd_propose(args: argparse.Namespace) -> int:
     pairs = load_pairs_yaml(args.pairs)
     T0 = load_extrinsics_yaml(args.extrinsics)["T_camera_lidar"] if args.extrinsics is not None else None
     image = load_image_rgb(args.image) if args.image is not None else None
-    session = GuidedSession(depth, camera, pairs, T_initial=T0, image=image, click_sigma_px=args.click_sigma)
+    screen = ProposalScreen(max_ellipse_px=args.max_ellipse_px)
+    session = GuidedSession(depth, camera, pairs, T_initial=T0, image=image, click_sigma_px=args.click_sigma,
+                            screen=screen)
     proposals = session.proposals(args.n)
     save_proposals_yaml(args.output, proposals, session.state)
     print(f"pose from {session.state.source} ({session.state.n_pairs} pairs); "
@@ -245,6 +248,8 @@ def cmd_propose(args: argparse.Namespace) -> int:
         major, minor = p.ellipse_sigma_px()
         print(f"{i:3d}  cell {p.laser_rc}  pixel ({p.pixel[0]:7.1f}, {p.pixel[1]:7.1f})  "
               f"1-sigma {major:5.2f} x {minor:5.2f} px  gain {p.gain:6.3f}  {p.kind}")
+    if not proposals:
+        print(f"no proposal: {proposals.reason}")
     print(f"wrote {args.output}")
     return 0
 
@@ -379,6 +384,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--image", type=Path, default=None, help="camera image: propose only cells with an image corner near their pixel")
     p.add_argument("-n", type=int, default=20, help="number of proposals (default 20)")
     p.add_argument("--click-sigma", type=float, default=0.3, help="click noise of a guided pair, px (default 0.3)")
+    p.add_argument("--max-ellipse-px", type=float, default=40.0,
+                   help="largest 3-sigma radius of a proposal, px (the loupe's half side; default 40)")
     p.add_argument("-o", "--output", required=True, type=Path, help="proposals YAML to write")
     p.set_defaults(func=cmd_propose)
 
