@@ -32,8 +32,9 @@ from calib_core.io.scan_readers import load_scan
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE = ROOT / "sample_data"
-#: Trials of the target (0 of 50 lost); BA_CALIB_KILL_TRIALS lowers it for quick runs.
-TRIALS = int(os.environ.get("BA_CALIB_KILL_TRIALS", "50"))
+#: Trials per CI run; the 50-trial target (0 of 50 lost) is ``python -m bench.durability``, which sets
+#: BA_CALIB_KILL_TRIALS=50 (issue 22: CI time).
+TRIALS = int(os.environ.get("BA_CALIB_KILL_TRIALS", "10"))
 
 
 def _env() -> dict:
