@@ -345,10 +345,6 @@ def _trace_geometry(depth: DepthMatrix, wrap_cols: bool) -> _TraceGeometry:
     return geometry
 
 
-#: Fewest rows and columns a depth matrix needs for its BA images.
-MIN_BA_SIDE = 2
-
-
 def _check_depth(depth) -> tuple[int, int]:
     if not isinstance(depth, DepthMatrix):
         raise CalibError(f"expected a DepthMatrix, got {type(depth).__name__}")
@@ -359,12 +355,6 @@ def _check_depth(depth) -> tuple[int, int]:
         )
     if np.shape(depth.valid) != shape:
         raise CalibError(f"inconsistent depth matrix: range {shape}, valid {np.shape(depth.valid)}")
-    if min(shape) < MIN_BA_SIDE:
-        # Every trace needs a previous neighbour: a single row or column has no vertical (or horizontal) one.
-        raise CalibError(
-            f"the scan's depth matrix is {shape[0]} x {shape[1]} cells, too small for Bearing Angle images "
-            f"(at least {MIN_BA_SIDE} x {MIN_BA_SIDE})"
-        )
     return shape
 
 

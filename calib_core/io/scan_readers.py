@@ -158,6 +158,20 @@ def _check_three_dimensional(path: Path, cloud: PointCloud) -> None:
         )
 
 
+#: Fewest rows and columns of a depth matrix: every Bearing Angle trace needs a previous neighbour.
+MIN_GRID_SIDE = 2
+
+
+def _check_grid(path: Path, depth: DepthMatrix) -> None:
+    """Refuse a depth matrix of one row or one column: a single scan line, too small for BA images."""
+    rows, cols = depth.shape
+    if min(rows, cols) < MIN_GRID_SIDE:
+        raise CalibError(
+            f"{path}: the scan is a {rows} x {cols} depth matrix, a single line: too small for Bearing Angle images "
+            f"(at least {MIN_GRID_SIDE} x {MIN_GRID_SIDE} cells; a 3-D scan is needed)"
+        )
+
+
 def read_point_cloud(path, bin_columns: int | None = None, max_points: int = DEFAULT_MAX_POINTS) -> PointCloud:
     """Read the points and per-point fields of a scan file.
 
@@ -299,8 +313,9 @@ def load_scan(
     ------
     CalibError
         Bad file or options (see :func:`read_point_cloud`), a cloud with no
-        extent along x, y or z (not a 3-D scan), or a cloud of which
-        organising keeps too few points to be one sensor's view.
+        extent along x, y or z (not a 3-D scan), a cloud of which organising
+        keeps too few points to be one sensor's view, or a depth matrix of a
+        single row or column (too small for Bearing Angle images).
     """
     if organize not in ORGANIZE_METHODS:
         raise CalibError(f"unknown organize method '{organize}' (one of {', '.join(ORGANIZE_METHODS)})")
@@ -308,6 +323,7 @@ def load_scan(
     path = _check_path(path, max_points)
     if _is_native_npz(path):
         depth = load_depth_npz(path, max_cells=max_points)
+        _check_grid(path, depth)
         meta = {**depth.meta, "source": str(path), "format": "native_npz", "organize": "native"}
         meta["organize_report"] = organize_report(dataclasses.replace(depth, meta=meta), "native scan file")
         return dataclasses.replace(depth, meta=meta)
@@ -336,6 +352,7 @@ def load_scan(
     except CalibError as err:
         raise CalibError(f"{path}: {err}") from None
 
+    _check_grid(path, depth)
     meta = {**depth.meta, "source": str(path), "format": cloud.meta.get("format")}
     meta["field_images"] = _field_images(cloud, meta["point_index"])
     return dataclasses.replace(depth, meta=meta)
