@@ -42,7 +42,7 @@ import numpy as np
 
 from ..errors import CalibError
 from .depth_matrix import DepthMatrix
-from .firing_order import azimuth_coverage, beam_origin_height, estimate_step, firing_order_rings, sequence_columns
+from .firing_order import AZIMUTH_HINT, azimuth_coverage, beam_origin_height, estimate_step, firing_order_rings, sequence_columns
 from .organized import organized_cloud_depth
 from .spherical import spherical_directions
 
@@ -147,7 +147,7 @@ def estimate_n_cols(azimuth_rad: np.ndarray, beam: np.ndarray) -> int:
     # Ignore exact duplicates (e.g. the start/end overlap of a sweep).
     steps = steps[steps > 1e-7]
     if steps.size < 8:
-        raise CalibError(f"cannot estimate the azimuth resolution from {steps.size} azimuth steps; pass n_cols")
+        raise CalibError(f"cannot estimate the azimuth resolution from {steps.size} azimuth steps; {AZIMUTH_HINT}")
     step = float(np.median(steps))
     return max(int(round(TWO_PI / step)), 1)
 

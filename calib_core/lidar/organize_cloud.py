@@ -146,7 +146,9 @@ def organize_cloud(
     organize : str
         One of :data:`ORGANIZE_METHODS`.
     beams, n_cols, v_res_deg, h_res_deg, v_range_deg, wrap_cols :
-        See :mod:`calib_core.lidar.organize`.
+        See :mod:`calib_core.lidar.organize`.  Without ``n_cols``, a given
+        ``h_res_deg`` (degrees) also sets the columns of the ring, firing
+        and elevation layouts (``round(360 / h_res_deg)``).
     sensor_origin : (3,) float, optional
         Scanner position in the cloud's frame (metres), for scans stored in
         a world frame; the points are shifted so that it is the origin.
@@ -173,6 +175,8 @@ def organize_cloud(
         raise CalibError(f"beams must be a positive integer, got {beams!r}")
     method = "firing_order" if organize == "firing" else organize
     origin = parse_sensor_origin(sensor_origin)
+    # The azimuth resolution, when given, also sets the columns of the beam-based layouts.
+    beam_cols = n_cols if n_cols is not None or h_res_deg is None else max(int(round(360.0 / float(h_res_deg))), 1)
     points = np.asarray(xyz, dtype=np.float64)
     if origin is not None:
         points = points - origin
@@ -187,12 +191,12 @@ def organize_cloud(
         reason = f"the file's own {organized_shape[0]} x {organized_shape[1]} grid" if method == "auto" else ""
     elif method == "ring" or (method == "auto" and ring is not None):
         if ring is None:
-            raise CalibError("no ring field; try beams=...")
-        depth = organize_by_ring(points, ring, n_cols=n_cols)
+            raise CalibError("the cloud has no ring field: organise it another way (--organize elevation --beams N)")
+        depth = organize_by_ring(points, ring, n_cols=beam_cols)
         reason = f"ring field '{ring_name}'" if method == "auto" else ""
     elif method == "auto":
         try:
-            depth = organize_by_firing_order(points, beams, n_cols=n_cols, pad_cropped=True)
+            depth = organize_by_firing_order(points, beams, n_cols=beam_cols, pad_cropped=True)
             _check_firing_layout(depth)
             reason = f"no ring field; points stored laser after laser ({depth.meta['n_sweeps']} azimuth sweeps)"
             if depth.meta.get("n_empty_beams_added"):
@@ -203,11 +207,11 @@ def organize_cloud(
         except NotFiringOrder as err:
             why = str(err).replace("the cloud does not look like", "not").rstrip(".")
             if beams is not None:
-                depth = organize_by_elevation(points, beams, n_cols=n_cols, range_aware=True)
+                depth = organize_by_elevation(points, beams, n_cols=beam_cols, range_aware=True)
                 height = depth.meta["beam_origin_height_m"]
                 reason = f"fallback to elevation clustering into {beams} beams (seen from {height:+.2f} m): {why}"
             elif (found := count_beam_elevations(points)) is not None:
-                depth = organize_by_elevation(points, found, n_cols=n_cols)
+                depth = organize_by_elevation(points, found, n_cols=beam_cols)
                 reason = f"fallback to elevation clustering: {why}; the elevations fall into {found} separate beams"
             elif (field := narrow_field_of_view(points)) is not None:
                 depth, note = _narrow_field(points, field, v_res_deg, h_res_deg, v_range_deg)
@@ -217,8 +221,8 @@ def organize_cloud(
                 reason = f"fallback to spherical binning: {why}; {note or 'resolution as given'}; pass --beams N for one row per beam"
     elif method in ("elevation", "firing_order"):
         if beams is None and method == "elevation":
-            raise CalibError(f"organize='{method}' needs the number of beams (beams=...)")
-        depth = organize_by_elevation(points, beams, n_cols=n_cols) if method == "elevation" else organize_by_firing_order(points, beams, n_cols=n_cols)
+            raise CalibError(f"organize='{method}' needs the number of beams (--beams N; beams=... from Python)")
+        depth = organize_by_elevation(points, beams, n_cols=beam_cols) if method == "elevation" else organize_by_firing_order(points, beams, n_cols=beam_cols)
     else:
         depth, reason = _spherical(points, v_res_deg, h_res_deg, v_range_deg)
 
