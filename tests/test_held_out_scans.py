@@ -213,3 +213,25 @@ def test_a_pair_at_the_lidar_origin_is_refused_naming_it(tmp_path):
                                   "-o", str(tmp_path / "e.yaml")))
     assert "pairs.yaml: pair 1" in line and "lidar origin" in line
     assert not (tmp_path / "e.yaml").exists()
+
+
+# --------------------------------------------------------------------------
+# The azimuth resolution the error asks for is an option that exists
+# --------------------------------------------------------------------------
+
+
+def test_too_few_azimuth_steps_name_the_option_that_gives_them(tmp_path):
+    # Three rings of three points each: 6 azimuth steps, too few to estimate the columns.
+    elevation, azimuth = np.radians([2.0, 0.0, -2.0]), np.radians([12.0, 23.0, 34.0])
+    rows = [(5 * np.cos(e) * np.cos(a), 5 * np.cos(e) * np.sin(a), 5 * np.sin(e), ring)
+            for ring, e in enumerate(elevation) for a in azimuth]
+    header = "VERSION 0.7\nFIELDS x y z ring\nSIZE 4 4 4 2\nTYPE F F F U\nCOUNT 1 1 1 1\nWIDTH 9\nHEIGHT 1\nPOINTS 9\nDATA ascii\n"
+    path = tmp_path / "three_rings.pcd"
+    path.write_text(header + "".join(f"{x:.6f} {y:.6f} {z:.6f} {ring}\n" for x, y, z, ring in rows))
+    line = one_error_line(run_cli("ba-images", "--scan", str(path), "-o", str(tmp_path / "ba")))
+    assert "azimuth resolution" in line and "--h-res-deg" in line and "pass n_cols" not in line
+    # The option named works: 10 deg columns, column c centred on azimuth 180 - 10 (c + 0.5) deg.
+    depth = load_scan(path, h_res_deg=10.0)
+    assert depth.shape == (3, 36)
+    assert sorted({int(c) for c in np.nonzero(depth.valid)[1]}) == [int((180 - a) // 10) for a in (34, 23, 12)]
+    assert run_cli("ba-images", "--scan", str(path), "--h-res-deg", "10", "-o", str(tmp_path / "ba")).returncode == 0
