@@ -113,7 +113,7 @@ def kitti_rows() -> dict[str, np.ndarray]:
 
 
 @needs_kitti
-def test_a_kitti_calib_file_is_the_rectified_camera_2_by_default():
+def test_a_kitti_calib_file_is_the_rectified_camera_2_by_default(tmp_path):
     rows = kitti_rows()
     path = KITTI / "calib" / "000002.txt"
     camera = load_camera(path, image_size=(1242, 375))
@@ -126,6 +126,15 @@ def test_a_kitti_calib_file_is_the_rectified_camera_2_by_default():
     with pytest.raises(CalibError) as excinfo:
         load_camera(path)  # KITTI states no image size
     assert "000002.txt" in str(excinfo.value) and "--image-size" in str(excinfo.value)
+
+    # A damaged P2 is one line naming the file and the key.
+    broken = [ln.replace("7.215377000000e+02", "7.2x", 1) if ln.startswith("P2:") else ln
+              for ln in (KITTI / "calib" / "000002.txt").read_text().splitlines()]
+    bad = tmp_path / "000002.txt"
+    bad.write_text("\n".join(broken) + "\n")
+    with pytest.raises(CalibError) as excinfo:
+        load_camera(bad, image_size=(1242, 375))
+    assert str(bad) in str(excinfo.value) and "'P2:'" in str(excinfo.value) and "\n" not in str(excinfo.value)
 
 
 @needs_kitti

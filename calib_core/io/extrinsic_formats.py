@@ -48,8 +48,8 @@ import numpy as np
 import yaml
 
 from ..errors import CalibError
-from .kitti_calib import DEFAULT_KITTI_CAMERA, kitti_T_camera_lidar, parse_kitti_calib
 from ..transforms import R_from_quat_xyzw, R_from_rpy_deg, invert_T, make_T, quat_xyzw_from_R, rpy_deg_from_R
+from .kitti_calib import DEFAULT_KITTI_CAMERA, kitti_T_camera_lidar, parse_kitti_calib
 
 __all__ = [
     "FORMATS",

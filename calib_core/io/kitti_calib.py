@@ -41,28 +41,33 @@ def looks_like_kitti_calib(text: str) -> bool:
 
 
 def parse_kitti_calib(text: str, where: str = "KITTI calib") -> dict[str, np.ndarray]:
-    """The matrices of a KITTI calib text: key -> array of :data:`KITTI_SHAPES` (other keys as flat arrays).
+    """The matrices of a KITTI calib text: key -> array of :data:`KITTI_SHAPES` (other numeric keys as flat
+    arrays).
 
-    Lines without a colon (comments, blank lines) are skipped.
+    Lines without a colon, comments and other keys whose values are not numbers are skipped.
 
     Raises
     ------
     CalibError
-        A value that is not a finite number, or a known key with the wrong number of values; one line
-        naming ``where`` and the key.
+        A known key whose values are not finite numbers, or not as many as its shape; one line naming
+        ``where`` and the key.
     """
     out: dict[str, np.ndarray] = {}
     for line in text.splitlines():
         if ":" not in line or line.lstrip().startswith("#"):
             continue
         key, values = (part.strip() for part in line.split(":", 1))
+        shape = KITTI_SHAPES.get(key)
         try:
             numbers = np.array(values.split(), dtype=np.float64)
         except ValueError:
-            raise CalibError(f"{where}: '{key[:40]}:' holds something that is not a number") from None
+            if shape is None:
+                continue  # another key (KITTI raw's calib_time: a date): not used here
+            raise CalibError(f"{where}: '{key}:' holds something that is not a number") from None
         if not np.isfinite(numbers).all():
-            raise CalibError(f"{where}: '{key[:40]}:' holds a value that is not finite")
-        shape = KITTI_SHAPES.get(key)
+            if shape is None:
+                continue
+            raise CalibError(f"{where}: '{key}:' holds a value that is not finite")
         if shape is not None:
             if numbers.size != shape[0] * shape[1]:
                 raise CalibError(f"{where}: '{key}:' needs {shape[0] * shape[1]} numbers, got {numbers.size}")
