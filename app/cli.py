@@ -18,7 +18,7 @@ from typing import Sequence
 
 from calib_core import compile_events
 
-from .cli_guard import (  # noqa: F401  (with_default_command: public, used by tests)
+from .cli_guard import (  # noqa: F401  (with_default_command, load_camera_from_args: public, used elsewhere)
     EXIT_USAGE,
     Noise,
     OneLineParser,
@@ -26,10 +26,10 @@ from .cli_guard import (  # noqa: F401  (with_default_command: public, used by t
     check_args,
     check_serve_files,
     error_line,
+    load_camera_from_args,
     remove_stale_temp_files,
     with_default_command,
 )
-from .cli_guard import load_camera_from_args as _load_camera_from_args
 from .cli_serve import add_serve_parser
 from .cli_toolchain import cmd_bag_extract, cmd_bag_info, cmd_export
 
@@ -114,11 +114,6 @@ def _add_camera_arg(p: argparse.ArgumentParser) -> None:
     add_camera_args(p, required=True)
 
 
-def load_camera_from_args(args: argparse.Namespace):
-    """The camera of ``--camera``; see :func:`app.cli_guard.load_camera_from_args`."""
-    return _load_camera_from_args(args)
-
-
 # --- commands ----------------------------------------------------------------
 
 
@@ -193,8 +188,7 @@ def cmd_solve(args: argparse.Namespace) -> int | Outcome:
     if args.initial_extrinsics is not None:
         from calib_core.io.extrinsic_formats import load_extrinsics_any
 
-        kitti = {} if args.kitti_camera is None else {"kitti_camera": args.kitti_camera}  # a full KITTI calib: that camera
-        initial = load_extrinsics_any(args.initial_extrinsics, **kitti)
+        initial = load_extrinsics_any(args.initial_extrinsics, kitti_camera=args.kitti_camera)
     result = calibrate(pairs, depth, camera, cost=args.cost, initial_T_camera_lidar=initial)
     ids, _ = pair_ids_and_sigmas(pairs)
     doc, notes = extrinsics_document(result, pairs, depth, camera, base_dir=args.output.parent)

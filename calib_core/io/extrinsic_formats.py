@@ -689,7 +689,7 @@ def detect_format(text: str) -> str:
 
 def parse_extrinsics(
     text: str, fmt: str | None = None, lidar_frame: str | None = None, camera_frame: str | None = None,
-    kitti_camera: int = DEFAULT_KITTI_CAMERA,
+    kitti_camera: int | None = None,
 ) -> ParsedExtrinsics:
     """Parse extrinsics text in any format of :data:`FORMATS` (detected when ``fmt`` is None).
 
@@ -697,8 +697,8 @@ def parse_extrinsics(
     tell (a URDF or Autoware file with several sensors: the chain between the
     two is composed).  The camera frame must be the optical frame (z forward,
     x right, y down), as this package's camera frame.  A full KITTI calib
-    file gives the pose of rectified camera ``kitti_camera`` (0-3, default
-    2: the colour images), see :mod:`calib_core.io.kitti_calib`.
+    file gives the pose of rectified camera ``kitti_camera`` (0-3; None: 2,
+    the colour images), see :mod:`calib_core.io.kitti_calib`.
 
     Raises
     ------
@@ -716,12 +716,13 @@ def parse_extrinsics(
         return ParsedExtrinsics(parse_transform(data["T_camera_lidar"], "T_camera_lidar"), "ba-calib")
     if fmt not in FORMATS:
         raise CalibError(f"unknown extrinsics format {fmt!r} (one of {', '.join(FORMATS)})")
-    return FORMATS[fmt].read(text, FrameHint(lidar_frame, camera_frame, kitti_camera))
+    kitti = DEFAULT_KITTI_CAMERA if kitti_camera is None else kitti_camera
+    return FORMATS[fmt].read(text, FrameHint(lidar_frame, camera_frame, kitti))
 
 
 def read_extrinsics_any(
     path: str | os.PathLike, fmt: str | None = None, lidar_frame: str | None = None, camera_frame: str | None = None,
-    kitti_camera: int = DEFAULT_KITTI_CAMERA,
+    kitti_camera: int | None = None,
 ) -> ParsedExtrinsics:
     """Read an extrinsics file of any supported format; errors name the file and the format."""
     path = Path(path)
@@ -741,7 +742,7 @@ def read_extrinsics_any(
 
 def load_extrinsics_any(
     path: str | os.PathLike, fmt: str | None = None, lidar_frame: str | None = None, camera_frame: str | None = None,
-    kitti_camera: int = DEFAULT_KITTI_CAMERA,
+    kitti_camera: int | None = None,
 ) -> np.ndarray:
     """``T_camera_lidar`` (4, 4) from an extrinsics file of any supported format."""
     return read_extrinsics_any(path, fmt, lidar_frame, camera_frame, kitti_camera).T_camera_lidar
