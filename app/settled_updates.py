@@ -37,6 +37,9 @@ def settled(callback: Callable[[Any], Awaitable[None]], delay: float = SETTLE_S)
     latest: dict[int, object] = {}  # widget -> token of its newest update
 
     async def on_update(event: Any) -> None:
+        if getattr(event, "client", None) is None:  # the app's own write: passed on at once, a typed value stays due
+            await callback(event)
+            return
         key = id(event.target)
         token = latest[key] = object()
         await asyncio.sleep(delay)

@@ -246,3 +246,35 @@ def test_plot_data_never_holds_nan():
     assert all(a.dtype == np.float64 for a in data)
     _, data = finite_plot({"label": "x"}, np.full(3, np.nan), [({"label": "y"}, np.ones(3))])
     assert [len(a) for a in data] == [0, 0]
+
+
+def test_a_typed_number_is_passed_on_once_typed():
+    """settled(): of the updates one per keystroke ("8", "80", "800"), only the last is passed on, once the box
+    has kept it for the delay; the app's own writes (no client) pass at once and do not cancel a typed value."""
+    import asyncio
+    from types import SimpleNamespace
+
+    from app.settled_updates import settled
+
+    box = SimpleNamespace(value=0)
+    got: list[tuple] = []
+
+    async def record(event) -> None:
+        got.append((event.client, box.value))
+
+    on_update = settled(record, delay=0.2)
+
+    async def person_types() -> None:
+        tasks = []
+        for text in ("8", "80", "800"):
+            box.value = int(text)
+            tasks.append(asyncio.create_task(on_update(SimpleNamespace(client="tab", target=box))))
+            await asyncio.sleep(0.05)  # a keystroke every 50 ms, well inside the delay
+        await on_update(SimpleNamespace(client=None, target=box))  # the app writes meanwhile: passed at once
+        assert got == [(None, 800)]
+        await asyncio.gather(*tasks)
+        box.value = 9  # a later change, after a pause: passed on too
+        await on_update(SimpleNamespace(client="tab", target=box))
+
+    asyncio.run(person_types())
+    assert got == [(None, 800), ("tab", 800), ("tab", 9)]
