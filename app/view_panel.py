@@ -392,10 +392,10 @@ class ViewPanel:
             return
         try:
             cam = client.camera
-            moved = not (np.allclose(cam.position, target[0], atol=1e-4) and np.allclose(cam.look_at, target[1], atol=1e-4))
+            framed = np.allclose(cam.position, target[0], atol=1e-4) and np.allclose(cam.look_at, target[1], atol=1e-4)
         except AssertionError:
             return
-        if not moved:
+        if framed:
             self.set_view(client, mode)
 
     def _apply_camera(self, client: Any, position: np.ndarray, look_at: np.ndarray, up: np.ndarray, fov: float) -> None:
