@@ -1,5 +1,7 @@
 """The calibration panel: the solve's quality verdict in colour with its reasons, the errors, the pose with its
-sigmas and the per-pair residual table (excluded pairs marked by id).  User text is escaped."""
+sigmas (roll/pitch/yaw and the viewing direction) and the per-pair residual table (excluded pairs marked by id).
+User text is escaped.  Only printable ASCII and the bullet are shown (:data:`FONT_SAFE`): an emoji or a symbol
+the page's font lacks draws as an empty box."""
 
 from __future__ import annotations
 
@@ -7,9 +9,14 @@ from typing import Any
 
 import numpy as np
 
-from calib_core.transforms import rpy_deg_from_R
+from calib_core.solve.quality import NO_ERROR_ESTIMATE, error_estimate_reason, pairs_in_fit
+from calib_core.transforms import rpy_deg_from_R, viewing_direction
 
 from .ui_common import MIN_PAIRS, QUALITY_BADGES, SolveBundle, md_escape, _fmt
+
+#: The characters the panel may show besides printable ASCII: ones every sans-serif font of the page's
+#: stack has (Arial / Liberation Sans, Roboto, Helvetica, DejaVu Sans).
+FONT_SAFE = "\u2022"  # bullet
 
 
 class CalibrationPanel:
@@ -68,15 +75,25 @@ class CalibrationPanel:
         checks = [int(i) for i in getattr(r, "check_ids", [])]
         if checks:
             out.append("Check pairs (not in the fit, see Verify): " + ", ".join(str(i) for i in checks))
+        n_fit = pairs_in_fit(r)
+        no_error = error_estimate_reason(n_fit)
+        if no_error is None:
+            error_line = (f"**Mean error: {_fmt(r.mean_px)} px** (std {_fmt(r.std_px)} px), "
+                          f"**{_fmt(r.mean_deg, 4)} deg** (std {_fmt(r.std_deg, 4)} deg)")
+        else:  # a near-exact fit is the likeliest outcome: its residuals are no error figure
+            error_line = f"**Mean error: {NO_ERROR_ESTIMATE}** ({no_error})"
+        view = viewing_direction(T[:3, :3], np.asarray(r.covariance_6x6)[:3, :3])
+        sv = view.sigma_deg
         out += [
             f"**Solved with {r.n_pairs} pairs** ({md_escape(r.cost_name)} cost, {r.iterations} iterations, "
             f"{bundle.seconds * 1000:.0f} ms)",
-            f"**Mean error: {_fmt(r.mean_px)} px** (std {_fmt(r.std_px)} px), "
-            f"**{_fmt(r.mean_deg, 4)} deg** (std {_fmt(r.std_deg, 4)} deg)",
+            error_line,
             f"t = ({t[0]:.4f}, {t[1]:.4f}, {t[2]:.4f}) m, sigma T = ({st[0] * 100:.2f}, {st[1] * 100:.2f}, "
             f"{st[2] * 100:.2f}) cm",
             f"rpy = ({rpy[0]:.3f}, {rpy[1]:.3f}, {rpy[2]:.3f}) deg, sigma R = ({sr[0]:.3f}, {sr[1]:.3f}, "
             f"{sr[2]:.3f}) deg",
+            f"looking along az {_fmt(view.azimuth_deg)} deg, el {_fmt(view.elevation_deg)} deg (lidar frame), "
+            f"roll about the axis {_fmt(view.roll_deg)} deg; sigma ({_fmt(sv[0])}, {_fmt(sv[1])}, {_fmt(sv[2])}) deg",
         ]
         for w in r.warnings:
             if w not in reasons:  # notes on the output's form (reasons are shown above)

@@ -29,6 +29,7 @@ from .cli_guard import (  # noqa: F401  (with_default_command: public, used by t
     with_default_command,
 )
 from .cli_serve import add_serve_parser
+from .cli_shots import add_shot_args, check_shot_form, cmd_propose_shots, cmd_solve_shots
 from .cli_toolchain import cmd_bag_extract, cmd_bag_info, cmd_export
 
 #: ``solve`` wrote the file but the calibration's quality status is ``unreliable``.
@@ -68,8 +69,8 @@ def default_sample_dir() -> Path:
 # --- scan options shared by every command that reads a scan -----------------
 
 
-def _add_scan_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--scan", required=True, type=Path, help="scan file: .npz (native), .pcd, .ply, .bin (KITTI), .las/.laz, .npy")
+def _add_scan_args(p: argparse.ArgumentParser, required: bool = True) -> None:
+    p.add_argument("--scan", required=required, type=Path, help="scan file: .npz (native), .pcd, .ply, .bin (KITTI), .las/.laz, .npy")
     p.add_argument(
         "--organize",
         choices=["auto", "ring", "elevation", "firing", "spherical"],
@@ -126,7 +127,8 @@ def format_summary(result, pairs_count: int, pair_ids: Sequence[int] | None = No
     """The solve summary table (paper Table I layout) with the quality verdict, as text."""
     import numpy as np
 
-    from calib_core.transforms import rpy_deg_from_R
+    from calib_core.solve.quality import NO_ERROR_ESTIMATE, error_estimate_reason, pairs_in_fit
+    from calib_core.transforms import rpy_deg_from_R, viewing_direction
 
     T = result.T_camera_lidar
     rpy = rpy_deg_from_R(T[:3, :3])
@@ -150,9 +152,16 @@ def format_summary(result, pairs_count: int, pair_ids: Sequence[int] | None = No
         lines.append(f"{name:14}{v:12.4f}{s:10.4f}")
     for name, v, s in zip(("roll [deg]", "pitch [deg]", "yaw [deg]"), rpy, result.sigma_rpy_deg):
         lines.append(f"{name:14}{v:12.3f}{s:10.3f}")
+    view = viewing_direction(T[:3, :3], np.asarray(result.covariance_6x6)[:3, :3])  # optical axis, lidar frame
+    for name, v, s in zip(("view az [deg]", "view el [deg]", "view roll[deg]"), (view.azimuth_deg, view.elevation_deg,
+                                                                           view.roll_deg), view.sigma_deg):
+        lines.append(f"{name:14}{v:12.3f}{s:10.3f}")
     lines.append("")
     fit = "" if not n_out else " (pairs in the fit)"
-    if np.isfinite(result.mean_px):
+    no_error = error_estimate_reason(pairs_in_fit(result))
+    if no_error is not None:  # a near-exact fit is the likeliest outcome: its residuals are no error figure
+        lines.append(f"reprojection error{fit}: {NO_ERROR_ESTIMATE} ({no_error})")
+    elif np.isfinite(result.mean_px):
         lines.append(f"reprojection error{fit}: {result.mean_px:.3f} +/- {result.std_px:.3f} px, {result.mean_deg:.4f} +/- {result.std_deg:.4f} deg")
     else:
         lines.append(f"reprojection error{fit}: {result.mean_deg:.4f} +/- {result.std_deg:.4f} deg")
@@ -176,6 +185,11 @@ def format_summary(result, pairs_count: int, pair_ids: Sequence[int] | None = No
 
 
 def cmd_solve(args: argparse.Namespace) -> int | Outcome:
+    if check_shot_form(args, "solve"):
+        quality = cmd_solve_shots(args)
+        if quality.status == "unreliable":
+            return Outcome(EXIT_UNRELIABLE, f"unreliable: {quality.reasons[0]} (exit code {EXIT_UNRELIABLE})")
+        return 0
     from calib_core.io.atomic import write_yaml_atomic
     from calib_core.verify import extrinsics_document
     from calib_core.pairs import load_pairs_yaml
@@ -209,6 +223,9 @@ def cmd_solve(args: argparse.Namespace) -> int | Outcome:
 
 
 def cmd_propose(args: argparse.Namespace) -> int:
+    if check_shot_form(args, "propose"):
+        return cmd_propose_shots(args)
+    from calib_core.guide.evidence import ProposalScreen
     from calib_core.guide.session import GuidedSession
     from calib_core.guide.propose import save_proposals_yaml
     from calib_core.io.extrinsics import load_extrinsics_yaml
@@ -220,7 +237,9 @@ def cmd_propose(args: argparse.Namespace) -> int:
     pairs = load_pairs_yaml(args.pairs)
     T0 = load_extrinsics_yaml(args.extrinsics)["T_camera_lidar"] if args.extrinsics is not None else None
     image = load_image_rgb(args.image) if args.image is not None else None
-    session = GuidedSession(depth, camera, pairs, T_initial=T0, image=image, click_sigma_px=args.click_sigma)
+    screen = ProposalScreen(max_ellipse_px=args.max_ellipse_px)
+    session = GuidedSession(depth, camera, pairs, T_initial=T0, image=image, click_sigma_px=args.click_sigma,
+                            screen=screen)
     proposals = session.proposals(args.n)
     save_proposals_yaml(args.output, proposals, session.state)
     print(f"pose from {session.state.source} ({session.state.n_pairs} pairs); "
@@ -229,6 +248,8 @@ def cmd_propose(args: argparse.Namespace) -> int:
         major, minor = p.ellipse_sigma_px()
         print(f"{i:3d}  cell {p.laser_rc}  pixel ({p.pixel[0]:7.1f}, {p.pixel[1]:7.1f})  "
               f"1-sigma {major:5.2f} x {minor:5.2f} px  gain {p.gain:6.3f}  {p.kind}")
+    if not proposals:
+        print(f"no proposal: {proposals.reason}")
     print(f"wrote {args.output}")
     return 0
 
@@ -265,6 +286,27 @@ def cmd_colorize(args: argparse.Namespace) -> int:
     depth = load_scan_from_args(args)
     coloured, n = export_colored_scan(args.output, depth, image, camera, T, occlusion=not args.no_occlusion)
     print(f"coloured {coloured} of {n} points; wrote {args.output}")
+    return 0
+
+
+def cmd_render(args: argparse.Namespace) -> int:
+    from calib_core.io.extrinsic_formats import load_extrinsics_any
+    from calib_core.render import check_render_path, render_from_camera, shade_render, write_render
+
+    check_render_path(args.output)
+    T = load_extrinsics_any(args.extrinsics)
+    camera = load_camera_from_args(args)
+    depth = load_scan_from_args(args)
+    ba = None
+    if args.mode == "ba":
+        from calib_core.bearing_angle import bearing_angle_images
+
+        ba = bearing_angle_images(depth, directions=(args.ba_direction,))[args.ba_direction]
+    render = render_from_camera(depth, camera, T)
+    rgba = shade_render(render, depth, args.mode, ba_image=ba) if args.output.suffix.lower() == ".png" else None
+    write_render(args.output, render, rgba)
+    shown = int(render.has_return.sum())
+    print(f"{shown} of {render.range_m.size} pixels show a return; wrote {args.output}")
     return 0
 
 
@@ -317,7 +359,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--h-res-deg", type=float, default=None)
     p.add_argument("--v-res-deg", type=float, default=None)
     _add_camera_arg(p)
-    p.add_argument("--pairs", required=True, type=Path, help="pairs YAML")
+    p.add_argument("--pairs", type=Path, default=None, help="pairs YAML (one shot; or give --shot)")
+    add_shot_args(p)
     p.add_argument("--max-pairs", type=int, default=1_000, help="refuse pairs files with more pairs than this (default 1000)")
     p.add_argument(
         "--cost",
@@ -333,13 +376,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_solve)
 
     p = sub.add_parser("propose", help="propose the next pairs to click (guided picking), best first")
-    _add_scan_args(p)
+    _add_scan_args(p, required=False)
     _add_camera_arg(p)
-    p.add_argument("--pairs", required=True, type=Path, help="pairs so far (>= 4, or give --extrinsics)")
+    p.add_argument("--pairs", type=Path, default=None, help="pairs so far (>= 4, or give --extrinsics; or give --shot)")
+    add_shot_args(p, images=True)
     p.add_argument("--extrinsics", type=Path, default=None, help="initial extrinsics YAML (imported calibration)")
     p.add_argument("--image", type=Path, default=None, help="camera image: propose only cells with an image corner near their pixel")
     p.add_argument("-n", type=int, default=20, help="number of proposals (default 20)")
     p.add_argument("--click-sigma", type=float, default=0.3, help="click noise of a guided pair, px (default 0.3)")
+    p.add_argument("--max-ellipse-px", type=float, default=40.0,
+                   help="largest 3-sigma radius of a proposal, px (the loupe's half side; default 40)")
     p.add_argument("-o", "--output", required=True, type=Path, help="proposals YAML to write")
     p.set_defaults(func=cmd_propose)
 
@@ -356,6 +402,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-occlusion", action="store_true", help="skip the depth test (colours occluded points too)")
     p.add_argument("-o", "--output", required=True, type=Path)
     p.set_defaults(func=cmd_colorize)
+
+    p = sub.add_parser("render", help="render the scan from the camera's viewpoint (PNG picture or NPZ arrays)")
+    _add_scan_args(p)
+    _add_camera_arg(p)
+    p.add_argument("--extrinsics", required=True, type=Path, help="T_camera_lidar: ba-calib YAML, KITTI calib txt or any 'export' format")
+    p.add_argument("--mode", choices=["range", "intensity", "ba"], default="range", help="shading of the PNG (default range)")
+    p.add_argument("--ba-direction", choices=["horizontal", "vertical", "diag_pos45", "diag_neg45"], default="horizontal",
+                   help="BA image of --mode ba (default horizontal)")
+    p.add_argument("-o", "--output", required=True, type=Path, help="view.png (shaded RGBA) or view.npz (range_m, cell_rc, camera_depth_m)")
+    p.set_defaults(func=cmd_render)
 
     p = sub.add_parser("sample", help="generate a synthetic scene with ground truth")
     p.add_argument("-o", "--output", required=True, type=Path)

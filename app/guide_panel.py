@@ -17,6 +17,17 @@ pick to the next proposal (the skipped one comes back last), "Not a corner"
 drops the cell for good, "Stop" removes the half pick.  Undo works on these
 picks as on any other.
 
+Proposals pass the clear-evidence screen of :mod:`calib_core.guide.evidence`
+with a 3-sigma radius of at most half the camera loupe's side zoomed out one
+step (:func:`max_ellipse_px_for`); the camera loupe zooms out (never in) to
+show a proposal's ellipse whole, and the ellipse is drawn inside the loupe
+only.  When no cell qualifies the panel says why (e.g. "do a better rough
+alignment first").  Guided picking is not offered while the calibration is
+unreliable (the live solve's quality verdict, or the guide's own solve of
+the same pairs): "Next pair" refuses with the reason, and a guided session
+stops framing new pairs.  "Stop" also removes the ellipse and the proposal
+text.
+
 With "Auto-accept" on, proposals whose camera corner passes the strict gate
 of :mod:`calib_core.guide.auto_accept` are added as pairs tagged ``auto``
 (one undoable step per batch).
@@ -33,20 +44,17 @@ from typing import Any, Callable
 import numpy as np
 
 from calib_core.errors import CalibError
-from calib_core.guide import GUIDED_CLICK_SIGMA_PX, Proposal, current_pose
-from calib_core.guide.auto_accept import AutoGate, auto_accept
+from calib_core.guide import GUIDED_CLICK_SIGMA_PX, Proposal
+from calib_core.guide.auto_accept import AutoGate
+from calib_core.guide.evidence import ProposalScreen
 from calib_core.guide.session import GuidedSession
 from calib_core.pairs import Pair
 
+from .guide_support import ELLIPSE_MARGIN_PX, live_quality, max_ellipse_px_for, rank_proposals
 from .live_solver import LiveSolver
 from .state import AnnotationState
 from .ui_common import MIN_PAIRS, md_escape
 
-#: Proposals computed per update.
-N_PROPOSALS = 20
-#: 1-sigma given to an auto-accepted pixel (cv2.cornerSubPix on a gated clean corner).  The gate accepts
-#: no proposal on the sample, so this is not measured there; it is set above the guided click's 0.3 px.
-AUTO_PRECISION_PX = 0.5
 BUTTONS = ("Next pair", "Skip", "Not a corner", "Stop")
 
 
@@ -86,6 +94,9 @@ class GuidePanel:
         Called after a guided half pick is started (the app forgets which
         full-image click a loupe click would refine: the loupe click now
         completes the new pick).
+    solve_quality : callable, optional
+        ``solve_quality()`` -> ``(pairs solved, status, reasons)`` of the live
+        solve shown (:class:`calib_core.solve.quality.Quality`), or None.
     order : float, optional
         Position of the folder in the control panel.
     """
@@ -96,8 +107,14 @@ class GuidePanel:
                  loupes: Callable[[], Any] = lambda: None, ba_key: str = "horizontal",
                  order: float | None = None, auto_gate: AutoGate | None = None,
                  click_source: Callable[[int], str | None] = lambda pick_id: None,
-                 on_start: Callable[[], None] = lambda: None) -> None:
+                 on_start: Callable[[], None] = lambda: None,
+                 solve_quality: Callable[[], tuple | None] = lambda: None) -> None:
         self.state, self.depth, self.camera, self.image = state, depth, camera, image
+        self._solve_quality = solve_quality
+        self._job_quality: tuple | None = None  # (pairs, status, reasons) of the guide's own solve, last job
+        self._reason: str | None = None  # why the last proposals are empty
+        #: The screen of the proposals; its 3-sigma limit follows the camera loupe (:func:`max_ellipse_px_for`).
+        self.screen = ProposalScreen(max_ellipse_px=max_ellipse_px_for(camera.width, camera.height))
         self._post, self._initial_T, self._loupes, self._ba_key = post, initial_T, loupes, ba_key
         self._on_start, self._click_source = on_start, click_source
         self._watch: list | None = None  # [id, pixel seen] of the guided pick started last
@@ -244,23 +261,8 @@ class GuidePanel:
         key, pairs, T0, skipped, dropped, auto = payload
         if self._session is None:
             self._session = GuidedSession(self.depth, self.camera, pairs, T_initial=T0, image=self.image)
-        s = self._session
-        s.pairs, s.T_initial = list(pairs), T0
-        s.state = current_pose(s.pairs, self.depth, self.camera, T0)
-        s.skipped, s.dropped = list(skipped), list(dropped)
-        # "Not a corner" on a re-click means: do not offer re-clicking that pair again.
-        gone = set(map(tuple, dropped))
-        props = [p for p in s.proposals(N_PROPOSALS + len(gone))
-                 if p.replaces is None or tuple(p.laser_rc) not in gone][:N_PROPOSALS]
-        # A re-click proposal names the pair it replaces by its index in ``pairs``: keep the pick id.
-        reclick_of = {tuple(p.laser_rc): pairs[p.replaces].id for p in props if p.replaces is not None}
-        auto_pairs: list[Pair] = []
-        if auto and props and s.corners is not None:  # (re-clicks are never auto-accepted: the gate refuses them)
-            ok, pixels = auto_accept(s.corners, props, self.auto_gate, image=self.image, depth=self.depth, camera=self.camera,
-                                     T_camera_lidar=s.state.T_camera_lidar)
-            auto_pairs = [Pair(tuple(p.laser_rc), None, (float(px[0]), float(px[1])), source="auto",
-                               precision_px=AUTO_PRECISION_PX) for p, good, px in zip(props, ok, pixels) if good]
-        return key, props, auto_pairs, reclick_of
+        return (key,) + rank_proposals(self._session, pairs, T0, skipped, dropped, self.screen,
+                                       self.auto_gate if auto else None)
 
     def _on_done(self, job: int, result: tuple | None, error: BaseException | None) -> None:
         with self._lock:
@@ -272,9 +274,10 @@ class GuidePanel:
                     f"{type(error).__name__}: {error}")
                 self._refresh()
                 return
-            key, props, auto_pairs, self._reclick_of = result
+            key, props, auto_pairs, self._reclick_of, self._job_quality = result
             self._busy = False
             self._error = None
+            self._reason = props.reason
             # A guided pick still waiting for its click (e.g. after an undo) keeps its proposal shown.
             half = self._guided_half()
             waiting = half.laser_rc if half is not None else next(
@@ -303,6 +306,10 @@ class GuidePanel:
                 fresh = self._shown_key == self._submitted
             if self._want_next and self._guiding and fresh:
                 self._want_next = False
+                if self._unreliable() is not None:  # a guided session stops framing; the panel says why
+                    self._guiding = False
+                    self._drop_unfinished()
+                    return
                 self._start_current(quiet=True)
             self._refresh()
         finally:
@@ -360,19 +367,34 @@ class GuidePanel:
         loupes = self._loupes()
         if loupes is not None:
             loupes.frame_ba(self._ba_key, int(p.laser_rc[0]), int(p.laser_rc[1]))
-            loupes.frame_camera(float(p.pixel[0]), float(p.pixel[1]), cov_px2=np.asarray(p.pixel_cov))
+            # Zoomed out (never in) so the whole 3-sigma ellipse, and a margin, shows.
+            loupes.frame_camera(float(p.pixel[0]), float(p.pixel[1]), cov_px2=np.asarray(p.pixel_cov),
+                                min_side_px=2.0 * p.radius_3sigma_px + ELLIPSE_MARGIN_PX)
         self._refresh()
 
+    def _unreliable(self) -> str | None:
+        """The first reason why the calibration of the current pairs is unreliable (the live solve's verdict,
+        else the guide's own solve of the same pairs), or None (reliable, or not known yet)."""
+        pairs = tuple(self.state.pairs())
+        for known in (self._solve_quality(), self._job_quality):
+            if known is not None and tuple(known[0]) == pairs:
+                return (str(known[2][0]) if known[2] else "the solve's verdict") if known[1] == "unreliable" else None
+        return None
+
     def _on_button(self, label: str) -> None:
-        if label != "Stop" and self._active(len(self.state.complete_picks())):
-            self._guiding = True  # from now on the proposals follow every change
-        self.update()  # an initial extrinsic imported since the last change is used from now on
         if label == "Stop":
             self._guiding = self._want_next = False
             self._drop_unfinished()
             return
         if not self._active(len(self.state.complete_picks())):
             raise CalibError(f"guided picking starts after {MIN_PAIRS} pairs or an imported initial extrinsic")
+        reason = self._unreliable()
+        if reason is not None:
+            self._guiding = self._want_next = False
+            self._drop_unfinished()
+            raise CalibError(f"guided picking waits for a reliable calibration: {reason}")
+        self._guiding = True  # from now on the proposals follow every change
+        self.update()  # an initial extrinsic imported since the last change is used from now on
         with self._lock:
             ready = not self._busy and self._shown_key == self._submitted
             p = self.current if ready else None
@@ -395,11 +417,15 @@ class GuidePanel:
         self._start_current()
 
     def _drop_unfinished(self) -> None:
-        """End a re-click and delete the guided pair still waiting for its camera click."""
+        """End a re-click, delete the guided pair still waiting for its camera click and take the proposal's
+        ellipse off the camera loupe."""
         self._end_reclick()
         half = self._guided_half()
         if half is not None:
             self.state.delete(half.id)
+        loupes = self._loupes()
+        if loupes is not None and loupes.camera_crop.cov_px2 is not None:
+            loupes.frame_camera(*loupes.camera_crop.center)
         self._refresh()
 
     def _on_auto(self, on: bool) -> None:
@@ -411,18 +437,24 @@ class GuidePanel:
         n = len(self.state.complete_picks())
         active = self._active(n)
         with self._lock:
-            busy, error, props, index = self._busy, self._error, self._proposals, self._index
+            busy, error, props, index, reason = self._busy, self._error, self._proposals, self._index, self._reason
+        unreliable = self._unreliable() if active else None
         lines = ["**Guided picking**"]
         if not active:
             lines.append(f"Starts after {MIN_PAIRS} pairs or an imported initial extrinsic.")
+        elif unreliable is not None:
+            lines.append(f"Not offered while the calibration is UNRELIABLE: {md_escape(unreliable)}. "
+                         "Fix or add pairs first.")
         elif error is not None:
             lines.append(f"Proposals failed: {md_escape(error)}")
-        elif busy:
+        elif busy and (self._guiding or self._auto):
             lines.append("Computing proposals…")
-        elif not props and not (self._guiding or self._auto):
+        elif not (self._guiding or self._auto):
             lines.append("Press **Next pair**: the tool proposes where to click next and frames it in the loupes.")
         elif not props:
-            lines.append("No proposal left.")
+            lines.append(f"No proposal: {md_escape(reason or 'none left')}.")
+        elif not self._guiding:
+            lines.append(f"{len(props)} proposals for auto-accept.")
         else:
             p = props[index]
             major = 3.0 * float(p.ellipse_sigma_px()[0])
@@ -454,4 +486,5 @@ def attach_guide_panel(app: Any) -> GuidePanel:
                       initial_T=lambda: getattr(app, "initial_T_camera_lidar", None),
                       loupes=lambda: getattr(app, "loupes", None), ba_key=app.ba_keys[0],
                       order=app.pairs_folder.order + 0.5,
-                      click_source=app.camera_click_source, on_start=app.forget_last_picks)
+                      click_source=app.camera_click_source, on_start=app.forget_last_picks,
+                      solve_quality=lambda: live_quality(app))

@@ -42,6 +42,12 @@ FRAMING_NODES = {"ba": ("/annot/loupe/ba_outline",),
                             "/annot/loupe/camera_outline")}
 
 
+def default_camera_crop_px(width: int, height: int) -> int:
+    """The camera loupe's crop side (original-image px) at zoom 1: bigger images get a wider crop,
+    so a rough prediction still falls inside it."""
+    return int(min(max(CAMERA_LOUPE_PX, round(CAMERA_LOUPE_PX * max(width, height) / 640 / 1.5)), 160))
+
+
 def node_name(kind: str) -> str:
     """Scene node of loupe ``kind`` (``"ba"`` or ``"camera"``)."""
     return f"/annot/loupe_{kind}"
@@ -91,8 +97,8 @@ class Loupes:
         n_rows, n_cols = app.depth.shape
         self._ba_cols = min(BA_LOUPE_COLUMNS, n_cols)
         cam_w, cam_h = app.camera.width, app.camera.height
-        # Bigger images get a wider default crop, so a rough prediction still falls inside it.
-        self._cam_n = int(min(max(CAMERA_LOUPE_PX, round(CAMERA_LOUPE_PX * max(cam_w, cam_h) / 640 / 1.5)), 160))
+        self._cam_n = default_camera_crop_px(cam_w, cam_h)
+        self._cam_n_chosen = self._cam_n  # the side the zoom buttons chose; framing may show more, never less
         self.ba_crop = self._make_ba_crop(app.ba_keys[0], n_rows // 2, n_cols // 2)
         self.camera_crop = self._make_camera_crop((cam_w - 1) / 2.0, (cam_h - 1) / 2.0, None)
         self._slots: dict[str, ImageSlot] = {}
@@ -133,8 +139,11 @@ class Loupes:
                 self._show("ba")
             self._titles["ba"].text = self.title("ba")  # sent only if it changed
 
-    def frame_camera(self, u: float, v: float, cov_px2: np.ndarray | None = None) -> None:
-        """Centre the camera loupe on original-image pixel ``(u, v)``; ``cov_px2`` (2x2, px^2) draws its 3-sigma ellipse."""
+    def frame_camera(self, u: float, v: float, cov_px2: np.ndarray | None = None,
+                     min_side_px: float | None = None) -> None:
+        """Centre the camera loupe on original-image pixel ``(u, v)``; ``cov_px2`` (2x2, px^2) draws its 3-sigma
+        ellipse; ``min_side_px`` zooms out (never in) so the crop is at least that many pixels wide, else the
+        zoom the buttons chose is used."""
         if not (np.isfinite(u) and np.isfinite(v)):
             raise CalibError("the camera loupe needs a finite pixel")
         cov = None
@@ -145,6 +154,8 @@ class Loupes:
             cov = tuple(map(tuple, c))
         with self.app.ui_lock:
             self._clicked.pop("camera", None)
+            side = self._cam_n_chosen if min_side_px is None else max(self._cam_n_chosen, math.ceil(min_side_px))
+            self._cam_n = int(min(side, CAMERA_PX_LIMITS[1]))
             crop = self._make_camera_crop(float(u), float(v), cov)
             if crop != self.camera_crop:
                 self.camera_crop = crop
@@ -161,7 +172,7 @@ class Loupes:
                 self.ba_crop = self._make_ba_crop(c.key, *c.center)
             else:
                 lo, hi = CAMERA_PX_LIMITS
-                self._cam_n = int(min(max(round(self._cam_n / factor), lo), hi))
+                self._cam_n = self._cam_n_chosen = int(min(max(round(self._cam_n / factor), lo), hi))
                 c = self.camera_crop
                 self.camera_crop = self._make_camera_crop(*c.center, c.cov_px2)
             self._show(kind)
@@ -311,8 +322,9 @@ class Loupes:
         ell = np.empty((0, 2, 3))
         if c.cov_px2 is not None:
             pts = ellipse_outline(c.center, np.array(c.cov_px2)) - [c.u0, c.v0]
+            inside = np.array([s.contains(p) for p in pts], bool)
             w = s.world_from_pixel(pts, z_offset=-0.011)
-            ell = np.stack([w[:-1], w[1:]], axis=1)
+            ell = np.stack([w[:-1], w[1:]], axis=1)[inside[:-1] & inside[1:]]  # only inside the loupe
         nodes.lines("/annot/loupe/ellipse", ell, np.full(ell.shape, (255, 200, 0), np.uint8), thickness=1.0)
 
     def _draw_ba_outline(self) -> None:

@@ -43,11 +43,12 @@ SNAP_RADIUS_PX = 4.0
 IMPORT_CHOICES = ("Append", "Replace all", "Cancel")
 
 
-#: The quality verdict as the result panel shows it (fixed strings: no user text).
+#: The quality verdict as the result panel shows it (fixed strings: no user text), coloured text rather than
+#: an emoji, which the page's fonts lack (it drew as an empty box).
 QUALITY_BADGES = {
-    "ok": "### 🟢 Quality: ok",
-    "warning": "### 🟡 Quality: warning",
-    "unreliable": "### 🔴 Quality: UNRELIABLE (do not use this pose)",
+    "ok": '### <span style="color:#2b8a3e">Quality: ok</span>',
+    "warning": '### <span style="color:#d9480f">Quality: warning</span>',
+    "unreliable": '### <span style="color:#c92a2a">Quality: UNRELIABLE (do not use this pose)</span>',
 }
 
 

@@ -375,7 +375,11 @@ def markdown(res: dict, scenes, cmd: str) -> str:
         a("")
     if not res["real"]:
         a("Real scenes: data not found; skipped.\n")
-    return "\n".join(L)
+    # The issue-20 section (python -m bench.guide_by_eye --write) is kept when this file is rewritten.
+    from .guide_by_eye import section_of
+
+    kept = section_of()
+    return "\n".join(L) + ("\n\n" + kept.rstrip("\n") if kept else "")
 
 
 def main(argv=None) -> int:

@@ -114,9 +114,12 @@ def test_guided_pairs_beat_the_start_and_keep_their_tags(app, scene, truth, tmp_
         proposal = d.guide_proposal
         assert proposal is not None
         cells.append(tuple(proposal.laser_rc))
-        # The loupes are framed on the cell and on the predicted pixel.
+        # The loupes are framed on the cell and on the predicted pixel; the camera loupe shows the whole
+        # 3-sigma ellipse (zoomed out when it is larger), which the screen keeps within the app's limit.
         assert tuple(d.loupe_view("ba")["center"]) == tuple(proposal.laser_rc)
         assert np.allclose(d.loupe_view("camera")["center"], proposal.pixel, atol=0.5)
+        radius = 3.0 * np.sqrt(np.linalg.eigvalsh(proposal.pixel_cov).max())
+        assert d.loupe_view("camera")["size"] >= 2 * radius and radius <= app.guide.screen.max_ellipse_px
         click = true_click(scene, truth, proposal, rng)
         if proposal.replaces is not None:
             # A re-click of a rough pair: that pair is selected, and the click moves its pixel.
@@ -205,9 +208,13 @@ def test_skip_not_a_corner_undo(app, scene, truth):
     back = app.state.pending()
     assert back.laser_rc == tuple(third.laser_rc) and back.pixel is None and back.source == "guided"
 
-    # Stop removes the half pick and leaves the pairs.
+    # Stop removes the half pick, the proposal's ellipse and its text, and leaves the pairs.
+    assert app.loupes.camera_crop.cov_px2 is not None and "Proposal " in d.guide_panel
     assert d.press_guide("Stop") == [] and d.wait_guide()
     assert app.state.pending() is None and len(app.state.complete_picks()) == n_complete - 1
+    assert app.loupes.camera_crop.cov_px2 is None and len(d.drawn_segment_pixels("/annot/loupe/ellipse",
+                                                                                  "loupe_camera")) == 0
+    assert "Proposal " not in d.guide_panel and "Next pair" in d.guide_panel
 
 
 def test_sessions_without_tags_load_and_bad_tags_are_refused(tmp_path):
@@ -304,3 +311,52 @@ def test_a_full_image_click_waits_for_the_loupe(app, scene, truth):
     pick = app.state.get(half.id)
     assert np.allclose(pick.pixel, click, atol=0.05) and pick.precision_px == pytest.approx(CLICK_SIGMA_PX)
     assert shown_target(app, d) != half.id
+
+
+def test_guided_picking_waits_for_a_reliable_calibration(app, scene, truth):
+    """While the live solve's verdict is "unreliable", "Next pair" refuses and the panel says why; once the
+    pairs are fixed, guided picking starts."""
+    from calib_core.solve import calibrate
+
+    d = AppDriver(app)
+    pairs = simulate_pairs(scene, 4, np.random.default_rng(3), pixel_noise_px=0.0)
+    wrong = np.asarray(pairs[3].pixel) + [60.0, 40.0]  # a click 72 px off its corner
+    for k, pair in enumerate(pairs):
+        assert d.click_cell(app.ba_keys[0], *pair.laser_rc) == []
+        assert d.click_camera(*(wrong if k == 3 else pair.pixel)) == []
+    assert d.wait_idle()
+    # The verdict of these pairs, solved here: 3 agree, the fourth is left out, so it cannot be trusted.
+    expected = calibrate(app.state.pairs(), scene.depth, scene.camera).quality
+    assert expected.status == "unreliable" and app.result.quality.status == "unreliable"
+    notes = d.press_guide("Next pair")
+    assert len(notes) == 1 and "reliable calibration" in notes[0][1] and expected.reasons[0] in notes[0][1]
+    assert d.wait_guide() and app.state.pending() is None and d.guide_proposal is None
+    assert "UNRELIABLE" in d.guide_panel and expected.reasons[0] in d.guide_panel
+    # The wrong click undone and made at the corner: the calibration can be trusted, guided picking starts.
+    assert d.press_edit("Undo") == [] and d.click_camera(*pairs[3].pixel) == [] and d.wait_idle()
+    assert app.result.quality.status != "unreliable"
+    assert d.press_guide("Next pair") == [] and d.wait_guide()
+    half = app.state.pending()
+    assert d.guide_proposal is not None and "UNRELIABLE" not in d.guide_panel
+    assert (half is not None and half.laser_rc == tuple(d.guide_proposal.laser_rc)) or app.state.selected is not None
+
+
+def test_the_camera_loupe_draws_the_ellipse_inside_itself(app, scene, truth):
+    """An ellipse larger than the loupe's view (a proposal's ellipse grown to a 3-sigma radius of 0.65 times the
+    loupe's side) is drawn only where the loupe shows it, not across the page."""
+    d = AppDriver(app)
+    click_start_pairs(d, scene)
+    assert d.wait_guide() and d.press_guide("Next pair") == [] and d.wait_guide()
+    p = d.guide_proposal
+    n = d.loupe_view("camera")["size"]
+    app.loupes.frame_camera(*p.pixel, cov_px2=(0.65 * n / p.radius_3sigma_px) ** 2 * np.asarray(p.pixel_cov))
+    crop = app.loupes.camera_crop
+    # The ellipse (computed here from the covariance) reaches beyond the crop the loupe shows now.
+    w, V = np.linalg.eigh(np.asarray(crop.cov_px2))
+    t = np.linspace(0, 2 * np.pi, 200)
+    outline = np.asarray(crop.center) + (3 * np.sqrt(w) * np.stack([np.cos(t), np.sin(t)], 1)) @ V.T
+    local = outline - [crop.u0, crop.v0]
+    assert ((local < -0.5) | (local > crop.n - 0.5)).any()
+    drawn = d.drawn_segment_pixels("/annot/loupe/ellipse", "loupe_camera").reshape(-1, 2)
+    assert len(drawn) > 0
+    assert np.all((drawn >= -0.5 - 1e-6) & (drawn <= crop.n - 0.5 + 1e-6))

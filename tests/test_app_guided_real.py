@@ -1,11 +1,15 @@
 """Guided picking in the app on a real scan: PJLab auto_calib (64 x 1800 lidar, 1920 x 1200 photo), ../shared/data.
 
-The app starts from the published extrinsic turned by 2 deg and shifted by 20 cm, with no pair.  "Next pair"
-is pressed once; for each proposal a simulated person clicks its true projection -- the proposed cell's laser
-point projected with the *published* calibration (not ground truth, but what careful clicks would match) -- with
-0.5 px noise in the camera loupe.  Where the loupe (framed on the prediction) does not show that pixel, the
-person first clicks the full camera image near it (1 px noise, whole pixels), then places it in the loupe.
-Every click and button press counts as an action.
+The app starts from the published extrinsic turned by 2 deg and shifted by 20 cm, with no pair.  Issue 20:
+proposals from that pose alone are not offered -- the imported extrinsic's 3-sigma ellipses (1 deg and 5 cm a
+priori, about 110 px here) do not fit the camera loupe -- and the panel says to do a better rough alignment
+first.  The simulated person then makes 5 rough pairs by eye (cells of real_data/pairs/auto_calib_pairs.yaml,
+pixels 5-15 px off their projection under the *published* calibration, clicked on the full image), and
+presses "Next pair" again; for each proposal they click its true projection -- the proposed cell's laser point
+projected with the published calibration (not ground truth, but what careful clicks would match) -- with 0.5 px
+noise in the camera loupe.  Where the loupe (framed on the prediction, zoomed out to show the ellipse) does not
+show that pixel, the person first clicks the full camera image near it (1 px noise, whole pixels), then places
+it in the loupe.  Every guided click and button press counts as an action.
 """
 
 from __future__ import annotations
@@ -18,10 +22,12 @@ import pytest
 import yaml
 from scipy.spatial.transform import Rotation
 
+from calib_core.pairs import load_pairs_yaml
 from calib_core.transforms import rotation_angle_deg, transform_points
 
 ROOT = Path(__file__).resolve().parents[1]
 PJLAB = ROOT.parent / "shared" / "data" / "pjlab_opencalib_lidar2camera" / "auto_calib"
+PAIRS = ROOT / "real_data" / "pairs" / "auto_calib_pairs.yaml"
 N_GUIDED = 12
 
 
@@ -50,6 +56,17 @@ def test_guided_pairs_on_the_real_scan_from_a_rough_extrinsic(tmp_path):
     d = AppDriver(app)
     rng = np.random.default_rng(0)
     try:
+        # The rough extrinsic alone: no proposal fits the loupe, and the panel says what to do.
+        assert d.press_guide("Next pair") == [] and d.wait_guide()
+        assert d.guide_proposal is None and app.state.pending() is None
+        assert "do a better rough alignment first" in d.guide_panel
+        # 5 rough pairs by eye, 5-15 px off.
+        for pair in [load_pairs_yaml(PAIRS)[i] for i in rng.choice(11, size=5, replace=False)]:
+            uv, _ = app.camera.project(transform_points(published, app.depth.points[pair.laser_rc][None]))
+            angle, length = rng.uniform(0, 2 * np.pi), rng.uniform(5.0, 15.0)
+            assert d.click_cell(app.ba_keys[0], *pair.laser_rc) == []
+            assert d.click_camera(*(uv[0] + length * np.array([np.cos(angle), np.sin(angle)]))) == []
+        assert d.wait_idle() and len(app.state.complete_picks()) == 5
         assert d.press_guide("Next pair") == [] and d.wait_guide()
         actions, two_click = 1, 0
         for k in range(N_GUIDED):
@@ -57,6 +74,8 @@ def test_guided_pairs_on_the_real_scan_from_a_rough_extrinsic(tmp_path):
             if proposal.replaces is not None:  # a re-click: the pair is selected, the click moves its pixel
                 half = app.state.get(app.state.selected)
             assert half is not None and half.laser_rc == tuple(proposal.laser_rc)
+            # The camera loupe, framed on the prediction, shows the whole 3-sigma ellipse.
+            assert app.loupes.camera_crop.n >= 2 * proposal.radius_3sigma_px
             pix, ok = app.camera.project(transform_points(published, np.asarray(proposal.laser_xyz, float)[None]))
             assert ok[0]
             click = pix[0] + rng.normal(0.0, 0.5, 2)
@@ -73,7 +92,7 @@ def test_guided_pairs_on_the_real_scan_from_a_rough_extrinsic(tmp_path):
         app.stop()
     rot = rotation_angle_deg(T[:3, :3], published[:3, :3])
     trans = float(np.linalg.norm(T[:3, 3] - published[:3, 3]))
-    print(f"\nPJLab auto_calib from 2 deg / 20 cm: {N_GUIDED} guided pairs in {actions} actions "
+    print(f"\nPJLab auto_calib from 5 rough pairs (5-15 px): {N_GUIDED} guided pairs in {actions} actions "
           f"({actions / N_GUIDED:.2f} per pair; {two_click} needed a full-image click first); "
           f"{rot:.3f} deg, {100 * trans:.2f} cm from the published calibration")
     # Issue 9's real-scene target (there with 5 rough + 20 guided pairs): within 0.1 deg and 5 cm.

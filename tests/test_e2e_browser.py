@@ -100,9 +100,12 @@ def test_annotate_sample_in_headless_chromium(tmp_path):
                     return text if f"Solved with {n} pairs" in text and "Solving" not in text else None
 
                 text = wait_for(solved_text, f"the error display for {n} pairs")
-                m = re.search(r"Mean error: ([0-9.]+) px \(std ([0-9.]+) px\), ([0-9.]+) deg", text)
-                assert m, text
-                mean_px_after.append(float(m.group(1)))
+                if n == 4:  # 4 pairs fit any pose closely: no mean error is shown (issue 20)
+                    assert "Mean error: no error estimate yet" in text, text
+                else:
+                    m = re.search(r"Mean error: ([0-9.]+) px \(std ([0-9.]+) px\), ([0-9.]+) deg", text)
+                    assert m, text
+                    mean_px_after.append(float(m.group(1)))
                 # The residual table lists every pair.
                 assert all(re.search(rf"\b{pid}\b", text) for pid in range(1, n + 1))
 
@@ -169,10 +172,10 @@ def test_annotate_sample_in_headless_chromium(tmp_path):
     elapsed = time.monotonic() - t_start
     print(
         f"\ne2e: rotation error {rot_err:.4f} deg, translation error {100 * trans_err:.2f} cm, "
-        f"mean px error after pairs 4..{N_PAIRS}: {mean_px_after}, predicted pixel of a 9th BA click "
+        f"mean px error after pairs 5..{N_PAIRS}: {mean_px_after}, predicted pixel of a 9th BA click "
         f"{predicted_err_px:.2f} px from the truth, run time {elapsed:.1f} s"
     )
-    assert len(mean_px_after) == N_PAIRS - 3
+    assert len(mean_px_after) == N_PAIRS - 4
     assert rot_err <= 0.5
     assert trans_err <= 0.05
     # The session file holds every pair (nothing is lost if the server dies now).

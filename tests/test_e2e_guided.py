@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 
 from calib_core.io.extrinsics import load_extrinsics_yaml
+from calib_core.solve.quality import NO_ERROR_ESTIMATE, error_estimate_reason, pairs_in_fit
 from calib_core.synthetic import load_sample, simulate_pairs
 from calib_core.transforms import rotation_angle_deg, transform_points
 
@@ -61,8 +62,8 @@ def test_guided_pairs_in_headless_chromium(tmp_path):
             def solved(n: int):
                 text = page_text(page)
                 ok = f"Solved with {n} pairs" in text and "Solving" not in text
-                m = re.search(r"Mean error: ([0-9.]+) px", text)
-                return m.group(1) if ok and m else None
+                m = re.search(r"Mean error: ([0-9.]+ px|no error estimate yet)", text)  # none at 4 pairs (issue 20)
+                return m.group(1).removesuffix(" px") if ok and m else None
 
             for k, pair in enumerate(start_pairs):
                 before = app.state.version
@@ -115,7 +116,8 @@ def test_guided_pairs_in_headless_chromium(tmp_path):
                 # The page shows the solve of these pairs.
                 assert app.wait_idle(TIMEOUT_S) and app.guide.wait_idle(TIMEOUT_S) and app.wait_idle(TIMEOUT_S)
                 r = app.result
-                mean = f"{r.mean_px:.3f}"
+                # A re-click keeps 4 pairs: no error estimate is shown then (issue 20).
+                mean = f"{r.mean_px:.3f}" if error_estimate_reason(pairs_in_fit(r)) is None else NO_ERROR_ESTIMATE
                 shown_errors.append(wait_for(lambda: solved(r.n_pairs) == mean and mean,
                                              f"the error display after guided pair {k + 1}"))
             browser_s = time.monotonic() - t_browser

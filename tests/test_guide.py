@@ -267,15 +267,17 @@ def test_corner_probability_favours_true_corners(scene, truth):
 
 
 def test_auto_accept_passes_only_true_corners_at_their_true_pixel(scene, truth):
-    """The default gate accepts some proposals of a 20-pair guided session on the sample, and every
-    accepted one is on a true corner not yet paired, its image corner within 2 px of the true projection."""
+    """The default gate accepts some proposals of a 15-pair guided session on the sample, and every
+    accepted one is on a true corner not yet paired, its image corner within 2 px of the true projection.
+    (15, not 20: the proposals' screen shows the clean corners first, so after 20 guided pairs the person
+    has paired the few the strict gate would take.)"""
     from calib_core.guide.auto_accept import auto_accept
 
     pix_true, pick_rc, _ = truth
     rng = np.random.default_rng(11)
     session = GuidedSession(scene.depth, scene.camera, simulate_pairs(scene, 4, rng, 1.0), image=scene.image)
     made, shown = 0, 0
-    while made < 20 and shown < 300:
+    while made < 15 and shown < 300:
         p = session.proposals(1)[0]
         shown += 1
         k = _corner_of([p.laser_rc], pick_rc)[0]

@@ -262,3 +262,91 @@ def test_pixel_sigma_weights_the_pairs(scene):
     d_weighted = _errors(weighted.T_camera_lidar, ref.T_camera_lidar)
     assert d_weighted[0] < 0.5 * d_equal[0] and d_weighted[1] < 0.5 * d_equal[1]
     assert weighted.residual_unit == "sigma" and equal.residual_unit == "px"
+
+
+# --- Issue 20: a tight cluster must not outvote well-spread pairs ---------------------------------------------------
+
+#: Trials per case (each a fresh scene and noise); without the grow step of the robust fit trial 1 of (5, 4) fails.
+CLUSTER_TRIALS = 50
+_PINHOLE_K = np.array([[800.0, 0.0, 639.5], [0.0, 800.0, 479.5], [0.0, 0.0, 1.0]])
+#: Where the well-spread pairs are clicked (jittered per trial): the corners, the centre, the top edge.
+_SPREAD_PX = np.array([[150, 120], [1130, 140], [640, 480], [170, 840], [1100, 820], [640, 100]], dtype=float)
+
+
+def _cluster_case(seed: int, n_spread: int, n_cluster: int):
+    """A forward pinhole camera, exact laser points; returns (points, pixels, camera, truth, wrong_pose).
+
+    Pairs ``0 .. n_spread-1``: well-spread and correct (1 px click noise).  Then ``n_cluster`` pairs
+    clicked within +-15 px of one spot whose pixels follow a WRONG pose (the truth pivoted 7 deg about
+    the cluster's bearing and tilted 1.7 deg), and last one gross outlier far away that follows the
+    same wrong pose: counted by pairs, the wrong pose has as many inliers as the true one.
+    """
+    from scipy.spatial.transform import Rotation
+
+    from calib_core.cameras import PinholeCamera
+    from calib_core.transforms import invert_T
+
+    rng = np.random.default_rng([20, seed, n_spread, n_cluster])
+    cam = PinholeCamera(_PINHOLE_K, np.zeros(5), 1280, 960)
+    R0 = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])  # looking along lidar +x
+    truth = np.eye(4)
+    truth[:3, :3] = Rotation.from_rotvec([0.02, -0.03, 0.01]).as_matrix() @ R0
+    truth[:3, 3] = [0.1, -0.2, 0.05]
+
+    def laser(pixels, depth):
+        return transform_points(invert_T(truth), cam.bearing(pixels) * depth[:, None])
+
+    spread_px = _SPREAD_PX[:n_spread] + rng.uniform(-40, 40, (n_spread, 2))
+    centre = np.array([420.0, 650.0]) + rng.uniform(-50, 50, 2)
+    cluster_px = centre + rng.uniform(-15, 15, (n_cluster, 2))
+    far_px = np.array([[1000.0, 300.0]]) + rng.uniform(-60, 60, (1, 2))
+    P_spread = laser(spread_px, rng.uniform(4, 12, n_spread))
+    P_cluster = laser(cluster_px, 6.0 + rng.uniform(-0.3, 0.3, n_cluster))  # one object
+    P_far = laser(far_px, rng.uniform(4, 12, 1))
+    axis = cam.bearing(centre[None])[0]
+    tilt = np.cross(axis, [0.0, 0.0, 1.0])
+    wrong = truth.copy()
+    wrong[:3, :3] = (Rotation.from_rotvec(0.03 * tilt / np.linalg.norm(tilt)).as_matrix()
+                     @ Rotation.from_rotvec(0.12 * axis).as_matrix() @ truth[:3, :3])
+    clicked_spread, _ = cam.project(transform_points(truth, P_spread))
+    clicked_cluster, _ = cam.project(transform_points(wrong, P_cluster))
+    clicked_far, _ = cam.project(transform_points(wrong, P_far))
+    pixels = np.vstack([clicked_spread + rng.normal(0, 1.0, (n_spread, 2)),
+                        clicked_cluster + rng.normal(0, 1.0, (n_cluster, 2)), clicked_far])
+    return np.vstack([P_spread, P_cluster, P_far]), pixels, cam, truth, wrong
+
+
+@pytest.mark.parametrize("n_spread, n_cluster", [(5, 4), (6, 4)])
+def test_a_tight_cluster_and_a_gross_outlier_do_not_outvote_spread_pairs(n_spread, n_cluster):
+    """Issue 20: the cluster and the far outlier agree on a wrong pose; the spread pairs are the correct ones."""
+    from scipy.spatial.transform import Rotation
+    from scipy.stats import chi2
+
+    from calib_core.solve import pose_covariance
+
+    n = n_spread + n_cluster + 1
+    wrong_ids = list(range(n_spread, n))
+    bound = chi2.ppf(0.9999, 6)
+    worst = 0.0
+    for trial in range(CLUSTER_TRIALS):
+        points, pixels, cam, truth, wrong = _cluster_case(trial, n_spread, n_cluster)
+        # The set-up is what it claims: the wrong pairs are far off under the truth, the outlier grossly.
+        true_px, _ = cam.project(transform_points(truth, points))
+        off = np.linalg.norm(pixels - true_px, axis=1)
+        assert off[n_spread:-1].min() > 15.0 and off[-1] > 60.0
+        res = solve_extrinsics(points, cam.bearing(pixels), camera=cam, pixels=pixels)
+        assert res.outliers == wrong_ids, f"trial {trial}: left out {res.outliers}, wrong pairs {wrong_ids}"
+        # The fit of the spread pairs alone (a separate, non-robust solve of them), to LM's tolerance.
+        alone = solve_extrinsics(points[:n_spread], cam.bearing(pixels[:n_spread]), camera=cam,
+                                 pixels=pixels[:n_spread], robust=False)
+        np.testing.assert_allclose(res.T_camera_lidar, alone.T_camera_lidar, atol=1e-6)
+        # Within the noise: Mahalanobis distance to the truth under the Cramer-Rao covariance of the spread
+        # pairs for 1 px clicks (1 px = 1/800 rad on the axis, less off it: the bound is conservative).
+        cov = pose_covariance(truth, points[:n_spread], 1.0 / 800.0).covariance_6x6
+        R_err = res.T_camera_lidar[:3, :3] @ truth[:3, :3].T
+        e = np.concatenate([Rotation.from_matrix(R_err).as_rotvec(), res.T_camera_lidar[:3, 3] - truth[:3, 3]])
+        d2 = float(e @ np.linalg.solve(cov, e))
+        worst = max(worst, d2)
+        assert d2 < bound, f"trial {trial}: squared Mahalanobis distance {d2:.1f} to the truth"
+    print(f"\n{n_spread} spread + {n_cluster} cluster + 1 outlier, {CLUSTER_TRIALS} trials: worst squared Mahalanobis "
+          f"distance {worst:.1f} (99.99 % bound {bound:.1f})")

@@ -9,6 +9,7 @@ Modules (one concept each):
 * :mod:`.corner_probability` -- probability that a candidate is a corner the person can click;
 * :mod:`.image_corners` -- camera-image corners, the clean-isolated-corner test, sub-pixel refinement;
 * :mod:`.pose_state` -- current pose and covariance from pairs or an imported extrinsic;
+* :mod:`.evidence` -- the screen: clear, isolated evidence in both views, an ellipse that fits the loupe;
 * :mod:`.propose` -- the ranked proposals with predicted pixels and ellipses;
 * :mod:`.snap` -- gated sub-pixel snapping of a click;
 * :mod:`.junction` -- gated 3-plane junction replacing a laser cell;
@@ -16,9 +17,10 @@ Modules (one concept each):
 """
 
 from .candidates import KINDS, Candidates, find_candidates
+from .evidence import ProposalScreen
 from .image_corners import CornerGate, CornerImage, corner_image
 from .pose_state import PoseState, current_pose
-from .propose import GUIDED_CLICK_SIGMA_PX, Proposal, propose, proposals_to_dict, save_proposals_yaml
+from .propose import GUIDED_CLICK_SIGMA_PX, Proposal, Proposals, propose, proposals_to_dict, save_proposals_yaml
 
 __all__ = [
     "KINDS",
@@ -31,6 +33,8 @@ __all__ = [
     "current_pose",
     "GUIDED_CLICK_SIGMA_PX",
     "Proposal",
+    "Proposals",
+    "ProposalScreen",
     "propose",
     "proposals_to_dict",
     "save_proposals_yaml",

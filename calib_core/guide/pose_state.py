@@ -12,7 +12,7 @@ stay honest for careless clicks.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -44,6 +44,8 @@ class PoseState:
     n_pairs : int
     source : str
         Where the pose came from.
+    quality : calib_core.solve.quality.Quality or None
+        The solve's verdict (``status``, ``reasons``); None when the pose is an imported extrinsic alone.
     """
 
     T_camera_lidar: np.ndarray
@@ -51,6 +53,7 @@ class PoseState:
     variance_factor: float
     n_pairs: int
     source: str
+    quality: Any = None
 
 
 def pair_sigmas(pairs: Sequence[Pair], default_px: float = DEFAULT_CLICK_SIGMA_PX) -> np.ndarray:
@@ -95,7 +98,8 @@ def current_pose(
         return PoseState(np.asarray(T_initial, dtype=np.float64), cov, 1.0, len(fit), "extrinsics")
     points, _, pixels = resolve_pairs(fit, depth, camera)
     # Weighted by each pair's precision_px and whole-cell laser pick (robust: gross outliers left out).
-    T = calibrate(fit, depth, camera, initial_T_camera_lidar=T_initial).T_camera_lidar
+    solved = calibrate(fit, depth, camera, initial_T_camera_lidar=T_initial)
+    T = solved.T_camera_lidar
     predicted, J_pose, J_point = pixel_jacobians(camera, T, points)
     laser = np.zeros((len(fit), 3, 3))
     rc_idx = [i for i, p in enumerate(fit) if p.laser_rc is not None]
@@ -110,4 +114,4 @@ def current_pose(
         chi2 = float(np.einsum("na,nab,nb->", r, np.linalg.inv(S), r))
         factor = max(1.0, chi2 / dof)
     source = "pairs" if T_initial is None else "pairs (started from the extrinsics)"
-    return PoseState(T, factor * information_inverse(F), factor, len(fit), source)
+    return PoseState(T, factor * information_inverse(F), factor, len(fit), source, solved.quality)

@@ -14,6 +14,16 @@ about the predicted one: the pose covariance propagated to the pixel plus the
 offset of the proposed cell from the feature (``cell_sigma`` cells, default
 one: a detected corner cell may sit a cell or two off), ``J_pose C J_pose^T +
 J_X Sigma_L J_X^T`` (px^2).
+
+With a :class:`.evidence.ProposalScreen` (the default) only cells with
+clear, isolated evidence in both views are proposed (:mod:`.evidence`:
+locally planar structure in the scan, one dominant corner in the image
+inside the ellipse, a cell footprint and a range the loupe can resolve,
+clear of the image border), and only where the 3-sigma ellipse fits the
+loupe (``max_ellipse_px``).  The result (:class:`Proposals`, a list) says
+why it is empty: :data:`.evidence.REASON_ROUGH_ALIGNMENT` when only the
+ellipses were too large, :data:`.evidence.REASON_NO_EVIDENCE` otherwise.
+``screen=None`` proposes as before the screen (kept for the benchmark).
 """
 
 from __future__ import annotations
@@ -29,13 +39,15 @@ from ..errors import CalibError
 from ..io.atomic import write_yaml_atomic
 from .candidates import KINDS, Candidates, find_candidates
 from .corner_probability import WEIGHTS, corner_features, corner_probability, laser_features, scan_range_noise_m
+from .evidence import (REASON_NO_EVIDENCE, REASON_ROUGH_ALIGNMENT, ProposalScreen, cell_footprint_px, corner_peaks,
+                       dominant_corner, ellipse_box_margin_px, local_plane_residual_m, planar_share)
 from .image_corners import CornerImage, content_mask, strongest_near
 from .information import d_optimal_gain, pair_noise, pixel_jacobians, pose_pixel_covariance
 from .laser_noise import DEFAULT_CELL_SIGMA, DEFAULT_RANGE_SIGMA_M, PICK_CELL_SIGMA, cell_covariance
 from .pose_state import PoseState
 from .visibility import visible_in_camera
 
-__all__ = ["Proposal", "propose", "proposals_to_dict", "save_proposals_yaml", "GUIDED_CLICK_SIGMA_PX"]
+__all__ = ["Proposal", "Proposals", "propose", "proposals_to_dict", "save_proposals_yaml", "GUIDED_CLICK_SIGMA_PX"]
 
 #: Click noise of a guided pair (magnified loupe, known target), pixels.
 GUIDED_CLICK_SIGMA_PX = 0.3
@@ -75,6 +87,13 @@ class Proposal:
     probability : float
         Probability that the cell is a corner the person can click
         (:mod:`.corner_probability`; 1 for a re-click; NaN without an image).
+    planar_share : float
+        Share of the cell's support that is locally planar (:func:`.evidence.planar_share`; NaN unscreened).
+    footprint_px : float
+        Image length of one cell step, px (:func:`.evidence.cell_footprint_px`; NaN unscreened).
+    corner_dominance : float
+        Strongest over second-strongest image corner in the ellipse (:func:`.evidence.dominant_corner`;
+        inf with a single corner, NaN unscreened or without an image).
     """
 
     laser_rc: tuple[int, int]
@@ -87,10 +106,18 @@ class Proposal:
     strength: float = float("nan")
     replaces: int | None = None
     probability: float = float("nan")
+    planar_share: float = float("nan")
+    footprint_px: float = float("nan")
+    corner_dominance: float = float("nan")
 
     def ellipse_sigma_px(self) -> np.ndarray:
         """1-sigma half-axes (major, minor) of the pixel ellipse, px."""
         return np.sqrt(np.maximum(np.linalg.eigvalsh(self.pixel_cov)[::-1], 0.0))
+
+    @property
+    def radius_3sigma_px(self) -> float:
+        """The 3-sigma radius: three times the ellipse's major 1-sigma half-axis, px."""
+        return 3.0 * float(self.ellipse_sigma_px()[0])
 
     def to_dict(self) -> dict:
         return {
@@ -100,9 +127,33 @@ class Proposal:
             "pixel_cov": [[float(x) for x in row] for row in self.pixel_cov],
             "gain": float(self.gain),
             "kind": self.kind,
+            "radius_3sigma_px": self.radius_3sigma_px,
             **({"probability": float(self.probability)} if np.isfinite(self.probability) else {}),
             **({"replaces": int(self.replaces)} if self.replaces is not None else {}),
         }
+
+
+class Proposals(list):
+    """The ranked proposals (a list of :class:`Proposal`, best first) and why there are none.
+
+    Attributes
+    ----------
+    reason : str or None
+        Set when the list is empty: what the person should do
+        (:data:`.evidence.REASON_ROUGH_ALIGNMENT` or :data:`.evidence.REASON_NO_EVIDENCE`).
+    screened : dict of str to int
+        Cells left out by each test of the screen (empty without a screen).
+    """
+
+    def __init__(self, items=(), reason: str | None = None, screened: dict | None = None) -> None:
+        super().__init__(items)
+        self.reason = reason
+        self.screened = dict(screened or {})
+
+    def like(self, items) -> "Proposals":
+        """Other items with this result's reason (when they are empty) and counts."""
+        items = list(items)
+        return Proposals(items, None if items else (self.reason or "no proposal left"), self.screened)
 
 
 def _cell_extent_m(laser_cov: np.ndarray, range_sigma_m: float, cell_sigma: float) -> np.ndarray:
@@ -132,7 +183,9 @@ def propose(
     rng: np.random.Generator | None = None,
     corner_weights=WEIGHTS,
     laser_evidence: np.ndarray | None = None,
-) -> list[Proposal]:
+    screen: ProposalScreen | None = ProposalScreen(),
+    plane_residual: np.ndarray | None = None,
+) -> Proposals:
     """The ``n`` best next pairs, best first (module docstring).
 
     Parameters
@@ -177,11 +230,25 @@ def propose(
     laser_evidence : (len(candidates), 5) ndarray, optional
         :func:`.corner_probability.laser_features` of the candidates, if
         already known (a session computes it once).
+    screen : ProposalScreen or None
+        The clear-evidence screen (:mod:`.evidence`; its ``max_ellipse_px``
+        is the loupe's limit).  Re-clicks pass only its ellipse and border
+        tests: their corner was chosen by the person, and a rough pair left
+        un-re-clicked biases the solve (measured: PJLab auto_calib from 5
+        by-eye pairs ended 0.42 deg off the published pose when re-clicks of
+        pairs beyond ``max_range_m`` were left out, 0.02 deg with them).  None: the behaviour
+        before the screen (``corner_image`` then needs an image corner of
+        ``min_image_corner`` within 2..12 px).
+    plane_residual : (H, W) ndarray, optional
+        :func:`.evidence.local_plane_residual_m` of ``depth`` with the
+        screen's ``same_surface_rel`` and ``min_plane_neighbours``, if
+        already known (a session computes it once).
 
     Returns
     -------
-    list of Proposal
-        Possibly fewer than ``n`` when the scan has fewer usable candidates.
+    Proposals
+        A list of :class:`Proposal`, possibly fewer than ``n`` (or none,
+        with the reason in :attr:`Proposals.reason`).
     """
     if n < 1:
         raise CalibError(f"the number of proposals must be at least 1, got {n}")
@@ -210,7 +277,13 @@ def propose(
     ok = np.all(np.isfinite(J_pose), axis=(1, 2)) & np.all(np.isfinite(pixel_cov), axis=(1, 2))
     ok &= _cell_extent_m(laser_cov, range_sigma_m, cell_sigma) <= max_cell_m
     strength = np.full(len(cand), np.nan)
-    if corner_image is not None:
+    screened: dict[str, int] = {}
+    evidence = {name: np.full(len(cand), np.nan) for name in ("planar", "footprint", "dominance")}
+    smallest_ellipse = np.inf
+    if screen is not None:
+        ok, smallest_ellipse = _screen(depth, camera, cand, pixels, pixel_cov, J_point, ok, screen, corner_image,
+                                       plane_residual, screened, strength, evidence)
+    elif corner_image is not None:
         major = np.sqrt(np.maximum(np.linalg.eigvalsh(np.where(ok[:, None, None], pixel_cov, 0.0))[:, -1], 0.0))
         radius = np.clip(3.0 * major, 2.0, 12.0)
         for r in np.unique(np.ceil(radius)):  # a few distinct radii
@@ -249,6 +322,14 @@ def propose(
         S_eff = np.linalg.inv(np.linalg.inv(S_new) - np.linalg.inv(S_old))
         cov_re = pose_pixel_covariance(Jp_re, state.covariance) + Jx_re @ whole_re @ np.swapaxes(Jx_re, 1, 2)
         fine = np.all(np.isfinite(Jp_re), axis=(1, 2)) & np.all(np.isfinite(S_eff), axis=(1, 2))
+        if screen is not None:  # the person chose the corner (even a far one); the loupe must still show where
+            major_re = 3.0 * np.sqrt(np.maximum(np.linalg.eigvalsh(np.nan_to_num(cov_re))[:, -1], 0.0))
+            fits = (major_re <= screen.max_ellipse_px) & (
+                ellipse_box_margin_px(pix_re, cov_re, camera.width, camera.height) >= screen.border_margin_px)
+            screened["reclick ellipse or border"] = int((fine & ~fits).sum())
+            if (fine & ~fits).any():
+                smallest_ellipse = min(smallest_ellipse, float(major_re[fine & ~fits].min()))
+            fine &= fits
         for k in np.flatnonzero(fine):
             extra[len(entries)] = (rows_re[k], rc_re[k], pts_re[k], pix_re[k], cov_re[k])
             entries.append(("reclick", int(k)))
@@ -256,7 +337,11 @@ def propose(
         P = np.concatenate([P, np.ones(int(fine.sum()))])
         J = np.concatenate([J, Jp_re[fine]])
     if not entries:
-        return []
+        if screen is not None and np.isfinite(smallest_ellipse):
+            reason = REASON_ROUGH_ALIGNMENT.format(limit=screen.max_ellipse_px, smallest=smallest_ellipse)
+        else:
+            reason = REASON_NO_EVIDENCE
+        return Proposals([], reason, screened)
     if order not in ("d_optimal", "farthest", "random"):
         raise CalibError(f"unknown proposal order {order!r}; use d_optimal, farthest or random")
     if order == "random" and rng is None:
@@ -314,13 +399,75 @@ def propose(
             image_corner=float(strength[i]),
             strength=float(cand.strength[i]),
             probability=float(probability[i]),
+            planar_share=float(evidence["planar"][i]),
+            footprint_px=float(evidence["footprint"][i]),
+            corner_dominance=float(evidence["dominance"][i]),
         ))
-    return out
+    return Proposals(out, None if out else REASON_NO_EVIDENCE, screened)
+
+
+def _screen(depth, camera, cand: Candidates, pixels, pixel_cov, J_point, ok, screen: ProposalScreen,
+            corner_image: CornerImage | None, plane_residual, screened: dict, strength, evidence: dict):
+    """Apply the clear-evidence screen (:mod:`.evidence`) to the candidates still ``ok``.
+
+    Fills ``screened`` (cells left out per test), ``strength`` (the dominant
+    image corner's ``lam_min``) and ``evidence`` (planar share, footprint,
+    dominance) in place.  Returns the new ``ok`` and the smallest 3-sigma
+    radius among the cells with laser evidence that the ellipse test left
+    out (inf when it left none out).
+    """
+    ok = ok.copy()
+
+    def cut(name: str, passes: np.ndarray) -> None:
+        nonlocal ok
+        screened[name] = screened.get(name, 0) + int((ok & ~passes).sum())
+        ok &= passes
+
+    rng_m = np.linalg.norm(cand.points_lidar, axis=1)
+    cut("far", rng_m <= screen.max_range_m)
+    foot = cell_footprint_px(depth, cand.rows_cols, np.nan_to_num(J_point))
+    evidence["footprint"][:] = foot
+    cut("footprint", foot <= screen.max_footprint_px)
+    if plane_residual is None:
+        plane_residual = local_plane_residual_m(depth, screen.same_surface_rel, screen.min_plane_neighbours)
+    tol_m = screen.max_plane_rms_noise * scan_range_noise_m(depth)
+    share, n_planar = planar_share(depth, cand.rows_cols, plane_residual, tol_m, screen.plane_half)
+    evidence["planar"][:] = share
+    cut("not planar", (share >= screen.min_planar_share) & (n_planar >= screen.min_planar_cells))
+    radius = 3.0 * np.sqrt(np.maximum(np.linalg.eigvalsh(np.where(ok[:, None, None], pixel_cov, 0.0))[:, -1], 0.0))
+    fits = radius <= screen.max_ellipse_px
+    too_big = ok & ~fits
+    smallest = float(radius[too_big].min()) if too_big.any() else np.inf
+    cut("ellipse larger than the loupe", fits)
+    cut("border", ellipse_box_margin_px(pixels, pixel_cov, camera.width, camera.height) >= screen.border_margin_px)
+    if corner_image is not None and ok.any():
+        # The rim of a fisheye's image circle is a border too.
+        gray8 = np.rint(corner_image.gray * 255).astype(np.uint8)
+        inside = cv2.distanceTransform(content_mask(gray8, 0).astype(np.uint8), cv2.DIST_L2, 5)
+        H_img, W_img = inside.shape
+        pu = np.clip(np.rint(np.nan_to_num(pixels[:, 0])).astype(np.int64), 0, W_img - 1)
+        pv = np.clip(np.rint(np.nan_to_num(pixels[:, 1])).astype(np.int64), 0, H_img - 1)
+        cut("border", inside[pv, pu] >= radius + screen.border_margin_px)
+        sel = np.flatnonzero(ok)
+        _, first, second, ratio = dominant_corner(corner_image, corner_peaks(corner_image), pixels[sel],
+                                                  pixel_cov[sel], screen.min_search_px)
+        strength[sel] = first
+        with np.errstate(divide="ignore", invalid="ignore"):
+            dominance = np.where(second > 0, first / np.where(second > 0, second, 1.0), np.inf)
+        evidence["dominance"][sel] = dominance
+        clean = np.zeros(len(ok), dtype=bool)
+        clean[sel] = ((first >= screen.min_corner_strength) & (ratio >= screen.min_corner_ratio)
+                      & (dominance >= screen.min_corner_dominance))
+        cut("no dominant image corner", clean)
+    return ok, smallest
 
 
 def proposals_to_dict(proposals: Sequence[Proposal], state: PoseState | None = None) -> dict:
     """The ``proposals:`` document (best first), with the pose they were computed from."""
     doc: dict = {"proposals": [p.to_dict() for p in proposals]}
+    reason = getattr(proposals, "reason", None)
+    if not proposals and reason:
+        doc["reason"] = str(reason)
     if state is not None:
         doc["pose"] = {
             "T_camera_lidar": [[float(x) for x in row] for row in state.T_camera_lidar],

@@ -18,9 +18,10 @@ from ..pairs import Pair, resolve_pairs
 from ..solve import CalibrationResult, calibrate
 from .candidates import find_candidates
 from .corner_probability import laser_features, scan_range_noise_m
+from .evidence import ProposalScreen, local_plane_residual_m
 from .image_corners import CornerImage, corner_image
 from .pose_state import DEFAULT_CLICK_SIGMA_PX, PoseState, current_pose
-from .propose import GUIDED_CLICK_SIGMA_PX, Proposal, propose
+from .propose import GUIDED_CLICK_SIGMA_PX, Proposal, Proposals, propose
 from .visibility import visible_in_camera
 
 __all__ = ["GuidedSession"]
@@ -43,12 +44,16 @@ class GuidedSession:
         Click noise of guided pairs (their ``precision_px``).
     reclicks : bool
         Whether rough pairs are proposed for a re-click in the loupe (default True).
+    **propose_options
+        Passed to :func:`calib_core.guide.propose.propose` (e.g. ``screen``:
+        a :class:`calib_core.guide.evidence.ProposalScreen`, or None for no screen);
+        :attr:`propose_options` may be changed later.
     """
 
     def __init__(self, depth, camera, pairs: Sequence[Pair] = (), T_initial: np.ndarray | None = None,
                  image: np.ndarray | None = None, click_sigma_px: float = GUIDED_CLICK_SIGMA_PX,
                  reclicks: bool = True, **propose_options) -> None:
-        self.depth, self.camera = depth, camera
+        self.depth, self.camera, self.image = depth, camera, image
         self.pairs: list[Pair] = list(pairs)
         self.T_initial = T_initial
         self.click_sigma_px = float(click_sigma_px)
@@ -61,6 +66,7 @@ class GuidedSession:
         self.propose_options = propose_options
         self.reclicks = bool(reclicks)
         self._visible: np.ndarray | None = None
+        self._plane_residual: tuple[tuple, np.ndarray] | None = None  # (its parameters, the map)
         self.state: PoseState = self._update_state()
 
     def _update_state(self) -> PoseState:
@@ -71,8 +77,18 @@ class GuidedSession:
                                                  self.candidates.points_lidar)
         return self.state
 
-    def proposals(self, n: int = 20) -> list[Proposal]:
-        """The ``n`` best next pairs under the current state (skipped ones go last)."""
+    def _residual_for(self, screen: ProposalScreen | None) -> np.ndarray | None:
+        """The scan's local plane residual map for ``screen``'s parameters, computed once per parameters."""
+        if screen is None:
+            return None
+        key = (screen.same_surface_rel, screen.min_plane_neighbours)
+        if self._plane_residual is None or self._plane_residual[0] != key:
+            self._plane_residual = (key, local_plane_residual_m(self.depth, *key))
+        return self._plane_residual[1]
+
+    def proposals(self, n: int = 20) -> Proposals:
+        """The ``n`` best next pairs under the current state (skipped ones go last); when there are
+        none, :attr:`Proposals.reason` says why."""
         used = [p.laser_rc for p in self.pairs if p.laser_rc is not None] + self.dropped
         dropped = set(self.dropped)  # "Not a corner" on a re-click: do not propose that re-click again
         rough = [(i, p.laser_rc, DEFAULT_CLICK_SIGMA_PX if p.precision_px is None else p.precision_px)
@@ -80,13 +96,16 @@ class GuidedSession:
                  and tuple(p.laser_rc) not in dropped] if self.reclicks else []
         fit = [p for p in self.pairs if not p.check]
         paired_points = resolve_pairs(fit, self.depth, self.camera)[0] if fit else None
+        options = dict(self.propose_options)
+        screen = options.setdefault("screen", ProposalScreen())
         props = propose(self.depth, self.camera, self.state, n + len(self.skipped), candidates=self.candidates,
                         exclude_rc=used, click_sigma_px=self.click_sigma_px, corner_image=self.corners,
                         visible=self._visible, reclick=rough, paired_points_lidar=paired_points,
-                        laser_evidence=self._laser_evidence,
-                        **self.propose_options)
+                        laser_evidence=self._laser_evidence, plane_residual=self._residual_for(screen),
+                        **options)
         skipped = set(self.skipped)
-        return ([p for p in props if p.laser_rc not in skipped] + [p for p in props if p.laser_rc in skipped])[:n]
+        return props.like(([p for p in props if p.laser_rc not in skipped]
+                           + [p for p in props if p.laser_rc in skipped])[:n])
 
     def accept(self, proposal: Proposal, pixel, source: str = "guided", precision_px: float | None = None,
                laser_rc: tuple[int, int] | None = None) -> Pair:

@@ -8,13 +8,24 @@ Layout::
       translation_m: [tx, ty, tz]
       quaternion_xyzw: [qx, qy, qz, qw]
       rpy_deg: [roll, pitch, yaw]                           # R = Rz(yaw) Ry(pitch) Rx(roll)
+      viewing_deg: [azimuth, elevation, roll]               # optical axis in the lidar frame, roll about it
+      viewing_direction_lidar: [dx, dy, dz]                 # the optical axis (camera +z), lidar frame
     quality: {status: ok | warning | unreliable, reasons: [...]}
     outliers: [{index, id, deg, px}, ...]                   # pairs left out of the fit (kept in pairs)
     check_pairs: [{index, id, deg, px}, ...]                # pairs marked check: not fitted, their errors
-    sigma: {translation_m: [...], rpy_deg: [...]}            # 1-sigma at the optimum
-    residuals: {n_pairs, n_inliers, mean_px, std_px, mean_deg, std_deg, per_pair: [...], warnings: [...]}
+    sigma: {translation_m: [...], rpy_deg: [...], viewing_deg: [...]}   # 1-sigma at the optimum
+    residuals: {n_pairs, n_inliers, error_estimated, mean_px, std_px, mean_deg, std_deg, per_pair: [...],
+                warnings: [...]}
+
+``viewing_deg`` (:func:`calib_core.transforms.viewing_direction`) stays readable where
+``rpy_deg`` is in gimbal lock (pitch -90 deg: a camera looking along lidar +x); it is null
+where undefined (a camera looking exactly along lidar +-z).  On reading, it and
+``viewing_direction_lidar`` must agree with the rotation (files without them load as before).
+``error_estimated`` is false when the pairs in the fit are too few for their residuals to
+estimate the error (:func:`calib_core.solve.quality.error_estimate_reason`).
     camera: {...}                                           # the camera description
     pairs: [...]                                            # the pairs that were solved
+    shots: [{index, name, residuals, leave_one_shot_out, test, ...}]  # several shots: calib_core.shots.shots_to_dict
 
 Floats are written with Python's shortest round-trip representation, so
 saving and loading again reproduces every number exactly.
@@ -30,7 +41,15 @@ import numpy as np
 
 from .. import __version__
 from ..errors import CalibError
-from ..transforms import R_from_quat_xyzw, R_from_rpy_deg, make_T, quat_xyzw_from_R, rpy_deg_from_R
+from ..transforms import (
+    R_from_quat_xyzw,
+    R_from_rpy_deg,
+    R_from_viewing_deg,
+    make_T,
+    quat_xyzw_from_R,
+    rpy_deg_from_R,
+    viewing_direction,
+)
 from .atomic import write_yaml_atomic
 from .input_files import MAX_EXTRINSICS_BYTES
 from .yaml_files import finite_vector, read_yaml_mapping
@@ -38,7 +57,11 @@ from .yaml_files import finite_vector, read_yaml_mapping
 #: Largest lidar-to-camera translation accepted (metres); beyond it a value is absurd.
 MAX_TRANSLATION_M = 1e4
 
-CONVENTION = "X_camera = matrix @ X_lidar (metres); rpy: R = Rz(yaw) @ Ry(pitch) @ Rx(roll)"
+CONVENTION = (
+    "X_camera = matrix @ X_lidar (metres); rpy: R = Rz(yaw) @ Ry(pitch) @ Rx(roll); viewing_deg: azimuth "
+    "atan2(dy, dx) and elevation asin(dz) of the optical axis d (camera +z) in the lidar frame, roll of the "
+    "camera about d (0: camera x horizontal, image up towards lidar +z)"
+)
 
 
 def _floats(a) -> list:
@@ -53,11 +76,14 @@ def _nan_to_none(values) -> list:
 def transform_to_dict(T_camera_lidar: np.ndarray) -> dict[str, Any]:
     """The ``T_camera_lidar`` block: matrix plus the same pose in three other forms."""
     T = np.asarray(T_camera_lidar, dtype=np.float64)
+    view = viewing_direction(T[:3, :3])
     return {
         "matrix": _floats(T),
         "translation_m": _floats(T[:3, 3]),
         "quaternion_xyzw": _floats(quat_xyzw_from_R(T[:3, :3])),
         "rpy_deg": _floats(rpy_deg_from_R(T[:3, :3])),
+        "viewing_deg": _nan_to_none([view.azimuth_deg, view.elevation_deg, view.roll_deg]),
+        "viewing_direction_lidar": _floats(view.direction_lidar),
         "convention": CONVENTION,
     }
 
@@ -71,6 +97,8 @@ def result_to_dict(result) -> dict[str, Any]:
     they stay in the ``pairs`` block.  ``per_pair`` has every pair, with
     ``outlier: true`` for those.
     """
+    from ..solve.quality import error_estimate_reason, pairs_in_fit  # (a result exists: the solver is loaded)
+
     per_pair = []
     outliers = [int(i) for i in result.outliers]
     ids = list(getattr(result, "outlier_ids", []) or outliers)
@@ -103,10 +131,13 @@ def result_to_dict(result) -> dict[str, Any]:
         "sigma": {
             "translation_m": _floats(result.sigma_translation_m),
             "rpy_deg": _floats(result.sigma_rpy_deg),
+            "viewing_deg": _floats(viewing_direction(
+                np.asarray(result.T_camera_lidar)[:3, :3], np.asarray(result.covariance_6x6)[:3, :3]).sigma_deg),
         },
         "residuals": {
             "n_pairs": int(result.n_pairs),
             "n_inliers": int(result.n_pairs) - len(outliers),
+            "error_estimated": error_estimate_reason(pairs_in_fit(result)) is None,
             "cost": str(result.cost_name),
             "mean_px": _nan_to_none([result.mean_px])[0],
             "std_px": _nan_to_none([result.std_px])[0],
@@ -202,7 +233,23 @@ def parse_transform(block: Any, where: str) -> np.ndarray:
         # Values printed with fewer digits by hand still agree to ~1e-6.
         if not np.allclose(T, T0, atol=1e-5):
             raise CalibError(f"{where}: '{name}' disagrees with '{name0}'; fix or remove one of them")
+    _check_viewing(block, T0[:3, :3], name0, where)
     return T0
+
+
+def _check_viewing(block: dict, R: np.ndarray, name0: str, where: str) -> None:
+    """The optional ``viewing_direction_lidar`` and ``viewing_deg`` must agree with the rotation ``R``."""
+    if "viewing_direction_lidar" in block:
+        d = np.array(finite_vector(block["viewing_direction_lidar"], 3, f"{where}.viewing_direction_lidar"))
+        if not np.allclose(d, R[2], atol=1e-5):
+            raise CalibError(f"{where}: 'viewing_direction_lidar' disagrees with '{name0}'; fix or remove one of them")
+    if "viewing_deg" in block:
+        angles = block["viewing_deg"]
+        if isinstance(angles, list) and len(angles) == 3 and (angles[0] is None or angles[2] is None):
+            return  # written for a camera looking exactly along lidar +-z: azimuth and roll undefined
+        v = np.array(finite_vector(angles, 3, f"{where}.viewing_deg", 1e4))
+        if not np.allclose(R_from_viewing_deg(*v), R, atol=1e-5):
+            raise CalibError(f"{where}: 'viewing_deg' disagrees with '{name0}'; fix or remove one of them")
 
 
 def load_extrinsics_yaml(path: str | os.PathLike) -> dict[str, Any]:

@@ -11,9 +11,9 @@ Pipeline of :func:`solve_extrinsics`:
 4. Levenberg-Marquardt on the whitened angular cost (compiled,
    :mod:`.kernels`), or, with ``cost="pixel"``, on the pixel error (eq. 6).
 5. If any residual is far above the noise scale, :mod:`.robust` finds the
-   largest set of pairs that agree on one pose (LO-MSAC over P3P on
-   bearings); the others are left out of the fit and the covariance, and
-   reported.
+   set of pairs that agree on one pose (LO-MSAC over P3P on bearings, pairs at
+   one place in the view sharing one vote); the others are left out of the fit
+   and the covariance, and reported.
 6. Covariance ``s^2 (J^T J)^-1`` on the pairs in the fit (Student-t
    sigma, or the known noise), and a :class:`.quality.Quality` verdict.
 """
@@ -44,7 +44,7 @@ from .checks import (
     validate_pixels,
 )
 from .kernels import dlt_pose
-from .quality import Quality, geometry_reasons
+from .quality import Quality, geometry_reasons, orientation_notes
 from .refine import (
     LM_MAX_ITER,
     PARAMETER_NAMES,
@@ -120,7 +120,8 @@ class CalibrationResult:
         Pairs given (inliers and outliers).
     warnings : list of str
         The lines of ``quality.reasons``, then notes on the output's form that do not
-        lower the quality (gimbal lock of roll/pitch/yaw).
+        lower the quality (roll/pitch/yaw near gimbal lock, or azimuth/roll of the
+        viewing direction near lidar +-z: :func:`.quality.orientation_notes`).
     outliers : list of int
         Positions (0-based, in the input arrays) of the pairs left out of the
         fit and the covariance as gross outliers.
@@ -466,14 +467,10 @@ def _noisy_warning(noise_scale: float) -> str:
 
 
 def _gimbal_notes(T: np.ndarray) -> list[str]:
-    """Notes about the output's form, not the calibration's quality."""
-    if abs(T[2, 0]) > _SIN_89:
-        return ["pitch is within 1 deg of +-90 deg (gimbal lock): roll, yaw and their sigmas are ill-defined; "
-                "use the matrix or quaternion"]
-    return []
+    """Notes about the output's form, not the calibration's quality (:func:`.quality.orientation_notes`)."""
+    return orientation_notes(T[:3, :3])
 
 
-_SIN_89 = math.sin(math.radians(89.0))
 _CONE_COS = math.cos(math.radians(CONE_WARNING_DEG))
 
 

@@ -1,0 +1,130 @@
+"""``solve`` and ``propose`` over several shots (``--shot SCAN PAIRS``, repeated): the CLI side of
+:mod:`calib_core.shots`.  No maths here."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def add_shot_args(p: argparse.ArgumentParser, *, images: bool = False) -> None:
+    """``--shot SCAN PAIRS`` (repeatable) and, for ``propose``, ``--image-for-shot K IMAGE``."""
+    p.add_argument(
+        "--shot", nargs=2, action="append", type=Path, metavar=("SCAN", "PAIRS"), default=None,
+        help="a shot: a scan and the pairs picked in it (repeat for several shots of one rig; "
+        "replaces --scan/--pairs; shots are numbered from 0 in this order)",
+    )
+    if images:
+        p.add_argument(
+            "--image-for-shot", nargs=2, action="append", metavar=("K", "IMAGE"), default=None,
+            help="the photo of shot K (0-based): its proposals need an image corner near their pixel",
+        )
+
+
+def check_shot_form(args: argparse.Namespace, command: str) -> bool:
+    """True for the ``--shot`` form; one clear error when the two forms are mixed or neither is given."""
+    from calib_core.errors import CalibError
+
+    shots = getattr(args, "shot", None)
+    if shots:
+        mixed = [opt for opt, key in (("--scan", "scan"), ("--pairs", "pairs"), ("--image", "image"))
+                 if getattr(args, key, None) is not None]
+        if mixed:
+            raise CalibError(f"{command}: give either --shot SCAN PAIRS (repeatable) or {mixed[0]}, not both")
+        return True
+    if getattr(args, "pairs", None) is None:
+        raise CalibError(f"{command}: give --pairs P (with --scan S), or one --shot SCAN PAIRS per shot")
+    if command == "propose" and args.scan is None:
+        raise CalibError("propose: give --scan S with --pairs P, or one --shot SCAN PAIRS per shot")
+    if getattr(args, "image_for_shot", None):
+        raise CalibError(f"{command}: --image-for-shot goes with --shot; use --image for one scan")
+    return False
+
+
+def load_shots(args: argparse.Namespace, camera):
+    """Each ``--shot``'s scan and pairs, resolved (the organisation report of each scan is printed)."""
+    from calib_core.errors import CalibError
+    from calib_core.io.scan_readers import load_scan
+    from calib_core.pairs import load_pairs_yaml
+    from calib_core.shots import Shot
+
+    from .cli import scan_options
+
+    shots = []
+    for k, (scan_path, pairs_path) in enumerate(args.shot):
+        pairs = load_pairs_yaml(pairs_path, max_pairs=getattr(args, "max_pairs", None) or 1_000)
+        depth = load_scan(scan_path, **scan_options(args))
+        report = depth.organize_report
+        if report is not None:
+            print(f"shot {k}: {report.line()}", flush=True)
+        try:
+            shots.append(Shot.from_pairs(pairs, depth, camera, name=f"{scan_path} + {pairs_path}"))
+        except CalibError as exc:  # name the shot: the same pair number exists in every shot
+            raise CalibError(f"shot {k} ({pairs_path}): {exc}") from None
+    return shots
+
+
+def cmd_solve_shots(args: argparse.Namespace):
+    """``solve --shot SCAN PAIRS ...``: the joint solve, its per-shot report and the extrinsics YAML.
+
+    Returns the result's :class:`calib_core.solve.Quality` (the caller turns ``unreliable`` into exit code 3).
+    """
+    from calib_core.io.atomic import write_yaml_atomic
+    from calib_core.shots import format_shots, shots_extrinsics_document, solve_shots
+
+    from .cli import format_summary, load_camera_from_args
+
+    camera = load_camera_from_args(args)
+    shots = load_shots(args, camera)
+    options = {}
+    if args.initial_extrinsics is not None:
+        from calib_core.io.extrinsic_formats import load_extrinsics_any
+
+        options["initial_T_camera_lidar"] = load_extrinsics_any(args.initial_extrinsics)
+    solved = solve_shots(shots, camera, cost=args.cost, **options)
+    doc, notes = shots_extrinsics_document(solved, shots, camera, base_dir=args.output.parent)
+    write_yaml_atomic(args.output, doc)  # before printing: a closed pipe must not lose the result
+    flat_ids = [i for ids in solved.pair_ids for i in ids]
+    print(f"{len(shots)} shot{'s' if len(shots) > 1 else ''}, one T_camera_lidar")
+    print(format_summary(solved.result, len(flat_ids), flat_ids))
+    print("")
+    print(format_shots(solved))
+    for note in notes:
+        print(f"note: {note}")
+    print(f"\nwrote {args.output}")
+    return solved.result.quality
+
+
+def cmd_propose_shots(args: argparse.Namespace) -> int:
+    """``propose --shot SCAN PAIRS ...``: proposals over all shots, each with its ``shot``."""
+    from calib_core.errors import CalibError
+    from calib_core.io.atomic import write_yaml_atomic
+    from calib_core.io.extrinsics import load_extrinsics_yaml
+    from calib_core.io.images import load_image_rgb
+    from calib_core.shots import propose_shots, shot_proposals_to_dict
+
+    from .cli import load_camera_from_args
+
+    camera = load_camera_from_args(args)
+    shots = load_shots(args, camera)
+    images = {}
+    for k_text, image_path in args.image_for_shot or []:
+        try:
+            k = int(k_text)
+        except ValueError:
+            raise CalibError(f"--image-for-shot: expected a shot number, got {k_text!r}") from None
+        if not 0 <= k < len(shots):
+            raise CalibError(f"--image-for-shot {k}: there are {len(shots)} shots, numbered 0 to {len(shots) - 1}")
+        images[k] = load_image_rgb(image_path)
+    T0 = load_extrinsics_yaml(args.extrinsics)["T_camera_lidar"] if args.extrinsics is not None else None
+    proposals, state = propose_shots(shots, camera, args.n, T_initial=T0, images=images,
+                                     click_sigma_px=args.click_sigma)
+    write_yaml_atomic(args.output, shot_proposals_to_dict(proposals, state, [s.name for s in shots]))
+    print(f"pose from {state.source} ({state.n_pairs} pairs in {len(shots)} shots); {len(proposals)} proposals")
+    for i, sp in enumerate(proposals):
+        p = sp.proposal
+        major, minor = p.ellipse_sigma_px()
+        print(f"{i:3d}  shot {sp.shot}  cell {p.laser_rc}  pixel ({p.pixel[0]:7.1f}, {p.pixel[1]:7.1f})  "
+              f"1-sigma {major:5.2f} x {minor:5.2f} px  gain {p.gain:6.3f}  {p.kind}")
+    print(f"wrote {args.output}")
+    return 0

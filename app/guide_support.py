@@ -1,0 +1,78 @@
+"""What the Guide panel (:mod:`app.guide_panel`) computes off the UI: the proposals job, the loupe's ellipse limit,
+the live solve's verdict.  No widgets here; the maths is :mod:`calib_core.guide`."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from calib_core.guide import current_pose
+from calib_core.guide.auto_accept import AutoGate, auto_accept
+from calib_core.guide.evidence import ProposalScreen
+from calib_core.guide.session import GuidedSession
+from calib_core.pairs import Pair
+
+from .loupes import ZOOM_FACTOR, default_camera_crop_px
+
+__all__ = ["N_PROPOSALS", "AUTO_PRECISION_PX", "MAX_LOUPE_ZOOM_OUT", "ELLIPSE_MARGIN_PX", "max_ellipse_px_for",
+           "rank_proposals", "live_quality"]
+
+#: Proposals computed per update.
+N_PROPOSALS = 20
+#: 1-sigma given to an auto-accepted pixel (cv2.cornerSubPix on a gated clean corner).  The gate accepts
+#: no proposal on the sample, so this is not measured there; it is set above the guided click's 0.3 px.
+AUTO_PRECISION_PX = 0.5
+#: The camera loupe zooms out at most this much (one zoom step) to show a proposal's 3-sigma ellipse whole.
+MAX_LOUPE_ZOOM_OUT = ZOOM_FACTOR
+#: Image pixels shown beyond the ellipse, both sides together (a framed ellipse does not touch the loupe's edge).
+ELLIPSE_MARGIN_PX = 4.0
+
+
+def max_ellipse_px_for(width: int, height: int) -> float:
+    """Largest 3-sigma radius (px) of a proposal the app shows for a ``width`` x ``height`` image: half the
+    camera loupe's side at zoom 1, zoomed out by :data:`MAX_LOUPE_ZOOM_OUT`."""
+    return 0.5 * default_camera_crop_px(width, height) * MAX_LOUPE_ZOOM_OUT
+
+
+def rank_proposals(session: GuidedSession, pairs: list, T0, skipped: list, dropped: list, screen: ProposalScreen,
+                   auto_gate: AutoGate | None) -> tuple:
+    """Sync ``session`` with the pairs and rank (on the guide's worker thread).
+
+    Returns
+    -------
+    props : calib_core.guide.Proposals
+        At most :data:`N_PROPOSALS`, with the reason when empty.
+    auto_pairs : list of Pair
+        Proposals ``auto_gate`` accepts (none without a gate, or while the solve is unreliable).
+    reclick_of : dict
+        Cell -> pick id of the pair each re-click proposal replaces.
+    quality : (pairs, status, reasons) or None
+        The session's own solve of ``pairs`` (None with an imported extrinsic alone).
+    """
+    s = session
+    s.propose_options["screen"] = screen
+    s.pairs, s.T_initial = list(pairs), T0
+    s.state = current_pose(s.pairs, s.depth, s.camera, T0)
+    s.skipped, s.dropped = list(skipped), list(dropped)
+    q = s.state.quality
+    quality = None if q is None else (tuple(pairs), q.status, list(q.reasons))
+    # "Not a corner" on a re-click means: do not offer re-clicking that pair again.
+    gone = set(map(tuple, dropped))
+    ranked = s.proposals(N_PROPOSALS + len(gone))
+    props = ranked.like([p for p in ranked if p.replaces is None or tuple(p.laser_rc) not in gone][:N_PROPOSALS])
+    # A re-click proposal names the pair it replaces by its index in ``pairs``: keep the pick id.
+    reclick_of = {tuple(p.laser_rc): pairs[p.replaces].id for p in props if p.replaces is not None}
+    auto_pairs: list[Pair] = []
+    unreliable = quality is not None and quality[1] == "unreliable"
+    if auto_gate is not None and props and s.corners is not None and not unreliable:  # (never re-clicks)
+        ok, pixels = auto_accept(s.corners, props, auto_gate, image=s.image, depth=s.depth, camera=s.camera,
+                                 T_camera_lidar=s.state.T_camera_lidar)
+        auto_pairs = [Pair(tuple(p.laser_rc), None, (float(px[0]), float(px[1])), source="auto",
+                           precision_px=AUTO_PRECISION_PX) for p, good, px in zip(props, ok, pixels) if good]
+    return props, auto_pairs, reclick_of, quality
+
+
+def live_quality(app: Any) -> tuple | None:
+    """``(pairs solved, status, reasons)`` of the live solve shown, or None (none yet)."""
+    bundle = app.live.bundle
+    quality = getattr(getattr(bundle, "result", None), "quality", None)
+    return None if quality is None else (tuple(bundle.pairs), quality.status, list(quality.reasons))

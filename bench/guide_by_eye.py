@@ -1,0 +1,391 @@
+"""Proposals a person can check, measured without a person: ``python -m bench.guide_by_eye [--trials N] [--write]``.
+
+Issue 20, item 3: a by-eye user found the guided proposals unusable on real
+scans (3-sigma ellipses larger than the loupe, cells on vegetation, far
+background and the image border).  This benchmark starts where that user
+started and measures what the user saw, on two real frames with their
+published calibrations (not ground truth, but correct to a few pixels):
+
+* KITTI object 000002 (``../shared/data/kitti_object_000002``, camera
+  ``real_data/kitti_000002_camera.yaml``, pose from its calib file);
+* PJLab OpenCalib manual_calib (``../shared/data/pjlab_opencalib_lidar2camera/manual_calib``,
+  64 beams by elevation, the 1920 x 1200 image).
+
+A trial: 5 rough pairs as a person makes them by eye -- laser cells at real
+corners (the committed ``real_data/pairs`` cells: foreground corners chosen
+by a fixed rule), each pixel off its projection under the published pose by
+5-15 px (uniform length, uniform direction), no ``precision_px`` (the app's
+default) -- then the 20 proposals of a :class:`GuidedSession` with the camera
+image, once without the screen (``screen=None``: the code before issue 20)
+and once with the default :class:`calib_core.guide.evidence.ProposalScreen`
+(``max_ellipse_px`` set to the app's limit for that image, as the app does).
+
+Each proposal is judged by this module's own measures (none of them is the
+screen's code):
+
+* **on a clean corner**: its laser point, projected with the *published*
+  pose, has an image corner passing :func:`calib_core.guide.image_corners.clean_corner`
+  (strength, L/X shape, isolation) within one cell footprint (at least 3 px); the
+  footprint is measured here by projecting the neighbouring beams;
+  **on a strong corner**: the same without the shape and isolation tests
+  (``lam_min >= 0.01``, the issue's machine check);
+* **3-sigma radius** and **fits the loupe**: the radius is at most half the
+  app's camera loupe side at zoom 1 (47 px for KITTI, 72 px for 1920 px), or
+  at most the app's limit (the loupe zoomed out one step);
+* **off vegetation**: at least :data:`MIN_EXPLAINED` of the near-side points
+  of its 5 x 5 window lie within 3 range-noise of at most two planes found
+  by RANSAC here (foliage scatters in depth and fails);
+* **off far background**: range at most :data:`FAR_M`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from calib_core.cameras import load_camera
+from calib_core.guide.evidence import ProposalScreen
+from calib_core.guide.image_corners import CornerGate, clean_corner, strongest_near
+from calib_core.guide.session import GuidedSession
+from calib_core.io.images import load_image_rgb
+from calib_core.io.scan_readers import load_scan
+from calib_core.pairs import Pair, load_pairs_yaml
+from calib_core.transforms import transform_points
+
+from .common import BENCH_SEED, REPO, log
+from .guide_real import KITTI, RealScene, kitti_available, load_kitti
+
+MANUAL = REPO.parent / "shared" / "data" / "pjlab_opencalib_lidar2camera" / "manual_calib"
+MANUAL_PAIRS = REPO / "real_data" / "pairs" / "manual_calib_pairs.yaml"
+#: Rough pairs per trial, and the range of their pixel error (px): a by-eye click on the full image.
+N_ROUGH = 5
+ROUGH_PX = (5.0, 15.0)
+N_PROPOSALS = 20
+#: Laser range (m) beyond which a proposal is on far background.
+FAR_M = 30.0
+#: Share of a window's near-side points that at most two planes must explain (else: vegetation-like).
+MIN_EXPLAINED = 0.7
+#: Plane tolerance of that test, in range-noise units.
+PLANE_TOL_NOISE = 3.0
+
+
+def manual_available() -> bool:
+    return (MANUAL / "0.pcd").is_file() and MANUAL_PAIRS.is_file()
+
+
+def load_manual() -> RealScene:
+    """manual_calib: 0.pcd organised into 64 beams by elevation; its JSON claims 1920 x 1080 but the image
+    is 1920 x 1200 (real_data/README.md); the published matrix from the dataset's JSON."""
+    doc = json.loads((MANUAL / "top_center_lidar-to-center_camera-extrinsic.json").read_text())
+    T = np.array(doc["top_center_lidar-to-center_camera-extrinsic"]["param"]["sensor_calib"]["data"], dtype=float)
+    return RealScene(load_scan(MANUAL / "0.pcd", beams=64),
+                     load_camera(MANUAL / "center_camera-intrinsic.json", image_size=(1920, 1200)),
+                     load_image_rgb(MANUAL / "0.png"), T, load_pairs_yaml(MANUAL_PAIRS))
+
+
+def loupe_side_px(width: int, height: int) -> int:
+    """The app's camera loupe side at zoom 1 (original-image px)."""
+    from app.loupes import default_camera_crop_px
+
+    return default_camera_crop_px(width, height)
+
+
+def app_screen(width: int, height: int) -> ProposalScreen:
+    """The screen the app uses for an image of this size (app/guide_support.py)."""
+    from app.guide_support import max_ellipse_px_for
+
+    return replace(ProposalScreen(), max_ellipse_px=max_ellipse_px_for(width, height))
+
+
+def by_eye_pairs(scene: RealScene, rng: np.random.Generator, n: int = N_ROUGH) -> list[Pair]:
+    """``n`` of the committed pairs' cells, pixels off their published projection by 5-15 px."""
+    pick = rng.choice(len(scene.pairs), size=n, replace=False)
+    out = []
+    for i in pick:
+        rc = scene.pairs[i].laser_rc
+        uv, _ = scene.camera.project(transform_points(scene.T_published, scene.depth.points[rc[0], rc[1]][None]))
+        angle, length = rng.uniform(0.0, 2 * np.pi), rng.uniform(*ROUGH_PX)
+        uv = np.clip(uv[0] + length * np.array([np.cos(angle), np.sin(angle)]), 0,
+                     [scene.camera.width - 1, scene.camera.height - 1])
+        out.append(Pair(rc, None, (float(uv[0]), float(uv[1]))))
+    return out
+
+
+# ------------------------------------------------------------------ the measures (independent of the screen)
+def range_noise_m(depth, step: int = 4) -> float:
+    """Median RMS of plane fits (SVD) to the valid points of 3 x 3 blocks on a grid of cells, metres."""
+    H, W = depth.shape
+    r0, c0 = np.meshgrid(np.arange(1, H - 1, step), np.arange(1, W - 1, step), indexing="ij")
+    off = np.array([(dr, dc) for dr in (-1, 0, 1) for dc in (-1, 0, 1)])
+    rows, cols = r0.reshape(-1, 1) + off[:, 0], c0.reshape(-1, 1) + off[:, 1]
+    full = depth.valid[rows, cols].all(axis=1)
+    P = depth.points[rows[full], cols[full]]
+    D = P - P.mean(axis=1, keepdims=True)
+    rms = np.sqrt(np.linalg.eigvalsh(np.einsum("nki,nkj->nij", D, D) / 9.0)[:, 0].clip(0))
+    return float(np.median(rms))
+
+
+def explained_by_two_planes(depth, rc, tol_m: float, rng: np.random.Generator, half: int = 2) -> float:
+    """Share of the near-side points of the cell's window that lie within ``tol_m`` of at most two RANSAC planes."""
+    H, W = depth.shape
+    r, c = int(rc[0]), int(rc[1])
+    rows = np.arange(max(r - half, 0), min(r + half + 1, H))
+    cols = np.mod(np.arange(c - half, c + half + 1), W)
+    ok = depth.valid[np.ix_(rows, cols)]
+    P = depth.points[np.ix_(rows, cols)][ok]
+    rng_m = np.linalg.norm(P, axis=1)
+    if len(P) < 4:
+        return 0.0
+    lo, hi = np.log(rng_m.min()), np.log(rng_m.max())
+    if hi - lo >= 0.05:  # a depth step: the near side is the object whose corner is proposed
+        P = P[np.log(rng_m) < 0.5 * (lo + hi)]
+    left = np.ones(len(P), dtype=bool)
+    for _ in range(2):
+        Q = P[left]
+        if len(Q) < 3:
+            break
+        idx = rng.integers(0, len(Q), size=(300, 3))
+        normal = np.cross(Q[idx[:, 1]] - Q[idx[:, 0]], Q[idx[:, 2]] - Q[idx[:, 0]])
+        norm = np.linalg.norm(normal, axis=1)
+        good = norm > 1e-9
+        if not good.any():
+            break
+        normal = normal[good] / norm[good, None]
+        # Distance of every point from every hypothesis plane: |n . (q - a)|.
+        d = np.abs(normal @ Q.T - np.einsum("hj,hj->h", normal, Q[idx[good, 0]])[:, None])
+        best = int(np.argmax((d <= tol_m).sum(axis=1)))
+        inl = d[best] <= tol_m
+        if inl.sum() < 3:
+            break
+        sub = np.flatnonzero(left)
+        left[sub[inl]] = False
+    return float(1.0 - left.mean()) if len(P) else 0.0
+
+
+def footprint_px(scene: RealScene, rc) -> float:
+    """Image length (px) of one cell step: the cell's range along the neighbouring beams, projected (published pose)."""
+    depth = scene.depth
+    H, W = depth.shape
+    r, c = int(rc[0]), int(rc[1])
+    rho = float(depth.range_m[r, c])
+    steps = []
+    for a, b in (((min(r + 1, H - 1), c), (max(r - 1, 0), c)), ((r, (c + 1) % W), (r, (c - 1) % W))):
+        d = np.array([depth.directions[a], depth.directions[b]])
+        if not np.isfinite(d).all():
+            continue
+        uv, ok = scene.camera.project(transform_points(scene.T_published, rho * d))
+        if ok.all():
+            steps.append(float(np.linalg.norm(uv[0] - uv[1])) / max(abs(a[0] - b[0]) + abs(a[1] - b[1]), 1))
+    return max(steps) if steps else np.nan
+
+
+@dataclass
+class Judged:
+    """Measures of one trial's proposals (one entry per proposal)."""
+
+    on_corner: list
+    strong: list
+    radius_px: list
+    fits_loupe: list
+    fits_zoomed: list
+    vegetation: list
+    far: list
+    reason: str | None = None
+
+
+def judge(scene: RealScene, corners, props, noise_m: float, loupe_px: int, max_ellipse_px: float,
+          rng: np.random.Generator) -> Judged:
+    out = Judged([], [], [], [], [], [], [], getattr(props, "reason", None))
+    for p in props:
+        uv, ok = scene.camera.project(transform_points(scene.T_published, np.asarray(p.laser_xyz)[None]))
+        radius = max(3.0, np.nan_to_num(footprint_px(scene, p.laser_rc), nan=3.0))
+        peak, strength = strongest_near(corners, uv, radius)
+        out.on_corner.append(bool(ok[0] and clean_corner(corners, peak, CornerGate())[0]))
+        out.strong.append(bool(ok[0] and strength[0] >= CornerGate().min_strength))
+        out.radius_px.append(p.radius_3sigma_px)
+        out.fits_loupe.append(p.radius_3sigma_px <= loupe_px / 2)
+        out.fits_zoomed.append(p.radius_3sigma_px <= max_ellipse_px)
+        out.vegetation.append(explained_by_two_planes(scene.depth, p.laser_rc, PLANE_TOL_NOISE * noise_m, rng)
+                              < MIN_EXPLAINED)
+        out.far.append(float(np.linalg.norm(p.laser_xyz)) > FAR_M)
+    return out
+
+
+def candidate_ceiling(scene: RealScene, corners) -> tuple[int, float, float, float]:
+    """Every laser candidate the camera sees under the published pose: their number, the shares whose
+    projection lies on a clean / strong image corner (what any choice among them can reach) and their
+    median cell footprint (px)."""
+    from calib_core.guide.candidates import find_candidates
+    from calib_core.guide.visibility import visible_in_camera
+
+    cand = find_candidates(scene.depth)
+    scan_points, _ = scene.depth.valid_points()
+    uv, seen = visible_in_camera(scene.camera, scene.T_published, scan_points, cand.points_lidar)
+    clean, strong, feet = [], [], []
+    for i in np.flatnonzero(seen):
+        feet.append(footprint_px(scene, cand.rows_cols[i]))
+        radius = max(3.0, np.nan_to_num(feet[-1], nan=3.0))
+        peak, s = strongest_near(corners, uv[i][None], radius)
+        clean.append(bool(clean_corner(corners, peak, CornerGate())[0]))
+        strong.append(bool(s[0] >= CornerGate().min_strength))
+    return len(clean), float(np.mean(clean)), float(np.mean(strong)), float(np.nanmedian(feet))
+
+
+def run_scene(name: str, scene: RealScene, trials: int) -> dict:
+    """Before and after the screen over ``trials`` trials: arm -> list of Judged."""
+    from calib_core.guide.image_corners import corner_image
+
+    corners = corner_image(scene.image)
+    noise = range_noise_m(scene.depth)
+    loupe = loupe_side_px(scene.camera.width, scene.camera.height)
+    screen = app_screen(scene.camera.width, scene.camera.height)
+    out: dict = {"before": [], "after": [], "loupe_px": loupe, "max_ellipse_px": screen.max_ellipse_px,
+                 "noise_m": noise, "ceiling": candidate_ceiling(scene, corners)}
+    session = None
+    for k in range(trials):
+        rng = np.random.default_rng([BENCH_SEED, k])
+        pairs = by_eye_pairs(scene, rng)
+        if session is None:
+            session = GuidedSession(scene.depth, scene.camera, pairs, image=scene.image)
+        else:  # the scan's candidates and corners are computed once
+            session.pairs = list(pairs)
+            session._update_state()
+        for arm, scr in (("before", None), ("after", screen)):
+            session.propose_options["screen"] = scr
+            props = session.proposals(N_PROPOSALS)
+            out[arm].append(judge(scene, corners, props, noise, loupe, screen.max_ellipse_px,
+                                  np.random.default_rng([BENCH_SEED, k, 1])))
+        log(f"{name} trial {k + 1}/{trials}: {len(out['before'][-1].radius_px)} proposals before, "
+            f"{len(out['after'][-1].radius_px)} after")
+    return out
+
+
+def _share(judged: list, attr: str) -> tuple[float, int]:
+    values = [v for j in judged for v in getattr(j, attr)]
+    return (float(np.mean(values)) if values else float("nan")), len(values)
+
+
+def table(results: dict, trials: int) -> list[str]:
+    """The before / after table (markdown)."""
+    pct = (lambda x: "-" if not np.isfinite(x) else f"{100 * x:.0f} %")  # noqa: E731
+    lines = [
+        f"| scene | proposals | shown ({trials} trials x 20) | true projection on a clean image corner | "
+        "on a strong image corner | median 3-sigma radius | fits the loupe at zoom 1 | fits the app's limit | "
+        f"off vegetation | off far background (> {FAR_M:.0f} m) | trials with none |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for name, res in results.items():
+        for arm in ("before", "after"):
+            js = res[arm]
+            on, n = _share(js, "on_corner")
+            strong, _ = _share(js, "strong")
+            fit, _ = _share(js, "fits_loupe")
+            fit_z, _ = _share(js, "fits_zoomed")
+            veg, _ = _share(js, "vegetation")
+            far, _ = _share(js, "far")
+            radii = [v for j in js for v in j.radius_px]
+            med = f"{np.median(radii):.1f} px" if radii else "-"
+            empty = sum(1 for j in js if not j.radius_px)
+            label = "before (no screen)" if arm == "before" else "after (screen)"
+            lines.append(f"| {name} (loupe {res['loupe_px']} px, limit {res['max_ellipse_px']:.0f} px) | {label} | {n} | "
+                         f"{pct(on)} | {pct(strong)} | {med} | {pct(fit)} | {pct(fit_z)} | {pct(1 - veg)} | "
+                         f"{pct(1 - far)} | {empty} |")
+        n_all, clean_all, strong_all, _ = res["ceiling"]
+        lines.append(f"| {name} | every laser candidate the camera sees (published pose) | {n_all} | {pct(clean_all)} | "
+                     f"{pct(strong_all)} | | | | | | |")
+    return lines
+
+
+DOC = REPO / "docs" / "guide_performance.md"
+START, END = "<!-- bench.guide_by_eye: start -->", "<!-- bench.guide_by_eye: end -->"
+
+
+def section_of(path: Path = DOC) -> str:
+    """The by-eye section (with its markers) of a guide_performance.md, or "" (bench/guide.py keeps it when it
+    rewrites the file)."""
+    text = path.read_text() if path.is_file() else ""
+    i, j = text.find(START), text.find(END)
+    return text[i:j + len(END)] + "\n" if 0 <= i < j else ""
+
+
+def write_section(body: str, path: Path = DOC) -> None:
+    """Put ``body`` between the markers of ``path`` (replacing the old section, else appended)."""
+    text = path.read_text() if path.is_file() else ""
+    block = f"{START}\n{body.rstrip()}\n{END}\n"
+    old = section_of(path)
+    text = text.replace(old, block) if old else text.rstrip("\n") + "\n\n" + block
+    path.write_text(text)
+
+
+def markdown(results: dict, trials: int, seconds: float, load: tuple) -> str:
+    """The section: how it was made, the table, the reasons shown when a trial had no proposal."""
+    lines = [
+        "## Proposals a person can check (issue 20)",
+        "",
+        f"Generated by `python -m bench.guide_by_eye --trials {trials} --write` (bench/guide_by_eye.py) in "
+        f"{seconds:.0f} s; load average at the start and the end {load[0]:.2f}, {load[1]:.2f} (2 cores, shared). "
+        "Each trial: 5 rough pairs made by eye (cells of the committed real_data pairs, pixels 5-15 px off their "
+        "projection under the published calibration, no precision given), then the first 20 proposals with the "
+        "camera image, without the screen (the code before issue 20, `screen=None`; the same proposals as on "
+        "main) and with the app's screen (`ProposalScreen` with `max_ellipse_px` = half the app's camera loupe "
+        "zoomed out one step). The measures are the benchmark's own (module docstring): *clean* corner = "
+        "`clean_corner` (strength, L/X shape, isolation) within one cell footprint of the laser point's "
+        "projection under the published calibration; *strong* = `lam_min >= 0.01` there; *vegetation* = fewer "
+        f"than {100 * MIN_EXPLAINED:.0f} % of the window's near-side points within {PLANE_TOL_NOISE:.0f} range "
+        f"noise of at most two RANSAC planes; *far* = range > {FAR_M:.0f} m. Re-clicks of the rough pairs are "
+        "proposals too and are counted; the screen keeps them even beyond its range limit (the person chose "
+        "those corners, and a rough pair left as it was biases the solve), which is all that is left on far "
+        "background after it.",
+        "",
+    ]
+    lines += table(results, trials)
+    ceil = {name: res["ceiling"] for name, res in results.items()}
+    if ceil:
+        lines += ["", "What limits the clean share (measured here): of every laser candidate the camera sees, "
+                  + ", ".join(f"{100 * c[1]:.0f} % ({name})" for name, c in ceil.items())
+                  + " have a clean image corner at their true projection, so no choice among them makes most "
+                  "proposals clean: the candidates are the limit, not the ranking or the screen.  Their median "
+                  "cell footprint is " + ", ".join(f"{c[3]:.1f} px ({name})" for name, c in ceil.items())
+                  + ": a footprint limit of 2-3 px would leave no proposal on these 64-beam scans, so the screen's "
+                  f"limit is {ProposalScreen().max_footprint_px:.0f} px (it drops irregular cells) and far cells "
+                  f"go by range ({ProposalScreen().max_range_m:.0f} m)."]
+    reasons = sorted({j.reason for res in results.values() for j in res["after"] if j.reason})
+    if reasons:
+        lines += ["", "Reasons shown when a trial had no proposal: " + "; ".join(f"\"{r}\"" for r in reasons) + "."]
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    import os
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--trials", type=int, default=5, help="trials per scene (default 5)")
+    ap.add_argument("--write", action="store_true",
+                    help="write the section into docs/guide_performance.md (between its markers)")
+    args = ap.parse_args(argv)
+    t0 = time.time()
+    load0 = os.getloadavg()[0]
+    results = {}
+    if kitti_available():
+        results["KITTI 000002"] = run_scene("KITTI 000002", load_kitti(), args.trials)
+    else:
+        log(f"KITTI data not found at {KITTI}; skipped")
+    if manual_available():
+        results["PJLab manual_calib"] = run_scene("PJLab manual_calib", load_manual(), args.trials)
+    else:
+        log(f"manual_calib data not found at {MANUAL}; skipped")
+    md = markdown(results, args.trials, time.time() - t0, (load0, os.getloadavg()[0]))
+    print(md)
+    if args.write:
+        write_section(md)
+        log(f"wrote the section into {DOC}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

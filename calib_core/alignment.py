@@ -1,0 +1,193 @@
+"""The maths of the rough alignment by drag: mounting presets, turning the view about the camera centre.
+
+Frames: the lidar frame is x forward, y left, z up; the camera frame is OpenCV's, x right, y down,
+z forward (the optical axis).  ``T_camera_lidar`` (4, 4) maps lidar points (metres) into the camera
+frame: ``p_camera = R @ p_lidar + t``; the camera centre in the lidar frame is ``-R.T @ t``.  Angles are
+radians unless a name says degrees.  Pixels are ``(u, v)`` = (column, row), the top-left pixel's centre
+at ``(0, 0)``.
+
+Sign convention of the view rotation (:func:`rotate_about_camera`), as seen on the screen:
+
+* positive ``d_yaw`` (about the camera's y axis) moves the projected points to the right (u grows);
+* positive ``d_pitch`` (about the camera's x axis) moves them down (v grows);
+* positive ``d_roll`` (about the optical axis) turns them clockwise about the principal point.
+
+So dragging the scan overlay by ``(du, dv)`` pixels is :func:`drag_to_rotation` ``(du, dv, f)`` fed
+straight into :func:`rotate_about_camera`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .arrays import as_transform
+from .errors import CalibError
+
+
+def _T_from_camera_axes(x_axis, y_axis, z_axis) -> np.ndarray:
+    """``T_camera_lidar`` with the camera at the lidar origin, its x/y/z axes given in the lidar frame."""
+    T = np.eye(4)
+    T[:3, :3] = np.array([x_axis, y_axis, z_axis], dtype=float)  # rows: camera axes in lidar coordinates
+    return T
+
+
+#: Initial ``T_camera_lidar`` for a camera at the lidar origin looking along one lidar axis, image upright
+#: (camera y = -lidar z).  Keys name the lidar axis the optical axis points along.
+MOUNTING_PRESETS: dict[str, np.ndarray] = {
+    "+x": _T_from_camera_axes((0, -1, 0), (0, 0, -1), (1, 0, 0)),   # forward: image right = lidar -y
+    "-y": _T_from_camera_axes((-1, 0, 0), (0, 0, -1), (0, -1, 0)),  # to the right: image right = lidar -x
+    "+y": _T_from_camera_axes((1, 0, 0), (0, 0, -1), (0, 1, 0)),    # to the left: image right = lidar +x
+    "-x": _T_from_camera_axes((0, 1, 0), (0, 0, -1), (-1, 0, 0)),   # backward: image right = lidar +y
+}
+#: Plain-word names of the presets.
+PRESET_ALIASES = {"forward": "+x", "right": "-y", "left": "+y", "backward": "-x"}
+
+
+def preset_T(name: str) -> np.ndarray:
+    """The mounting preset ``name`` (``"+x"``, ``"-y"``, ``"+y"``, ``"-x"``, or forward/right/left/backward).
+
+    Returns
+    -------
+    (4, 4) float64
+        ``T_camera_lidar``, translation 0 (a copy: safe to modify).
+    """
+    key = PRESET_ALIASES.get(str(name).strip().lower(), str(name).strip())
+    if key not in MOUNTING_PRESETS:
+        names = ", ".join(list(MOUNTING_PRESETS) + list(PRESET_ALIASES))
+        raise CalibError(f"unknown mounting preset {name!r}; use one of {names}")
+    return MOUNTING_PRESETS[key].copy()
+
+
+def _rot_x(a: float) -> np.ndarray:
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+
+def _rot_y(a: float) -> np.ndarray:
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
+def _rot_z(a: float) -> np.ndarray:
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def view_rotation(d_yaw_rad: float, d_pitch_rad: float, d_roll_rad: float = 0.0) -> np.ndarray:
+    """The rotation ``R_delta`` (3, 3) applied to camera-frame points by :func:`rotate_about_camera`.
+
+    ``R_delta = Rz(d_roll) @ Rx(-d_pitch) @ Ry(d_yaw)`` (right-handed elementary rotations about the
+    camera axes; yaw acts first).  A point on the optical axis goes to
+    ``(sin(yaw), sin(pitch) cos(yaw), cos(pitch) cos(yaw))`` (before the roll): right for positive yaw,
+    down for positive pitch.
+    """
+    return _rot_z(float(d_roll_rad)) @ _rot_x(-float(d_pitch_rad)) @ _rot_y(float(d_yaw_rad))
+
+
+def rotate_about_camera(T_camera_lidar, d_yaw_rad: float, d_pitch_rad: float, d_roll_rad: float = 0.0) -> np.ndarray:
+    """Turn the view about the camera centre: the camera stays where it is, the scene turns in the image.
+
+    Parameters
+    ----------
+    T_camera_lidar : (4, 4) array_like
+        Maps lidar points (metres) into the camera frame.
+    d_yaw_rad, d_pitch_rad, d_roll_rad : float
+        Radians, about the camera's y (image up/down), x (image left/right) and z (optical) axes, with the
+        module's screen convention: positive yaw moves projected points right, positive pitch down,
+        positive roll clockwise on the screen.
+
+    Returns
+    -------
+    (4, 4) float64
+        ``[R_delta R | R_delta t]`` with ``R_delta = view_rotation(...)``: camera-frame points are turned by
+        ``R_delta``; the camera centre in the lidar frame, ``-R.T t``, is unchanged.
+    """
+    T = as_transform(T_camera_lidar)
+    R_delta = view_rotation(d_yaw_rad, d_pitch_rad, d_roll_rad)
+    out = np.eye(4)
+    out[:3, :3] = R_delta @ T[:3, :3]
+    out[:3, 3] = R_delta @ T[:3, 3]
+    return out
+
+
+def drag_to_rotation(du_px: float, dv_px: float, focal_px) -> tuple[float, float]:
+    """The view rotation that makes the point under the cursor follow a drag of ``(du, dv)`` screen pixels.
+
+    For a pinhole camera (focal lengths ``fx``, ``fy``) and a point on the optical axis (it projects to the
+    principal point), :func:`rotate_about_camera` with the returned angles moves its projection by exactly
+    ``(du, dv)``: after the yaw ``a`` and then the pitch ``b`` of :func:`view_rotation` the point is at
+    ``u - cx = fx tan(a) / cos(b)``, ``v - cy = fy tan(b)``, so
+
+    ``d_pitch = atan(dv / fy)``,  ``d_yaw = atan(du / (fx * sqrt(1 + (dv / fy)**2)))``.
+
+    Elsewhere in the image, and for other camera models (with :func:`focal_px_estimate`), the point follows
+    the cursor to first order.
+
+    Parameters
+    ----------
+    du_px, dv_px : float
+        Drag in image pixels (right and down positive).
+    focal_px : float or (float, float)
+        Focal length in pixels, or ``(fx, fy)``.
+
+    Returns
+    -------
+    (d_yaw_rad, d_pitch_rad) : (float, float)
+        Radians, for :func:`rotate_about_camera` (roll 0).
+    """
+    f = np.broadcast_to(np.asarray(focal_px, dtype=float), (2,))
+    fx, fy = float(f[0]), float(f[1])
+    if not (np.isfinite(fx) and np.isfinite(fy) and fx > 0 and fy > 0):
+        raise CalibError(f"focal length must be positive and finite, got {focal_px}")
+    du, dv = float(du_px), float(dv_px)
+    if not (np.isfinite(du) and np.isfinite(dv)):
+        raise CalibError(f"drag must be finite, got ({du_px}, {dv_px})")
+    d_pitch = float(np.arctan2(dv, fy))
+    d_yaw = float(np.arctan2(du, fx * np.hypot(1.0, dv / fy)))
+    return d_yaw, d_pitch
+
+
+def translate_in_camera(T_camera_lidar, dx_m: float, dy_m: float, dz_m: float) -> np.ndarray:
+    """Move the camera by ``(dx, dy, dz)`` metres along its own axes (x right, y down, z forward).
+
+    The camera centre in the lidar frame moves by ``R.T @ d``; the orientation is unchanged, so
+    ``t' = t - d`` (camera-frame points move by ``-d``).
+
+    Returns
+    -------
+    (4, 4) float64
+    """
+    T = as_transform(T_camera_lidar).copy()
+    d = np.array([dx_m, dy_m, dz_m], dtype=float)
+    if not np.isfinite(d).all():
+        raise CalibError(f"camera step must be finite, got {tuple(d)}")
+    T[:3, 3] -= d
+    return T
+
+
+def focal_px_estimate(camera) -> float:
+    """A focal length in pixels (pixels per radian near the image centre), for any camera model.
+
+    From the bearings of the pixels one to each side of the principal point (where the optical axis
+    projects; the image centre if it projects outside the image): two pixels ``2 * atan(1 / f)`` apart in
+    angle give ``f = 1 / tan(angle / 2)``, horizontally and vertically; the mean of the two is returned.
+    Exact ``(fx + fy) / 2`` for an undistorted pinhole; for fisheye and OCam models the local scale of the
+    image near its centre.
+    """
+    width, height = int(camera.width), int(camera.height)
+    centre_px, ok = camera.project(np.array([[0.0, 0.0, 1.0]]))
+    centre = np.asarray(centre_px, float).reshape(2)
+    if not (bool(np.asarray(ok).reshape(-1)[0]) and np.isfinite(centre).all()):
+        centre = np.array([(width - 1) / 2.0, (height - 1) / 2.0])
+    steps = np.array([[-1.0, 0.0], [1.0, 0.0], [0.0, -1.0], [0.0, 1.0]])
+    rays = np.asarray(camera.bearing(centre + steps), float)
+    rays = rays / np.linalg.norm(rays, axis=1, keepdims=True)
+    focals = []
+    for a, b in ((0, 1), (2, 3)):
+        angle = np.arctan2(np.linalg.norm(np.cross(rays[a], rays[b])), float(rays[a] @ rays[b]))
+        if np.isfinite(angle) and angle > 0:
+            focals.append(1.0 / np.tan(angle / 2.0))
+    if not focals:
+        raise CalibError(f"cannot estimate a focal length: the camera model has no rays at the image centre "
+                         f"({camera!r})")
+    return float(np.mean(focals))

@@ -1,0 +1,335 @@
+"""Clear, isolated evidence in both views: the screen a proposal must pass before a person is asked to click it.
+
+A D-optimal proposal is worthless when the person cannot find its corner:
+on vegetation (no corner at all), on far background, at the image border,
+in clutter of similar corners, or with a 3-sigma ellipse larger than the
+loupe it is shown in.  :class:`ProposalScreen` names each test's threshold;
+:func:`calib_core.guide.propose.propose` applies it.
+
+Laser side
+    *Locally planar structure.*  Every cell gets the RMS distance of its
+    3 x 3 neighbours on the same surface (range within ``same_surface_rel``)
+    from their least-squares plane (:func:`local_plane_residual_m`; NaN where
+    fewer than ``min_plane_neighbours`` such neighbours, or where they lie on
+    one line: no plane is defined).  A candidate's *support* is its
+    ``(2 plane_half + 1)^2`` window: the near side of the depth step through
+    it when there is one (the object whose corner is proposed), else every
+    valid cell.  :func:`planar_share` is the share of the support whose
+    residual is at most ``max_plane_rms_noise`` times the scan's range noise;
+    foliage scatters its returns in depth and fails, a box face, a wall, a
+    pole, the road pass.
+
+    *Resolution.*  :func:`cell_footprint_px` is the image length of one
+    cell step (row or column, the larger): the cell's angular size times the
+    camera's local focal length (``d pixel / d point``).  A cell longer than
+    ``max_footprint_px`` leaves the corner's pixel too uncertain for a loupe.
+    Note: for a lidar next to the camera the footprint is nearly the same at
+    every range (both are angles); cells on far background are left out by
+    ``max_range_m`` and, through their metric size, by ``max_cell_m`` of
+    :func:`~calib_core.guide.propose.propose`.
+
+Image side
+    *One dominant corner inside the 3-sigma ellipse* (:func:`dominant_corner`):
+    the local maxima of the structure tensor's ``lam_min``
+    (:mod:`.image_corners`) inside the ellipse; the strongest must be at least
+    ``min_corner_strength``, an L or X corner (``lam_min / lam_max >=
+    min_corner_ratio``) and ``min_corner_dominance`` times stronger than the
+    second strongest.
+
+Both
+    The predicted pixel's 3-sigma box keeps ``border_margin_px`` from the
+    image border (and from the rim of a fisheye's image circle), and its
+    3-sigma radius (major half-axis) is at most ``max_ellipse_px``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from ..errors import CalibError
+from ..solve.whiten import cell_pick_covariance
+from .image_corners import CornerImage
+
+__all__ = [
+    "ProposalScreen",
+    "DEFAULT_MAX_ELLIPSE_PX",
+    "REASON_ROUGH_ALIGNMENT",
+    "REASON_NO_EVIDENCE",
+    "local_plane_residual_m",
+    "planar_share",
+    "cell_footprint_px",
+    "corner_peaks",
+    "dominant_corner",
+    "ellipse_box_margin_px",
+]
+
+#: Largest 3-sigma radius (px) of a proposal by default: an 80 px disc, about the app's camera loupe for a
+#: 1242-1920 px wide image (47-72 px) zoomed out one step (x 1.5).
+DEFAULT_MAX_ELLIPSE_PX = 40.0
+
+#: Why there is no proposal, as the app and the CLI show it.
+REASON_ROUGH_ALIGNMENT = (
+    "no proposal's 3-sigma ellipse fits the loupe (at most {limit:.0f} px; the smallest is {smallest:.0f} px): "
+    "do a better rough alignment first (more pairs, or more careful clicks)"
+)
+REASON_NO_EVIDENCE = (
+    "no laser cell here has clear, isolated corner evidence in both the scan and the image; "
+    "pick the next pairs by hand"
+)
+
+
+@dataclass(frozen=True)
+class ProposalScreen:
+    """Thresholds of the clear-evidence screen (module docstring).
+
+    Attributes
+    ----------
+    max_ellipse_px : float
+        Largest 3-sigma radius (major half-axis of the pixel ellipse), px.
+    border_margin_px : float
+        Smallest distance of the 3-sigma box from the image border, px.
+    max_footprint_px : float
+        Largest image length of one cell step, px.
+    max_range_m : float
+        Farthest laser range proposed, metres.
+    plane_half : int
+        Half-size of the support window, cells (2 = 5 x 5).
+    same_surface_rel : float
+        Neighbours whose range differs from the cell's by at most this fraction are on its surface.
+    min_plane_neighbours : int
+        Fewest same-surface cells (the cell included) of a 3 x 3 block for a plane fit.
+    max_plane_rms_noise : float
+        Largest plane-fit RMS of a planar cell, in units of the scan's range noise
+        (:func:`calib_core.guide.corner_probability.scan_range_noise_m`).
+    min_planar_share : float
+        Smallest share (0..1) of the support that is planar.
+    min_planar_cells : int
+        Fewest planar cells in the support.
+    min_corner_strength : float
+        Smallest ``lam_min`` of the image corner, grey levels^2 (grey 0..1, 5 x 5 window).
+    min_corner_ratio : float
+        Smallest ``lam_min / lam_max`` of the image corner (1 = an ideal L or X corner, 0 = an edge).
+    min_corner_dominance : float
+        The strongest corner in the ellipse must be this many times stronger than the second.
+    min_search_px : float
+        The corner search covers at least this radius (px) around the prediction, so a tiny
+        ellipse cannot hide clutter just next to it.
+    """
+
+    max_ellipse_px: float = DEFAULT_MAX_ELLIPSE_PX
+    border_margin_px: float = 10.0
+    max_footprint_px: float = 10.0
+    max_range_m: float = 30.0
+    plane_half: int = 2
+    same_surface_rel: float = 0.15
+    min_plane_neighbours: int = 5
+    max_plane_rms_noise: float = 2.5
+    min_planar_share: float = 0.6
+    min_planar_cells: int = 4
+    min_corner_strength: float = 0.01
+    min_corner_ratio: float = 0.3
+    min_corner_dominance: float = 2.0
+    min_search_px: float = 4.0
+
+    def __post_init__(self) -> None:
+        for name, value in vars(self).items():
+            if not (isinstance(value, (int, float)) and np.isfinite(value) and value >= 0):
+                raise CalibError(f"proposal screen: {name} must be a finite number >= 0, got {value!r}")
+        if self.max_ellipse_px <= 0:
+            raise CalibError(f"proposal screen: max_ellipse_px must be a positive number of pixels, "
+                             f"got {self.max_ellipse_px!r}")
+
+
+def _neighbours(a: np.ndarray, wrap: bool, fill) -> np.ndarray:
+    """The 3 x 3 neighbourhood of every cell: ``(H, W, 9, ...)`` (``fill`` outside the scan; columns wrap if ``wrap``)."""
+    H, W = a.shape[:2]
+    out = []
+    for dr in (-1, 0, 1):
+        for dc in (-1, 0, 1):
+            s = np.roll(a, (-dr, -dc), axis=(0, 1))
+            if dr == 1:
+                s[H - 1] = fill
+            elif dr == -1:
+                s[0] = fill
+            if not wrap and dc == 1:
+                s[:, W - 1] = fill
+            elif not wrap and dc == -1:
+                s[:, 0] = fill
+            out.append(s)
+    return np.stack(out, axis=2)
+
+
+def local_plane_residual_m(depth, same_surface_rel: float = 0.15, min_neighbours: int = 5) -> np.ndarray:
+    """RMS distance (m) of each cell's same-surface 3 x 3 neighbours from their least-squares plane, (H, W).
+
+    Neighbours are on the cell's surface when their range differs from its
+    range by at most ``same_surface_rel`` (a fraction).  NaN where the cell
+    is not valid, where fewer than ``min_neighbours`` cells (itself included)
+    are on its surface, or where those span a single row or column (a line
+    fits any plane through it).
+    """
+    valid = np.asarray(depth.valid, dtype=bool)
+    wrap = bool(depth.meta.get("wrap_cols", False))
+    r = np.where(valid, depth.range_m, np.nan).astype(np.float64)
+    R = _neighbours(r, wrap, np.nan)
+    with np.errstate(invalid="ignore"):
+        same = np.isfinite(R) & (np.abs(R - r[:, :, None]) <= same_surface_rel * r[:, :, None])
+    n = same.sum(axis=2)
+    rows_used = same.reshape(*same.shape[:2], 3, 3).any(axis=3).sum(axis=2)
+    cols_used = same.reshape(*same.shape[:2], 3, 3).any(axis=2).sum(axis=2)
+    P = _neighbours(np.where(valid[:, :, None], np.nan_to_num(depth.points), 0.0), wrap, 0.0)
+    w = same[..., None]
+    mean = np.where(w, P, 0.0).sum(axis=2) / np.maximum(n, 1)[..., None]
+    D = np.where(w, P - mean[:, :, None, :], 0.0)
+    cov = np.einsum("hwki,hwkj->hwij", D, D) / np.maximum(n, 1)[..., None, None]
+    smallest = np.linalg.eigvalsh(cov)[..., 0]
+    ok = valid & (n >= min_neighbours) & (rows_used >= 2) & (cols_used >= 2)
+    return np.where(ok, np.sqrt(np.maximum(smallest, 0.0)), np.nan)
+
+
+def _support(depth, rows_cols: np.ndarray, half: int, step_log: float = 0.05) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Rows, cols ``(N, k, k)`` of each window and its support mask: the near side of a depth step
+    (log range below the window's midpoint, when it spans at least ``step_log``), else every valid cell."""
+    rc = np.asarray(rows_cols, dtype=np.int64).reshape(-1, 2)
+    H, W = depth.shape
+    off = np.arange(-half, half + 1)
+    rows = rc[:, 0, None, None] + off[None, :, None] + 0 * off[None, None, :]
+    cols = rc[:, 1, None, None] + off[None, None, :] + 0 * off[None, :, None]
+    inside = (rows >= 0) & (rows < H)
+    if depth.meta.get("wrap_cols", False):
+        cols = np.mod(cols, W)
+    else:
+        inside &= (cols >= 0) & (cols < W)
+    rows, cols = np.clip(rows, 0, H - 1), np.clip(cols, 0, W - 1)
+    ok = inside & np.asarray(depth.valid)[rows, cols]
+    lr = np.log(np.where(ok, depth.range_m[rows, cols], 1.0))
+    lo = np.where(ok, lr, np.inf).min(axis=(1, 2))
+    hi = np.where(ok, lr, -np.inf).max(axis=(1, 2))
+    any_ok = ok.any(axis=(1, 2))
+    step = any_ok & (np.where(any_ok, hi - lo, 0.0) >= step_log)
+    near = lr < np.where(any_ok, 0.5 * (lo + hi), 0.0)[:, None, None]
+    support = ok & np.where(step[:, None, None], near, True)
+    return rows, cols, support
+
+
+def planar_share(depth, rows_cols: np.ndarray, residual_m: np.ndarray, tol_m: float,
+                 half: int = 2) -> tuple[np.ndarray, np.ndarray]:
+    """Share of each cell's support that is planar, and the number of planar cells (module docstring).
+
+    Parameters
+    ----------
+    depth : DepthMatrix
+    rows_cols : (N, 2) int
+    residual_m : (H, W) ndarray
+        :func:`local_plane_residual_m` of ``depth``.
+    tol_m : float
+        Largest residual (m) of a planar cell.
+    half : int
+        Half-size of the window, cells.
+
+    Returns
+    -------
+    share : (N,) float
+        0..1 (0 where the support is empty).
+    n_planar : (N,) int
+    """
+    rows, cols, support = _support(depth, rows_cols, half)
+    res = np.asarray(residual_m)[rows, cols]
+    with np.errstate(invalid="ignore"):
+        planar = support & np.isfinite(res) & (res <= tol_m)
+    n_support = support.sum(axis=(1, 2))
+    n_planar = planar.sum(axis=(1, 2))
+    return np.where(n_support > 0, n_planar / np.maximum(n_support, 1), 0.0), n_planar
+
+
+def cell_footprint_px(depth, rows_cols: np.ndarray, J_point: np.ndarray) -> np.ndarray:
+    """Image length (px) of one cell step at each cell, the larger of the row and the column step, (N,).
+
+    The step is the change of the beam direction over one row (column) times
+    the range (:func:`calib_core.solve.whiten.cell_pick_covariance` with a
+    one-cell offset), mapped to the image by ``J_point`` (``d pixel / d
+    X_lidar``, px/m, :func:`.information.pixel_jacobians`).
+    """
+    rc = np.asarray(rows_cols, dtype=np.int64).reshape(-1, 2)
+    out = np.zeros(len(rc))
+    for sigma in ((1.0, 0.0), (0.0, 1.0)):
+        cov = cell_pick_covariance(depth, rc, sigma, 0.0)
+        px = np.einsum("nai,nij,naj->n", J_point, cov, J_point)
+        out = np.maximum(out, np.sqrt(np.maximum(px, 0.0)))
+    return out
+
+
+def corner_peaks(ci: CornerImage) -> np.ndarray:
+    """``lam_min`` at its local maxima within a window-sized neighbourhood (one value per corner), 0 elsewhere."""
+    k = 2 * ci.window + 1
+    lam = np.asarray(ci.lam_min, dtype=np.float32)
+    peak = (lam >= cv2.dilate(lam, np.ones((k, k), np.uint8))) & (lam > 0)
+    return np.where(peak, lam, 0.0).astype(np.float32)
+
+
+def dominant_corner(ci: CornerImage, peaks: np.ndarray, pixels: np.ndarray, pixel_cov: np.ndarray,
+                    min_search_px: float = 4.0) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The strongest and second-strongest image corners inside each 3-sigma ellipse.
+
+    Parameters
+    ----------
+    ci : CornerImage
+    peaks : (H, W) ndarray
+        :func:`corner_peaks` of ``ci``.
+    pixels : (N, 2) ndarray
+        Predicted ``(u, v)``.
+    pixel_cov : (N, 2, 2) ndarray
+        Their covariances, px^2; the ellipse is ``d^T C^-1 d <= 9``, grown
+        to a disc of ``min_search_px`` where smaller.
+
+    Returns
+    -------
+    peak_uv : (N, 2) float
+        The strongest corner's pixel (the prediction where there is none).
+    first, second : (N,) float
+        ``lam_min`` of the strongest and second-strongest corner (0 where none).
+    ratio : (N,) float
+        ``lam_min / lam_max`` at the strongest corner.
+    """
+    p = np.nan_to_num(np.asarray(pixels, dtype=np.float64).reshape(-1, 2))
+    C = np.nan_to_num(np.asarray(pixel_cov, dtype=np.float64).reshape(-1, 2, 2)) + 1e-9 * np.eye(2)
+    n = len(p)
+    if n == 0:
+        return np.zeros((0, 2)), np.zeros(0), np.zeros(0), np.zeros(0)
+    major = np.sqrt(np.maximum(np.linalg.eigvalsh(C)[:, -1], 0.0))
+    R = int(np.ceil(max(3.0 * float(major.max()), min_search_px)))
+    H, W = peaks.shape
+    off = np.arange(-R, R + 1, dtype=np.float64)
+    du, dv = np.meshgrid(off, off)  # (k, k): du along columns
+    Ci = np.linalg.inv(C)
+    m2 = Ci[:, 0, 0, None, None] * du**2 + 2 * Ci[:, 0, 1, None, None] * du * dv + Ci[:, 1, 1, None, None] * dv**2
+    inside = (m2 <= 9.0) | ((du**2 + dv**2) <= min_search_px**2)[None]
+    u0 = np.rint(p[:, 0]).astype(np.int64)
+    v0 = np.rint(p[:, 1]).astype(np.int64)
+    us = u0[:, None, None] + du.astype(np.int64)[None]
+    vs = v0[:, None, None] + dv.astype(np.int64)[None]
+    on_image = (us >= 0) & (us < W) & (vs >= 0) & (vs < H)
+    vals = np.where(inside & on_image, peaks[np.clip(vs, 0, H - 1), np.clip(us, 0, W - 1)], 0.0).reshape(n, -1)
+    best = np.argmax(vals, axis=1)
+    first = vals[np.arange(n), best]
+    second = -np.partition(-vals, 1, axis=1)[:, 1] if vals.shape[1] > 1 else np.zeros(n)
+    bu = us.reshape(n, -1)[np.arange(n), best]
+    bv = vs.reshape(n, -1)[np.arange(n), best]
+    peak_uv = np.where((first > 0)[:, None], np.stack([bu, bv], axis=1).astype(np.float64), p)
+    lam_max = np.asarray(ci.lam_max)[np.clip(bv, 0, H - 1), np.clip(bu, 0, W - 1)]
+    ratio = np.where(first > 0, first / np.maximum(lam_max, 1e-30), 0.0)
+    return peak_uv, first.astype(np.float64), second.astype(np.float64), ratio.astype(np.float64)
+
+
+def ellipse_box_margin_px(pixels: np.ndarray, pixel_cov: np.ndarray, width: int, height: int) -> np.ndarray:
+    """Distance (px) from each 3-sigma box (``u +- 3 sqrt(C_uu)``, ``v +- 3 sqrt(C_vv)``) to the image border, (N,);
+    negative where the box crosses it, NaN pixels give -inf.  Pixel centres run 0..width-1, 0..height-1."""
+    p = np.asarray(pixels, dtype=np.float64).reshape(-1, 2)
+    C = np.asarray(pixel_cov, dtype=np.float64).reshape(-1, 2, 2)
+    hu = 3.0 * np.sqrt(np.maximum(C[:, 0, 0], 0.0))
+    hv = 3.0 * np.sqrt(np.maximum(C[:, 1, 1], 0.0))
+    m = np.minimum.reduce([p[:, 0] - hu, (width - 1) - (p[:, 0] + hu), p[:, 1] - hv, (height - 1) - (p[:, 1] + hv)])
+    return np.where(np.isfinite(m), m, -np.inf)
