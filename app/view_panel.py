@@ -369,7 +369,12 @@ class ViewPanel:
         self._zoom(client, factor=ZOOM_STEP, centre=centre, min_units=units)
 
     def _watch_canvas(self, client: Any) -> None:
-        """Re-frame tab ``client`` when its canvas changes size (a resized window), once registered."""
+        """Re-frame tab ``client`` when its canvas changes shape (a resized window), once registered.
+
+        The reported size is in device pixels, which viser also scales down and up by itself when the page
+        renders slowly (its adaptive pixel ratio): that keeps the shape and shows the same view, so only a
+        change of the width / height ratio counts as a resize.
+        """
         if client.client_id in self._canvas_size:
             return
         self._canvas_size[client.client_id] = None
@@ -378,7 +383,7 @@ class ViewPanel:
             cid = camera.client.client_id
             size = (int(camera.image_width), int(camera.image_height))
             old, self._canvas_size[cid] = self._canvas_size.get(cid), size
-            if old is not None and old != size:
+            if old is not None and min(old + size) > 0 and abs(size[0] * old[1] / (size[1] * old[0]) - 1.0) > 0.005:
                 self.app.post(lambda: self._refit(camera.client), camera.client)
 
         client.camera.on_update(on_camera)
