@@ -57,6 +57,9 @@ class ViewSettings:
         laser images (``Intensity``, ``Range``), or ``""`` for its BA direction.
     edge_opacity : float
         Opacity of the BA-edge overlay, in :data:`EDGE_OPACITY_RANGE` (0 hides it).
+    hide_marks : bool
+        Hide every mark drawn over the images and in the loupes (pair markers, their numbers, the
+        selection, predictions, reprojection overlays, the loupes' outlines), to see what lies under them.
     """
 
     panorama: bool = True
@@ -71,6 +74,7 @@ class ViewSettings:
     loupe_shows: str = AS_CLICKED
     last_pane_shows: str = ""
     edge_opacity: float = 0.8
+    hide_marks: bool = False
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -121,7 +125,7 @@ def _checked(name: str, value: Any) -> Any:
 
 _FIELDS = {"panorama": bool, "show_reprojection": bool, "show_edges": bool, "snap": bool, "up_axis": str,
            "ba_window_mode": str, "ba_window_start": int, "ba_window_width": int, "contrast": float,
-           "loupe_shows": str, "last_pane_shows": str, "edge_opacity": float}
+           "loupe_shows": str, "last_pane_shows": str, "edge_opacity": float, "hide_marks": bool}
 _CHOICES = {"up_axis": tuple(UP_AXES), "ba_window_mode": tuple(BA_WINDOW_MODES)}
 _RANGES = {"contrast": CONTRAST_RANGE, "edge_opacity": EDGE_OPACITY_RANGE}
 assert tuple(_FIELDS) == tuple(f.name for f in fields(ViewSettings)), "ViewSettings and _FIELDS disagree"
