@@ -111,6 +111,6 @@ class CalibrationPanel:
                 rows.append(f"| {pid} | {_fmt(px, 2)} | {_fmt(deg, 3)} | yes |")
         for pos, px, deg in zip(getattr(r, "check_positions", []), getattr(r, "check_residual_px", []),
                                 getattr(r, "check_residual_deg", [])):
-            rows.append(f"| {bundle.pick_ids[pos]} | {_fmt(float(px), 2)} | {_fmt(float(deg), 3)} | "
-                        "no: check pair |")
+            shown = _fmt(float(px), 2) if np.isfinite(px) else "projects outside the image"  # no pixel error
+            rows.append(f"| {bundle.pick_ids[pos]} | {shown} | {_fmt(float(deg), 3)} | no: check pair |")
         self.md_table.content = "\n".join(rows)

@@ -18,13 +18,15 @@ from typing import Sequence
 
 from calib_core import compile_events
 
-from .cli_guard import (  # noqa: F401  (with_default_command: public, used by tests)
+from .cli_guard import (  # noqa: F401  (with_default_command, load_camera_from_args: public, used elsewhere)
     EXIT_USAGE,
     Noise,
     OneLineParser,
+    add_camera_args,
     check_args,
     check_serve_files,
     error_line,
+    load_camera_from_args,
     remove_stale_temp_files,
     with_default_command,
 )
@@ -79,7 +81,8 @@ def _add_scan_args(p: argparse.ArgumentParser, required: bool = True) -> None:
         "if points are stored laser after laser, else --beams, else spherical)",
     )
     p.add_argument("--beams", type=int, default=None, help="number of beams, for clouds without a ring field")
-    p.add_argument("--h-res-deg", type=float, default=None, help="azimuth resolution of the spherical fallback")
+    p.add_argument("--h-res-deg", type=float, default=None,
+                   help="azimuth resolution in degrees: the spherical fallback's cells, the columns of the other layouts")
     p.add_argument("--v-res-deg", type=float, default=None, help="elevation resolution of the spherical fallback")
     p.add_argument(
         "--sensor-origin", type=float, nargs=3, metavar=("X", "Y", "Z"), default=None,
@@ -109,15 +112,7 @@ def load_scan_from_args(args: argparse.Namespace):
 
 
 def _add_camera_arg(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--camera", required=True, type=Path, help="camera file: our YAML, ROS camera_info YAML, OCamCalib calib_results.txt")
-    p.add_argument("--image-size", type=int, nargs=2, metavar=("W", "H"), default=None, help="override the camera file's image size")
-
-
-def load_camera_from_args(args: argparse.Namespace):
-    from calib_core.cameras import load_camera
-
-    size = tuple(args.image_size) if args.image_size else None
-    return load_camera(args.camera, image_size=size) if size else load_camera(args.camera)
+    add_camera_args(p, required=True)
 
 
 # --- commands ----------------------------------------------------------------
@@ -207,7 +202,7 @@ def cmd_solve(args: argparse.Namespace) -> int | Outcome:
     if args.initial_extrinsics is not None:
         from calib_core.io.extrinsic_formats import load_extrinsics_any
 
-        initial = load_extrinsics_any(args.initial_extrinsics)
+        initial = load_extrinsics_any(args.initial_extrinsics, kitti_camera=args.kitti_camera)
     result = calibrate(pairs, depth, camera, cost=args.cost, initial_T_camera_lidar=initial)
     ids, _ = pair_ids_and_sigmas(pairs)
     doc, notes = extrinsics_document(result, pairs, depth, camera, base_dir=args.output.parent)

@@ -64,8 +64,9 @@ def check_args(args: argparse.Namespace) -> None:
 
 
 def check_serve_files(args: argparse.Namespace) -> None:
-    """``serve`` runs until stopped: a session it cannot restore, or an output it may not replace,
-    is reported now, in one line, rather than after the scene has loaded or at the first Export."""
+    """``serve`` runs until stopped: a session it cannot restore, an output it may not replace, or an image
+    the camera file does not fit, is reported now, in one line, rather than after the scene has loaded or at
+    the first Export."""
     if args.command != "serve":
         return
     from calib_core.io.atomic import output_target
@@ -76,6 +77,70 @@ def check_serve_files(args: argparse.Namespace) -> None:
         output_target(args.session)
     if args.output is not None:
         output_target(args.output)
+    if getattr(args, "bag", None) is None and args.camera is not None and args.image is not None:
+        load_camera_from_args(args)  # also checks the image's size against the camera's
+
+
+# --- cameras -------------------------------------------------------------------
+
+CAMERA_HELP = ("camera file: our YAML, ROS camera_info YAML, OCamCalib calib_results.txt, a KITTI calib/NNNNNN.txt "
+               "(see --kitti-camera), PJLab/OpenCalib intrinsic JSON (pinhole or OCam)")
+
+
+def add_camera_args(p: argparse.ArgumentParser, required: bool) -> None:
+    """``--camera``, ``--image-size`` and ``--kitti-camera``, as every command that reads a camera takes them."""
+    p.add_argument("--camera", required=required, type=Path, help=CAMERA_HELP)
+    p.add_argument("--image-size", type=int, nargs=2, metavar=("W", "H"), default=None,
+                   help="the images' size in pixels, when the camera file states another (or none)")
+    p.add_argument("--kitti-camera", type=int, choices=(0, 1, 2, 3), default=None, metavar="N",
+                   help="with a KITTI calib file: which rectified camera, 0-3 (P0..P3; default 2, the colour "
+                        "image_2); K = P[:, :3], no distortion, the image size from --image (or --image-size)")
+
+
+def camera_image_size(args: argparse.Namespace) -> tuple[int, int] | None:
+    """The image size the camera is loaded with: ``--image-size``, else for a KITTI calib file (which
+    states none) the size of ``--image`` (its header), else None (the camera file's own)."""
+    size = getattr(args, "image_size", None)
+    if size:
+        return int(size[0]), int(size[1])
+    camera, image = getattr(args, "camera", None), getattr(args, "image", None)
+    if camera is not None and image is not None:
+        from calib_core.cameras.io import is_kitti_calib
+
+        if is_kitti_calib(camera):
+            from calib_core.io.images import image_header_size
+
+            return image_header_size(image)
+    return None
+
+
+def load_camera_from_args(args: argparse.Namespace):
+    """The camera of ``--camera`` (with ``--image-size``, ``--kitti-camera``); with ``--image``, also checks
+    that the image has the camera's size (one line naming both, and ``--image-size`` when it would help)."""
+    from calib_core.cameras import load_camera
+
+    camera = load_camera(args.camera, image_size=camera_image_size(args), kitti_camera=getattr(args, "kitti_camera", None))
+    image = getattr(args, "image", None)
+    if image is not None:
+        check_image_fits_camera(image, camera, args)
+    return camera
+
+
+def check_image_fits_camera(image, camera, args: argparse.Namespace) -> None:
+    """Refuse an image whose header size is not the camera model's (before it is decoded)."""
+    from calib_core.errors import CalibError
+    from calib_core.io.images import image_header_size
+
+    width, height = image_header_size(image)
+    if (width, height) == (camera.width, camera.height):
+        return
+    if getattr(args, "image_size", None):
+        fix = f"--image-size says {camera.width} {camera.height}"
+    else:
+        fix = (f"if the camera's parameters are for this image and only the file's size is wrong, "
+               f"give --image-size {width} {height}")
+    raise CalibError(f"{image}: the image is {width}x{height} but the camera model {args.camera} is "
+                     f"{camera.width}x{camera.height}; {fix}")
 
 
 def remove_stale_temp_files(args: argparse.Namespace) -> None:

@@ -10,6 +10,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
     from app.serving import serve
 
     from .cli import default_sample_dir, scan_options
+    from .cli_guard import camera_image_size
 
     if getattr(args, "bag", None) is not None:
         from app.serving import BagSource
@@ -23,7 +24,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
                            camera=args.camera, frames_dir=args.frames_dir, session=args.session)
         serve(None, None, None, output_path=args.output, host=args.host, port=args.port,
               scan_options=scan_options(args), image_size=tuple(args.image_size) if args.image_size else None,
-              initial_extrinsics_path=args.initial_extrinsics, bag=source)
+              initial_extrinsics_path=args.initial_extrinsics, bag=source, kitti_camera=args.kitti_camera)
         return 0
     bag_only = [o for o, v in (("--cloud-topic", args.cloud_topic), ("--image-topic", args.image_topic),
                                ("--camera-info-topic", args.camera_info_topic), ("--index", args.index),
@@ -51,23 +52,31 @@ def cmd_serve(args: argparse.Namespace) -> int:
         host=args.host,
         port=args.port,
         scan_options=scan_options(args),
-        image_size=tuple(args.image_size) if args.image_size else None,
+        image_size=camera_image_size(args),  # a KITTI calib file states none: the image's
         initial_extrinsics_path=args.initial_extrinsics,
+        kitti_camera=args.kitti_camera,
     )
     return 0
 
 
 def add_serve_parser(sub) -> None:
     """The ``serve`` sub-command's options (``sub``: the parser's sub-parsers)."""
-    p = sub.add_parser("serve", help="open the browser app on a scene")
-    p.add_argument("--scan", type=Path)
-    p.add_argument("--image", type=Path)
-    p.add_argument("--camera", type=Path)
-    p.add_argument("--image-size", type=int, nargs=2, metavar=("W", "H"), default=None)
-    p.add_argument("--organize", choices=["auto", "ring", "elevation", "firing", "spherical"], default="auto")
-    p.add_argument("--beams", type=int, default=None)
-    p.add_argument("--h-res-deg", type=float, default=None)
-    p.add_argument("--v-res-deg", type=float, default=None)
+    from .cli_guard import add_camera_args
+
+    p = sub.add_parser("serve", help="open the browser app on a scene",
+                       description="Open the browser app on a scan, its camera image and the camera model "
+                                   "(all three, or none for the bundled sample).")
+    p.add_argument("--scan", type=Path,
+                   help="scan file: .npz (native), .pcd, .ply, .bin (KITTI, nuScenes, SUN RGB-D), .las/.laz, .npy")
+    p.add_argument("--image", type=Path, help="the camera image taken with the scan (PNG, JPEG, ...)")
+    add_camera_args(p, required=False)
+    p.add_argument("--organize", choices=["auto", "ring", "elevation", "firing", "spherical"], default="auto",
+                   help="how an unorganized cloud becomes a depth matrix (default: ring field if present, else the "
+                        "scan order if points are stored laser after laser, else --beams, else spherical)")
+    p.add_argument("--beams", type=int, default=None, help="number of beams, for clouds without a ring field")
+    p.add_argument("--h-res-deg", type=float, default=None,
+                   help="azimuth resolution in degrees: the spherical fallback's cells, the columns of the other layouts")
+    p.add_argument("--v-res-deg", type=float, default=None, help="elevation resolution of the spherical fallback")
     p.add_argument("--session", type=Path, default=None, help="pairs session file, saved after every change and restored on start")
     p.add_argument("--output", type=Path, default=None, help="where Export also writes the extrinsics YAML")
     p.add_argument("--host", default="127.0.0.1", help="interface to bind (default 127.0.0.1: this machine only)")

@@ -1,6 +1,6 @@
 """What the laser panes show: the BA loupe's image (BA as clicked, one BA direction, intensity, range), the last
-pane's image (its BA direction, intensity or range), a contrast control for the laser panes and the loupe, and the
-BA-edge overlay's opacity.  Grey levels come from
+pane's image (its BA direction, intensity or range), a contrast control for the laser panes and the loupe, the
+BA-edge overlay's opacity, and "Hide marks" (every mark off, to see the corner under it).  Grey levels come from
 :mod:`calib_core.display_images` and :func:`calib_core.bearing_angle.ba_to_display`."""
 
 from __future__ import annotations
@@ -11,6 +11,7 @@ import numpy as np
 
 from calib_core.display_images import apply_contrast
 
+from .settled_updates import settled
 from .ui_common import BA_TITLES
 from .view_settings import AS_CLICKED
 
@@ -19,8 +20,9 @@ class DisplayPanel:
     """What the laser panes of one :class:`app.server.CalibrationApp` show (``app.display``).
 
     It owns the grey images as shown (contrast applied) and its widgets, which
-    the view panel places in the View folder (:meth:`add_pane_controls`,
-    :meth:`add_edge_control`).  Public: :meth:`ba_display`, :meth:`ba_title`,
+    the view panel places in the Loupes folder (:meth:`add_loupe_controls`) and
+    the View folder (:meth:`add_last_pane_control`, :meth:`add_edge_control`).
+    Public: :meth:`ba_display`, :meth:`ba_title`,
     :meth:`loupe_image`, :meth:`loupe_sources`, :attr:`loupe_source`,
     :meth:`last_pane_sources`, :attr:`last_pane_source`, :attr:`edge_opacity`
     and the widgets' handlers (``on_*``).
@@ -31,27 +33,35 @@ class DisplayPanel:
         self._shown_gray: dict[str, np.ndarray] = {}
         self._recontrast()
 
-    def add_pane_controls(self, gui: Any) -> None:
-        """The "BA loupe shows", "Last laser pane" and "Laser contrast" widgets, where ``gui`` adds now."""
+    def add_loupe_controls(self, gui: Any) -> None:
+        """The "BA loupe shows", "Laser contrast" and "Hide marks" widgets, where ``gui`` adds now."""
         guard, view = self.app.guard, self.app.state.view
         self._dd_loupe_source = gui.add_dropdown(
             "BA loupe shows", self.loupe_sources(), initial_value=self.loupe_source,
             hint="The BA image last clicked, one BA direction, the scan's intensity (if it has one) or range")
         self._dd_loupe_source.on_update(guard(self.on_loupe_source))
+        self._sl_contrast = gui.add_slider("Laser contrast", 0.5, 3.0, 0.25, initial_value=view.contrast,
+                                           hint="Contrast of the BA images and the BA loupe")
+        self._sl_contrast.on_update(settled(guard(self.on_contrast)))  # a typed number applies once typed
+        self._cb_hide_marks = gui.add_checkbox(
+            "Hide marks", initial_value=view.hide_marks,
+            hint="Hide the pair markers, their numbers and the overlays on the images and in the loupes, "
+                 "to see the corner under them")
+        self._cb_hide_marks.on_update(guard(self.on_hide_marks))
+
+    def add_last_pane_control(self, gui: Any) -> None:
+        """The "Last laser pane" dropdown, where ``gui`` adds now."""
         self._dd_last_pane = gui.add_dropdown(
             "Last laser pane", self.last_pane_sources(), initial_value=self.last_pane_source,
             hint="What the bottom laser pane shows: its BA direction, the scan's intensity (if it has one) or "
                  "range; clicks on it pick the same cells")
-        self._dd_last_pane.on_update(guard(self.on_last_pane_source))
-        self._sl_contrast = gui.add_slider("Laser contrast", 0.5, 3.0, 0.25, initial_value=view.contrast,
-                                           hint="Contrast of the BA images and the BA loupe")
-        self._sl_contrast.on_update(guard(self.on_contrast))
+        self._dd_last_pane.on_update(self.app.guard(self.on_last_pane_source))
 
     def add_edge_control(self, gui: Any) -> None:
         """The "BA-edge opacity" slider, where ``gui`` adds now."""
         self._sl_edge_opacity = gui.add_slider("BA-edge opacity", 0.0, 1.0, 0.1,
                                                initial_value=self.app.state.view.edge_opacity)
-        self._sl_edge_opacity.on_update(self.app.guard(self.on_edge_opacity))
+        self._sl_edge_opacity.on_update(settled(self.app.guard(self.on_edge_opacity)))
 
     def loupe_sources(self) -> tuple[str, ...]:
         """The choices of what the BA loupe shows."""
@@ -147,6 +157,13 @@ class DisplayPanel:
                 for key in app.ba_keys:
                     app.page.set_ba(key, texture=app.view.ba_texture(key))
             app.loupes.refresh()
+
+    def on_hide_marks(self, event: Any) -> None:
+        """The "Hide marks" checkbox: every mark on the images and in the loupes off (or back)."""
+        if event.client is None:
+            return
+        self.app.state.set_view(hide_marks=bool(event.value))
+        self.app.overlays.refresh()  # the marks' redraws depend on the setting: only they are sent
 
     def on_edge_opacity(self, event: Any) -> None:
         """The "BA-edge opacity" slider."""

@@ -151,7 +151,7 @@ class LoupeSupport:
             guide.update()
 
     def add_upload_button(self, client: Any) -> None:
-        """This tab's "Import initial extrinsics" button, in the View folder (each tab gets its own)."""
+        """This tab's "Import initial extrinsics" button, in the Align folder (each tab gets its own)."""
         app = self.app
         with app.page.folder_lock:
             with app.align.folder:

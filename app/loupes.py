@@ -36,6 +36,10 @@ CAMERA_PX_LIMITS = (8, 1200)
 TEXTURE_TEXELS = 320  # texels along the longer side of a loupe texture (at least 1 per cell or pixel)
 PAD_GRAY = 60  # outside the scan or the image
 KINDS = ("ba", "camera")
+#: Scene nodes drawn from a loupe's view (not from the picks): its outline on the main image, the camera loupe's centre.
+FRAMING_NODES = {"ba": ("/annot/loupe/ba_outline",),
+                 "camera": ("/annot/loupe/camera_centre_halo", "/annot/loupe/camera_centre", "/annot/loupe/ellipse",
+                            "/annot/loupe/camera_outline")}
 
 
 def default_camera_crop_px(width: int, height: int) -> int:
@@ -80,8 +84,8 @@ class CameraCrop:
 class Loupes:
     """The BA loupe and the camera loupe of one :class:`app.server.CalibrationApp`.
 
-    Public: :meth:`frame_ba`, :meth:`frame_camera`, :meth:`zoom`,
-    :attr:`ba_crop`, :attr:`camera_crop`, :meth:`slot`,
+    Public: :meth:`frame_ba`, :meth:`frame_camera`, :meth:`zoom`, :meth:`show_click`,
+    :meth:`relayout`, :attr:`ba_crop`, :attr:`camera_crop`, :meth:`slot`,
     :meth:`target_at` (loupe pixel -> cell or original pixel) and
     :meth:`display_of` (the inverse).
     """
@@ -100,6 +104,7 @@ class Loupes:
         self._slots: dict[str, ImageSlot] = {}
         self._marks_of: dict[str, tuple] = {}  # kind -> inputs its marks were last drawn from
         self._framing_of: dict[str, tuple] = {}  # kind -> inputs its outline (and centre marker) were drawn from
+        self._clicked: dict[str, tuple] = {}  # kind -> the cell / pixel a click inside it chose: its title names it
         self.shows_render = False  # the laser loupe shows the camera-view render's crop (after a click on it)
         scene = app.server.scene
         self._handles: dict[str, Any] = {}
@@ -128,10 +133,12 @@ class Loupes:
         if not (0 <= int(row) < n_rows and 0 <= int(col) < n_cols):
             raise CalibError(f"cell ({row}, {col}) is outside the {n_rows} x {n_cols} scan")
         with self.app.ui_lock:
+            self._clicked.pop("ba", None)  # the title names the framed cell again
             crop = self._make_ba_crop(key, int(row), int(col))
             if crop != self.ba_crop:
                 self.ba_crop = crop
                 self._show("ba")
+            self._titles["ba"].text = self.title("ba")  # sent only if it changed
 
     def frame_camera(self, u: float, v: float, cov_px2: np.ndarray | None = None,
                      min_side_px: float | None = None) -> None:
@@ -147,12 +154,14 @@ class Loupes:
                 raise CalibError("cov_px2 must be a finite 2x2 covariance (pixels squared)")
             cov = tuple(map(tuple, c))
         with self.app.ui_lock:
+            self._clicked.pop("camera", None)
             side = self._cam_n_chosen if min_side_px is None else max(self._cam_n_chosen, math.ceil(min_side_px))
             self._cam_n = int(min(side, CAMERA_PX_LIMITS[1]))
             crop = self._make_camera_crop(float(u), float(v), cov)
             if crop != self.camera_crop:
                 self.camera_crop = crop
                 self._show("camera")
+            self._titles["camera"].text = self.title("camera")
 
     def show_render(self, on: bool) -> None:
         """Let the laser loupe show the camera-view render's crop (the camera loupe's crop), or the BA image's."""
@@ -187,6 +196,25 @@ class Loupes:
                 c = self.camera_crop
                 self.camera_crop = self._make_camera_crop(*c.center, c.cov_px2)
             self._show(kind)
+
+    def show_click(self, kind: str, point: tuple) -> None:
+        """Name a click made inside loupe ``kind`` in its title: scan cell ``(row, col)`` (BA) or original pixel
+        ``(u, v)``.  The loupe keeps its view (the click was aimed in it)."""
+        with self.app.ui_lock:
+            self._clicked[kind] = tuple(point)
+            self._titles[kind].text = self.title(kind)
+
+    def relayout(self) -> None:
+        """Place both loupes beside the images again (the page layout changed, e.g. another BA column window)."""
+        app = self.app
+        with app.ui_lock, app.server.atomic():
+            main = list(app.slots.values())  # camera views, the camera-view render, BA images
+            self.areas = loupe_areas(bounds_of(main))
+            for kind in KINDS:
+                area = self.areas[kind]
+                self._titles[kind].position = (area.x0, area.y0 - 0.03, -0.01)
+                self._place(kind)
+                self._draw_marks(kind)  # their marks follow the slots
 
     def texture(self, kind: str) -> np.ndarray:
         """The loupe's current texture (what the page shows)."""
@@ -251,12 +279,13 @@ class Loupes:
     def _draw_marks(self, kind: str) -> None:
         """One loupe's marks and outline; skipped when neither its view, the picks nor the main view changed."""
         app = self.app
-        picks = app.state.picks
+        hidden = app.state.view.hide_marks  # "Hide marks": nothing drawn in or around the loupe
+        picks = () if hidden else app.state.picks
         crop = self.ba_crop if kind == "ba" else self.camera_crop
         main = app.slots.get(crop.key) if kind == "ba" else app.camera_slot()
         # Only the ends this loupe draws: moving a pixel leaves the BA loupe's marks alone, and vice versa.
         ends = tuple((p.id, p.laser_rc if kind == "ba" else p.pixel) for p in picks)
-        inputs = (crop, self._slots[kind], ends, main, app.ba_window)
+        inputs = (crop, self._slots[kind], ends, main, app.ba_window, hidden)
         if kind == "ba" and self._render_on():
             inputs += (self.camera_crop, id(app.render_pane.current))
         if self._marks_of.get(kind) == inputs:
@@ -267,10 +296,13 @@ class Loupes:
         else:
             self._draw_camera_marks(list(picks))
         # The outline on the main image (and the camera loupe's centre marker) follow the crop, not the picks.
-        framing = (crop, self._slots[kind], main, app.ba_window)
+        framing = (crop, self._slots[kind], main, app.ba_window, hidden)
         if self._framing_of.get(kind) != framing:
             self._framing_of[kind] = framing
-            if kind == "ba":
+            if hidden:
+                for name in FRAMING_NODES[kind]:
+                    app.nodes.lines(name, np.empty((0, 2, 3)), (0, 0, 0))
+            elif kind == "ba":
                 self._draw_ba_outline()
             else:
                 self._draw_camera_centre()
@@ -435,13 +467,14 @@ class Loupes:
             return self.app.render_pane.loupe_title(self.camera_crop.center, self.camera_crop.n)
         if kind == "ba":
             c = self.ba_crop
-            row, col = c.center
+            row, col = self._clicked.get("ba", c.center)
             rng = self.app.depth.range_m[row, col]
             shown = f"{rng:.2f} m" if self.app.depth.valid[row, col] and np.isfinite(rng) else "no return"
             name = self.app.display.loupe_image(c.key)[1]
             return f"{name} loupe: row {row}, column {col}, range {shown} ({c.n_cols} columns shown)"
         c = self.camera_crop
-        return f"Camera loupe (original image): ({c.center[0]:.1f}, {c.center[1]:.1f}), {c.n} x {c.n} px shown"
+        u, v = self._clicked.get("camera", c.center)
+        return f"Camera loupe (original image): ({u:.1f}, {v:.1f}), {c.n} x {c.n} px shown"
 
     def _show(self, kind: str) -> None:
         """Send the loupe's new texture, size and title, and redraw its marks (in one message batch)."""

@@ -43,8 +43,9 @@ class OverlayDrawing:
         """Redraw markers, labels, selection and the reprojection overlays (only what changed is sent)."""
         app = self.app
         with app.ui_lock, app.server.atomic():
-            picks = {p.id: p for p in app.state.picks}
-            selected = app.state.selected
+            hidden = app.state.view.hide_marks  # "Hide marks": draw as if there were no picks and no solve
+            picks = {} if hidden else {p.id: p for p in app.state.picks}
+            selected = None if hidden else app.state.selected
             labels: dict[str, tuple[str, tuple]] = {}
             cam_slot = app.camera_slot()
             for key in (*app.ba_keys, cam_slot.key):
@@ -125,7 +126,7 @@ class OverlayDrawing:
         cached = self._marker_cache.get(key)
         if cached is not None and cached[0] == inputs:
             return cached[1]
-        ids, uv = self.pick_ends(key)
+        ids, uv = self.pick_ends(key) if picks else ([], np.empty((0, 2)))
         world = slot.world_from_pixel(uv, z_offset=-0.01)
         colors = np.array([picks[i].color for i in ids], np.uint8).reshape(-1, 3)
         r = self.ring_radius(slot)
@@ -156,7 +157,7 @@ class OverlayDrawing:
         """Reprojected pairs, residual lines, BA-edge points and predicted-pixel crosses on the camera view."""
         app = self.app
         slot = app.camera_slot()
-        bundle = app.solve_bundle
+        bundle = None if app.state.view.hide_marks else app.solve_bundle
         camera, cview = app.camera, app.view.camera_view
         # Skipped when neither the solve, the view nor the picks it colours changed (e.g. a click on a BA image).
         self._draw_predictions(slot, predictions)  # cheap, changes with every BA click

@@ -217,6 +217,8 @@ class PairsPanel:
         if target[0] == "ba":
             if recentre:
                 self.app.loupes.frame_ba(*target[1:])
+            else:  # a click inside the loupe: it keeps its view, its title names the new cell
+                self.app.loupes.show_click("ba", target[2:])
             if pick is not None and pick.pixel is not None:
                 self.app.loupes.frame_camera(*pick.pixel)
             elif render_uv is not None:
@@ -228,6 +230,8 @@ class PairsPanel:
         else:
             if recentre:
                 self.app.loupes.frame_camera(target[1], target[2])
+            else:
+                self.app.loupes.show_click("camera", target[1:])
             if pick is not None and pick.laser_rc is not None:
                 self.app.loupes.frame_ba(self.app.loupes.ba_crop.key, *pick.laser_rc)
             else:

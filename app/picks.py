@@ -34,7 +34,8 @@ class Pick:
     Attributes
     ----------
     id : int
-        Stable number shown on the markers (1, 2, ...); never reused.
+        Stable number shown on the markers (1, 2, ...); a new pick takes the one above the highest existing
+        (:func:`app.state.next_number`).
     laser_rc : (row, col) or None
         Depth-matrix cell, 0-based.
     laser_xyz : (x, y, z) or None

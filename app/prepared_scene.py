@@ -93,6 +93,7 @@ class PreparedScene:
         *,
         scan_options: dict | None = None,
         image_size: tuple[int, int] | None = None,
+        kitti_camera: int | None = None,
         max_cloud_points: int = MAX_CLOUD_POINTS,
     ) -> "PreparedScene":
         """Read the three files and precompute.  CalibError on unreadable or inconsistent inputs."""
@@ -100,7 +101,7 @@ class PreparedScene:
 
         scan_path, image_path, camera_path = Path(scan_path), Path(image_path), Path(camera_path)
         depth = load_scan(scan_path, **(scan_options or {}))
-        camera = load_camera(camera_path, image_size=image_size)
+        camera = load_camera(camera_path, image_size=image_size, kitti_camera=kitti_camera)
         image = load_image_rgb(image_path)
         h, w = image.shape[:2]
         if (w, h) != (camera.width, camera.height):

@@ -414,7 +414,8 @@ class RenderPane:
         """The picked laser ends on the render, as rings in their pair's colour where the render's pose puts them."""
         app = self.app
         shown = self.current
-        picks = tuple((p.id, p.laser_rc, p.color) for p in app.state.picks if p.laser_rc is not None)
+        hidden = app.state.view.hide_marks  # "Hide marks": none on the render either
+        picks = tuple((p.id, p.laser_rc, p.color) for p in app.state.picks if p.laser_rc is not None and not hidden)
         slot = app.slots[RENDER_KEY]
         inputs = (id(shown), picks, slot, app.state.selected)
         if inputs == self._marks_of:

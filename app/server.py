@@ -68,6 +68,8 @@ class CalibrationApp:
         Keyword options of :func:`calib_core.io.scan_readers.load_scan` (``organize``, ``beams``, ...).
     image_size : (width, height), optional
         Overrides the camera file's image size (see :func:`calib_core.cameras.load_camera`).
+    kitti_camera : int, optional
+        For a KITTI calib file as the camera: which rectified camera (0-3; default 2).
     max_cloud_points : int
         Points shown in the 3-D pane (the PLY export has all of them).
     token : str, optional
@@ -90,7 +92,7 @@ class CalibrationApp:
                  host: str = "127.0.0.1", port: int = 8080, title: str | None = None, scan_options: dict | None = None,
                  image_size: tuple[int, int] | None = None, max_cloud_points: int = MAX_CLOUD_POINTS,
                  token: str | None = None, allowed_hosts: tuple[str, ...] = (),
-                 initial_extrinsics_path: str | os.PathLike | None = None) -> None:
+                 initial_extrinsics_path: str | os.PathLike | None = None, kitti_camera: int | None = None) -> None:
         # Kernels compile in the background while the inputs load; nothing waits for it.
         self.warm_up = WarmUp()
         self.scan_path, self.image_path, self.camera_path = Path(scan_path), Path(image_path), Path(camera_path)
@@ -102,7 +104,7 @@ class CalibrationApp:
         # -- data (all maths from calib_core, no viser) ----------------------------------
         self.scene_data = sd = PreparedScene.load(self.scan_path, self.image_path, self.camera_path,
                                                   scan_options=scan_options, image_size=image_size,
-                                                  max_cloud_points=max_cloud_points)
+                                                  max_cloud_points=max_cloud_points, kitti_camera=kitti_camera)
         self.depth, self.camera, self.image = sd.depth, sd.camera, sd.image
         self.ba_keys, self.ba_gray, self.image_gray = sd.ba_keys, sd.ba_gray, sd.image_gray
         self.all_points_lidar, self.cloud_points_lidar = sd.all_points_lidar, sd.cloud_points_lidar

@@ -11,6 +11,7 @@ offered as the initial extrinsic.
 
 from __future__ import annotations
 
+import contextlib
 import inspect
 import os
 import queue
@@ -231,6 +232,7 @@ def serve(
     allowed_hosts: tuple[str, ...] = (),
     initial_extrinsics_path: str | os.PathLike | None = None,
     bag: BagSource | None = None,
+    kitti_camera: int | None = None,
 ) -> None:
     """Serve the annotation app until Ctrl+C; prints the URL (with the access token off loopback).
 
@@ -241,18 +243,24 @@ def serve(
     """
     options = dict(output_path=output_path, host=host, port=port, title=title, scan_options=scan_options,
                    image_size=image_size, token=token, allowed_hosts=allowed_hosts)
+    if kitti_camera is not None:
+        options["kitti_camera"] = kitti_camera
     server = None
-    if bag is not None:
-        server = BagServer(bag, initial_extrinsics_path=initial_extrinsics_path, **options)
-        app = server.load()
-    else:
-        app = make_app(scan_path, image_path, camera_path, session_path=session_path,
-                       initial_extrinsics_path=initial_extrinsics_path, **options)
-    _announce(app, host)
+    stop_signal = _StopSignal()
     if threading.current_thread() is threading.main_thread():
-        # `kill` (SIGTERM) stops like Ctrl+C: stop() writes the last changes to the session file.
-        signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
+        # `kill` (SIGTERM) stops like Ctrl+C: stop() writes the last changes to the session file.  Installed before
+        # start-up, which only notes it: a half-built app cannot be stopped, a built one is, at once.
+        signal.signal(signal.SIGTERM, stop_signal)
+    with stop_signal.deferred():
+        if bag is not None:
+            server = BagServer(bag, initial_extrinsics_path=initial_extrinsics_path, **options)
+            app = server.load()
+        else:
+            app = make_app(scan_path, image_path, camera_path, session_path=session_path,
+                           initial_extrinsics_path=initial_extrinsics_path, **options)
     try:
+        stop_signal.raise_if_pending()
+        _announce(app, host)
         while True:
             if server is None:
                 time.sleep(3600)
@@ -262,13 +270,16 @@ def serve(
             except queue.Empty:
                 continue
             try:
-                app = server.load(index)
+                with stop_signal.deferred():
+                    app = server.load(index)
             except CalibError as exc:
                 print(f"ba-calib: frame {index} not loaded: {exc}", flush=True)
                 if server.app is not None:
                     server.app.notify(None, "Frame not loaded", str(exc))
+                    stop_signal.raise_if_pending()
                     continue
                 raise
+            stop_signal.raise_if_pending()
             _announce(app, host)
     except KeyboardInterrupt:
         pass
@@ -279,15 +290,90 @@ def serve(
             app.stop()
 
 
+def other_machines_url(port: int, token: str | None) -> str | None:
+    """The URL another machine opens for a server bound to every interface (``0.0.0.0``), with the token.
+
+    The machine's fully qualified name when it names this machine to others; when it does not (it is
+    ``localhost``, or resolves to a loopback address only), the address of the interface that routes
+    outwards; None when there is none (no network).  The server accepts both as ``Host``
+    (:meth:`app.security.AccessPolicy.allowed_hosts`: its names, and the address a connection arrives on).
+    """
+    query = "" if token is None else f"/?{TOKEN_QUERY}={token}"
+    name = socket.getfqdn()
+    if name and not is_loopback(name) and not name.lower().startswith("localhost") and not _resolves_to_loopback(name):
+        return f"http://{name}:{port}{query}"
+    address = _outward_address()
+    if address is None:
+        return None
+    return f"http://{'[' + address + ']' if ':' in address else address}:{port}{query}"
+
+
+def _resolves_to_loopback(name: str) -> bool:
+    """True when ``name`` resolves only to loopback addresses (or not at all)."""
+    try:
+        infos = socket.getaddrinfo(name, None)
+    except (OSError, UnicodeError):
+        return True
+    return all(is_loopback(info[4][0]) for info in infos)
+
+
+def _outward_address() -> str | None:
+    """The local address of the interface that routes outwards (a UDP connect sends no packet), or None."""
+    for family, target in ((socket.AF_INET, ("192.0.2.1", 9)), (socket.AF_INET6, ("2001:db8::1", 9))):
+        try:
+            with socket.socket(family, socket.SOCK_DGRAM) as probe:
+                probe.connect(target)
+                address = probe.getsockname()[0]
+        except OSError:
+            continue
+        if address and not is_loopback(address) and address not in ("0.0.0.0", "::"):
+            return address
+    return None
+
+
 def _announce(app: CalibrationApp, host: str) -> None:
+    report = getattr(getattr(app, "depth", None), "organize_report", None)
+    if report is not None:  # as solve and ba-images say it
+        print(report.line(), flush=True)
     print(f"ba-calib: open {app.url} in a browser (Ctrl+C to stop)", flush=True)
     print(f"ba-calib: session file {app.session_path}", flush=True)
     if app.access.token is not None and not is_loopback(host):
         if host in ("0.0.0.0", "", "::"):
-            print(f"ba-calib: from other machines: http://{socket.getfqdn()}:{app.port}/?{TOKEN_QUERY}="
-                  f"{app.access.token}", flush=True)
+            url = other_machines_url(app.port, app.access.token)
+            if url is not None:
+                print(f"ba-calib: from other machines: {url}", flush=True)
+            else:
+                print("ba-calib: from other machines: no network address found; open http://<this machine's "
+                      f"address>:{app.port}/?{TOKEN_QUERY}={app.access.token}", flush=True)
         print(f"ba-calib: listening on {host}: requests without the token in the URL above are refused", flush=True)
 
 
-def _raise_keyboard_interrupt(signum: int, frame: Any) -> None:
-    raise KeyboardInterrupt
+class _StopSignal:
+    """The SIGTERM handler of :func:`serve`: a KeyboardInterrupt, as Ctrl+C, except while the app is being built.
+
+    During start-up (``with deferred():``) the signal is only noted; :meth:`raise_if_pending` raises it once
+    the app exists, so that its ``stop()`` folds the session journal as at any other time.
+    """
+
+    def __init__(self) -> None:
+        self.pending = False
+        self._deferring = False
+
+    def __call__(self, signum: int, frame: Any) -> None:
+        if self._deferring:
+            self.pending = True
+            return
+        raise KeyboardInterrupt
+
+    @contextlib.contextmanager
+    def deferred(self):
+        self._deferring = True
+        try:
+            yield
+        finally:
+            self._deferring = False
+
+    def raise_if_pending(self) -> None:
+        if self.pending:
+            self.pending = False
+            raise KeyboardInterrupt

@@ -13,6 +13,15 @@ the newest complete record: the session YAML carries the sequence number it
 was compacted at (``journal_seq``), and journal records with a higher number
 win.  A torn last line (the process was killed while writing it) fails its
 CRC and is ignored; that change was never acknowledged.
+
+A journal belongs to one session file and never outlives it.  The YAML
+carries a random ``session_id``, and every journal record carries the same
+id and whether a YAML with that id had been written (``filed``).  The first
+change of a session writes the YAML itself (with the id), before any journal
+line, so a journal normally never exists without its file.  On start, records
+of another session id, or records of a filed session whose YAML is gone (the
+user deleted it to start over), are ignored with one warning line; a clean
+exit folds the journal into the YAML and removes it.
 """
 
 from __future__ import annotations
@@ -24,8 +33,10 @@ import stat
 import sys
 import threading
 import time
+import uuid
 import weakref
 import zlib
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
@@ -45,6 +56,8 @@ HARD_CAP_BYTES = 64 << 20
 #: A failed compaction is retried this often (seconds); the journal keeps the data meanwhile.
 RETRY_S = 1.0
 SEQ_KEY = "journal_seq"
+#: The session file's id, which its journal records repeat.
+ID_KEY = "session_id"
 
 _fdatasync = getattr(os, "fdatasync", os.fsync)
 
@@ -53,14 +66,37 @@ def _one_line(exc: BaseException) -> str:
     return " ".join(str(exc).split()) or type(exc).__name__
 
 
-def encode_record(seq: int, data: dict) -> bytes:
-    """One journal line: ``<crc32 hex> <json>\\n`` of ``{"seq": seq, "session": data}``."""
-    body = json.dumps({"seq": int(seq), "session": data}, separators=(",", ":"), allow_nan=False).encode()
+@dataclass(frozen=True)
+class JournalRecord:
+    """One intact journal line.
+
+    Attributes
+    ----------
+    seq : int
+        Sequence number of the change.
+    session : dict
+        The whole session after the change.
+    session_id : str or None
+        The session file's id (None: a journal of an older ba-calib).
+    filed : bool
+        Whether a session YAML with this id had been written when the line was.
+    """
+
+    seq: int
+    session: dict
+    session_id: str | None = None
+    filed: bool = True
+
+
+def encode_record(seq: int, data: dict, session_id: str | None = None, filed: bool = True) -> bytes:
+    """One journal line: ``<crc32 hex> <json>\\n`` of ``{"seq", "id", "filed", "session"}``."""
+    record = {"seq": int(seq), "id": session_id, "filed": bool(filed), "session": data}
+    body = json.dumps(record, separators=(",", ":"), allow_nan=False).encode()
     return b"%08x %s\n" % (zlib.crc32(body), body)
 
 
-def decode_records(raw: bytes) -> list[tuple[int, dict]]:
-    """The intact ``(seq, session)`` records of a journal; torn or damaged lines are skipped."""
+def decode_records(raw: bytes) -> list[JournalRecord]:
+    """The intact records of a journal; torn or damaged lines are skipped."""
     out = []
     for line in raw.split(b"\n")[:-1]:  # the part after the last newline is torn
         crc, _, body = line.partition(b" ")
@@ -69,11 +105,20 @@ def decode_records(raw: bytes) -> list[tuple[int, dict]]:
                 continue
             rec = json.loads(body)
             seq, data = int(rec["seq"]), rec["session"]
-        except (ValueError, KeyError, TypeError, RecursionError):
+            session_id, filed = rec.get("id"), bool(rec.get("filed", True))
+        except (ValueError, KeyError, TypeError, AttributeError, RecursionError):
             continue
-        if isinstance(data, dict):
-            out.append((seq, data))
+        if isinstance(data, dict) and (session_id is None or isinstance(session_id, str)):
+            out.append(JournalRecord(seq, data, session_id, filed))
     return out
+
+
+def _yaml_session_id(data: dict) -> str | None:
+    """The ``session_id`` a session YAML carries, or None (a pairs file, an older session, a malformed id)."""
+    value = data.get(ID_KEY)
+    if isinstance(value, str) and 8 <= len(value) <= 64 and value.isalnum():
+        return value
+    return None
 
 
 class SessionStore:
@@ -105,8 +150,14 @@ class SessionStore:
         self._last_append = 0.0
         self._closed = False
         self._thread: threading.Thread | None = None
+        #: The id the session YAML and every journal record carry (adopted from the YAML on :meth:`load`).
+        self.session_id = uuid.uuid4().hex
+        self._filed = False  # a YAML with this id has been written (read on load, or written here)
+        self._claim_tried = False  # the first change tried to write the YAML (later ones leave it to compaction)
         #: Session YAML writes so far (compactions).
         self.compactions = 0
+        #: The one-line warning :meth:`load` printed about an ignored journal, or None.
+        self.warning: str | None = None
 
     # ------------------------------------------------------------------ reading
     def load(self) -> tuple[dict | None, bool]:
@@ -115,21 +166,49 @@ class SessionStore:
         Returns ``(data, from_yaml)``: ``data`` is None without any file;
         ``from_yaml`` is True when no journal record is newer than the YAML
         (which may then be a plain pairs file given as the session).
+
+        Journal records of another session file are ignored, with one
+        warning line on stderr (also kept in :attr:`warning`): records of
+        another ``session_id``, and records of a session whose YAML had been
+        written but is gone (deleted to start over).  Records of a session
+        whose YAML was never written (killed before the first save
+        succeeded) are restored.
         """
         data: dict | None = None
-        if self.path.exists():
+        yaml_id: str | None = None
+        has_yaml = self.path.exists()
+        if has_yaml:
             data = read_yaml_mapping(self.path, "session file")
             try:
                 self._compacted = self._seq = max(0, int(data.get(SEQ_KEY) or 0))
             except (TypeError, ValueError):
                 raise CalibError(f"{self.path}: {SEQ_KEY} must be an integer") from None
+            yaml_id = _yaml_session_id(data)
+            if yaml_id is not None:
+                self.session_id, self._filed = yaml_id, True
         records = decode_records(self._read_journal())
-        newer = [(s, d) for s, d in records if s > self._seq]
+        if yaml_id is not None:
+            ours = [r for r in records if r.session_id == yaml_id]
+        elif has_yaml:  # a pairs file or an older session file: older journals, or a session never saved
+            ours = [r for r in records if r.session_id is None or not r.filed]
+        else:  # no file: only a session whose file was never written
+            ours = [r for r in records if r.session_id is not None and not r.filed]
+        ignored = len(records) - len(ours)
+        if ignored:
+            owner = f"{self.path.name} (session {yaml_id})" if yaml_id is not None else (
+                f"{self.path.name}, which is not the session it was written for" if has_yaml
+                else f"{self.path.name}, which no longer exists")
+            self.warning = (f"ignored the session journal {self.journal_path} ({ignored} change(s)): it does not "
+                            f"belong to {owner}; it is removed at the next save")
+            print(f"ba-calib: warning: {self.warning}", file=sys.stderr, flush=True)
+        newer = [r for r in ours if r.seq > self._seq]
         if not newer:
             return data, True
-        self._seq, latest = max(newer, key=lambda r: r[0])
-        self._latest = latest
-        return latest, False
+        latest = max(newer, key=lambda r: r.seq)
+        self._seq, self._latest = latest.seq, latest.session
+        if yaml_id is None and latest.session_id is not None:
+            self.session_id = latest.session_id  # the unsaved session goes on under its own id
+        return latest.session, False
 
     def _read_journal(self) -> bytes:
         try:
@@ -153,17 +232,24 @@ class SessionStore:
     def append(self, data: dict) -> None:
         """Put ``data`` (the whole session, plain JSON-able) on disk before returning.
 
+        The first change of a session whose YAML does not carry this
+        store's id writes the YAML (with the id) instead of a journal line,
+        and removes any journal left beside it; if the YAML cannot be
+        written, the change goes to the journal (marked unfiled).
+
         Raises
         ------
         CalibError
             The journal cannot be written; the change must not be made.
         """
+        if not self._filed and not self._claim_tried and self._claim(data):
+            return
         with self._lock:
             if self._closed:
                 raise CalibError(f"{self.path}: the session is closed")
             seq = self._seq + 1
             try:
-                line = encode_record(seq, data)
+                line = encode_record(seq, data, self.session_id, self._filed)
                 fd = self._open_locked()
                 view = memoryview(line)
                 while view:
@@ -181,6 +267,50 @@ class SessionStore:
         self._ensure_thread()
         if over_cap:
             self.compact()
+
+    def _claim(self, data: dict) -> bool:
+        """Write ``data`` as the session YAML with this store's id, then drop the journal; False if it cannot."""
+        with self._compact_lock, self._lock:
+            if self._closed:
+                raise CalibError(f"{self.path}: the session is closed")
+            if self._filed or self._claim_tried:
+                return False  # another thread's change claimed it (or tried) meanwhile
+            self._claim_tried = True
+            seq = self._seq + 1
+            try:
+                self._write_yaml(data, seq)
+            except CalibError:
+                return False  # the journal keeps the change; the compactor retries and reports
+            self._seq, self._latest, self._compacted = seq, data, seq
+            self._remove_journal_locked()
+            return True
+
+    def _write_yaml(self, data: dict, seq: int) -> None:
+        """Replace the session YAML by ``data`` at ``seq``, with this store's id (CalibError if it cannot)."""
+        # libyaml's dumper when present: the dump holds the GIL that the clicks need (20 ms -> 5 ms).
+        text = yaml.dump({**data, SEQ_KEY: seq, ID_KEY: self.session_id},
+                         Dumper=getattr(yaml, "CSafeDumper", yaml.SafeDumper),
+                         sort_keys=False, default_flow_style=None, width=100)
+        try:
+            write_bytes_atomic(self.path, text.encode("utf-8"))
+        except (OSError, CalibError) as exc:
+            raise CalibError(f"{self.path}: cannot save the session: {_one_line(exc)}") from None
+        self._filed = True
+        self.compactions += 1
+
+    def _remove_journal_locked(self) -> None:
+        """Close and delete the journal: the YAML holds every change it held (or it was another session's)."""
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
+        self._bytes = self._records = self._new_bytes = 0
+        try:
+            os.unlink(self.journal_path)
+        except FileNotFoundError:
+            pass
+        except OSError as exc:
+            print(f"ba-calib: cannot remove the session journal {self.journal_path}: {_one_line(exc)}",
+                  file=sys.stderr)
 
     def _open_locked(self) -> int:
         if self._fd is None:
@@ -213,15 +343,8 @@ class SessionStore:
                 return
             with self._lock:  # what comes after this point waits for the next compaction
                 self._records, self._new_bytes = 0, 0
-            # libyaml's dumper when present: the dump holds the GIL that the clicks need (20 ms -> 5 ms).
-            text = yaml.dump({**data, SEQ_KEY: seq}, Dumper=getattr(yaml, "CSafeDumper", yaml.SafeDumper),
-                             sort_keys=False, default_flow_style=None, width=100)
-            try:
-                write_bytes_atomic(self.path, text.encode("utf-8"))
-            except (OSError, CalibError) as exc:
-                raise CalibError(f"{self.path}: cannot save the session: {_one_line(exc)}") from None
+            self._write_yaml(data, seq)
             self._compacted = seq
-            self.compactions += 1
             self._truncate_if_current(seq)
 
     def _truncate_if_current(self, seq: int) -> None:
@@ -252,17 +375,20 @@ class SessionStore:
             thread.join(timeout=10.0)
         try:
             self.compact()
-        finally:
+        except BaseException:
             with self._lock:
                 if self._fd is not None:
-                    empty = self._bytes == 0
                     os.close(self._fd)
                     self._fd = None
-                    if empty:
-                        try:
-                            os.unlink(self.journal_path)
-                        except OSError:
-                            pass
+            raise
+        with self._lock:
+            # The YAML holds every change (or there were none): no journal outlives this session,
+            # also not one this store only read (restored from) or ignored.
+            if self._seq <= self._compacted:
+                self._remove_journal_locked()
+            elif self._fd is not None:
+                os.close(self._fd)
+                self._fd = None
 
     # --------------------------------------------------------------- background
     def _ensure_thread(self) -> None:

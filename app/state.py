@@ -40,6 +40,17 @@ MAX_HISTORY = 500
 
 Listener = Callable[["AnnotationState"], None]
 
+
+def next_number(picks: Sequence[Pick]) -> int:
+    """The number a new pick gets: one more than the highest existing one (1 when there is none).
+
+    So a pick that was started and then dropped or undone (a declined guided
+    proposal) leaves no gap: the next pair made gets its number.  Deleting a
+    pair below the highest keeps the others' numbers (and colours) as they are.
+    """
+    return max((int(p.id) for p in picks), default=0) + 1
+
+
 class AnnotationState:
     """Thread-safe pairs under construction, with undo/redo and a session file.
 
@@ -263,7 +274,7 @@ class AnnotationState:
         return out
 
     def delete(self, pick_id: int) -> None:
-        """Remove pick ``pick_id`` (its number is not reused)."""
+        """Remove pick ``pick_id`` (its number is reused only if it was the highest: see :func:`next_number`)."""
         with self._lock:
             self.get(pick_id)
             picks = tuple(p for p in self._snap.picks if p.id != pick_id)
@@ -308,7 +319,7 @@ class AnnotationState:
         checked = self.check_import(pairs)
         with self._lock:
             base = () if replace_existing else self._snap.picks
-            next_id = self._snap.next_id
+            next_id = next_number(base)
             used = {p.id for p in base}
             new = []
             for p in new_ends(checked, base):
@@ -453,6 +464,8 @@ class AnnotationState:
         return pick_id
 
     def _commit_locked(self, snap: Snapshot) -> None:
+        # Numbers follow the picks that exist: one dropped or undone (a declined proposal) frees its number.
+        snap = Snapshot(snap.picks, next_number(snap.picks))
         if snap == self._snap:
             return
         before = self._checkpoint_locked()
@@ -490,6 +503,7 @@ class AnnotationState:
 
     def _restore(self, data: dict, path: Path) -> None:
         """Restore the session ``data`` read from ``path`` (the session YAML or its journal)."""
-        self._snap, view = restore_session(data, path, self.check_laser_cell, self.check_pixel)
+        snap, view = restore_session(data, path, self.check_laser_cell, self.check_pixel)
+        self._snap = Snapshot(snap.picks, next_number(snap.picks))
         if view is not None:
             self._view = ViewSettings.from_dict(view, default=self._view)

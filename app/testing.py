@@ -121,6 +121,19 @@ class AppDriver(RenderDriver):
         target = SimpleNamespace(value=value)
         return self._fire(self.app.guard(handler), SimpleNamespace(client=self.tab, target=target))
 
+    def set_hide_marks(self, on: bool) -> list[tuple[str, str]]:
+        """Tick (or clear) "Hide marks" in the Loupes folder."""
+        return self._fire(self.app.guard(self.app.display.on_hide_marks), SimpleNamespace(
+            client=self.tab, target=SimpleNamespace(value=bool(on))))
+
+    def drawn_labels(self) -> dict[str, str]:
+        """The number labels the scene shows now, by node name (``/annot/labels/<image>/<id>``): their texts."""
+        return {name: spec[1] for name, (_, spec) in self.app.nodes.drawn.items() if spec[0] == "label"}
+
+    def loupe_title(self, kind: str) -> str:
+        """The title the page shows above loupe ``kind`` (``"ba"`` or ``"camera"``): the text sent to its label."""
+        return str(self.app.loupes._titles[kind].text)
+
     def loupe_texture(self, kind: str) -> np.ndarray:
         """The texture the loupe shows now (a nearest-neighbour enlarged crop)."""
         return self.app.loupes.texture(kind)

@@ -72,6 +72,11 @@ class FakeCamera:
     fov: float = 0.5
     image_width: int = 1400
     image_height: int = 900
+    update_callbacks: list = field(default_factory=list)  # what the app registered with on_update (never called)
+
+    def on_update(self, callback: Any) -> Any:
+        self.update_callbacks.append(callback)
+        return callback
 
     def screen_of(self, world) -> tuple[float, float]:
         """Canvas pixel of a world point on the annotation plane, for a camera looking along +z (as the app sets)."""

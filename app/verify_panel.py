@@ -45,6 +45,10 @@ HEAT_WIDTH = 480
 HEAT_PERCENTILE = 98.0
 CHECK_CHOICES = ("Make check pair", "Put back in fit")
 _COLORS = {"fit": "#1c7ed6", "loo": "#e8590c", "check": "#2f9e44", "rot": "#ae3ec9"}
+#: uPlot's x scale is a time axis unless told otherwise: these plots count pairs and parameters.
+NUMERIC_X = {"x": {"time": False}}
+#: What the table and the summary say of a check pair whose laser point projects off the image under the fit.
+OFF_IMAGE = "projects outside the image"
 
 
 @dataclass(eq=False)
@@ -66,6 +70,32 @@ def _series(label: str, color: str | None = None) -> uplot.Series:
     if color is not None:
         s.update(stroke=color, width=2, points={"show": True, "size": 7, "fill": color})
     return s  # type: ignore[return-value]
+
+
+def finite_plot(x_series: uplot.Series, x: np.ndarray, columns: list[tuple[uplot.Series, np.ndarray]]
+                ) -> tuple[tuple[uplot.Series, ...], tuple[np.ndarray, ...]]:
+    """The series and data one uPlot plot gets: float arrays with no NaN, no None.
+
+    uPlot draws nothing sensible from NaN (its scales become NaN), so rows
+    with a missing value are left out.  The first column is always kept; a
+    further column with no finite value where the first has one is left out
+    as a whole (e.g. leave-one-out errors with only 4 fit pairs), rather than
+    emptying the plot.
+
+    Returns
+    -------
+    series : tuple
+        ``x_series`` and the kept columns' series.
+    data : tuple of (n,) float64 arrays
+        ``x`` and the kept columns, rows where all of them are finite.
+    """
+    xs = np.asarray(x, dtype=np.float64).reshape(-1)
+    values = [np.asarray(v, dtype=np.float64).reshape(-1) for _, v in columns]
+    ok = np.isfinite(xs) & np.isfinite(values[0])
+    keep = [0] + [k for k in range(1, len(values)) if np.any(ok & np.isfinite(values[k]))]
+    for k in keep:
+        ok &= np.isfinite(values[k])
+    return (x_series, *(columns[k][0] for k in keep)), (xs[ok], *(values[k][ok] for k in keep))
 
 
 class VerifyPanel:
@@ -107,15 +137,15 @@ class VerifyPanel:
             self._plot_pairs = gui.add_uplot(
                 empty, (_series("pair id"), _series("under the fit (px)", _COLORS["fit"]),
                         _series("left out (px)", _COLORS["loo"])),
-                title="Error per pair: in the fit vs left out (LOO / check)", aspect=1.6)
+                title="Error per pair: in the fit vs left out (LOO / check)", aspect=1.6, scales=NUMERIC_X)
             self._plot_count = gui.add_uplot(
                 empty, (_series("pairs"), _series("fit residual (px)", _COLORS["fit"]),
                         _series("check pairs (px)", _COLORS["check"])),
-                title="Error against the number of pairs so far", aspect=1.6)
+                title="Error against the number of pairs so far", aspect=1.6, scales=NUMERIC_X)
             self._plot_sigma = gui.add_uplot(
                 empty, (_series("1 = x / roll, 2 = y / pitch, 3 = z / yaw"),
                         _series("sigma translation (cm)", _COLORS["fit"]), _series("sigma rotation (deg)", _COLORS["rot"])),
-                title="Sigma per parameter", aspect=1.6)
+                title="Sigma per parameter", aspect=1.6, scales=NUMERIC_X)
             self._img_heat = gui.add_image(np.full((8, 8, 3), 230, np.uint8), label="Expected error over the image",
                                            format="jpeg", jpeg_quality=85)
             self._md_heat = gui.add_markdown("")
@@ -257,9 +287,12 @@ class VerifyPanel:
             lines.append(f"**Leave-one-out: mean {loo.mean():.2f} px**, max {loo.max():.2f} px "
                          f"(pair {ids[int(rep.fit_index[worst])]}): the error to expect on a fresh click")
         chk = rep.check_px[np.isfinite(rep.check_px)]
+        n_off = int(np.count_nonzero(rep.check_outside))
         if rep.check_index.size:
-            lines.append(f"**Check pairs: mean {_fmt(float(chk.mean()) if chk.size else np.nan, 2)} px**, "
-                         f"{_fmt(float(np.mean(rep.check_deg)), 3)} deg (not in the fit)")
+            mean_px = f"mean {chk.mean():.2f} px" if chk.size else f"no pixel error: every one {OFF_IMAGE}"
+            off = f", {n_off} {OFF_IMAGE} (angle only)" if n_off and chk.size else ""
+            lines.append(f"**Check pairs: {mean_px}**, {_fmt(float(np.mean(rep.check_deg)), 3)} deg "
+                         f"(not in the fit{off})")
         if rep.reference is not None and self._reference is not None:
             ref = rep.reference
             lines.append(f"**Reference {md_escape(self._reference[1])}:** rotation {_fmt(ref['rotation_deg'], 3)} deg, "
@@ -283,35 +316,37 @@ class VerifyPanel:
             role[int(i)] = "check"
         for i in outliers:
             role[i] = "outlier"
+        off_image = {int(i) for i, off in zip(rep.check_index, rep.check_outside) if off}
         for i, pid in enumerate(ids):
-            rows.append(f"| {pid} | {role.get(i, '?')} | {_fmt(under[i], 2)} | {_fmt(left[i], 2)} |")
+            if i in off_image:  # no pixel error to show: say why
+                rows.append(f"| {pid} | {role.get(i, '?')} | {OFF_IMAGE} | {OFF_IMAGE} |")
+            else:
+                rows.append(f"| {pid} | {role.get(i, '?')} | {_fmt(under[i], 2)} | {_fmt(left[i], 2)} |")
         self._md_table.content = "\n".join(rows)
 
         x = np.asarray(ids, dtype=np.float64)
-        ok = np.isfinite(under) & np.isfinite(left)
-        if np.all(np.diff(x) > 0):
-            self._plot_pairs.data = (x[ok], under[ok], left[ok])
-        else:  # imported ids out of order: uPlot needs rising x, so plot by position
-            self._plot_pairs.data = (np.arange(1.0, len(ids) + 1)[ok], under[ok], left[ok])
-        count = rep.pairs_vs_count
-        if count is not None:
-            n = np.asarray(count["n_pairs"], dtype=np.float64)
-            fit_px, chk_px = np.asarray(count["fit_px"]), np.asarray(count["check_px"])
-            series = [_series("pairs"), _series("fit residual (px)", _COLORS["fit"])]
-            if rep.check_index.size:
-                series.append(_series("check pairs (px)", _COLORS["check"]))
-                ok = np.isfinite(fit_px) & np.isfinite(chk_px)
-                data = (n[ok], fit_px[ok], chk_px[ok])
-            else:
-                ok = np.isfinite(fit_px)
-                data = (n[ok], fit_px[ok])
-            with self.app.server.atomic():
-                if len(self._plot_count.series) != len(series):
-                    self._plot_count.series = tuple(series)
-                self._plot_count.data = data
+        if not np.all(np.diff(x) > 0):  # imported ids out of order: uPlot needs rising x, so plot by position
+            x = np.arange(1.0, len(ids) + 1)
+        count = rep.pairs_vs_count or {"n_pairs": np.zeros(0), "fit_px": np.zeros(0), "check_px": np.zeros(0)}
         st, sr = 100.0 * np.asarray(r.sigma_translation_m), np.asarray(r.sigma_rpy_deg)
-        if np.all(np.isfinite(st)) and np.all(np.isfinite(sr)):
-            self._plot_sigma.data = (np.array([1.0, 2.0, 3.0]), st, sr)
+        # All three parameters or none: a NaN sigma (undetermined pose) empties the plot rather than leave it stale.
+        sigma_x = np.array([1.0, 2.0, 3.0]) if np.isfinite(st).all() and np.isfinite(sr).all() else np.full(3, np.nan)
+        plots = [
+            (self._plot_pairs, finite_plot(_series("pair id"), x, [
+                (_series("under the fit (px)", _COLORS["fit"]), under),
+                (_series("left out (px)", _COLORS["loo"]), left)])),
+            (self._plot_count, finite_plot(_series("pairs"), count["n_pairs"], [
+                (_series("fit residual (px)", _COLORS["fit"]), count["fit_px"]),
+                (_series("check pairs (px)", _COLORS["check"]), count["check_px"])])),
+            (self._plot_sigma, finite_plot(_series("1 = x / roll, 2 = y / pitch, 3 = z / yaw"), sigma_x, [
+                (_series("sigma translation (cm)", _COLORS["fit"]), st),
+                (_series("sigma rotation (deg)", _COLORS["rot"]), sr)])),
+        ]
+        with self.app.server.atomic():
+            for plot, (series, data) in plots:
+                if tuple(plot.series) != series:
+                    plot.series = series
+                plot.data = data
         self._img_heat.image = cur.heat_image
         shown = np.isfinite(cur.heat_px)
         if shown.any():

@@ -20,6 +20,7 @@ from .ba_view import ColumnWindow, ba_texture, texture_factor
 from .camera_view import CameraView
 from .layout import CAMERA_WIDTH, GAP, LABEL_HEIGHT, ImageSlot, annotation_layout, bounds_of
 from .render_pane import RENDER_KEY, with_render_slot
+from .settled_updates import settled
 from .ui_common import (
     MIN_PAIRS, CLOUD_ORIGIN, PANEL_PX, ZOOM_PX_PER_CELL, ZOOM_PX_PER_IMAGE_PX, ZOOM_STEP,
 )
@@ -40,6 +41,8 @@ class ViewPanel:
         self.app = app
         self._client_mode: dict[int, str] = {}  # client id -> "all" | "camera" | "ba" | "3d"
         self._view_target: dict[int, tuple[np.ndarray, np.ndarray, float]] = {}
+        self._framed: dict[int, bool] = {}  # client id -> its view is the app's framing (not zoomed since)
+        self._canvas_size: dict[int, tuple[int, int] | None] = {}  # client id -> canvas size last reported
         self._ba_window = self._wanted_ba_window()
         self.slots: dict[str, ImageSlot] = self._layout()
         self._build_folder(app.server.gui)
@@ -47,11 +50,15 @@ class ViewPanel:
 
     def _build_folder(self, gui: Any) -> None:
         app, guard, view = self.app, self.app.guard, self.app.state.view
-        self.folder = gui.add_folder("View")
-        with self.folder:
+        # The loupe controls are used while picking: right below the Pairs folder, found without scrolling.
+        self.loupes_folder = gui.add_folder("Loupes", order=app.pairs_folder.order + 0.25)
+        with self.loupes_folder:
             loupe_zoom = gui.add_button_group("Loupe zoom", ("BA +", "BA -", "Camera +", "Camera -"))
             loupe_zoom.on_click(guard(app.loupe_support.on_loupe_zoom))
-            app.display.add_pane_controls(gui)
+            app.display.add_loupe_controls(gui)
+        self.folder = gui.add_folder("View")
+        with self.folder:
+            app.display.add_last_pane_control(gui)
             gui.add_button_group("Show", ("2D annotation", "3D cloud")).on_click(guard(self.on_view_mode))
             gui.add_button_group("Frame", ("All", "Camera", "BA images")).on_click(guard(self.on_zoom))
             gui.add_button_group("Zoom", ("In", "Out", "On last click")).on_click(guard(self.on_magnify))
@@ -64,10 +71,10 @@ class ViewPanel:
             self.ba_columns_dropdown.on_update(guard(self.on_ba_window_mode))
             self.ba_start_slider = gui.add_slider("BA first column", 0, max(n_cols - 1, 1), 1,
                                                   initial_value=self._ba_window.start)
-            self.ba_start_slider.on_update(guard(self.on_ba_window_slider))
+            self.ba_start_slider.on_update(settled(guard(self.on_ba_window_slider)))  # applied once typed
             self.ba_width_slider = gui.add_slider("BA columns shown", min(16, n_cols), n_cols, 1,
                                                   initial_value=max(self._ba_window.width, min(16, n_cols)))
-            self.ba_width_slider.on_update(guard(self.on_ba_window_slider))
+            self.ba_width_slider.on_update(settled(guard(self.on_ba_window_slider)))
             self._cb_pano = gui.add_checkbox(
                 "Unwrapped panorama", initial_value=self.camera_view.key == "panorama",
                 disabled="panorama" not in app.camera_views,
@@ -132,9 +139,10 @@ class ViewPanel:
         last = (w.start + w.width - 1) % w.n_cols
         return f"{title} (columns {w.start}-{last} of {w.n_cols})"
 
-    def apply_ba_window(self, relayout: bool = False) -> None:
-        """Show the window the mode asks for: new textures, slots, markers; re-frame 2-D tabs.  ``relayout``: lay
-        the page out again even if the window is the same (the camera view changed)."""
+    def apply_ba_window(self, typed: tuple[int, int] | None = None, relayout: bool = False) -> None:
+        """Show the window the mode asks for: new textures, slots, markers, loupes; re-frame 2-D tabs
+        (``typed``: see :meth:`sync_window_widgets`; ``relayout``: lay the page out again even if the window is
+        the same, e.g. the camera view changed)."""
         with self.app.ui_lock:
             window = self._wanted_ba_window()
             if window == self._ba_window and not relayout:
@@ -147,17 +155,25 @@ class ViewPanel:
                                          title=self.ba_title(key))
                 if getattr(self.app, "render_pane", None) is not None:
                     self.app.render_pane.place()
-            self.sync_window_widgets()
+            self.sync_window_widgets(typed)
         self.app.overlays.refresh()
         if self.slots == old_slots:
             return  # same size (only the first column moved): keep every tab's zoom and pan
+        if getattr(self.app, "loupes", None) is not None:
+            self.app.loupes.relayout()  # beside the new images, not where the old ones ended
         clients = self.app.server.get_clients()
         for cid, mode in list(self._client_mode.items()):
             if mode != "3d" and cid in clients:
                 self.set_view(clients[cid], mode)
 
-    def sync_window_widgets(self) -> None:
-        """Show the current window in the GUI (server-side updates; their callbacks ignore them)."""
+    def sync_window_widgets(self, typed: tuple[int, int] | None = None) -> None:
+        """Show the current window in the GUI (server-side updates; their callbacks ignore them).
+
+        ``typed``: the (first column, width) the sliders held when this change was asked for.  If the person
+        has changed either since (typing on), nothing is written back: their newer value is applied next.
+        """
+        if typed is not None and (self.ba_start_slider.value, self.ba_width_slider.value) != typed:
+            return
         w = self._ba_window
         want = BA_WINDOW_MODES[self.app.state.view.ba_window_mode]
         if self.ba_columns_dropdown.value != want:
@@ -235,22 +251,26 @@ class ViewPanel:
             return
         if event.value != event.target.value:
             return  # a newer slider position is queued behind this one
-        self._set_ba_mode("custom", ColumnWindow.make(int(self.ba_start_slider.value), int(self.ba_width_slider.value),
-                                                      self.app.depth.shape[1], self.app.wrap_cols))
+        typed = (self.ba_start_slider.value, self.ba_width_slider.value)
+        self._set_ba_mode("custom", ColumnWindow.make(int(typed[0]), int(typed[1]), self.app.depth.shape[1],
+                                                      self.app.wrap_cols), typed)
 
-    def _set_ba_mode(self, mode: str, custom: ColumnWindow | None = None) -> None:
-        """Save the BA column mode (and the custom window, if given), then show it."""
+    def _set_ba_mode(self, mode: str, custom: ColumnWindow | None = None, typed: tuple | None = None) -> None:
+        """Save the BA column mode (and the custom window, if given), then show it (``typed``: the sliders' values
+        it came from, see :meth:`sync_window_widgets`)."""
         w = self._ba_custom if custom is None else custom
         self.app.state.set_view(ba_window_mode=mode, ba_window_start=int(w.start), ba_window_width=int(w.width))
         if mode == "camera":
             self.app.live.ensure_facing()
-        self.apply_ba_window()
-        self.sync_window_widgets()
+        self.apply_ba_window(typed)
+        self.sync_window_widgets(typed)
 
     def forget_tab(self, client_id: int) -> None:
         """Forget a closed tab (the 3-D pane hides when no tab shows it)."""
         self._client_mode.pop(client_id, None)
         self._view_target.pop(client_id, None)
+        self._framed.pop(client_id, None)
+        self._canvas_size.pop(client_id, None)
         self._update_cloud_visibility()
 
     def any_tab_in_3d(self) -> bool:
@@ -265,6 +285,8 @@ class ViewPanel:
         """Point one client's camera at the annotation images (``all``, ``camera``, ``ba``) or the 3-D cloud."""
         cam = client.camera
         fov = math.radians(30.0)
+        self._watch_canvas(client)
+        self._framed[client.client_id] = mode != "3d"
         if mode == "3d":
             self._client_mode[client.client_id] = "3d"
             self._update_cloud_visibility()
@@ -323,6 +345,7 @@ class ViewPanel:
         new_units = float(np.clip(new_units, 1e-6, 0.2))  # 0.2 units/px: the whole layout is tiny
         new_look = np.array([centre[0] + shift_px * new_units, centre[1], 0.0])
         new_dist = new_units * h_px / (2 * tan)
+        self._framed[client.client_id] = False  # zoomed: a resize keeps this view
         self._apply_camera(client, new_look + np.array([0.0, 0.0, -new_dist]), new_look, np.array([0.0, -1.0, 0.0]),
                            fov)
 
@@ -349,6 +372,41 @@ class ViewPanel:
                 centre = slot.world_from_pixel(uv)[0]
                 units = slot.units_per_px / ZOOM_PX_PER_IMAGE_PX
         self._zoom(client, factor=ZOOM_STEP, centre=centre, min_units=units)
+
+    def _watch_canvas(self, client: Any) -> None:
+        """Re-frame tab ``client`` when its canvas changes shape (a resized window), once registered.
+
+        The reported size is in device pixels, which viser also scales down and up by itself when the page
+        renders slowly (its adaptive pixel ratio): that keeps the shape and shows the same view, so only a
+        change of the width / height ratio counts as a resize.
+        """
+        if client.client_id in self._canvas_size:
+            return
+        self._canvas_size[client.client_id] = None
+
+        async def on_camera(camera: Any) -> None:  # every camera message, on viser's event loop: cheap
+            cid = camera.client.client_id
+            size = (int(camera.image_width), int(camera.image_height))
+            old, self._canvas_size[cid] = self._canvas_size.get(cid), size
+            if old is not None and min(old + size) > 0 and abs(size[0] * old[1] / (size[1] * old[0]) - 1.0) > 0.005:
+                self.app.post(lambda: self._refit(camera.client), camera.client)
+
+        client.camera.on_update(on_camera)
+
+    def _refit(self, client: Any) -> None:
+        """Frame a resized tab again (the part of the canvas left of the control panel changed), unless its view
+        is not the app's framing any more (zoomed, panned or wheeled since)."""
+        cid = client.client_id
+        mode, target = self._client_mode.get(cid), self._view_target.get(cid)
+        if mode in (None, "3d") or target is None or not self._framed.get(cid):
+            return
+        try:
+            cam = client.camera
+            framed = np.allclose(cam.position, target[0], atol=1e-4) and np.allclose(cam.look_at, target[1], atol=1e-4)
+        except AssertionError:
+            return
+        if framed:
+            self.set_view(client, mode)
 
     def _apply_camera(self, client: Any, position: np.ndarray, look_at: np.ndarray, up: np.ndarray, fov: float) -> None:
         cam = client.camera

@@ -62,6 +62,9 @@ class ViewSettings:
         laser images (``Intensity``, ``Range``), or ``""`` for its BA direction.
     edge_opacity : float
         Opacity of the BA-edge overlay, in :data:`EDGE_OPACITY_RANGE` (0 hides it).
+    hide_marks : bool
+        Hide every mark drawn over the images and in the loupes (pair markers, their numbers, the
+        selection, predictions, reprojection overlays, the loupes' outlines), to see what lies under them.
     render_mode : str
         Key of :data:`RENDER_MODES`: how the scan seen from the camera is shaded.
     render_blend : float
@@ -84,6 +87,7 @@ class ViewSettings:
     loupe_shows: str = AS_CLICKED
     last_pane_shows: str = ""
     edge_opacity: float = 0.8
+    hide_marks: bool = False
     render_mode: str = "range"
     render_blend: float = 0.0
     rough_T_camera_lidar: tuple = ()
@@ -158,8 +162,8 @@ def _checked_pose(value: Any) -> tuple | None:
 
 _FIELDS = {"panorama": bool, "show_reprojection": bool, "show_edges": bool, "snap": bool, "up_axis": str,
            "ba_window_mode": str, "ba_window_start": int, "ba_window_width": int, "contrast": float,
-           "loupe_shows": str, "last_pane_shows": str, "edge_opacity": float, "render_mode": str,
-           "render_blend": float, "rough_T_camera_lidar": tuple}
+           "loupe_shows": str, "last_pane_shows": str, "edge_opacity": float, "hide_marks": bool,
+           "render_mode": str, "render_blend": float, "rough_T_camera_lidar": tuple}
 _CHOICES = {"up_axis": tuple(UP_AXES), "ba_window_mode": tuple(BA_WINDOW_MODES), "render_mode": tuple(RENDER_MODES)}
 _RANGES = {"contrast": CONTRAST_RANGE, "edge_opacity": EDGE_OPACITY_RANGE, "render_blend": RENDER_BLEND_RANGE}
 assert tuple(_FIELDS) == tuple(f.name for f in fields(ViewSettings)), "ViewSettings and _FIELDS disagree"

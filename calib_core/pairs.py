@@ -104,6 +104,13 @@ class Pair:
             rc = parse_laser_rc(entry["laser_rc"], f"{where} laser_rc")
             return Pair((int(rc[0]), int(rc[1])), None, pixel, **extra)  # type: ignore[arg-type]
         xyz = tuple(finite_vector(entry["laser_xyz"], 3, f"{where} laser_xyz", max_abs=MAX_COORDINATE_M))
+        if float(np.linalg.norm(xyz)) < MIN_LASER_RANGE_M:
+            # No return comes from the sensor's own origin (drivers write 0, 0, 0 for "no return").
+            name = where if "id" not in extra else f"{where} (id {extra['id']})"
+            raise CalibError(
+                f"{name} laser_xyz: {list(xyz)} is at the lidar origin (closer than {MIN_LASER_RANGE_M * 1000:g} mm), "
+                f"not a laser return"
+            )
         return Pair(None, xyz, pixel, **extra)  # type: ignore[arg-type]
 
 
@@ -118,6 +125,8 @@ MAX_CELL_INDEX = 10_000_000
 #: Largest laser coordinate (metres) and pixel coordinate accepted; beyond them a value is absurd.
 MAX_COORDINATE_M = 1e6
 MAX_PIXEL = 1e7
+#: A laser point closer than this to the lidar origin (metres) is no return.
+MIN_LASER_RANGE_M = 1e-3
 
 
 def parse_laser_rc(value: Any, where: str) -> tuple[int, int]:

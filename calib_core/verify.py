@@ -37,6 +37,7 @@ __all__ = [
     "verify_pairs",
     "leave_one_out",
     "pixel_errors",
+    "projects_outside",
     "expected_error_px",
     "expected_error_map",
     "compare_to_reference",
@@ -61,6 +62,10 @@ class VerifyReport:
     check_px, check_deg : (n_check,) arrays
         Error of each check pair under ``result.T_camera_lidar`` (px NaN when
         it does not project into the image or there is no camera).
+    check_outside : (n_check,) bool array
+        True where the check pair's laser point projects outside the image
+        (or behind the camera) under ``result.T_camera_lidar``: it has no pixel
+        error, only an angle; a warning names it.
     loo_px, loo_deg : (n_fit,) arrays
         Leave-one-out error of each fit pair.
     pairs_vs_count : dict or None
@@ -81,6 +86,7 @@ class VerifyReport:
     pairs_vs_count: dict | None = None
     reference: dict | None = None
     warnings: list[str] = field(default_factory=list)
+    check_outside: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
 
 
 # --------------------------------------------------------------------------------------
@@ -93,6 +99,12 @@ def pixel_errors(T_camera_lidar: np.ndarray, points_lidar: np.ndarray, pixels: n
     projected, valid = camera.project(transform_points(T_camera_lidar, points_lidar))
     err = np.linalg.norm(np.asarray(projected, dtype=np.float64) - pixels, axis=1)
     return np.where(np.asarray(valid, bool) & np.isfinite(err), err, np.nan)
+
+
+def projects_outside(T_camera_lidar: np.ndarray, points_lidar: np.ndarray, camera) -> np.ndarray:
+    """``(N,)`` bool: True where a laser point (lidar frame, m) does not project into the image under the pose."""
+    _, valid = camera.project(transform_points(T_camera_lidar, points_lidar))
+    return ~np.asarray(valid, bool).reshape(-1)
 
 
 def angular_errors_deg(T_camera_lidar: np.ndarray, points_lidar: np.ndarray, bearings: np.ndarray) -> np.ndarray:
@@ -335,7 +347,8 @@ def error_vs_pair_count(
         out["sigma_rotation_deg"][j] = float(np.linalg.norm(r.sigma_rpy_deg))
         out["sigma_translation_cm"][j] = float(100.0 * np.linalg.norm(r.sigma_translation_m))
         if chk_idx.size and camera is not None and pixels is not None:
-            out["check_px"][j] = float(np.nanmean(pixel_errors(r.T_camera_lidar, points_lidar[chk_idx], pixels[chk_idx], camera)))
+            mean = _mean(pixel_errors(r.T_camera_lidar, points_lidar[chk_idx], pixels[chk_idx], camera))
+            out["check_px"][j] = np.nan if mean is None else mean  # NaN: every check pair projects off the image
     return out
 
 
@@ -403,10 +416,13 @@ def verify_calibration(
     T = result.T_camera_lidar
     warnings: list[str] = []
     check_deg = angular_errors_deg(T, points[chk_idx], bear[chk_idx]) if chk_idx.size else np.zeros(0)
+    check_outside = np.zeros(chk_idx.size, bool)
     if chk_idx.size and camera is not None and pix is not None:
         check_px = pixel_errors(T, points[chk_idx], pix[chk_idx], camera)
+        check_outside = projects_outside(T, points[chk_idx], camera)
     else:
         check_px = np.full(chk_idx.size, np.nan)
+    pair_ids = list(ids) if ids is not None else list(range(n))
     # Outliers the fit left out stay out of every refit; their own error is under the fit (made without them).
     inl = np.ones(len(fit_idx), bool)
     inl[[int(i) for i in getattr(result, "outliers", [])]] = False
@@ -422,6 +438,9 @@ def verify_calibration(
             loo_px[~inl] = pixel_errors(T, points[out_idx], pix[out_idx], camera)
     if len(fit_idx) <= MIN_PAIRS:
         warnings.append(f"leave-one-out needs more than {MIN_PAIRS} fit pairs")
+    for i in chk_idx[check_outside]:
+        warnings.append(f"check pair {pair_ids[int(i)]}: its laser point projects outside the image under the fit, "
+                        "so it has no pixel error (only its angle)")
     if chk_idx.size == 0:
         warnings.append("no check pairs: mark a few pairs as check pairs to test the result on clicks it was not fitted to")
     else:
@@ -439,7 +458,7 @@ def verify_calibration(
         result=result,
         fit_index=fit_idx,
         check_index=chk_idx,
-        ids=list(ids) if ids is not None else list(range(n)),
+        ids=pair_ids,
         check_px=check_px,
         check_deg=check_deg,
         loo_px=loo_px,
@@ -447,6 +466,7 @@ def verify_calibration(
         pairs_vs_count=count,
         reference=reference,
         warnings=warnings,
+        check_outside=check_outside,
     )
 
 

@@ -189,11 +189,27 @@ def test_reads_the_published_opencalib_file(scene):
 @pytest.mark.realdata
 @pytest.mark.skipif(not (DATA / "kitti_object_000002").is_dir(), reason="../shared/data KITTI frame absent")
 def test_reads_a_kitti_calib_file():
+    """A full KITTI calib file: the pose of the rectified camera whose image KITTI projects into with
+    ``x = Pn @ R0_rect @ Tr_velo_to_cam @ X`` (camera 2 by default, the colour images)."""
     path = DATA / "kitti_object_000002" / "calib" / "000002.txt"
-    line = [ln for ln in path.read_text().splitlines() if ln.startswith("Tr_velo_to_cam:")][0]
-    expected = np.array(line.split(":")[1].split(), dtype=float).reshape(3, 4)
-    got = read_extrinsics_any(path)
-    assert got.format == "kitti" and np.array_equal(got.T_camera_lidar[:3], expected)
+    rows = {ln.split(":")[0]: np.array(ln.split(":")[1].split(), dtype=float) for ln in path.read_text().splitlines() if ":" in ln}
+    Tr, R0 = np.vstack([rows["Tr_velo_to_cam"].reshape(3, 4), [0, 0, 0, 1]]), np.eye(4)
+    R0[:3, :3] = rows["R0_rect"].reshape(3, 3)
+    points = np.random.default_rng(0).uniform([5, -10, -2], [40, 10, 2], (50, 3))  # Velodyne frame, ahead
+    homogeneous = np.c_[points, np.ones(len(points))]
+    for camera in (2, 0, 3):
+        P = rows[f"P{camera}"].reshape(3, 4)
+        got = read_extrinsics_any(path, kitti_camera=camera) if camera != 2 else read_extrinsics_any(path)
+        assert got.format == "kitti"
+        T = got.T_camera_lidar
+        np.testing.assert_allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3), atol=1e-5)  # a rotation (R0 is rounded)
+        # KITTI's projection and K @ T give the same pixels.
+        kitti = (P @ R0 @ Tr @ homogeneous.T).T
+        ours = (P[:, :3] @ (T @ homogeneous.T)[:3]).T
+        np.testing.assert_allclose(ours[:, :2] / ours[:, 2:], kitti[:, :2] / kitti[:, 2:], atol=1e-9)
+        assert np.all(ours[:, 2] > 0)
+    # Camera 0 has no baseline: its pose is R0_rect @ Tr_velo_to_cam.
+    np.testing.assert_allclose(read_extrinsics_any(path, kitti_camera=0).T_camera_lidar, R0 @ Tr, atol=1e-12)
 
 
 @pytest.mark.parametrize(

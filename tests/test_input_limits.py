@@ -21,7 +21,6 @@ from calib_core.pairs import MAX_PAIRS, load_pairs_yaml
 
 REPO = Path(__file__).resolve().parents[1]
 SAMPLE = REPO / "sample_data"
-OTHER_TOOLS = REPO.parent / "shared" / "data" / "other_tools_files"
 
 
 def _in_thread(fn, timeout: float = 20.0):
@@ -223,16 +222,20 @@ def test_absurd_extrinsics_are_refused(tmp_path, block):
         load_extrinsics_yaml(path)
 
 
-@pytest.mark.realdata
-def test_an_ocam_model_in_a_pjlab_json_is_named():
-    path = OTHER_TOOLS / "cam" / "pjlab_surround_ocam_Front.json"
-    if not path.is_file():
-        pytest.skip(f"{path} not present (shared data)")
+def test_an_ocam_model_in_a_pjlab_json_with_a_shrinking_polynomial_is_refused(tmp_path):
+    # PJLab's OCam layout (cam_K = [[c, d, u0], [e, 1, v0], [0, 0, 1]], cam_dist = world2cam), but the
+    # polynomial's radius shrinks away from the axis: no camera projects like that.
+    doc = {"front_camera-intrinsic": {"param": {
+        "img_dist_w": 1280, "img_dist_h": 960,
+        "cam_K": {"rows": 3, "cols": 3, "data": [[1.0, 0.0, 640.0], [0.0, 1.0, 480.0], [0.0, 0.0, 1.0]]},
+        "cam_dist": {"rows": 1, "cols": 3, "data": [[100.0, -300.0, 0.0]]},
+    }}}
+    path = tmp_path / "Front.json"
+    path.write_text(json.dumps(doc))
     with pytest.raises(CalibError) as err:
         load_camera(path)
     msg = str(err.value)
-    assert "OCam (Scaramuzza) model in PJLab's intrinsic JSON" in msg and "not supported" in msg
-    assert "skew" not in msg
+    assert msg.startswith(str(path)) and "world2cam polynomial does not grow" in msg and "\n" not in msg
 
 
 # ---------------------------------------------------------------- sessions

@@ -199,7 +199,9 @@ def _example_depths():
     rho = np.array([[1.0, np.nan, 3.0], [4.0, 5.0, 0.0]])
     yield rotating_scanner_depth(rho, np.array([[0.2], [-0.2]]), np.array([0.0, 2.0, 4.0]), 0.02, -0.03, wrap_cols=True)
     yield spherical_depth(rho, [0.1, -0.1], [1.0, 0.0, -1.0])
-    yield organized_cloud_depth(np.array([[[1.0, 2.0, 3.0], [np.nan] * 3], [[0.0] * 3, [-1.0, 0.5, 0.0]]]))
+    # At least 3 valid cells: a native scan with fewer is refused on loading.
+    yield organized_cloud_depth(np.array([[[1.0, 2.0, 3.0], [np.nan] * 3, [0.5, 1.0, -2.0]],
+                                          [[0.0] * 3, [-1.0, 0.5, 0.0], [2.0, 2.0, 2.0]]]))
 
 
 @pytest.mark.parametrize("depth", list(_example_depths()), ids=lambda d: d.meta["model"])

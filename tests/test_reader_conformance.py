@@ -474,13 +474,77 @@ def test_small_pcds_from_other_projects(tmp_path, name, text, n_points):
     check_pcd(path, cloud)
 
 
-def test_cut_copy_of_a_fixed_width_pcd_is_refused(tmp_path):
-    # The same PCL file cut inside its last number: narrower than the numbers above it.
+def test_a_missing_final_newline_is_no_truncation_the_values_are_counted(tmp_path):
+    # PCL nhood_test.pcd has no newline after its last line; cut inside its last number, the file still
+    # holds every value (a shorter last number is a valid number): the values are counted, not their widths.
     path = tmp_path / "cut.pcd"
     path.write_text(PCL_NHOOD[:-3])
+    np.testing.assert_array_equal(read_point_cloud(path).xyz[-1], np.float32([-1.052991, -0.732873, 1.534287]))
+    # Cut so that the last point loses values, or lines: refused.
+    for cut, name in ((PCL_NHOOD[: PCL_NHOOD.rindex(" ")], "short_last_line"), (PCL_NHOOD[:-40], "lost_line")):
+        path = tmp_path / f"{name}.pcd"
+        path.write_text(cut)
+        with pytest.raises(CalibError) as excinfo:
+            read_point_cloud(path)
+        assert "truncated" in assert_one_line(excinfo, path)
+
+
+# PointCloudLibrary/pcl test/rops_cloud.pcd @ fd791e47 (BSD-3-Clause): its header, its first 7 and its 28th of
+# 32,087 points, counts changed to 8; numbers of varying width (%g) and, like the original,
+# no final newline.
+PCL_ROPS_HEAD = (
+    "# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\n"
+    "WIDTH 8\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 8\nDATA ascii\n"
+)
+PCL_ROPS_POINTS = [
+    (0.13058, 0.24871, -1.1732), (0.13169, 0.24871, -1.1732), (0.12191, 0.24796, -1.1749),
+    (0.12285, 0.24763, -1.1733), (0.1239, 0.24752, -1.1728), (0.12489, 0.24729, -1.1717),
+    (0.12595, 0.24721, -1.1713), (0.13794, 0.24583, -1.17),
+]
+# mikedh/trimesh models/metadata.ply @ ae499e5a (MIT), whole file: no newline after the last face.
+TRIMESH_METADATA = (
+    "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n"
+    "element face 2\nproperty list uchar int vertex_index\nproperty char face_type\nend_header\n"
+    "-4 -4 0\n-4 4 0\n4 -4 0\n4 4 0\n3 0 2 1 12\n3 1 2 3 90"
+)
+# PDAL/PDAL test/data/ply/simple_text.ply @ 85360956 (BSD), whole file: "ply " with a trailing blank.
+PDAL_SIMPLE_TEXT = (
+    "ply \nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z \n"
+    "end_header\n-1 0 0\n 0 1 0\n 1 0 0 \n"
+)
+
+
+def test_pcl_variable_width_pcd_without_a_final_newline(tmp_path):
+    path = tmp_path / "rops_head.pcd"
+    body = "\n".join(" ".join(f"{v:g}" for v in point) for point in PCL_ROPS_POINTS)
+    path.write_text(PCL_ROPS_HEAD + body)  # no final newline
+    cloud = read_point_cloud(path)
+    np.testing.assert_array_equal(cloud.xyz, np.float32(PCL_ROPS_POINTS).astype(np.float64))
+    check_pcd(path, cloud)
+
+
+@pytest.mark.parametrize(
+    "name, text, xyz",
+    [
+        ("metadata.ply", TRIMESH_METADATA, [[-4, -4, 0], [-4, 4, 0], [4, -4, 0], [4, 4, 0]]),
+        ("simple_text.ply", PDAL_SIMPLE_TEXT, [[-1, 0, 0], [0, 1, 0], [1, 0, 0]]),
+    ],
+)
+def test_ascii_plys_of_other_projects(tmp_path, name, text, xyz):
+    path = tmp_path / name
+    path.write_text(text)
+    cloud = read_point_cloud(path)
+    np.testing.assert_array_equal(cloud.xyz, np.array(xyz, dtype=np.float64))
+
+
+def test_ascii_ply_rows_are_counted(tmp_path):
+    # A vertex row cut short (and no list in the element): refused, naming the row.
+    text = TRIMESH_POINTS_ASCII.rstrip()
+    path = tmp_path / "cut.ply"
+    path.write_text(text[: text.rindex(" ")])
     with pytest.raises(CalibError) as excinfo:
         read_point_cloud(path)
-    assert "truncated" in assert_one_line(excinfo, path)
+    assert "vertex 4 has 2 values" in assert_one_line(excinfo, path)
 
 
 @pytest.mark.parametrize("text", [TRIMESH_POINTS_ASCII, TRIMESH_POINTS_WITH_LISTS], ids=["points", "with_lists"])

@@ -526,12 +526,15 @@ def test_non_regular_files_are_refused_without_blocking(tmp_path):
         load_scan("/dev/zero")
 
 
-def test_ascii_pcd_cut_mid_number_is_refused(tmp_path):
+def test_ascii_pcd_without_a_final_newline_is_read_a_cut_that_loses_values_is_refused(tmp_path):
     rec = sample_records(10)
     good = pcd_bytes(rec, "ascii")
-    # Cut one character before the end: the last number loses its last digit and the line its newline.
-    path = write(tmp_path / "cut.pcd", good[:-2])
-    refuse(path, "truncated", "cut off")
+    # Without its final newline the file is whole: every point holds its values (issue 23: PCL's rops_cloud.pcd).
+    cloud = read_point_cloud(write(tmp_path / "no_newline.pcd", good[:-1]))
+    np.testing.assert_array_equal(cloud.fields["time"], rec["time"])
+    # Cut inside the last line so that its last value is lost: refused.
+    last_blank = good.rstrip().rindex(b" ")
+    refuse(write(tmp_path / "cut.pcd", good[:last_blank]), "truncated", "point 10 has 5 values")
     # A whole file still reads, with the last number intact.
     cloud = read_point_cloud(write(tmp_path / "whole.pcd", good))
     np.testing.assert_array_equal(cloud.fields["time"], rec["time"])
@@ -594,8 +597,11 @@ def test_ply_declared_counts_must_match_the_data(tmp_path, capfd):
         b"end_header", b"element face 1000000000\nproperty list uchar int vertex_indices\nend_header"
     )
     refuse(write(tmp_path / "faces.ply", faces + xyz.tobytes()), "1,000,000,000 face", capfd=capfd)
-    body = b"1.5 2 3\n4 5 6.25\n7 8 9.125"  # cut: '9.125' is wider than nothing above it is sure of
-    refuse(write(tmp_path / "cut.ply", ply_header("ascii", 3, "x y z") + body), "truncated", capfd=capfd)
+    body = b"1.5 2 3\n4 5 6.25\n7 8 9.125"  # no final newline, but every row holds its 3 values: whole
+    np.testing.assert_array_equal(read_point_cloud(write(tmp_path / "whole.ply", ply_header("ascii", 3, "x y z") + body)).xyz,
+                                  [[1.5, 2, 3], [4, 5, 6.25], [7, 8, 9.125]])
+    cut = body[: body.rindex(b" ")]  # the last row lost its z
+    refuse(write(tmp_path / "cut.ply", ply_header("ascii", 3, "x y z") + cut), "truncated", "vertex 2 has 2 values", capfd=capfd)
 
 
 def test_ply_rows_beyond_the_declared_counts_are_refused(tmp_path):

@@ -16,9 +16,15 @@ Accepted inputs (:func:`load_camera`):
   ``image_height``, ``camera_matrix``, ``distortion_model``,
   ``distortion_coefficients``); ``plumb_bob`` and ``rational_polynomial`` map
   to ``pinhole``, ``equidistant`` to ``fisheye``.
-* ``.txt``: the OCamCalib toolbox's C export ``calib_results.txt``.
+* ``.txt``: the OCamCalib toolbox's C export ``calib_results.txt``, or a
+  KITTI ``calib/NNNNNN.txt``: rectified camera 2 by default (``P2``; 0-3
+  with ``kitti_camera``), pinhole ``K = P[:, :3]`` without distortion, and
+  the image size given by the caller (KITTI states none).
 * ``.json``: the PJLab OpenCalib intrinsic JSON (``cam_K``, ``cam_dist``,
-  ``img_dist_w``, ``img_dist_h``), or our own format as JSON.
+  ``img_dist_w``, ``img_dist_h``): a pinhole with OpenCV distortion, or an
+  OCam model as PJLab's surround-view tools store it (``cam_K`` holds the
+  affine ``c, d, e`` and the centre, ``cam_dist`` the world2cam polynomial);
+  or our own format as JSON.
 """
 
 from __future__ import annotations
@@ -166,7 +172,9 @@ def ros_camera_info_to_dict(data: dict[str, Any]) -> dict[str, Any]:
 
 
 def pjlab_intrinsic_to_dict(data: dict[str, Any]) -> dict[str, Any]:
-    """A PJLab OpenCalib ``*-intrinsic.json`` mapping -> our own pinhole mapping."""
+    """A PJLab OpenCalib ``*-intrinsic.json`` mapping -> our own pinhole mapping, or our ``ocam`` mapping
+    for the OCam models PJLab's surround-view tools store in the same layout
+    (:func:`calib_core.cameras.ocam.pjlab_ocam_parameters`)."""
     param = data.get("param")
     if param is None:
         blocks = [v for v in data.values() if isinstance(v, dict) and "param" in v]
@@ -184,14 +192,12 @@ def pjlab_intrinsic_to_dict(data: dict[str, Any]) -> dict[str, Any]:
         dist = _numeric_array(param["cam_dist"]["data"], "cam_dist.data").ravel().tolist()
     K = K.reshape(3, 3)
     if (abs(K[0, 0]) < 10 and abs(K[1, 1]) < 10) or len(dist) > 14:
-        # PJLab's surround-view tools store an OCam (Scaramuzza) model in this layout: affine
-        # c, d, e near 1 in place of fx, fy, and a long polynomial (first term hundreds of px) as
-        # the distortion.  Which polynomial it is (pol or invpol) is not stated, so no guess.
-        raise CalibError(
-            f"looks like an OCam (Scaramuzza) model in PJLab's intrinsic JSON layout (cam_K diagonal "
-            f"{K[0, 0]:.3g}, {K[1, 1]:.3g}; {len(dist)} cam_dist terms), which is not supported; "
-            f"give the OCamCalib calib_results.txt instead"
-        )
+        # PJLab's surround-view tools store an OCam (Scaramuzza) model in this layout: the affine c, d, e
+        # (near 1 and 0) in place of fx, fy and the skew, and the world2cam polynomial (its first term
+        # hundreds of px) as the distortion; their run_avm.cpp projects with it.
+        from .ocam import pjlab_ocam_parameters
+
+        return pjlab_ocam_parameters(K, dist, param["img_dist_w"], param["img_dist_h"])
     return {
         "model": "pinhole",
         "width": param["img_dist_w"],
@@ -235,17 +241,56 @@ def _read_json(path: Path) -> Any:
     return parse_json_text(read_input_text(path, "camera file", MAX_CAMERA_BYTES), str(path))
 
 
-def load_camera(path: str | os.PathLike, image_size: tuple[int, int] | None = None) -> CameraModel:
+def is_kitti_calib(path: str | os.PathLike) -> bool:
+    """True when ``path`` is a ``.txt`` holding KITTI calib lines (``P2: ...``), not an OCamCalib export."""
+    from ..io.kitti_calib import looks_like_kitti_calib
+
+    path = Path(path)
+    if path.suffix.lower() != ".txt":
+        return False
+    try:
+        return looks_like_kitti_calib(read_input_text(path, "camera file", MAX_CAMERA_BYTES))
+    except CalibError:
+        return False  # load_camera says what is wrong with the file
+
+
+def kitti_camera_dict(path: Path, kitti_camera: int | None, image_size: tuple[int, int] | None) -> dict[str, Any]:
+    """Our pinhole mapping of rectified camera ``kitti_camera`` (default 2) of a KITTI calib file.
+
+    ``K = Pn[:, :3]``, no distortion (KITTI's images are rectified).  The
+    file states no image size: ``image_size`` (the rectified image's, about
+    1242 x 375) is required.
+    """
+    from ..io.kitti_calib import DEFAULT_KITTI_CAMERA, kitti_camera_matrix, read_kitti_calib
+
+    camera = DEFAULT_KITTI_CAMERA if kitti_camera is None else kitti_camera
+    K = kitti_camera_matrix(read_kitti_calib(path), camera, str(path))
+    if image_size is None:
+        raise CalibError(
+            f"{path}: a KITTI calib file states no image size: give the rectified image (serve and colorize "
+            f"take its size from --image) or --image-size W H"
+        )
+    return {"model": "pinhole", "width": image_size[0], "height": image_size[1], "K": K.tolist(), "dist": []}
+
+
+def load_camera(
+    path: str | os.PathLike, image_size: tuple[int, int] | None = None, kitti_camera: int | None = None
+) -> CameraModel:
     """Load a camera model from a file.
 
     Parameters
     ----------
     path : path-like
         ``.yaml``/``.yml`` (own format or ROS camera_info), ``.txt`` (OCamCalib
-        ``calib_results.txt``) or ``.json`` (PJLab intrinsic, or own format).
+        ``calib_results.txt``, or a KITTI ``calib/NNNNNN.txt``) or ``.json``
+        (PJLab intrinsic, or own format).
     image_size : (int, int), optional
         ``(width, height)`` in pixels replacing the size stated in the file
-        (e.g. PJLab's manual_calib JSON claims 1920x1080 for a 1920x1200 image).
+        (e.g. PJLab's manual_calib JSON claims 1920x1080 for a 1920x1200 image);
+        required for a KITTI calib file, which states none.
+    kitti_camera : int, optional
+        For a KITTI calib file: which rectified camera, 0-3 (``P0``..``P3``;
+        default 2, the colour images).  Refused for other files.
 
     Raises
     ------
@@ -261,6 +306,10 @@ def load_camera(path: str | os.PathLike, image_size: tuple[int, int] | None = No
             if len(image_size) != 2:
                 raise CalibError(f"image_size must be (width, height), got {image_size!r}")
             param_image_size(*image_size)
+        if is_kitti_calib(path):
+            return camera_from_dict(kitti_camera_dict(path, kitti_camera, image_size), path.parent)
+        if kitti_camera is not None:
+            raise CalibError("is not a KITTI calib file (no 'P2:' line): the KITTI camera option does not apply")
         if suffix == ".txt":
             camera = CAMERA_MODELS["ocam"].from_calib_results(path)
             if image_size is not None:

@@ -381,3 +381,111 @@ class OCamCamera:
             f"d={self.d:.6g}, e={self.e:.6g}, {self.width}x{self.height}, "
             f"max_angle={np.degrees(self.max_angle_rad):.1f} deg)"
         )
+
+
+# -- other tools' files ------------------------------------------------------------------
+#: Largest degree tried when a direct polynomial is fitted to a file that only gives the inverse one.
+_POL_MAX_DEGREE = 12
+#: Smallest angle from the axis sampled for that fit (radians): on the axis ``z = -rho / tan(alpha)`` is 0/0.
+_POL_FIT_MIN_ANGLE = np.radians(0.5)
+
+
+def pjlab_ocam_parameters(K: Any, world2cam: Any, width: Any, height: Any) -> dict[str, Any]:
+    """Our ``model: ocam`` parameters for an OCam model in PJLab's intrinsic JSON layout.
+
+    PJLab's SensorsCalibration (``surround-camera/manual_calib``) stores the
+    affine part as ``cam_K = [[c, d, u0], [e, 1, v0], [0, 0, 1]]`` and the
+    world2cam polynomial (OCamCalib's ``invpol``, ascending powers of
+    ``theta``) as ``cam_dist``; it has no cam2world polynomial.  Its
+    projection of a point ``(X, Y, Z)`` of the OpenCV camera frame (x
+    right, y down, z forward) is, with ``n = hypot(X, Y)``,
+    ``theta = atan(-Z / n)`` and ``rho = sum_i D_i theta^i``::
+
+        u = c X rho / n + d Y rho / n + u0     (column)
+        v = e X rho / n +   Y rho / n + v0     (row)
+
+    OCamCalib's own frame has x along rows, so the same projection in our
+    convention (``row = c' x + d' y + xc``, ``column = e' x + y + yc``,
+    ``x = Y rho' / n``, ``y = X rho' / n``) takes ``rho' = c rho``,
+    ``c' = 1 / c``, ``d' = e / c``, ``e' = d / c``, ``xc = v0``,
+    ``yc = u0``: the same pixels exactly.  The direct polynomial ``pol``
+    (``z = pol(rho')``, with ``a1 = 0`` as the toolbox fits it) is fitted to
+    the rays ``z = -rho' / tan(alpha)``, ``alpha = theta + pi/2``, out to
+    the image corners, of the lowest degree whose angles land within
+    0.01 px of ``rho'``.
+
+    Parameters
+    ----------
+    K : (3, 3) array_like
+        ``cam_K``.
+    world2cam : array_like
+        ``cam_dist``, the world2cam coefficients (pixels per radian^i).
+    width, height : int
+        Image size in pixels (``img_dist_w``, ``img_dist_h``).
+
+    Returns
+    -------
+    dict
+        ``{model: ocam, pol, invpol, xc, yc, c, d, e, width, height}``.
+
+    Raises
+    ------
+    CalibError
+        A singular affine part, a polynomial that is not increasing from
+        the axis out to the image corners, or no direct polynomial that
+        reproduces it.
+    """
+    K = np.asarray(K, dtype=np.float64).reshape(3, 3)
+    coeffs = param_vector(world2cam, "cam_dist (world2cam)")
+    c, d, e = float(K[0, 0]), float(K[0, 1]), float(K[1, 0])
+    if abs(c) < 1e-9 or abs(K[1, 1] - 1.0) > 1e-9:
+        raise CalibError(f"cam_K {K.tolist()} is not an OCam affine part [[c, d, u0], [e, 1, v0], [0, 0, 1]]")
+    width, height = param_image_size(width, height)
+    invpol = c * coeffs  # rho' = c rho
+    ours = {"c": 1.0 / c, "d": e / c, "e": d / c, "xc": float(K[1, 2]), "yc": float(K[0, 2])}
+    det = ours["c"] - ours["d"] * ours["e"]
+    if abs(det) < 1e-9:
+        raise CalibError(f"cam_K {K.tolist()}: the affine part is singular")
+    # Sensor-plane radius of the image corners (pixel edges), as OCamCamera measures the image.
+    rows = np.array([-0.5, -0.5, height - 0.5, height - 0.5]) - ours["xc"]
+    cols = np.array([-0.5, width - 0.5, -0.5, width - 0.5]) - ours["yc"]
+    xp, yp = (rows - ours["d"] * cols) / det, (-ours["e"] * rows + ours["c"] * cols) / det
+    rho_corner = float(np.max(np.hypot(xp, yp)))
+    alpha = np.linspace(0.0, np.pi, 20_001)
+    rho = npoly.polyval(alpha - np.pi / 2, invpol)
+    increasing = np.diff(rho) > 0
+    n_ok = int(np.argmin(increasing)) + 1 if not increasing.all() else rho.size
+    reach = np.flatnonzero(rho[:n_ok] >= rho_corner)
+    if rho[0] < -0.5 or not reach.size:
+        raise CalibError(
+            f"cam_dist: the world2cam polynomial does not grow from the centre (rho {rho[0]:.3g} px) out to the image "
+            f"corners ({rho_corner:.0f} px)"
+        )
+    alpha_max = min(alpha[min(int(reach[0] * 1.02) + 1, n_ok - 1)], np.pi - _POL_FIT_MIN_ANGLE)
+    samples = np.linspace(_POL_FIT_MIN_ANGLE, alpha_max, 2000)
+    rho_s = npoly.polyval(samples - np.pi / 2, invpol)
+    z_s = -rho_s / np.tan(samples)
+    scale = float(rho_s.max())
+    t = rho_s / scale
+    best, best_err = None, np.inf
+    for degree in range(3, _POL_MAX_DEGREE + 1):
+        powers = np.r_[0, np.arange(2, degree + 1)]  # a1 = 0, as the toolbox fits pol
+        fit, *_ = np.linalg.lstsq(t[:, None] ** powers[None, :], z_s, rcond=None)
+        pol = np.zeros(degree + 1)
+        pol[powers] = fit / scale ** powers
+        if not pol[0] < 0:
+            continue
+        # Where each sampled ray lands under the fitted pol: pol(r) sin(alpha) + r cos(alpha) = 0, by Newton.
+        r = rho_s.copy()
+        dpol = npoly.polyder(pol)
+        for _ in range(20):
+            h = npoly.polyval(r, pol) * np.sin(samples) + r * np.cos(samples)
+            r = r - h / (npoly.polyval(r, dpol) * np.sin(samples) + np.cos(samples))
+        err = float(np.max(np.abs(r - rho_s)))
+        if np.isfinite(err) and err < best_err:
+            best, best_err = pol, err
+        if err < _INVPOL_MAX_ERR_PX:
+            break
+    if best is None or best_err > 0.1:
+        raise CalibError(f"cam_dist: no direct polynomial reproduces the world2cam polynomial (best {best_err:.3g} px)")
+    return {"model": "ocam", "pol": best.tolist(), "invpol": invpol.tolist(), **ours, "width": width, "height": height}

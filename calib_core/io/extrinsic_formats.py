@@ -21,7 +21,9 @@ is this package's pose):
              4x4 ``T_camera_lidar`` (OpenCalib's lidar-to-camera convention)
 ``dvlc``     direct_visual_lidar_calibration's ``calib.json``, ``results.T_lidar_camera =
              [x, y, z, qx, qy, qz, qw]``: ``T_lidar_camera``
-``kitti``    ``Tr_velo_to_cam: 12 numbers``: the 3x4 of ``T_camera_lidar``
+``kitti``    ``Tr_velo_to_cam: 12 numbers``: the 3x4 of ``T_camera_lidar``; read from a
+             full KITTI calib file (``P0``..``P3``, ``R0_rect``), the pose of the
+             rectified camera 2 (``kitti_camera``), as KITTI projects into its images
 ``matrix``   a plain 4x4, ``T_parent_child`` (so both directions, chosen by the
              order of the frames)
 ==========  =====================================================================
@@ -47,6 +49,7 @@ import yaml
 
 from ..errors import CalibError
 from ..transforms import R_from_quat_xyzw, R_from_rpy_deg, invert_T, make_T, quat_xyzw_from_R, rpy_deg_from_R
+from .kitti_calib import DEFAULT_KITTI_CAMERA, kitti_T_camera_lidar, parse_kitti_calib
 
 __all__ = [
     "FORMATS",
@@ -92,10 +95,12 @@ class ParsedExtrinsics:
 
 
 class FrameHint(NamedTuple):
-    """Frame names a caller knows: which frame is the lidar's, which the camera's (None: unknown)."""
+    """Frame names a caller knows: which frame is the lidar's, which the camera's (None: unknown); and which
+    rectified camera (0-3) a full KITTI calib file's extrinsic is for."""
 
     lidar: str | None = None
     camera: str | None = None
+    kitti_camera: int = DEFAULT_KITTI_CAMERA
 
 
 @dataclass(frozen=True)
@@ -560,14 +565,17 @@ def _write_kitti(T_camera_lidar, parent, child, lidar) -> str:
 
 
 def _read_kitti(text: str, hint: FrameHint) -> ParsedExtrinsics:
-    for line in text.splitlines():
-        if line.strip().startswith("Tr_velo_to_cam"):
-            values = line.split(":", 1)[1].split() if ":" in line else line.split()[1:]
-            M = np.eye(4)
-            M[:3, :4] = _numbers(values, 12, "kitti Tr_velo_to_cam").reshape(3, 4)
-            found = _find_marker(text) or (None, None)
-            return ParsedExtrinsics(_check_rigid(M, "kitti Tr_velo_to_cam"), "kitti", *found)
-    raise CalibError("kitti: no 'Tr_velo_to_cam:' line")
+    # The same reader as a KITTI calib file given as a camera (calib_core.io.kitti_calib).
+    calib = parse_kitti_calib(text, "kitti")
+    if "Tr_velo_to_cam" not in calib:
+        raise CalibError("kitti: no 'Tr_velo_to_cam:' line")
+    Tr = np.eye(4)
+    Tr[:3] = calib["Tr_velo_to_cam"]
+    _check_rigid(Tr, "kitti Tr_velo_to_cam")
+    # A full calib file (P0..P3, R0_rect): the rectified camera's pose; an export (Tr_velo_to_cam only): Tr.
+    T = kitti_T_camera_lidar(calib, hint.kitti_camera, "kitti")
+    found = _find_marker(text) or (None, None)
+    return ParsedExtrinsics(_check_rigid(T, f"kitti camera {hint.kitti_camera}"), "kitti", *found)
 
 
 def _write_matrix(T_camera_lidar, parent, child, lidar) -> str:
@@ -680,14 +688,17 @@ def detect_format(text: str) -> str:
 
 
 def parse_extrinsics(
-    text: str, fmt: str | None = None, lidar_frame: str | None = None, camera_frame: str | None = None
+    text: str, fmt: str | None = None, lidar_frame: str | None = None, camera_frame: str | None = None,
+    kitti_camera: int | None = None,
 ) -> ParsedExtrinsics:
     """Parse extrinsics text in any format of :data:`FORMATS` (detected when ``fmt`` is None).
 
     ``lidar_frame``/``camera_frame`` name the frames when the file does not
     tell (a URDF or Autoware file with several sensors: the chain between the
     two is composed).  The camera frame must be the optical frame (z forward,
-    x right, y down), as this package's camera frame.
+    x right, y down), as this package's camera frame.  A full KITTI calib
+    file gives the pose of rectified camera ``kitti_camera`` (0-3; None: 2,
+    the colour images), see :mod:`calib_core.io.kitti_calib`.
 
     Raises
     ------
@@ -705,11 +716,13 @@ def parse_extrinsics(
         return ParsedExtrinsics(parse_transform(data["T_camera_lidar"], "T_camera_lidar"), "ba-calib")
     if fmt not in FORMATS:
         raise CalibError(f"unknown extrinsics format {fmt!r} (one of {', '.join(FORMATS)})")
-    return FORMATS[fmt].read(text, FrameHint(lidar_frame, camera_frame))
+    kitti = DEFAULT_KITTI_CAMERA if kitti_camera is None else kitti_camera
+    return FORMATS[fmt].read(text, FrameHint(lidar_frame, camera_frame, kitti))
 
 
 def read_extrinsics_any(
-    path: str | os.PathLike, fmt: str | None = None, lidar_frame: str | None = None, camera_frame: str | None = None
+    path: str | os.PathLike, fmt: str | None = None, lidar_frame: str | None = None, camera_frame: str | None = None,
+    kitti_camera: int | None = None,
 ) -> ParsedExtrinsics:
     """Read an extrinsics file of any supported format; errors name the file and the format."""
     path = Path(path)
@@ -722,13 +735,14 @@ def read_extrinsics_any(
     except (OSError, UnicodeDecodeError) as exc:
         raise CalibError(f"{path}: cannot read extrinsics file: {exc}") from None
     try:
-        return parse_extrinsics(text, fmt, lidar_frame, camera_frame)
+        return parse_extrinsics(text, fmt, lidar_frame, camera_frame, kitti_camera)
     except CalibError as exc:
         raise CalibError(f"{path}: {exc}") from None
 
 
 def load_extrinsics_any(
-    path: str | os.PathLike, fmt: str | None = None, lidar_frame: str | None = None, camera_frame: str | None = None
+    path: str | os.PathLike, fmt: str | None = None, lidar_frame: str | None = None, camera_frame: str | None = None,
+    kitti_camera: int | None = None,
 ) -> np.ndarray:
     """``T_camera_lidar`` (4, 4) from an extrinsics file of any supported format."""
-    return read_extrinsics_any(path, fmt, lidar_frame, camera_frame).T_camera_lidar
+    return read_extrinsics_any(path, fmt, lidar_frame, camera_frame, kitti_camera).T_camera_lidar

@@ -141,6 +141,37 @@ def _check_points(path: Path, cloud: PointCloud) -> None:
         raise CalibError(f"{path}: a coordinate of {largest:.3g}: not metres in a sensor frame")
 
 
+#: An axis along which the points spread less than this share of their largest extent is no extent.
+FLAT_EXTENT_SHARE = 1e-6
+
+
+def _check_three_dimensional(path: Path, cloud: PointCloud) -> None:
+    """Refuse 2-D data stored as a point cloud: no extent along x, y or z (PCL's lena.pcd: pixels, z = 0)."""
+    xyz = cloud.xyz[np.isfinite(cloud.xyz).all(axis=1)]
+    extent = np.ptp(xyz, axis=0)
+    flat = extent <= FLAT_EXTENT_SHARE * extent.max()
+    if flat.any():
+        axis = int(np.argmax(flat))
+        raise CalibError(
+            f"{path}: not a 3-D scan: all {len(xyz)} points have {'xyz'[axis]} = {xyz[0, axis]:.6g} "
+            f"(no extent along {'xyz'[axis]}; 2-D data such as an image stored as a point cloud?)"
+        )
+
+
+#: Fewest rows and columns of a depth matrix: every Bearing Angle trace needs a previous neighbour.
+MIN_GRID_SIDE = 2
+
+
+def _check_grid(path: Path, depth: DepthMatrix) -> None:
+    """Refuse a depth matrix of one row or one column: a single scan line, too small for BA images."""
+    rows, cols = depth.shape
+    if min(rows, cols) < MIN_GRID_SIDE:
+        raise CalibError(
+            f"{path}: the scan is a {rows} x {cols} depth matrix, a single line: too small for Bearing Angle images "
+            f"(at least {MIN_GRID_SIDE} x {MIN_GRID_SIDE} cells; a 3-D scan is needed)"
+        )
+
+
 def read_point_cloud(path, bin_columns: int | None = None, max_points: int = DEFAULT_MAX_POINTS) -> PointCloud:
     """Read the points and per-point fields of a scan file.
 
@@ -281,8 +312,10 @@ def load_scan(
     Raises
     ------
     CalibError
-        Bad file or options (see :func:`read_point_cloud`), or a cloud of
-        which organising keeps too few points to be one sensor's view.
+        Bad file or options (see :func:`read_point_cloud`), a cloud with no
+        extent along x, y or z (not a 3-D scan), a cloud of which organising
+        keeps too few points to be one sensor's view, or a depth matrix of a
+        single row or column (too small for Bearing Angle images).
     """
     if organize not in ORGANIZE_METHODS:
         raise CalibError(f"unknown organize method '{organize}' (one of {', '.join(ORGANIZE_METHODS)})")
@@ -290,11 +323,13 @@ def load_scan(
     path = _check_path(path, max_points)
     if _is_native_npz(path):
         depth = load_depth_npz(path, max_cells=max_points)
+        _check_grid(path, depth)
         meta = {**depth.meta, "source": str(path), "format": "native_npz", "organize": "native"}
         meta["organize_report"] = organize_report(dataclasses.replace(depth, meta=meta), "native scan file")
         return dataclasses.replace(depth, meta=meta)
 
     cloud = read_point_cloud(path, bin_columns=bin_columns, max_points=max_points)
+    _check_three_dimensional(path, cloud)
     if beams is not None and (isinstance(beams, bool) or not isinstance(beams, (int, np.integer)) or beams < 1):
         raise CalibError(f"beams must be a positive integer, got {beams!r}")
     ring = cloud.ring_field()
@@ -317,6 +352,7 @@ def load_scan(
     except CalibError as err:
         raise CalibError(f"{path}: {err}") from None
 
+    _check_grid(path, depth)
     meta = {**depth.meta, "source": str(path), "format": cloud.meta.get("format")}
     meta["field_images"] = _field_images(cloud, meta["point_index"])
     return dataclasses.replace(depth, meta=meta)

@@ -10,6 +10,8 @@ Layout (written by ``app/state.py``)::
         laser_rc: [row, col]     # and/or laser_xyz: [x, y, z]
         pixel: [u, v]            # optional while the pick is incomplete
     view: {...}                  # UI settings, a mapping
+    journal_seq: 57              # the journal record this file holds (app/session_store.py)
+    session_id: 3f2a...          # the id every line of <file>.journal repeats (a journal of another file is ignored)
 
 :func:`parse_session` is pure: it takes the mapping read from the file and
 returns checked values, or raises a one-line :class:`CalibError`.  Whether the

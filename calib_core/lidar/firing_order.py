@@ -18,6 +18,9 @@ import numpy as np
 
 from ..errors import CalibError
 
+#: What to give when the azimuth step cannot be estimated: the columns, as the command line and Python name them.
+AZIMUTH_HINT = "give the azimuth resolution (--h-res-deg DEG on the command line, n_cols=... from Python)"
+
 TWO_PI = 2.0 * np.pi
 
 #: Share of consecutive points that must be azimuth neighbours for a scan order,
@@ -423,7 +426,7 @@ def estimate_step(azimuth_rad: np.ndarray, rows: np.ndarray) -> float:
     steps = np.abs(_wrap(np.diff(azimuth_rad)))[rows[1:] == rows[:-1]]
     steps = steps[steps > 1e-7]
     if steps.size < 8:
-        raise CalibError(f"cannot estimate the azimuth resolution from {steps.size} azimuth steps; pass n_cols")
+        raise CalibError(f"cannot estimate the azimuth resolution from {steps.size} azimuth steps; {AZIMUTH_HINT}")
     median = float(np.median(steps))
     regular = steps[(steps >= 0.25 * median) & (steps <= 1.5 * median)]
     return float(regular.mean())

@@ -52,6 +52,8 @@ DEFAULT_MAX_CELLS = 5_000_000
 MAX_CELLS_OPTION = "--max-points"
 #: Bytes a member may hold per allowed cell: float64 x, y, z and a few float64 fields.
 _BYTES_PER_CELL = 64
+#: Fewest valid cells a native scan must have (as a cloud needs 3 finite points).
+MIN_VALID_CELLS = 3
 #: Coordinates (metres) beyond this are not a sensor's measurement (the Earth is 1.3e7 m across).
 MAX_ABS_COORDINATE_M = 1e8
 
@@ -194,13 +196,23 @@ def npz_members(path, keys=None, max_bytes: int | None = None) -> dict[str, tupl
     return members
 
 
+def _one_line(err: BaseException) -> str:
+    text = " ".join(str(err).split()) or type(err).__name__
+    return text if len(text) <= 160 else text[:157] + "..."
+
+
+def _member(data, path: Path, key: str) -> np.ndarray:
+    """Array ``key`` of an open ``.npz``; a damaged member is a one-line CalibError naming the file."""
+    try:
+        return data[key]
+    except Exception as err:  # BadZipFile (CRC), zlib.error (a damaged deflate stream), ValueError, OSError, EOFError
+        raise CalibError(f"{path}: cannot read key '{key}' (damaged file?): {_one_line(err)}") from None
+
+
 def _read_key(data, path: Path, key: str, model: str) -> np.ndarray:
     if key not in data.files:
         raise CalibError(f"{path}: missing key '{key}' (needed by model '{model}')")
-    try:
-        value = data[key]
-    except (ValueError, OSError, zipfile.BadZipFile, EOFError) as err:
-        raise CalibError(f"{path}: cannot read key '{key}': {err}") from None
+    value = _member(data, path, key)
     if value.dtype.kind not in "biuf":
         raise CalibError(f"{path}: key '{key}' must be numeric, got dtype {value.dtype}")
     return value
@@ -246,17 +258,14 @@ def load_depth_npz(path, max_cells: int = DEFAULT_MAX_CELLS) -> DepthMatrix:
                 )
     try:
         data = np.load(path, allow_pickle=False)
-    except (ValueError, OSError, zipfile.BadZipFile, EOFError) as err:
-        raise CalibError(f"{path}: not a readable .npz scan file ({err})") from None
+    except Exception as err:  # BadZipFile, zlib.error, ValueError, OSError, EOFError
+        raise CalibError(f"{path}: not a readable .npz scan file ({_one_line(err)})") from None
     if not isinstance(data, np.lib.npyio.NpzFile):
         raise CalibError(f"{path}: holds a single array, not an .npz scan with a 'model' key")
     with data:
         if "model" not in data.files:
             raise CalibError(f"{path}: missing key 'model' (one of {', '.join(MODEL_KEYS)})")
-        try:
-            model_array = data["model"]
-        except (ValueError, OSError, zipfile.BadZipFile, EOFError) as err:
-            raise CalibError(f"{path}: cannot read key 'model': {err}") from None
+        model_array = _member(data, path, "model")
         if model_array.dtype.kind != "U" or model_array.size != 1:
             raise CalibError(f"{path}: key 'model' must be one string, got {model_array.dtype} of shape {model_array.shape}")
         model = str(model_array.reshape(()))
@@ -286,6 +295,12 @@ def load_depth_npz(path, max_cells: int = DEFAULT_MAX_CELLS) -> DepthMatrix:
         raise CalibError(f"{path}: {err}") from None
     if not depth.valid.any():
         raise CalibError(f"{path}: the scan has no valid cell (all {depth.valid.size} ranges are missing or not positive)")
+    n_valid = int(np.count_nonzero(depth.valid))
+    if n_valid < MIN_VALID_CELLS:
+        raise CalibError(
+            f"{path}: only {n_valid} valid cell(s) in the {depth.shape[0]} x {depth.shape[1]} scan; "
+            f"a scan needs at least {MIN_VALID_CELLS}"
+        )
     with np.errstate(all="ignore"):
         largest = float(np.max(np.abs(depth.points[depth.valid])))
     if not np.isfinite(largest) or largest > MAX_ABS_COORDINATE_M:

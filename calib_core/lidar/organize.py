@@ -30,8 +30,10 @@ Grid conventions (shared by every function here)
 ``wrap_cols``, ``point_index`` ((H, W) index of each cell's point in the
 input, -1 where empty), ``row_elevation_rad`` (H,), ``col_azimuth_rad`` (W,)
 and the counts ``n_points_in``, ``n_points_dropped``, ``n_points_kept``,
-``n_points_collided`` (points lost to a nearer one in the same cell) and
-``n_cells_with_collision``.
+``n_points_collided`` (points lost to a nearer one in the same cell),
+``n_cells_with_collision`` and ``n_points_behind`` (collided points more
+than :data:`BEHIND_SHARE` farther than their cell's nearest point: hidden,
+seen from the origin).
 """
 
 from __future__ import annotations
@@ -40,7 +42,7 @@ import numpy as np
 
 from ..errors import CalibError
 from .depth_matrix import DepthMatrix
-from .firing_order import azimuth_coverage, beam_origin_height, estimate_step, firing_order_rings, sequence_columns
+from .firing_order import AZIMUTH_HINT, azimuth_coverage, beam_origin_height, estimate_step, firing_order_rings, sequence_columns
 from .organized import organized_cloud_depth
 from .spherical import spherical_directions
 
@@ -48,6 +50,10 @@ TWO_PI = 2.0 * np.pi
 
 #: Upper bound of the spherical fallback's default grid, in cells per point.
 MAX_SPHERICAL_CELLS_PER_POINT = 4.0
+
+#: A spherical grid whose columns leave at least this share of the turn empty in one arc is cut to the rest
+#: (:func:`crop_to_field_of_view`); a cloud covering less azimuth than the rest is seen over a narrow field.
+NARROW_FIELD_EMPTY_SHARE = 0.5
 
 #: Field names that carry a spinning lidar's beam index.
 RING_FIELD_NAMES = ("ring", "laser_id", "channel")
@@ -141,7 +147,7 @@ def estimate_n_cols(azimuth_rad: np.ndarray, beam: np.ndarray) -> int:
     # Ignore exact duplicates (e.g. the start/end overlap of a sweep).
     steps = steps[steps > 1e-7]
     if steps.size < 8:
-        raise CalibError(f"cannot estimate the azimuth resolution from {steps.size} azimuth steps; pass n_cols")
+        raise CalibError(f"cannot estimate the azimuth resolution from {steps.size} azimuth steps; {AZIMUTH_HINT}")
     step = float(np.median(steps))
     return max(int(round(TWO_PI / step)), 1)
 
@@ -219,8 +225,13 @@ def cluster_elevations(elevation_rad: np.ndarray, n_beams: int, max_iter: int = 
 # --------------------------------------------------------------------------
 
 
-def _nearest_per_cell(cell: np.ndarray, range_m: np.ndarray, n_cells: int) -> tuple[np.ndarray, int]:
-    """Indices of the nearest point of every occupied cell, and the number of cells holding several points.
+#: A point farther than the nearest point of its cell by this share of that range lies behind it.
+BEHIND_SHARE = 0.1
+
+
+def _nearest_per_cell(cell: np.ndarray, range_m: np.ndarray, n_cells: int) -> tuple[np.ndarray, int, int]:
+    """Indices of the nearest point of every occupied cell, the number of cells holding several points and
+    the number of points lying behind a nearer one of their cell (more than :data:`BEHIND_SHARE` farther).
 
     Only the points of shared cells are sorted (usually few).
     """
@@ -228,12 +239,15 @@ def _nearest_per_cell(cell: np.ndarray, range_m: np.ndarray, n_cells: int) -> tu
     shared = counts[cell] > 1
     alone = np.flatnonzero(~shared)
     if alone.size == len(cell):
-        return alone, 0
+        return alone, 0, 0
     contested = np.flatnonzero(shared)
     order = contested[np.lexsort((range_m[contested], cell[contested]))]
     first = np.r_[True, cell[order][1:] != cell[order][:-1]]
     winners = np.sort(np.r_[alone, order[first]])
-    return winners, int(first.sum())
+    # Seen from the origin, a point behind a nearer one in the same direction would be hidden.
+    nearest = range_m[order][np.maximum.accumulate(np.where(first, np.arange(order.size), 0))]
+    behind = int(np.count_nonzero(range_m[order] > (1.0 + BEHIND_SHARE) * nearest))
+    return winners, int(first.sum()), behind
 
 
 def _assemble(
@@ -258,7 +272,7 @@ def _assemble(
     kept_points = points[keep] if kept_points is None else kept_points
     kept_range = np.linalg.norm(kept_points, axis=1) if kept_range is None else kept_range
     cell = rows * n_cols + cols
-    winners, cells_with_collision = _nearest_per_cell(cell, kept_range, n_rows * n_cols)
+    winners, cells_with_collision, n_behind = _nearest_per_cell(cell, kept_range, n_rows * n_cols)
     n_occupied = len(winners)
 
     target = cell[winners]
@@ -287,6 +301,7 @@ def _assemble(
         n_points_kept=n_occupied,
         n_points_collided=int(keep.sum() - n_occupied),
         n_cells_with_collision=cells_with_collision,
+        n_points_behind=n_behind,
         row_elevation_rad=np.asarray(row_elevation, dtype=np.float64),
         col_azimuth_rad=column_azimuths(n_cols),
         point_index=point_index.reshape(n_rows, n_cols),
@@ -605,6 +620,22 @@ def count_beam_elevations(xyz: np.ndarray, gap_deg: float = 0.01, min_share: flo
     return n_beams if width < 0.25 * spacing else None
 
 
+def azimuth_span_rad(azimuth_rad: np.ndarray) -> tuple[float, float]:
+    """The smallest arc of azimuths holding every point: ``(start, width)`` in radians.
+
+    ``start`` is the arc's first azimuth (counter-clockwise from it the arc
+    runs ``width``); a full turn when the points leave no gap wider than the
+    others.  The complement of the widest gap between sorted azimuths.
+    """
+    az = np.sort(np.mod(np.asarray(azimuth_rad, dtype=np.float64), TWO_PI))
+    if az.size < 2:
+        return (float(az[0]) if az.size else 0.0), 0.0
+    gaps = np.diff(np.r_[az, az[0] + TWO_PI])
+    widest = int(np.argmax(gaps))
+    start = az[(widest + 1) % az.size]
+    return float(start), float(TWO_PI - gaps[widest])
+
+
 def default_spherical_resolution_deg(xyz: np.ndarray) -> float:
     """Square cell size (degrees) for the spherical fallback.
 
@@ -635,6 +666,98 @@ def default_spherical_resolution_deg(xyz: np.ndarray) -> float:
             pass
     resolution = max(resolution, equal_area / np.sqrt(MAX_SPHERICAL_CELLS_PER_POINT))
     return max(float(np.ceil(resolution * 100.0 - 1e-6) / 100.0), 0.01)
+
+
+#: A cloud seen over a narrow field covers at least this many degrees of azimuth and of elevation (a camera's
+#: field); less is not one sensor's view from the origin (an aerial tile seen from far away).
+MIN_FIELD_DEG = 5.0
+
+
+def narrow_field_of_view(xyz: np.ndarray) -> tuple[float, float] | None:
+    """``(azimuth, elevation)`` extent in degrees when the points fill a narrow field seen from the origin.
+
+    Narrow: the points cover at most half a turn of azimuth
+    (:data:`NARROW_FIELD_EMPTY_SHARE`) and at least :data:`MIN_FIELD_DEG`
+    of azimuth and of elevation, like an RGB-D camera's frame stored in its
+    own frame (SUN RGB-D as mmdetection3d keeps it).  None otherwise.
+    """
+    points, keep = _clean_points(xyz)
+    _, elevation, azimuth = _spherical_angles(points[keep])
+    azimuth_deg = float(np.degrees(azimuth_span_rad(azimuth)[1]))
+    elevation_deg = float(np.degrees(elevation.max() - elevation.min()))
+    if MIN_FIELD_DEG <= azimuth_deg <= 360.0 * (1.0 - NARROW_FIELD_EMPTY_SHARE) and elevation_deg >= MIN_FIELD_DEG:
+        return azimuth_deg, elevation_deg
+    return None
+
+
+def narrow_field_resolution_deg(xyz: np.ndarray) -> float:
+    """Square cell size (degrees) for a cloud seen over a narrow field: one cell per point of the area it fills.
+
+    An RGB-D frame is a random subsample of a depth image: it has no beams
+    and no scan order.  Cells holding one point on average keep about 63 %
+    of the points and fill about as many cells, which the BA images need (a
+    BA pixel needs its neighbour's return too); two cells per point would
+    keep 80 % but leave most BA pixels without a neighbour.  The area is the
+    part of the azimuth-elevation plane the points fill, counted on coarse
+    cells of about ten points (a frustum fills less than its bounding box).
+    Rounded up to 0.01 degree, at least 0.01.
+    """
+    points, keep = _clean_points(xyz)
+    _, elevation, azimuth = _spherical_angles(points[keep])
+    start, width = azimuth_span_rad(azimuth)
+    azimuth_deg = max(float(np.degrees(width)), 0.01)
+    span_deg = max(float(np.degrees(elevation.max() - elevation.min())), 0.01)
+    n_points = int(keep.sum())
+    coarse = np.sqrt(azimuth_deg * span_deg * 10.0 / n_points)
+    rows = np.floor((np.degrees(elevation) - np.degrees(elevation.min())) / coarse).astype(np.int64)
+    cols = np.floor(np.degrees(np.mod(azimuth - start, TWO_PI)) / coarse).astype(np.int64)
+    filled = np.unique(rows * (int(azimuth_deg / coarse) + 2) + cols).size * coarse * coarse
+    area_deg2 = min(azimuth_deg * span_deg, filled)
+    return max(float(np.ceil(np.sqrt(area_deg2 / n_points) * 100.0 - 1e-6) / 100.0), 0.01)
+
+
+def crop_to_field_of_view(depth: DepthMatrix, min_empty_share: float = NARROW_FIELD_EMPTY_SHARE) -> DepthMatrix:
+    """A 360-degree grid cut to the columns its points cover, when they leave a wide arc empty.
+
+    An RGB-D frame or a forward-looking sensor seen over a narrow field
+    fills a small part of a full turn's columns; the others would only be
+    black in the BA images.  When the widest run of empty columns (around
+    the turn) is at least ``min_empty_share`` of the columns, the grid keeps
+    the other columns, in order, and ``wrap_cols`` becomes False; otherwise
+    ``depth`` is returned unchanged.  Cells keep their points, directions and
+    ``point_index``; ``meta["col_azimuth_rad"]`` the kept columns' azimuths
+    and ``meta["cropped_cols"]`` ``(first column, columns kept, columns of
+    the full turn)``.
+    """
+    n_cols = depth.shape[1]
+    occupied = depth.valid.any(axis=0)
+    if occupied.all() or not occupied.any() or not depth.meta.get("wrap_cols", False):
+        return depth
+    # Widest circular run of empty columns: runs in the doubled sequence, capped at one turn.
+    empty = np.r_[~occupied, ~occupied].astype(np.int64)
+    edges = np.flatnonzero(np.diff(np.r_[0, empty, 0]))
+    starts, stops = edges[::2], edges[1::2]
+    lengths = np.minimum(stops - starts, n_cols)
+    widest = int(np.argmax(lengths))
+    if lengths[widest] < min_empty_share * n_cols:
+        return depth
+    first = int(stops[widest]) % n_cols
+    keep = (first + np.arange(n_cols - int(lengths[widest]))) % n_cols
+    meta = dict(depth.meta)
+    meta.update(
+        wrap_cols=False,
+        col_azimuth_rad=np.asarray(meta["col_azimuth_rad"])[keep],
+        point_index=meta["point_index"][:, keep],
+        points=depth.points[:, keep],
+        cropped_cols=(first, int(keep.size), n_cols),
+    )
+    return DepthMatrix(
+        range_m=depth.range_m[:, keep],
+        directions=depth.directions[:, keep],
+        points=meta["points"],
+        valid=depth.valid[:, keep],
+        meta=meta,
+    )
 
 
 def organize_spherical(

@@ -19,7 +19,10 @@ from .depth_matrix import DepthMatrix
 from .firing_order import NotFiringOrder
 from .organize import (
     count_beam_elevations,
+    crop_to_field_of_view,
     default_spherical_resolution_deg,
+    narrow_field_of_view,
+    narrow_field_resolution_deg,
     organize_by_elevation,
     organize_by_firing_order,
     organize_by_ring,
@@ -56,6 +59,37 @@ def _spherical(xyz, v_res_deg, h_res_deg, v_range_deg) -> tuple[DepthMatrix, str
     if note:
         depth = dataclasses.replace(depth, meta={**depth.meta, "spherical_resolution": note})
     return depth, note
+
+
+#: Seen from the origin, at most this share of a narrow field's points may lie behind nearer ones.
+MAX_BEHIND_SHARE = 0.05
+
+
+def _narrow_field(xyz, field, v_res_deg, h_res_deg, v_range_deg) -> tuple[DepthMatrix, str]:
+    """A cloud seen over a narrow field (an RGB-D frame): one cell per point, columns cut to the field.
+
+    Refused when too many points lie behind nearer points of their cell: not
+    one view from the origin (an object scanned from around it).
+    """
+    note = ""
+    if v_res_deg is None or h_res_deg is None:
+        default = narrow_field_resolution_deg(xyz)
+        note = f"spherical cells of {default} deg (one per point; --h-res-deg/--v-res-deg to change)"
+        v_res_deg = default if v_res_deg is None else v_res_deg
+        h_res_deg = default if h_res_deg is None else h_res_deg
+    depth = crop_to_field_of_view(organize_spherical(xyz, v_res_deg, h_res_deg, v_range_deg))
+    behind = depth.meta["n_points_behind"] / max(int(depth.meta["n_points_in"] - depth.meta["n_points_dropped"]), 1)
+    if behind > MAX_BEHIND_SHARE:
+        raise CalibError(
+            f"the cloud does not look like a scan seen from the lidar origin: {100 * behind:.0f} % of its points lie "
+            f"behind nearer points in the same direction (an object scanned from around it?; give the scanner "
+            f"position with --sensor-origin X Y Z if the points are in a world frame)"
+        )
+    where = f"a narrow field of {field[0]:.0f} x {field[1]:.0f} deg seen from the origin (an RGB-D frame?)"
+    if "cropped_cols" in depth.meta:
+        where += ", columns cut to it"
+    note = f"{where}; {note}" if note else where
+    return dataclasses.replace(depth, meta={**depth.meta, "spherical_resolution": note}), note
 
 
 #: A firing order that loses more points than this to shared cells is not one.
@@ -96,7 +130,10 @@ def organize_cloud(
     order is not a firing order, elevation clustering into ``beams`` beams
     if given (seen from the beams' common origin height), else into the
     beams found as separate elevations (:func:`count_beam_elevations`),
-    else spherical binning.  The reason for the choice is in the report.
+    else spherical binning: over a narrow field seen from the origin (an
+    RGB-D frame, :func:`narrow_field_of_view`) one cell per point with the
+    columns cut to that field, else :func:`default_spherical_resolution_deg`.
+    The reason for the choice is in the report.
 
     Parameters
     ----------
@@ -109,7 +146,9 @@ def organize_cloud(
     organize : str
         One of :data:`ORGANIZE_METHODS`.
     beams, n_cols, v_res_deg, h_res_deg, v_range_deg, wrap_cols :
-        See :mod:`calib_core.lidar.organize`.
+        See :mod:`calib_core.lidar.organize`.  Without ``n_cols``, a given
+        ``h_res_deg`` (degrees) also sets the columns of the ring, firing
+        and elevation layouts (``round(360 / h_res_deg)``).
     sensor_origin : (3,) float, optional
         Scanner position in the cloud's frame (metres), for scans stored in
         a world frame; the points are shifted so that it is the origin.
@@ -136,6 +175,8 @@ def organize_cloud(
         raise CalibError(f"beams must be a positive integer, got {beams!r}")
     method = "firing_order" if organize == "firing" else organize
     origin = parse_sensor_origin(sensor_origin)
+    # The azimuth resolution, when given, also sets the columns of the beam-based layouts.
+    beam_cols = n_cols if n_cols is not None or h_res_deg is None else max(int(round(360.0 / float(h_res_deg))), 1)
     points = np.asarray(xyz, dtype=np.float64)
     if origin is not None:
         points = points - origin
@@ -150,12 +191,12 @@ def organize_cloud(
         reason = f"the file's own {organized_shape[0]} x {organized_shape[1]} grid" if method == "auto" else ""
     elif method == "ring" or (method == "auto" and ring is not None):
         if ring is None:
-            raise CalibError("no ring field; try beams=...")
-        depth = organize_by_ring(points, ring, n_cols=n_cols)
+            raise CalibError("the cloud has no ring field: organise it another way (--organize elevation --beams N)")
+        depth = organize_by_ring(points, ring, n_cols=beam_cols)
         reason = f"ring field '{ring_name}'" if method == "auto" else ""
     elif method == "auto":
         try:
-            depth = organize_by_firing_order(points, beams, n_cols=n_cols, pad_cropped=True)
+            depth = organize_by_firing_order(points, beams, n_cols=beam_cols, pad_cropped=True)
             _check_firing_layout(depth)
             reason = f"no ring field; points stored laser after laser ({depth.meta['n_sweeps']} azimuth sweeps)"
             if depth.meta.get("n_empty_beams_added"):
@@ -166,19 +207,22 @@ def organize_cloud(
         except NotFiringOrder as err:
             why = str(err).replace("the cloud does not look like", "not").rstrip(".")
             if beams is not None:
-                depth = organize_by_elevation(points, beams, n_cols=n_cols, range_aware=True)
+                depth = organize_by_elevation(points, beams, n_cols=beam_cols, range_aware=True)
                 height = depth.meta["beam_origin_height_m"]
                 reason = f"fallback to elevation clustering into {beams} beams (seen from {height:+.2f} m): {why}"
             elif (found := count_beam_elevations(points)) is not None:
-                depth = organize_by_elevation(points, found, n_cols=n_cols)
+                depth = organize_by_elevation(points, found, n_cols=beam_cols)
                 reason = f"fallback to elevation clustering: {why}; the elevations fall into {found} separate beams"
+            elif (field := narrow_field_of_view(points)) is not None:
+                depth, note = _narrow_field(points, field, v_res_deg, h_res_deg, v_range_deg)
+                reason = f"fallback to spherical binning: {why}; {note}"
             else:
                 depth, note = _spherical(points, v_res_deg, h_res_deg, v_range_deg)
                 reason = f"fallback to spherical binning: {why}; {note or 'resolution as given'}; pass --beams N for one row per beam"
     elif method in ("elevation", "firing_order"):
         if beams is None and method == "elevation":
-            raise CalibError(f"organize='{method}' needs the number of beams (beams=...)")
-        depth = organize_by_elevation(points, beams, n_cols=n_cols) if method == "elevation" else organize_by_firing_order(points, beams, n_cols=n_cols)
+            raise CalibError(f"organize='{method}' needs the number of beams (--beams N; beams=... from Python)")
+        depth = organize_by_elevation(points, beams, n_cols=beam_cols) if method == "elevation" else organize_by_firing_order(points, beams, n_cols=beam_cols)
     else:
         depth, reason = _spherical(points, v_res_deg, h_res_deg, v_range_deg)
 

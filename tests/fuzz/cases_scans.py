@@ -293,6 +293,12 @@ def _pcd_files(rec: np.ndarray) -> dict[str, bytes]:
     files["pcd_empty.pcd"] = b""
     files["pcd_png_bytes.pcd"] = png_bytes(4, 4)
     files["pcd_zero_points.pcd"] = pcd_header(0, "binary")
+    # Issue 23: an image stored as an organised cloud (PCL's lena.pcd: x, y the pixel, z = 0): no 3-D extent.
+    grid = "".join(f"{c} {r} 0 {(r * 7 + c) % 256}\n" for r in range(32) for c in range(32))
+    files["pcd_image_as_cloud_z0.pcd"] = (
+        "VERSION 0.7\nFIELDS x y z intensity\nSIZE 4 4 4 4\nTYPE F F F F\nCOUNT 1 1 1 1\nWIDTH 32\nHEIGHT 32\n"
+        "VIEWPOINT 0 0 0 1 0 0 0\nPOINTS 1024\nDATA ascii\n" + grid
+    ).encode()
     return files
 
 
@@ -508,9 +514,47 @@ def _npz_files(rec: np.ndarray) -> dict[str, bytes]:
         "npz_is_npy.npz": npy_bytes(xyz),
         "npz_v3_header.npz": npz_bytes({"points.npy": b"\x93NUMPY\x03\x00" + npy_header(xyz.shape)[8:] + xyz.tobytes()}),
         "npz_encrypted_flag.npz": _set_encrypted(npz_bytes({"points.npy": npy_bytes(xyz)}, zipfile.ZIP_STORED)),
+        # Issue 23: a deflate stream damaged so that zlib itself fails (not the CRC); scans too small for BA images.
+        "npz_native_zlib_damaged.npz": _zlib_damaged(npz_bytes(native), "range_m.npy"),
+        "npz_points_zlib_damaged.npz": _zlib_damaged(npz_bytes({"points.npy": npy_bytes(xyz)}), "points.npy"),
+        "npz_rotating_1x1.npz": npz_bytes(_rotating_members(1, 1)),
+        "npz_rotating_1x6.npz": npz_bytes(_rotating_members(1, 6)),
+        "npz_rotating_2x1.npz": npz_bytes(_rotating_members(2, 1)),
     }
     _ = n
     return files
+
+
+def _rotating_members(rows: int, cols: int) -> dict[str, bytes]:
+    """A native rotating-scanner scan of ``rows`` x ``cols`` cells, ranges 2-3 m."""
+    return {
+        "model.npy": npy_bytes(np.array("rotating_2d")),
+        "range_m.npy": npy_bytes(2.0 + np.arange(rows * cols, dtype=np.float64).reshape(rows, cols) / (rows * cols)),
+        "theta_rad.npy": npy_bytes(np.linspace(-0.5, 0.5, rows)[:, None]),
+        "phi_rad.npy": npy_bytes(np.linspace(0.0, 3.0, cols)[None, :]),
+        "dx_m.npy": npy_bytes(np.array(0.0)),
+        "dz_m.npy": npy_bytes(np.array(0.0)),
+    }
+
+
+def _zlib_damaged(data: bytes, member: str) -> bytes:
+    """Flip the first bit past the middle of ``member``'s deflate stream that makes zlib fail on reading."""
+    data = bytearray(data)
+    with zipfile.ZipFile(io.BytesIO(bytes(data))) as archive:
+        info = archive.getinfo(member)
+    at = info.header_offset
+    start = at + 30 + int.from_bytes(data[at + 26 : at + 28], "little") + int.from_bytes(data[at + 28 : at + 30], "little")
+    stream = bytes(data[start : start + info.compress_size])
+    for offset in range(info.compress_size // 2, info.compress_size):
+        for bit in range(8):
+            damaged = bytearray(stream)
+            damaged[offset] ^= 1 << bit
+            try:
+                zlib.decompressobj(-15).decompress(bytes(damaged), info.file_size)
+            except zlib.error:
+                data[start + offset] ^= 1 << bit
+                return bytes(data)
+    raise ValueError(f"no bit flip of {member} makes a zlib error")
 
 
 def _flip_crc(data: bytes) -> bytes:

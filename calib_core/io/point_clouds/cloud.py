@@ -76,22 +76,17 @@ def xyz_field_names(path: Path, names, what: str) -> tuple[str, str, str]:
     return chosen[0], chosen[1], chosen[2]
 
 
-def ends_mid_line(data: bytes) -> bool:
-    """Text data that may have been cut in the middle of its last number.
+def values_per_line(data: bytes) -> np.ndarray:
+    """Number of values on each line of :func:`normalise_text` output (single spaces, one final newline).
 
-    A final line without an end of line is accepted only when its last
-    number has the same width as the last number of every line before it
-    (fixed-width writers such as ``%f``), so a cut number cannot pass.
+    A missing final newline is not a truncation: readers count the values of
+    every line against the header instead (a cut file loses values or lines).
     """
-    stripped = data.rstrip(b" \t\r\x00")
-    if not stripped or stripped.endswith(b"\n"):
-        return False
-    lines = [line.split() for line in stripped[-65536:].split(b"\n")[1:]]
-    lines = [words for words in lines if words]
-    if len(lines) < 2:
-        return True
-    widths = {len(words[-1].lstrip(b"+-")) for words in lines[:-1]}
-    return widths != {len(lines[-1][-1].lstrip(b"+-"))}
+    codes = np.frombuffer(data, dtype=np.uint8)
+    space = (codes == 32) | (codes == 10)
+    starts = ~space & np.concatenate(([True], space[:-1]))
+    line_of_token = np.cumsum(codes == 10)[starts]
+    return np.bincount(line_of_token, minlength=int(np.count_nonzero(codes == 10)))
 
 
 def normalise_text(data: bytes) -> bytes:

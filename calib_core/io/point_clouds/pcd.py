@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from ...errors import CalibError
-from .cloud import PointCloud, ends_mid_line, normalise_text, one_line, too_many_points, xyz_field_names
+from .cloud import PointCloud, normalise_text, one_line, too_many_points, values_per_line, xyz_field_names
 
 
 _PCD_KEYS = ("VERSION", "FIELDS", "SIZE", "TYPE", "COUNT", "WIDTH", "HEIGHT", "VIEWPOINT", "POINTS", "DATA")
@@ -119,19 +119,17 @@ def _refuse_trailing(path: Path, extra: int, row_bytes: int, n_points: int) -> N
 
 
 def _pcd_ascii_check(path: Path, data: bytes, n_points: int, values_per_point: int) -> None:
-    """Every data line holds one point's values; the last line is complete."""
-    codes = np.frombuffer(data, dtype=np.uint8)
-    space = (codes == 32) | (codes == 10)
-    starts = ~space & np.concatenate(([True], space[:-1]))
-    line_of_token = np.cumsum(codes == 10)[starts]
-    lines, per_line = np.unique(line_of_token, return_counts=True)
-    if len(lines) != n_points:
-        raise CalibError(f"{path}: truncated or padded ascii PCD: header says {n_points} points, data has {len(lines)} lines")
+    """Every data line holds one point's values (normalised text; the last line needs no end of line)."""
+    per_line = values_per_line(data)
+    per_line = per_line[per_line > 0]
+    if len(per_line) != n_points:
+        raise CalibError(f"{path}: truncated or padded ascii PCD: header says {n_points} points, data has {len(per_line)} lines")
     wrong = np.flatnonzero(per_line != values_per_point)
     if len(wrong):
         raise CalibError(
             f"{path}: ascii PCD point {wrong[0] + 1} has {per_line[wrong[0]]} values, "
             f"the header declares {values_per_point} per point"
+            + (" (truncated?)" if wrong[0] == n_points - 1 and per_line[wrong[0]] < values_per_point else "")
         )
 
 
@@ -180,14 +178,7 @@ def read_pcd(path: Path, max_points: int, **_) -> PointCloud:
                 raise CalibError(
                     f"{path}: truncated ascii PCD: {data_bytes} data bytes cannot hold the {n_points} points the header declares"
                 )
-            data = handle.read()
-            if ends_mid_line(data):
-                tail = data.rstrip()[-30:].decode("ascii", "replace").split("\n")[-1]
-                raise CalibError(
-                    f"{path}: truncated ascii PCD: the last line '{tail}' has no end of line and its last number "
-                    f"is narrower than those above it (cut off mid-number?)"
-                )
-            data = normalise_text(data)
+            data = normalise_text(handle.read())
             _pcd_ascii_check(path, data, n_points, values_per_point)
     # pypcd4 only takes VERSION 0.7 headers: hand it a normalised one (the data layout is the same).
     normalised = "\n".join(

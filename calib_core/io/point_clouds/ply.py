@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import CalibError
-from .cloud import PointCloud, ends_mid_line, normalise_text, one_line, too_many_points
+from .cloud import PointCloud, normalise_text, one_line, too_many_points, values_per_line
 
 
 _PLY_SCALAR_BYTES = {
@@ -20,13 +20,15 @@ _PLY_SCALAR_BYTES = {
 }
 
 
-def _ply_header(path: Path) -> tuple[str, list[tuple[str, int, int, bool]], int]:
-    """The PLY format, its elements as (name, count, smallest bytes per row, has a list) and the data offset."""
+def _ply_header(path: Path) -> tuple[str, list[tuple[str, int, int, bool, int]], int]:
+    """The PLY format, its elements as (name, count, smallest bytes per row, has a list, properties) and the
+    data offset."""
     elements: list[list] = []
     fmt = None
     offset = 0
     with open(path, "rb") as handle:
-        if handle.read(4).rstrip(b"\r\n") != b"ply":
+        # The magic line is "ply"; writers add trailing blanks or a CR (PDAL's test files: "ply ").
+        if handle.readline(64).rstrip(b" \t\r\n") != b"ply":
             raise CalibError(f"{path}: not a PLY file (it does not start with 'ply')")
         handle.seek(0)
         for _ in range(10_000):
@@ -51,7 +53,7 @@ def _ply_header(path: Path) -> tuple[str, list[tuple[str, int, int, bool]], int]
                     raise CalibError(f"{path}: PLY element '{words[1]}' has a non-integer count '{words[2][:20]}'") from None
                 if count < 0:
                     raise CalibError(f"{path}: PLY element '{words[1]}' has a negative count")
-                elements.append([words[1], count, 0, False])
+                elements.append([words[1], count, 0, False, 0])
             elif words[0] == "property" and elements:
                 if len(words) >= 5 and words[1] == "list":
                     size = _PLY_SCALAR_BYTES.get(words[2])  # an empty list still stores its length
@@ -61,6 +63,7 @@ def _ply_header(path: Path) -> tuple[str, list[tuple[str, int, int, bool]], int]
                 if size is None:
                     raise CalibError(f"{path}: PLY property line '{' '.join(words)[:60]}' has an unknown type")
                 elements[-1][2] += size
+                elements[-1][4] += 1
             elif words[0] == "end_header":
                 if fmt not in ("ascii", "binary_little_endian", "binary_big_endian"):
                     raise CalibError(f"{path}: PLY format '{fmt}' is not ascii or binary")
@@ -68,11 +71,33 @@ def _ply_header(path: Path) -> tuple[str, list[tuple[str, int, int, bool]], int]
     raise CalibError(f"{path}: not a PLY file (no end_header)")
 
 
+def _check_ascii_rows(path: Path, text: bytes, layout: list, counts: str) -> None:
+    """One line per element row, and the declared number of values on every row without a list.
+
+    A missing final newline is no truncation: a cut file loses lines or values.
+    """
+    per_line = values_per_line(text) if text else np.zeros(0, dtype=np.int64)
+    per_line = per_line[per_line > 0]
+    if len(per_line) != sum(count for _, count, _, _, _ in layout):
+        raise CalibError(f"{path}: ascii PLY declares {counts} rows but holds {len(per_line):,} lines")
+    start = 0
+    for name, count, _, listed, n_properties in layout:
+        rows = per_line[start : start + count]
+        wrong = np.flatnonzero(rows != n_properties) if not listed else np.zeros(0, dtype=np.int64)
+        if len(wrong):
+            raise CalibError(
+                f"{path}: ascii PLY {name} {wrong[0]} has {rows[wrong[0]]} values, the header declares {n_properties}"
+                + (" (truncated?)" if start + wrong[0] == len(per_line) - 1 and rows[wrong[0]] < n_properties else "")
+            )
+        start += count
+
+
 def read_ply(path: Path, max_points: int, **_) -> PointCloud:
     """A PLY file's vertices as stored, with their numeric properties as fields."""
     fmt, elements, data_offset = _ply_header(path)
-    has_lists = any(listed for *_, listed in elements)
-    elements = [(name, count, row) for name, count, row, _ in elements]
+    has_lists = any(listed for _, _, _, listed, _ in elements)
+    layout = elements
+    elements = [(name, count, row) for name, count, row, _, _ in layout]
     vertex = [e for e in elements if e[0] == "vertex"]
     if not vertex or vertex[0][1] == 0:
         raise CalibError(f"{path}: the point cloud is empty (PLY without vertices)")
@@ -89,14 +114,7 @@ def read_ply(path: Path, max_points: int, **_) -> PointCloud:
     counts = ", ".join(f"{count:,} {name}" for name, count, _ in elements)
     if fmt == "ascii":
         text = path.read_bytes()[data_offset:]
-        if ends_mid_line(text):
-            raise CalibError(
-                f"{path}: truncated ascii PLY: the last line has no end of line and its last number is narrower "
-                f"than those above it (cut off mid-number?)"
-            )
-        lines = normalise_text(text).count(b"\n") if text.strip() else 0
-        if lines != sum(count for _, count, _ in elements):
-            raise CalibError(f"{path}: ascii PLY declares {counts} rows but holds {lines:,} lines")
+        _check_ascii_rows(path, normalise_text(text) if text.strip() else b"", layout, counts)
     elif not has_lists and data_bytes - smallest >= max(1, min(row for _, _, row in elements)):
         raise CalibError(f"{path}: binary PLY holds {data_bytes - smallest:,} bytes more than its declared {counts}")
     import trimesh  # after the checks: it takes a second to import
