@@ -27,7 +27,7 @@ from calib_core.errors import CalibError
 from calib_core.overlays import project_lidar_points
 from calib_core.render import render_from_camera, shade_render
 
-from .layout import GAP, LABEL_HEIGHT, ImageSlot
+from .layout import CAMERA_WIDTH, GAP, LABEL_HEIGHT, ImageSlot, annotation_layout
 from .live_solver import LiveSolver
 from .ui_common import marker_segments
 from .view_settings import RENDER_MODES
@@ -71,6 +71,16 @@ def with_render_slot(slots: dict[str, ImageSlot], view_key: str = "raw") -> dict
                                 (raw.center[0], LABEL_HEIGHT + raw.render_height / 2, 0.0), raw.render_width,
                                 raw.render_height)
     return out
+
+
+def layout_with_render(camera_sizes: dict[str, tuple[int, int]], view_key: str, ba_size: tuple[int, int],
+                       ba_keys: tuple[str, ...], cell_aspect: float) -> dict[str, ImageSlot]:
+    """The page layout (:func:`app.layout.annotation_layout`) with the render below camera view ``view_key``; the
+    BA grid is chosen for the whole column (camera view, render, BA panes)."""
+    view_w, view_h = camera_sizes[view_key]
+    render_band = CAMERA_WIDTH * view_h / view_w + GAP + LABEL_HEIGHT
+    slots = annotation_layout(camera_sizes, ba_size, ba_keys, cell_aspect=cell_aspect, above_height=render_band)
+    return with_render_slot(slots, view_key)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

@@ -18,8 +18,8 @@ from calib_core.viewpoint import viewpoint_behind_camera
 
 from .ba_view import ColumnWindow, ba_texture, texture_factor
 from .camera_view import CameraView
-from .layout import CAMERA_WIDTH, GAP, LABEL_HEIGHT, ImageSlot, annotation_layout, bounds_of
-from .render_pane import RENDER_KEY, with_render_slot
+from .layout import ImageSlot, bounds_of
+from .render_pane import RENDER_KEY, layout_with_render
 from .settled_updates import settled
 from .ui_common import (
     MIN_PAIRS, CLOUD_ORIGIN, PANEL_PX, ZOOM_PX_PER_CELL, ZOOM_PX_PER_IMAGE_PX, ZOOM_STEP,
@@ -95,14 +95,9 @@ class ViewPanel:
         return self._ba_window
 
     def _layout(self) -> dict[str, ImageSlot]:
-        app = self.app
-        window = self._ba_window
-        # The camera-view render goes below the camera view, as large and in the same framing.
-        view_w, view_h = app.camera_sizes[self.camera_view.key]
-        render_band = CAMERA_WIDTH * view_h / view_w + GAP + LABEL_HEIGHT
-        return with_render_slot(annotation_layout(app.camera_sizes, (window.width, app.depth.shape[0]), app.ba_keys,
-                                                  cell_aspect=app.ba_cell_aspect, above_height=render_band),
-                                self.camera_view.key)
+        app = self.app  # the camera-view render goes below the camera view, as large and in its framing
+        return layout_with_render(app.camera_sizes, self.camera_view.key, (self._ba_window.width, app.depth.shape[0]),
+                                  app.ba_keys, app.ba_cell_aspect)
 
     def slot_of(self, key: str) -> ImageSlot:
         """The image slot of click key ``key``: a BA key, ``raw``, ``panorama``, ``loupe_ba`` or ``loupe_camera``."""
@@ -470,13 +465,8 @@ class ViewPanel:
             if shown is None:
                 raise CalibError(f"{uv} is not shown in the {target[len('loupe_'):]} loupe")
             disp = np.array([shown])
-        elif target == RENDER_KEY:  # ``uv``: an original camera pixel, shown in the camera view's framing
-            slot = self.slots[RENDER_KEY]
-            disp, ok = self.app.display_from_pixels(disp)
-            if not ok[0]:
-                raise CalibError(f"pixel {uv} is not shown in the camera-view render")
-        elif target == "camera":
-            slot = self.camera_slot()
+        elif target in ("camera", RENDER_KEY):  # the render shows original pixels as the camera view does
+            slot = self.camera_slot() if target == "camera" else self.slots[RENDER_KEY]
             disp, ok = self.app.display_from_pixels(disp)
             if not ok[0]:
                 raise CalibError(f"pixel {uv} is not shown in the camera view")
