@@ -36,10 +36,9 @@ MAX_HISTORY = 100
 TURN_LABELS = ("◀", "▶", "▲", "▼", "⟲", "⟳")
 MOVE_LABELS = ("x-", "x+", "y-", "y+", "z-", "z+")
 HELP = (
-    "Before any pair: pick the preset nearest the mounting, then tick **Align by drag** and drag the camera "
-    "image or the **camera-view laser** render below it so that the laser's corners fall on the photo's "
-    "(**Shift**+drag rolls). The buttons nudge: the turn buttons move the render by 0.5°, the move buttons move "
-    "the camera 5 cm along its own x (right), y (down), z (forward)."
+    "Before any pair: pick the nearest preset, tick **Align by drag** and drag the **camera-view laser** render "
+    "(or the photo) so that its corners land on the photo's; **Shift**+drag rolls. The buttons nudge the render "
+    "by 0.5° and move the camera 5 cm along its x (right), y (down), z (forward)."
 )
 
 
@@ -123,6 +122,9 @@ class AlignPanel:
                     f"({centre[0]:.2f}, {centre[1]:.2f}, {centre[2]:.2f}) m in the lidar frame.")
         self._md_pose.content = line
         self._bt_undo.disabled = not self._history
+        # Once solved the rough pose is not used: tabs opened from then on find the folder folded.
+        if self.folder.expand_by_default != (source != "solve"):
+            self.folder.expand_by_default = source != "solve"
 
     # ------------------------------------------------------------------ changes of the rough pose
     def _check_unsolved(self) -> None:

@@ -242,6 +242,9 @@ class RenderPane:
         key = (np.asarray(T, np.float64).tobytes(), mode, source)
         if key == self._requested:
             return
+        align = getattr(self.app, "align", None)
+        if align is not None and (self._requested is None or self._requested[2] != source):
+            align.show()  # its pose line says which pose is used (solve, rough pose, preset)
         self._requested = key
         self._wanted = (np.array(T, np.float64), mode, source)
         self._job += 1

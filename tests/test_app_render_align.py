@@ -233,12 +233,21 @@ def test_an_imported_extrinsic_is_the_start_the_rough_pose_is_refused_once_solve
     try:
         np.testing.assert_allclose(d.rough_pose, truth)
         assert d.wait_render() and d.render_shown.source == "rough"
+        # The pose line names the nearest preset and the camera centre (-R^T t) in the lidar frame.
+        turned = {k: rotation_angle_deg(truth[:3, :3], preset_T(k)[:3, :3]) for k in ("+x", "-y", "+y", "-x")}
+        nearest = min(turned, key=turned.get)
+        centre = -truth[:3, :3].T @ truth[:3, 3]
+        assert app.align.folder.expand_by_default and d.align_text == (
+            f"Rough pose: {turned[nearest]:.1f}° from '{nearest}'; camera centre at ({centre[0]:.2f}, "
+            f"{centre[1]:.2f}, {centre[2]:.2f}) m in the lidar frame.")
         assert d.press_preset("-y") == [] and np.array_equal(d.rough_pose, preset_T("-y"))
         assert d.press_back_to_imported() == [] and np.allclose(d.rough_pose, truth)
         assert d.upload_pairs("pairs.yaml", (SAMPLE / "pairs.yaml").read_bytes())[0][0] == "Pairs imported"
         assert d.wait_idle() and app.result is not None and d.wait_render()
         assert d.render_shown.source == "solve"
         np.testing.assert_allclose(d.render_shown.T_camera_lidar, app.result.T_camera_lidar)
+        # Solved: the rough pose is not used; the Align folder says so and tabs opened now find it folded.
+        assert "A calibration from 4+ pairs is shown" in d.align_text and not app.align.folder.expand_by_default
         notes = d.press_preset("+x")
         assert [t for t, _ in notes] == ["Not accepted"] and "pairs are solved" in notes[0][1]
         assert np.allclose(d.rough_pose, truth)
