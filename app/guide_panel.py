@@ -143,7 +143,8 @@ class GuidePanel:
 
         folder = gui.add_folder("Guided picking", **({} if order is None else {"order": order}))
         with folder:
-            self._md = gui.add_markdown("")
+            # The buttons come first: the status text below them changes height with every proposal, and
+            # buttons under it would jump between a person's look and their click (by-eye trial, issue 20).
             self._buttons = {}
             for label in BUTTONS:
                 button = gui.add_button(label)
@@ -155,6 +156,7 @@ class GuidePanel:
                 hint="Add proposals whose camera corner passes a strict quality gate without a click (tagged auto)")
             self._callbacks["auto"] = guard(lambda action: self._on_auto(bool(action.value)))
             self._cb_auto.on_update(self._callbacks["auto"])
+            self._md = gui.add_markdown("")
         self._worker = LiveSolver(self._job, self._on_done, name="ba-calib-guide")
         state.subscribe(self._on_state_change)
         self._on_state_change(state)

@@ -77,6 +77,15 @@ def test_guided_pairs_in_headless_chromium(tmp_path):
             start_s = time.monotonic() - t_browser
 
             actions = 0
+            # The guided buttons must not move while the panel's status text changes (a click planned from
+            # one look would hit another button: by-eye trial, issue 20).
+            not_a_corner = page.get_by_role("button", name="Not a corner")
+            heading = page.get_by_text("Guided picking", exact=True).first  # the folder title
+
+            def offset() -> float:  # the button's place in its folder (the panel itself may scroll)
+                return not_a_corner.bounding_box()["y"] - heading.bounding_box()["y"]
+
+            offset0 = offset()
             page.get_by_role("button", name="Next pair").click()
             actions += 1
             px_per_image_px = []
@@ -96,6 +105,7 @@ def test_guided_pairs_in_headless_chromium(tmp_path):
                     return (prop, half.id) if ok and half.laser_rc == tuple(prop.laser_rc) else None
 
                 prop, target = wait_for(framed, f"guided pair {k + 1}: the proposal to be framed in the loupes")
+                assert abs(offset() - offset0) <= 1, (offset0, offset())
                 n_new += prop.replaces is None
                 pix, ok = scene.camera.project(transform_points(truth, np.asarray(prop.laser_xyz, float)[None]))
                 assert ok[0]
