@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from app.testing import AppDriver
+from app_driver import AppDriver
 from calib_core.pairs import load_pairs_yaml, save_pairs_yaml
 from viser_wire import WireClient
 from browser_helpers import free_port

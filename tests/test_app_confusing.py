@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import yaml
 
-from app.testing import AppDriver
+from app_driver import AppDriver
 from calib_core.errors import CalibError
 from calib_core.pairs import Pair, load_pairs_yaml, resolve_pairs, save_pairs_yaml
 from browser_helpers import free_port

@@ -1,4 +1,4 @@
-"""Guided picking in the app (issue 9), driven through :class:`app.testing.AppDriver` on the committed sample.
+"""Guided picking in the app (issue 9), driven through :class:`app_driver.AppDriver` on the committed sample.
 
 The simulated person clicks, for each proposal, its true projection -- the
 proposed cell's laser point projected with the sample's ground-truth
@@ -22,7 +22,7 @@ from calib_core.transforms import rotation_angle_deg, transform_points
 
 from app.server import CalibrationApp
 from app.state import AnnotationState
-from app.testing import AppDriver
+from app_driver import AppDriver
 
 SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
 N_GUIDED = 10

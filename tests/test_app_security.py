@@ -227,10 +227,10 @@ def test_the_real_page_connects_with_the_token_and_not_without(tmp_path):
             browser = p.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS)
             page = browser.new_page()
             response = page.goto(f"http://127.0.0.1:{app.port}/")  # no token: refused
-            assert response.status == 403 and app.view.client_ids() == []
+            assert response.status == 403 and not app.server.get_clients()
             response = page.goto(app.url)
             assert response.status == 200
-            wait_for(lambda: app.view.client_ids(), "the tokened page's websocket to connect")
+            wait_for(lambda: app.server.get_clients(), "the tokened page's websocket to connect")
             page.get_by_text("Import pairs YAML").first.wait_for(timeout=30_000)  # this tab's own button
             browser.close()
     finally:

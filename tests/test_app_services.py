@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from app.app_services import AppServices
-from app.testing import AppDriver, FakeTab
+from app_driver import AppDriver, FakeTab
 from calib_core.errors import CalibError
 from browser_helpers import free_port
 

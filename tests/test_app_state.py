@@ -568,7 +568,7 @@ def test_app_column_window_clicks_markers_and_zoom_on_the_sample(tmp_path):
 
     from app.ba_view import ColumnWindow
     from app.server import CalibrationApp
-    from app.testing import AppDriver
+    from app_driver import AppDriver
     from app.ui_common import PANEL_PX, ZOOM_PX_PER_CELL
 
     sample = Path(__file__).resolve().parents[1] / "sample_data"
@@ -704,7 +704,7 @@ def test_cloud_is_recoloured_only_while_a_tab_shows_3d(tmp_path):
     from pathlib import Path
 
     from app.server import CalibrationApp
-    from app.testing import AppDriver
+    from app_driver import AppDriver
     from calib_core.io.extrinsics import load_extrinsics_yaml
     from calib_core.transforms import transform_points
 

@@ -10,7 +10,7 @@ import pytest
 import yaml
 
 from app.state import AnnotationState
-from app.testing import AppDriver
+from app_driver import AppDriver
 from app.view_settings import AS_CLICKED, ViewSettings
 from calib_core.errors import CalibError
 from browser_helpers import free_port

@@ -23,7 +23,7 @@ from browser_helpers import free_port
 from scipy.spatial.transform import Rotation
 
 from app.serving import BagServer, BagSource, app_takes_initial_extrinsics, make_app
-from app.testing import AppDriver
+from app_driver import AppDriver
 from calib_core.cameras import load_camera
 from calib_core.errors import CalibError
 from calib_core.io.extrinsic_formats import load_extrinsics_any

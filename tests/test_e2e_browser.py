@@ -56,7 +56,7 @@ def test_annotate_sample_in_headless_chromium(tmp_path):
             page, cid, box = tab.page, tab.cid, tab.box
 
             def click(target: str, uv) -> None:
-                fx, fy = app.view.page_position(cid, target, uv)
+                fx, fy = tab.driver.page_position(cid, target, uv)
                 assert 0.0 < fx < 1.0 and 0.0 < fy < 1.0, f"{target} {uv} is off screen"
                 page.mouse.click(box["x"] + fx * box["width"], box["y"] + fy * box["height"])
 

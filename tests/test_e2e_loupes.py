@@ -43,7 +43,7 @@ ROUGH_OFFSET = (2, -3)  # (rows, cols) of the full-image BA click from the wante
 def test_ten_pairs_through_the_loupes(tmp_path):
     sync_api = pytest.importorskip("playwright.sync_api", reason="the playwright package is not installed")
     from app.server import CalibrationApp
-    from app.testing import AppDriver
+    from app_driver import AppDriver
 
     t_start = time.monotonic()
     scene = load_sample(SAMPLE)
@@ -178,7 +178,7 @@ def test_six_pairs_on_the_real_scan_from_a_rough_extrinsic(tmp_path):
 
     sync_api = pytest.importorskip("playwright.sync_api", reason="the playwright package is not installed")
     from app.server import CalibrationApp
-    from app.testing import AppDriver
+    from app_driver import AppDriver
     from calib_core.pairs import load_pairs_yaml
 
     t_start = time.monotonic()

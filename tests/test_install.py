@@ -48,6 +48,10 @@ def test_wheel_install_serves_the_sample_from_another_folder(tmp_path):
         names = zf.namelist()
     assert any(n.endswith("/LICENSE") and ".dist-info/" in n for n in names), "the wheel carries the licence"
     assert not any(n.startswith(("tests/", "sample_data/")) for n in names)
+    # No test scaffolding in the installed package (the test driver lives in tests/app_driver).
+    assert "app/server.py" in names and "calib_core/__init__.py" in names, names
+    scaffolding = [n for n in names if n.endswith(".py") and Path(n).name.startswith(("testing", "test_", "conftest"))]
+    assert scaffolding == [] and not any("app_driver" in n for n in names), scaffolding
 
     venv = tmp_path / "venv"
     assert _run([sys.executable, "-m", "venv", "--without-pip", str(venv)]).returncode == 0
