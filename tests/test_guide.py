@@ -15,12 +15,12 @@ import pytest
 import yaml
 
 from app.cli import main as cli_main
+from bench.guide_junction import fit_junctions  # the snap and junction assists are measured in bench only
+from bench.guide_snap import snap_clicks
 from calib_core.guide import corner_image, current_pose, propose
 from calib_core.guide.candidates import find_candidates
 from calib_core.guide.information import d_optimal_gain
-from calib_core.guide.junction import fit_junctions
 from calib_core.guide.session import GuidedSession
-from calib_core.guide.snap import snap_clicks
 from calib_core.pairs import Pair, load_pairs_yaml, save_pairs_yaml
 from calib_core.synthetic import load_sample
 from calib_core.synthetic.picks import laser_picks, simulate_pairs
