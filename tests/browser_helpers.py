@@ -8,6 +8,7 @@ import time
 from pathlib import Path
 
 import pytest
+from repo_paths import SAMPLE
 
 #: Debian's chromium; browser downloads fail on these machines.
 CHROMIUM = Path("/usr/bin/chromium")
@@ -40,8 +41,7 @@ def start_sample_app(tmp_path: Path, pairs, session_path: Path | None = None):
     from app_driver import AppDriver
     from calib_core.pairs import save_pairs_yaml
 
-    sample = Path(__file__).resolve().parents[1] / "sample_data"
-    app = CalibrationApp(sample / "scan.npz", sample / "image.png", sample / "camera.yaml",
+    app = CalibrationApp(SAMPLE / "scan.npz", SAMPLE / "image.png", SAMPLE / "camera.yaml",
                          session_path=session_path or tmp_path / "session.yaml", port=free_port())
     try:
         driver = AppDriver(app)

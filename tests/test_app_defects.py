@@ -13,7 +13,6 @@ order) is in ``tests/test_e2e_defects.py``.
 from __future__ import annotations
 
 import warnings
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -21,9 +20,7 @@ import pytest
 from calib_core.pairs import Pair, save_pairs_yaml
 from calib_core.synthetic import load_sample, simulate_pairs
 from calib_core.transforms import transform_points
-
-ROOT = Path(__file__).resolve().parents[1]
-SAMPLE = ROOT / "sample_data"
+from repo_paths import SAMPLE
 
 
 @pytest.fixture(scope="module")

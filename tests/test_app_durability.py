@@ -29,9 +29,9 @@ import numpy as np
 from app.state import AnnotationState
 from calib_core.cameras import load_camera
 from calib_core.io.scan_readers import load_scan
+from repo_paths import SAMPLE
 
 ROOT = Path(__file__).resolve().parents[1]
-SAMPLE = ROOT / "sample_data"
 #: Trials per CI run; the 50-trial target (0 of 50 lost) is ``python -m bench.durability``, which sets
 #: BA_CALIB_KILL_TRIALS=50 (issue 22: CI time).
 TRIALS = int(os.environ.get("BA_CALIB_KILL_TRIALS", "10"))

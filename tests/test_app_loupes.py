@@ -6,16 +6,13 @@ real scene corners), and hand-computed geometry (a 3-sigma circle of a 4 px^2 co
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from calib_core.io.extrinsics import load_extrinsics_yaml
 from calib_core.synthetic import load_sample, simulate_pairs
-
-ROOT = Path(__file__).resolve().parents[1]
-SAMPLE = ROOT / "sample_data"
+from repo_paths import SAMPLE
 
 
 @pytest.fixture(scope="module")

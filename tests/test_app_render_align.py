@@ -18,11 +18,11 @@ from calib_core.alignment import preset_T
 from calib_core.io.kitti_calib import read_kitti_camera2
 from calib_core.render import render_from_camera
 from calib_core.transforms import invert_T, rotation_angle_deg
+from repo_paths import SAMPLE
 
 ROOT = Path(__file__).resolve().parents[1]
 KITTI = ROOT.parent / "shared" / "data" / "kitti_object_000002"
 CAMERA_YAML = ROOT / "real_data" / "kitti_000002_camera.yaml"
-SAMPLE = ROOT / "sample_data"
 needs_kitti = pytest.mark.skipif(not (KITTI / "velodyne" / "000002.bin").is_file(),
                                  reason=f"KITTI frame not found at {KITTI} (../shared/data)")
 # The KITTI camera file's K, written out here (rectified: no distortion).

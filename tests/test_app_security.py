@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import asyncio
 import http.client
-from pathlib import Path
 
 import pytest
 import viser
@@ -19,8 +18,8 @@ from websockets.exceptions import InvalidStatus
 from app.security import AccessPolicy, cookie_name, is_loopback, split_host
 from calib_core.errors import CalibError
 from browser_helpers import free_port
+from repo_paths import SAMPLE
 
-SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
 SUBPROTOCOL = f"viser-v{viser.__version__}"
 
 

@@ -9,7 +9,6 @@ read back as plain YAML.
 from __future__ import annotations
 
 import re
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -24,8 +23,8 @@ from calib_core.io.extrinsic_formats import FORMATS, export_extrinsics
 from calib_core.pairs import load_pairs_yaml, resolve_pairs
 from calib_core.solve import solve_extrinsics
 from calib_core.transforms import rotation_angle_deg
+from repo_paths import SAMPLE
 
-SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
 PAIRS = (SAMPLE / "pairs.yaml").read_bytes()
 
 

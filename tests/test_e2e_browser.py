@@ -23,14 +23,13 @@ from calib_core.synthetic import load_sample, simulate_pairs
 from calib_core.transforms import rotation_angle_deg
 
 from browser_helpers import CHROMIUM, TIMEOUT_S, AnnotationTab, page_text, free_port, save_small_png, wait_for
+from repo_paths import SAMPLE
 
 pytestmark = pytest.mark.browser
 
 ROOT = Path(__file__).resolve().parents[1]
-SAMPLE = ROOT / "sample_data"
 SCREENSHOT = ROOT / "docs" / "screenshot.png"
 N_PAIRS = 8
-
 
 
 @pytest.mark.skipif(not CHROMIUM.exists(), reason="/usr/bin/chromium is missing (apt-get install chromium); CI installs it")

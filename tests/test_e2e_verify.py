@@ -21,8 +21,7 @@ from PIL import Image
 
 from app_driver import AppDriver
 from calib_core.io.extrinsic_formats import export_extrinsics
-
-SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
+from repo_paths import SAMPLE
 
 
 def page_text(page) -> str:

@@ -8,7 +8,6 @@ of calib_core.guide.information.
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -26,8 +25,7 @@ from calib_core.synthetic import load_sample
 from calib_core.synthetic.picks import laser_picks, simulate_pairs
 from calib_core.synthetic.render import cast
 from calib_core.transforms import rotation_angle_deg, transform_points
-
-SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
+from repo_paths import SAMPLE
 
 
 @pytest.fixture(scope="module")
@@ -309,7 +307,6 @@ def test_not_a_corner_on_a_reclick_is_not_proposed_again(scene):
     assert all(p.replaces != reclicks[0].replaces for p in session.proposals(20))
     assert not [p for p in GuidedSession(scene.depth, scene.camera, session.pairs, image=scene.image,
                                          reclicks=False).proposals(20) if p.replaces is not None]
-
 
 
 def test_pick_noise_model_is_calibrated_on_the_true_corners(scene, truth):

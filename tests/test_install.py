@@ -24,8 +24,8 @@ import numpy as np
 import pytest
 import yaml
 from browser_helpers import free_port
+from repo_paths import REPO, SAMPLE
 
-REPO = Path(__file__).resolve().parents[1]
 
 pytestmark = pytest.mark.install
 
@@ -108,7 +108,7 @@ def test_wheel_install_serves_the_sample_from_another_folder(tmp_path):
         assert (sample / name).is_file(), name
     # The generated sample is the committed one (seed 0).
     got = np.array(yaml.safe_load((sample / "ground_truth.yaml").read_text())["T_camera_lidar"]["matrix"])
-    ref = np.array(yaml.safe_load((REPO / "sample_data" / "ground_truth.yaml").read_text())["T_camera_lidar"]["matrix"])
+    ref = np.array(yaml.safe_load((SAMPLE / "ground_truth.yaml").read_text())["T_camera_lidar"]["matrix"])
     assert np.array_equal(got, ref)
     # A headless command of the installed package on it.
     solved = _run(
