@@ -382,5 +382,3 @@ class PairsPanel:
         self.app.state.clear()
         self.app.notify(event.client, "Pairs cleared", f"{n} pairs removed. Undo (in Edit) brings them back.",
                      color="yellow")
-
-    # Old private names, still used by app/testing.py.

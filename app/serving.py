@@ -12,7 +12,6 @@ offered as the initial extrinsic.
 from __future__ import annotations
 
 import contextlib
-import inspect
 import os
 import queue
 import signal
@@ -28,11 +27,6 @@ from calib_core.errors import CalibError
 from .security import TOKEN_QUERY, is_loopback
 from .server import CalibrationApp
 from .ui_common import md_escape
-
-
-def app_takes_initial_extrinsics() -> bool:
-    """Whether this build's :class:`CalibrationApp` takes ``initial_extrinsics_path``."""
-    return "initial_extrinsics_path" in inspect.signature(CalibrationApp.__init__).parameters
 
 
 @dataclass
@@ -185,19 +179,11 @@ class BagServer:
 
     def _start(self, frame: BagFrame, options: dict) -> CalibrationApp:
         initial = self.initial_extrinsics_path or frame.initial_extrinsics
-        notes = list(frame.notes)
-        if initial is not None:
-            if app_takes_initial_extrinsics():
-                options["initial_extrinsics_path"] = initial
-            elif self.initial_extrinsics_path is not None:
-                raise CalibError("this build's app cannot start from an initial extrinsic yet (--initial-extrinsics)")
-            else:
-                notes.append(f"initial extrinsic from /tf_static written to {initial} (this build's app does not "
-                             "take one yet: use it with 'solve --initial-extrinsics')")
-        self.app = make_app(frame.scan, frame.image, frame.camera, session_path=frame.session, **options)
+        self.app = CalibrationApp(frame.scan, frame.image, frame.camera, session_path=frame.session,
+                                  initial_extrinsics_path=initial, **options)
         self.frame = frame
         self.panel = BagFramePanel(self.app, self.source, frame, self.requests.put)
-        for note in notes:
+        for note in frame.notes:
             print(f"ba-calib: {note}", flush=True)
         return self.app
 
@@ -205,15 +191,6 @@ class BagServer:
         if self.app is not None:
             self.app.stop()
             self.app = None
-
-
-def make_app(scan_path, image_path, camera_path, *, initial_extrinsics_path=None, **options: Any) -> CalibrationApp:
-    """A :class:`CalibrationApp`; ``initial_extrinsics_path`` only when given (older apps do not take it)."""
-    if initial_extrinsics_path is not None:
-        if not app_takes_initial_extrinsics():
-            raise CalibError("this build's app cannot start from an initial extrinsic yet (--initial-extrinsics)")
-        options["initial_extrinsics_path"] = initial_extrinsics_path
-    return CalibrationApp(scan_path, image_path, camera_path, **options)
 
 
 def serve(
@@ -256,8 +233,8 @@ def serve(
             server = BagServer(bag, initial_extrinsics_path=initial_extrinsics_path, **options)
             app = server.load()
         else:
-            app = make_app(scan_path, image_path, camera_path, session_path=session_path,
-                           initial_extrinsics_path=initial_extrinsics_path, **options)
+            app = CalibrationApp(scan_path, image_path, camera_path, session_path=session_path,
+                                 initial_extrinsics_path=initial_extrinsics_path, **options)
     try:
         stop_signal.raise_if_pending()
         _announce(app, host)

@@ -1,6 +1,6 @@
 """The view panel and the per-tab cameras: camera image raw or unwrapped, overlays on/off, the BA column window and
-the page layout that follows from it, the 2-D / 3-D views, zoom, and where a view's pixel is on the page (for
-real-browser tests).  The View folder also holds the display panel's widgets and the loupe zoom buttons."""
+the page layout that follows from it, the 2-D / 3-D views and zoom.  The View folder also holds the display
+panel's widgets and the loupe zoom buttons."""
 
 from __future__ import annotations
 
@@ -9,11 +9,8 @@ import time
 from typing import Any
 
 import numpy as np
-import viser.transforms as vtf
 
 from calib_core.errors import CalibError
-from calib_core.cameras.pinhole import PinholeCamera
-from calib_core.transforms import invert_T, transform_points
 from calib_core.viewpoint import viewpoint_behind_camera
 
 from .ba_view import ColumnWindow, ba_texture, texture_factor
@@ -423,10 +420,7 @@ class ViewPanel:
             return R_lidar_camera @ np.array([0.0, -1.0, 0.0])
         return np.array(axis, dtype=np.float64)
 
-    def client_ids(self) -> list[int]:
-        """Ids of the connected browser tabs."""
-        return sorted(self.app.server.get_clients())
-
+    # The two below are read only by tests (waiting for a real tab's view); they read this panel's own record.
     def view_set_time(self, client_id: int) -> float:
         """``time.time()`` when this app last set the tab's camera (0.0: never)."""
         target = self._view_target.get(client_id)
@@ -445,47 +439,3 @@ class ViewPanel:
                         and np.allclose(cam.look_at, target[1], atol=1e-4))
         except AssertionError:
             return False
-
-    def page_position(self, client_id: int, target: str, uv: tuple[float, float]) -> tuple[float, float]:
-        """Where a pixel appears in a tab's canvas, as fractions of the canvas width and height.
-
-        Parameters
-        ----------
-        target : str
-            ``"camera"`` (``uv`` is an ORIGINAL camera-image pixel, shown in the
-            visible camera view), a BA key (``uv`` = (col, row) of a scan
-            cell, which must lie in the shown column window; fractions of a
-            cell aim off its centre), ``"loupe_camera"`` (an original pixel the
-            camera loupe shows) or ``"loupe_ba"`` ((col, row) of a cell the BA loupe shows).
-        """
-        disp = np.asarray(uv, dtype=np.float64).reshape(1, 2)
-        if target.startswith("loupe_"):
-            slot = self.app.loupes.slot(target[len("loupe_"):])
-            shown = self.app.loupes.display_of(target[len("loupe_"):], (disp[0, 0], disp[0, 1]))
-            if shown is None:
-                raise CalibError(f"{uv} is not shown in the {target[len('loupe_'):]} loupe")
-            disp = np.array([shown])
-        elif target in ("camera", RENDER_KEY):  # the render shows original pixels as the camera view does
-            slot = self.camera_slot() if target == "camera" else self.slots[RENDER_KEY]
-            disp, ok = self.app.display_from_pixels(disp)
-            if not ok[0]:
-                raise CalibError(f"pixel {uv} is not shown in the camera view")
-        else:
-            slot = self.slots[target]
-            u, shown = self._ba_window.display_cols(np.array([int(round(disp[0, 0]))]))
-            if not shown[0]:
-                raise CalibError(f"BA column {uv[0]} is outside the shown columns")
-            disp = np.array([[u[0] + disp[0, 0] - round(disp[0, 0]), disp[0, 1]]])
-        world = slot.world_from_pixel(disp)
-        cam = self.app.server.get_clients()[client_id].camera
-        # The tab's view as a distortion-free pinhole (viser's camera frame is OpenCV's: +z forward, +y down).
-        T_world_view = np.eye(4)
-        T_world_view[:3, :3] = vtf.SO3(np.asarray(cam.wxyz)).as_matrix()
-        T_world_view[:3, 3] = cam.position
-        f = (cam.image_height / 2) / math.tan(cam.fov / 2)
-        view = PinholeCamera([[f, 0.0, cam.image_width / 2], [0.0, f, cam.image_height / 2], [0.0, 0.0, 1.0]], [],
-                             int(cam.image_width), int(cam.image_height))
-        xy, _ = view.project(transform_points(invert_T(T_world_view), world))
-        return float(xy[0, 0]) / cam.image_width, float(xy[0, 1]) / cam.image_height
-
-    # Old private names, still used by app/testing.py.

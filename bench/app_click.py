@@ -1,7 +1,7 @@
 """Server-side click-to-update of the loupe workflow on the sample: ``python -m bench.app_click [--reps N]``.
 
 A real :class:`app.server.CalibrationApp` (viser on a free local port, no browser) is driven by
-:class:`app.testing.AppDriver`, one pair at a time as a person picks it through the loupes:
+:class:`app_driver.AppDriver`, one pair at a time as a person picks it through the loupes:
 
 * ``BA full click``: a click on a full BA image (state change, markers, both loupes re-framed: the BA
   loupe on the click, the camera loupe on the predicted pixel);
@@ -19,6 +19,7 @@ server process (all threads, including the live solve and the follow-up projecti
 from __future__ import annotations
 
 import argparse
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -31,7 +32,10 @@ TARGET_S = 0.020
 
 def run(reps: int = 12) -> dict[str, list[float]]:
     from app.server import CalibrationApp
-    from app.testing import AppDriver
+
+    if str(REPO / "tests") not in sys.path:  # the test driver lives in tests/app_driver (not in the wheel)
+        sys.path.insert(0, str(REPO / "tests"))
+    from app_driver import AppDriver
     from calib_core.synthetic import load_sample, simulate_pairs
 
     sample = REPO / "sample_data"

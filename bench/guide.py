@@ -31,12 +31,12 @@ from pathlib import Path
 import numpy as np
 
 from calib_core.guide.image_corners import corner_image
-from calib_core.guide.junction import fit_junctions
-from calib_core.guide.snap import SNAP_MIN_CLICK_SIGMA_PX, snap_clicks
 from calib_core.solve import calibrate
 from calib_core.synthetic.picks import MAX_LASER_PICK_ERROR_M, laser_picks, simulate_pairs
 
 from . import guide_order, guide_real
+from .guide_junction import fit_junctions
+from .guide_snap import SNAP_MIN_CLICK_SIGMA_PX, snap_clicks
 from .common import BENCH_SEED, REPO, load_scenes, log, parallel_map, pose_error
 from .guide_auto import GATES as AUTO_GATES
 from .guide_sim import ORDER_ARMS, guided_run, order_trial, true_pixels

@@ -8,6 +8,7 @@ import time
 from pathlib import Path
 
 import pytest
+from repo_paths import SAMPLE
 
 #: Debian's chromium; browser downloads fail on these machines.
 CHROMIUM = Path("/usr/bin/chromium")
@@ -37,11 +38,10 @@ def start_sample_app(tmp_path: Path, pairs, session_path: Path | None = None):
     stops the app (it is stopped here if the import fails).
     """
     from app.server import CalibrationApp
-    from app.testing import AppDriver
+    from app_driver import AppDriver
     from calib_core.pairs import save_pairs_yaml
 
-    sample = Path(__file__).resolve().parents[1] / "sample_data"
-    app = CalibrationApp(sample / "scan.npz", sample / "image.png", sample / "camera.yaml",
+    app = CalibrationApp(SAMPLE / "scan.npz", SAMPLE / "image.png", SAMPLE / "camera.yaml",
                          session_path=session_path or tmp_path / "session.yaml", port=free_port())
     try:
         driver = AppDriver(app)
@@ -92,15 +92,17 @@ class AnnotationTab:
     """A headless-Chromium tab on a running app, connected, its annotation view set, the WebGL notice closed.
 
     ``screen(target, uv)`` is the page position of pixel ``uv`` of a view (``"camera"``, a BA key,
-    ``"loupe_ba"``, ``"loupe_camera"``), from the camera the tab reported (:meth:`app.view_panel.ViewPanel.page_position`).
+    ``"loupe_ba"``, ``"loupe_camera"``), from the camera the tab reported (:meth:`app_driver.AppDriver.page_position`).
     """
 
     def __init__(self, playwright, app, viewport: dict, **page_options) -> None:
-        self.app = app
+        from app_driver import AppDriver
+
+        self.app, self.driver = app, AppDriver(app)
         self.browser = playwright.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS)
         self.page = self.browser.new_page(viewport=viewport, **page_options)
         self.page.goto(app.url)
-        self.cid = wait_for(lambda: app.view.client_ids(), "the tab to connect")[0]
+        self.cid = wait_for(lambda: self.driver.client_ids(), "the tab to connect")[0]
         wait_for(lambda: app.view.view_settled(self.cid), "the annotation view to be set")
         # The software-WebGL notice swallows clicks at the top left: close it.
         notice = self.page.locator(".mantine-Notification-root", has_text="Software WebGL")
@@ -111,7 +113,7 @@ class AnnotationTab:
         assert self.box is not None
 
     def screen(self, target: str, uv) -> tuple[float, float]:
-        fx, fy = self.app.view.page_position(self.cid, target, uv)
+        fx, fy = self.driver.page_position(self.cid, target, uv)
         assert 0.0 < fx < 1.0 and 0.0 < fy < 1.0, f"{target} {uv} is off screen"
         return self.box["x"] + fx * self.box["width"], self.box["y"] + fy * self.box["height"]
 

@@ -1,6 +1,16 @@
 """Shared test setup."""
 
 import os
+import sys
+from pathlib import Path
+
+# The test driver (tests/app_driver) and helpers (browser_helpers, bag_helpers, ...) are imported by name from
+# tests/; bench-only code that tests check (bench.guide_snap, bench.guide_junction) from the repository root.
+# pytest's default import mode and ``python -m pytest`` put them on sys.path; this says so whatever the mode.
+TESTS_DIR = Path(__file__).resolve().parent
+for _path in (TESTS_DIR.parent, TESTS_DIR):
+    if str(_path) not in sys.path:
+        sys.path.insert(0, str(_path))
 
 # Before numpy loads: see calib_core/__init__.py (single-threaded BLAS).
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):

@@ -7,7 +7,6 @@ projection written in the test.
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -25,8 +24,8 @@ from calib_core.cameras.fisheye import FisheyeCamera
 from calib_core.cameras.io import load_camera
 from calib_core.cameras.pinhole import PinholeCamera
 from calib_core.errors import CalibError
+from repo_paths import REPO, SAMPLE
 
-REPO = Path(__file__).resolve().parents[1]
 KITTI_CALIB = REPO.parent / "shared" / "data" / "kitti_object_000002" / "calib" / "000002.txt"
 
 
@@ -187,7 +186,7 @@ def test_focal_estimate_fisheye_and_ocam():
                         640, 480)
     assert focal_px_estimate(cam) == pytest.approx(310.0, rel=1e-4)
     # OCam (the sample): its pixels-per-radian at the centre from the projection of two rays 1 mrad apart.
-    ocam = load_camera(REPO / "sample_data" / "camera.yaml")
+    ocam = load_camera(SAMPLE / "camera.yaml")
     px, ok = ocam.project(np.array([[0.0, 0.0, 1.0], [np.tan(1e-3), 0.0, 1.0], [0.0, np.tan(1e-3), 1.0]]))
     assert ok.all()
     scale = (np.linalg.norm(px[1] - px[0]) + np.linalg.norm(px[2] - px[0])) / 2 / 1e-3

@@ -10,17 +10,16 @@ import asyncio
 import http.client
 import threading
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-from app.testing import AppDriver
+from app_driver import AppDriver
 from calib_core.pairs import load_pairs_yaml, save_pairs_yaml
 from viser_wire import WireClient
 from browser_helpers import free_port
+from repo_paths import SAMPLE
 
-SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
 UPLOAD_LABEL = "Import pairs YAML"
 
 

@@ -7,18 +7,17 @@ import socket
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
 
-from app.testing import AppDriver
+from app_driver import AppDriver
 from calib_core.errors import CalibError
 from calib_core.pairs import Pair, load_pairs_yaml, resolve_pairs, save_pairs_yaml
 from browser_helpers import free_port
+from repo_paths import SAMPLE
 
-SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
 ROOT = SAMPLE.parent
 
 

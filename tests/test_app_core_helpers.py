@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import trimesh
@@ -13,8 +12,7 @@ from calib_core.io.images import load_image_rgb
 from calib_core.io.scan_readers import load_scan
 from calib_core.overlays import columns_seen_by_camera, export_colored_scan
 from calib_core.pairs import load_pairs_yaml
-
-SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
+from repo_paths import SAMPLE
 
 
 def scene():

@@ -13,7 +13,6 @@ order) is in ``tests/test_e2e_defects.py``.
 from __future__ import annotations
 
 import warnings
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -21,9 +20,7 @@ import pytest
 from calib_core.pairs import Pair, save_pairs_yaml
 from calib_core.synthetic import load_sample, simulate_pairs
 from calib_core.transforms import transform_points
-
-ROOT = Path(__file__).resolve().parents[1]
-SAMPLE = ROOT / "sample_data"
+from repo_paths import SAMPLE
 
 
 @pytest.fixture(scope="module")
@@ -78,7 +75,7 @@ MARK_LINES = ("/annot/loupe/ba_marks", "/annot/loupe/camera_marks", "/annot/loup
 
 
 def test_hide_marks_hides_every_mark_and_is_saved(tmp_path, scene):
-    from app.testing import AppDriver
+    from app_driver import AppDriver
 
     pairs = simulate_pairs(scene, 6, np.random.default_rng(5), pixel_noise_px=0.5)
     pairs_file = tmp_path / "pairs.yaml"
@@ -141,7 +138,7 @@ def test_hide_marks_hides_every_mark_and_is_saved(tmp_path, scene):
 
 # ---------------------------------------------------------------------------------------------- loupe title
 def test_the_loupe_title_names_the_latest_click(tmp_path, scene):
-    from app.testing import AppDriver
+    from app_driver import AppDriver
 
     pair = simulate_pairs(scene, 1, np.random.default_rng(4), pixel_noise_px=0.0)[0]
     row, col = pair.laser_rc
@@ -205,7 +202,7 @@ def test_a_check_pair_off_the_image_says_why_without_a_numpy_warning(tmp_path, s
     assert doc["check_mean_px"] is None and any("projects outside the image" in w for w in doc["warnings"])
 
     # ... and the app's panels give the reason where they gave "n/a".
-    from app.testing import AppDriver
+    from app_driver import AppDriver
 
     pairs_file = tmp_path / "pairs.yaml"
     save_pairs_yaml(pairs_file, fit + checks)

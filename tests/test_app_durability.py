@@ -5,10 +5,10 @@ line we send, answering ``ack <pairs>`` once the page would show it.  Right
 after an ack (or up to 60 ms later, the window in which the issue saw losses)
 we SIGKILL it and restore the session the way the app does on start.
 
-The children are forked by ``python -m app.testing zygote``, which has
+The children are forked by ``python -m app_driver zygote``, which has
 imported the app and loaded its numba kernels once: each child only builds
 the app (the start-up was most of a trial's time).  One trial also runs the
-child as a new process (``python -m app.testing child``), as a user starts it.
+child as a new process (``python -m app_driver child``), as a user starts it.
 """
 
 from __future__ import annotations
@@ -29,16 +29,18 @@ import numpy as np
 from app.state import AnnotationState
 from calib_core.cameras import load_camera
 from calib_core.io.scan_readers import load_scan
+from repo_paths import SAMPLE
 
 ROOT = Path(__file__).resolve().parents[1]
-SAMPLE = ROOT / "sample_data"
 #: Trials per CI run; the 50-trial target (0 of 50 lost) is ``python -m bench.durability``, which sets
 #: BA_CALIB_KILL_TRIALS=50 (issue 22: CI time).
 TRIALS = int(os.environ.get("BA_CALIB_KILL_TRIALS", "10"))
 
 
 def _env() -> dict:
-    return dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
+    # The children run ``python -m app_driver`` (tests/app_driver, the test driver kept out of the wheel).
+    path = [str(ROOT), str(ROOT / "tests"), os.environ.get("PYTHONPATH", "")]
+    return dict(os.environ, PYTHONPATH=os.pathsep.join(path))
 
 
 class Child:
@@ -86,7 +88,7 @@ class Child:
 
 def start_process_child(session: Path) -> Child:
     """The app as a new process, as a user starts it."""
-    proc = subprocess.Popen([sys.executable, "-m", "app.testing", "child", "--session", str(session)], cwd=ROOT,
+    proc = subprocess.Popen([sys.executable, "-m", "app_driver", "child", "--session", str(session)], cwd=ROOT,
                             env=_env(), stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
                             text=True, bufsize=1)
     child = Child(proc.pid, proc.stdin, proc.stdout, proc)
@@ -95,11 +97,11 @@ def start_process_child(session: Path) -> Child:
 
 
 class Zygote:
-    """``python -m app.testing zygote``: forks app children that share its imports and compiled kernels."""
+    """``python -m app_driver zygote``: forks app children that share its imports and compiled kernels."""
 
     def __init__(self):
         self._control, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
-        self.proc = subprocess.Popen([sys.executable, "-m", "app.testing", "zygote", str(theirs.fileno())], cwd=ROOT,
+        self.proc = subprocess.Popen([sys.executable, "-m", "app_driver", "zygote", str(theirs.fileno())], cwd=ROOT,
                                      env=_env(), pass_fds=[theirs.fileno()], stdin=subprocess.DEVNULL,
                                      stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         theirs.close()

@@ -1,4 +1,4 @@
-"""Guided picking in the app (issue 9), driven through :class:`app.testing.AppDriver` on the committed sample.
+"""Guided picking in the app (issue 9), driven through :class:`app_driver.AppDriver` on the committed sample.
 
 The simulated person clicks, for each proposal, its true projection -- the
 proposed cell's laser point projected with the sample's ground-truth
@@ -8,7 +8,6 @@ axis, the click noise issue 9 assumes for a magnified, known target.
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -22,9 +21,9 @@ from calib_core.transforms import rotation_angle_deg, transform_points
 
 from app.server import CalibrationApp
 from app.state import AnnotationState
-from app.testing import AppDriver
+from app_driver import AppDriver
+from repo_paths import SAMPLE
 
-SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
 N_GUIDED = 10
 CLICK_SIGMA_PX = 0.3
 # Issue 9's Cramer-Rao bound for the sample at 10 pairs of 0.3 px clicks (whole-cell laser picks): 0.22 deg and

@@ -45,7 +45,7 @@ def rough_extrinsic(T: np.ndarray, degrees: float = 2.0, metres: float = 0.20) -
 @pytest.mark.skipif(not (PJLAB / "calib.pcd").is_file(), reason=f"real data not found at {PJLAB} (../shared/data)")
 def test_guided_pairs_on_the_real_scan_from_a_rough_extrinsic(tmp_path):
     from app.server import CalibrationApp
-    from app.testing import AppDriver
+    from app_driver import AppDriver
 
     doc = json.loads((PJLAB / "top_center_lidar-to-center_camera-extrinsic.json").read_text())
     published = np.array(doc["top_center_lidar-to-center_camera-extrinsic"]["param"]["sensor_calib"]["data"], float)

@@ -1,4 +1,4 @@
-"""The loupes, driven as a tab would through :class:`app.testing.AppDriver` (no browser).
+"""The loupes, driven as a tab would through :class:`app_driver.AppDriver` (no browser).
 
 Truth: the sample's ground-truth extrinsics and :func:`calib_core.synthetic.simulate_pairs` (cells and pixels of
 real scene corners), and hand-computed geometry (a 3-sigma circle of a 4 px^2 covariance has radius 6 px).
@@ -6,16 +6,13 @@ real scene corners), and hand-computed geometry (a 3-sigma circle of a 4 px^2 co
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from calib_core.io.extrinsics import load_extrinsics_yaml
 from calib_core.synthetic import load_sample, simulate_pairs
-
-ROOT = Path(__file__).resolve().parents[1]
-SAMPLE = ROOT / "sample_data"
+from repo_paths import SAMPLE
 
 
 @pytest.fixture(scope="module")
@@ -31,7 +28,7 @@ def make_app(tmp_path, **kwargs):
 
 
 def test_loupe_clicks_map_back_exactly_and_refine_the_full_image_click(tmp_path, scene):
-    from app.testing import AppDriver
+    from app_driver import AppDriver
 
     pair = simulate_pairs(scene, 1, np.random.default_rng(4), pixel_noise_px=0.0)[0]
     row, col = pair.laser_rc
@@ -61,7 +58,7 @@ def test_loupe_clicks_map_back_exactly_and_refine_the_full_image_click(tmp_path,
 
 
 def test_predictions_both_ways_from_an_imported_initial_extrinsic(tmp_path, scene):
-    from app.testing import AppDriver
+    from app_driver import AppDriver
 
     truth = load_extrinsics_yaml(SAMPLE / "ground_truth.yaml")["T_camera_lidar"]
     pairs = simulate_pairs(scene, 6, np.random.default_rng(7), pixel_noise_px=0.0)
@@ -87,7 +84,7 @@ def test_predictions_both_ways_from_an_imported_initial_extrinsic(tmp_path, scen
 
 
 def test_frame_camera_draws_the_3_sigma_ellipse_and_zoom_keeps_the_centre(tmp_path):
-    from app.testing import AppDriver
+    from app_driver import AppDriver
 
     app = make_app(tmp_path)
     try:
@@ -119,7 +116,7 @@ def test_frame_camera_draws_the_3_sigma_ellipse_and_zoom_keeps_the_centre(tmp_pa
 
 
 def test_initial_extrinsics_upload(tmp_path):
-    from app.testing import AppDriver
+    from app_driver import AppDriver
 
     app = make_app(tmp_path)
     try:
@@ -140,7 +137,7 @@ def test_initial_extrinsics_upload(tmp_path):
 def test_loupe_shows_range_and_contrast_and_the_edge_overlay_stays_in_the_fisheye_circle(tmp_path):
     import yaml
 
-    from app.testing import AppDriver
+    from app_driver import AppDriver
     from calib_core.pairs import load_pairs_yaml
 
     session = tmp_path / "session.yaml"
@@ -210,7 +207,7 @@ def test_bad_initial_extrinsics_and_bad_frames_are_one_line_errors(tmp_path):
 
 def test_last_laser_pane_shows_range_picks_the_same_cells_and_is_saved(tmp_path):
     from app.server import CalibrationApp
-    from app.testing import AppDriver
+    from app_driver import AppDriver
 
     session = tmp_path / "session.yaml"
     app = CalibrationApp(SAMPLE / "scan.npz", SAMPLE / "image.png", SAMPLE / "camera.yaml", session_path=session,

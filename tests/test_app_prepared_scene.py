@@ -9,9 +9,9 @@ from pathlib import Path
 import pytest
 
 from calib_core.errors import CalibError
+from repo_paths import SAMPLE
 
 ROOT = Path(__file__).resolve().parents[1]
-SAMPLE = ROOT / "sample_data"
 
 
 def test_prepared_scene_loads_the_sample_without_importing_viser():

@@ -3,13 +3,11 @@
 from __future__ import annotations
 
 import re
-from pathlib import Path
 
 from app.ui_common import md_escape
 from calib_core.pairs import Pair, load_pairs_yaml
 from browser_helpers import start_sample_app
-
-SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
+from repo_paths import SAMPLE
 
 
 def table_rows(table: str) -> dict[int, str]:

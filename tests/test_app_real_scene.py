@@ -52,7 +52,7 @@ def make_app(session: Path, **kwargs):
 def test_facing_the_camera_from_an_imported_extrinsic_before_any_pair(tmp_path):
     """With the published extrinsic imported (its own JSON format), "Facing the camera" works with no pairs,
     and a BA click frames the camera loupe on the published projection of that cell."""
-    from app.testing import AppDriver
+    from app_driver import AppDriver
 
     extrinsic = DATA / "top_center_lidar-to-center_camera-extrinsic.json"
     app = make_app(tmp_path / "session.yaml", initial_extrinsics_path=extrinsic)
@@ -86,7 +86,7 @@ def test_facing_the_camera_from_an_imported_extrinsic_before_any_pair(tmp_path):
 
 
 def test_camera_facing_window_shows_what_the_published_calibration_projects(tmp_path):
-    from app.testing import AppDriver
+    from app_driver import AppDriver
 
     session = tmp_path / "session.yaml"
     app = make_app(session)

@@ -5,7 +5,6 @@ one redraw draws everything, against a solve computed here with calib_core on th
 from __future__ import annotations
 
 import re
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -14,8 +13,7 @@ from scipy.spatial import cKDTree
 from calib_core.pairs import load_pairs_yaml, resolve_pairs
 from calib_core.solve import calibrate
 from browser_helpers import start_sample_app
-
-SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
+from repo_paths import SAMPLE
 
 
 @pytest.fixture(params=["panorama", "raw"])

@@ -18,11 +18,11 @@ from calib_core.alignment import preset_T
 from calib_core.io.kitti_calib import read_kitti_camera2
 from calib_core.render import render_from_camera
 from calib_core.transforms import invert_T, rotation_angle_deg
+from repo_paths import SAMPLE
 
 ROOT = Path(__file__).resolve().parents[1]
 KITTI = ROOT.parent / "shared" / "data" / "kitti_object_000002"
 CAMERA_YAML = ROOT / "real_data" / "kitti_000002_camera.yaml"
-SAMPLE = ROOT / "sample_data"
 needs_kitti = pytest.mark.skipif(not (KITTI / "velodyne" / "000002.bin").is_file(),
                                  reason=f"KITTI frame not found at {KITTI} (../shared/data)")
 # The KITTI camera file's K, written out here (rectified: no distortion).
@@ -31,7 +31,7 @@ FX, CX, CY, W, H = 721.5377, 609.5593, 172.854, 1242, 375
 
 def kitti_app(tmp_path: Path, session: Path | None = None, **kwargs):
     from app.server import CalibrationApp
-    from app.testing import AppDriver
+    from app_driver import AppDriver
 
     app = CalibrationApp(KITTI / "velodyne" / "000002.bin", KITTI / "image_2" / "000002.png", CAMERA_YAML,
                          session_path=session or tmp_path / "session.yaml", port=0, **kwargs)
@@ -222,7 +222,7 @@ def test_an_imported_extrinsic_is_the_start_the_rough_pose_is_refused_once_solve
     """On the sample: the file given at start is the rough pose and "Back to the imported extrinsic" returns to it;
     with 4+ pairs solved the render shows the solve and the Align actions say why they do nothing."""
     from app.server import CalibrationApp
-    from app.testing import AppDriver
+    from app_driver import AppDriver
     from calib_core.io.extrinsics import load_extrinsics_yaml
 
     truth = load_extrinsics_yaml(SAMPLE / "ground_truth.yaml")["T_camera_lidar"]
@@ -260,7 +260,7 @@ def test_on_a_panorama_the_render_is_unwrapped_like_the_photo_and_clicks_map_bac
     picks the cell the render draws at the original pixel under the click; as recorded, likewise."""
     from app.render_pane import RENDER_KEY
     from app.server import CalibrationApp
-    from app.testing import AppDriver
+    from app_driver import AppDriver
 
     app = CalibrationApp(SAMPLE / "scan.npz", SAMPLE / "image.png", SAMPLE / "camera.yaml",
                          session_path=tmp_path / "session.yaml", port=0)

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import asyncio
 import http.client
-from pathlib import Path
 
 import pytest
 import viser
@@ -19,8 +18,8 @@ from websockets.exceptions import InvalidStatus
 from app.security import AccessPolicy, cookie_name, is_loopback, split_host
 from calib_core.errors import CalibError
 from browser_helpers import free_port
+from repo_paths import SAMPLE
 
-SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
 SUBPROTOCOL = f"viser-v{viser.__version__}"
 
 
@@ -227,10 +226,10 @@ def test_the_real_page_connects_with_the_token_and_not_without(tmp_path):
             browser = p.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS)
             page = browser.new_page()
             response = page.goto(f"http://127.0.0.1:{app.port}/")  # no token: refused
-            assert response.status == 403 and app.view.client_ids() == []
+            assert response.status == 403 and not app.server.get_clients()
             response = page.goto(app.url)
             assert response.status == 200
-            wait_for(lambda: app.view.client_ids(), "the tokened page's websocket to connect")
+            wait_for(lambda: app.server.get_clients(), "the tokened page's websocket to connect")
             page.get_by_text("Import pairs YAML").first.wait_for(timeout=30_000)  # this tab's own button
             browser.close()
     finally:

@@ -2,15 +2,13 @@
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from calib_core.pairs import load_pairs_yaml
 from browser_helpers import start_sample_app
-
-SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
+from repo_paths import SAMPLE
 
 
 @pytest.fixture

@@ -3,16 +3,14 @@
 from __future__ import annotations
 
 import inspect
-from pathlib import Path
 
 import pytest
 
 from app.app_services import AppServices
-from app.testing import AppDriver, FakeTab
+from app_driver import AppDriver, FakeTab
 from calib_core.errors import CalibError
 from browser_helpers import free_port
-
-SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
+from repo_paths import SAMPLE
 
 
 @pytest.fixture(scope="module")

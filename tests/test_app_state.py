@@ -13,6 +13,7 @@ from app.state import AnnotationState
 from app.view_settings import ViewSettings
 from calib_core.errors import CalibError
 from calib_core.pairs import Pair, load_pairs_yaml, save_pairs_yaml
+from repo_paths import SAMPLE
 
 H, W = 20, 40  # depth matrix
 IMG = (320, 240)  # camera image width, height
@@ -564,16 +565,13 @@ def test_pick_markers_are_rings_that_leave_the_picked_cell_visible():
 
 # ------------------------------------------------ the app on the sample (no browser)
 def test_app_column_window_clicks_markers_and_zoom_on_the_sample(tmp_path):
-    from pathlib import Path
-
     from app.ba_view import ColumnWindow
     from app.server import CalibrationApp
-    from app.testing import AppDriver
+    from app_driver import AppDriver
     from app.ui_common import PANEL_PX, ZOOM_PX_PER_CELL
 
-    sample = Path(__file__).resolve().parents[1] / "sample_data"
     session = tmp_path / "session.yaml"
-    app = CalibrationApp(sample / "scan.npz", sample / "image.png", sample / "camera.yaml", session_path=session,
+    app = CalibrationApp(SAMPLE / "scan.npz", SAMPLE / "image.png", SAMPLE / "camera.yaml", session_path=session,
                          port=0)
     d = AppDriver(app)
     try:
@@ -628,7 +626,7 @@ def test_app_column_window_clicks_markers_and_zoom_on_the_sample(tmp_path):
         app.stop()
 
     # The window is part of the session.
-    app = CalibrationApp(sample / "scan.npz", sample / "image.png", sample / "camera.yaml", session_path=session,
+    app = CalibrationApp(SAMPLE / "scan.npz", SAMPLE / "image.png", SAMPLE / "camera.yaml", session_path=session,
                          port=0)
     try:
         assert app.ba_window == ColumnWindow(700, 60, 720, True)
@@ -639,24 +637,22 @@ def test_app_column_window_clicks_markers_and_zoom_on_the_sample(tmp_path):
 
 def test_a_click_updates_only_what_it_changed_in_place(tmp_path):
     import socket
-    from pathlib import Path
 
     from app.server import CalibrationApp
 
     import time
 
-    sample = Path(__file__).resolve().parents[1] / "sample_data"
     session = tmp_path / "session.yaml"
     session.write_text(yaml.safe_dump({"format": "ba-calib-session", "version": 1, "pairs": [],
                                        "view": {"panorama": False}}))
     with socket.socket() as sock:
         sock.bind(("127.0.0.1", 0))
         port = sock.getsockname()[1]
-    app = CalibrationApp(sample / "scan.npz", sample / "image.png", sample / "camera.yaml", session_path=session,
+    app = CalibrationApp(SAMPLE / "scan.npz", SAMPLE / "image.png", SAMPLE / "camera.yaml", session_path=session,
                          port=port)
     try:
         assert app.live.last_click_to_update() is None and app.last_update_time is None  # nothing solved yet
-        ids = app.state.import_pairs(load_pairs_yaml(sample / "pairs.yaml")[:5])
+        ids = app.state.import_pairs(load_pairs_yaml(SAMPLE / "pairs.yaml")[:5])
         assert app.wait_idle(60) and app.result is not None
         node = lambda name: app.nodes.drawn[name][0]  # noqa: E731
         ba_ring, cam_ring = node("/annot/markers/horizontal/ring"), node("/annot/markers/raw/ring")
@@ -701,19 +697,16 @@ def test_a_click_updates_only_what_it_changed_in_place(tmp_path):
 
 
 def test_cloud_is_recoloured_only_while_a_tab_shows_3d(tmp_path):
-    from pathlib import Path
-
     from app.server import CalibrationApp
-    from app.testing import AppDriver
+    from app_driver import AppDriver
     from calib_core.io.extrinsics import load_extrinsics_yaml
     from calib_core.transforms import transform_points
 
-    sample = Path(__file__).resolve().parents[1] / "sample_data"
-    app = CalibrationApp(sample / "scan.npz", sample / "image.png", sample / "camera.yaml",
+    app = CalibrationApp(SAMPLE / "scan.npz", SAMPLE / "image.png", SAMPLE / "camera.yaml",
                          session_path=tmp_path / "session.yaml", port=0)
     d = AppDriver(app)
     try:
-        ids = app.state.import_pairs(load_pairs_yaml(sample / "pairs.yaml"))
+        ids = app.state.import_pairs(load_pairs_yaml(SAMPLE / "pairs.yaml"))
         assert app.wait_idle(60) and app.result is not None
         # No tab shows the 3-D view: the error display is up, the cloud is not recoloured.
         assert np.all(d.cloud_colors == 150)
@@ -722,7 +715,7 @@ def test_cloud_is_recoloured_only_while_a_tab_shows_3d(tmp_path):
         assert app.wait_idle(60)
         colors = d.cloud_colors
         # Truth: the image colour where the ground-truth pose projects each point (points the camera sees).
-        truth = load_extrinsics_yaml(sample / "ground_truth.yaml")["T_camera_lidar"]
+        truth = load_extrinsics_yaml(SAMPLE / "ground_truth.yaml")["T_camera_lidar"]
         uv, ok = app.camera.project(transform_points(truth, app.cloud_points_lidar))
         coloured = np.any(colors != 110, axis=1)
         assert coloured.sum() > 1000 and not np.any(coloured & ~ok)

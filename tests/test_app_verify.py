@@ -1,4 +1,4 @@
-"""The app's Verify panel and robotics-format export, driven through app.testing.AppDriver.
+"""The app's Verify panel and robotics-format export, driven through app_driver.AppDriver.
 
 Truth is independent of the panels: errors are recomputed here from the
 camera model and refits with calib_core.solve, exported files are parsed by
@@ -9,7 +9,6 @@ read back as plain YAML.
 from __future__ import annotations
 
 import re
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,14 +17,14 @@ from scipy.spatial.transform import Rotation
 from test_extrinsic_formats import CAMERA, LIDAR, independent_T_camera_lidar
 
 from app.server import CalibrationApp
-from app.testing import AppDriver
+from app_driver import AppDriver
 from app.verify_panel import heat_overlay
 from calib_core.io.extrinsic_formats import FORMATS, export_extrinsics
 from calib_core.pairs import load_pairs_yaml, resolve_pairs
 from calib_core.solve import solve_extrinsics
 from calib_core.transforms import rotation_angle_deg
+from repo_paths import SAMPLE
 
-SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
 PAIRS = (SAMPLE / "pairs.yaml").read_bytes()
 
 

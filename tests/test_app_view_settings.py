@@ -3,19 +3,18 @@
 from __future__ import annotations
 
 from dataclasses import fields
-from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
 
 from app.state import AnnotationState
-from app.testing import AppDriver
+from app_driver import AppDriver
 from app.view_settings import AS_CLICKED, ViewSettings
 from calib_core.errors import CalibError
 from browser_helpers import free_port
+from repo_paths import SAMPLE
 
-SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
 IMG = (640, 480)
 
 

@@ -4,12 +4,10 @@ from __future__ import annotations
 
 import http.client
 import threading
-from pathlib import Path
 
 import calib_core.solve
 from browser_helpers import free_port
-
-SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
+from repo_paths import SAMPLE
 
 
 def test_first_page_is_served_while_the_warm_up_still_runs(tmp_path, monkeypatch):

@@ -17,9 +17,7 @@ import pytest
 
 from calib_core.errors import CalibError
 from calib_core.io.atomic import TEMP_PREFIX, remove_stale_temp_files, write_bytes_atomic, write_yaml_atomic
-
-REPO = Path(__file__).resolve().parents[1]
-SAMPLE = REPO / "sample_data"
+from repo_paths import REPO, SAMPLE
 
 
 def _no_temp_files(folder: Path) -> bool:

@@ -25,9 +25,8 @@ from calib_core.io.images import load_image_rgb
 from calib_core.io.scan_readers import load_scan, read_point_cloud
 from calib_core.pairs import load_pairs_yaml, resolve_pairs
 from calib_core.solve import solve_extrinsics
+from repo_paths import REPO, SAMPLE
 
-REPO = Path(__file__).resolve().parents[1]
-SAMPLE = REPO / "sample_data"
 AUTO = REPO.parent / "shared" / "data" / "pjlab_opencalib_lidar2camera" / "auto_calib"
 KINDS = ["ros1", "sqlite3", "mcap"]
 

@@ -13,8 +13,7 @@ import trimesh
 from calib_core.io.extrinsics import load_extrinsics_yaml
 from calib_core.io.images import load_image_rgb
 from calib_core.transforms import rotation_angle_deg
-
-SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
+from repo_paths import SAMPLE
 
 
 def run_cli(*args: str) -> subprocess.CompletedProcess:

@@ -9,8 +9,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
-SAMPLE = REPO / "sample_data"
+from repo_paths import REPO, SAMPLE
 
 
 def run_cli(*args: str, cwd: Path = REPO) -> subprocess.CompletedProcess:

@@ -22,8 +22,8 @@ from bag_helpers import CloudSpec, SceneBag, write_bag
 from browser_helpers import free_port
 from scipy.spatial.transform import Rotation
 
-from app.serving import BagServer, BagSource, app_takes_initial_extrinsics, make_app
-from app.testing import AppDriver
+from app.serving import BagServer, BagSource
+from app_driver import AppDriver
 from calib_core.cameras import load_camera
 from calib_core.errors import CalibError
 from calib_core.io.extrinsic_formats import load_extrinsics_any
@@ -31,9 +31,8 @@ from calib_core.io.images import load_image_rgb
 from calib_core.io.scan_readers import load_scan, read_point_cloud
 from calib_core.pairs import load_pairs_yaml
 from calib_core.solve import calibrate
+from repo_paths import REPO, SAMPLE
 
-REPO = Path(__file__).resolve().parents[1]
-SAMPLE = REPO / "sample_data"
 AUTO = REPO.parent / "shared" / "data" / "pjlab_opencalib_lidar2camera" / "auto_calib"
 KINDS = ["ros1", "sqlite3", "mcap"]
 
@@ -78,12 +77,7 @@ def test_serve_bag_shows_the_frame_and_switches_frames(kind, sample_cloud, tmp_p
         T_tf = load_extrinsics_any(server.frame.initial_extrinsics)
         expected = np.linalg.inv(T_LIDAR_BODY @ T_BODY_OPTICAL)
         assert np.abs(T_tf - expected).max() < 1e-9
-        if app_takes_initial_extrinsics():  # offered to the app: its pose before any pair
-            assert np.abs(app.pose() - expected).max() < 1e-9
-        else:  # an app without the keyword: passing one is refused in one line, not ignored
-            with pytest.raises(CalibError, match="cannot start from an initial extrinsic"):
-                make_app(server.frame.scan, server.frame.image, server.frame.camera,
-                         initial_extrinsics_path=server.frame.initial_extrinsics, port=0)
+        assert np.abs(app.pose() - expected).max() < 1e-9  # offered to the app: its pose before any pair
         assert "cloud 0 of 2" in server.frame.description
         port = app.port
         # The page's "Load this frame" asks for frame 1; serve() then restarts the app on it, on the same port.

@@ -10,7 +10,6 @@ from __future__ import annotations
 import dataclasses
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -21,9 +20,8 @@ from calib_core.pairs import Pair, load_pairs_yaml, save_pairs_yaml
 from calib_core.synthetic import load_sample, simulate_pairs
 from calib_core.synthetic.picks import laser_picks
 from calib_core.transforms import rotation_angle_deg
+from repo_paths import REPO, SAMPLE
 
-REPO = Path(__file__).resolve().parents[1]
-SAMPLE = REPO / "sample_data"
 SCAN, CAMERA = str(SAMPLE / "scan.npz"), str(SAMPLE / "camera.yaml")
 
 

@@ -11,9 +11,7 @@ import yaml
 
 from calib_core.io.extrinsics import load_extrinsics_yaml
 from calib_core.transforms import rotation_angle_deg
-
-REPO = Path(__file__).resolve().parents[1]
-SAMPLE = REPO / "sample_data"
+from repo_paths import REPO, SAMPLE
 
 
 def _run(pairs_file: Path, out: Path) -> subprocess.CompletedProcess:

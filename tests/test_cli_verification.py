@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,9 +14,7 @@ from calib_core.io.extrinsics import load_extrinsics_yaml
 from calib_core.io.scan_readers import load_scan
 from calib_core.pairs import load_pairs_yaml, resolve_pairs
 from calib_core.solve import solve_extrinsics
-
-REPO = Path(__file__).resolve().parents[1]
-SAMPLE = REPO / "sample_data"
+from repo_paths import REPO, SAMPLE
 
 
 def test_solve_writes_the_verification_block(tmp_path):

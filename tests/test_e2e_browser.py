@@ -23,14 +23,13 @@ from calib_core.synthetic import load_sample, simulate_pairs
 from calib_core.transforms import rotation_angle_deg
 
 from browser_helpers import CHROMIUM, TIMEOUT_S, AnnotationTab, page_text, free_port, save_small_png, wait_for
+from repo_paths import SAMPLE
 
 pytestmark = pytest.mark.browser
 
 ROOT = Path(__file__).resolve().parents[1]
-SAMPLE = ROOT / "sample_data"
 SCREENSHOT = ROOT / "docs" / "screenshot.png"
 N_PAIRS = 8
-
 
 
 @pytest.mark.skipif(not CHROMIUM.exists(), reason="/usr/bin/chromium is missing (apt-get install chromium); CI installs it")
@@ -56,7 +55,7 @@ def test_annotate_sample_in_headless_chromium(tmp_path):
             page, cid, box = tab.page, tab.cid, tab.box
 
             def click(target: str, uv) -> None:
-                fx, fy = app.view.page_position(cid, target, uv)
+                fx, fy = tab.driver.page_position(cid, target, uv)
                 assert 0.0 < fx < 1.0 and 0.0 < fy < 1.0, f"{target} {uv} is off screen"
                 page.mouse.click(box["x"] + fx * box["width"], box["y"] + fy * box["height"])
 

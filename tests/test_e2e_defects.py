@@ -79,7 +79,7 @@ def is_number(text: str) -> bool:
 def test_number_boxes_verify_plots_layout_and_loupes_folder_in_the_browser(tmp_path):
     sync_api = pytest.importorskip("playwright.sync_api", reason="the playwright package is not installed")
     from app.server import CalibrationApp
-    from app.testing import AppDriver
+    from app_driver import AppDriver
 
     app = CalibrationApp(DATA / "calib.pcd", DATA / "calib.png", DATA / "center_camera-intrinsic.json",
                          session_path=tmp_path / "session.yaml", port=free_port())
@@ -97,7 +97,7 @@ def test_number_boxes_verify_plots_layout_and_loupes_folder_in_the_browser(tmp_p
             page.on("pageerror", lambda exc: errors.append(("pageerror", str(exc))))
             page.on("console", lambda msg: errors.append(("console", msg.text)) if msg.type == "error" else None)
             page.goto(app.url)
-            cid = wait_for(lambda: app.view.client_ids(), "the tab to connect")[0]
+            cid = wait_for(lambda: driver.client_ids(), "the tab to connect")[0]
             client = app.server.get_clients()[cid]
             wait_for(lambda: app.view.view_settled(cid), "the annotation view to be set")
             notice = page.locator(".mantine-Notification-root", has_text="Software WebGL")

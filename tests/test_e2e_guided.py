@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import re
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -24,15 +23,14 @@ from calib_core.synthetic import load_sample, simulate_pairs
 from calib_core.transforms import rotation_angle_deg, transform_points
 
 from browser_helpers import CHROMIUM, TIMEOUT_S, AnnotationTab, page_text, free_port, wait_for
+from repo_paths import SAMPLE
 
 pytestmark = pytest.mark.browser
 
-SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
 N_GUIDED = 10
 CLICK_SIGMA_PX = 0.3
 MAX_ACTIONS_PER_PAIR = 1.5  # issue 9
 MIN_SCREEN_PX_PER_IMAGE_PX = 8.0  # issue 9, camera loupe
-
 
 
 @pytest.mark.skipif(not CHROMIUM.exists(), reason="/usr/bin/chromium is missing (apt-get install chromium); CI installs it")

@@ -28,11 +28,11 @@ from calib_core.synthetic import load_sample, simulate_pairs
 from calib_core.transforms import rotation_angle_deg
 
 from browser_helpers import CHROMIUM, TIMEOUT_S, AnnotationTab, free_port, save_small_png, wait_for
+from repo_paths import SAMPLE
 
 pytestmark = pytest.mark.browser
 
 ROOT = Path(__file__).resolve().parents[1]
-SAMPLE = ROOT / "sample_data"
 SCREENSHOT = ROOT / "docs" / "img" / "loupes_sample.png"
 N_PAIRS = 10
 VIEWPORT = {"width": 1400, "height": 900}
@@ -43,7 +43,7 @@ ROUGH_OFFSET = (2, -3)  # (rows, cols) of the full-image BA click from the wante
 def test_ten_pairs_through_the_loupes(tmp_path):
     sync_api = pytest.importorskip("playwright.sync_api", reason="the playwright package is not installed")
     from app.server import CalibrationApp
-    from app.testing import AppDriver
+    from app_driver import AppDriver
 
     t_start = time.monotonic()
     scene = load_sample(SAMPLE)
@@ -60,7 +60,6 @@ def test_ten_pairs_through_the_loupes(tmp_path):
         with sync_api.sync_playwright() as p:
             tab = AnnotationTab(p, app, VIEWPORT)
             page, screen, scale = tab.page, tab.screen, tab.scale
-
 
 
             def click(target: str, uv) -> None:
@@ -178,7 +177,7 @@ def test_six_pairs_on_the_real_scan_from_a_rough_extrinsic(tmp_path):
 
     sync_api = pytest.importorskip("playwright.sync_api", reason="the playwright package is not installed")
     from app.server import CalibrationApp
-    from app.testing import AppDriver
+    from app_driver import AppDriver
     from calib_core.pairs import load_pairs_yaml
 
     t_start = time.monotonic()
@@ -200,7 +199,6 @@ def test_six_pairs_on_the_real_scan_from_a_rough_extrinsic(tmp_path):
         with sync_api.sync_playwright() as p:
             tab = AnnotationTab(p, app, VIEWPORT)
             page, screen, scale = tab.page, tab.screen, tab.scale
-
 
 
             def click(target: str, uv) -> None:

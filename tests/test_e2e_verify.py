@@ -19,10 +19,9 @@ import pytest
 from browser_helpers import CHROMIUM, CHROMIUM_ARGS, TIMEOUT_S, free_port, wait_for
 from PIL import Image
 
-from app.testing import AppDriver
+from app_driver import AppDriver
 from calib_core.io.extrinsic_formats import export_extrinsics
-
-SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
+from repo_paths import SAMPLE
 
 
 def page_text(page) -> str:

@@ -15,7 +15,6 @@ import json
 import subprocess
 import sys
 import xml.etree.ElementTree as ET
-from pathlib import Path
 
 import cv2
 import numpy as np
@@ -25,8 +24,8 @@ from scipy.spatial.transform import Rotation
 
 from calib_core.errors import CalibError
 from calib_core.io.extrinsic_formats import FORMATS, export_extrinsics, load_extrinsics_any, read_extrinsics_any
+from repo_paths import REPO, SAMPLE
 
-REPO = Path(__file__).resolve().parents[1]
 DATA = REPO.parent / "shared" / "data"
 
 LIDAR, CAMERA = "velodyne", "camera_optical"
@@ -264,15 +263,14 @@ def test_cli_export_errors(tmp_path):
 
 
 def test_cli_solve_starts_from_an_imported_extrinsic(tmp_path):
-    sample = REPO / "sample_data"
-    truth = yaml.safe_load((sample / "ground_truth.yaml").read_text())["T_camera_lidar"]["matrix"]
+    truth = yaml.safe_load((SAMPLE / "ground_truth.yaml").read_text())["T_camera_lidar"]["matrix"]
     init = tmp_path / "init.urdf"
     # A start 2 deg and 10 cm off, written as a URDF joint (camera -> lidar direction).
     off = np.array(truth)
     off[:3, :3] = Rotation.from_euler("z", 2.0, degrees=True).as_matrix() @ off[:3, :3]
     off[:3, 3] += [0.1, 0.0, 0.0]
     init.write_text(export_extrinsics(off, "urdf", "lidar", "camera"))
-    base = ["solve", "--scan", str(sample / "scan.npz"), "--camera", str(sample / "camera.yaml"), "--pairs", str(sample / "pairs.yaml")]
+    base = ["solve", "--scan", str(SAMPLE / "scan.npz"), "--camera", str(SAMPLE / "camera.yaml"), "--pairs", str(SAMPLE / "pairs.yaml")]
     plain = _cli(*base, "-o", str(tmp_path / "a.yaml"))
     started = _cli(*base, "--initial-extrinsics", str(init), "-o", str(tmp_path / "b.yaml"))
     assert plain.returncode == 0 and started.returncode == 0, started.stderr

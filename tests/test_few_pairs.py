@@ -10,7 +10,6 @@ from __future__ import annotations
 import contextlib
 import math
 import unicodedata
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -20,8 +19,8 @@ from calib_core.solve import calibrate, solve_extrinsics
 from calib_core.solve.quality import MIN_PAIRS_FOR_ERROR, NO_ERROR_ESTIMATE, error_estimate_reason
 from calib_core.synthetic import load_sample
 from calib_core.transforms import transform_points
+from repo_paths import SAMPLE
 
-SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
 NO_ESTIMATE_4 = f"{NO_ERROR_ESTIMATE}: 4 pairs fit any pose closely; add pairs"
 
 

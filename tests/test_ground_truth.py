@@ -28,7 +28,6 @@ measured errors.
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -39,8 +38,8 @@ from calib_core.io.extrinsics import load_extrinsics_yaml
 from calib_core.solve import calibrate
 from calib_core.synthetic import load_sample, simulate_pairs
 from calib_core.transforms import rotation_angle_deg
+from repo_paths import SAMPLE
 
-SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
 TRIALS = 10
 PAIRS = 10
 

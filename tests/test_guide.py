@@ -8,26 +8,24 @@ of calib_core.guide.information.
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
 
 from app.cli import main as cli_main
+from bench.guide_junction import fit_junctions  # the snap and junction assists are measured in bench only
+from bench.guide_snap import snap_clicks
 from calib_core.guide import corner_image, current_pose, propose
 from calib_core.guide.candidates import find_candidates
 from calib_core.guide.information import d_optimal_gain
-from calib_core.guide.junction import fit_junctions
 from calib_core.guide.session import GuidedSession
-from calib_core.guide.snap import snap_clicks
 from calib_core.pairs import Pair, load_pairs_yaml, save_pairs_yaml
 from calib_core.synthetic import load_sample
 from calib_core.synthetic.picks import laser_picks, simulate_pairs
 from calib_core.synthetic.render import cast
 from calib_core.transforms import rotation_angle_deg, transform_points
-
-SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
+from repo_paths import SAMPLE
 
 
 @pytest.fixture(scope="module")
@@ -309,7 +307,6 @@ def test_not_a_corner_on_a_reclick_is_not_proposed_again(scene):
     assert all(p.replaces != reclicks[0].replaces for p in session.proposals(20))
     assert not [p for p in GuidedSession(scene.depth, scene.camera, session.pairs, image=scene.image,
                                          reclicks=False).proposals(20) if p.replaces is not None]
-
 
 
 def test_pick_noise_model_is_calibrated_on_the_true_corners(scene, truth):

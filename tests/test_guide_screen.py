@@ -28,9 +28,9 @@ from calib_core.io.scan_readers import load_scan
 from calib_core.pairs import Pair, load_pairs_yaml
 from calib_core.synthetic import load_sample, simulate_pairs
 from calib_core.transforms import transform_points
+from repo_paths import SAMPLE
 
 ROOT = Path(__file__).resolve().parents[1]
-SAMPLE = ROOT / "sample_data"
 DATA = ROOT.parent / "shared" / "data"
 KITTI = DATA / "kitti_object_000002"
 MANUAL = DATA / "pjlab_opencalib_lidar2camera" / "manual_calib"

@@ -10,7 +10,6 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,9 +17,8 @@ from PIL import Image
 
 from calib_core.cameras import load_camera
 from calib_core.errors import CalibError
+from repo_paths import REPO, SAMPLE
 
-REPO = Path(__file__).resolve().parents[1]
-SAMPLE = REPO / "sample_data"
 DATA = REPO.parent / "shared" / "data"
 OCAM_JSON = DATA / "other_tools_files" / "cam" / "pjlab_surround_ocam_Front.json"
 KITTI = DATA / "kitti_object_000002"

@@ -17,7 +17,6 @@ import subprocess
 import sys
 import zipfile
 import zlib
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -25,9 +24,7 @@ import pytest
 from calib_core.errors import CalibError
 from calib_core.io.scan_readers import load_scan
 from calib_core.pairs import load_pairs_yaml
-
-REPO = Path(__file__).resolve().parents[1]
-SAMPLE = REPO / "sample_data"
+from repo_paths import REPO, SAMPLE
 
 
 def run_cli(*args: str) -> subprocess.CompletedProcess:

@@ -22,9 +22,9 @@ import yaml
 from app.security import AccessPolicy
 from app.state import AnnotationState
 from calib_core.io.scan_readers import load_scan
+from repo_paths import SAMPLE
 
 ROOT = Path(__file__).resolve().parents[1]
-SAMPLE = ROOT / "sample_data"
 
 
 def free_port() -> int:

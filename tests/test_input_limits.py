@@ -18,9 +18,7 @@ from calib_core.io.input_files import read_input_bytes
 from calib_core.io.session_file import SESSION_VERSION, parse_session
 from calib_core.io.yaml_files import MAX_DEPTH, parse_json_text, parse_yaml_text
 from calib_core.pairs import MAX_PAIRS, load_pairs_yaml
-
-REPO = Path(__file__).resolve().parents[1]
-SAMPLE = REPO / "sample_data"
+from repo_paths import REPO
 
 
 def _in_thread(fn, timeout: float = 20.0):

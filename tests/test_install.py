@@ -24,8 +24,8 @@ import numpy as np
 import pytest
 import yaml
 from browser_helpers import free_port
+from repo_paths import REPO, SAMPLE
 
-REPO = Path(__file__).resolve().parents[1]
 
 pytestmark = pytest.mark.install
 
@@ -48,6 +48,10 @@ def test_wheel_install_serves_the_sample_from_another_folder(tmp_path):
         names = zf.namelist()
     assert any(n.endswith("/LICENSE") and ".dist-info/" in n for n in names), "the wheel carries the licence"
     assert not any(n.startswith(("tests/", "sample_data/")) for n in names)
+    # No test scaffolding in the installed package (the test driver lives in tests/app_driver).
+    assert "app/server.py" in names and "calib_core/__init__.py" in names, names
+    scaffolding = [n for n in names if n.endswith(".py") and Path(n).name.startswith(("testing", "test_", "conftest"))]
+    assert scaffolding == [] and not any("app_driver" in n for n in names), scaffolding
 
     venv = tmp_path / "venv"
     assert _run([sys.executable, "-m", "venv", "--without-pip", str(venv)]).returncode == 0
@@ -104,7 +108,7 @@ def test_wheel_install_serves_the_sample_from_another_folder(tmp_path):
         assert (sample / name).is_file(), name
     # The generated sample is the committed one (seed 0).
     got = np.array(yaml.safe_load((sample / "ground_truth.yaml").read_text())["T_camera_lidar"]["matrix"])
-    ref = np.array(yaml.safe_load((REPO / "sample_data" / "ground_truth.yaml").read_text())["T_camera_lidar"]["matrix"])
+    ref = np.array(yaml.safe_load((SAMPLE / "ground_truth.yaml").read_text())["T_camera_lidar"]["matrix"])
     assert np.array_equal(got, ref)
     # A headless command of the installed package on it.
     solved = _run(

@@ -8,6 +8,7 @@ import trimesh
 
 from calib_core.errors import CalibError
 from calib_core.overlays import colorize_points, export_colored_ply
+from repo_paths import SAMPLE
 
 
 class _Pinhole:
@@ -215,12 +216,9 @@ def test_matches_a_plain_computation_on_the_ocam_sample(cell, n):
     """Against an independent float64 computation on the sample's OCam camera, image and scan,
     seen from the true pose, with the scan points in random order plus jitter (as a dense cloud);
     250k points are coloured on two threads."""
-    from pathlib import Path
-
     from calib_core.synthetic import load_sample
 
-    sample = Path(__file__).resolve().parents[1] / "sample_data"
-    sc = load_sample(sample)
+    sc = load_sample(SAMPLE)
     rng = np.random.default_rng(3)
     pts = sc.depth.points[sc.depth.valid]
     pts = pts[rng.integers(0, len(pts), n)] + rng.normal(0, 0.01, (n, 3))

@@ -16,7 +16,6 @@ from __future__ import annotations
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import cv2
 import numpy as np
@@ -32,9 +31,8 @@ from calib_core.io.extrinsic_formats import load_extrinsics_any
 from calib_core.io.scan_readers import load_scan
 from calib_core.lidar.depth_matrix import DepthMatrix
 from calib_core.render import CameraRender, render_from_camera, shade_render
+from repo_paths import REPO, SAMPLE
 
-REPO = Path(__file__).resolve().parents[1]
-SAMPLE = REPO / "sample_data"
 KITTI = REPO.parent / "shared" / "data" / "kitti_object_000002"
 KITTI_BIN = KITTI / "velodyne" / "000002.bin"
 KITTI_CALIB = KITTI / "calib" / "000002.txt"

@@ -15,7 +15,6 @@ half the pairs wrong the status is ``unreliable``, never a confident pose.
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -26,8 +25,8 @@ from calib_core.solve import Quality, solve_extrinsics
 from calib_core.synthetic import load_sample, simulate_pairs
 from calib_core.synthetic.picks import laser_picks
 from calib_core.transforms import rotation_angle_deg, transform_points
+from repo_paths import SAMPLE
 
-SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
 TRIALS = 12
 #: A wrong pair's pixel is at least this far from where its laser point truly projects.
 WRONG_MIN_PX = 30.0

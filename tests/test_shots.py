@@ -25,9 +25,8 @@ from calib_core.synthetic.picks import CIRCLE_MARGIN_PX, MAX_LASER_PICK_ERROR_M,
 from calib_core.synthetic.render import image_circle_mask
 from calib_core.synthetic.sample import IMAGE_CIRCLE_RADIUS_PX
 from calib_core.transforms import rotation_angle_deg, transform_points
+from repo_paths import REPO, SAMPLE
 
-REPO = Path(__file__).resolve().parents[1]
-SAMPLE = REPO / "sample_data"
 TWO_SCENES = REPO.parent / "shared" / "data" / "pjlab_opencalib_two_scenes"
 
 

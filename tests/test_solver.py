@@ -13,6 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
+from calib_core import cameras
 from calib_core.errors import CalibError
 from calib_core.solve import pose_covariance, solve_extrinsics
 from calib_core.solve import refine as refine_module
@@ -448,7 +449,6 @@ def test_angular_lm_failure_becomes_calib_error():
 
 
 def test_pixel_cost_with_the_package_pinhole_model():
-    cameras = pytest.importorskip("calib_core.cameras")
     cam = cameras.PinholeCamera(np.array([[500.0, 0, 320], [0, 500, 240], [0, 0, 1]]), np.array([-0.2, 0.05, 0, 0, 0]), 640, 480)
     rng = np.random.default_rng(6)
     T_true, _, _ = random_scene(6, 1)
@@ -477,7 +477,6 @@ class ProtocolOnlyCamera:
 
 
 def _package_camera(kind: str):
-    cameras = pytest.importorskip("calib_core.cameras")
     if kind == "pinhole":
         K = np.array([[500.0, 0, 320], [0, 500, 240], [0, 0, 1]])
         return cameras.PinholeCamera(K, np.array([-0.2, 0.05, 0.001, -0.001, 0]), 640, 480)

@@ -9,7 +9,6 @@ pose at which the scan's surfaces best explain the image's colours).
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -31,8 +30,7 @@ from calib_core.transforms import (
     rpy_deg_from_R,
     transform_points,
 )
-
-SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
+from repo_paths import SAMPLE
 
 
 @pytest.fixture(scope="module")

@@ -8,7 +8,6 @@ was not fitted to can be measured directly.
 from __future__ import annotations
 
 import dataclasses
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -29,8 +28,7 @@ from calib_core.verify import (
     verify_calibration,
     verify_pairs,
 )
-
-SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
+from repo_paths import SAMPLE
 
 
 @pytest.fixture(scope="module")

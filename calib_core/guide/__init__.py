@@ -11,8 +11,6 @@ Modules (one concept each):
 * :mod:`.pose_state` -- current pose and covariance from pairs or an imported extrinsic;
 * :mod:`.evidence` -- the screen: clear, isolated evidence in both views, an ellipse that fits the loupe;
 * :mod:`.propose` -- the ranked proposals with predicted pixels and ellipses;
-* :mod:`.snap` -- gated sub-pixel snapping of a click;
-* :mod:`.junction` -- gated 3-plane junction replacing a laser cell;
 * :mod:`.auto_accept` -- strictly gated acceptance without a click.
 """
 

@@ -224,17 +224,6 @@ def normal_equations(R, t, P, F, W):
 
 
 @njit(**_JIT)
-def _cost(R, t, P, F, W):
-    z = np.empty(2)
-    Jd = np.empty((2, 6))
-    cost = 0.0
-    for i in range(P.shape[0]):
-        _pair(R, t, P, F, W, i, z, Jd, False)
-        cost += z[0] * z[0] + z[1] * z[1]
-    return cost
-
-
-@njit(**_JIT)
 def _cholesky_solve(A, b):
     """Solve ``A x = b`` for a symmetric positive-definite 6x6 ``A``; ok False if it is not."""
     n = A.shape[0]

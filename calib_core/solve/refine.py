@@ -42,11 +42,9 @@ __all__ = [
     "pixel_jacobian",
     "refine_pose",
     "refine_angular",
-    "angular_at_pose",
     "bearing_frames",
     "rpy_jacobian",
     "pose_covariance",
-    "covariance_from_jacobian",
     "covariance_from_normal",
     "uncertainty_from_covariance",
     "LM_MAX_ITER",
@@ -114,14 +112,6 @@ def _left_jacobian_so3(phi: np.ndarray) -> np.ndarray:
         a = (1 - math.cos(theta)) / theta2
         b = (theta - math.sin(theta)) / (theta2 * theta)
     return _so3_matrix(phi, a, b, 1.0 - b * theta2)
-
-
-def cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``a x b`` for (..., 3) arrays (broadcast): np.cross's axis handling costs
-    more than the arithmetic for a few vectors."""
-    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
 
 
 def tangent_basis(bearings_camera: np.ndarray) -> np.ndarray:
@@ -363,28 +353,6 @@ def refine_angular(
     return T, int(iterations)
 
 
-def angular_at_pose(
-    T_camera_lidar: np.ndarray, points_lidar: np.ndarray, frames: np.ndarray, W: np.ndarray | None = None
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Jacobian, residuals and angles of the (whitened) angular cost at a pose.
-
-    Returns
-    -------
-    J : (2N, 6) ndarray
-        Jacobian w.r.t. ``(delta, t)`` about ``T_camera_lidar`` (``delta = 0``).
-    residuals : (2N,) ndarray
-        Whitened log-map residuals (radians when ``W`` is omitted).
-    angle_rad : (N,) ndarray
-        Geodesic angle between each bearing and its transformed point.
-    """
-    T = np.asarray(T_camera_lidar, dtype=np.float64)
-    P = np.ascontiguousarray(points_lidar, dtype=np.float64)
-    W = _identity_W(len(P)) if W is None else np.ascontiguousarray(W, dtype=np.float64)
-    R, t = np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3])
-    z, theta = kernels.whitened_residuals(R, t, P, frames, W)
-    return kernels.jacobian(R, t, P, frames, W), z.ravel(), theta
-
-
 def rpy_jacobian(R: np.ndarray) -> np.ndarray:
     """``d(roll, pitch, yaw) / d delta`` (3x3, rad/rad) at ``R = Rz Ry Rx``.
 
@@ -448,12 +416,6 @@ def covariance_from_normal(JtJ: np.ndarray, sigma: float, R: np.ndarray) -> Pose
     JtJ = np.ascontiguousarray(JtJ, dtype=np.float64)
     cov, _ = kernels.covariance(JtJ, float(sigma))
     return uncertainty_from_covariance(cov, JtJ, np.asarray(R, dtype=np.float64))
-
-
-def covariance_from_jacobian(J: np.ndarray, sigma: float, R: np.ndarray) -> PoseUncertainty:
-    """:func:`covariance_from_normal` of ``J^T J`` for a ``(2N, 6)`` Jacobian ``J``."""
-    J = np.asarray(J, dtype=np.float64)
-    return covariance_from_normal(J.T @ J, sigma, R)
 
 
 def pose_covariance(T_camera_lidar: np.ndarray, points_lidar: np.ndarray, noise_rad: float) -> PoseUncertainty:

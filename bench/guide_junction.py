@@ -87,7 +87,7 @@ def fit_junctions(
     out = depth.points[rc[:, 0], rc[:, 1]].astype(np.float64).copy()
     fitted = np.zeros(len(rc), dtype=bool)
     rng = np.random.default_rng(seed)
-    from .laser_noise import cell_covariance  # local: the cell extent from the same model
+    from calib_core.guide.laser_noise import cell_covariance  # local: the cell extent from the same model
 
     extent = np.sqrt(np.linalg.eigvalsh(cell_covariance(depth, rc, 1.0, 0.0))[:, -1])
     for i, (r, c) in enumerate(rc):  # a few tens of cells

@@ -1,4 +1,4 @@
-"""Stand-ins for a viser client handle (a browser tab) that :class:`app.testing.AppDriver` drives the app with.
+"""Stand-ins for a viser client handle (a browser tab) that :class:`app_driver.AppDriver` drives the app with.
 
 They record what the app sends to the tab (notifications, downloads, modal questions) and carry a
 camera like the one viser reports, so that tests read what a person would see.

@@ -1,37 +1,33 @@
-"""A public test driver for :class:`app.server.CalibrationApp`: act as a browser tab would, read what it shows.
+"""A test driver for :class:`app.server.CalibrationApp`: act as a browser tab would, read what it shows.
 
-Tests use :class:`AppDriver` instead of the app's private members.  Every
+Tests (and ``bench/app_click.py``) use :class:`AppDriver` instead of the app's private members.  Every
 action goes through the same handler the viser event would reach (a click is
 a ray onto the image, queued on the app's ordered action worker) and returns
 once the app has applied it and redrawn -- that is, once the page would show
 it.  Notifications the app sends to the tab are collected.
 
-``python -m app.testing child --session PATH`` runs the app on the committed
-sample and applies one action per line read from stdin (``ba ROW COL``,
-``cam U V``, ``undo``), printing ``ack <json of the pairs>`` when the page
-would show it: the kill -9 durability test drives such children.
-
-``python -m app.testing zygote FD`` starts them faster: it imports the app and
-compiles (or loads) every numba kernel once, then for each message ``fork
-SESSION`` that arrives on the Unix socket FD with a socket attached, forks a
-child that runs the same loop with that socket as its stdin and stdout, and
-answers ``pid N``.  A child pays only for building the app (about 1.4 s,
-against about 3 s for a new process).
+It lives in the tests tree, not in the installed package: ``tests/conftest.py`` puts ``tests/`` on
+``sys.path``, so tests import it as ``app_driver``.  ``python -m app_driver`` (with ``tests/`` on
+``PYTHONPATH``) runs the kill -9 durability test's app children: see ``app_driver/__main__.py``.
 """
-
 from __future__ import annotations
 
 import asyncio
-import json
-import sys
-from pathlib import Path
+import math
 from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
+import viser.transforms as vtf
 
-from .testing_fakes import FakeTab
-from .testing_render import RenderDriver
+from app.render_pane import RENDER_KEY
+from calib_core.cameras.pinhole import PinholeCamera
+from calib_core.transforms import invert_T, transform_points
+
+from .fakes import FakeCamera, FakeTab
+from .render import RenderDriver
+
+__all__ = ["AppDriver", "FakeCamera", "FakeTab"]
 
 
 class AppDriver(RenderDriver):
@@ -157,7 +153,7 @@ class AppDriver(RenderDriver):
 
     def drawn_marker_pixels(self, key: str) -> np.ndarray:
         """Display pixels ``(N, 2)`` on image ``key`` of the pick markers drawn there: the centres of the rings as sent."""
-        from .ui_common import RING_SEGMENTS, marker_segments
+        from app.ui_common import RING_SEGMENTS, marker_segments
 
         segs = self.app.nodes.segments(f"/annot/markers/{key}/ring")
         per = len(marker_segments(np.zeros((1, 3)), 1.0, cell_half_size=(1.0, 1.0) if key in self.app.ba_keys else None))
@@ -270,6 +266,57 @@ class AppDriver(RenderDriver):
         return self.app.wait_idle(timeout)
 
     # ------------------------------------------------------------- for real tabs
+    def client_ids(self) -> list[int]:
+        """Ids of the browser tabs connected to the app."""
+        return sorted(self.app.server.get_clients())
+
+    def page_position(self, client_id: int, target: str, uv: tuple[float, float]) -> tuple[float, float]:
+        """Where a pixel appears in a real tab's canvas, as fractions of the canvas width and height, from the
+        camera that tab reported.
+
+        Parameters
+        ----------
+        client_id : int
+            The tab (see :meth:`client_ids`).
+        target : str
+            ``"camera"`` (``uv`` is an ORIGINAL camera-image pixel, shown in the
+            visible camera view), ``"render"`` (an original pixel, in the camera-view render), a BA key
+            (``uv`` = (col, row) of a scan cell, which must lie in the shown column window; fractions of a
+            cell aim off its centre), ``"loupe_camera"`` (an original pixel the
+            camera loupe shows) or ``"loupe_ba"`` ((col, row) of a cell the BA loupe shows).
+        """
+        app = self.app
+        disp = np.asarray(uv, dtype=np.float64).reshape(1, 2)
+        if target.startswith("loupe_"):
+            kind = target[len("loupe_"):]
+            slot = app.loupes.slot(kind)
+            shown = app.loupes.display_of(kind, (disp[0, 0], disp[0, 1]))
+            if shown is None:
+                raise ValueError(f"{uv} is not shown in the {kind} loupe")
+            disp = np.array([shown])
+        elif target in ("camera", RENDER_KEY):  # the render shows original pixels as the camera view does
+            slot = app.camera_slot() if target == "camera" else app.view.slots[RENDER_KEY]
+            disp, ok = app.display_from_pixels(disp)
+            if not ok[0]:
+                raise ValueError(f"pixel {uv} is not shown in the camera view")
+        else:
+            slot = app.view.slots[target]
+            u, shown = app.view.ba_window.display_cols(np.array([int(round(disp[0, 0]))]))
+            if not shown[0]:
+                raise ValueError(f"BA column {uv[0]} is outside the shown columns")
+            disp = np.array([[u[0] + disp[0, 0] - round(disp[0, 0]), disp[0, 1]]])
+        world = slot.world_from_pixel(disp)
+        cam = app.server.get_clients()[client_id].camera
+        # The tab's view as a distortion-free pinhole (viser's camera frame is OpenCV's: +z forward, +y down).
+        T_world_view = np.eye(4)
+        T_world_view[:3, :3] = vtf.SO3(np.asarray(cam.wxyz)).as_matrix()
+        T_world_view[:3, 3] = cam.position
+        f = (cam.image_height / 2) / math.tan(cam.fov / 2)
+        view = PinholeCamera([[f, 0.0, cam.image_width / 2], [0.0, f, cam.image_height / 2], [0.0, 0.0, 1.0]], [],
+                             int(cam.image_width), int(cam.image_height))
+        xy, _ = view.project(transform_points(invert_T(T_world_view), world))
+        return float(xy[0, 0]) / cam.image_width, float(xy[0, 1]) / cam.image_height
+
     def node_name(self, key: str) -> str:
         """Scene node of image ``key`` (a BA key, ``raw`` or ``panorama``) that takes the clicks."""
         return {"raw": "/annot/camera_raw", "panorama": "/annot/camera_pano", "loupe_ba": "/annot/loupe_ba",
@@ -418,92 +465,3 @@ class AppDriver(RenderDriver):
         """The direction line of the format export panel."""
         return self.app.format_export.direction_text
     # ------------------------------------------------ end of the verify helper's block
-
-
-def _picks_json(app: Any) -> str:
-    return json.dumps([p.to_dict() for p in app.state.picks], separators=(",", ":"))
-
-
-def _child(session: Path) -> int:
-    from .server import CalibrationApp
-
-    sample = Path(__file__).resolve().parents[1] / "sample_data"
-    app = CalibrationApp(sample / "scan.npz", sample / "image.png", sample / "camera.yaml", session_path=session,
-                         port=0)
-    driver = AppDriver(app)
-    print("ready " + _picks_json(app), flush=True)
-    for line in sys.stdin:
-        cmd = line.split()
-        if not cmd:
-            continue
-        try:
-            if cmd[0] == "ba":
-                notes = driver.click_cell("horizontal", int(cmd[1]), int(cmd[2]))
-            elif cmd[0] == "cam":
-                notes = driver.click_camera(float(cmd[1]), float(cmd[2]))
-            elif cmd[0] == "undo":
-                notes = driver.press_edit("Undo")
-            else:
-                break
-        except ValueError as exc:  # not shown on the page: nothing to click
-            notes = [("Not shown", str(exc))]
-        if notes:  # refused: say why (one line), the pairs are unchanged
-            print("nack " + json.dumps(notes), flush=True)
-        else:
-            print(f"ack {_picks_json(app)}", flush=True)
-    app.stop()
-    return 0
-
-
-def _zygote(control_fd: int) -> int:
-    """Fork children that run :func:`_child` (see the module docstring); no thread runs when it forks."""
-    import os
-    import signal
-    import socket
-
-    from . import server  # noqa: F401 - imported once, inherited by every child
-    from .warm_up import WarmUp
-
-    # Compiled code is inherited too: a child's own warm-up finds every kernel ready.  wait() returns
-    # once the warm-up's thread has ended, so no thread runs at the forks.
-    WarmUp().wait()
-    signal.signal(signal.SIGCHLD, signal.SIG_IGN)  # the kernel reaps the children
-    control = socket.socket(fileno=control_fd)
-    control.sendall(b"ready\n")
-    while True:
-        msg, fds, _, _ = socket.recv_fds(control, 4096, 1)
-        if not msg:
-            return 0  # the test closed its end
-        cmd = msg.decode().split()
-        if len(cmd) != 2 or cmd[0] != "fork" or len(fds) != 1:
-            for fd in fds:
-                os.close(fd)
-            control.sendall(f"error expected 'fork SESSION' and one socket, got {msg!r}\n".encode())
-            continue
-        pid = os.fork()
-        if pid == 0:
-            code = 1
-            try:
-                signal.signal(signal.SIGCHLD, signal.SIG_DFL)
-                control.close()
-                conn = socket.socket(fileno=fds[0])
-                sys.stdin = conn.makefile("r", encoding="utf-8")
-                sys.stdout = conn.makefile("w", encoding="utf-8", buffering=1)
-                code = _child(Path(cmd[1]))
-            except BaseException:
-                import traceback
-
-                traceback.print_exc()
-            finally:
-                os._exit(code)
-        os.close(fds[0])  # the child's end: once the child is gone, the test reads EOF
-        control.sendall(f"pid {pid}\n".encode())
-
-
-if __name__ == "__main__":  # pragma: no cover - run by the durability test as a child process
-    if len(sys.argv) == 4 and sys.argv[1] == "child" and sys.argv[2] == "--session":
-        sys.exit(_child(Path(sys.argv[3])))
-    if len(sys.argv) == 3 and sys.argv[1] == "zygote":
-        sys.exit(_zygote(int(sys.argv[2])))
-    print("usage: python -m app.testing child --session PATH | python -m app.testing zygote FD", file=sys.stderr)
-    sys.exit(2)

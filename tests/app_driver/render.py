@@ -1,4 +1,4 @@
-"""The test driver's part for the camera-view render and the Align folder (mixed into :class:`app.testing.AppDriver`).
+"""The test driver's part for the camera-view render and the Align folder (mixed into :class:`app_driver.AppDriver`).
 
 As the rest of the driver: every action goes through the handler the viser event would reach, queued on the app's
 action worker, and returns once it is applied (:meth:`RenderDriver.wait_render` also waits for the render).
@@ -12,12 +12,12 @@ from typing import Any
 
 import numpy as np
 
-from .render_pane import RENDER_KEY
+from app.render_pane import RENDER_KEY
 
 
 class RenderDriver:
     """The camera-view render pane and the Align folder, driven as a tab would (``self.app``, ``self.tab``,
-    ``self._fire`` and ``self.click`` come from :class:`app.testing.AppDriver`)."""
+    ``self._fire`` and ``self.click`` come from :class:`app_driver.AppDriver`)."""
 
     app: Any
     tab: Any

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .image_corners import CornerGate, CornerImage, clean_corner, refine_subpixel, strongest_near
+from calib_core.guide.image_corners import CornerGate, CornerImage, clean_corner, refine_subpixel, strongest_near
 
 __all__ = ["snap_clicks", "SNAP_MIN_CLICK_SIGMA_PX", "SNAP_GATE"]
 
