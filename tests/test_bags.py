@@ -10,8 +10,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -26,13 +24,10 @@ from calib_core.io.scan_readers import load_scan, read_point_cloud
 from calib_core.pairs import load_pairs_yaml, resolve_pairs
 from calib_core.solve import solve_extrinsics
 from repo_paths import REPO, SAMPLE
+from cli_helpers import run_cli
 
 AUTO = REPO.parent / "shared" / "data" / "pjlab_opencalib_lidar2camera" / "auto_calib"
 KINDS = ["ros1", "sqlite3", "mcap"]
-
-
-def run_cli(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "app.cli", *args], capture_output=True, text=True, timeout=300, cwd=REPO)
 
 
 def _small_scene(rng, **cloud_kw) -> tuple[SceneBag, dict]:

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import dataclasses
 import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -20,14 +19,10 @@ from calib_core.pairs import Pair, load_pairs_yaml, save_pairs_yaml
 from calib_core.synthetic import load_sample, simulate_pairs
 from calib_core.synthetic.picks import laser_picks
 from calib_core.transforms import rotation_angle_deg
-from repo_paths import REPO, SAMPLE
+from repo_paths import SAMPLE
+from cli_helpers import run_cli
 
 SCAN, CAMERA = str(SAMPLE / "scan.npz"), str(SAMPLE / "camera.yaml")
-
-
-def run_cli(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "app.cli", *args], capture_output=True, text=True, timeout=300,
-                          cwd=REPO)
 
 
 def assert_one_line_error(proc: subprocess.CompletedProcess, *fragments: str) -> None:

@@ -7,7 +7,6 @@ Truth: the sample's ground truth and simulated clicks with a known noise; the ch
 
 from __future__ import annotations
 
-import contextlib
 import math
 import unicodedata
 
@@ -18,7 +17,7 @@ from calib_core.pairs import Pair, load_pairs_yaml
 from calib_core.solve import calibrate, solve_extrinsics
 from calib_core.solve.quality import MIN_PAIRS_FOR_ERROR, NO_ERROR_ESTIMATE, error_estimate_reason
 from calib_core.synthetic import load_sample
-from calib_core.transforms import transform_points
+from app_driver.fakes import FakeGui
 from repo_paths import SAMPLE
 
 NO_ESTIMATE_4 = f"{NO_ERROR_ESTIMATE}: 4 pairs fit any pose closely; add pairs"
@@ -34,26 +33,11 @@ def sample_pairs():
     return load_pairs_yaml(SAMPLE / "pairs.yaml")
 
 
-class _Markdown:
-    def __init__(self, content: str) -> None:
-        self.content = content
-
-
-class _Gui:
-    """The two calls the calibration panel makes of viser's GUI API."""
-
-    def add_folder(self, label: str):
-        return contextlib.nullcontext()
-
-    def add_markdown(self, content: str) -> _Markdown:
-        return _Markdown(content)
-
-
 def _panel_text(result, n: int) -> str:
     from app.calibration_panel import CalibrationPanel
     from app.ui_common import SolveBundle
 
-    panel = CalibrationPanel(_Gui())
+    panel = CalibrationPanel(FakeGui())
     bundle = SolveBundle(pick_ids=list(range(1, n + 1)), pairs=[], result=result, pixels=np.zeros((n, 2)),
                          points_camera=np.zeros((n, 3)), edges_camera=np.zeros((0, 3)), seconds=0.01)
     panel.show(bundle, None, False, n)

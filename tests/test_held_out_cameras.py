@@ -8,8 +8,6 @@ against the calib file's ``P2`` and KITTI's published projection ``x = P2 @ R0_r
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -18,23 +16,13 @@ from PIL import Image
 from calib_core.cameras import load_camera
 from calib_core.errors import CalibError
 from repo_paths import REPO, SAMPLE
+from cli_helpers import one_error_line, run_cli
 
 DATA = REPO.parent / "shared" / "data"
 OCAM_JSON = DATA / "other_tools_files" / "cam" / "pjlab_surround_ocam_Front.json"
 KITTI = DATA / "kitti_object_000002"
 needs_ocam = pytest.mark.skipif(not OCAM_JSON.is_file(), reason=f"{OCAM_JSON} not found (shared data)")
 needs_kitti = pytest.mark.skipif(not KITTI.is_dir(), reason=f"{KITTI} not found (shared data)")
-
-
-def run_cli(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "app.cli", *args], capture_output=True, text=True, timeout=300, cwd=REPO)
-
-
-def one_error_line(proc: subprocess.CompletedProcess) -> str:
-    assert proc.returncode == 2, (proc.returncode, proc.stdout[-500:], proc.stderr[-500:])
-    lines = proc.stderr.splitlines()
-    assert len(lines) == 1 and lines[0].startswith("error: "), proc.stderr
-    return lines[0]
 
 
 # --------------------------------------------------------------------------

@@ -13,8 +13,6 @@ geometry that generated them, not from the code under test.
 from __future__ import annotations
 
 import io
-import subprocess
-import sys
 import zipfile
 import zlib
 
@@ -24,18 +22,8 @@ import pytest
 from calib_core.errors import CalibError
 from calib_core.io.scan_readers import load_scan
 from calib_core.pairs import load_pairs_yaml
-from repo_paths import REPO, SAMPLE
-
-
-def run_cli(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "app.cli", *args], capture_output=True, text=True, timeout=300, cwd=REPO)
-
-
-def one_error_line(proc: subprocess.CompletedProcess) -> str:
-    assert proc.returncode == 2, (proc.returncode, proc.stdout[-500:], proc.stderr[-500:])
-    lines = proc.stderr.splitlines()
-    assert len(lines) == 1 and lines[0].startswith("error: "), proc.stderr
-    return lines[0]
+from repo_paths import SAMPLE
+from cli_helpers import one_error_line, run_cli
 
 
 # --------------------------------------------------------------------------

@@ -6,13 +6,13 @@ Euler compositions, finite differences for the propagated sigmas, and a solve ag
 
 from __future__ import annotations
 
-import contextlib
 import warnings
 
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from app_driver.fakes import FakeGui
 from calib_core.errors import CalibError
 from calib_core.solve.quality import NEAR_SINGULAR_DEG, orientation_notes
 from calib_core.transforms import R_from_viewing_deg, rpy_deg_from_R, viewing_direction
@@ -135,19 +135,6 @@ def test_notes_name_the_chart_that_is_near_its_singularity():
 # --- a solve near gimbal lock: the note, the panel, the CLI and the YAML ------------------------------------------
 
 
-class _Markdown:
-    def __init__(self, content: str) -> None:
-        self.content = content
-
-
-class _Gui:
-    def add_folder(self, label: str):
-        return contextlib.nullcontext()
-
-    def add_markdown(self, content: str) -> _Markdown:
-        return _Markdown(content)
-
-
 @pytest.fixture(scope="module")
 def solved():
     """10 pairs of a pinhole camera looking 4 deg above lidar +x, 1 deg left, rolled 2 deg (pitch -86)."""
@@ -186,7 +173,7 @@ def test_solve_near_gimbal_lock_notes_it_once_everywhere(solved, tmp_path):
     err = wrap(angles(res.T_camera_lidar[:3, :3]) - angles(truth[:3, :3]))
     assert np.all(np.abs(err) < 4 * v.sigma_deg), (err, v.sigma_deg)
 
-    panel = CalibrationPanel(_Gui())
+    panel = CalibrationPanel(FakeGui())
     bundle = SolveBundle(list(range(1, 11)), [], res, np.zeros((10, 2)), np.zeros((10, 3)), np.zeros((0, 3)), 0.01)
     panel.show(bundle, None, False, 10)
     text = panel.result_text

@@ -38,8 +38,9 @@ class _FakeWidget:
         return None
 
 
-class _FakeGui:
-    """Records the modals (questions) the app opens in one tab, with their text and buttons."""
+class FakeGui:
+    """A GUI without a browser: records the modals (questions) the app opens in one tab, with their text and
+    buttons; folders and markdown keep their content (enough for the calibration panel)."""
 
     def __init__(self) -> None:
         self.modals: list[tuple[_FakeWidget, list[_FakeWidget]]] = []
@@ -48,6 +49,9 @@ class _FakeGui:
         modal = _FakeWidget("modal", title)
         self.modals.append((modal, []))
         return modal
+
+    def add_folder(self, label: str, **kwargs: Any) -> _FakeWidget:
+        return _FakeWidget("folder", label)
 
     def add_markdown(self, content: str, **kwargs: Any) -> _FakeWidget:
         w = _FakeWidget("markdown", content=content)
@@ -93,7 +97,7 @@ class FakeTab:
     client_id: int = field(default_factory=lambda: next(_CLIENT_IDS))
     notifications: list[tuple[str, str]] = field(default_factory=list)
     downloads: list[tuple[str, bytes]] = field(default_factory=list)
-    gui: _FakeGui = field(default_factory=_FakeGui)
+    gui: FakeGui = field(default_factory=FakeGui)
     camera: FakeCamera = field(default_factory=FakeCamera)
 
     def add_notification(self, title: str, body: str, **kwargs: Any) -> None:
