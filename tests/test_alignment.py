@@ -24,32 +24,14 @@ from calib_core.cameras.fisheye import FisheyeCamera
 from calib_core.cameras.io import load_camera
 from calib_core.cameras.pinhole import PinholeCamera
 from calib_core.errors import CalibError
-from repo_paths import REPO, SAMPLE
-
-KITTI_CALIB = REPO.parent / "shared" / "data" / "kitti_object_000002" / "calib" / "000002.txt"
+from kitti_reference import KITTI_CALIB, kitti_K_T
+from repo_paths import SAMPLE
 
 
 def pinhole_pixel(K: np.ndarray, T: np.ndarray, p_lidar: np.ndarray) -> np.ndarray:
     """The test's own pinhole projection: K (R p + t), divided by depth."""
     q = K @ (T[:3, :3] @ p_lidar + T[:3, 3])
     return q[:2] / q[2]
-
-
-def kitti_T() -> np.ndarray:
-    """KITTI's T_camera_lidar = [I | K^-1 P2[:, 3]] @ R0 @ Tr, parsed here from calib/000002.txt."""
-    rows = {}
-    for line in KITTI_CALIB.read_text().splitlines():
-        if ":" in line:
-            key, values = line.split(":", 1)
-            rows[key.strip()] = np.array(values.split(), float)
-    P2 = rows["P2"].reshape(3, 4)
-    shift = np.eye(4)
-    shift[:3, 3] = np.linalg.solve(P2[:, :3], P2[:, 3])
-    R0 = np.eye(4)
-    R0[:3, :3] = rows["R0_rect"].reshape(3, 3)
-    Tr = np.eye(4)
-    Tr[:3, :] = rows["Tr_velo_to_cam"].reshape(3, 4)
-    return shift @ R0 @ Tr
 
 
 def angle_deg(R_a: np.ndarray, R_b: np.ndarray) -> float:
@@ -90,11 +72,11 @@ def test_preset_aliases_copies_and_errors():
 
 @pytest.mark.skipif(not KITTI_CALIB.is_file(), reason=f"KITTI calib not found at {KITTI_CALIB}")
 def test_forward_preset_is_close_to_kitti_published_rotation():
-    error = angle_deg(preset_T("+x")[:3, :3], kitti_T()[:3, :3])
+    error = angle_deg(preset_T("+x")[:3, :3], kitti_K_T()[1][:3, :3])
     print(f"\n'+x' preset vs KITTI 000002 published rotation: {error:.2f} deg")
     assert error < 3.0
     for other in ("-y", "+y", "-x"):
-        assert angle_deg(preset_T(other)[:3, :3], kitti_T()[:3, :3]) > 80.0
+        assert angle_deg(preset_T(other)[:3, :3], kitti_K_T()[1][:3, :3]) > 80.0
 
 
 # ------------------------------------------------------------------ rotation about the camera

@@ -31,11 +31,10 @@ from calib_core.io.extrinsic_formats import load_extrinsics_any
 from calib_core.io.scan_readers import load_scan
 from calib_core.lidar.depth_matrix import DepthMatrix
 from calib_core.render import CameraRender, render_from_camera, shade_render
+from kitti_reference import KITTI, KITTI_CALIB, kitti_K_T
 from repo_paths import REPO, SAMPLE
 
-KITTI = REPO.parent / "shared" / "data" / "kitti_object_000002"
 KITTI_BIN = KITTI / "velodyne" / "000002.bin"
-KITTI_CALIB = KITTI / "calib" / "000002.txt"
 KITTI_CAMERA = REPO / "real_data" / "kitti_000002_camera.yaml"
 needs_kitti = pytest.mark.skipif(not KITTI_BIN.is_file(), reason=f"KITTI frame not found at {KITTI}")
 
@@ -230,24 +229,6 @@ def test_shade_render_modes():
 
 
 # ------------------------------------------------------------------ KITTI 000002, published calibration
-def kitti_K_T() -> tuple[np.ndarray, np.ndarray]:
-    """K = P2[:, :3] and T_camera_lidar = [I | K^-1 P2[:, 3]] @ R0 @ Tr, parsed here from calib/000002.txt."""
-    rows = {}
-    for line in KITTI_CALIB.read_text().splitlines():
-        if ":" in line:
-            key, values = line.split(":", 1)
-            rows[key.strip()] = np.array(values.split(), float)
-    P2 = rows["P2"].reshape(3, 4)
-    K = P2[:, :3]
-    shift = np.eye(4)
-    shift[:3, 3] = np.linalg.solve(K, P2[:, 3])
-    R0 = np.eye(4)
-    R0[:3, :3] = rows["R0_rect"].reshape(3, 3)
-    Tr = np.eye(4)
-    Tr[:3, :] = rows["Tr_velo_to_cam"].reshape(3, 4)
-    return K, shift @ R0 @ Tr
-
-
 def independent_zbuffer(points: np.ndarray, K: np.ndarray, T: np.ndarray, width: int, height: int):
     """Per pixel the index of the nearest projected point (no footprint) and its distance from the camera."""
     p = points @ T[:3, :3].T + T[:3, 3]

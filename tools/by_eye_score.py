@@ -42,19 +42,8 @@ def pose_difference(T_a: np.ndarray, T_b: np.ndarray) -> tuple[float, float]:
 
 
 def reference_T(path: str) -> np.ndarray:
-    """``T_camera_lidar`` of the reference; for a KITTI calib file, of the rectified camera 2 the image shows:
-    ``[I | K^-1 P2[:, 3]] @ R0_rect @ Tr_velo_to_cam`` (its README.txt), not the bare ``Tr_velo_to_cam``."""
-    text = Path(path).read_text()
-    if "R0_rect" not in text:
-        return load_extrinsics_any(path)
-    rows = {k.strip(): np.array(v.split(), float) for k, v in
-            (line.split(":", 1) for line in text.splitlines() if ":" in line)}
-    P2 = rows["P2"].reshape(3, 4)
-    A, R0, Tr = np.eye(4), np.eye(4), np.eye(4)
-    A[:3, 3] = np.linalg.solve(P2[:, :3], P2[:, 3])
-    R0[:3, :3] = rows["R0_rect"].reshape(3, 3)
-    Tr[:3] = rows["Tr_velo_to_cam"].reshape(3, 4)
-    return A @ R0 @ Tr
+    """``T_camera_lidar`` of the reference; a KITTI calib file gives rectified camera 2's, the one its image shows."""
+    return load_extrinsics_any(path)
 
 
 def main(argv: list[str] | None = None) -> int:
