@@ -24,7 +24,7 @@ from calib_core.alignment import (
 from calib_core.errors import CalibError
 from calib_core.transforms import invert_T, rotation_angle_deg
 
-from .render_pane import RENDER_KEY
+from .layout import RENDER_KEY
 from .ui_common import MIN_PAIRS
 
 #: One press of a turn button turns the view this much (degrees); a move button moves the camera this far (metres).

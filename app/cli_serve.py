@@ -9,7 +9,7 @@ from pathlib import Path
 def cmd_serve(args: argparse.Namespace) -> int:
     from app.serving import serve
 
-    from .cli import default_sample_dir, scan_options
+    from .cli_common import default_sample_dir, scan_options
     from .cli_guard import camera_image_size
 
     if getattr(args, "bag", None) is not None:

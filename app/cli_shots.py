@@ -48,7 +48,7 @@ def load_shots(args: argparse.Namespace, camera):
     from calib_core.pairs import load_pairs_yaml
     from calib_core.shots import Shot
 
-    from .cli import scan_options
+    from .cli_common import scan_options
 
     shots = []
     for k, (scan_path, pairs_path) in enumerate(args.shot):
@@ -72,7 +72,8 @@ def cmd_solve_shots(args: argparse.Namespace):
     from calib_core.io.atomic import write_yaml_atomic
     from calib_core.shots import format_shots, shots_extrinsics_document, solve_shots
 
-    from .cli import format_summary, load_camera_from_args
+    from .cli_common import format_summary
+    from .cli_guard import load_camera_from_args
 
     camera = load_camera_from_args(args)
     shots = load_shots(args, camera)
@@ -103,7 +104,7 @@ def cmd_propose_shots(args: argparse.Namespace) -> int:
     from calib_core.io.images import load_image_rgb
     from calib_core.shots import propose_shots, shot_proposals_to_dict
 
-    from .cli import load_camera_from_args
+    from .cli_guard import load_camera_from_args
 
     camera = load_camera_from_args(args)
     shots = load_shots(args, camera)

@@ -28,7 +28,7 @@ maths lives here.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -172,6 +172,42 @@ def annotation_layout(
         height = CAMERA_WIDTH * h / w
         slots[name] = ImageSlot(name, w, h, (0.0, -GAP - height / 2, 0.0), CAMERA_WIDTH, height)
     return slots
+
+
+#: The camera-view render's page slot and click key (:mod:`app.render_pane` draws it).
+RENDER_KEY = "render"
+
+
+def with_render_slot(slots: dict[str, ImageSlot], view_key: str = "raw") -> dict[str, ImageSlot]:
+    """``slots`` with the render's slot right below the camera views, the same size as the camera view shown
+    (``view_key``: ``raw`` or ``panorama``); the images below the camera views (the BA panes) move down to make room.
+
+    Stacked rather than side by side: with the loupe column on the right, the camera image gets more screen
+    for any image wider than about 3:4, and a corner in the photo lies straight above the same corner in the render.
+    """
+    raw = slots[view_key]
+    camera_keys = [k for k, s in slots.items() if s.center[1] < 0.0]  # the camera views sit above y = 0
+    shift = raw.render_height + GAP + LABEL_HEIGHT
+    out = {}
+    for key, s in slots.items():
+        if key in camera_keys:
+            out[key] = s
+        else:
+            out[key] = replace(s, center=(s.center[0], s.center[1] + shift, s.center[2]))
+    out[RENDER_KEY] = ImageSlot(RENDER_KEY, raw.width_px, raw.height_px,
+                                (raw.center[0], LABEL_HEIGHT + raw.render_height / 2, 0.0), raw.render_width,
+                                raw.render_height)
+    return out
+
+
+def layout_with_render(camera_sizes: dict[str, tuple[int, int]], view_key: str, ba_size: tuple[int, int],
+                       ba_keys: tuple[str, ...], cell_aspect: float) -> dict[str, ImageSlot]:
+    """The page layout (:func:`app.layout.annotation_layout`) with the render below camera view ``view_key``; the
+    BA grid is chosen for the whole column (camera view, render, BA panes)."""
+    view_w, view_h = camera_sizes[view_key]
+    render_band = CAMERA_WIDTH * view_h / view_w + GAP + LABEL_HEIGHT
+    slots = annotation_layout(camera_sizes, ba_size, ba_keys, cell_aspect=cell_aspect, above_height=render_band)
+    return with_render_slot(slots, view_key)
 
 
 @dataclass(frozen=True)

@@ -14,7 +14,7 @@ from calib_core.errors import CalibError
 from calib_core.pairs import Pair, load_pairs_yaml
 from calib_core.panorama import refine_click_to_corner
 
-from .render_pane import RENDER_KEY
+from .layout import RENDER_KEY
 from .security import upload_display_name
 from .ui_common import MIN_PAIRS, PICK_RADII, SNAP_RADIUS_PX, IMPORT_CHOICES, md_escape
 

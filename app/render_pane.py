@@ -27,13 +27,12 @@ from calib_core.errors import CalibError
 from calib_core.overlays import project_lidar_points
 from calib_core.render import render_from_camera, shade_render
 
-from .layout import CAMERA_WIDTH, GAP, LABEL_HEIGHT, ImageSlot, annotation_layout
+from .layout import RENDER_KEY, ImageSlot
 from .live_solver import LiveSolver
 from .ui_common import marker_segments
 from .view_settings import RENDER_MODES
 
-#: The render's page slot and click key, its scene nodes.
-RENDER_KEY = "render"
+#: The render's scene nodes (its page slot and click key: :data:`app.layout.RENDER_KEY`).
 NODE = "/annot/render"
 OVERLAY_NODE = "/annot/render_over"
 #: What the pane shows where the scan has no return (dark, so range colours and white depth edges stand out).
@@ -49,38 +48,6 @@ SOLVE_RENDER_INTERVAL_S = 0.5
 #: Where the pose the render uses comes from, as its title says it.
 POSE_NAMES = {"solve": "solved pose", "rough": "rough pose", "default": "'+x' preset (no pose yet)",
               "drag": "rough pose (dragging)"}
-
-
-def with_render_slot(slots: dict[str, ImageSlot], view_key: str = "raw") -> dict[str, ImageSlot]:
-    """``slots`` with the render's slot right below the camera views, the same size as the camera view shown
-    (``view_key``: ``raw`` or ``panorama``); the images below the camera views (the BA panes) move down to make room.
-
-    Stacked rather than side by side: with the loupe column on the right, the camera image gets more screen
-    for any image wider than about 3:4, and a corner in the photo lies straight above the same corner in the render.
-    """
-    raw = slots[view_key]
-    camera_keys = [k for k, s in slots.items() if s.center[1] < 0.0]  # the camera views sit above y = 0
-    shift = raw.render_height + GAP + LABEL_HEIGHT
-    out = {}
-    for key, s in slots.items():
-        if key in camera_keys:
-            out[key] = s
-        else:
-            out[key] = dataclasses.replace(s, center=(s.center[0], s.center[1] + shift, s.center[2]))
-    out[RENDER_KEY] = ImageSlot(RENDER_KEY, raw.width_px, raw.height_px,
-                                (raw.center[0], LABEL_HEIGHT + raw.render_height / 2, 0.0), raw.render_width,
-                                raw.render_height)
-    return out
-
-
-def layout_with_render(camera_sizes: dict[str, tuple[int, int]], view_key: str, ba_size: tuple[int, int],
-                       ba_keys: tuple[str, ...], cell_aspect: float) -> dict[str, ImageSlot]:
-    """The page layout (:func:`app.layout.annotation_layout`) with the render below camera view ``view_key``; the
-    BA grid is chosen for the whole column (camera view, render, BA panes)."""
-    view_w, view_h = camera_sizes[view_key]
-    render_band = CAMERA_WIDTH * view_h / view_w + GAP + LABEL_HEIGHT
-    slots = annotation_layout(camera_sizes, ba_size, ba_keys, cell_aspect=cell_aspect, above_height=render_band)
-    return with_render_slot(slots, view_key)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

@@ -15,8 +15,7 @@ from calib_core.viewpoint import viewpoint_behind_camera
 
 from .ba_view import ColumnWindow, ba_texture, texture_factor
 from .camera_view import CameraView
-from .layout import ImageSlot, bounds_of
-from .render_pane import RENDER_KEY, layout_with_render
+from .layout import RENDER_KEY, ImageSlot, bounds_of, layout_with_render
 from .settled_updates import settled
 from .ui_common import (
     MIN_PAIRS, CLOUD_ORIGIN, PANEL_PX, ZOOM_PX_PER_CELL, ZOOM_PX_PER_IMAGE_PX, ZOOM_STEP,

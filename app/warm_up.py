@@ -8,13 +8,12 @@ kernel once, under its own lock).
 from __future__ import annotations
 
 import threading
-import time
 import traceback
 
 
 class WarmUp:
-    """One daemon thread running :func:`calib_core._jit.warm_up`, :func:`calib_core.solve.warm_up` and
-    :func:`calib_core.render.warm_up` (the camera-view render's kernels)."""
+    """One daemon thread running :func:`calib_core.warm_up.warm_up` on every module with kernels
+    (:data:`calib_core.warm_up.KERNEL_MODULES`: camera models, BA images, colouring, render, solve)."""
 
     def __init__(self) -> None:
         self.seconds: dict[str, float] = {}
@@ -25,17 +24,10 @@ class WarmUp:
 
     def _run(self) -> None:
         try:
-            from calib_core import _jit, render, solve
+            from calib_core.warm_up import KERNEL_MODULES, warm_up
 
-            self.seconds.update(_jit.warm_up())
-            t0 = time.perf_counter()
-            render.warm_up()  # the first render of the page comes right after start-up
-            self.seconds["calib_core.render"] = time.perf_counter() - t0
-            warm_solve = getattr(solve, "warm_up", None)
-            if warm_solve is not None:
-                t0 = time.perf_counter()
-                warm_solve()
-                self.seconds["calib_core.solve"] = time.perf_counter() - t0
+            for module in KERNEL_MODULES:  # one at a time: what is done shows in ``seconds`` at once
+                self.seconds.update(warm_up([module]))
         except BaseException as exc:  # a failed warm-up only costs the first click its compile time
             self.error = exc
             traceback.print_exc()

@@ -428,7 +428,7 @@ def _markdown(*, quick, scenes, pin_scenes, n_values, trials, omni_res, pin_res,
 
     a("## Speed of the live steps\n")
     groups = [("ba", "Bearing Angle images, 4 directions (`bearing_angle_images`)"),
-              ("jit", "Compiled kernels: compile and cached start-up (`calib_core._jit.warm_up`, new process)"),
+              ("jit", "Compiled kernels: compile and cached start-up (`calib_core.warm_up`: cameras, BA, colouring; new process)"),
               ("solve", "Solve: initial pose + LM + covariance (`solve_extrinsics`)"),
               ("colorize", "Colourise with the occlusion test (`colorize_points`)"),
               ("panorama", "Panorama unwrap (`Panorama`)"),

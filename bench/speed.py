@@ -170,17 +170,18 @@ def ba_section(rep: "SpeedReport", sc, reps: Callable[[int], int], scale: float)
 #: (numba comes with them), then warm the kernels; prints both times, seconds.
 _WARM_UP_CODE = (
     "import time; t0 = time.perf_counter(); import calib_core.bearing_angle, calib_core.overlays, "
-    "calib_core.lidar, calib_core.cameras; from calib_core._jit import warm_up; t1 = time.perf_counter(); "
-    "warm_up(); print(t1 - t0, time.perf_counter() - t1)"
+    "calib_core.lidar, calib_core.cameras; from calib_core.warm_up import warm_up; t1 = time.perf_counter(); "
+    "warm_up(['calib_core.cameras', 'calib_core.bearing_angle', 'calib_core.overlays']); "
+    "print(t1 - t0, time.perf_counter() - t1)"
 )
 
 
 def jit_startup(rep: "SpeedReport", runs: int = 3) -> None:
     """Compile time and cached start-up of the compiled kernels, each in a new process.
 
-    ``calib_core._jit.warm_up()`` with an empty numba cache directory (every
-    kernel compiled and written to the cache), then again with that cache
-    (loaded from disk).  The app runs it in a background thread at start-up;
+    ``calib_core.warm_up.warm_up()`` of the camera, BA and colouring kernels
+    with an empty numba cache directory (every kernel compiled and written to
+    the cache), then again with that cache (loaded from disk).  The app runs it in a background thread at start-up;
     importing the package (which imports numba) is on the main thread and is
     reported apart.  The cache is a temporary ``NUMBA_CACHE_DIR``, so the
     repository's own cache is left alone.

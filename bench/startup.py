@@ -73,7 +73,7 @@ def startup(runs: int = 3) -> dict:
     with tempfile.TemporaryDirectory(prefix="ba-calib-numba-") as cache:
         cold = first_page_seconds(cache)
         # The cold run's background warm-up may have been cut short by the terminate: fill the cache.
-        subprocess.run([sys.executable, "-c", "from calib_core import _jit, solve; _jit.warm_up(); solve.warm_up()"],
+        subprocess.run([sys.executable, "-c", "from calib_core.warm_up import warm_up; warm_up()"],
                        env=dict(os.environ, NUMBA_CACHE_DIR=cache,
                                 PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", "")),
                        cwd=REPO, check=True, timeout=900)

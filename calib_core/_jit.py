@@ -1,4 +1,4 @@
-"""Compiled kernels: one decorator for every numba kernel of the package, and their warm-up.
+"""Compiled kernels: one decorator for every numba kernel of the package.
 
 numba compiles a kernel on its first call (hundreds of milliseconds each);
 with ``cache=True`` the machine code is written to disk and later processes
@@ -9,8 +9,9 @@ install with no writable home finds none, and ``cache=True`` would raise at
 import; :func:`kernel` then falls back to a per-user directory under the
 system temp directory, and as a last resort compiles without a disk cache.
 
-The app calls :func:`warm_up` in a background thread at start-up, so the
-first BA image or colouring does not stall on a compile.
+The app calls :func:`calib_core.warm_up.warm_up` in a background thread at
+start-up, so the first BA image or colouring does not stall on a compile.
+This module stays below every module with kernels: it imports none of them.
 
 What a fresh process pays before the first kernel runs, even with every
 kernel cached (bench/organize.py measures it): ``import numba`` and, once
@@ -26,7 +27,6 @@ from __future__ import annotations
 import os
 import tempfile
 import threading
-import time
 import warnings
 from typing import Callable
 
@@ -90,24 +90,3 @@ class _FirstCompile(numba.core.event.Listener):
 # numba fires "numba:compile" only on a disk-cache miss, around the compile itself.
 numba.core.event.register("numba:compile", _FirstCompile())
 
-
-def warm_up() -> dict[str, float]:
-    """Compile (or load from the disk cache) every kernel of the package on tiny inputs.
-
-    Safe to call from a background thread; a kernel called meanwhile from
-    another thread waits for its compile instead of compiling twice.
-
-    Returns
-    -------
-    dict[str, float]
-        Seconds spent per module, for the start-up log and the benchmark.
-    """
-    from . import bearing_angle, overlays
-    from .cameras import kernels as camera_kernels
-
-    seconds = {}
-    for module in (camera_kernels, bearing_angle, overlays):
-        t0 = time.perf_counter()
-        module.warm_up()
-        seconds[module.__name__] = time.perf_counter() - t0
-    return seconds

@@ -21,9 +21,9 @@ from typing import Any, ClassVar
 import numpy as np
 
 from ..errors import CalibError
-from . import kernels
+from .kernels import fisheye_bearing, FISHEYE_PARAMS, fisheye_project, MODEL_FISHEYE, _F_D
 from .base import as_pixels, as_points_keep_float32, empty_projection, register_camera_model
-from .io import param_image_size, param_matrix, param_vector, require_keys
+from .params import param_image_size, param_matrix, param_vector, require_keys
 
 _THETA_SEARCH = np.linspace(0.0, np.pi / 2, 20001)
 
@@ -80,12 +80,12 @@ class FisheyeCamera:
         self._table_theta_d = _theta_d(self._table_theta, self.D)
         self.theta_d_max = float(self._table_theta_d[-1])
         # The compiled kernels' parameter vector (layout: calib_core.cameras.kernels).
-        self._prm = np.zeros(kernels.FISHEYE_PARAMS)
-        self._prm[: kernels._F_D] = (K[0, 0], K[0, 1], K[0, 2], K[1, 1], K[1, 2], self.theta_max, self.theta_d_max,
+        self._prm = np.zeros(FISHEYE_PARAMS)
+        self._prm[: _F_D] = (K[0, 0], K[0, 1], K[0, 2], K[1, 1], K[1, 2], self.theta_max, self.theta_d_max,
                                      self.width, self.height)
-        self._prm[kernels._F_D :] = self.D
+        self._prm[_F_D :] = self.D
         #: ``(model code, parameters, table)`` for compiled callers (:func:`.kernels.project_model`).
-        self.compiled_projection = (kernels.MODEL_FISHEYE, self._prm, np.zeros((1, 2)))
+        self.compiled_projection = (MODEL_FISHEYE, self._prm, np.zeros((1, 2)))
 
     def project(self, points: Any) -> tuple[np.ndarray, np.ndarray]:
         """Pixels of points in the OpenCV camera frame (metres).
@@ -97,7 +97,7 @@ class FisheyeCamera:
         """
         P = as_points_keep_float32(points)
         pixels, valid = empty_projection(P)
-        kernels.fisheye_project(P, self._prm, pixels, valid)
+        fisheye_project(P, self._prm, pixels, valid)
         return pixels, valid
 
     def bearing(self, pixels: Any) -> np.ndarray:
@@ -108,7 +108,7 @@ class FisheyeCamera:
         """
         uv = as_pixels(pixels)
         rays = np.empty((uv.shape[0], 3))
-        kernels.fisheye_bearing(uv, self._prm, self._table_theta_d, self._table_theta, rays)
+        fisheye_bearing(uv, self._prm, self._table_theta_d, self._table_theta, rays)
         return rays
 
     def to_dict(self, base_dir: Path | None = None) -> dict[str, Any]:

@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any
 
 import numpy as np
 
@@ -40,6 +40,15 @@ from ..io.atomic import write_yaml_atomic
 from ..io.input_files import MAX_CAMERA_BYTES, check_input_file, read_input_text
 from ..io.yaml_files import parse_json_text, read_yaml_mapping
 from .base import CAMERA_MODELS, CameraModel
+from .params import (  # noqa: F401  (MAX_PARAM, MAX_IMAGE_SIDE: public here too)
+    MAX_IMAGE_SIDE,
+    MAX_PARAM,
+    numeric_array,
+    param_float,
+    param_image_size,
+    param_vector,
+    require_keys,
+)
 
 #: ROS ``distortion_model`` names -> our model names.
 ROS_DISTORTION_MODELS = {
@@ -51,89 +60,6 @@ ROS_DISTORTION_MODELS = {
 
 #: File name of the OCamCalib sidecar written by :func:`save_camera_yaml`.
 OCAM_SIDECAR_NAME = "calib_results.txt"
-
-
-#: Largest magnitude of any camera parameter (pixels, coefficients); beyond it a value is absurd.
-MAX_PARAM = 1e8
-#: Largest image width or height in pixels.
-MAX_IMAGE_SIDE = 65_536
-
-
-def _short(value: Any) -> str:
-    text = repr(value)
-    return text if len(text) <= 80 else text[:77] + "..."
-
-
-# -- checking numbers from user files ---------------------------------------------
-def _numeric_array(value: Any, name: str, max_abs: float = MAX_PARAM) -> np.ndarray:
-    try:
-        arr = np.asarray(value)
-    except (ValueError, TypeError, OverflowError, RecursionError):
-        raise CalibError(f"{name}: expected numbers, got {_short(value)}") from None
-    if arr.dtype == object or arr.dtype.kind not in "iuf":
-        raise CalibError(f"{name}: expected numbers, got {_short(value)}")
-    arr = arr.astype(np.float64)
-    if not np.all(np.isfinite(arr)):
-        raise CalibError(f"{name}: numbers must be finite, got {_short(arr.tolist())}")
-    if np.any(np.abs(arr) > max_abs):
-        raise CalibError(f"{name}: numbers must be at most {max_abs:g} in size, got {_short(arr.tolist())}")
-    return arr
-
-
-def param_matrix(value: Any, name: str, shape: tuple[int, int]) -> np.ndarray:
-    """``value`` as a finite float matrix of exactly ``shape``, or a :class:`CalibError`."""
-    arr = _numeric_array(value, name)
-    if arr.shape != shape:
-        raise CalibError(f"{name} must be a {shape[0]}x{shape[1]} matrix, got shape {arr.shape}")
-    return arr
-
-
-def param_vector(value: Any, name: str, lengths: Iterable[int] | None = None) -> np.ndarray:
-    """``value`` as a finite 1-D float vector (optionally of an allowed length)."""
-    arr = _numeric_array(value, name)
-    if arr.ndim != 1:
-        raise CalibError(f"{name} must be a list of numbers, got shape {arr.shape}")
-    if lengths is not None:
-        lengths = tuple(lengths)
-        if arr.size not in lengths:
-            allowed = ", ".join(map(str, lengths))
-            raise CalibError(f"{name} must have {allowed} coefficients, got {arr.size}")
-    return arr
-
-
-def param_float(value: Any, name: str) -> float:
-    """``value`` as one finite float."""
-    arr = _numeric_array(value, name)
-    if arr.ndim != 0:
-        raise CalibError(f"{name} must be one number, got {value!r}")
-    return float(arr)
-
-
-def param_image_size(width: Any, height: Any) -> tuple[int, int]:
-    """Positive integer ``(width, height)`` in pixels."""
-    out = []
-    for name, value in (("width", width), ("height", height)):
-        if isinstance(value, bool):
-            raise CalibError(f"{name} must be a positive integer, got {value!r}")
-        arr = _numeric_array(value, name, max_abs=float("inf"))
-        if arr.ndim != 0:
-            raise CalibError(f"{name} must be a positive integer, got {_short(value)}")
-        v = float(arr)
-        if v <= 0 or v != int(v):
-            raise CalibError(f"{name} must be a positive integer, got {_short(value)}")
-        if v > MAX_IMAGE_SIDE:
-            raise CalibError(f"{name} must be at most {MAX_IMAGE_SIDE} pixels, got {int(v)}")
-        out.append(int(v))
-    return out[0], out[1]
-
-
-def require_keys(data: Any, keys: Iterable[str], what: str) -> None:
-    """Raise a :class:`CalibError` naming the first key of ``keys`` missing from ``data``."""
-    if not isinstance(data, dict):
-        raise CalibError(f"{what}: expected a mapping, got {type(data).__name__}")
-    for key in keys:
-        if key not in data:
-            raise CalibError(f"{what}: missing key '{key}'")
 
 
 # -- format conversions ---------------------------------------------------------------
@@ -183,13 +109,13 @@ def pjlab_intrinsic_to_dict(data: dict[str, Any]) -> dict[str, Any]:
         param = blocks[0]["param"]
     require_keys(param, ("cam_K", "img_dist_w", "img_dist_h"), "PJLab intrinsic param")
     require_keys(param["cam_K"], ("data",), "cam_K")
-    K = _numeric_array(param["cam_K"]["data"], "cam_K.data")
+    K = numeric_array(param["cam_K"]["data"], "cam_K.data")
     if K.size != 9:
         raise CalibError(f"cam_K.data must be 3x3, got shape {K.shape}")
     dist: list[float] = []
     if "cam_dist" in param:
         require_keys(param["cam_dist"], ("data",), "cam_dist")
-        dist = _numeric_array(param["cam_dist"]["data"], "cam_dist.data").ravel().tolist()
+        dist = numeric_array(param["cam_dist"]["data"], "cam_dist.data").ravel().tolist()
     K = K.reshape(3, 3)
     if (abs(K[0, 0]) < 10 and abs(K[1, 1]) < 10) or len(dist) > 14:
         # PJLab's surround-view tools store an OCam (Scaramuzza) model in this layout: the affine c, d, e

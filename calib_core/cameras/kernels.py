@@ -404,25 +404,3 @@ def project_model(model, p, table, points, pixels, valid):
     else:
         ocam_project(points, p, table, pixels, valid)
 
-
-def warm_up() -> None:
-    """Compile (or load from numba's disk cache) the camera kernels for the inputs the package gives them.
-
-    Points come as float64 C arrays (the solve) and as column-major float32
-    arrays (colouring: ``xyz.T`` of a (3, N) array); pixels as float64 C
-    arrays.  Other layouts compile (or load) on first use.
-    """
-    from .fisheye import FisheyeCamera
-    from .ocam import OCamCamera
-    from .pinhole import PinholeCamera
-
-    cams = (
-        PinholeCamera(np.array([[4.0, 0, 2], [0, 4.0, 2], [0, 0, 1]]), np.zeros(5), 4, 4),
-        FisheyeCamera(np.array([[4.0, 0, 2], [0, 4.0, 2], [0, 0, 1]]), np.zeros(4), 4, 4),
-        OCamCamera([-4.0, 0.0, 0.01], [2.0], 1.5, 1.5, 1.0, 0.0, 0.0, 4, 4),
-    )
-    points = np.array([[0.0, 0.0, 1.0], [0.1, 0.0, 2.0], [np.nan, 0.0, 1.0]])
-    for cam in cams:
-        cam.project(points)
-        cam.project(np.asfortranarray(points, dtype=np.float32))
-        cam.bearing(np.array([[1.5, 1.5], [0.0, 2.0]]))

@@ -43,9 +43,9 @@ from numpy.polynomial import polynomial as npoly
 from ..errors import CalibError
 from ..io.atomic import write_bytes_atomic
 from ..io.input_files import MAX_CAMERA_BYTES, read_input_text
-from . import kernels
+from .kernels import MODEL_OCAM, ocam_bearing, ocam_project, _O_INVSTEP
 from .base import as_pixels, as_points_keep_float32, empty_projection, register_camera_model
-from .io import param_float, param_image_size, param_vector, require_keys
+from .params import param_float, param_image_size, param_vector, require_keys
 
 #: Rotation taking OCam-frame vectors to the OpenCV camera frame (det +1).
 R_CV_OCAM = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
@@ -188,10 +188,10 @@ class OCamCamera:
         rho32 = self.rho_from_angle(np.clip(_angle_from_s(s32), 0.0, self.max_angle_rad))
         coarse = np.column_stack([rho32, np.append(np.diff(rho32), 0.0)]).astype(np.float32)
         prm32 = self._prm.copy()
-        prm32[kernels._O_INVSTEP] = (m - 1) / self._s_max
+        prm32[_O_INVSTEP] = (m - 1) / self._s_max
         self._fast_tables = {np.dtype(np.float64): (self._prm, table), np.dtype(np.float32): (prm32, coarse)}
         #: ``(model code, parameters, table)`` for compiled callers (:func:`.kernels.project_model`).
-        self.compiled_projection = (kernels.MODEL_OCAM, self._prm, table)
+        self.compiled_projection = (MODEL_OCAM, self._prm, table)
 
     def rho_from_angle(self, alpha: np.ndarray) -> np.ndarray:
         """Radius (pixels) at which rays at ``alpha`` rad from the axis land.
@@ -244,7 +244,7 @@ class OCamCamera:
         P = as_points_keep_float32(points)
         pixels, valid = empty_projection(P)
         prm, table = self._fast_tables[P.dtype]
-        kernels.ocam_project(P, prm, table, pixels, valid)
+        ocam_project(P, prm, table, pixels, valid)
         return pixels, valid
 
     # -- F^-1: image -> camera ------------------------------------------------------
@@ -256,7 +256,7 @@ class OCamCamera:
         """
         uv = as_pixels(pixels)
         rays = np.empty((uv.shape[0], 3))
-        kernels.ocam_bearing(uv, self._prm, self._pol_c, rays)
+        ocam_bearing(uv, self._prm, self._pol_c, rays)
         return rays
 
     # -- files ----------------------------------------------------------------------

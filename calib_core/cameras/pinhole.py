@@ -27,9 +27,24 @@ from typing import Any, ClassVar
 import numpy as np
 
 from ..errors import CalibError
-from . import kernels
+from .kernels import (
+    MODEL_PINHOLE,
+    pinhole_bearing,
+    PINHOLE_PARAMS,
+    pinhole_project,
+    _P_CX,
+    _P_CY,
+    _P_FX,
+    _P_FY,
+    _P_H,
+    _P_K,
+    _P_RMAX,
+    _P_T,
+    _P_TILT,
+    _P_W,
+)
 from .base import as_pixels, as_points_keep_float32, empty_projection, register_camera_model
-from .io import param_image_size, param_matrix, param_vector, require_keys
+from .params import param_image_size, param_matrix, param_vector, require_keys
 
 #: Accepted lengths of an OpenCV distortion vector.
 OPENCV_DIST_LENGTHS = (0, 4, 5, 8, 12, 14)
@@ -120,16 +135,16 @@ class PinholeCamera:
         num, den, _, _ = _radial_parts(r * r, self._k)
         self._table_r, self._table_rd = r, np.ascontiguousarray(r * num / den)
         # The compiled kernels' parameter vectors (layout: calib_core.cameras.kernels).
-        prm = np.zeros(kernels.PINHOLE_PARAMS)
-        prm[[kernels._P_FX, kernels._P_FY, kernels._P_CX, kernels._P_CY]] = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
-        prm[kernels._P_RMAX], prm[kernels._P_W], prm[kernels._P_H] = self.r_max, self.width, self.height
-        prm[kernels._P_TILT] = float(self._k[12] != 0 or self._k[13] != 0)
-        prm[kernels._P_K : kernels._P_K + 14] = self._k
+        prm = np.zeros(PINHOLE_PARAMS)
+        prm[[_P_FX, _P_FY, _P_CX, _P_CY]] = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
+        prm[_P_RMAX], prm[_P_W], prm[_P_H] = self.r_max, self.width, self.height
+        prm[_P_TILT] = float(self._k[12] != 0 or self._k[13] != 0)
+        prm[_P_K : _P_K + 14] = self._k
         self._prm_project, self._prm_bearing = prm.copy(), prm.copy()
-        self._prm_project[kernels._P_T :] = self._tilt.ravel()
-        self._prm_bearing[kernels._P_T :] = self._tilt_inv.ravel()
+        self._prm_project[_P_T :] = self._tilt.ravel()
+        self._prm_bearing[_P_T :] = self._tilt_inv.ravel()
         #: ``(model code, parameters, table)`` for compiled callers (:func:`.kernels.project_model`).
-        self.compiled_projection = (kernels.MODEL_PINHOLE, self._prm_project, np.zeros((1, 2)))
+        self.compiled_projection = (MODEL_PINHOLE, self._prm_project, np.zeros((1, 2)))
 
     # -- F: camera -> image ---------------------------------------------------
     def project(self, points: Any) -> tuple[np.ndarray, np.ndarray]:
@@ -142,7 +157,7 @@ class PinholeCamera:
         """
         P = as_points_keep_float32(points)
         pixels, valid = empty_projection(P)
-        kernels.pinhole_project(P, self._prm_project, pixels, valid)
+        pinhole_project(P, self._prm_project, pixels, valid)
         return pixels, valid
 
     # -- F^-1: image -> camera ------------------------------------------------
@@ -155,7 +170,7 @@ class PinholeCamera:
         """
         uv = as_pixels(pixels)
         rays = np.empty((uv.shape[0], 3))
-        kernels.pinhole_bearing(uv, self._prm_bearing, self._table_r, self._table_rd, rays)
+        pinhole_bearing(uv, self._prm_bearing, self._table_r, self._table_rd, rays)
         return rays
 
     # -- YAML -------------------------------------------------------------------

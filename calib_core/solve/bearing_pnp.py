@@ -28,7 +28,7 @@ import itertools
 import numpy as np
 
 from ..arrays import angle_between_rad
-from . import kernels
+from .kernels import p3p_grunert as compiled_p3p_grunert
 from .checks import median
 from .rigid import rigid_fit
 
@@ -349,7 +349,7 @@ def p3p_grunert(points_lidar: np.ndarray, bearings_camera: np.ndarray) -> tuple[
     """
     P = np.ascontiguousarray(points_lidar, dtype=np.float64).reshape(-1, 3, 3)
     Bm = np.ascontiguousarray(bearings_camera, dtype=np.float64).reshape(-1, 3, 3)
-    return kernels.p3p_grunert(P, Bm)  # compiled: one implementation
+    return compiled_p3p_grunert(P, Bm)  # compiled: one implementation
 
 
 def _spread_order(bearings: np.ndarray, count: int) -> np.ndarray:

@@ -64,7 +64,7 @@ def calibrate(pairs: Sequence[Any], depth: Any, camera: Any, *, cost: str = "ang
         result's rows (and ``outliers``) to positions in ``pairs``.  ``outlier_ids`` are ids.
     """
     from ..pairs import resolve_pairs
-    from . import solve_extrinsics
+    from .extrinsics import solve_extrinsics
     from .bearing_pnp import angular_errors_rad
     from .whiten import cell_pick_covariance
 

@@ -30,7 +30,15 @@ from typing import Any, Callable, NamedTuple
 import numpy as np
 
 from ..errors import CalibError
-from . import kernels
+from .kernels import bearing_frames as compiled_bearing_frames
+from .kernels import (
+    covariance,
+    jacobian,
+    lm_refine,
+    normal_equations,
+    rpy_sigmas,
+    whitened_residuals,
+)
 
 __all__ = [
     "PARAMETER_NAMES",
@@ -148,7 +156,7 @@ def bearing_frames(bearings_camera: np.ndarray, E: np.ndarray | None = None) -> 
     """
     b = np.ascontiguousarray(bearings_camera, dtype=np.float64)
     if E is None:
-        return kernels.bearing_frames(b)
+        return compiled_bearing_frames(b)
     return np.concatenate([E, b[:, None, :]], axis=1)
 
 
@@ -165,7 +173,7 @@ def log_map_residuals(points_camera: np.ndarray, bearings_camera: np.ndarray, E:
     """
     P = np.ascontiguousarray(points_camera, dtype=np.float64)
     frames = bearing_frames(bearings_camera, E)
-    z, _ = kernels.whitened_residuals(np.eye(3), np.zeros(3), P, frames, _identity_W(len(P)))
+    z, _ = whitened_residuals(np.eye(3), np.zeros(3), P, frames, _identity_W(len(P)))
     return z
 
 
@@ -180,7 +188,7 @@ def angular_jacobian(
     x = np.asarray(x, dtype=np.float64)
     R, t = _pose(x, R0)
     P = np.ascontiguousarray(points_lidar, dtype=np.float64)
-    J = kernels.jacobian(R, np.ascontiguousarray(t), P, bearing_frames(bearings_camera, E), _identity_W(len(P)))
+    J = jacobian(R, np.ascontiguousarray(t), P, bearing_frames(bearings_camera, E), _identity_W(len(P)))
     # The kernel differentiates a left perturbation at R; exp(delta + d) R0 = exp(J_l d) exp(delta) R0.
     J[:, :3] = J[:, :3] @ _left_jacobian_so3(x[:3])
     return J
@@ -341,7 +349,7 @@ def refine_angular(
     P = np.ascontiguousarray(points_lidar, dtype=np.float64)
     W = _identity_W(len(P)) if W is None else np.ascontiguousarray(W, dtype=np.float64)
     T0 = np.asarray(T_initial, dtype=np.float64)
-    R, t, iterations, status = kernels.lm_refine(
+    R, t, iterations, status = lm_refine(
         np.ascontiguousarray(T0[:3, :3]), np.ascontiguousarray(T0[:3, 3]), P, frames, W, LM_MAX_ITER
     )
     if status == -2 or not (np.all(np.isfinite(R)) and np.all(np.isfinite(t))):
@@ -397,7 +405,7 @@ class PoseUncertainty(NamedTuple):
 
 def uncertainty_from_covariance(cov: np.ndarray, JtJ: np.ndarray, R: np.ndarray) -> PoseUncertainty:
     """Sigmas of ``t`` and of roll/pitch/yaw from the 6x6 covariance of ``(delta, t)`` at rotation ``R``."""
-    sigma_t, sigma_rpy = kernels.rpy_sigmas(np.ascontiguousarray(R, dtype=np.float64), cov)
+    sigma_t, sigma_rpy = rpy_sigmas(np.ascontiguousarray(R, dtype=np.float64), cov)
     return PoseUncertainty(cov, sigma_t, sigma_rpy, JtJ)
 
 
@@ -414,7 +422,7 @@ def covariance_from_normal(JtJ: np.ndarray, sigma: float, R: np.ndarray) -> Pose
         Estimated rotation (for the roll/pitch/yaw Jacobian).
     """
     JtJ = np.ascontiguousarray(JtJ, dtype=np.float64)
-    cov, _ = kernels.covariance(JtJ, float(sigma))
+    cov, _ = covariance(JtJ, float(sigma))
     return uncertainty_from_covariance(cov, JtJ, np.asarray(R, dtype=np.float64))
 
 
@@ -441,5 +449,5 @@ def pose_covariance(T_camera_lidar: np.ndarray, points_lidar: np.ndarray, noise_
     bearings = points_camera / np.linalg.norm(points_camera, axis=1, keepdims=True)
     frames = bearing_frames(bearings)
     R, t = np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3])
-    H, _, _ = kernels.normal_equations(R, t, points, frames, _identity_W(len(points)))
+    H, _, _ = normal_equations(R, t, points, frames, _identity_W(len(points)))
     return covariance_from_normal(H, float(noise_rad), T[:3, :3])

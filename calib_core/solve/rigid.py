@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import kernels
+from .kernels import rigid_fit_batch
 
 
 def rigid_fit(points_src: np.ndarray, points_dst: np.ndarray) -> np.ndarray:
@@ -44,7 +44,7 @@ def rigid_fit(points_src: np.ndarray, points_dst: np.ndarray) -> np.ndarray:
     dst = np.asarray(points_dst, dtype=np.float64)
     lead = src.shape[:-2]
     n = src.shape[-2]
-    T = kernels.rigid_fit_batch(
+    T = rigid_fit_batch(
         np.ascontiguousarray(src.reshape(-1, n, 3)), np.ascontiguousarray(dst.reshape(-1, n, 3))
     )
     return T.reshape(lead + (4, 4))

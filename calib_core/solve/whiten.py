@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import CalibError
-from . import kernels
+from .kernels import probe_jacobians, tangent_probes
 
 __all__ = ["tangent_to_pixel", "whitening", "check_pixel_sigma", "cell_pick_covariance",
            "laser_tangent_covariance", "PICK_CELL_SIGMA", "PICK_RANGE_SIGMA_M"]
@@ -155,9 +155,9 @@ def tangent_to_pixel(camera: Any, frames: np.ndarray) -> np.ndarray:
     ok : (N,) bool ndarray
         ``A`` is finite and invertible.
     """
-    probe = kernels.tangent_probes(np.ascontiguousarray(frames, dtype=np.float64), STEP_RAD)
+    probe = tangent_probes(np.ascontiguousarray(frames, dtype=np.float64), STEP_RAD)
     uv = np.ascontiguousarray(camera.project(probe)[0], dtype=np.float64)
-    return kernels.probe_jacobians(uv, STEP_RAD)
+    return probe_jacobians(uv, STEP_RAD)
 
 
 def whitening(

@@ -1,0 +1,591 @@
+"""The solve itself: :func:`solve_extrinsics` (the pipeline of :mod:`calib_core.solve`) and its warm-up."""
+
+from __future__ import annotations
+
+import functools
+import math
+from typing import Any
+
+import numpy as np
+
+from ..errors import CalibError
+from .bearing_pnp import initial_pose
+from .checks import (
+    COLLINEAR_RATIO,
+    CONDITION_WARNING,
+    CONE_WARNING_DEG,
+    MIN_PAIRS,
+    SAME_BEARING_RAD,
+    SAME_POINT_M,
+    UNIT_TOLERANCE,
+    conditioning_warning,
+    validate_initial_T,
+    validate_pairs,
+    validate_pixels,
+)
+from .fused import (
+    I_COND,
+    I_ITER,
+    I_MEAN_PX,
+    I_N_OFF,
+    I_NOISE_SCALE,
+    I_ROT_SIGMA,
+    I_STD_PX,
+    INFO_SIZE,
+    OK,
+    solve_fused,
+)
+from .kernels import bearing_frames, covariance, dlt_pose, finish, pose_core, rotation_sigma_deg, whitened_residuals
+from .quality import Quality, geometry_reasons, orientation_notes
+from .refine import (
+    LM_MAX_ITER,
+    uncertainty_from_covariance,
+    pixel_jacobian,
+    pixel_residuals,
+    pose_covariance,
+    refine_angular,
+    refine_pose,
+)
+from .result import CalibrationResult
+from .robust import inlier_k, robust_fit, robust_scale
+from .whiten import STEP_RAD, check_pixel_sigma, laser_tangent_covariance, whitening
+
+__all__ = ["COSTS", "NOISY_FACTOR", "PRIOR_PX", "sigma_coverage", "solve_extrinsics", "student_t_factor", "warm_up"]
+
+
+#: Costs: "angular" = eq. 7 whitened by the camera (default), "geodesic" = eq. 7 as printed
+#: (every ray weighed alike), "pixel" = eq. 6.
+COSTS = ("angular", "geodesic", "pixel")
+#: Floor of the noise scale (whitened units: px, sigmas, or radians without a camera).
+_MIN_SCALE = {"px": 1e-3, "sigma": 1e-3, "noise": 1e-3, "rad": 1e-6}
+#: Expected sigma per axis of a pair's pixel error (1 px click + the laser pick), px or sigmas.
+PRIOR_PX = 1.5
+#: Residual scale above this many times :data:`PRIOR_PX` gives a warning.
+NOISY_FACTOR = 3.0
+
+
+def _mean_std(values: np.ndarray) -> tuple[float, float]:
+    finite = values[np.isfinite(values)]
+    if finite.size == 0:
+        return float("nan"), float("nan")
+    # sum and dot instead of .mean() / .std(): the same figures, a quarter of the call overhead.
+    mean = float(finite.sum()) / finite.size
+    dev = finite - mean
+    return mean, math.sqrt(float(dev @ dev) / finite.size)
+
+
+def _pixel_errors(camera: Any, T: np.ndarray, points_lidar: np.ndarray, pixels: np.ndarray) -> np.ndarray:
+    projected, valid = camera.project(points_lidar @ T[:3, :3].T + T[:3, 3])
+    diff = np.asarray(projected, dtype=np.float64) - pixels
+    err = np.hypot(diff[:, 0], diff[:, 1])
+    return np.where(np.asarray(valid, dtype=bool) & np.isfinite(err), err, np.nan)
+
+
+@functools.lru_cache(maxsize=256)
+def student_t_factor(dof: int) -> float:
+    """Half-width of the 68.27 % Student-t interval with ``dof`` degrees of freedom, in sigmas.
+
+    ``t_ppf(Phi(1), dof)``: the factor that makes +-1 reported sigma cover
+    68.27 % when sigma is estimated from ``dof`` residual degrees of freedom.
+    """
+    from scipy.special import stdtrit  # (scipy.stats would add 1.4 s to the first solve's imports)
+
+    return float(stdtrit(dof, 0.5 * (1.0 + math.erf(1.0 / math.sqrt(2.0)))))
+
+
+def sigma_coverage(n_pairs: int) -> tuple[float, float]:
+    """Shares of solves whose error lies within 1 and 2 reported sigma, when the noise is estimated.
+
+    The reported sigma is widened by :func:`student_t_factor` of ``2 n - 6`` degrees of freedom, so
+    +-1 sigma covers 68.27 %; +-2 such sigmas cover ``P(|t| < 2 factor)``, less than the normal
+    95.45 % because the t distribution's tails are heavier (94.30 % at 10 pairs, 92.8 % at 6).
+    With known noise (``noise_rad``) the shares are the normal ones.
+    """
+    from scipy.special import stdtr
+
+    dof = 2 * int(n_pairs) - 6
+    f = student_t_factor(dof)
+    return float(2 * stdtr(dof, f) - 1), float(2 * stdtr(dof, 2 * f) - 1)
+
+
+def _check_pair_ids(pair_ids: object, n: int) -> list[int]:
+    if pair_ids is None:
+        return list(range(n))
+    ids = np.asarray(pair_ids)
+    if ids.shape != (n,) or not np.issubdtype(ids.dtype, np.integer):
+        raise CalibError(f"pair_ids must be {n} whole numbers, one per pair, got {ids.dtype} of shape {ids.shape}")
+    if len(set(ids.tolist())) != n:
+        raise CalibError("pair_ids must be unique")
+    return [int(i) for i in ids]
+
+
+def _ids_text(ids: list[int]) -> str:
+    shown = ", ".join(str(i) for i in ids[:8])
+    return shown + (f" and {len(ids) - 8} more" if len(ids) > 8 else "")
+
+
+def _initial(points: np.ndarray, bearings: np.ndarray) -> tuple[np.ndarray, str]:
+    """Linear DLT on the bearings when it applies (n >= 6, not coplanar), else Quan & Lan / P3P."""
+    R, t, ok = dlt_pose(points, bearings)
+    if ok:  # (finite by construction: ok needs a proper SVD and points in front)
+        T = np.eye(4)
+        T[:3, :3], T[:3, 3] = R, t
+        return T, "dlt"
+    T, method, init_cost = initial_pose(points, bearings)
+    if not np.isfinite(init_cost):
+        raise CalibError("no initial pose found from these pairs (all closed-form solutions failed)")
+    return T, method
+
+
+def solve_extrinsics(
+    points_lidar: np.ndarray,
+    bearings_camera: np.ndarray,
+    *,
+    camera: Any = None,
+    pixels: np.ndarray | None = None,
+    cost: str = "angular",
+    initial_T_camera_lidar: np.ndarray | None = None,
+    noise_rad: float | None = None,
+    pixel_sigma: np.ndarray | None = None,
+    laser_cov_m2: np.ndarray | None = None,
+    pair_ids: np.ndarray | list[int] | None = None,
+    robust: bool = True,
+) -> CalibrationResult:
+    """Estimate ``T_camera_lidar`` from n >= 4 laser-point / bearing pairs.
+
+    Parameters
+    ----------
+    points_lidar : (N, 3) array_like
+        Laser points in the lidar frame, metres.
+    bearings_camera : (N, 3) array_like
+        Unit bearings of the clicked pixels in the OpenCV camera frame; any
+        direction on the sphere (also more than 90 deg off axis).
+    camera : CameraModel, optional
+        Whitens the angular residuals, and gives pixel residuals; needed for
+        ``cost="pixel"``.
+    pixels : (N, 2) array_like, optional
+        Clicked ``(u, v)`` pixels.  With a camera but without pixels, the
+        pixels of the bearings (``camera.project(bearings)``) are used.
+    cost : {"angular", "geodesic", "pixel"}
+        ``"angular"``: paper eq. 7 with each residual whitened by the
+        camera's pixel-to-angle Jacobian (default; without a camera it is eq.
+        7 as printed).  ``"geodesic"``: eq. 7 as printed, every ray weighed
+        alike.  ``"pixel"``: reprojection error, eq. 6, for comparisons; it
+        starts from the angular optimum.
+    initial_T_camera_lidar : (4, 4) array_like, optional
+        Start the refinement here instead of the closed-form initial pose.
+    noise_rad : float, optional
+        Known click noise (std of the bearing error along each tangent
+        direction, radians).  The residuals are then divided by it (no camera
+        whitening) and the covariance is ``(J^T J)^-1`` (the Cramer-Rao
+        bound); otherwise the noise is estimated from the residuals.
+    pixel_sigma : (N,) array_like, optional
+        1-sigma of each click in pixels (a pair's ``precision_px``): weights
+        the residuals (``1 / pixel_sigma``) and sets the expected noise for
+        the outlier test.  None: all pairs alike, 1 px.  Without a camera it
+        only sets relative weights.
+    laser_cov_m2 : (N, 3, 3) array_like, optional
+        Covariance of each laser point, metres^2, lidar frame (e.g. a
+        whole-cell pick, :func:`calib_core.solve.whiten.cell_pick_covariance`).
+        Its effect on the bearing, at the current pose, is added to the click
+        noise in the whitening.  Needs a camera; None: laser points exact.
+    pair_ids : (N,) array_like of int, optional
+        Ids of the pairs, used in messages and in ``outlier_ids``; default
+        their positions.  ``outliers`` always holds positions.
+    robust : bool
+        Find and leave out gross outliers (default).  False fits all pairs.
+
+    Returns
+    -------
+    CalibrationResult
+        Always check ``result.quality.status``: ``"unreliable"`` means the
+        pose must not be used (the reasons say why).
+
+    Raises
+    ------
+    CalibError
+        Degenerate or malformed input (see
+        :func:`calib_core.solve.checks.validate_pairs`), a missing camera or
+        pixels for ``cost="pixel"``, or a failed refinement (with the reason).
+    """
+    if cost not in COSTS:
+        raise CalibError(f"unknown cost {cost!r}; use one of {', '.join(COSTS)}")
+    if cost != "pixel" and laser_cov_m2 is None:
+        result = _solve_fast(points_lidar, bearings_camera, camera, pixels, cost, initial_T_camera_lidar, noise_rad,
+                             pixel_sigma, pair_ids, robust)
+        if result is not None:
+            return result
+    return _solve_general(points_lidar, bearings_camera, camera=camera, pixels=pixels, cost=cost,
+                          initial_T_camera_lidar=initial_T_camera_lidar, noise_rad=noise_rad,
+                          pixel_sigma=pixel_sigma, laser_cov_m2=laser_cov_m2, pair_ids=pair_ids, robust=robust)
+
+
+_NO_PIXELS = np.zeros((0, 2))
+_NO_SIGMA = np.zeros(0)
+_NO_T = np.eye(4)
+_NO_TABLE = np.zeros((1, 2))
+_NO_CHECKS = np.zeros(0)
+_NO_CHECKS.flags.writeable = False  # shared by results: never written (calibrate() assigns new arrays)
+
+
+def _as_pairs_array(a: object, dim: int) -> np.ndarray | None:
+    """A float64 C ``(N, dim)`` array, or None (the general path then names the problem)."""
+    try:
+        a = np.asarray(a, dtype=np.float64)
+    except (TypeError, ValueError):
+        return None
+    if a.ndim != 2 or a.shape[1] != dim:
+        return None
+    return a if a.flags.c_contiguous else np.ascontiguousarray(a)
+
+
+def _solve_fast(points_lidar, bearings_camera, camera, pixels, cost, initial_T, noise_rad, pixel_sigma, pair_ids,
+                robust) -> CalibrationResult | None:
+    """The common case in one compiled call (:func:`.fused.solve_fused`); None when the general path must run.
+
+    Same figures, warnings and verdict as :func:`_solve_general` for the cases it accepts: no laser
+    covariance, an angular cost, a camera with a compiled projection (or none), no outlier beyond the
+    threshold, a DLT start (or a given one), no narrow cone of bearings.
+    """
+    spec = None
+    if camera is not None:
+        spec = getattr(camera, "compiled_projection", None)
+        if spec is None:
+            return None
+    points = _as_pairs_array(points_lidar, 3)
+    bearings = _as_pairs_array(bearings_camera, 3)
+    if points is None or bearings is None or len(points) != len(bearings) or len(points) < MIN_PAIRS:
+        return None
+    n = len(points)
+    if pixels is not None:
+        pixels = _as_pairs_array(pixels, 2)
+        if pixels is None or len(pixels) != n:
+            return None
+    ids = None if pair_ids is None else _check_pair_ids(pair_ids, n)
+    sigmas = check_pixel_sigma(pixel_sigma, n)
+    if noise_rad is not None and not (np.isfinite(noise_rad) and noise_rad > 0):
+        raise CalibError(f"noise_rad must be a positive number, got {noise_rad!r}")
+    T_given = None if initial_T is None else validate_initial_T(initial_T)
+    whiten_cam = cost != "geodesic" and camera is not None
+    if noise_rad is not None:
+        unit = "noise"
+    elif whiten_cam:
+        unit = "px" if sigmas is None else "sigma"
+    else:
+        unit = "rad"
+    prior = {"px": PRIOR_PX, "sigma": PRIOR_PX, "noise": 1.0}.get(unit)
+    dof = 2 * n - 6
+    model, prm, table = spec if spec is not None else (-1, _NO_SIGMA, _NO_TABLE)
+    T, T0, cov, H = np.empty((4, 4)), np.empty((4, 4)), np.empty((6, 6)), np.empty((6, 6))
+    stats, residual_deg, residual_px = np.empty(7), np.empty(n), np.empty(n)
+    sigma_t, sigma_rpy, info = np.empty(3), np.empty(3), np.empty(INFO_SIZE)
+    inliers = np.empty(n, dtype=bool)
+    status = solve_fused(
+        points, bearings, _NO_PIXELS if pixels is None else pixels, pixels is not None, model, prm, table,
+        whiten_cam, _NO_SIGMA if sigmas is None else sigmas, sigmas is not None,
+        0.0 if noise_rad is None else float(noise_rad), _NO_T if T_given is None else T_given, T_given is not None,
+        bool(robust), inlier_k(n), -1.0 if prior is None else prior, _MIN_SCALE[unit],
+        student_t_factor(dof) if dof > 0 else 1.0, LM_MAX_ITER, SAME_POINT_M, SAME_BEARING_RAD, UNIT_TOLERANCE,
+        COLLINEAR_RATIO, _CONE_COS, STEP_RAD, T, T0, cov, H, stats, residual_deg, residual_px, sigma_t, sigma_rpy,
+        info, inliers,
+    )
+    if status != OK:
+        return None
+    if ids is None:
+        ids = range(n)
+    warnings: list[str] = []
+    n_off = int(info[I_N_OFF])
+    if camera is not None and n_off:
+        off = np.flatnonzero(~np.isfinite(residual_px))
+        warnings.append(f"pairs {_ids_text([ids[i] for i in off])} do not reproject into the image; "
+                        "their pixel error is NaN")
+    condition = info[I_COND]
+    if not condition <= CONDITION_WARNING:
+        weak = conditioning_warning(H)
+        if weak:
+            warnings.append(weak)
+    bad_geo, weak_geo = geometry_reasons(stats[3:6], n, info[I_ROT_SIGMA], sigma_t, float(stats[2]))
+    warnings += weak_geo
+    noise_scale = float(info[I_NOISE_SCALE])
+    if unit == "px" and noise_scale > NOISY_FACTOR * prior:
+        warnings.append(_noisy_warning(noise_scale))
+    quality = Quality.from_reasons(bad_geo, warnings)
+    return CalibrationResult(
+        T_camera_lidar=T,
+        initial_T_camera_lidar=T0 if T_given is None else T_given,
+        covariance_6x6=cov,
+        sigma_translation_m=sigma_t,
+        sigma_rpy_deg=sigma_rpy,
+        residual_deg=residual_deg,
+        residual_px=residual_px,
+        mean_px=float(info[I_MEAN_PX]),
+        std_px=float(info[I_STD_PX]),
+        mean_deg=math.degrees(stats[0]),
+        std_deg=math.degrees(stats[1]),
+        n_pairs=n,
+        warnings=list(quality.reasons) + _gimbal_notes(T),
+        outliers=[],
+        outlier_ids=[],
+        inliers=inliers,
+        quality=quality,
+        iterations=int(info[I_ITER]),
+        cost_name=cost,
+        initial_method="given" if T_given is not None else "dlt",
+        noise_scale=noise_scale,
+        residual_unit=unit,
+        hypotheses=0,
+        check_residual_px=_NO_CHECKS,
+        check_residual_deg=_NO_CHECKS,
+    )
+
+
+def _noisy_warning(noise_scale: float) -> str:
+    return (
+        f"the pairs fit to {noise_scale:.1f} px (1 sigma per axis), over {NOISY_FACTOR:g}x the {PRIOR_PX:g} px "
+        "expected of clicks and laser picks: check the camera model and the picks"
+    )
+
+
+def _gimbal_notes(T: np.ndarray) -> list[str]:
+    """Notes about the output's form, not the calibration's quality (:func:`.quality.orientation_notes`)."""
+    return orientation_notes(T[:3, :3])
+
+
+_CONE_COS = math.cos(math.radians(CONE_WARNING_DEG))
+
+
+def _solve_general(
+    points_lidar: np.ndarray,
+    bearings_camera: np.ndarray,
+    *,
+    camera: Any = None,
+    pixels: np.ndarray | None = None,
+    cost: str = "angular",
+    initial_T_camera_lidar: np.ndarray | None = None,
+    noise_rad: float | None = None,
+    pixel_sigma: np.ndarray | None = None,
+    laser_cov_m2: np.ndarray | None = None,
+    pair_ids: np.ndarray | list[int] | None = None,
+    robust: bool = True,
+) -> CalibrationResult:
+    """Every case of :func:`solve_extrinsics`, step by step (input errors, robust search, pixel cost, laser term)."""
+    points, bearings, warnings = validate_pairs(points_lidar, bearings_camera)
+    n = len(points)
+    ids = _check_pair_ids(pair_ids, n)
+    sigmas = check_pixel_sigma(pixel_sigma, n)
+    laser_cov = None
+    if laser_cov_m2 is not None:
+        laser_cov = np.asarray(laser_cov_m2, dtype=np.float64)
+        if laser_cov.shape != (n, 3, 3) or not np.all(np.isfinite(laser_cov)):
+            raise CalibError(f"laser_cov_m2 must be {n} finite 3x3 covariances, got shape {laser_cov.shape}")
+    if noise_rad is not None and not (np.isfinite(noise_rad) and noise_rad > 0):
+        raise CalibError(f"noise_rad must be a positive number, got {noise_rad!r}")
+    if pixels is not None:
+        pixels = validate_pixels(pixels, n)
+    if cost == "pixel":
+        if camera is None or pixels is None:
+            raise CalibError("cost='pixel' needs a camera and the clicked pixels")
+
+    # 1. Whitening, computed once per solve (and once more at the pose for the laser term).
+    frames = bearing_frames(bearings)
+    whiten_camera = camera if cost != "geodesic" else None
+
+    def whiten(T_at: np.ndarray | None) -> tuple[np.ndarray, str]:
+        lt = None
+        if laser_cov is not None and T_at is not None and whiten_camera is not None:
+            lt = laser_tangent_covariance(T_at, points, frames, laser_cov)
+        return whitening(n, camera=whiten_camera, frames=frames, pixel_sigma=sigmas, noise_rad=noise_rad,
+                         laser_tangent_cov=lt)
+
+    W, unit = whiten(None)
+    # Expected scale of the whitened residuals, for the outlier test: the known noise, or the
+    # click noise plus the laser pick (whole-cell picks add about 1 px; measured 0.76 px on the sample).
+    prior = {"px": PRIOR_PX, "sigma": PRIOR_PX, "noise": 1.0}.get(unit)
+    floor = _MIN_SCALE[unit]
+
+    # 2. Initial pose and LM on all pairs.
+    if initial_T_camera_lidar is not None:
+        T_init, method = validate_initial_T(initial_T_camera_lidar), "given"
+    else:
+        T_init, method = _initial(points, bearings)
+    try:
+        T, iterations = refine_angular(T_init, points, frames, W)
+    except CalibError:
+        if not robust:
+            raise
+        T, iterations = T_init, 0
+    if laser_cov is not None and whiten_camera is not None:
+        # The laser term depends on the pose: whiten at the first optimum and refine once more.
+        W, unit = whiten(T)
+        try:
+            T, more = refine_angular(T, points, frames, W)
+            iterations += more
+        except CalibError:
+            if not robust:
+                raise
+    z, _ = whitened_residuals(T[:3, :3].copy(), T[:3, 3].copy(), points, frames, W)
+    r2 = z[:, 0] ** 2 + z[:, 1] ** 2
+
+    # 3. Outliers: only searched for when some residual is far above the noise scale.
+    # With a prior (expected click noise), any pair beyond it is suspect; without one, the
+    # median residual sets the scale.  A noisier-than-expected set just takes the robust path.
+    inliers = np.ones(n, dtype=bool)
+    hypotheses = 0
+    scale_ref = max(prior, floor) if prior is not None else max(robust_scale(r2), floor)
+    if robust and r2.max() >= (inlier_k(n) * scale_ref) ** 2:
+        fit = robust_fit(points, bearings, frames, W, prior, T[:3, :3], T[:3, 3], min_scale=floor)
+        hypotheses = fit.hypotheses
+        iterations += fit.iterations
+        if fit.inliers.sum() >= 3:
+            inliers = fit.inliers
+            T = np.eye(4)
+            T[:3, :3], T[:3, 3] = fit.R, fit.t
+        if laser_cov is not None and whiten_camera is not None:
+            # The laser term depends on the pose: whiten at the robust pose and refine once more.
+            W, unit = whiten(T)
+            keep = np.flatnonzero(inliers)
+            if keep.size >= 3:
+                T, more = refine_angular(T, points[keep], frames[keep], W[keep])
+                iterations += more
+    idx = np.flatnonzero(inliers)
+    n_in = idx.size
+    if cost == "pixel" and n_in >= 3:
+        bad = np.nonzero(~np.all(np.isfinite(pixels[idx]), axis=1))[0]
+        if bad.size:
+            raise CalibError(f"cost='pixel': pairs {bad.tolist()} have no finite pixel")
+        T, more = refine_pose(
+            T, points[idx], bearings[idx], cost="pixel", camera=camera, pixels=pixels[idx],
+            pixel_sigma=None if sigmas is None else sigmas[idx],
+        )
+        iterations += more
+
+    # 4. Covariance on the inliers: Student-t sigma from the residuals, or the known noise.
+    R_hat, t_hat = T[:3, :3].copy(), T[:3, 3].copy()
+    dof = 2 * n_in - 6
+    z, theta, H, ssr, stats = finish(R_hat, t_hat, points, frames, W, inliers)
+    if cost == "pixel":
+        x_opt = np.concatenate([np.zeros(3), t_hat])
+        inv_s = 1.0 if sigmas is None else np.repeat(1.0 / sigmas[idx], 2)[:, None]
+        J = pixel_jacobian(x_opt, R_hat, points[idx], pixels[idx], camera) * inv_s
+        rp = pixel_residuals(x_opt, R_hat, points[idx], pixels[idx], camera).ravel() * np.ravel(inv_s)
+        J = np.where(np.isfinite(J), J, 0.0)
+        H = J.T @ J
+        ssr = float(np.nansum(rp**2))
+        if noise_rad is not None:
+            warnings.append("noise_rad is ignored with cost='pixel'; sigma comes from the pixel residuals")
+    noise_scale = math.sqrt(ssr / dof) if dof > 0 else float("nan")
+    if noise_rad is not None and cost != "pixel":
+        sigma = 1.0  # residuals are in units of the known noise
+    elif dof > 0:
+        sigma = noise_scale * student_t_factor(dof)
+    else:
+        sigma = float(prior) if prior is not None else float("inf")  # no redundancy: the expected noise
+    cov, condition = covariance(H, sigma)
+    uncertainty = uncertainty_from_covariance(cov, H, R_hat)
+
+    # 5. Report.
+    residual_deg = np.degrees(theta)
+    if camera is not None:
+        if pixels is None:
+            projected, valid = camera.project(bearings)
+            pixels = np.where(np.asarray(valid, dtype=bool)[:, None], np.asarray(projected, dtype=np.float64), np.nan)
+        residual_px = _pixel_errors(camera, T, points, pixels)
+        off = np.flatnonzero(~np.isfinite(residual_px[idx]))
+        if off.size:
+            warnings.append(
+                f"pairs {_ids_text([ids[idx[i]] for i in off])} do not reproject into the image; their pixel error is NaN"
+            )
+    else:
+        residual_px = np.full(n, np.nan)
+    mean_deg, std_deg = math.degrees(stats[0]), math.degrees(stats[1])
+    mean_px, std_px = _mean_std(residual_px[idx])
+    outliers = np.flatnonzero(~inliers).tolist()
+    outlier_ids = [ids[i] for i in outliers]
+
+    unreliable: list[str] = []
+    if outliers:
+        if n_in < MIN_PAIRS:
+            unreliable.append(f"only {n_in} of {n} pairs agree on one pose; at least {MIN_PAIRS} are needed")
+        elif 2 * n_in <= n:
+            unreliable.append(
+                f"only {n_in} of {n} pairs agree on one pose: with half of the pairs or more left out, "
+                "no consensus can be trusted"
+            )
+        worst = sorted(outliers, key=lambda i: -residual_deg[i])[:5]
+        sizes = ", ".join(
+            f"{residual_px[i]:.1f} px" if np.isfinite(residual_px[i]) else f"{residual_deg[i]:.2f} deg" for i in worst
+        )
+        warnings.insert(
+            0,
+            f"pairs {_ids_text(outlier_ids)} left out as outliers (largest errors {sizes}); check these clicks",
+        )
+    if not condition <= CONDITION_WARNING:
+        weak = conditioning_warning(H)
+        if weak:
+            warnings.append(weak)
+    bad_geo, weak_geo = geometry_reasons(
+        stats[3:6], n_in, rotation_sigma_deg(uncertainty.covariance_6x6), uncertainty.sigma_translation_m,
+        float(stats[2]),
+    )
+    unreliable += bad_geo
+    warnings += weak_geo
+    if unit == "px" and np.isfinite(noise_scale) and noise_scale > NOISY_FACTOR * prior:
+        warnings.append(_noisy_warning(noise_scale))
+    notes = _gimbal_notes(T)
+    quality = Quality.from_reasons(unreliable, warnings)
+    return CalibrationResult(
+        T_camera_lidar=T,
+        initial_T_camera_lidar=T_init,
+        covariance_6x6=uncertainty.covariance_6x6,
+        sigma_translation_m=uncertainty.sigma_translation_m,
+        sigma_rpy_deg=uncertainty.sigma_rpy_deg,
+        residual_deg=residual_deg,
+        residual_px=residual_px,
+        mean_px=mean_px,
+        std_px=std_px,
+        mean_deg=mean_deg,
+        std_deg=std_deg,
+        n_pairs=n,
+        warnings=list(quality.reasons) + notes,
+        outliers=outliers,
+        outlier_ids=outlier_ids,
+        inliers=inliers,
+        quality=quality,
+        iterations=iterations,
+        cost_name=cost,
+        initial_method=method,
+        noise_scale=noise_scale,
+        residual_unit=unit,
+        hypotheses=hypotheses,
+    )
+
+
+def warm_up() -> float:
+    """Compile (or load from numba's cache) every solve kernel; returns the seconds it took.
+
+    The first call of a numba kernel compiles it (seconds) or loads it from
+    the on-disk cache (``cache=True``, milliseconds); call this once in a
+    background thread at start-up so that the first click never waits.
+    """
+    import time
+
+    t0 = time.perf_counter()
+    rng = np.random.default_rng(0)
+    d = rng.normal(size=(8, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    points = d * rng.uniform(2, 8, (8, 1))
+    bearings = d.copy()
+    bearings[0] = -bearings[0]  # one outlier: runs the robust path too
+    solve_extrinsics(points, bearings)  # DLT start, LM, robust search (P3P), report
+    solve_extrinsics(points[1:6], d[1:6])  # 5 pairs: Quan & Lan start (rigid fit)
+    from ..cameras.pinhole import PinholeCamera  # whitening through a camera
+
+    cam = PinholeCamera(np.array([[300.0, 0, 320], [0, 300, 240], [0, 0, 1]]), np.zeros(5), 640, 480)
+    front = d.copy()
+    front[:, 2] = np.abs(front[:, 2]) + 1.0
+    front /= np.linalg.norm(front, axis=1, keepdims=True)
+    solve_extrinsics(front * 4.0, front, camera=cam, laser_cov_m2=np.broadcast_to(1e-4 * np.eye(3), (8, 3, 3)))
+    pose_covariance(np.eye(4), points, 1e-3)
+    pose_core(points[1:], d[1:], np.broadcast_to(np.eye(2), (7, 2, 2)).copy(), 5)
+    return time.perf_counter() - t0
+
