@@ -118,8 +118,11 @@ class CalibrationApp:
         # the session YAML in the background and by stop().  The view settings live in ``state.view`` only.
         self._stopped = False
         # The BA panes show the columns the camera sees (under the rough pose, else the "+x" preset) by default.
+        # The render is shaded by intensity where the scan has it: in the by-eye trials range shading hid the
+        # doors, bins and boxes that intensity shows, and every clicker switched (docs/by_eye.md).
         default_view = ViewSettings(up_axis="+y" if self.depth.meta.get("model") == "rotating_2d" else "+z",
-                                    ba_window_mode="camera")
+                                    ba_window_mode="camera",
+                                    render_mode="intensity" if "Intensity" in sd.laser_images else "range")
         self.state = AnnotationState(self.depth.valid, (self.camera.width, self.camera.height), self.session_path,
                                      on_save_error=self._on_save_error, default_view=default_view)
         self.ui_lock = UiLock()  # public: held while the scene and the panels are redrawn

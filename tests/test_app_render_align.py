@@ -70,6 +70,8 @@ def test_the_render_pane_a_click_on_it_and_the_ba_columns_before_any_pair(tmp_pa
         # The pane: the camera image's size and framing, right below it, same size on the page.
         shown = d.render_shown
         assert shown.source == "default" and np.array_equal(shown.T_camera_lidar, preset_T("+x"))
+        # KITTI's .bin has reflectance: the render starts shaded by it (the sample has none: range, below).
+        assert shown.mode == "intensity" and app.state.view.render_mode == "intensity"
         raw, slot = app.slots["raw"], app.slots[RENDER_KEY]
         assert (slot.width_px, slot.height_px) == (W, H) == (raw.width_px, raw.height_px)
         assert (slot.render_width, slot.render_height) == (raw.render_width, raw.render_height)
@@ -233,6 +235,7 @@ def test_an_imported_extrinsic_is_the_start_the_rough_pose_is_refused_once_solve
     try:
         np.testing.assert_allclose(d.rough_pose, truth)
         assert d.wait_render() and d.render_shown.source == "rough"
+        assert d.render_shown.mode == "range"  # the sample's scan has no intensity field
         # The pose line names the nearest preset and the camera centre (-R^T t) in the lidar frame.
         turned = {k: rotation_angle_deg(truth[:3, :3], preset_T(k)[:3, :3]) for k in ("+x", "-y", "+y", "-x")}
         nearest = min(turned, key=turned.get)
