@@ -118,6 +118,8 @@ def check_screen(props, depth, camera, T, corners, screen: ProposalScreen) -> No
         assert hi[0] <= camera.width - 1 - screen.border_margin_px and hi[1] <= camera.height - 1 - screen.border_margin_px
         if p.replaces is not None:
             continue
+        # Not on the scan's first or last rows: there the scan ends, not the object.
+        assert screen.scan_edge_rows <= p.laser_rc[0] < depth.shape[0] - screen.scan_edge_rows
         assert np.linalg.norm(p.laser_xyz) <= screen.max_range_m
         # Resolution: pose from the pairs (the session's), footprint computed by projecting the neighbours.
         assert footprint_px(depth, camera, T, p.laser_rc) <= 1.05 * screen.max_footprint_px

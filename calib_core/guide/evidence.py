@@ -36,6 +36,11 @@ Image side
     min_corner_ratio``) and ``min_corner_dominance`` times stronger than the
     second strongest.
 
+    *Inside the scan.*  Cells in the first or last ``scan_edge_rows`` rows
+    of the depth matrix are left out: the scan's top or bottom beam cannot show
+    where an object ends (it may go on past the beam), so a "corner" there is
+    the edge of the scan, not of the scene (a by-eye user met one at row 1).
+
 Both
     The predicted pixel's 3-sigma box keeps ``border_margin_px`` from the
     image border (and from the rim of a fisheye's image circle), and its
@@ -117,6 +122,8 @@ class ProposalScreen:
     min_search_px : float
         The corner search covers at least this radius (px) around the prediction, so a tiny
         ellipse cannot hide clutter just next to it.
+    scan_edge_rows : int
+        Cells in this many first and last rows of the depth matrix are not proposed.
     """
 
     max_ellipse_px: float = DEFAULT_MAX_ELLIPSE_PX
@@ -133,6 +140,7 @@ class ProposalScreen:
     min_corner_ratio: float = 0.3
     min_corner_dominance: float = 2.0
     min_search_px: float = 4.0
+    scan_edge_rows: int = 2
 
     def __post_init__(self) -> None:
         for name, value in vars(self).items():

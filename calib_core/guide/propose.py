@@ -423,6 +423,8 @@ def _screen(depth, camera, cand: Candidates, pixels, pixel_cov, J_point, ok, scr
         screened[name] = screened.get(name, 0) + int((ok & ~passes).sum())
         ok &= passes
 
+    rows = cand.rows_cols[:, 0]
+    cut("scan edge", (rows >= screen.scan_edge_rows) & (rows < depth.shape[0] - screen.scan_edge_rows))
     rng_m = np.linalg.norm(cand.points_lidar, axis=1)
     cut("far", rng_m <= screen.max_range_m)
     foot = cell_footprint_px(depth, cand.rows_cols, np.nan_to_num(J_point))
