@@ -35,7 +35,7 @@ class Pick:
     ----------
     id : int
         Stable number shown on the markers (1, 2, ...); a new pick takes the one above the highest existing
-        (:func:`app.state.next_number`).
+        (:func:`next_number`).
     laser_rc : (row, col) or None
         Depth-matrix cell, 0-based.
     laser_xyz : (x, y, z) or None
@@ -212,3 +212,13 @@ def restore_session(data: dict, path: Path, check_cell: Callable, check_pixel: C
     if not isinstance(view, dict):
         raise CalibError(f"{path}: 'view' must be a mapping")
     return Snapshot(tuple(picks), next_id), dict(view)
+
+
+def next_number(picks: Sequence[Pick]) -> int:
+    """The number a new pick gets: one more than the highest existing one (1 when there is none).
+
+    So a pick that was started and then dropped or undone (a declined guided
+    proposal) leaves no gap: the next pair made gets its number.  Deleting a
+    pair below the highest keeps the others' numbers (and colours) as they are.
+    """
+    return max((int(p.id) for p in picks), default=0) + 1

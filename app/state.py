@@ -31,7 +31,8 @@ import numpy as np
 from calib_core.errors import CalibError
 from calib_core.pairs import PAIR_SOURCES, Pair, load_pairs_yaml, save_pairs_yaml
 
-from .picks import SESSION_FORMAT, SESSION_VERSION, Pick, Snapshot, checked_picks, new_ends, restore_session
+from .picks import (SESSION_FORMAT, SESSION_VERSION, Pick, Snapshot, checked_picks, new_ends, next_number,
+                    restore_session)
 from .session_store import SessionStore, compact_at_exit, forget_at_exit
 from .view_settings import ViewSettings
 
@@ -39,16 +40,6 @@ MAX_HISTORY = 500
 
 
 Listener = Callable[["AnnotationState"], None]
-
-
-def next_number(picks: Sequence[Pick]) -> int:
-    """The number a new pick gets: one more than the highest existing one (1 when there is none).
-
-    So a pick that was started and then dropped or undone (a declined guided
-    proposal) leaves no gap: the next pair made gets its number.  Deleting a
-    pair below the highest keeps the others' numbers (and colours) as they are.
-    """
-    return max((int(p.id) for p in picks), default=0) + 1
 
 
 class AnnotationState:
