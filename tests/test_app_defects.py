@@ -17,6 +17,7 @@ import warnings
 import numpy as np
 import pytest
 
+from app_driver import sample_app
 from calib_core.pairs import Pair, save_pairs_yaml
 from calib_core.synthetic import load_sample, simulate_pairs
 from calib_core.transforms import transform_points
@@ -26,13 +27,6 @@ from repo_paths import SAMPLE
 @pytest.fixture(scope="module")
 def scene():
     return load_sample(SAMPLE)
-
-
-def make_app(tmp_path, **kwargs):
-    from app.server import CalibrationApp
-
-    return CalibrationApp(SAMPLE / "scan.npz", SAMPLE / "image.png", SAMPLE / "camera.yaml",
-                          session_path=tmp_path / "session.yaml", port=0, **kwargs)
 
 
 # ---------------------------------------------------------------------------------------------- pair numbers
@@ -80,7 +74,7 @@ def test_hide_marks_hides_every_mark_and_is_saved(tmp_path, scene):
     pairs = simulate_pairs(scene, 6, np.random.default_rng(5), pixel_noise_px=0.5)
     pairs_file = tmp_path / "pairs.yaml"
     save_pairs_yaml(pairs_file, pairs)
-    app = make_app(tmp_path)
+    app = sample_app(tmp_path / "session.yaml")
     try:
         d = AppDriver(app)
         assert [t for t, _ in d.upload_pairs("pairs.yaml", pairs_file.read_bytes())] == ["Pairs imported"]
@@ -122,13 +116,13 @@ def test_hide_marks_hides_every_mark_and_is_saved(tmp_path, scene):
     finally:
         app.stop()
     # Saved in the session's view settings like the other toggles: a restart keeps the marks hidden.
-    again = make_app(tmp_path)
+    again = sample_app(tmp_path / "session.yaml")
     try:
         assert again.state.view.hide_marks is False
         AppDriver(again).set_hide_marks(True)
     finally:
         again.stop()
-    third = make_app(tmp_path)
+    third = sample_app(tmp_path / "session.yaml")
     try:
         assert third.state.view.hide_marks is True
         assert len(AppDriver(third).drawn_marker_pixels("horizontal")) == 0 and len(third.state.picks) == 7
@@ -143,7 +137,7 @@ def test_the_loupe_title_names_the_latest_click(tmp_path, scene):
     pair = simulate_pairs(scene, 1, np.random.default_rng(4), pixel_noise_px=0.0)[0]
     row, col = pair.laser_rc
     u, v = pair.pixel
-    app = make_app(tmp_path)
+    app = sample_app(tmp_path / "session.yaml")
     try:
         d = AppDriver(app)
         rough = (row + 2, col - 3)
@@ -206,7 +200,7 @@ def test_a_check_pair_off_the_image_says_why_without_a_numpy_warning(tmp_path, s
 
     pairs_file = tmp_path / "pairs.yaml"
     save_pairs_yaml(pairs_file, fit + checks)
-    app = make_app(tmp_path)
+    app = sample_app(tmp_path / "session.yaml")
     try:
         d = AppDriver(app)
         with warnings.catch_warnings(record=True) as caught:

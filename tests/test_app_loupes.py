@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from app_driver import sample_app
 from calib_core.io.extrinsics import load_extrinsics_yaml
 from calib_core.synthetic import load_sample, simulate_pairs
 from repo_paths import SAMPLE
@@ -20,19 +21,12 @@ def scene():
     return load_sample(SAMPLE)
 
 
-def make_app(tmp_path, **kwargs):
-    from app.server import CalibrationApp
-
-    return CalibrationApp(SAMPLE / "scan.npz", SAMPLE / "image.png", SAMPLE / "camera.yaml",
-                          session_path=tmp_path / "session.yaml", port=0, **kwargs)
-
-
 def test_loupe_clicks_map_back_exactly_and_refine_the_full_image_click(tmp_path, scene):
     from app_driver import AppDriver
 
     pair = simulate_pairs(scene, 1, np.random.default_rng(4), pixel_noise_px=0.0)[0]
     row, col = pair.laser_rc
-    app = make_app(tmp_path)
+    app = sample_app(tmp_path / "session.yaml")
     try:
         d = AppDriver(app)
         assert d.click_cell("vertical", row + 2, col - 3) == []  # a rough click on the full BA image
@@ -62,7 +56,7 @@ def test_predictions_both_ways_from_an_imported_initial_extrinsic(tmp_path, scen
 
     truth = load_extrinsics_yaml(SAMPLE / "ground_truth.yaml")["T_camera_lidar"]
     pairs = simulate_pairs(scene, 6, np.random.default_rng(7), pixel_noise_px=0.0)
-    app = make_app(tmp_path, initial_extrinsics_path=SAMPLE / "ground_truth.yaml")
+    app = sample_app(tmp_path / "session.yaml", initial_extrinsics_path=SAMPLE / "ground_truth.yaml")
     try:
         np.testing.assert_allclose(app.initial_T_camera_lidar, truth, atol=1e-12)
         d = AppDriver(app)
@@ -86,7 +80,7 @@ def test_predictions_both_ways_from_an_imported_initial_extrinsic(tmp_path, scen
 def test_frame_camera_draws_the_3_sigma_ellipse_and_zoom_keeps_the_centre(tmp_path):
     from app_driver import AppDriver
 
-    app = make_app(tmp_path)
+    app = sample_app(tmp_path / "session.yaml")
     try:
         d = AppDriver(app)
         app.loupes.frame_camera(300.25, 200.5, cov_px2=np.diag([4.0, 4.0]))
@@ -118,7 +112,7 @@ def test_frame_camera_draws_the_3_sigma_ellipse_and_zoom_keeps_the_centre(tmp_pa
 def test_initial_extrinsics_upload(tmp_path):
     from app_driver import AppDriver
 
-    app = make_app(tmp_path)
+    app = sample_app(tmp_path / "session.yaml")
     try:
         d = AppDriver(app)
         assert app.initial_T_camera_lidar is None and app.pose() is None
@@ -191,9 +185,9 @@ def test_bad_initial_extrinsics_and_bad_frames_are_one_line_errors(tmp_path):
     from calib_core.errors import CalibError
 
     with pytest.raises(CalibError, match="extrinsics file not found") as info:
-        make_app(tmp_path, initial_extrinsics_path=tmp_path / "missing.yaml")
+        sample_app(tmp_path / "session.yaml", initial_extrinsics_path=tmp_path / "missing.yaml")
     assert "\n" not in str(info.value)
-    app = make_app(tmp_path)
+    app = sample_app(tmp_path / "session.yaml")
     try:
         with pytest.raises(CalibError, match="no BA image 'nope'"):
             app.loupes.frame_ba("nope", 1, 1)

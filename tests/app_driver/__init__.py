@@ -27,6 +27,15 @@ from calib_core.transforms import invert_T, transform_points
 from .fakes import FakeCamera, FakeTab
 from .render import RenderDriver
 
+
+def sample_app(session_path, **kwargs: Any):
+    """The app on the committed sample scene (a free port), its session at ``session_path``."""
+    from app.server import CalibrationApp
+    from repo_paths import SAMPLE
+
+    return CalibrationApp(SAMPLE / "scan.npz", SAMPLE / "image.png", SAMPLE / "camera.yaml",
+                          session_path=session_path, port=0, **kwargs)
+
 __all__ = ["AppDriver", "FakeCamera", "FakeTab"]
 
 
