@@ -48,13 +48,18 @@ def parse_sensor_origin(value) -> np.ndarray | None:
     return origin
 
 
+def _resolution(v_res_deg, h_res_deg, default_deg, why: str) -> tuple[float, float, str]:
+    """The cell size (degrees) given, or ``default_deg()`` where not given, and the note that says so."""
+    if v_res_deg is not None and h_res_deg is not None:
+        return v_res_deg, h_res_deg, ""
+    default = default_deg()
+    note = f"spherical cells of {default} deg ({why}; --h-res-deg/--v-res-deg to change)"
+    return (default if v_res_deg is None else v_res_deg), (default if h_res_deg is None else h_res_deg), note
+
+
 def _spherical(xyz, v_res_deg, h_res_deg, v_range_deg) -> tuple[DepthMatrix, str]:
-    note = ""
-    if v_res_deg is None or h_res_deg is None:
-        default = default_spherical_resolution_deg(xyz)
-        note = f"spherical cells of {default} deg (default; --h-res-deg/--v-res-deg to change)"
-        v_res_deg = default if v_res_deg is None else v_res_deg
-        h_res_deg = default if h_res_deg is None else h_res_deg
+    v_res_deg, h_res_deg, note = _resolution(v_res_deg, h_res_deg, lambda: default_spherical_resolution_deg(xyz),
+                                             "default")
     depth = organize_spherical(xyz, v_res_deg, h_res_deg, v_range_deg)
     if note:
         depth = dataclasses.replace(depth, meta={**depth.meta, "spherical_resolution": note})
@@ -71,12 +76,8 @@ def _narrow_field(xyz, field, v_res_deg, h_res_deg, v_range_deg) -> tuple[DepthM
     Refused when too many points lie behind nearer points of their cell: not
     one view from the origin (an object scanned from around it).
     """
-    note = ""
-    if v_res_deg is None or h_res_deg is None:
-        default = narrow_field_resolution_deg(xyz)
-        note = f"spherical cells of {default} deg (one per point; --h-res-deg/--v-res-deg to change)"
-        v_res_deg = default if v_res_deg is None else v_res_deg
-        h_res_deg = default if h_res_deg is None else h_res_deg
+    v_res_deg, h_res_deg, note = _resolution(v_res_deg, h_res_deg, lambda: narrow_field_resolution_deg(xyz),
+                                             "one per point")
     depth = crop_to_field_of_view(organize_spherical(xyz, v_res_deg, h_res_deg, v_range_deg))
     behind = depth.meta["n_points_behind"] / max(int(depth.meta["n_points_in"] - depth.meta["n_points_dropped"]), 1)
     if behind > MAX_BEHIND_SHARE:
