@@ -41,11 +41,6 @@ def pose_difference(T_a: np.ndarray, T_b: np.ndarray) -> tuple[float, float]:
     return float(angle), float(np.linalg.norm(T_a[:3, 3] - T_b[:3, 3]) * 100)
 
 
-def reference_T(path: str) -> np.ndarray:
-    """``T_camera_lidar`` of the reference; a KITTI calib file gives rectified camera 2's, the one its image shows."""
-    return load_extrinsics_any(path)
-
-
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("session")
@@ -57,7 +52,7 @@ def main(argv: list[str] | None = None) -> int:
 
     depth = load_scan(args.scan)
     camera = load_camera(args.camera)
-    T_ref = reference_T(args.reference)
+    T_ref = load_extrinsics_any(args.reference)  # a KITTI calib file: rectified camera 2, the one its image shows
     session = read_yaml_mapping(args.session, "session file")
     pairs = [Pair(laser_rc=tuple(e["laser_rc"]) if e.get("laser_rc") is not None else None,
                   laser_xyz=tuple(e["laser_xyz"]) if e.get("laser_rc") is None else None,
