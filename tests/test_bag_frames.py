@@ -106,7 +106,7 @@ def _rig_pose(t):
     return s[:, None] * V, OMEGA * s
 
 
-def _motion_bag(tmp_path: Path, kind: str, odometry: bool = False) -> tuple[Path, dict]:
+def _motion_bag(tmp_path: Path, kind: str, odometry: bool = False, static_on_tf: bool = False) -> tuple[Path, dict]:
     """12 small clouds at 10 Hz, each image 30 ms after its cloud, except cloud 2 (5 ms, while moving).
     The rig stands still around clouds 3, 6 and 11 (STOPS): the stillest frames, one per third of the bag."""
     cloud_t = [T0 + 0.1 * k for k in range(12)]
@@ -116,8 +116,11 @@ def _motion_bag(tmp_path: Path, kind: str, odometry: bool = False) -> tuple[Path
     samples = T0 - 0.05 + 0.01 * np.arange(131)  # 100 Hz, knots on the stops' ends: interpolation is exact
     pos, yaw = _rig_pose(samples)
     static = [("base_link", "velodyne", T_BASE_VELO), ("base_link", "camera_optical", _T([0.1, -1.5, 0.0], [1.5, 0.2, 1.4]))]
-    msgs.append((T0 - 0.05, "/tf_static", "tf2_msgs/msg/TFMessage", lambda s, r: tf_message(s, r, T0 - 0.05, static)))
+    if not static_on_tf:
+        msgs.append((T0 - 0.05, "/tf_static", "tf2_msgs/msg/TFMessage", lambda s, r: tf_message(s, r, T0 - 0.05, static)))
     for t, p, y in zip(samples, pos, yaw):
+        if static_on_tf:  # as some recorders do: the fixed joints repeated on /tf with the moving one
+            msgs.append((t, "/tf", "tf2_msgs/msg/TFMessage", lambda s, r, t=t: tf_message(s, r, t, static)))
         pose = _T([0.0, 0.0, y], p)
         if odometry:
             msgs.append((t, "/odom", "nav_msgs/msg/Odometry", lambda s, r, t=t, pose=pose: _odometry(s, r, t, pose)))
@@ -184,6 +187,15 @@ def test_odometry_gives_the_same_motion_as_tf(tmp_path):
     assert table.motion_source == "/odom (nav_msgs/Odometry)"
     rot, trans = _expected_lidar_motion(planted["cloud_t"], planted["image_t"])
     np.testing.assert_allclose(table.rotation_deg, rot, atol=1e-9)
+    np.testing.assert_allclose(table.translation_m, trans, atol=1e-9)
+    assert choose_frames(table, frames=3) == [3, 6, 11]
+
+
+def test_fixed_joints_repeated_on_tf_are_not_taken_for_the_rig(tmp_path):
+    bag, planted = _motion_bag(tmp_path, "sqlite3", static_on_tf=True)
+    table = read_frame_table(bag)
+    assert table.motion_source == "/tf odom -> base_link"  # not base_link -> velodyne, sent as often
+    rot, trans = _expected_lidar_motion(planted["cloud_t"], planted["image_t"])
     np.testing.assert_allclose(table.translation_m, trans, atol=1e-9)
     assert choose_frames(table, frames=3) == [3, 6, 11]
 
@@ -358,3 +370,14 @@ def test_bag_frames_solve_as_the_loose_files(kind, two_scenes, tmp_path):
                                               f"{s.stamp_s:.6f}"] for s in shots]
         proc = run_cli("bag", "frames", str(bag), "--index", "7", "1", "-o", str(out))
         assert proc.returncode == 0 and len([ln for ln in proc.stdout.splitlines() if ln.startswith("shot ")]) == 2
+
+
+def test_unreadable_bags_give_one_line(tmp_path):
+    junk = tmp_path / "junk.bag"
+    junk.write_text("hello")
+    for path, fragment in ((tmp_path / "missing.bag", "bag not found"), (junk, "not a readable ROS bag")):
+        line = one_error_line(run_cli("bag", "frames", str(path), "--frames", "2", "-o", str(tmp_path / "out")))
+        assert fragment in line and str(path) in line, line
+    with pytest.raises(CalibError, match="no point cloud topic"):
+        shots_from_bag(_write(tmp_path / "images_only", "mcap", _tiny_image_msgs([1.0, 2.0])), frames=1,
+                       out_dir=tmp_path / "out")

@@ -294,6 +294,8 @@ def _trajectory_from(times, positions, quats, child: str, source: str) -> _Traje
 
 def _rig_trajectory(bag: _Bag, lidar_frame: str, static_edges: dict, notes: list[str]) -> tuple[_Trajectory, np.ndarray] | None:
     """The rig's trajectory and ``T_child_lidar`` (module docstring), or None when the bag records none."""
+    from ..transforms import R_from_quat_xyzw, make_T
+
     tf_conns = [c for c in bag.reader.connections if c.topic.lstrip("/") == "tf" and c.msgtype == TF_MESSAGE]
     samples: dict[tuple[str, str], list] = {}
     for _, msg in bag.messages(tf_conns) if tf_conns else ():
@@ -301,16 +303,27 @@ def _rig_trajectory(bag: _Bag, lidar_frame: str, static_edges: dict, notes: list
             t, q, s = ts.transform.translation, ts.transform.rotation, ts.header.stamp
             samples.setdefault((_frame(ts), str(ts.child_frame_id).lstrip("/")), []).append(
                 (s.sec + 1e-9 * s.nanosec, (t.x, t.y, t.z), (q.x, q.y, q.z, q.w)))
+    # A transform that never changes is static even when sent on /tf (some recorders do): it links frames.
+    linked, moving = dict(static_edges), {}
+    for edge, rows in samples.items():
+        pose = np.array([(*p, *q) for _, p, q in rows], dtype=np.float64)
+        if np.ptp(pose, axis=0).max() == 0.0:
+            try:
+                linked[edge] = make_T(R_from_quat_xyzw(pose[0, 3:]), pose[0, :3])
+            except CalibError:
+                pass
+        else:
+            moving[edge] = rows
     candidates = []
-    for (parent, child), rows in samples.items():
-        T_child_lidar = np.eye(4) if child == lidar_frame else compose_tree(static_edges, child, lidar_frame)
-        parent_static = parent == lidar_frame or compose_tree(static_edges, parent, lidar_frame) is not None
-        if T_child_lidar is not None and not parent_static:
+    for (parent, child), rows in moving.items():
+        T_child_lidar = np.eye(4) if child == lidar_frame else compose_tree(linked, child, lidar_frame)
+        parent_linked = parent == lidar_frame or compose_tree(linked, parent, lidar_frame) is not None
+        if T_child_lidar is not None and not parent_linked:  # the rig itself moving, not a joint within it
             candidates.append((len(rows), parent, child, T_child_lidar))
-    if not candidates and len(samples) == 1:
-        (parent, child), = samples
+    if not candidates and len(moving) == 1:
+        (parent, child), = moving
         notes.append(f"/tf {parent} -> {child} is taken as the rig's motion (no /tf_static links it to {lidar_frame or 'the lidar'})")
-        candidates.append((len(samples[(parent, child)]), parent, child, np.eye(4)))
+        candidates.append((len(moving[(parent, child)]), parent, child, np.eye(4)))
     if candidates:
         _, parent, child, T_child_lidar = max(candidates, key=lambda c: c[0])
         rows = samples[(parent, child)]
