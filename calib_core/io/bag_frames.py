@@ -2,7 +2,7 @@
 
 A *frame* is one cloud of the cloud topic with the image whose ``header.stamp``
 is nearest to the cloud's.  :func:`read_frame_table` reads the stamps of every
-frame in one pass (and the rig's motion when the bag records it);
+frame (and the rig's motion when the bag records it);
 :func:`choose_frames` chooses frames, spread over the bag and still, or by
 hand (times or indices); :func:`extract_frames` writes each chosen frame's scan
 and image into a folder of its own; :func:`shots_from_bag` does all three.
@@ -14,7 +14,8 @@ far the rig moved between a frame's two stamps is judged from what the bag has:
 
 * **A trajectory of the rig**, when the bag records one: the dynamic ``/tf``
   transform whose child frame is the lidar's frame or is linked to it by
-  ``/tf_static`` (e.g. ``odom -> base_link``), or else the pose of the only
+  ``/tf_static`` (or by a transform that never changes on ``/tf``), e.g.
+  ``odom -> base_link``, the most frequent if several; or else the pose of the only
   ``nav_msgs/Odometry`` topic.  The lidar's pose is interpolated at the cloud's
   and at the image's stamp (linear in position, spherical in rotation) and the
   motion between the two is its rotation angle ``theta`` (rad) and the
