@@ -26,6 +26,7 @@ from calib_core.pairs import Pair, load_pairs_yaml
 from calib_core.solve import calibrate, solve_extrinsics
 from calib_core.solve.quality import HIGH_LEVERAGE, LOO_NOISY_PX, leave_one_out_estimate
 from calib_core.transforms import rotation_angle_deg
+from calib_core.verify import verify_pairs
 from kitti_reference import KITTI, kitti_K_T
 from repo_paths import REPO
 
@@ -246,6 +247,10 @@ def test_by_eye_sessions_are_not_ok_and_the_left_out_error_tracks_their_true_err
     assert result.mean_px < 0.9 * true_px.mean()
     assert abs(loo.mean_px / true_px.mean() - 1.0) < 0.25
     assert result.quality.status != "ok"
+    # The Verify panel's leave-one-out (exact refits of the other pairs, no new outlier search in them) agrees.
+    report = verify_pairs(pairs, depth, camera, result=result, with_pair_count=False)
+    print(f"  Verify's leave-one-out mean {np.nanmean(report.loo_px):.2f} px")
+    assert abs(np.nanmean(report.loo_px) / true_px.mean() - 1.0) < 0.25
 
 
 @needs_kitti
