@@ -160,12 +160,15 @@ class AlignPanel:
 
         Called on the action worker after the complete pairs changed (:mod:`app.live_coordinator`).  Does nothing
         (returns False) with fewer than 2 or with 4+ pairs, once a solve is shown, when the pairs changed again
-        meanwhile, or when their directions are parallel (no rotation fixed).  Clicks weigh ``1 / precision_px^2``.
+        meanwhile, when a pair is guided (guided picking proposes from the rough pose it was started on: turning
+        it would reshuffle the proposals under the person), or when their directions are parallel (no rotation
+        fixed).  Clicks weigh ``1 / precision_px^2``.
         """
         app = self.app
         current = [p.to_pair() for p in app.state.picks if p.complete]
         if (app.live.bundle is not None or current != list(pairs)
-                or not MIN_ROTATION_PAIRS <= len(pairs) < MIN_PAIRS):
+                or not MIN_ROTATION_PAIRS <= len(pairs) < MIN_PAIRS
+                or any(getattr(p, "source", None) == "guided" for p in pairs)):
             return False
         points, bearings, _ = resolve_pairs(pairs, app.depth, app.camera)
         sigma = np.array([p.precision_px or 1.0 for p in pairs], np.float64)
