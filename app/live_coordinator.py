@@ -110,6 +110,8 @@ class LiveSolveCoordinator:
                     self.solve_error = None
                     self.solving = False
                     app.cloud.show_camera(None)
+                    if len(picks) >= 2:  # 2-3 pairs fix the rotation: line the render and loupes up (issue 20)
+                        app.post(lambda pairs=[p.to_pair() for p in picks]: app.align.fit_to_pairs(pairs))
         # Not while this thread holds the UI lock: the solver could not redraw before the wait ends.
         if solve_job is not None and not app.ui_lock.held_here() and self._wait_shown(solve_job, SHOW_WAIT_S):
             return
