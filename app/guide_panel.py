@@ -139,6 +139,7 @@ class GuidePanel:
         self._pending_posts = 0
         self._auto = False
         self._auto_pairs: list[Pair] = []
+        self._guided_side = 0.0  # the camera loupe's side (px) during this guided session: never shrinks
         self._callbacks: dict[str, Callable] = {}
 
         folder = gui.add_folder("Guided picking", **({} if order is None else {"order": order}))
@@ -247,8 +248,10 @@ class GuidePanel:
                 return
             full = self._click_source(pick_id) == "full" and self._loupes() is not None
             precision = None if full or self._click_source(pick_id) is None else GUIDED_CLICK_SIGMA_PX
-            if pick.precision_px != precision or pick.source != "guided":
-                self.state.move_pixel(pick_id, *pick.pixel, precision_px=precision, source="guided")
+            # A re-click refines a pair and keeps its source (a hand pair stays "clicked" in the counts).
+            source = pick.source if pick_id == self._reclick else "guided"
+            if pick.precision_px != precision or pick.source != source:
+                self.state.move_pixel(pick_id, *pick.pixel, precision_px=precision, source=source)
             if pick_id == self._reclick:
                 self._end_reclick()
             self._refine = pick_id if full else None
@@ -369,9 +372,11 @@ class GuidePanel:
         loupes = self._loupes()
         if loupes is not None:
             loupes.frame_ba(self._ba_key, int(p.laser_rc[0]), int(p.laser_rc[1]))
-            # Zoomed out (never in) so the whole 3-sigma ellipse, and a margin, shows.
+            # Zoomed out (never in) so the whole 3-sigma ellipse, and a margin, shows; the side only grows
+            # during a guided session, so the zoom stays steady from one proposal to the next.
+            self._guided_side = max(self._guided_side, 2.0 * p.radius_3sigma_px + ELLIPSE_MARGIN_PX)
             loupes.frame_camera(float(p.pixel[0]), float(p.pixel[1]), cov_px2=np.asarray(p.pixel_cov),
-                                min_side_px=2.0 * p.radius_3sigma_px + ELLIPSE_MARGIN_PX)
+                                min_side_px=self._guided_side)
         self._refresh()
 
     def _unreliable(self) -> str | None:
@@ -386,6 +391,7 @@ class GuidePanel:
     def _on_button(self, label: str) -> None:
         if label == "Stop":
             self._guiding = self._want_next = False
+            self._guided_side = 0.0
             self._drop_unfinished()
             return
         if not self._active(len(self.state.complete_picks())):
