@@ -469,6 +469,18 @@ def markdown(results: dict, trials: int, seconds: float, load: tuple) -> str:
     return "\n".join(lines)
 
 
+def with_rows_before(md: str, before: str, label: str) -> str:
+    """``md`` with the proposal rows of an older run's table (``before``) inserted after its own table, their
+    proposals column prefixed with ``label``."""
+    rows = [line for line in before.splitlines() if line.startswith("| ") and "| scene |" not in line
+            and "every laser candidate" not in line]
+    rows = [line.replace(" | no screen | ", f" | {label}: no screen | ").replace(" | screen | ", f" | {label}: screen | ")
+            for line in rows]
+    lines = md.splitlines()
+    last = max(i for i, line in enumerate(lines) if line.startswith("|"))
+    return "\n".join(lines[:last + 1] + rows + lines[last + 1:])
+
+
 def main(argv=None) -> int:
     import os
 
@@ -476,6 +488,11 @@ def main(argv=None) -> int:
     ap.add_argument("--trials", type=int, default=5, help="trials per scene (default 5)")
     ap.add_argument("--crops", type=Path, default=None,
                     help="save photo | render crops around each proposal of the first trial (with the screen) here")
+    ap.add_argument("--before", type=Path, default=None,
+                    help="the printed output of this benchmark run on older code: its table rows are added, "
+                         "labelled with --before-label")
+    ap.add_argument("--before-label", default="before",
+                    help="label of the --before rows (e.g. the commit they were measured on)")
     ap.add_argument("--write", action="store_true",
                     help="write the section into docs/guide_performance.md (between its markers)")
     args = ap.parse_args(argv)
@@ -497,6 +514,8 @@ def main(argv=None) -> int:
     else:
         log(f"manual_calib data not found at {MANUAL}; skipped")
     md = markdown(results, args.trials, time.time() - t0, (load0, os.getloadavg()[0]))
+    if args.before is not None:
+        md = with_rows_before(md, args.before.read_text(), args.before_label)
     print(md)
     if args.write:
         write_section(md)
