@@ -16,26 +16,29 @@ corners (the committed ``real_data/pairs`` cells: foreground corners chosen
 by a fixed rule), each pixel off its projection under the published pose by
 5-15 px (uniform length, uniform direction), no ``precision_px`` (the app's
 default) -- then the 20 proposals of a :class:`GuidedSession` with the camera
-image, once without the screen (``screen=None``: the code before issue 20)
-and once with the default :class:`calib_core.guide.evidence.ProposalScreen`
-(``max_ellipse_px`` set to the app's limit for that image, as the app does).
+image, once without the screen (``screen=None``) and once with the app's
+:class:`calib_core.guide.evidence.ProposalScreen` (``max_ellipse_px`` set to
+the app's limit for that image).  ``--before FILE`` adds the rows of a run on
+older code (run this file with that code on the path), so one table shows
+before and after.
 
-Each proposal is judged by this module's own measures (none of them is the
-screen's code):
+Each proposal is judged from its laser point projected with the *published*
+pose, by this module's own measures (none of them is the proposal code):
 
-* **on a clean corner**: its laser point, projected with the *published*
-  pose, has an image corner passing :func:`calib_core.guide.image_corners.clean_corner`
-  (strength, L/X shape, isolation) within one cell footprint (at least 3 px); the
-  footprint is measured here by projecting the neighbouring beams;
-  **on a strong corner**: the same without the shape and isolation tests
-  (``lam_min >= 0.01``, the issue's machine check);
-* **3-sigma radius** and **fits the loupe**: the radius is at most half the
-  app's camera loupe side at zoom 1 (47 px for KITTI, 72 px for 1920 px), or
-  at most the app's limit (the loupe zoomed out one step);
-* **off vegetation**: at least :data:`MIN_EXPLAINED` of the near-side points
-  of its 5 x 5 window lie within 3 range-noise of at most two planes found
-  by RANSAC here (foliage scatters in depth and fails);
-* **off far background**: range at most :data:`FAR_M`.
+* **corner**: an OpenCV Harris corner (``cv2.goodFeaturesToTrack``) within
+  :data:`ON_CORNER_PX` and isolated (at most :data:`MAX_RIVALS` others within
+  :data:`ISOLATION_PX`), the laser window explained by at most two RANSAC
+  planes (not vegetation), not on a RANSAC ground plane, not beyond
+  :data:`FAR_M`; also reported: a Harris corner within 3 px, within one cell
+  footprint (measured by projecting the neighbouring beams);
+* **3-sigma radius**, **fits the loupe** at zoom 1 (half the camera loupe's
+  side) and within the app's limit (the loupe zoomed out one step);
+* **off vegetation**, **off far background** (range > :data:`FAR_M`), **off
+  the ground**.
+
+``--crops DIR`` saves, for the first trial with the screen, the photo and the
+scan rendered from the camera under the published pose side by side around
+each proposal's true projection: what a person judging it looks at.
 """
 
 from __future__ import annotations

@@ -214,3 +214,35 @@ def test_no_proposal_on_a_non_planar_neighbourhood_of_the_sample(sample):
     session.propose_options["screen"] = None
     loose = [p for p in session.proposals(200) if p.replaces is None]
     assert not all(ransac_planes_share(near_side_points(depth, p.laser_rc), 3.0 * noise, rng) >= 0.7 for p in loose)
+
+
+# ------------------------------------------------------------------ hand-made depth matrices
+def _wall(ranges: np.ndarray):
+    """A depth matrix looking along +x: rows and columns 0.5 deg apart, ``ranges`` (NaN = no return)."""
+    from calib_core.lidar.depth_matrix import DepthMatrix
+
+    H, W = ranges.shape
+    el = np.radians(0.5 * (H // 2 - np.arange(H)))[:, None] + 0 * np.arange(W)[None]
+    az = np.radians(0.5 * (np.arange(W) - W // 2))[None, :] + 0 * np.arange(H)[:, None]
+    d = np.stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)], axis=-1)
+    valid = np.isfinite(ranges)
+    r = np.where(valid, ranges, 0.0)
+    return DepthMatrix(r, d, r[..., None] * d, valid, {})
+
+
+def test_dropouts_are_no_depth_step_and_a_step_needs_returns_behind():
+    from calib_core.guide.evidence import far_side_share, fill_holes
+
+    ranges = np.full((15, 15), 10.0)
+    ranges[7, 7] = np.nan  # one dropout inside the wall
+    filled = fill_holes(_wall(ranges))
+    assert filled.valid.all() and filled.range_m[7, 7] == pytest.approx(10.0)
+    assert np.allclose(filled.points[7, 7], 10.0 * filled.directions[7, 7])
+    # A box corner at 10 m: the lower-left quadrant near, the rest a wall at 20 m (returns) or sky (none).
+    for background in (20.0, np.nan):
+        ranges = np.full((15, 15), background)
+        ranges[7:, :8] = 10.0
+        depth = fill_holes(_wall(ranges))
+        # The 7 x 7 window around the corner cell (7, 7): 4 x 4 near cells, 33 behind -- measured by hand.
+        share = far_side_share(depth, np.array([[7, 7]]), 0.15)[0]
+        assert share == pytest.approx(0.0 if np.isnan(background) else 33 / 49)

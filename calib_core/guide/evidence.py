@@ -28,13 +28,28 @@ Laser side
     ``max_range_m`` and, through their metric size, by ``max_cell_m`` of
     :func:`~calib_core.guide.propose.propose`.
 
+    *A corner of its own kind* (the by-eye runs declined flat asphalt,
+    curbs, junctions on a flat door, shadows at an object's foot):
+    a depth-jump cell needs a step of ``min_depth_step`` (log range) against
+    *returns* (``min_far_share`` of its window; dropouts are filled first,
+    :func:`fill_holes`, so a hole in a surface is no step) and the near side
+    must be a corner of the object, not a straight stretch of its edge
+    (``max_convex_share`` / ``min_concave_share``).  Plane junctions need a
+    fine scan (``max_junction_footprint_px``).  Nothing on the ground
+    (:func:`ground_plane`: ``max_ground_share`` of the window within
+    ``ground_tol_m``) or lower than ``min_height_m`` above it, except
+    ``marking`` candidates (intensity corners of painted road markings) well
+    inside the road (``min_marking_ground_share``, ``min_marking_strength``).
+
 Image side
     *One dominant corner inside the 3-sigma ellipse* (:func:`dominant_corner`):
     the local maxima of the structure tensor's ``lam_min``
     (:mod:`.image_corners`) inside the ellipse; the strongest must be at least
     ``min_corner_strength``, an L or X corner (``lam_min / lam_max >=
     min_corner_ratio``) and ``min_corner_dominance`` times stronger than the
-    second strongest.
+    second strongest, and not a repeated texture: at most ``max_rivals``
+    corners of ``rival_fraction`` of its strength within ``rival_radius_px``
+    of it (:func:`corner_rivals`: a fence, a railing, foliage, a window grid).
 
     *Inside the scan.*  Cells in the first or last ``scan_edge_rows`` rows
     of the depth matrix are left out: the scan's top or bottom beam cannot show
@@ -69,6 +84,8 @@ __all__ = [
     "corner_peaks",
     "dominant_corner",
     "ellipse_box_margin_px",
+    "ground_plane",
+    "height_above_ground_m",
     "ground_cells",
     "window_share",
     "normal_span",
@@ -136,6 +153,9 @@ class ProposalScreen:
     max_ground_share : float
         A cell on the ground whose window is more than this share (0..1) ground is not proposed, unless it
         is a corner of a painted marking in the scan's intensity (:func:`intensity_corner`).
+    min_height_m : float
+        Cells lower than this (m) above the ground plane are not proposed (markings aside): where an object
+        meets the road (a tyre, a curb, a door's foot) the photo shows shadow, not a corner.
     min_intensity_corner : float
         Smallest intensity corner measure of a painted-marking corner (:func:`intensity_corner`).
     min_marking_ground_share : float
@@ -187,11 +207,12 @@ class ProposalScreen:
     min_planar_cells: int = 4
     min_corner_strength: float = 0.01
     min_corner_ratio: float = 0.3
-    min_corner_dominance: float = 2.0
+    min_corner_dominance: float = 3.0
     min_search_px: float = 4.0
     scan_edge_rows: int = 3
     ground_tol_m: float = 0.2
     max_ground_share: float = 0.5
+    min_height_m: float = 0.3
     min_intensity_corner: float = 0.25
     min_marking_ground_share: float = 0.9
     min_marking_strength: float = 1.0
@@ -406,44 +427,62 @@ def ellipse_box_margin_px(pixels: np.ndarray, pixel_cov: np.ndarray, width: int,
     return np.where(np.isfinite(m), m, -np.inf)
 
 
-def ground_cells(depth, tol_m: float, bottom_share: float = 0.25, min_inliers: float = 0.3) -> np.ndarray:
-    """Cells on the scan's ground plane, (H, W) bool (all False when no ground plane is found).
+def ground_plane(depth, tol_m: float, bottom_share: float = 0.25,
+                 min_inliers: float = 0.3) -> tuple[np.ndarray, float] | None:
+    """The scan's ground plane ``n . x = d`` (unit ``n`` facing the sensor side, lidar frame, metres), or None.
 
     The ground is the plane most of the bottom rows' points lie on (the lowest
     beams of a vehicle lidar hit the road): the median surface normal of the
-    cells in the last ``bottom_share`` of the rows (sign faced to the sensor)
-    and the median offset ``n . x``, refined once by a least-squares fit to the
-    points within ``tol_m`` (metres).  It is a ground plane only when at least
-    ``min_inliers`` of those bottom cells lie on it.  Every valid cell within
-    ``tol_m`` of the plane is a ground cell.
+    cells in the last ``bottom_share`` of the rows and the median offset
+    ``n . x``, refined twice by a least-squares fit to the points within
+    ``tol_m`` (metres).  It is a ground plane only when at least
+    ``min_inliers`` of those bottom cells lie on it.
     """
     from .candidates import surface_normals
 
     valid = np.asarray(depth.valid, dtype=bool)
     H = depth.shape[0]
-    none = np.zeros(depth.shape, dtype=bool)
     bottom = valid.copy()
     bottom[: H - max(int(round(bottom_share * H)), 1)] = False
     if bottom.sum() < 10:
-        return none
+        return None
     normals = surface_normals(depth)[bottom]
     P = depth.points[bottom]
     n = np.median(normals, axis=0)
     if np.linalg.norm(n) < 1e-6:
-        return none
+        return None
     n /= np.linalg.norm(n)
     d = float(np.median(P @ n))
     for _ in range(2):  # least-squares refinement on the inliers
         inl = np.abs(P @ n - d) <= tol_m
         if inl.sum() < 3:
-            return none
+            return None
         Q = P[inl]
         centre = Q.mean(axis=0)
-        n = np.linalg.eigh(np.cov((Q - centre).T))[1][:, 0]
+        m = np.linalg.eigh(np.cov((Q - centre).T))[1][:, 0]
+        n = m if m @ n >= 0 else -m
         d = float(centre @ n)
     if np.mean(np.abs(P @ n - d) <= tol_m) < min_inliers:
-        return none
-    return valid & (np.abs(np.nan_to_num(depth.points) @ n - d) <= tol_m)
+        return None
+    if d > 0:  # face the sensor: the lidar origin on the positive side (n . 0 - d > 0)
+        n, d = -n, -d
+    return n, d
+
+
+def height_above_ground_m(depth, plane: tuple[np.ndarray, float] | None) -> np.ndarray:
+    """Signed distance (m) of every cell's point from the ground plane, positive on the sensor's side, (H, W);
+    +inf everywhere without a plane, NaN at invalid cells."""
+    if plane is None:
+        return np.full(depth.shape, np.inf)
+    n, d = plane
+    h = np.nan_to_num(depth.points) @ n - d
+    return np.where(np.asarray(depth.valid, dtype=bool), h, np.nan)
+
+
+def ground_cells(depth, tol_m: float, bottom_share: float = 0.25, min_inliers: float = 0.3) -> np.ndarray:
+    """Cells within ``tol_m`` (m) of the scan's :func:`ground_plane`, (H, W) bool (all False without one)."""
+    with np.errstate(invalid="ignore"):
+        return np.abs(height_above_ground_m(depth, ground_plane(depth, tol_m, bottom_share, min_inliers))) <= tol_m
 
 
 def window_share(mask: np.ndarray, depth, rows_cols: np.ndarray, half: int = 2) -> np.ndarray:

@@ -40,7 +40,7 @@ from ..io.atomic import write_yaml_atomic
 from .candidates import KINDS, Candidates, depth_discontinuity, find_candidates, near_fraction
 from .corner_probability import WEIGHTS, corner_features, corner_probability, laser_features, scan_range_noise_m
 from .evidence import (REASON_NO_EVIDENCE, REASON_ROUGH_ALIGNMENT, ProposalScreen, cell_footprint_px, corner_peaks,
-                       corner_rivals, dominant_corner, ellipse_box_margin_px, far_side_share, fill_holes, ground_cells, intensity_corner,
+                       corner_rivals, dominant_corner, ellipse_box_margin_px, far_side_share, fill_holes, ground_plane, height_above_ground_m, intensity_corner,
                        local_plane_residual_m, normal_span, planar_share, window_share)
 from .image_corners import CornerImage, content_mask, strongest_near
 from .information import d_optimal_gain, pair_noise, pixel_jacobians, pose_pixel_covariance
@@ -460,7 +460,10 @@ def _screen(depth, camera, cand: Candidates, pixels, pixel_cov, J_point, ok, scr
     # Nothing on the ground unless it is a painted-marking corner in intensity.
     sel = np.flatnonzero(ok)
     if sel.size:
-        ground = ground_cells(depth, screen.ground_tol_m)
+        plane = ground_plane(depth, screen.ground_tol_m)
+        height = height_above_ground_m(depth, plane)
+        with np.errstate(invalid="ignore"):
+            ground = np.abs(height) <= screen.ground_tol_m
         on_ground = np.zeros(len(ok), dtype=bool)
         inside_road = np.zeros(len(ok), dtype=bool)
         rc = cand.rows_cols[sel]
@@ -472,6 +475,9 @@ def _screen(depth, camera, cand: Candidates, pixels, pixel_cov, J_point, ok, scr
         if g.size:
             painted[g] = intensity_corner(depth, cand.rows_cols[g], screen.min_intensity_corner)
         cut("on the ground", ~on_ground | painted)
+        low = np.zeros(len(ok), dtype=bool)
+        low[sel] = np.nan_to_num(height[rc[:, 0], rc[:, 1]], nan=np.inf) < screen.min_height_m
+        cut("at the foot of an object", ~low | marking)
         # Intensity corners off the road are door frames, retro-reflectors, shading: not painted markings.
         cut("intensity corner off the ground", ~marking | inside_road)
         cut("weak intensity corner", ~marking | (cand.strength >= screen.min_marking_strength))
