@@ -17,7 +17,6 @@ from scipy import ndimage
 from calib_core.guide.evidence import ProposalScreen
 from calib_core.guide.session import GuidedSession
 from calib_core.synthetic import load_sample, simulate_pairs
-from calib_core.transforms import transform_points
 from repo_paths import SAMPLE
 from test_guide_screen import DATA, KITTI, MANUAL, _kitti, _manual, by_eye, footprint_px
 
@@ -246,3 +245,38 @@ def test_dropouts_are_no_depth_step_and_a_step_needs_returns_behind():
         # The 7 x 7 window around the corner cell (7, 7): 4 x 4 near cells, 33 behind -- measured by hand.
         share = far_side_share(depth, np.array([[7, 7]]), 0.15)[0]
         assert share == pytest.approx(0.0 if np.isnan(background) else 33 / 49)
+
+
+def test_a_straight_depth_edge_does_not_turn_a_box_corner_does():
+    """:func:`near_edge_turn` on hand-made depth: a wall at 10 m in front of one at 20 m, its edge straight
+    (vertical, or slanted and stair-stepped through the cells) or turning at a box's corner."""
+    from calib_core.guide.evidence import near_edge_turn
+
+    rows, cols = np.mgrid[0:21, 0:21]
+    straight = np.where(cols <= 10, 10.0, 20.0)
+    slanted = np.where(cols <= 10 + (rows - 10) // 2, 10.0, 20.0)  # one column per two rows
+    corner = np.where((cols <= 10) & (rows >= 10), 10.0, 20.0)
+    turns = [near_edge_turn(_wall(r), np.array([[10, 10]]))[0] for r in (straight, slanted, corner)]
+    assert turns[0] == pytest.approx(0.0, abs=1e-12)
+    assert turns[1] < 0.3 <= turns[2]
+
+
+def test_a_painted_corner_turns_a_stripe_side_or_speckle_does_not():
+    """:func:`intensity_edge_turn` on a flat wall with hand-made intensity: a bright quadrant (a marking's
+    corner), a bright half (a stripe's side), isolated bright cells (speckle)."""
+    import dataclasses
+
+    from calib_core.guide.evidence import intensity_edge_turn
+
+    rows, cols = np.mgrid[0:21, 0:21]
+    rng = np.random.default_rng(0)
+    patterns = {
+        "corner": np.where((cols <= 10) & (rows >= 10), 80.0, 5.0),
+        "side": np.where(cols <= 10, 80.0, 5.0),
+        "speckle": np.where(rng.random((21, 21)) < 0.15, 80.0, 5.0),
+    }
+    wall = _wall(np.full((21, 21), 10.0))
+    turn = {name: intensity_edge_turn(dataclasses.replace(wall, meta={"field_images": {"intensity": values}}),
+                                      np.array([[10, 10]]))[0] for name, values in patterns.items()}
+    assert turn["corner"] >= 0.3 and turn["side"] < 0.05 and turn["speckle"] == 0.0
+    assert intensity_edge_turn(wall, np.array([[10, 10]]))[0] == 0.0  # no intensity field

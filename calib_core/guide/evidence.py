@@ -34,7 +34,8 @@ Laser side
     *returns* (``min_far_share`` of its window; dropouts are filled first,
     :func:`fill_holes`, so a hole in a surface is no step) and the near side
     must be a corner of the object, not a straight stretch of its edge
-    (``max_convex_share`` / ``min_concave_share``).  Plane junctions need a
+    (``max_convex_share`` / ``min_concave_share``; its outline turns,
+    ``min_edge_turn``).  Plane junctions need a
     fine scan (``max_junction_footprint_px``).  Nothing on the ground
     (:func:`ground_plane`: ``max_ground_share`` of the window within
     ``ground_tol_m``) or lower than ``min_height_m`` above it, except
@@ -93,6 +94,8 @@ __all__ = [
     "corner_rivals",
     "fill_holes",
     "far_side_share",
+    "near_edge_turn",
+    "intensity_edge_turn",
 ]
 
 #: Largest 3-sigma radius (px) of a proposal by default: an 80 px disc, about the app's camera loupe for a
@@ -160,7 +163,9 @@ class ProposalScreen:
         Smallest intensity corner measure of a painted-marking corner (:func:`intensity_corner`).
     min_marking_ground_share : float
         A ``marking`` candidate (an intensity corner) is proposed only on a ground cell whose window is at
-        least this share ground: a painted corner lies inside the road, not where a wall or a door meets it.
+        least this share ground: a painted corner lies inside the road, not where a wall or a door meets it;
+        its bright side's outline must turn by ``min_edge_turn`` (:func:`intensity_edge_turn`: a stripe's
+        corner, not its side).
     min_marking_strength : float
         Smallest corner measure of a ``marking`` candidate (:attr:`calib_core.guide.candidates.Candidates.strength`,
         units of the squared gradient clip): rough asphalt makes weaker intensity corners (KITTI 000002's road:
@@ -182,6 +187,10 @@ class ProposalScreen:
         The near side of the step (dropouts filled, :func:`fill_holes`) must cover at most the first or at
         least the second share of the 7 x 7 window (:func:`calib_core.guide.candidates.near_fraction`):
         a corner of the object, not a straight stretch of its edge.
+    min_edge_turn : float
+        A depth-jump cell's near-side outline must turn by at least this (:func:`near_edge_turn`, 0 along a
+        straight edge, 0.5-0.6 at a box's corner): a roof line or a pole's side is no corner, however it
+        steps through the cells.
     max_junction_footprint_px : float
         Plane-junction cells are proposed only where one cell step is at most this long in the image
         (:func:`cell_footprint_px`): on a 64-beam scan (5-8 px per cell) the normals of a 5 x 5 window mix
@@ -219,6 +228,7 @@ class ProposalScreen:
     min_junction_span: float = 0.0
     min_depth_step: float = 0.15
     max_junction_footprint_px: float = 3.0
+    min_edge_turn: float = 0.3
     min_far_share: float = 0.15
     max_convex_share: float = 0.4
     min_concave_share: float = 0.7
@@ -594,3 +604,67 @@ def far_side_share(depth, rows_cols: np.ndarray, min_step: float, half: int = 3)
     own = np.log(np.maximum(depth.range_m[rc[:, 0], rc[:, 1]], 1e-6))
     far = support & (lr >= own[:, None, None] + min_step)
     return far.mean(axis=(1, 2))
+
+
+def near_edge_turn(depth, rows_cols: np.ndarray, half: int = 3) -> np.ndarray:
+    """How much the near side's outline turns inside each cell's window: ``lam_min / lam_max`` of the structure
+    tensor of the near-side mask (Sobel over the ``(2 half + 1)^2`` window), (N,), 0..1.
+
+    Near 0 along a straight depth edge, however slanted or stair-stepped in the
+    cells (a roof line, a wall's side); clearly above 0 where the outline turns
+    (an object's corner).  The near side is the cells below the midpoint of the
+    window's log ranges (no return counts as far); 0 without a step.
+    """
+    from .candidates import _log_range_windows
+
+    rc = np.asarray(rows_cols, dtype=np.int64).reshape(-1, 2)
+    if len(rc) == 0:
+        return np.zeros(0)
+    lr, _ = _log_range_windows(depth, rc, half + 1)
+    lo, hi = lr.min(axis=(1, 2)), lr.max(axis=(1, 2))
+    near = (lr < (0.5 * (lo + hi))[:, None, None]).astype(np.float64)
+    return np.where(hi - lo >= 0.005, _mask_turn(near), 0.0)
+
+
+def intensity_edge_turn(depth, rows_cols: np.ndarray, half: int = 3) -> np.ndarray:
+    """:func:`near_edge_turn` of the bright side of the scan's log intensity
+    (:func:`calib_core.guide.candidates.intensity_log_image`, split at the window's
+    midpoint), (N,): clearly above 0 at a painted marking's corner, near 0 along a
+    stripe's side; 0 without intensity or contrast (a 0.5 step of log intensity), or where the bright
+    side is speckle (fewer than 70 % of its cells have two bright 4-neighbours, or fewer than 4 cells)."""
+    from .candidates import intensity_log_image
+
+    rc = np.asarray(rows_cols, dtype=np.int64).reshape(-1, 2)
+    found = intensity_log_image(depth)
+    if found is None or len(rc) == 0:
+        return np.zeros(len(rc))
+    log_i, ok = found
+    H, W = depth.shape
+    off = np.arange(-half - 1, half + 2)
+    rows = np.clip(rc[:, 0, None, None] + off[None, :, None], 0, H - 1)
+    cols = np.clip(rc[:, 1, None, None] + off[None, None, :], 0, W - 1)
+    inside = ok[rows, cols]
+    li = np.where(inside, log_i[rows, cols], np.nan)
+    with np.errstate(invalid="ignore"):
+        lo, hi = np.nanmin(li, axis=(1, 2)), np.nanmax(li, axis=(1, 2))
+        bright = (li > (0.5 * (lo + hi))[:, None, None]).astype(np.float64)
+    # A marking is a solid bright region: most of its cells have two or more bright 4-neighbours.
+    # Speckle (noise on dark asphalt, retro-reflector bloom) has isolated bright cells.
+    pad = np.pad(bright, ((0, 0), (1, 1), (1, 1)))
+    neighbours = pad[:, :-2, 1:-1] + pad[:, 2:, 1:-1] + pad[:, 1:-1, :-2] + pad[:, 1:-1, 2:]
+    n_bright = bright.sum(axis=(1, 2))
+    solid = ((neighbours >= 2) & (bright > 0)).sum(axis=(1, 2)) / np.maximum(n_bright, 1)
+    coherent = (n_bright >= 4) & (solid >= 0.7)
+    return np.where((np.nan_to_num(hi - lo) >= 0.5) & coherent, _mask_turn(bright), 0.0)
+
+
+def _mask_turn(mask: np.ndarray) -> np.ndarray:
+    """``lam_min / lam_max`` of the structure tensor of binary windows ``(N, k, k)`` (gradients at the inner cells)."""
+    near = mask
+    # Central differences inside the (2 half + 3)^2 window: gradients at the inner (2 half + 1)^2 cells.
+    gx = 0.5 * (near[:, 1:-1, 2:] - near[:, 1:-1, :-2])
+    gy = 0.5 * (near[:, 2:, 1:-1] - near[:, :-2, 1:-1])
+    a, b, c = (gx * gx).sum(axis=(1, 2)), (gx * gy).sum(axis=(1, 2)), (gy * gy).sum(axis=(1, 2))
+    root = np.sqrt(np.maximum(0.25 * (a - c) ** 2 + b * b, 0.0))
+    lam_max, lam_min = 0.5 * (a + c) + root, 0.5 * (a + c) - root
+    return np.where(lam_max > 0, lam_min / np.maximum(lam_max, 1e-12), 0.0)

@@ -40,8 +40,9 @@ from ..io.atomic import write_yaml_atomic
 from .candidates import KINDS, Candidates, depth_discontinuity, find_candidates, near_fraction
 from .corner_probability import WEIGHTS, corner_features, corner_probability, laser_features, scan_range_noise_m
 from .evidence import (REASON_NO_EVIDENCE, REASON_ROUGH_ALIGNMENT, ProposalScreen, cell_footprint_px, corner_peaks,
-                       corner_rivals, dominant_corner, ellipse_box_margin_px, far_side_share, fill_holes, ground_plane, height_above_ground_m, intensity_corner,
-                       local_plane_residual_m, normal_span, planar_share, window_share)
+                       corner_rivals, dominant_corner, ellipse_box_margin_px, far_side_share, fill_holes, ground_plane,
+                       height_above_ground_m, intensity_corner, intensity_edge_turn, local_plane_residual_m,
+                       near_edge_turn, normal_span, planar_share, window_share)
 from .image_corners import CornerImage, content_mask, strongest_near
 from .information import d_optimal_gain, pair_noise, pixel_jacobians, pose_pixel_covariance
 from .laser_noise import DEFAULT_CELL_SIGMA, DEFAULT_RANGE_SIGMA_M, PICK_CELL_SIGMA, cell_covariance
@@ -445,18 +446,21 @@ def _screen(depth, camera, cand: Candidates, pixels, pixel_cov, J_point, ok, scr
     step = np.zeros(len(ok))
     far = np.zeros(len(ok))
     near_share = np.full(len(ok), 0.5)
+    turn = np.zeros(len(ok))
     if sel.size:
         filled = fill_holes(depth)
         span[sel] = normal_span(depth, cand.rows_cols[sel], screen.plane_half)[:, 0]
         step[sel] = depth_discontinuity(filled, cand.rows_cols[sel])
         far[sel] = far_side_share(filled, cand.rows_cols[sel], screen.min_depth_step)
         near_share[sel] = np.nan_to_num(near_fraction(filled, cand.rows_cols[sel]), nan=0.5)
+        turn[sel] = near_edge_turn(filled, cand.rows_cols[sel])
     cut("junction of fewer than three planes", ~junction | (span >= screen.min_junction_span))
     cut("junction on a coarse scan", ~junction | (foot <= screen.max_junction_footprint_px))
     depth_jump = ~junction & ~marking
     cut("depth step too small", ~depth_jump | ((step >= screen.min_depth_step) & (far >= screen.min_far_share)))
     cut("straight depth edge", ~depth_jump | (near_share <= screen.max_convex_share)
         | (near_share >= screen.min_concave_share))
+    cut("depth edge does not turn", ~depth_jump | (turn >= screen.min_edge_turn))
     # Nothing on the ground unless it is a painted-marking corner in intensity.
     sel = np.flatnonzero(ok)
     if sel.size:
@@ -481,6 +485,11 @@ def _screen(depth, camera, cand: Candidates, pixels, pixel_cov, J_point, ok, scr
         # Intensity corners off the road are door frames, retro-reflectors, shading: not painted markings.
         cut("intensity corner off the ground", ~marking | inside_road)
         cut("weak intensity corner", ~marking | (cand.strength >= screen.min_marking_strength))
+        mark_turn = np.zeros(len(ok))
+        m = np.flatnonzero(ok & marking)
+        if m.size:
+            mark_turn[m] = intensity_edge_turn(depth, cand.rows_cols[m])
+        cut("marking edge does not turn", ~marking | (mark_turn >= screen.min_edge_turn))
     radius = 3.0 * np.sqrt(np.maximum(np.linalg.eigvalsh(np.where(ok[:, None, None], pixel_cov, 0.0))[:, -1], 0.0))
     fits = radius <= screen.max_ellipse_px
     too_big = ok & ~fits
