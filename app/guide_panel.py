@@ -9,7 +9,7 @@ worker thread after every change of the pairs, never on a viser callback.
 ``source="guided"``, ``precision_px`` = the guided click's 0.3 px) and frames
 the loupes on the cell and on the predicted pixel with its 3-sigma ellipse;
 a proposal to re-click a rough pair selects that pair instead, so the click
-moves its pixel (it becomes ``guided``, 0.3 px).
+moves its pixel (0.3 px; it keeps its source, e.g. ``clicked``).
 One click on the camera (loupe or image) completes the pair through the
 ordinary pick logic; when the new proposals arrive the next one is started
 and framed by itself, so a guided pair costs one click.  "Skip" moves the half
@@ -20,8 +20,8 @@ picks as on any other.
 Proposals pass the clear-evidence screen of :mod:`calib_core.guide.evidence`
 with a 3-sigma radius of at most half the camera loupe's side zoomed out one
 step (:func:`max_ellipse_px_for`); the camera loupe zooms out (never in) to
-show a proposal's ellipse whole, and the ellipse is drawn inside the loupe
-only.  When no cell qualifies the panel says why (e.g. "do a better rough
+show a proposal's ellipse whole and keeps that zoom until "Stop" (steady from
+one proposal to the next), and the ellipse is drawn inside the loupe only.  When no cell qualifies the panel says why (e.g. "do a better rough
 alignment first").  Guided picking is not offered while the calibration is
 unreliable (the live solve's quality verdict, or the guide's own solve of
 the same pairs): "Next pair" refuses with the reason, and a guided session
