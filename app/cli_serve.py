@@ -1,4 +1,4 @@
-"""``ba-calib serve``: the browser app on a scene, the bundled sample or a ROS bag's frame."""
+"""``ba-calib serve``: the browser app on a scene, on several shots of one rig, the bundled sample or a ROS bag's frame."""
 
 from __future__ import annotations
 
@@ -12,6 +12,8 @@ def cmd_serve(args: argparse.Namespace) -> int:
     from .cli_common import default_sample_dir, scan_options
     from .cli_guard import camera_image_size
 
+    if getattr(args, "shot", None):
+        return _serve_shots(args)
     if getattr(args, "bag", None) is not None:
         from app.serving import BagSource
 
@@ -59,6 +61,36 @@ def cmd_serve(args: argparse.Namespace) -> int:
     return 0
 
 
+def _serve_shots(args: argparse.Namespace) -> int:
+    """``serve --camera C --shot SCAN IMAGE [--shot ...]``: the files checked first, one line per problem."""
+    from calib_core.errors import CalibError
+
+    from app.serving import serve
+
+    from .cli_common import scan_options
+    from .cli_guard import camera_image_size, check_image_fits_camera, load_camera_from_args
+
+    if args.bag is not None or args.scan is not None or args.image is not None:
+        raise CalibError("give the shots with --shot SCAN IMAGE only: leave out --scan, --image and --bag")
+    if args.camera is None:
+        raise CalibError("serve --shot needs --camera: the one camera of every shot")
+    first = argparse.Namespace(**{**vars(args), "image": args.shot[0][1]})  # a KITTI calib file takes its size
+    camera = load_camera_from_args(argparse.Namespace(**{**vars(first), "image": None}))
+    for k, (scan, image) in enumerate(args.shot):
+        for what, path in (("scan", scan), ("image", image)):
+            if not path.is_file():
+                raise CalibError(f"shot {k}: the {what} {path} does not exist")
+        try:
+            check_image_fits_camera(image, camera, args)
+        except CalibError as exc:
+            raise CalibError(f"shot {k}: {exc}") from None
+    serve(None, None, args.camera, shots=[tuple(s) for s in args.shot], session_path=args.session,
+          output_path=args.output, host=args.host, port=args.port, scan_options=scan_options(args),
+          image_size=camera_image_size(first), initial_extrinsics_path=args.initial_extrinsics,
+          kitti_camera=args.kitti_camera)
+    return 0
+
+
 def add_serve_parser(sub) -> None:
     """The ``serve`` sub-command's options (``sub``: the parser's sub-parsers)."""
     from .cli_guard import add_camera_args
@@ -69,6 +101,9 @@ def add_serve_parser(sub) -> None:
     p.add_argument("--scan", type=Path,
                    help="scan file: .npz (native), .pcd, .ply, .bin (KITTI, nuScenes, SUN RGB-D), .las/.laz, .npy")
     p.add_argument("--image", type=Path, help="the camera image taken with the scan (PNG, JPEG, ...)")
+    p.add_argument("--shot", type=Path, nargs=2, action="append", metavar=("SCAN", "IMAGE"), default=None,
+                   help="a scan and the photo taken with it; repeat for several shots of one rig (one camera, one "
+                        "T_camera_lidar): every shot's pairs are solved together, the page switches shots")
     add_camera_args(p, required=False)
     p.add_argument("--organize", choices=["auto", "ring", "elevation", "firing", "spherical"], default="auto",
                    help="how an unorganized cloud becomes a depth matrix (default: ring field if present, else the "

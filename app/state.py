@@ -108,12 +108,7 @@ class AnnotationState(StateShots):
                 self._restore(data, self.session_path if from_yaml else store.journal_path, tuple(shots))
             self._store = store
             compact_at_exit(store)
-        if len(self._snap.shots) > len(self._masks):
-            raise CalibError(f"{self.session_path}: the session lists {len(self._snap.shots)} shots but "
-                             f"{len(self._masks)} scan(s) are loaded: open it with --shot SCAN IMAGE for each shot")
-        if active_shot is not None:
-            self._active = int(active_shot)
-        self._active = min(max(self._active, 0), self.n_shots - 1)
+        self._settle_active(active_shot)
 
     # ------------------------------------------------------------------ queries
     @property
@@ -175,33 +170,6 @@ class AnnotationState(StateShots):
         """The view settings (panorama on/off, overlays ...): the one copy the app reads."""
         with self._lock:
             return self._view
-
-    # ------------------------------------------------------------- validation
-    def check_laser_cell(self, row: int, col: int, shot: int | None = None) -> tuple[int, int]:
-        """``(row, col)`` as ints if the cell exists and has a return in ``shot`` (default: active), else CalibError."""
-        valid = self._masks[self._active if shot is None else shot]
-        h, w = valid.shape
-        try:
-            r, c = int(row), int(col)
-        except (TypeError, ValueError):
-            raise CalibError(f"laser cell must be two integers, got ({row!r}, {col!r})") from None
-        if not (0 <= r < h and 0 <= c < w):
-            raise CalibError(f"laser cell ({r}, {c}) is outside the {h}x{w} scan")
-        if not valid[r, c]:
-            raise CalibError(f"laser cell ({r}, {c}) has no laser return; click on a valid (non-black) cell")
-        return r, c
-
-    def check_pixel(self, u: float, v: float) -> tuple[float, float]:
-        """``(u, v)`` as floats if inside the original camera image, else CalibError."""
-        try:
-            uf, vf = float(u), float(v)
-        except (TypeError, ValueError):
-            raise CalibError(f"pixel must be two numbers, got ({u!r}, {v!r})") from None
-        if not (np.isfinite(uf) and np.isfinite(vf)):
-            raise CalibError(f"pixel ({uf}, {vf}) is not finite")
-        if not (-0.5 <= uf <= self._width - 0.5 and -0.5 <= vf <= self._height - 0.5):
-            raise CalibError(f"pixel ({uf:.1f}, {vf:.1f}) is outside the {self._width}x{self._height} camera image")
-        return uf, vf
 
     # ---------------------------------------------------------------- changes
     # Public mutators take the lock, change the snapshot, save the session and
@@ -408,6 +376,11 @@ class AnnotationState(StateShots):
         """Call ``listener(state)`` after every change (outside the lock, on the changing thread)."""
         with self._lock:
             self._listeners.append(listener)
+
+    def clear_listeners(self) -> None:
+        """Forget every listener (the app they drew was stopped; the state lives on for the next shot's)."""
+        with self._lock:
+            self._listeners = []
 
     # ---------------------------------------------------------------- session
     def session_dict(self) -> dict[str, Any]:

@@ -22,7 +22,40 @@ from .view_settings import ViewSettings
 
 
 class StateShots:
-    """Mixin of :class:`app.state.AnnotationState` (it uses the state's lock, snapshot and masks)."""
+    """Mixin of :class:`app.state.AnnotationState`: the shots, and the checks of clicks against a shot's scene
+    (it uses the state's lock, snapshot and validity masks)."""
+
+    def check_laser_cell(self, row: int, col: int, shot: int | None = None) -> tuple[int, int]:
+        """``(row, col)`` as ints if the cell exists and has a return in ``shot`` (default: active), else CalibError."""
+        valid = self._masks[self._active if shot is None else shot]
+        h, w = valid.shape
+        try:
+            r, c = int(row), int(col)
+        except (TypeError, ValueError):
+            raise CalibError(f"laser cell must be two integers, got ({row!r}, {col!r})") from None
+        if not (0 <= r < h and 0 <= c < w):
+            raise CalibError(f"laser cell ({r}, {c}) is outside the {h}x{w} scan")
+        if not valid[r, c]:
+            raise CalibError(f"laser cell ({r}, {c}) has no laser return; click on a valid (non-black) cell")
+        return r, c
+
+    def check_pixel(self, u: float, v: float) -> tuple[float, float]:
+        """``(u, v)`` as floats if inside the original camera image, else CalibError."""
+        try:
+            uf, vf = float(u), float(v)
+        except (TypeError, ValueError):
+            raise CalibError(f"pixel must be two numbers, got ({u!r}, {v!r})") from None
+        if not (np.isfinite(uf) and np.isfinite(vf)):
+            raise CalibError(f"pixel ({uf}, {vf}) is not finite")
+        if not (-0.5 <= uf <= self._width - 0.5 and -0.5 <= vf <= self._height - 0.5):
+            raise CalibError(f"pixel ({uf:.1f}, {vf:.1f}) is outside the {self._width}x{self._height} camera image")
+        return uf, vf
+
+    def _settle_active(self, active_shot: int | None) -> None:
+        """After the restore: the shot shown (``active_shot``, else the session's), within the shots."""
+        if active_shot is not None:
+            self._active = int(active_shot)
+        self._active = min(max(self._active, 0), self.n_shots - 1)
 
     @property
     def all_picks(self) -> tuple[Pick, ...]:
