@@ -149,5 +149,5 @@ def shots_markdown(joint: JointSolve, active: int) -> str:
         offset = _fmt(t.rotation_deg, 3) if t is not None and math.isfinite(t.rotation_deg) else "-"
         err = _fmt(rep.mean_px, 2) if math.isfinite(rep.mean_px) else "-"
         rows.append(f"| {rep.index}{shown} | {rep.n_pairs} | {err} | {loso_px} | {loso_deg} | {offset} | {flag} |")
-    notes = [f"Shot {e.shot} left out: {md_escape(e.note)}" for e in solved.leave_one_shot_out if e.note]
+    notes = [f"Shot {e.shot}, leave-one-shot-out: {md_escape(e.note)}" for e in solved.leave_one_shot_out if e.note]
     return "  \n".join(lines) + "\n\n" + "\n".join(rows) + ("\n\n" + "  \n".join(notes) if notes else "")
