@@ -43,7 +43,7 @@ class ShotsPanel:
             self.scan_text = gui.add_text("New shot: scan", "", hint="Path of the scan on the machine serving the page")
             self.image_text = gui.add_text("New shot: photo", "", hint="Path of the photo taken with that scan")
             self.add_button = gui.add_button("Add this shot", hint="One undoable step (Pairs: Undo removes it)")
-        self.show_button.on_click(app.guard(self._on_show))
+        self.show_button.on_click(app.guard(self.show_chosen))
         self.add_button.on_click(app.guard(self._on_add))
         app.state.subscribe(self._on_state_change)
         self._on_state_change(app.state)
@@ -67,9 +67,13 @@ class ShotsPanel:
         return str(self._md.content)
 
     # ------------------------------------------------------------------ actions
-    def _on_show(self, action: Any) -> None:
+    def show_chosen(self, action: Any = None) -> None:
+        """"Show this shot": ask for the shot chosen in the dropdown."""
+        options = self._options(self.app.state)
         value = str(self.dropdown.value)
-        self.request(self._options(self.app.state).index(value) if value in self._options(self.app.state) else 0)
+        if value not in options:
+            raise CalibError("choose a shot in 'Shot to show' first")
+        self.request(options.index(value))
 
     def _on_add(self, action: Any) -> None:
         scan, image = str(self.scan_text.value).strip(), str(self.image_text.value).strip()

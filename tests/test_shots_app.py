@@ -292,3 +292,30 @@ def test_serve_shot_bad_input_is_one_line(tmp_path, two_shots):
     line = one_error_line(run_cli("serve", "--camera", cam, "--shot", scan0, image0, "--shot", scan0, image0,
                                   "--port", "0"))
     assert "is given twice" in line
+
+
+def test_the_shots_panel_switches_shots_and_an_undone_shot_is_left(tmp_path, two_shots):
+    from app.serving import ShotServer
+
+    _, _, scan1, image1 = two_shots
+    server = ShotServer([(SAMPLE / "scan.npz", SAMPLE / "image.png")], SAMPLE / "camera.yaml",
+                        session_path=tmp_path / "session.yaml", port=0)
+    try:
+        app = server.load()
+        assert server.add_shot(scan1, image1) == 1  # what "Add this shot" does before asking for it
+        panel = server.panel
+        assert tuple(panel.dropdown.options) == ("Shot 0: scan.npz + image.png", "Shot 1: scan1.npz + image1.png")
+        panel.dropdown.value = panel.dropdown.options[1]
+        panel.show_chosen()
+        assert server.requests.get_nowait() == 1
+        app = server.load(1)
+        assert app.active_shot == 1 and np.array_equal(app.image, load_image_rgb(image1))
+        assert "Showing shot 1 of 2" in server.panel.summary
+        assert app.state.undo()  # the added shot goes: the panes go back to shot 0
+        assert server.requests.get(timeout=10) == 0
+        app = server.load(0)
+        assert app.state.n_shots == 1 and app.active_shot == 0 and np.array_equal(app.image, load_image_rgb(SAMPLE / "image.png"))
+        with pytest.raises(CalibError, match="no shot 1"):
+            server.load(1)
+    finally:
+        server.stop()
