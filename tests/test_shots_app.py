@@ -26,7 +26,7 @@ from calib_core.io.images import load_image_rgb, save_image_rgb
 from calib_core.shots import Shot, solve_shots
 from calib_core.synthetic import load_sample, simulate_pairs
 from calib_core.transforms import rotation_angle_deg
-from repo_paths import SAMPLE
+from repo_paths import REPO, SAMPLE
 
 #: A one-shot session as the app wrote it before shots (main at 72ab6b2: AnnotationState on the sample,
 #: 5 pairs of sample_data/pairs.yaml imported, pair 5 made a check pair, one more BA click, closed).
@@ -317,5 +317,53 @@ def test_the_shots_panel_switches_shots_and_an_undone_shot_is_left(tmp_path, two
         assert app.state.n_shots == 1 and app.active_shot == 0 and np.array_equal(app.image, load_image_rgb(SAMPLE / "image.png"))
         with pytest.raises(CalibError, match="no shot 1"):
             server.load(1)
+    finally:
+        server.stop()
+
+
+# ----------------------------------------------------------------------------- real data: two road scenes
+
+
+TWO_SCENES = REPO.parent / "shared" / "data" / "pjlab_opencalib_two_scenes"
+
+
+@pytest.mark.realdata
+@pytest.mark.skipif(not (TWO_SCENES / "scene1" / "calib.pcd").is_file(), reason=f"no data at {TWO_SCENES}")
+def test_serve_two_real_road_scenes_three_pairs_each(tmp_path):
+    """The two PJLab scenes of one rig as two shots: 3 pairs per scene (the published calibration's
+    projections of real corners plus 1 px noise, tools/make_real_pairs.py's rule, as tests/test_shots.py
+    takes them) solve in the app together, to the published calibration."""
+    from test_shots import _errors, _pair_rule, _read_calib_txt
+
+    from app.serving import ShotServer
+    from calib_core.cameras import save_camera_yaml
+    from calib_core.cameras.pinhole import PinholeCamera
+    from calib_core.pairs import Pair
+
+    K, D, T_pub = _read_calib_txt(TWO_SCENES / "scene1" / "calib.txt")
+    save_camera_yaml(PinholeCamera(K, D, 1920, 1200), tmp_path / "camera.yaml")
+    server = ShotServer([(TWO_SCENES / n / "calib.pcd", TWO_SCENES / n / "calib.jpg") for n in ("scene1", "scene2")],
+                        tmp_path / "camera.yaml", session_path=tmp_path / "session.yaml", port=0)
+    select_pairs = _pair_rule()
+    try:
+        per_shot = []
+        for k in (0, 1):
+            app = server.load(k)
+            entries = select_pairs(app.depth, app.camera, T_pub, 1000 + k)[:3]
+            per_shot.append([Pair(tuple(e["laser_rc"]), None, tuple(e["pixel"])) for e in entries])
+            app.state.import_pairs(per_shot[-1])
+        assert app.wait_idle(120)
+        assert "3 complete in shot 1 (shown); 6 in all 2 shots" in app.pairs_panel._md_pairs.content
+        ids = [[p.id for p in app.state.all_picks if p.shot == k] for k in (0, 1)]
+        here = solve_shots([Shot.from_pairs([dataclasses.replace(p, id=i) for p, i in zip(pairs, ids[k])],
+                                            server.scenes[k].depth, app.camera) for k, pairs in enumerate(per_shot)],
+                           app.camera)
+        np.testing.assert_allclose(app.result.T_camera_lidar, here.result.T_camera_lidar, rtol=0, atol=1e-12)
+        rot, shift = _errors(app.result.T_camera_lidar, T_pub)
+        print(f"\ntwo road scenes in the app, 3 + 3 pairs: {rot:.3f} deg, {100 * shift:.2f} cm from the published T")
+        assert rot <= 0.5 and shift <= 0.10
+        assert app.verify_panel.wait_idle(120) and app.wait_idle(60) and app.verify_panel.wait_idle(120)
+        assert "2 shots, one calibration" in app.verify_panel.shots_text
+        assert "do not determine a pose alone" in app.verify_panel.shots_text  # 3 pairs cannot: said, not hidden
     finally:
         server.stop()
