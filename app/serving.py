@@ -245,7 +245,9 @@ class ShotServer:
         data = peek_session(self.session_path)
         listed = list(session_shots(data, self.session_path)) if data is not None else []
         merged = listed + [f for f in given if f not in listed]
-        self.scenes: list[PreparedScene] = [self.prepare(k, f.scan, f.image) for k, f in enumerate(merged)]
+        where = f" (listed in the session {self.session_path})"
+        self.scenes: list[PreparedScene] = [self.prepare(k, f.scan, f.image, where if f in listed else "")
+                                            for k, f in enumerate(merged)]
         first = self.scenes[0]
         self.state = AnnotationState([sc.depth.valid for sc in self.scenes], (first.camera.width, first.camera.height),
                                      self.session_path, on_save_error=self._on_save_error,
@@ -254,15 +256,15 @@ class ShotServer:
         self.app: CalibrationApp | None = None
         self.panel: Any = None
 
-    def prepare(self, k: int, scan: Any, image: Any) -> PreparedScene:
-        """Load shot ``k``'s scene (CalibError naming the shot for a missing or unfit file)."""
+    def prepare(self, k: int, scan: Any, image: Any, where: str = "") -> PreparedScene:
+        """Load shot ``k``'s scene (CalibError naming the shot, and ``where`` it was listed, for a bad file)."""
         for what, path in (("scan", scan), ("image", image)):
             if not Path(path).is_file():
-                raise CalibError(f"shot {k}: the {what} {path} does not exist")
+                raise CalibError(f"shot {k}{where}: the {what} {path} does not exist")
         try:
             return PreparedScene.load(scan, image, self.camera_path, **self._load_options)
         except CalibError as exc:
-            raise CalibError(f"shot {k}: {exc}") from None
+            raise CalibError(f"shot {k}{where}: {exc}") from None
 
     def add_shot(self, scan: Any, image: Any) -> int:
         """Load a scan and its photo and add them as a new shot (one undoable step); returns its index."""

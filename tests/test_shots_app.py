@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -366,3 +367,21 @@ def test_serve_two_real_road_scenes_three_pairs_each(tmp_path):
         assert "do not determine a pose alone" in app.verify_panel.shots_text  # 3 pairs cannot: said, not hidden
     finally:
         server.stop()
+
+
+def test_a_session_shot_whose_files_are_gone_is_named(tmp_path, two_shots):
+    from app.serving import ShotServer
+
+    _, _, scan1, image1 = two_shots
+    moved = tmp_path / "moved"
+    moved.mkdir()
+    scan, image = shutil.copy(scan1, moved / "s.npz"), shutil.copy(image1, moved / "i.png")
+    session = tmp_path / "session.yaml"
+    server = ShotServer([(SAMPLE / "scan.npz", SAMPLE / "image.png"), (scan, image)], SAMPLE / "camera.yaml",
+                        session_path=session, port=0)
+    server.state.set_active_shot(1)  # a change: the session file now lists both shots
+    server.stop()
+    Path(scan).unlink()
+    with pytest.raises(CalibError) as err:
+        ShotServer([(SAMPLE / "scan.npz", SAMPLE / "image.png")], SAMPLE / "camera.yaml", session_path=session, port=0)
+    assert str(err.value) == f"shot 1 (listed in the session {session}): the scan {scan} does not exist"
