@@ -385,3 +385,40 @@ def test_a_session_shot_whose_files_are_gone_is_named(tmp_path, two_shots):
     with pytest.raises(CalibError) as err:
         ShotServer([(SAMPLE / "scan.npz", SAMPLE / "image.png")], SAMPLE / "camera.yaml", session_path=session, port=0)
     assert str(err.value) == f"shot 1 (listed in the session {session}): the scan {scan} does not exist"
+
+
+def test_serve_bag_frames_opens_one_session_of_three_shots(tmp_path, monkeypatch):
+    """``serve --bag BAG --frames 3`` on an MCAP bag of three clouds and images (tests/bag_helpers.py): the
+    three frames are written as shots and served as one session of three shots."""
+    from bag_helpers import CloudSpec, SceneBag, write_bag
+
+    import app.serving
+    from app.cli import build_parser
+    from app.serving import ShotServer
+    from calib_core.io.scan_readers import read_point_cloud
+
+    cloud = read_point_cloud(SAMPLE / "scan.npz")
+    spec = CloudSpec({a: cloud.xyz[:, i].copy() for i, a in enumerate("xyz")}, organized_shape=cloud.organized_shape)
+    image = load_image_rgb(SAMPLE / "image.png")
+    images = [image, image[::-1].copy(), image[:, ::-1].copy()]
+    bag = write_bag(tmp_path / "bag", "mcap", SceneBag(clouds=[spec] * 3, cloud_times=[50.0, 51.0, 52.0],
+                                                       images=images, image_times=[50.0, 51.0, 52.0]))
+    served = {}
+    monkeypatch.setattr(app.serving, "serve", lambda *a, **k: served.update(args=a, kwargs=k))
+    session = tmp_path / "session.yaml"
+    args = build_parser().parse_args(["serve", "--bag", str(bag), "--frames", "3", "--camera", str(SAMPLE / "camera.yaml"),
+                                      "--session", str(session), "--port", "0"])
+    assert args.func(args) == 0
+    shots = served["kwargs"]["shots"]
+    assert len(shots) == 3 and served["args"][2] == SAMPLE / "camera.yaml"
+    server = ShotServer(shots, served["args"][2], session_path=served["kwargs"]["session_path"], port=0)
+    try:
+        assert server.state.n_shots == 3
+        for k in (0, 2):
+            app_k = server.load(k)
+            assert np.array_equal(app_k.image, images[k])  # each shot shows its own frame's photo
+    finally:
+        server.stop()
+    with pytest.raises(CalibError, match="give --bag too"):
+        bad = build_parser().parse_args(["serve", "--frames", "3", "--camera", str(SAMPLE / "camera.yaml")])
+        bad.func(bad)
