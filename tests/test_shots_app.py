@@ -296,6 +296,7 @@ def test_serve_shot_bad_input_is_one_line(tmp_path, two_shots):
 
 def test_the_shots_panel_switches_shots_and_an_undone_shot_is_left(tmp_path, two_shots):
     from app.serving import ShotServer
+    from app.session_store import peek_session
 
     _, _, scan1, image1 = two_shots
     server = ShotServer([(SAMPLE / "scan.npz", SAMPLE / "image.png")], SAMPLE / "camera.yaml",
@@ -303,6 +304,9 @@ def test_the_shots_panel_switches_shots_and_an_undone_shot_is_left(tmp_path, two
     try:
         app = server.load()
         assert server.add_shot(scan1, image1) == 1  # what "Add this shot" does before asking for it
+        # On disk before it returns (journal first), as every change: what a restart after kill -9 reads.
+        on_disk = peek_session(tmp_path / "session.yaml")
+        assert [e["scan"] for e in on_disk["shots"]] == [str((SAMPLE / "scan.npz").absolute()), str(Path(scan1).absolute())]
         panel = server.panel
         assert tuple(panel.dropdown.options) == ("Shot 0: scan.npz + image.png", "Shot 1: scan1.npz + image1.png")
         panel.dropdown.value = panel.dropdown.options[1]
@@ -313,6 +317,7 @@ def test_the_shots_panel_switches_shots_and_an_undone_shot_is_left(tmp_path, two
         assert "Showing shot 1 of 2" in server.panel.summary
         assert app.state.undo()  # the added shot goes: the panes go back to shot 0
         assert server.requests.get(timeout=10) == 0
+        assert len(peek_session(tmp_path / "session.yaml")["shots"]) == 1
         app = server.load(0)
         assert app.state.n_shots == 1 and app.active_shot == 0 and np.array_equal(app.image, load_image_rgb(SAMPLE / "image.png"))
         with pytest.raises(CalibError, match="no shot 1"):
