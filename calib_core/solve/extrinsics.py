@@ -18,15 +18,15 @@ from .checks import (
     validate_pairs,
     validate_pixels,
 )
-from .kernels import bearing_frames, covariance, dlt_pose, finish, rotation_sigma_deg, whitened_residuals
+from .kernels import bearing_frames, fit_pose, pose_report, whitened_residuals
 from .quality import Quality, geometry_reasons, orientation_notes
 from .refine import (
-    uncertainty_from_covariance,
+    LM_MAX_ITER,
+    lm_failure,
     pixel_jacobian,
     pixel_residuals,
     pose_covariance,
     refine_angular,
-    refine_angular_normal,
     refine_pose,
 )
 from .result import CalibrationResult
@@ -107,13 +107,17 @@ def _ids_text(ids: list[int]) -> str:
     return shown + (f" and {len(ids) - 8} more" if len(ids) > 8 else "")
 
 
-def _initial(points: np.ndarray, bearings: np.ndarray) -> tuple[np.ndarray, str]:
-    """Linear DLT on the bearings when it applies (n >= 6, not coplanar), else Quan & Lan / P3P."""
-    R, t, ok = dlt_pose(points, bearings)
-    if ok:  # (finite by construction: ok needs a proper SVD and points in front)
-        T = np.eye(4)
-        T[:3, :3], T[:3, 3] = R, t
-        return T, "dlt"
+_EYE3, _ZERO3, _NO_H = np.eye(3), np.zeros(3), np.zeros((6, 6))
+
+
+def _pose_matrix(R: np.ndarray, t: np.ndarray) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R, t
+    return T
+
+
+def _closed_form_start(points: np.ndarray, bearings: np.ndarray) -> tuple[np.ndarray, str]:
+    """Quan & Lan / P3P: the start where the linear DLT does not apply (n < 6, coplanar points)."""
     T, method, init_cost = initial_pose(points, bearings)
     if not np.isfinite(init_cost):
         raise CalibError("no initial pose found from these pairs (all closed-form solutions failed)")
@@ -239,29 +243,41 @@ def solve_extrinsics(
     prior = {"px": PRIOR_PX, "sigma": PRIOR_PX, "noise": 1.0}.get(unit)
     floor = _MIN_SCALE[unit]
 
-    # 2. Initial pose and LM on all pairs.
-    if initial_T_camera_lidar is not None:
-        T_init, method = validate_initial_T(initial_T_camera_lidar), "given"
-    else:
-        T_init, method = _initial(points, bearings)
-    H_at_T = None  # the LM's normal matrix, while T is the LM's optimum on all pairs with this W
-    try:
-        T, iterations, H_at_T = refine_angular_normal(T_init, points, frames, W)
-    except CalibError:
-        if not robust:
-            raise
-        T, iterations = T_init, 0
+    # 2. Initial pose (the linear DLT on the bearings when it applies, n >= 6 and not coplanar, else
+    # Quan & Lan / P3P) and LM on all pairs, in one compiled call (fit_pose).
+    def fit(T_start: np.ndarray | None) -> tuple[np.ndarray, int, np.ndarray | None, np.ndarray, np.ndarray, str]:
+        """LM from ``T_start`` (None: from the DLT, or the closed-form start where it does not apply).
+
+        ``(T, iterations, H, z, T_start, start method)``; a failed LM keeps ``T_start`` (H None), or
+        raises when ``robust`` is off.
+        """
+        method = "given"
+        if T_start is None:
+            R, t, R0, t0, it, status, H, z = fit_pose(points, bearings, frames, W, _EYE3, _ZERO3, True, LM_MAX_ITER)
+            if status == -3:
+                T_closed, method = _closed_form_start(points, bearings)
+                return fit(T_closed)[:5] + (method,)
+            T_start, method = _pose_matrix(R0, t0), "dlt"
+        else:
+            R, t, _, _, it, status, H, z = fit_pose(points, bearings, frames, W, np.ascontiguousarray(T_start[:3, :3]),
+                                                   np.ascontiguousarray(T_start[:3, 3]), False, LM_MAX_ITER)
+        failure = lm_failure(status, R, t)
+        if failure:
+            if not robust:
+                raise CalibError(failure)
+            z, _ = whitened_residuals(np.ascontiguousarray(T_start[:3, :3]), np.ascontiguousarray(T_start[:3, 3]),
+                                      points, frames, W)
+            return T_start, 0, None, z, T_start, method
+        return _pose_matrix(R, t), int(it), H, z, T_start, method
+
+    given = None if initial_T_camera_lidar is None else validate_initial_T(initial_T_camera_lidar)
+    # H_at_T: the LM's normal matrix while T is the LM's optimum on all pairs with this W (else None).
+    T, iterations, H_at_T, z, T_init, method = fit(given)
     if laser_cov is not None and whiten_camera is not None:
         # The laser term depends on the pose: whiten at the first optimum and refine once more.
         W, unit = whiten(T)
-        try:
-            T, more, H_at_T = refine_angular_normal(T, points, frames, W)
-            iterations += more
-        except CalibError:
-            H_at_T = None
-            if not robust:
-                raise
-    z, _ = whitened_residuals(T[:3, :3].copy(), T[:3, 3].copy(), points, frames, W)
+        T, more, H_at_T, z, _, _ = fit(T)
+        iterations += more
     r2 = z[:, 0] ** 2 + z[:, 1] ** 2
 
     # 3. Outliers: only searched for when some residual is far above the noise scale.
@@ -301,29 +317,22 @@ def solve_extrinsics(
     # 4. Covariance on the inliers: Student-t sigma from the residuals, or the known noise.
     R_hat, t_hat = T[:3, :3].copy(), T[:3, 3].copy()
     dof = 2 * n_in - 6
-    reuse_H = H_at_T is not None and cost != "pixel" and n_in == n
-    z, theta, H, ssr, stats = finish(R_hat, t_hat, points, frames, W, inliers, not reuse_H)
-    if reuse_H:
-        H = H_at_T
+    H_known, ssr_known = (H_at_T, -1.0) if H_at_T is not None and cost != "pixel" and n_in == n else (None, -1.0)
     if cost == "pixel":
         x_opt = np.concatenate([np.zeros(3), t_hat])
         inv_s = 1.0 if sigmas is None else np.repeat(1.0 / sigmas[idx], 2)[:, None]
         J = pixel_jacobian(x_opt, R_hat, points[idx], pixels[idx], camera) * inv_s
         rp = pixel_residuals(x_opt, R_hat, points[idx], pixels[idx], camera).ravel() * np.ravel(inv_s)
         J = np.where(np.isfinite(J), J, 0.0)
-        H = J.T @ J
-        ssr = float(np.nansum(rp**2))
+        H_known, ssr_known = J.T @ J, float(np.nansum(rp**2))
         if noise_rad is not None:
             warnings.append("noise_rad is ignored with cost='pixel'; sigma comes from the pixel residuals")
-    noise_scale = math.sqrt(ssr / dof) if dof > 0 else float("nan")
-    if noise_rad is not None and cost != "pixel":
-        sigma = 1.0  # residuals are in units of the known noise
-    elif dof > 0:
-        sigma = noise_scale * student_t_factor(dof)
-    else:
-        sigma = float(prior) if prior is not None else float("inf")  # no redundancy: the expected noise
-    cov, condition = covariance(H, sigma)
-    uncertainty = uncertainty_from_covariance(cov, H, R_hat)
+    theta, H, stats, noise_scale, cov, condition, sigma_t, sigma_rpy, sigma_rotation = pose_report(
+        R_hat, t_hat, points, frames, W, inliers, _NO_H if H_known is None else H_known, H_known is not None,
+        ssr_known, noise_rad is not None and cost != "pixel", student_t_factor(dof) if dof > 0 else 1.0,
+        float(prior) if prior is not None else math.inf,  # no redundancy: the expected noise
+    )
+    noise_scale = float(noise_scale)
 
     # 5. Report.
     residual_deg = np.degrees(theta)
@@ -365,10 +374,7 @@ def solve_extrinsics(
         weak = conditioning_warning(H)
         if weak:
             warnings.append(weak)
-    bad_geo, weak_geo = geometry_reasons(
-        stats[3:6], n_in, rotation_sigma_deg(uncertainty.covariance_6x6), uncertainty.sigma_translation_m,
-        float(stats[2]),
-    )
+    bad_geo, weak_geo = geometry_reasons(stats[3:6], n_in, sigma_rotation, sigma_t, float(stats[2]))
     unreliable += bad_geo
     warnings += weak_geo
     if unit == "px" and np.isfinite(noise_scale) and noise_scale > NOISY_FACTOR * prior:
@@ -378,9 +384,9 @@ def solve_extrinsics(
     return CalibrationResult(
         T_camera_lidar=T,
         initial_T_camera_lidar=T_init,
-        covariance_6x6=uncertainty.covariance_6x6,
-        sigma_translation_m=uncertainty.sigma_translation_m,
-        sigma_rpy_deg=uncertainty.sigma_rpy_deg,
+        covariance_6x6=cov,
+        sigma_translation_m=sigma_t,
+        sigma_rpy_deg=sigma_rpy,
         residual_deg=residual_deg,
         residual_px=residual_px,
         mean_px=mean_px,

@@ -673,6 +673,75 @@ def finish(R, t, P, F, W, inliers, want_H=True):
 
 
 @kernel
+def fit_pose(P, B, F, W, R0, t0, use_dlt, max_iter):
+    """The start and the LM of :func:`calib_core.solve.solve_extrinsics` in one call.
+
+    Start: :func:`dlt_pose` on the bearings ``B`` when ``use_dlt``, else ``(R0, t0)``; then
+    :func:`lm_refine` on the whitened angular cost.
+
+    Returns
+    -------
+    R, t : the optimum; R_start, t_start : the start
+    iterations : int
+    status : int
+        As :func:`lm_refine`; -3 when the DLT start failed (fewer than 6 pairs, coplanar points).
+    H : (6, 6) normal matrix at ``(R, t)``
+    z : (N, 2) whitened residuals at ``(R, t)`` (for the outlier test)
+    """
+    if use_dlt:
+        R_start, t_start, ok = dlt_pose(P, B)
+        if not ok:
+            return R_start, t_start, R_start, t_start, 0, -3, np.zeros((6, 6)), np.zeros((P.shape[0], 2))
+    else:
+        R_start, t_start = R0.copy(), t0.copy()
+    R, t, it, status, H = lm_refine(R_start, t_start, P, F, W, max_iter)
+    z, _ = whitened_residuals(R, t, P, F, W)
+    return R, t, R_start, t_start, it, status, H, z
+
+
+@kernel
+def pose_report(R, t, P, F, W, inliers, H_given, have_H, ssr_given, known_noise, t_factor, prior_sigma):
+    """The figures of the final pose in one call: :func:`finish`, the residual scale, the covariance and sigmas.
+
+    Parameters
+    ----------
+    H_given : (6, 6), have_H : bool
+        The normal matrix at this pose when the caller has it (the LM's; the pixel cost's).
+    ssr_given : float
+        Sum of squared residuals to use instead of the angular one (the pixel cost's); < 0: none.
+    known_noise : bool
+        The residuals are in units of a known noise: sigma = 1 (the covariance is the Cramer-Rao bound).
+    t_factor : float
+        Student-t factor of ``2 m - 6`` degrees of freedom (m inliers), widening the estimated sigma.
+    prior_sigma : float
+        Sigma when there is no redundancy (``2 m <= 6``): the expected noise, or inf.
+
+    Returns
+    -------
+    theta : (N,) geodesic angles, rad; H : (6, 6); stats : (7,) as :func:`finish`
+    noise_scale : float, ``sqrt(SSR / (2 m - 6))`` (NaN without redundancy)
+    cov : (6, 6), condition : float, as :func:`covariance`
+    sigma_t : (3,) m; sigma_rpy : (3,) deg; sigma_rotation : float, deg (:func:`rotation_sigma_deg`)
+    """
+    z, theta, H, ssr, stats = finish(R, t, P, F, W, inliers, not have_H)
+    if have_H:
+        H = H_given
+    if ssr_given >= 0.0:
+        ssr = ssr_given
+    dof = 2 * int(stats[6]) - 6
+    noise_scale = math.sqrt(ssr / dof) if dof > 0 else np.nan
+    if known_noise:
+        sigma = 1.0
+    elif dof > 0:
+        sigma = noise_scale * t_factor
+    else:
+        sigma = prior_sigma
+    cov, condition = covariance(H, sigma)
+    sigma_t, sigma_rpy = rpy_sigmas(R, cov)
+    return theta, H, stats, noise_scale, cov, condition, sigma_t, sigma_rpy, rotation_sigma_deg(cov)
+
+
+@kernel
 def rotation_sigma_deg(cov):
     """1-sigma of the rotation along its worst axis, degrees: ``sqrt(max eig(cov[:3, :3]))``.
 

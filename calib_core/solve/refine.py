@@ -52,6 +52,7 @@ __all__ = [
     "refine_pose",
     "refine_angular",
     "refine_angular_normal",
+    "lm_failure",
     "bearing_frames",
     "rpy_jacobian",
     "pose_covariance",
@@ -348,13 +349,21 @@ def refine_angular_normal(
     R, t, iterations, status, H = lm_refine(
         np.ascontiguousarray(T0[:3, :3]), np.ascontiguousarray(T0[:3, 3]), P, frames, W, LM_MAX_ITER
     )
-    if status == -2 or not (np.all(np.isfinite(R)) and np.all(np.isfinite(t))):
-        raise CalibError("Levenberg-Marquardt (angular) failed: the cost is not finite at the initial pose")
-    if status == -1:
-        raise CalibError("Levenberg-Marquardt (angular) failed: the normal equations are singular (degenerate pairs)")
+    failure = lm_failure(status, R, t)
+    if failure:
+        raise CalibError(failure)
     T = np.eye(4)
     T[:3, :3], T[:3, 3] = R, t
     return T, int(iterations), H
+
+
+def lm_failure(status: int, R: np.ndarray, t: np.ndarray) -> str | None:
+    """Why the angular LM (:func:`.kernels.lm_refine`, status as there) gave no pose, or None."""
+    if status == -2 or not math.isfinite(float(R.sum()) + float(t.sum())):
+        return "Levenberg-Marquardt (angular) failed: the cost is not finite at the initial pose"
+    if status == -1:
+        return "Levenberg-Marquardt (angular) failed: the normal equations are singular (degenerate pairs)"
+    return None
 
 
 def rpy_jacobian(R: np.ndarray) -> np.ndarray:
