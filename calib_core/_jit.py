@@ -81,8 +81,8 @@ def _dispatcher(fn: Callable) -> Any:
 #: CPU seconds a process may spend running kernels interpreted before they compile (environment
 #: variable ``BA_CALIB_INTERPRET_S`` overrides; 0 compiles at once, as plain numba).
 INTERPRET_BUDGET_S = float(os.environ.get("BA_CALIB_INTERPRET_S", "3.0"))
-#: Largest array (elements) an interpreted call may take: bulk work (colouring a scan) compiles at once.
-INTERPRET_MAX_ELEMENTS = 4096
+#: Largest array (elements) an interpreted call may take (200 pairs of 3-vectors): bulk work compiles at once.
+INTERPRET_MAX_ELEMENTS = 600
 _spent = [0.0]  # CPU seconds spent interpreting, this process
 _local = threading.local()  # .force: compile in this thread; .depth: nesting of interpreted calls
 
