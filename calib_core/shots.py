@@ -886,6 +886,7 @@ def propose_shots(
     images: dict[int, np.ndarray] | None = None,
     click_sigma_px: float | None = None,
     state=None,
+    shot_options: dict[int, dict] | None = None,
 ) -> tuple[list[ShotProposal], Any]:
     """The ``n`` best next pairs over all shots, best first, ranked by one D-optimal gain.
 
@@ -904,6 +905,9 @@ def propose_shots(
         Click noise of a guided pair (default :data:`calib_core.guide.GUIDED_CLICK_SIGMA_PX`).
     state : PoseState, optional
         The joint pose and covariance, if already known (:func:`joint_pose_state`).
+    shot_options : dict shot -> dict, optional
+        More keyword arguments of :func:`calib_core.guide.propose` for that shot, e.g. its scan's precomputed
+        ``candidates`` and ``plane_residual`` (a loop over many proposals computes them once per scan).
 
     Returns
     -------
@@ -937,7 +941,7 @@ def propose_shots(
                  for i, p in enumerate(s.pairs) if p.laser_rc is not None and not p.check]
         corners = corner_image(images[k]) if k in images else None
         props = propose(s.depth, camera, state, n, exclude_rc=used, click_sigma_px=sigma, corner_image=corners,
-                        reclick=rough)
+                        reclick=rough, **(shot_options or {}).get(k, {}))
         if not props:
             continue
         rc = np.array([p.laser_rc for p in props], dtype=np.int64)
