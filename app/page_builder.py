@@ -39,7 +39,7 @@ class PageBuilder:
         self.folder_lock = threading.Lock()
         gui, scene = app.server.gui, app.server.scene
         gui.configure_theme(control_width="large", show_share_button=False, dark_mode=False)
-        gui.add_markdown(f"**{md_escape(app.title)}**  \n" + INTRO)
+        self.intro = gui.add_markdown(f"**{md_escape(app.title)}**  \n" + INTRO)  # the pair actions go above it
         backdrop = scene.add_image(
             "/annot/backdrop", np.full((2, 2, 3), 238, np.uint8), 600.0, 600.0, format="png", position=(0.0, 0.0, 0.5)
         )
