@@ -120,7 +120,7 @@ class PairsPanel:
                     lines.append(f"Predicted camera pixel: ({uv[0, 0]:.1f}, {uv[0, 1]:.1f}) (cross in the image).")
             status = []
             if pending is not None:
-                status.append(f"Pair {pending.id} waits for a {need} click (**Cancel pair** drops it).")
+                status.append(f"Pair {pending.id} waits for a {need} click (**Cancel pair** or Esc drops it).")
             if selected is not None:
                 lines.append(f"**Pair {selected} selected:** clicks now move its ends (Deselect to add pairs).")
                 status.append(f"Pair {selected} selected: the next click moves it (**Cancel pair** deselects).")
