@@ -227,3 +227,32 @@ def test_a_click_just_beside_the_renders_outline_takes_the_nearest_return(driver
     finally:
         cam.position = old
         reset(d)
+
+
+def shown_widths(camera_size, ba_size, cell_aspect, canvas=(1000, 900)):
+    """Screen widths (px) of the photo and of one BA pane when the whole page (photo, render, BA panes, loupes) is
+    fitted into ``canvas`` (the part left of the control panel), and the number of BA columns."""
+    from app.layout import bounds_of, layout_with_render, loupe_areas
+
+    keys = ("horizontal", "vertical", "diag_pos45", "diag_neg45")
+    slots = layout_with_render({"raw": camera_size}, "raw", ba_size, keys, cell_aspect)
+    main = bounds_of(list(slots.values()))
+    x0, y0, x1, y1 = main
+    for area in loupe_areas(main).values():
+        x1, y1 = max(x1, area.x0 + area.width), max(y1, area.y0 + area.height)
+    scale = min(canvas[0] / (x1 - x0), canvas[1] / (y1 - y0))  # screen px per world unit
+    n_cols = len({round(slots[k].center[0], 6) for k in keys})
+    return slots["raw"].render_width * scale, slots[keys[0]].render_width * scale, n_cols
+
+
+def test_a_small_window_gives_the_photo_and_the_render_the_room():
+    # PJLab manual_calib at 1400 x 900 (1000 px left of the panel): 1920 x 1200 photo, the 272 columns facing it.
+    photo, ba, n_cols = shown_widths((1920, 1200), (272, 64), 3.3)
+    assert photo >= 0.5 * 1000, (photo, ba, n_cols)  # by-eye run: about 390 px
+    assert ba >= 100 and n_cols == 4
+    # A wide, short photo (KITTI) keeps the 2 x 2 BA panes: the photo is wide already.
+    photo, ba, n_cols = shown_widths((1242, 375), (520, 64), 2.53)
+    assert photo >= 0.55 * 1000 and n_cols == 2
+    # A whole 360 deg strip is never cut into slivers 1 x 4 (each a quarter of the photo's width).
+    photo, ba, n_cols = shown_widths((1920, 1200), (1800, 64), 3.24)
+    assert n_cols in (1, 2) and ba >= 0.45 * photo
