@@ -20,6 +20,9 @@ from .ui_common import MIN_PAIRS, PICK_RADII, SNAP_RADIUS_PX, IMPORT_CHOICES, md
 
 #: The buttons at the top of the control panel ("Next pair" is guided picking's own).
 PAIR_ACTIONS = ("Undo", "Cancel pair", "Next pair")
+#: After a refining click in one loupe the other keeps its view while the pair's other end lies at least this
+#: share of its side from its edges.
+STEADY_MARGIN = 0.15
 
 
 class PairsPanel:
@@ -235,14 +238,44 @@ class PairsPanel:
             self._last_click[cid] = last_click
         self._last_pick[cid] = (kind, out, source)
         if source == "loupe" and out == self._loupes_pick:
-            # A refining click inside a loupe: both loupes keep their crops (the next click may be planned from
-            # this look); only the clicked loupe's title names the new cell or pixel.
+            # A refining click inside a loupe: the loupes keep their crops (the next click may be planned from this
+            # look); the clicked loupe's title names the new cell or pixel.  The other loupe moves only if the
+            # pair's other end (or its prediction) would leave its middle.
             self.app.loupes.show_click(kind, target[2:] if kind == "ba" else target[1:])
+            self._keep_other_end_shown(kind, out)
             return out
         self._loupes_pick = out
         self._frame_loupes(target, out, recentre=source == "full",
                            render_uv=self.app.render_pane.last_pixel if key == RENDER_KEY else None)
         return out
+
+    def _keep_other_end_shown(self, clicked: str, pick_id: int) -> None:
+        """After a refining click in loupe ``clicked``: frame the other loupe on pick ``pick_id``'s other end (or
+        its prediction) only if that is not inside the middle of what it shows (a margin of
+        :data:`STEADY_MARGIN` of its side)."""
+        loupes, support = self.app.loupes, self.app.loupe_support
+        pick = next((p for p in self.app.state.picks if p.id == pick_id), None)
+        if pick is None or (clicked == "camera" and loupes.shows_render):
+            return  # the laser loupe shows the camera loupe's crop of the render: both stay
+        if clicked == "ba":
+            uv = pick.pixel if pick.pixel is not None else (
+                None if pick.laser_rc is None else support.predict_pixel(*pick.laser_rc))
+            if uv is not None and not self._well_inside("camera", (uv[0], uv[1])):
+                loupes.frame_camera(*uv)
+            return
+        cell = pick.laser_rc if pick.laser_rc is not None else (
+            None if pick.pixel is None else support.predict_cell(*pick.pixel))
+        if cell is not None and not self._well_inside("ba", (cell[1], cell[0])):
+            loupes.frame_ba(loupes.ba_crop.key, *cell)
+
+    def _well_inside(self, kind: str, target: tuple[float, float]) -> bool:
+        """Does loupe ``kind`` show ``target`` (``(col, row)`` of a cell or an original pixel) away from its edges?"""
+        shown = self.app.loupes.display_of(kind, target)
+        if shown is None:
+            return False
+        slot = self.app.loupes.slot(kind)
+        mx, my = STEADY_MARGIN * slot.width_px, STEADY_MARGIN * slot.height_px
+        return (mx - 0.5 <= shown[0] <= slot.width_px - 0.5 - mx) and (my - 0.5 <= shown[1] <= slot.height_px - 0.5 - my)
 
     def _frame_loupes(self, target: tuple, pick_id: int, recentre: bool,
                       render_uv: tuple[float, float] | None = None) -> None:

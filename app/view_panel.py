@@ -125,7 +125,8 @@ class ViewPanel:
         """The title of BA image ``key`` (with the shown columns when they are not all)."""
         w = self._ba_window
         title = self.app.display.ba_title(key)
-        if w.is_full:
+        side_by_side = len({round(self.slots[k].center[1], 6) for k in self.app.ba_keys}) == 1
+        if w.is_full or side_by_side:  # four narrow panes in a row: a longer title would run into the next one
             return title
         last = (w.start + w.width - 1) % w.n_cols
         return f"{title} (columns {w.start}-{last} of {w.n_cols})"
