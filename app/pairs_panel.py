@@ -275,7 +275,8 @@ class PairsPanel:
             return False
         slot = self.app.loupes.slot(kind)
         mx, my = STEADY_MARGIN * slot.width_px, STEADY_MARGIN * slot.height_px
-        return (mx - 0.5 <= shown[0] <= slot.width_px - 0.5 - mx) and (my - 0.5 <= shown[1] <= slot.height_px - 0.5 - my)
+        return (mx - 0.5 <= shown[0] <= slot.width_px - 0.5 - mx
+                and my - 0.5 <= shown[1] <= slot.height_px - 0.5 - my)
 
     def _frame_loupes(self, target: tuple, pick_id: int, recentre: bool,
                       render_uv: tuple[float, float] | None = None) -> None:

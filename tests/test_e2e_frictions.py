@@ -26,8 +26,8 @@ from repo_paths import SAMPLE
 #: Set BA_CALIB_SHOTS=dir to keep a screenshot of the page with the notification (for looking, not for checking).
 SHOT_DIR = Path(os.environ["BA_CALIB_SHOTS"]) if os.environ.get("BA_CALIB_SHOTS") else None
 
-pytestmark = [pytest.mark.browser,
-              pytest.mark.skipif(not CHROMIUM.exists(), reason="/usr/bin/chromium is missing (apt-get install chromium)")]
+pytestmark = [pytest.mark.browser, pytest.mark.skipif(
+    not CHROMIUM.exists(), reason="/usr/bin/chromium is missing (apt-get install chromium)")]
 
 #: The page rectangle (left, top, right, bottom) of the innermost element whose text is ``text`` (``exact``) or
 #: contains it; null if none.
