@@ -8,7 +8,9 @@ move the camera by 5 cm.  The render (and its copy over the photo) follows every
 (predictions, BA columns, proposals, the session file) takes the new pose when the drag ends.
 
 The result is an ordinary initial extrinsic (``app.loupe_support``): predictions, loupes and proposals use it until
-4 pairs are solved.  The maths is :mod:`calib_core.alignment`; this panel only maps widgets and drags to it.
+4 pairs are solved.  After the 2nd and the 3rd complete pair (:meth:`AlignPanel.fit_to_pairs`) the rough pose is turned
+about the camera centre so that those pairs line up (:func:`calib_core.alignment.fit_rotation_about_centre`): one
+ordinary align step, which "Undo align step" takes back and a drag or a turn button changes further.  The maths is :mod:`calib_core.alignment`; this panel only maps widgets and drags to it.
 """
 
 from __future__ import annotations
@@ -19,9 +21,11 @@ from typing import Any
 import numpy as np
 
 from calib_core.alignment import (
-    MOUNTING_PRESETS, drag_to_rotation, focal_px_estimate, preset_T, rotate_about_camera, translate_in_camera,
+    MIN_ROTATION_PAIRS, MOUNTING_PRESETS, drag_to_rotation, fit_rotation_about_centre, focal_px_estimate, preset_T,
+    rotate_about_camera, translate_in_camera,
 )
 from calib_core.errors import CalibError
+from calib_core.pairs import resolve_pairs
 from calib_core.transforms import invert_T, rotation_angle_deg
 
 from .layout import RENDER_KEY
@@ -54,6 +58,7 @@ class AlignPanel:
         self.app = app
         self._history: list[np.ndarray | None] = []
         self._drag: dict | None = None  # the drag in progress: its start pose and pixel, and its slot
+        self._fitted_to: tuple | None = None  # the pair ids the rough pose was last turned to fit (shown)
         gui, guard = app.server.gui, app.guard
         self.folder = gui.add_folder("Align (rough pose)", order=order)
         with self.folder:
@@ -120,6 +125,9 @@ class AlignPanel:
             centre = invert_T(T)[:3, 3]
             line = (f"Rough pose: {turned[nearest]:.1f}° from '{nearest}'; camera centre at "
                     f"({centre[0]:.2f}, {centre[1]:.2f}, {centre[2]:.2f}) m in the lidar frame.")
+            if self._fitted_to:
+                line += (f" Turned to fit pairs {', '.join(str(i) for i in self._fitted_to)} (the camera centre kept): "
+                         "drag or **Undo align step** to change it.")
         self._md_pose.content = line
         self._bt_undo.disabled = not self._history
         # Once solved the rough pose is not used: tabs opened from then on find the folder folded.
@@ -136,13 +144,43 @@ class AlignPanel:
         """The pose a step starts from: the rough pose, else the assumed '+x' view."""
         return np.array(self.app.loupe_support.view_pose()[0], np.float64)
 
-    def adopt(self, T_camera_lidar: np.ndarray | None) -> None:
-        """Make ``T_camera_lidar`` the rough pose (None: none), remembering the old one for "Undo align step"."""
+    def adopt(self, T_camera_lidar: np.ndarray | None, fitted_to: tuple | None = None) -> None:
+        """Make ``T_camera_lidar`` the rough pose (None: none), remembering the old one for "Undo align step";
+        ``fitted_to``: the ids of the pairs it was turned to fit (None: a step by hand)."""
+        self._fitted_to = fitted_to
         old = self.app.loupe_support.initial_T_camera_lidar
         self._history.append(None if old is None else np.array(old))
         del self._history[:-MAX_HISTORY]
         self.app.loupe_support.adopt_rough_pose(T_camera_lidar)
         self.show()
+
+    def fit_to_pairs(self, pairs: list) -> bool:
+        """Before the first solve, turn the rough pose so that 2 or 3 complete ``pairs`` line up (the camera centre
+        kept; :func:`calib_core.alignment.fit_rotation_about_centre`), as one align step.
+
+        Called on the action worker after the complete pairs changed (:mod:`app.live_coordinator`).  Does nothing
+        (returns False) with fewer than 2 or with 4+ pairs, once a solve is shown, when the pairs changed again
+        meanwhile, when a pair is guided (guided picking proposes from the rough pose it was started on: turning
+        it would reshuffle the proposals under the person), or when their directions are parallel (no rotation
+        fixed).  Clicks weigh ``1 / precision_px^2``.
+        """
+        app = self.app
+        current = [p.to_pair() for p in app.state.picks if p.complete]
+        if (app.live.bundle is not None or current != list(pairs)
+                or not MIN_ROTATION_PAIRS <= len(pairs) < MIN_PAIRS
+                or any(getattr(p, "source", None) == "guided" for p in pairs)):
+            return False
+        points, bearings, _ = resolve_pairs(pairs, app.depth, app.camera)
+        sigma = np.array([p.precision_px or 1.0 for p in pairs], np.float64)
+        T0 = self._start_pose()
+        try:
+            T = fit_rotation_about_centre(T0, points, bearings, 1.0 / sigma**2)
+        except CalibError:
+            return False  # e.g. both corners in one direction from the camera: keep the pose
+        if np.allclose(T, T0, atol=1e-12):
+            return False
+        self.adopt(T, fitted_to=tuple(int(p.id) for p in pairs))
+        return True
 
     def apply_preset(self, name: str) -> None:
         """Start from mounting preset ``name`` (a key of :data:`calib_core.alignment.MOUNTING_PRESETS`)."""
@@ -175,6 +213,7 @@ class AlignPanel:
         if not self._history:
             raise CalibError("no align step to undo")
         self._check_unsolved()
+        self._fitted_to = None
         self.app.loupe_support.adopt_rough_pose(self._history.pop())
         self.show()
 

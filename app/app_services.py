@@ -98,6 +98,10 @@ class AppServices(Protocol):
         :class:`calib_core.solve.CalibrationResult`, or None.
     initial_T_camera_lidar : ndarray, shape (4, 4), or None
         The imported rough extrinsic predictions use before a solve.
+    active_shot : int
+        The shot these panes show (0-based; ``state.picks`` are its picks, ``state.all_picks`` every shot's).
+    shot_scenes : list of app.prepared_scene.PreparedScene
+        Every shot's scene, in shot order (one for a one-shot session); the live solve uses them all.
     """
 
     server: Any
@@ -122,6 +126,8 @@ class AppServices(Protocol):
     solve_bundle: Any
     result: Any
     initial_T_camera_lidar: np.ndarray | None
+    active_shot: int
+    shot_scenes: list
 
     def guard(self, fn: Callable[[Any], None]) -> Callable:
         """A viser callback that queues ``fn(action)`` on the ordered action worker (errors become notifications)."""

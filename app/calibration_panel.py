@@ -82,6 +82,13 @@ class CalibrationPanel:
                           f"**{_fmt(r.mean_deg, 4)} deg** (std {_fmt(r.std_deg, 4)} deg)")
         else:  # a near-exact fit is the likeliest outcome: its residuals are no error figure
             error_line = f"**Mean error: {NO_ERROR_ESTIMATE}** ({no_error})"
+        loo = getattr(quality, "leave_one_out", None)
+        loo_px = {} if loo is None else dict(zip(loo.ids, loo.loo_px))
+        loo_mean = np.nan if loo is None else loo.mean_px
+        if no_error is None and np.isfinite(loo_mean):
+            # The fit error flatters few pairs (the pose bends to them); this is how far a click it did not see lands.
+            error_line += (f"  \n**Error on pairs left out: {_fmt(loo_mean, 2)} px** (mean; each pair against the "
+                           "pose fitted without it, the honest figure with few pairs)")
         view = viewing_direction(T[:3, :3], np.asarray(r.covariance_6x6)[:3, :3])
         sv = view.sigma_deg
         out += [
@@ -99,18 +106,21 @@ class CalibrationPanel:
             if w not in reasons:  # notes on the output's form (reasons are shown above)
                 out.append(f"Note: {md_escape(w)}")
         self.md_result.content = "  \n".join(out)
-        rows = ["| pair | px | deg | in fit |", "|---:|---:|---:|:---|"]
+        rows = ["| pair | px | left out px | deg | in fit |", "|---:|---:|---:|---:|:---|"]
         # calibrate() leaves check pairs out: its rows are the fit pairs (pair_positions), checks come apart.
         positions = getattr(r, "pair_positions", None) or list(range(len(r.residual_px)))
         for k, pos in enumerate(positions):
             pid = bundle.pick_ids[pos]
             px, deg = float(r.residual_px[k]), float(r.residual_deg[k])
-            if pid in excluded:
-                rows.append(f"| **{pid}** | **{_fmt(px, 2)}** | **{_fmt(deg, 3)}** | **excluded (outlier)** |")
+            left_out = float(loo_px.get(pid, np.nan))  # its error under the pose fitted without it
+            shown_loo = _fmt(left_out, 2) if np.isfinite(left_out) else "-"
+            if pid in excluded:  # an outlier is already left out: its px is its left-out error
+                rows.append(f"| **{pid}** | **{_fmt(px, 2)}** | **{_fmt(px, 2)}** | **{_fmt(deg, 3)}** | "
+                            "**excluded (outlier)** |")
             else:
-                rows.append(f"| {pid} | {_fmt(px, 2)} | {_fmt(deg, 3)} | yes |")
+                rows.append(f"| {pid} | {_fmt(px, 2)} | {shown_loo} | {_fmt(deg, 3)} | yes |")
         for pos, px, deg in zip(getattr(r, "check_positions", []), getattr(r, "check_residual_px", []),
                                 getattr(r, "check_residual_deg", [])):
             shown = _fmt(float(px), 2) if np.isfinite(px) else "projects outside the image"  # no pixel error
-            rows.append(f"| {bundle.pick_ids[pos]} | {shown} | {_fmt(float(deg), 3)} | no: check pair |")
+            rows.append(f"| {bundle.pick_ids[pos]} | {shown} | {shown} | {_fmt(float(deg), 3)} | no: check pair |")
         self.md_table.content = "\n".join(rows)

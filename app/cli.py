@@ -38,7 +38,7 @@ from .cli_common import (  # noqa: F401  (default_sample_dir, format_summary, sc
     scan_options,
 )
 from .cli_serve import add_serve_parser
-from .cli_shots import add_shot_args, check_shot_form, cmd_propose_shots, cmd_solve_shots
+from .cli_shots import add_bag_frames_parser, add_shot_args, check_shot_form, cmd_propose_shots, cmd_solve_shots
 from .cli_toolchain import cmd_bag_extract, cmd_bag_info, cmd_export
 
 #: ``solve`` wrote the file but the calibration's quality status is ``unreliable``.
@@ -338,6 +338,7 @@ def build_parser() -> argparse.ArgumentParser:
     which.add_argument("--index", type=int, default=None, help="the cloud with this 0-based index on its topic (default 0)")
     q.add_argument("-o", "--output", required=True, type=Path, help="output folder")
     q.set_defaults(func=cmd_bag_extract)
+    add_bag_frames_parser(bag_sub)
     parser.commands = tuple(sub.choices)  # type: ignore[attr-defined]  (for with_default_command)
     return parser
 

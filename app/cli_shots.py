@@ -129,3 +129,46 @@ def cmd_propose_shots(args: argparse.Namespace) -> int:
               f"1-sigma {major:5.2f} x {minor:5.2f} px  gain {p.gain:6.3f}  {p.kind}")
     print(f"wrote {args.output}")
     return 0
+
+
+def add_bag_frames_parser(bag_sub) -> None:
+    """``bag frames BAG (--frames N | --time T ... | --index I ...) -o DIR``: several frames of a bag as shots."""
+    q = bag_sub.add_parser(
+        "frames",
+        help="write several frames as shots (scan + image each), chosen spread over the bag and still, or by hand",
+        description="Chooses frames (a cloud and the image nearest it in time) and writes each into "
+        "DIR/frame_NNNNN/ (scan.pcd, image.png, camera.yaml, initial_extrinsics.yaml as `bag extract` does). "
+        "--frames N spreads N frames over the bag, each the stillest of its part: the least motion of the rig "
+        "between the cloud's and the image's stamps when the bag has /tf or odometry of the rig, else the "
+        "smallest stamp gap. Prints one line per shot: 'shot K: SCAN IMAGE STAMP ...'.",
+    )
+    q.add_argument("bag", type=Path, help="a .bag file, or a ROS 2 bag folder (or a file in it)")
+    q.add_argument("--cloud-topic", default=None, help="sensor_msgs/PointCloud2 topic")
+    q.add_argument("--image-topic", default=None, help="sensor_msgs/Image or CompressedImage topic")
+    q.add_argument("--camera-info-topic", default=None, help="sensor_msgs/CameraInfo topic")
+    which = q.add_mutually_exclusive_group(required=True)
+    which.add_argument("--frames", type=int, default=None, help="this many frames, spread over the bag and still")
+    which.add_argument("--time", type=float, nargs="+", default=None,
+                       help="the clouds nearest these times (seconds after the bag's start)")
+    which.add_argument("--index", type=int, nargs="+", default=None, help="the clouds with these 0-based indices")
+    q.add_argument("-o", "--output", required=True, type=Path, help="output folder (one sub-folder per frame)")
+    q.set_defaults(func=cmd_bag_frames)
+
+
+def cmd_bag_frames(args: argparse.Namespace) -> int:
+    """Write the chosen frames; print the notes, then one line per shot (scan, image, stamp, quality of the frame)."""
+    from calib_core.io.bag_frames import shots_from_bag
+
+    shots = shots_from_bag(args.bag, frames=args.frames, times=args.time, indices=args.index, out_dir=args.output,
+                           cloud_topic=args.cloud_topic, image_topic=args.image_topic,
+                           camera_info_topic=args.camera_info_topic)
+    for note in shots.notes:
+        print(note)
+    for k, shot in enumerate(shots):
+        print(f"shot {k}: {shot.scan} {shot.image} {shot.stamp_s:.6f}  {shot.line()}")
+        for note in shot.notes:
+            print(f"  {note}")
+    print(f"camera: {shots.camera}" if shots.camera is not None else "no camera info: give the camera file yourself (--camera)")
+    if shots.initial_extrinsics is not None:
+        print(f"initial extrinsics (/tf_static): {shots.initial_extrinsics}")
+    return 0

@@ -27,6 +27,7 @@ from calib_core.overlays import export_colored_scan
 from calib_core.verify import extrinsics_document
 
 from .security import upload_display_name
+from .shot_solve import joint_export
 from .ui_common import MIN_PAIRS, md_escape
 
 
@@ -84,6 +85,8 @@ class ExportPanel:
         bundle = app.solve_bundle
         if bundle is None:
             raise CalibError(f"no calibration yet: pick at least {MIN_PAIRS} pairs")
+        if bundle.shots is not None:  # several shots: per-shot residuals and leave-one-shot-out (app.shot_solve)
+            return joint_export(app, bundle.shots)
         r = bundle.result
         panel = getattr(app, "verify_panel", None)
         report = panel.report_for(bundle.pairs, r) if panel is not None else None

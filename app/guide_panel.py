@@ -9,7 +9,7 @@ worker thread after every change of the pairs, never on a viser callback.
 ``source="guided"``, ``precision_px`` = the guided click's 0.3 px) and frames
 the loupes on the cell and on the predicted pixel with its 3-sigma ellipse;
 a proposal to re-click a rough pair selects that pair instead, so the click
-moves its pixel (it becomes ``guided``, 0.3 px).
+moves its pixel (0.3 px; it keeps its source, e.g. ``clicked``).
 One click on the camera (loupe or image) completes the pair through the
 ordinary pick logic; when the new proposals arrive the next one is started
 and framed by itself, so a guided pair costs one click.  "Skip" moves the half
@@ -20,8 +20,8 @@ picks as on any other.
 Proposals pass the clear-evidence screen of :mod:`calib_core.guide.evidence`
 with a 3-sigma radius of at most half the camera loupe's side zoomed out one
 step (:func:`max_ellipse_px_for`); the camera loupe zooms out (never in) to
-show a proposal's ellipse whole, and the ellipse is drawn inside the loupe
-only.  When no cell qualifies the panel says why (e.g. "do a better rough
+show a proposal's ellipse whole and keeps that zoom until "Stop" (steady from
+one proposal to the next), and the ellipse is drawn inside the loupe only.  When no cell qualifies the panel says why (e.g. "do a better rough
 alignment first").  Guided picking is not offered while the calibration is
 unreliable (the live solve's quality verdict, or the guide's own solve of
 the same pairs): "Next pair" refuses with the reason, and a guided session
@@ -139,6 +139,7 @@ class GuidePanel:
         self._pending_posts = 0
         self._auto = False
         self._auto_pairs: list[Pair] = []
+        self._guided_side = 0.0  # the camera loupe's side (px) during this guided session: never shrinks
         self._callbacks: dict[str, Callable] = {}
 
         folder = gui.add_folder("Guided picking", **({} if order is None else {"order": order}))
@@ -247,8 +248,10 @@ class GuidePanel:
                 return
             full = self._click_source(pick_id) == "full" and self._loupes() is not None
             precision = None if full or self._click_source(pick_id) is None else GUIDED_CLICK_SIGMA_PX
-            if pick.precision_px != precision or pick.source != "guided":
-                self.state.move_pixel(pick_id, *pick.pixel, precision_px=precision, source="guided")
+            # A re-click refines a pair and keeps its source (a hand pair stays "clicked" in the counts).
+            source = pick.source if pick_id == self._reclick else "guided"
+            if pick.precision_px != precision or pick.source != source:
+                self.state.move_pixel(pick_id, *pick.pixel, precision_px=precision, source=source)
             if pick_id == self._reclick:
                 self._end_reclick()
             self._refine = pick_id if full else None
@@ -369,9 +372,11 @@ class GuidePanel:
         loupes = self._loupes()
         if loupes is not None:
             loupes.frame_ba(self._ba_key, int(p.laser_rc[0]), int(p.laser_rc[1]))
-            # Zoomed out (never in) so the whole 3-sigma ellipse, and a margin, shows.
+            # Zoomed out (never in) so the whole 3-sigma ellipse, and a margin, shows; the side only grows
+            # during a guided session, so the zoom stays steady from one proposal to the next.
+            self._guided_side = max(self._guided_side, 2.0 * p.radius_3sigma_px + ELLIPSE_MARGIN_PX)
             loupes.frame_camera(float(p.pixel[0]), float(p.pixel[1]), cov_px2=np.asarray(p.pixel_cov),
-                                min_side_px=2.0 * p.radius_3sigma_px + ELLIPSE_MARGIN_PX)
+                                min_side_px=self._guided_side)
         self._refresh()
 
     def _unreliable(self) -> str | None:
@@ -386,6 +391,7 @@ class GuidePanel:
     def _on_button(self, label: str) -> None:
         if label == "Stop":
             self._guiding = self._want_next = False
+            self._guided_side = 0.0
             self._drop_unfinished()
             return
         if not self._active(len(self.state.complete_picks())):

@@ -20,6 +20,7 @@ from calib_core.transforms import transform_points
 
 from .ba_view import ColumnWindow, covering_window
 from .live_solver import LiveSolver
+from .shot_solve import joint_bundle
 from .state import AnnotationState
 from .ui_common import MIN_PAIRS, SolveBundle, CloudUpdate
 
@@ -88,8 +89,8 @@ class LiveSolveCoordinator:
         is later than that is the change drawn here first.  A click thus costs one redraw, not two.
         """
         app = self.app
-        picks = [p for p in state.picks if p.complete]
-        key = tuple((p.id, p.to_pair()) for p in picks)
+        picks = [p for p in state.all_picks if p.complete]  # every shot's: one joint solve
+        key = tuple((p.id, p.shot, p.to_pair()) for p in picks)
         solve_job = None
         with app.ui_lock:
             if key != self._submitted:
@@ -99,7 +100,8 @@ class LiveSolveCoordinator:
                     self.solving = True
                     # Worth awaiting only if the solver is free: else it first finishes (and shows) an older job.
                     solver_free = self._solver.idle
-                    self._solver.submit(self._job, ([p.id for p in picks], [p.to_pair() for p in picks]))
+                    self._solver.submit(self._job, ([p.id for p in picks], [p.to_pair() for p in picks],
+                                                    [p.shot for p in picks]))
                     # From the start of the change, its disk write included.
                     self._change_time = (self._job, state.last_change_started or time.perf_counter())
                     solve_job = self._job if solver_free else None
@@ -110,6 +112,8 @@ class LiveSolveCoordinator:
                     self.solve_error = None
                     self.solving = False
                     app.cloud.show_camera(None)
+                    if len(picks) >= 2:  # 2-3 pairs fix the rotation: line the render and loupes up (issue 20)
+                        app.post(lambda pairs=[p.to_pair() for p in picks]: app.align.fit_to_pairs(pairs))
         # Not while this thread holds the UI lock: the solver could not redraw before the wait ends.
         if solve_job is not None and not app.ui_lock.held_here() and self._wait_shown(solve_job, SHOW_WAIT_S):
             return
@@ -134,13 +138,15 @@ class LiveSolveCoordinator:
         app = self.app
         with app.ui_lock:
             app.pairs_panel.refresh()
-            n_complete = sum(1 for p in app.state.picks if p.complete)
+            n_complete = sum(1 for p in app.state.all_picks if p.complete)
             app.calibration_panel.show(self._bundle, self.solve_error, self.solving, n_complete)
 
-    def _solve_job(self, payload: tuple[list[int], list[Pair]]) -> SolveBundle:
+    def _solve_job(self, payload: tuple[list[int], list[Pair], list[int]]) -> SolveBundle:
         """The solve and what the error display and the 2-D overlays need (the cloud comes later)."""
         app = self.app
-        ids, pairs = payload
+        ids, pairs, shot_of = payload
+        if len(app.shot_scenes) > 1:  # several shots: one joint solve (app.shot_solve)
+            return joint_bundle(app, ids, pairs, shot_of)
         t0 = time.perf_counter()
         points, _, pixels = resolve_pairs(pairs, app.depth, app.camera)
         # The pairs carry their pick ids, so the solve names outliers and warnings by the ids the page shows.

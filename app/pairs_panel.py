@@ -114,7 +114,9 @@ class PairsPanel:
             complete = [p for p in picks if p.complete]
             pending = state.pending()
             selected = state.selected
-            lines = [f"**Pairs:** {len(complete)} complete"]
+            total = sum(1 for p in state.all_picks if p.complete)  # every shot's pairs go into the solve
+            lines = [f"**Pairs:** {len(complete)} complete" + (
+                f" in shot {state.active_shot} (shown); {total} in all {state.n_shots} shots" if state.n_shots > 1 else "")]
             if pending is not None:
                 need = "camera" if pending.pixel is None else "BA"
                 lines.append(f"Pair {pending.id} waits for a {need} click.")
@@ -129,8 +131,8 @@ class PairsPanel:
                 status.append(f"Pair {selected} selected: the next click moves it (**Cancel pair** deselects).")
             if self._md_status.content != "  \n".join(status):
                 self._md_status.content = "  \n".join(status)
-            if len(complete) < MIN_PAIRS:
-                lines.append(f"Pick {MIN_PAIRS - len(complete)} more to calibrate.")
+            if total < MIN_PAIRS:
+                lines.append(f"Pick {MIN_PAIRS - total} more to calibrate.")
             lines.append(f"Undo: {'yes' if state.can_undo else 'no'}, redo: {'yes' if state.can_redo else 'no'}")
             self._md_pairs.content = "  \n".join(lines)
             options = ("none",) + tuple(f"#{p.id}" for p in picks)

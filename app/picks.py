@@ -16,7 +16,9 @@ from calib_core.io.yaml_files import finite_vector
 from calib_core.pairs import PAIR_SOURCES, Pair, load_pairs_yaml, tag_fields
 
 SESSION_FORMAT = "ba-calib-session"
-SESSION_VERSION = 1
+#: Version 2 lists the shots (``shots:``) and each pick's ``shot``; version 1 (one shot) is still read.
+SESSION_VERSION = 2
+READABLE_VERSIONS = (1, 2)
 
 
 @functools.lru_cache(maxsize=4096)  # called per pick and redraw
@@ -49,6 +51,8 @@ class Pick:
         1-sigma of the pixel in px, when known (None: the solve's default).
     check : bool
         A check pair: left out of the fit, its error reported apart (Verify panel).
+    shot : int
+        The shot (scan and photo) the pick belongs to, 0-based (:class:`ShotFiles`).
     """
 
     id: int
@@ -58,6 +62,7 @@ class Pick:
     source: str = "clicked"
     precision_px: float | None = None
     check: bool = False
+    shot: int = 0
 
     @property
     def has_laser(self) -> bool:
@@ -85,15 +90,61 @@ class Pick:
         out["laser_xyz"] = None if self.laser_xyz is None else [float(v) for v in self.laser_xyz]
         out["pixel"] = None if self.pixel is None else [float(v) for v in self.pixel]
         out.update(tag_fields(self.source, self.precision_px, self.check))
+        out["shot"] = int(self.shot)
         return out
 
 
 @dataclass(frozen=True)
+class ShotFiles:
+    """One shot of the session: a scan and the photo taken with it by the rig (paths as strings)."""
+
+    scan: str
+    image: str
+
+    def to_dict(self) -> dict[str, str]:
+        return {"scan": self.scan, "image": self.image}
+
+    @classmethod
+    def of(cls, scan: Any, image: Any) -> "ShotFiles":
+        """The shot of these files, by absolute path (a session names the same files from any folder)."""
+        return cls(str(Path(scan).absolute()), str(Path(image).absolute()))
+
+
+@dataclass(frozen=True)
 class Snapshot:
-    """The undoable part of the state."""
+    """The undoable part of the state: the picks of every shot and the shots' files."""
 
     picks: tuple[Pick, ...] = ()
     next_id: int = 1
+    shots: tuple[ShotFiles, ...] = ()
+
+
+def session_shots(data: dict, where: Any) -> tuple[ShotFiles, ...]:
+    """The ``shots:`` list of session ``data`` (empty for a version-1 session or a pairs file), checked."""
+    entries = data.get("shots") if data.get("format") == SESSION_FORMAT else None
+    if entries is None:
+        return ()
+    if not isinstance(entries, list):
+        raise CalibError(f"{where}: 'shots' must be a list of {{scan, image}}")
+    out = []
+    for k, e in enumerate(entries):
+        if not (isinstance(e, dict) and isinstance(e.get("scan"), str) and isinstance(e.get("image"), str)):
+            raise CalibError(f"{where}: shot {k}: expected a mapping with the scan and image file names")
+        out.append(ShotFiles(e["scan"], e["image"]))
+    return tuple(out)
+
+
+def session_data(snap: Snapshot, view: dict, active_shot: int) -> dict[str, Any]:
+    """What the session file holds (plain data)."""
+    return {
+        "format": SESSION_FORMAT,
+        "version": SESSION_VERSION,
+        "next_id": int(snap.next_id),
+        "shots": [s.to_dict() for s in snap.shots],
+        "active_shot": int(active_shot),
+        "pairs": [p.to_dict() for p in snap.picks],
+        "view": view,
+    }
 
 
 def new_ends(checked: Sequence[Pick], existing: Sequence[Pick]) -> list[Pick]:
@@ -141,11 +192,13 @@ def checked_picks(pairs: Sequence[Pair], check_cell: Callable, check_pixel: Call
     return checked
 
 
-def restore_session(data: dict, path: Path, check_cell: Callable, check_pixel: Callable
+def restore_session(data: dict, path: Path, check_cell: Callable, check_pixel: Callable, n_shots: int = 1
                     ) -> tuple[Snapshot, dict | None]:
     """The picks (and view settings, None for a plain pairs file) of session ``data`` read from ``path``.
 
-    ``check_cell(row, col)`` and ``check_pixel(u, v)`` raise CalibError for ends not of this scene.
+    ``check_cell(row, col, shot=k)`` and ``check_pixel(u, v)`` raise CalibError for ends not of that shot's
+    scene; ``n_shots`` is how many shots there are (a pick's ``shot`` must be below it).  The snapshot's
+    ``shots`` are the session's (empty for a version-1 session or a pairs file: they hold one shot).
     """
     if data.get("format") != SESSION_FORMAT:
         # A plain pairs file given as the session: start from its pairs.
@@ -156,7 +209,7 @@ def restore_session(data: dict, path: Path, check_cell: Callable, check_pixel: C
         for i, p in enumerate(pairs):
             try:
                 if p.laser_rc is not None:
-                    check_cell(*p.laser_rc)
+                    check_cell(*p.laser_rc, shot=0)
                 check_pixel(*p.pixel)
             except CalibError as exc:
                 raise CalibError(f"{path}: pair {i}: {exc} (pairs from another scene?)") from None
@@ -165,9 +218,10 @@ def restore_session(data: dict, path: Path, check_cell: Callable, check_pixel: C
             picks.append(Pick(pid, laser_rc=p.laser_rc, laser_xyz=p.laser_xyz, pixel=p.pixel, source=p.source,
                               precision_px=p.precision_px, check=bool(p.check)))
         return Snapshot(tuple(picks), max([len(picks)] + [p.id for p in picks]) + 1), None
-    if data.get("version") != SESSION_VERSION:
+    if data.get("version") not in READABLE_VERSIONS:
         raise CalibError(f"{path}: session version {data.get('version')!r} is not supported "
-                         f"(this ba-calib reads version {SESSION_VERSION})")
+                         f"(this ba-calib reads versions {', '.join(map(str, READABLE_VERSIONS))})")
+    shots = session_shots(data, path)
     entries = data.get("pairs") or []
     if not isinstance(entries, list):
         raise CalibError(f"{path}: 'pairs' must be a list")
@@ -189,10 +243,13 @@ def restore_session(data: dict, path: Path, check_cell: Callable, check_pixel: C
         rc_t = None if rc_f is None else tuple(int(round(float(v))) for v in rc_f)
         xyz_t = None if xyz is None else tuple(finite_vector(xyz, 3, f"{where} laser_xyz"))
         px_t = None if px is None else tuple(finite_vector(px, 2, f"{where} pixel"))
+        shot = e.get("shot", 0)
+        if isinstance(shot, bool) or not isinstance(shot, int) or not 0 <= shot < n_shots:
+            raise CalibError(f"{where}: shot must be a shot number from 0 to {n_shots - 1}, got {shot!r}")
         # A session written for another scene must not inject invalid picks.
         try:
             if rc_t is not None:
-                check_cell(*rc_t)
+                check_cell(*rc_t, shot=shot)
             if px_t is not None:
                 check_pixel(*px_t)
         except CalibError as exc:
@@ -200,7 +257,7 @@ def restore_session(data: dict, path: Path, check_cell: Callable, check_pixel: C
         check = e.get("check", False)
         if not isinstance(check, bool):
             raise CalibError(f"{where}: check must be true or false, got {check!r}")
-        picks.append(Pick(pick_id, rc_t, xyz_t, px_t, check=check, **pick_tags(e, where)))  # type: ignore[arg-type]
+        picks.append(Pick(pick_id, rc_t, xyz_t, px_t, check=check, shot=shot, **pick_tags(e, where)))  # type: ignore[arg-type]
     ids = [p.id for p in picks]
     if len(set(ids)) != len(ids):
         raise CalibError(f"{path}: duplicate pair ids")
@@ -211,7 +268,7 @@ def restore_session(data: dict, path: Path, check_cell: Callable, check_pixel: C
     view = data.get("view") or {}
     if not isinstance(view, dict):
         raise CalibError(f"{path}: 'view' must be a mapping")
-    return Snapshot(tuple(picks), next_id), dict(view)
+    return Snapshot(tuple(picks), next_id, shots), dict(view)
 
 
 def next_number(picks: Sequence[Pick]) -> int:
@@ -233,7 +290,8 @@ def joins_newest_step(undo: Sequence[Snapshot], current: Snapshot, new: Snapshot
     """
     changed = set(current.picks) ^ set(new.picks)
     ids = {p.id for p in changed}
-    if not undo or len(ids) != 1 or any(p.complete for p in changed) or len(current.picks) != len(new.picks):
+    if (not undo or len(ids) != 1 or any(p.complete for p in changed) or len(current.picks) != len(new.picks)
+            or not current.shots == new.shots == undo[-1].shots):
         return False
     (pick_id,) = ids
     before = undo[-1].picks

@@ -9,7 +9,7 @@ import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -22,6 +22,9 @@ from calib_core.overlays import ba_edge_points_consensus
 from calib_core.panorama import Panorama
 
 from .ba_view import cell_aspect_from_directions
+
+if TYPE_CHECKING:
+    from .view_settings import ViewSettings
 
 #: Display points of the 3-D cloud (software WebGL slows down beyond ~100k).
 MAX_CLOUD_POINTS = 100_000
@@ -131,3 +134,16 @@ class PreparedScene:
             wrap_cols=bool(depth.meta.get("wrap_cols", False)), laser_images=laser_images,
             image_valid=image.max(axis=2) > 0,
         )
+
+    def default_view(self) -> "ViewSettings":
+        """The view settings of a new session on this scene.
+
+        The BA panes show the columns the camera sees (under the rough pose, else the "+x" preset).  The
+        render is shaded by intensity where the scan has it: in the by-eye trials range shading hid the
+        doors, bins and boxes that intensity shows, and every clicker switched (docs/by_eye.md).
+        """
+        from .view_settings import ViewSettings
+
+        return ViewSettings(up_axis="+y" if self.depth.meta.get("model") == "rotating_2d" else "+z",
+                            ba_window_mode="camera",
+                            render_mode="intensity" if "Intensity" in self.laser_images else "range")

@@ -39,7 +39,7 @@ from .state import AnnotationState
 from .ui_common import page_url
 from .verify_panel import VerifyPanel
 from .view_panel import ViewPanel
-from .view_settings import ViewSettings
+from .picks import ShotFiles
 from .warm_up import WarmUp
 
 
@@ -80,6 +80,9 @@ class CalibrationApp:
     initial_extrinsics_path : path-like, optional
         A rough extrinsic (any format :func:`calib_core.io.extrinsic_formats.load_extrinsics_any` reads)
         that predictions and "Facing the camera" use until a solve exists.
+    scene_data, state, shot_scenes : optional
+        A session of several shots (:class:`app.serving.ShotServer`): this shot's loaded scene, the
+        state shared by every shot (not closed by :meth:`stop`) and every shot's scene, in shot order.
 
     Raises
     ------
@@ -92,7 +95,9 @@ class CalibrationApp:
                  host: str = "127.0.0.1", port: int = 8080, title: str | None = None, scan_options: dict | None = None,
                  image_size: tuple[int, int] | None = None, max_cloud_points: int = MAX_CLOUD_POINTS,
                  token: str | None = None, allowed_hosts: tuple[str, ...] = (),
-                 initial_extrinsics_path: str | os.PathLike | None = None, kitti_camera: int | None = None) -> None:
+                 initial_extrinsics_path: str | os.PathLike | None = None, kitti_camera: int | None = None,
+                 scene_data: PreparedScene | None = None, state: AnnotationState | None = None,
+                 shot_scenes: list[PreparedScene] | None = None) -> None:
         # Kernels compile in the background while the inputs load; nothing waits for it.
         self.warm_up = WarmUp()
         self.scan_path, self.image_path, self.camera_path = Path(scan_path), Path(image_path), Path(camera_path)
@@ -102,9 +107,10 @@ class CalibrationApp:
         self.title = title or f"ba-calib: {self.scan_path.name} + {self.image_path.name}"
 
         # -- data (all maths from calib_core, no viser) ----------------------------------
-        self.scene_data = sd = PreparedScene.load(self.scan_path, self.image_path, self.camera_path,
-                                                  scan_options=scan_options, image_size=image_size,
-                                                  max_cloud_points=max_cloud_points, kitti_camera=kitti_camera)
+        self.scene_data = sd = scene_data or PreparedScene.load(
+            self.scan_path, self.image_path, self.camera_path, scan_options=scan_options, image_size=image_size,
+            max_cloud_points=max_cloud_points, kitti_camera=kitti_camera)
+        self.shot_scenes = list(shot_scenes) if shot_scenes else [sd]  # every shot's scene (the live solve's)
         self.depth, self.camera, self.image = sd.depth, sd.camera, sd.image
         self.ba_keys, self.ba_gray, self.image_gray = sd.ba_keys, sd.ba_gray, sd.image_gray
         self.all_points_lidar, self.cloud_points_lidar = sd.all_points_lidar, sd.cloud_points_lidar
@@ -120,11 +126,13 @@ class CalibrationApp:
         # The BA panes show the columns the camera sees (under the rough pose, else the "+x" preset) by default.
         # The render is shaded by intensity where the scan has it: in the by-eye trials range shading hid the
         # doors, bins and boxes that intensity shows, and every clicker switched (docs/by_eye.md).
-        default_view = ViewSettings(up_axis="+y" if self.depth.meta.get("model") == "rotating_2d" else "+z",
-                                    ba_window_mode="camera",
-                                    render_mode="intensity" if "Intensity" in sd.laser_images else "range")
-        self.state = AnnotationState(self.depth.valid, (self.camera.width, self.camera.height), self.session_path,
-                                     on_save_error=self._on_save_error, default_view=default_view)
+        self._owns_state = state is None
+        self.state = state or AnnotationState(self.depth.valid, (self.camera.width, self.camera.height),
+                                              self.session_path, on_save_error=self._on_save_error,
+                                              default_view=sd.default_view(),
+                                              shots=(ShotFiles.of(self.scan_path, self.image_path),))
+        self.session_path = self.state.session_path or self.session_path
+        self.active_shot = self.state.active_shot  # the shot these panes show
         self.ui_lock = UiLock()  # public: held while the scene and the panels are redrawn
         self.display = DisplayPanel(self)  # the laser panes' grey levels, with the saved contrast
         self.live = LiveSolveCoordinator(self)  # the solve shown; its threads start with the page
@@ -176,7 +184,7 @@ class CalibrationApp:
                 self.render_pane.stop()
             self.live.stop()
             self.server.stop()
-            self.state.close()
+            self.state.close() if self._owns_state else self.state.clear_listeners()
             blas_threads.unlimit()
             raise
 
@@ -264,7 +272,7 @@ class CalibrationApp:
         self.guide.stop()
         self.verify_panel.stop()
         try:
-            self.state.close()
+            self.state.close() if self._owns_state else self.state.clear_listeners()
         finally:
             self.server.stop()
             if self._blas_limited:  # once per app, however often stop() is called

@@ -7,6 +7,11 @@ a "Bag frame" folder to choose another cloud: the app is then restarted on the
 same port with that frame (each frame has its own session file) and the page
 reconnects.  ``/tf_static`` between the cloud's and the image's frames is
 offered as the initial extrinsic.
+
+``serve --shot SCAN IMAGE --shot ...`` serves a session of several shots of one rig (:class:`ShotServer`):
+every shot's scene is loaded once, one :class:`app.state.AnnotationState` holds every shot's pairs (one
+session file, one undo history) and the live solve uses them all; the panes show one shot, and the page's
+"Shots" folder (:class:`app.shots_panel.ShotsPanel`) restarts the app on another shot the same way.
 """
 
 from __future__ import annotations
@@ -20,12 +25,16 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Sequence
 
 from calib_core.errors import CalibError
 
 from .security import TOKEN_QUERY, is_loopback
+from .picks import ShotFiles, session_shots
+from .prepared_scene import MAX_CLOUD_POINTS, PreparedScene
 from .server import CalibrationApp
+from .session_store import peek_session
+from .state import AnnotationState
 from .ui_common import md_escape
 
 
@@ -193,6 +202,123 @@ class BagServer:
             self.app = None
 
 
+class ShotServer:
+    """Serve a session of several shots, one shot's panes at a time (same port); :meth:`load` shows another.
+
+    Parameters
+    ----------
+    shots : sequence of (scan, image) paths
+        The shots given (``--shot``).  A session file that already lists shots keeps them, in its order;
+        the shots given that it lacks are added after them.
+    camera_path : path
+        The one camera of every shot.
+    session_path : path, optional
+        Default ``<first scan stem>.ba-calib-session.yaml`` in the current folder.
+    scan_options, image_size, kitti_camera, max_cloud_points :
+        As for :class:`app.server.CalibrationApp`, for every shot.
+    **app_options
+        The other options of :class:`app.server.CalibrationApp` (``port``, ``host``, ...).
+
+    Raises
+    ------
+    CalibError
+        A missing file, a shot given twice, an image whose size is not the camera's (naming the shot).
+    """
+
+    def __init__(self, shots: Sequence[tuple[Any, Any]], camera_path: str | os.PathLike, *,
+                 session_path: str | os.PathLike | None = None, scan_options: dict | None = None,
+                 image_size: tuple[int, int] | None = None, kitti_camera: int | None = None,
+                 max_cloud_points: int = MAX_CLOUD_POINTS, **app_options: Any) -> None:
+        if not shots:
+            raise CalibError("no shot given: give --shot SCAN IMAGE at least once")
+        self.camera_path = Path(camera_path)
+        self.session_path = (Path.cwd() / f"{Path(shots[0][0]).stem}.ba-calib-session.yaml" if session_path is None
+                             else Path(session_path))
+        self._load_options = dict(scan_options=scan_options, image_size=image_size, kitti_camera=kitti_camera,
+                                  max_cloud_points=max_cloud_points)
+        app_options.pop("title", None)  # each shot's page names its shot
+        self.app_options = app_options
+        given = [ShotFiles.of(scan, image) for scan, image in shots]
+        for k, files in enumerate(given):
+            if files in given[:k]:
+                raise CalibError(f"shot {k}: {files.scan} with {files.image} is given twice (shot {given.index(files)})")
+        data = peek_session(self.session_path)
+        listed = list(session_shots(data, self.session_path)) if data is not None else []
+        merged = listed + [f for f in given if f not in listed]
+        where = f" (listed in the session {self.session_path})"
+        self.scenes: list[PreparedScene] = [self.prepare(k, f.scan, f.image, where if f in listed else "")
+                                            for k, f in enumerate(merged)]
+        first = self.scenes[0]
+        self.state = AnnotationState([sc.depth.valid for sc in self.scenes], (first.camera.width, first.camera.height),
+                                     self.session_path, on_save_error=self._on_save_error,
+                                     default_view=first.default_view(), shots=merged)
+        self.requests: queue.Queue[int] = queue.Queue()
+        self.app: CalibrationApp | None = None
+        self.panel: Any = None
+
+    def prepare(self, k: int, scan: Any, image: Any, where: str = "") -> PreparedScene:
+        """Load shot ``k``'s scene (CalibError naming the shot, and ``where`` it was listed, for a bad file)."""
+        for what, path in (("scan", scan), ("image", image)):
+            if not Path(path).is_file():
+                raise CalibError(f"shot {k}{where}: the {what} {path} does not exist")
+        try:
+            return PreparedScene.load(scan, image, self.camera_path, **self._load_options)
+        except CalibError as exc:
+            raise CalibError(f"shot {k}{where}: {exc}") from None
+
+    def add_shot(self, scan: Any, image: Any) -> int:
+        """Load a scan and its photo and add them as a new shot (one undoable step); returns its index."""
+        k = self.state.n_shots if self.state.shots else 0
+        scene = self.prepare(k, scan, image)
+        k = self.state.add_shot(scan, image, scene.depth.valid)
+        self.scenes[k:k + 1] = [scene]  # a slot freed by an undone shot is taken over
+        return k
+
+    def load(self, shot: int | None = None) -> CalibrationApp:
+        """Stop the current app (if any) and serve shot ``shot`` (None: the session's active shot)."""
+        options = dict(self.app_options)
+        previous = self.state.active_shot
+        if shot is not None and not 0 <= shot < self.state.n_shots:
+            raise CalibError(f"no shot {shot}: the session has {self.state.n_shots} (0-based)")
+        if self.app is not None:
+            options["port"] = self.app.port
+            self.app.stop()  # the state lives on; the stopped app's listeners are dropped
+            self.app = None
+        try:
+            return self._start(shot, options)
+        except CalibError:
+            if shot is None or shot == previous:
+                raise
+            self._start(previous, options)  # the shot shown before keeps being served
+            raise
+
+    def _start(self, shot: int | None, options: dict) -> CalibrationApp:
+        if shot is not None:
+            self.state.set_active_shot(shot)
+        k = self.state.active_shot
+        files = self.state.shots[k]
+        n = self.state.n_shots
+        title = f"ba-calib: shot {k} of {n}: {Path(files.scan).name} + {Path(files.image).name}"
+        self.app = CalibrationApp(files.scan, files.image, self.camera_path, session_path=self.session_path,
+                                  title=title, scene_data=self.scenes[k], state=self.state,
+                                  shot_scenes=self.scenes[:n], **options)
+        from .shots_panel import ShotsPanel
+
+        self.panel = ShotsPanel(self.app, self)
+        return self.app
+
+    def _on_save_error(self, message: str) -> None:
+        if self.app is not None:
+            self.app.notify(None, "Session file not updated (retrying; no change lost)", message)
+
+    def stop(self) -> None:
+        """Stop the app and close the session (its YAML then holds every change)."""
+        if self.app is not None:
+            self.app.stop()
+            self.app = None
+        self.state.close()
+
+
 def serve(
     scan_path: str | os.PathLike | None,
     image_path: str | os.PathLike | None,
@@ -210,12 +336,14 @@ def serve(
     initial_extrinsics_path: str | os.PathLike | None = None,
     bag: BagSource | None = None,
     kitti_camera: int | None = None,
+    shots: Sequence[tuple[Any, Any]] | None = None,
 ) -> None:
     """Serve the annotation app until Ctrl+C; prints the URL (with the access token off loopback).
 
     See :class:`CalibrationApp` for the parameters.  With ``bag`` the scene
     comes from the bag (``scan_path`` and ``image_path`` are ignored) and the
-    page can switch frames.  Bad input files raise :class:`CalibError` before
+    page can switch frames; with ``shots`` (several ``(scan, image)``) a session of several shots is served
+    (:class:`ShotServer`; ``scan_path`` and ``image_path`` are ignored).  Bad input files raise :class:`CalibError` before
     the server starts.
     """
     options = dict(output_path=output_path, host=host, port=port, title=title, scan_options=scan_options,
@@ -231,6 +359,10 @@ def serve(
     with stop_signal.deferred():
         if bag is not None:
             server = BagServer(bag, initial_extrinsics_path=initial_extrinsics_path, **options)
+            app = server.load()
+        elif shots is not None:
+            server = ShotServer(shots, camera_path, session_path=session_path,
+                                initial_extrinsics_path=initial_extrinsics_path, **options)
             app = server.load()
         else:
             app = CalibrationApp(scan_path, image_path, camera_path, session_path=session_path,
@@ -250,9 +382,10 @@ def serve(
                 with stop_signal.deferred():
                     app = server.load(index)
             except CalibError as exc:
-                print(f"ba-calib: frame {index} not loaded: {exc}", flush=True)
+                what = "shot" if isinstance(server, ShotServer) else "frame"
+                print(f"ba-calib: {what} {index} not loaded: {exc}", flush=True)
                 if server.app is not None:
-                    server.app.notify(None, "Frame not loaded", str(exc))
+                    server.app.notify(None, f"{what.capitalize()} not loaded", str(exc))
                     stop_signal.raise_if_pending()
                     continue
                 raise

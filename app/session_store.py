@@ -451,3 +451,15 @@ def _compact_open_stores() -> None:
             store.compact()
         except Exception as exc:  # exiting anyway: say so, do not hide it
             print(f"ba-calib: {exc}", file=sys.stderr)
+
+
+def peek_session(path: str | os.PathLike) -> dict | None:
+    """The newest saved session at ``path`` (YAML or journal), read without opening it for writing; None: none.
+
+    What :meth:`SessionStore.load` restores, for a caller that must know the session's shots before it
+    loads their scans (:class:`app.serving.ShotServer`)."""
+    path = Path(path)
+    if not path.exists() and not path.with_name(path.name + JOURNAL_SUFFIX).exists():
+        return None
+    data, _ = SessionStore(path).load()
+    return data

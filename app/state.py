@@ -12,7 +12,9 @@ either order.  Every change goes through :class:`AnnotationState`, which
   (:class:`app.session_store.SessionStore`), so that closing the tab or killing the server loses no
   acknowledged click; a change that cannot be saved is refused and undone.  The session is restored on
   start; :meth:`AnnotationState.flush_session` and :meth:`AnnotationState.close` bring the YAML up to date,
-* is thread-safe: viser runs callbacks on a thread pool, and two browser tabs share one state.
+* is thread-safe: viser runs callbacks on a thread pool, and two browser tabs share one state,
+* holds several *shots* (a scan and a photo each, one rig): every pick belongs to one; the panes show the
+  *active* shot, whose picks :attr:`AnnotationState.picks` are (:attr:`AnnotationState.all_picks`: every shot's).
 
 Pure Python plus numpy; no maths, no viser.
 """
@@ -31,9 +33,10 @@ import numpy as np
 from calib_core.errors import CalibError
 from calib_core.pairs import PAIR_SOURCES, Pair, load_pairs_yaml, save_pairs_yaml
 
-from .picks import (SESSION_FORMAT, SESSION_VERSION, Pick, Snapshot, checked_picks, joins_newest_step, new_ends,
-                    next_number, restore_session)
+from .picks import (Pick, ShotFiles, Snapshot, checked_picks, joins_newest_step, new_ends, next_number,
+                    session_data)
 from .session_store import SessionStore, compact_at_exit, forget_at_exit
+from .state_shots import StateShots
 from .view_settings import ViewSettings
 
 MAX_HISTORY = 500
@@ -42,12 +45,12 @@ MAX_HISTORY = 500
 Listener = Callable[["AnnotationState"], None]
 
 
-class AnnotationState:
+class AnnotationState(StateShots):
     """Thread-safe pairs under construction, with undo/redo and a session file.
 
     Parameters
     ----------
-    depth_valid : (H, W) bool array
+    depth_valid : (H, W) bool array, or a list of them (one per shot)
         Which depth-matrix cells have a laser return (clicks elsewhere are refused).
     image_size : (width, height)
         Size of the original camera image in pixels.
@@ -64,6 +67,10 @@ class AnnotationState:
     default_view : ViewSettings, optional
         The view settings of a new session, and the fallback of every setting
         a session file lacks or holds a bad value for.
+    shots : sequence of ShotFiles
+        The shots' files, in the order of ``depth_valid``; a session that lists shots keeps its own first.
+    active_shot : int, optional
+        The shot shown (default: the session's, else 0).
     """
 
     def __init__(
@@ -74,13 +81,18 @@ class AnnotationState:
         *,
         on_save_error: Callable[[str], None] | None = None,
         default_view: ViewSettings | None = None,
+        shots: Sequence[ShotFiles] = (),
+        active_shot: int | None = None,
     ) -> None:
-        self._valid = np.asarray(depth_valid, dtype=bool)
-        if self._valid.ndim != 2:
-            raise CalibError(f"depth validity mask must be 2-D, got shape {self._valid.shape}")
+        masks = list(depth_valid) if isinstance(depth_valid, (list, tuple)) else [depth_valid]
+        self._masks = [np.asarray(m, dtype=bool) for m in masks]
+        for m in self._masks:
+            if m.ndim != 2:
+                raise CalibError(f"depth validity mask must be 2-D, got shape {m.shape}")
+        self._active = 0
         self._width, self._height = int(image_size[0]), int(image_size[1])
         self._lock = threading.RLock()
-        self._snap = Snapshot()
+        self._snap = Snapshot(shots=tuple(shots))
         self._undo: list[Snapshot] = []
         self._redo: list[Snapshot] = []
         self._selected: int | None = None
@@ -94,9 +106,10 @@ class AnnotationState:
             store = SessionStore(self.session_path, on_error=on_save_error)
             data, from_yaml = store.load()
             if data is not None:
-                self._restore(data, self.session_path if from_yaml else store.journal_path)
+                self._restore(data, self.session_path if from_yaml else store.journal_path, tuple(shots))
             self._store = store
             compact_at_exit(store)
+        self._settle_active(active_shot)
 
     # ------------------------------------------------------------------ queries
     @property
@@ -107,9 +120,9 @@ class AnnotationState:
 
     @property
     def picks(self) -> tuple[Pick, ...]:
-        """All picks, in creation order (an immutable snapshot)."""
+        """The active shot's picks, in creation order (an immutable snapshot)."""
         with self._lock:
-            return self._snap.picks
+            return tuple(p for p in self._snap.picks if p.shot == self._active)
 
     @property
     def selected(self) -> int | None:
@@ -158,32 +171,6 @@ class AnnotationState:
         """The view settings (panorama on/off, overlays ...): the one copy the app reads."""
         with self._lock:
             return self._view
-
-    # ------------------------------------------------------------- validation
-    def check_laser_cell(self, row: int, col: int) -> tuple[int, int]:
-        """``(row, col)`` as ints if the cell exists and has a return, else CalibError."""
-        h, w = self._valid.shape
-        try:
-            r, c = int(row), int(col)
-        except (TypeError, ValueError):
-            raise CalibError(f"laser cell must be two integers, got ({row!r}, {col!r})") from None
-        if not (0 <= r < h and 0 <= c < w):
-            raise CalibError(f"laser cell ({r}, {c}) is outside the {h}x{w} scan")
-        if not self._valid[r, c]:
-            raise CalibError(f"laser cell ({r}, {c}) has no laser return; click on a valid (non-black) cell")
-        return r, c
-
-    def check_pixel(self, u: float, v: float) -> tuple[float, float]:
-        """``(u, v)`` as floats if inside the original camera image, else CalibError."""
-        try:
-            uf, vf = float(u), float(v)
-        except (TypeError, ValueError):
-            raise CalibError(f"pixel must be two numbers, got ({u!r}, {v!r})") from None
-        if not (np.isfinite(uf) and np.isfinite(vf)):
-            raise CalibError(f"pixel ({uf}, {vf}) is not finite")
-        if not (-0.5 <= uf <= self._width - 0.5 and -0.5 <= vf <= self._height - 0.5):
-            raise CalibError(f"pixel ({uf:.1f}, {vf:.1f}) is outside the {self._width}x{self._height} camera image")
-        return uf, vf
 
     # ---------------------------------------------------------------- changes
     # Public mutators take the lock, change the snapshot, save the session and
@@ -243,8 +230,8 @@ class AnnotationState:
         with self._lock:
             if (pending := self._pending_locked()) is not None:
                 raise CalibError(f"pair {pending.id} is not finished; complete it or undo it first")
-            new = Pick(self._snap.next_id, laser_rc=rc, source=source, precision_px=precision_px)
-            self._commit_locked(Snapshot(self._snap.picks + (new,), self._snap.next_id + 1))
+            new = Pick(self._snap.next_id, laser_rc=rc, source=source, precision_px=precision_px, shot=self._active)
+            self._commit_locked(self._with(self._snap.picks + (new,)))
         self._notify()
         return new.id
 
@@ -268,8 +255,7 @@ class AnnotationState:
         """Remove pick ``pick_id`` (its number is reused only if it was the highest: see :func:`next_number`)."""
         with self._lock:
             self.get(pick_id)
-            picks = tuple(p for p in self._snap.picks if p.id != pick_id)
-            self._commit_locked(Snapshot(picks, self._snap.next_id))
+            self._commit_locked(self._with(tuple(p for p in self._snap.picks if p.id != pick_id)))
         self._notify()
 
     def set_check(self, pick_id: int, check: bool) -> None:
@@ -277,16 +263,17 @@ class AnnotationState:
         with self._lock:
             old = self.get(pick_id)
             if old.check != bool(check):
-                picks = tuple(replace(p, check=bool(check)) if p.id == pick_id else p for p in self._snap.picks)
-                self._commit_locked(Snapshot(picks, self._snap.next_id))
+                self._commit_locked(self._with(tuple(replace(p, check=bool(check)) if p.id == pick_id else p
+                                                     for p in self._snap.picks)))
         self._notify()
 
     def clear(self) -> None:
-        """Remove every pick (undoable)."""
+        """Remove every pick of the active shot (undoable)."""
         with self._lock:
-            if not self._snap.picks:
+            others = tuple(p for p in self._snap.picks if p.shot != self._active)
+            if len(others) == len(self._snap.picks):
                 return
-            self._commit_locked(Snapshot((), self._snap.next_id))
+            self._commit_locked(self._with(others))
         self._notify()
 
     def check_import(self, pairs: Sequence[Pair]) -> list[Pick]:
@@ -295,10 +282,10 @@ class AnnotationState:
 
     def count_duplicates(self, pairs: Sequence[Pair]) -> int:
         """How many of ``pairs`` are exact duplicates of a pick here (or of an earlier one of ``pairs``)."""
-        return len(pairs) - len(new_ends(self.check_import(pairs), self.picks))
+        return len(pairs) - len(new_ends(self.check_import(pairs), self.picks))  # of the active shot
 
     def import_pairs(self, pairs: Sequence[Pair], replace_existing: bool = False) -> list[int]:
-        """Add pairs (e.g. from a pairs YAML) as one undoable step; returns the ids of those added.
+        """Add pairs (e.g. from a pairs YAML) to the active shot as one undoable step; returns the ids added.
 
         Exact duplicates (same laser end and pixel as a pick already here, or
         as an earlier imported pair) are skipped.  A pair keeps the ``id`` it
@@ -309,18 +296,18 @@ class AnnotationState:
         """
         checked = self.check_import(pairs)
         with self._lock:
-            base = () if replace_existing else self._snap.picks
-            next_id = next_number(base)
-            used = {p.id for p in base}
+            kept = tuple(p for p in self._snap.picks if not (replace_existing and p.shot == self._active))
+            next_id = next_number(kept)
+            used = {p.id for p in kept}  # ids are unique across shots
             new = []
-            for p in new_ends(checked, base):
+            for p in new_ends(checked, [p for p in kept if p.shot == self._active]):
                 pid = p.id if p.id >= 0 and p.id not in used else next_id
                 used.add(pid)
                 next_id = max(next_id, pid + 1)
-                new.append(replace(p, id=pid))
+                new.append(replace(p, id=pid, shot=self._active))
             if not new and not replace_existing:
                 return []
-            self._commit_locked(Snapshot(base + tuple(new), next_id))
+            self._commit_locked(self._with(kept + tuple(new)))
         self._notify()
         return [p.id for p in new]
 
@@ -359,10 +346,10 @@ class AnnotationState:
         return True
 
     def select(self, pick_id: int | None) -> None:
-        """Select a pick (later clicks move its ends) or None for adding new pairs."""
+        """Select a pick of the active shot (later clicks move its ends) or None for adding new pairs."""
         with self._lock:
-            if pick_id is not None:
-                self.get(pick_id)
+            if pick_id is not None and self.get(pick_id).shot != self._active:
+                raise CalibError(f"pair {pick_id} is in shot {self.get(pick_id).shot}; show that shot to select it")
             if self._selected == pick_id:
                 return
             self._selected = pick_id
@@ -391,17 +378,16 @@ class AnnotationState:
         with self._lock:
             self._listeners.append(listener)
 
+    def clear_listeners(self) -> None:
+        """Forget every listener (the app they drew was stopped; the state lives on for the next shot's)."""
+        with self._lock:
+            self._listeners = []
+
     # ---------------------------------------------------------------- session
     def session_dict(self) -> dict[str, Any]:
         """The session as plain data (what the session file holds)."""
         with self._lock:
-            return {
-                "format": SESSION_FORMAT,
-                "version": SESSION_VERSION,
-                "next_id": int(self._snap.next_id),
-                "pairs": [p.to_dict() for p in self._snap.picks],
-                "view": self._view.to_dict(),
-            }
+            return session_data(self._snap, self._view.to_dict(), self._active)
 
     def flush_session(self) -> None:
         """Return once every change so far is in the session file (no-op without a session file).
@@ -430,33 +416,38 @@ class AnnotationState:
             store.close()
 
     # -------------------------------------------------------------- internals
+    def _with(self, picks: tuple[Pick, ...]) -> Snapshot:
+        return Snapshot(picks, self._snap.next_id, self._snap.shots)
+
     def _pending_locked(self) -> Pick | None:
         for p in reversed(self._snap.picks):
-            if not p.complete:
+            if not p.complete and p.shot == self._active:
                 return p
         return None
 
     def _add_locked(self, laser_rc=None, pixel=None) -> int:
         target = self._pending_locked()
         if target is None:
-            new = Pick(self._snap.next_id, laser_rc=laser_rc, pixel=pixel)
-            self._commit_locked(Snapshot(self._snap.picks + (new,), self._snap.next_id + 1))
+            new = Pick(self._snap.next_id, laser_rc=laser_rc, pixel=pixel, shot=self._active)
+            self._commit_locked(self._with(self._snap.picks + (new,)))
             return new.id
         return self._move_locked(target.id, laser_rc=laser_rc, pixel=pixel)
 
     def _move_locked(self, pick_id: int, laser_rc=None, pixel=None, **tags: Any) -> int:
-        new = replace(self.get(pick_id), **tags)
+        old = self.get(pick_id)
+        if old.shot != self._active:  # its ends were checked against the active shot's scan
+            raise CalibError(f"pair {pick_id} is in shot {old.shot}; show that shot to move it")
+        new = replace(old, **tags)
         if laser_rc is not None:
             new = replace(new, laser_rc=laser_rc, laser_xyz=None)
         if pixel is not None:
             new = replace(new, pixel=pixel)
-        picks = tuple(new if p.id == pick_id else p for p in self._snap.picks)
-        self._commit_locked(Snapshot(picks, self._snap.next_id))
+        self._commit_locked(self._with(tuple(new if p.id == pick_id else p for p in self._snap.picks)))
         return pick_id
 
     def _commit_locked(self, snap: Snapshot) -> None:
         # Numbers follow the picks that exist: one dropped or undone (a declined proposal) frees its number.
-        snap = Snapshot(snap.picks, next_number(snap.picks))
+        snap = Snapshot(snap.picks, next_number(snap.picks), snap.shots)
         if snap == self._snap:
             return
         before = self._checkpoint_locked()
@@ -469,10 +460,12 @@ class AnnotationState:
     def _checkpoint_locked(self) -> tuple:
         # Taken at the start of every saved change: also when the change began (for timing hooks).
         self._change_started = time.perf_counter()
-        return self._snap, list(self._undo), list(self._redo), self._selected, self._view, self._version
+        return (self._snap, list(self._undo), list(self._redo), self._selected, self._view, self._version,
+                self._active)
 
     def _after_change_locked(self, before: tuple) -> None:
-        ids = {p.id for p in self._snap.picks}
+        self._active = min(self._active, self.n_shots - 1)  # an undone shot that was shown
+        ids = {p.id for p in self._snap.picks if p.shot == self._active}
         if self._selected is not None and self._selected not in ids:
             self._selected = None
         self._version += 1
@@ -485,16 +478,9 @@ class AnnotationState:
         try:
             self._store.append(self.session_dict())
         except CalibError as exc:
-            self._snap, self._undo, self._redo, self._selected, self._view, self._version = before
+            self._snap, self._undo, self._redo, self._selected, self._view, self._version, self._active = before
             raise CalibError(f"{exc} (the change was not made)") from None
 
     def _notify(self) -> None:
         for listener in list(self._listeners):
             listener(self)
-
-    def _restore(self, data: dict, path: Path) -> None:
-        """Restore the session ``data`` read from ``path`` (the session YAML or its journal)."""
-        snap, view = restore_session(data, path, self.check_laser_cell, self.check_pixel)
-        self._snap = Snapshot(snap.picks, next_number(snap.picks))
-        if view is not None:
-            self._view = ViewSettings.from_dict(view, default=self._view)

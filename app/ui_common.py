@@ -94,6 +94,7 @@ class SolveBundle:
     points_camera: np.ndarray  # (N, 3) laser points moved by the solved pose
     edges_camera: np.ndarray  # (M, 3) BA-edge points moved by the solved pose
     seconds: float  # time of the solve job (resolve, solve, move the points)
+    shots: Any = None  # calib_core.shots.ShotsResult when the session has several shots (app.shot_solve)
 
 
 @dataclass(eq=False)

@@ -7,6 +7,9 @@
   difference to an imported reference extrinsic (degrees, cm, pixels).
 * Plots (viser's uPlot widget): error per pair, error against the number of
   pairs so far, sigma per parameter.
+* With several shots (:mod:`app.shot_solve`): every shot's pairs, each shot's error under the joint pose,
+  leave-one-shot-out per shot (its pairs under the pose fitted to the other shots) and the shot that
+  disagrees with the others, named.
 
 All numbers come from :mod:`calib_core.verify`; they are computed in this
 panel's own worker thread after a change of the pairs (never on a viser
@@ -29,10 +32,12 @@ import viser.uplot as uplot
 
 from calib_core.errors import CalibError
 from calib_core.pairs import Pair
+from calib_core.shots import solve_shots
 from calib_core.solve import calibrate
 from calib_core.verify import VerifyReport, expected_error_map, verify_pairs
 
 from .live_solver import LiveSolver
+from .shot_solve import JointSolve, by_shot, make_shots, shot_name, shots_markdown, verify_joint
 from .ui_common import MIN_PAIRS, _fmt, md_escape
 
 #: Seconds of quiet after a change before the verification runs (a click burst costs one run).
@@ -63,6 +68,8 @@ class Verification:
     heat_image: np.ndarray  # (h, w, 3) uint8: the camera image with the heat map over it
     heat_max_px: float  # top of the colour scale
     seconds: float
+    shots_text: str = ""  # with several shots: the per-shot table (markdown)
+    shot_of: tuple = ()  # with several shots: each pair's shot (``ids`` order)
 
 
 def _series(label: str, color: str | None = None) -> uplot.Series:
@@ -129,6 +136,7 @@ class VerifyPanel:
         guard = self.app.guard
         with gui.add_folder("Verify"):
             self._md_summary = gui.add_markdown("")
+            self._md_shots = gui.add_markdown("")
             self._dd_pair = gui.add_dropdown("Pair to mark", ("none",), initial_value="none",
                                              hint="Check pairs are left out of the fit; their errors test it")
             self._bg_check = gui.add_button_group("Check pair", CHECK_CHOICES)
@@ -165,7 +173,7 @@ class VerifyPanel:
         """Make pair ``pick_id`` a check pair (``check``) or put it back in the fit (undoable)."""
         pick = self.app.state.get(pick_id)
         if check and not pick.check:
-            fit = [p for p in self.app.state.picks if p.complete and not p.check]
+            fit = [p for p in self.app.state.all_picks if p.complete and not p.check]
             if pick.complete and len(fit) - 1 < MIN_PAIRS:
                 raise CalibError(f"pair {pick_id} is one of the last {MIN_PAIRS} fit pairs; the fit needs them")
         self.app.state.set_check(pick_id, check)
@@ -203,17 +211,29 @@ class VerifyPanel:
         self._submit()
 
     def _submit(self, force: bool = False) -> None:
-        picks = [p for p in self.app.state.picks if p.complete]
+        picks = [p for p in self.app.state.all_picks if p.complete]  # every shot's
         pairs = tuple(p.to_pair() for p in picks)
+        shot_of = tuple(p.shot for p in picks)
         with self._lock:
             ref = self._reference
-            key = (pairs, None if ref is None else (ref[0].tobytes(), ref[1]))
+            key = (pairs, None if ref is None else (ref[0].tobytes(), ref[1]), shot_of)
             if key == self._wanted and not force:
                 return
             self._wanted = key
             self._version += 1
             version = self._version
         self._worker.submit(version, (key, [p.id for p in picks], list(pairs), ref))
+
+    def _joint_job(self, ids: list[int], pairs: list[Pair], shot_of: tuple, ref: Any) -> tuple:
+        """A session of several shots: the joint solve, its Verify report, the per-shot text, ids in row order."""
+        app = self.app
+        ids, pairs, rows_shot = by_shot(ids, pairs, shot_of)
+        names = [shot_name(f) for f in app.state.shots]
+        shots = make_shots(pairs, rows_shot, [sc.depth for sc in app.shot_scenes], app.camera, names)
+        joint = JointSolve(solve_shots(shots, app.camera), shots, rows_shot)
+        report = verify_joint(joint, app.camera, T_reference=None if ref is None else ref[0],
+                              scene_points_lidar=self._scene_points)
+        return joint.solved.result, report, shots_markdown(joint, app.active_shot), ids, tuple(rows_shot.tolist())
 
     def _job(self, payload: tuple) -> Verification | None:
         key, ids, pairs, ref = payload
@@ -227,20 +247,24 @@ class VerifyPanel:
         n_fit = sum(not p.check for p in pairs)
         if n_fit < MIN_PAIRS:
             raise CalibError(f"{n_fit} fit pairs; verification needs at least {MIN_PAIRS}")
-        result = calibrate(pairs, app.depth, app.camera)
-        # Between the steps too: a click that arrives meanwhile should not share the cores with stale work.
-        if key != self._wanted or self._stopped:
-            return None
-        report = verify_pairs(pairs, app.depth, app.camera, result=result,
-                              T_reference=None if ref is None else ref[0],
-                              scene_points_lidar=self._scene_points)
+        shots_text, shot_of = "", ()
+        if len(app.shot_scenes) > 1:
+            result, report, shots_text, ids, shot_of = self._joint_job(ids, pairs, key[2], ref)
+        else:
+            result = calibrate(pairs, app.depth, app.camera)
+            # Between the steps too: a click that arrives meanwhile should not share the cores with stale work.
+            if key != self._wanted or self._stopped:
+                return None
+            report = verify_pairs(pairs, app.depth, app.camera, result=result,
+                                  T_reference=None if ref is None else ref[0],
+                                  scene_points_lidar=self._scene_points)
         if key != self._wanted or self._stopped:
             return None
         cell = max(4, int(np.ceil(app.camera.width / 64)))
         heat = expected_error_map(result.T_camera_lidar, result.covariance_6x6, app.camera, self._scene_points,
                                   cell_px=cell)
         image, top = heat_overlay(app.image, heat)
-        return Verification(key, ids, report, heat, cell, image, top, time.perf_counter() - t0)
+        return Verification(key, ids, report, heat, cell, image, top, time.perf_counter() - t0, shots_text, shot_of)
 
     def _on_done(self, version: int, out: Verification | None, error: BaseException | None) -> None:
         if self._stopped:
@@ -268,6 +292,7 @@ class VerifyPanel:
                                         f"Verification starts at {MIN_PAIRS} fit pairs.")
             self._md_table.content = ""
             self._md_heat.content = ""
+            self._md_shots.content = ""
             # No stale figures beside a "not verified": the plots and the map empty out.
             empty = np.zeros(0)
             with self.app.server.atomic():
@@ -302,8 +327,11 @@ class VerifyPanel:
         for w in rep.warnings:
             lines.append(f"• {md_escape(w)}")
         self._md_summary.content = "  \n".join(lines)
+        self._md_shots.content = cur.shots_text
 
         rows = ["| pair | role | under the fit px | left out px |", "|---:|:---|---:|---:|"]
+        if cur.shot_of:  # several shots: which one each pair is in
+            rows = ["| pair | shot | role | under the fit px | left out px |", "|---:|---:|:---|---:|---:|"]
         role = {int(i): "fit" for i in rep.fit_index}
         outliers = {int(rep.fit_index[k]) for k in getattr(r, "outliers", [])}
         under = np.full(len(ids), np.nan)
@@ -318,10 +346,11 @@ class VerifyPanel:
             role[i] = "outlier"
         off_image = {int(i) for i, off in zip(rep.check_index, rep.check_outside) if off}
         for i, pid in enumerate(ids):
+            name = f"{pid} | {cur.shot_of[i]}" if cur.shot_of else f"{pid}"
             if i in off_image:  # no pixel error to show: say why
-                rows.append(f"| {pid} | {role.get(i, '?')} | {OFF_IMAGE} | {OFF_IMAGE} |")
+                rows.append(f"| {name} | {role.get(i, '?')} | {OFF_IMAGE} | {OFF_IMAGE} |")
             else:
-                rows.append(f"| {pid} | {role.get(i, '?')} | {_fmt(under[i], 2)} | {_fmt(left[i], 2)} |")
+                rows.append(f"| {name} | {role.get(i, '?')} | {_fmt(under[i], 2)} | {_fmt(left[i], 2)} |")
         self._md_table.content = "\n".join(rows)
 
         x = np.asarray(ids, dtype=np.float64)
@@ -368,6 +397,11 @@ class VerifyPanel:
         return str(self._md_summary.content)
 
     @property
+    def shots_text(self) -> str:
+        """With several shots: the per-shot table, leave-one-shot-out and the disagreeing shot (markdown)."""
+        return str(self._md_shots.content)
+
+    @property
     def table(self) -> str:
         """The per-pair table (markdown)."""
         return str(self._md_table.content)
@@ -387,7 +421,7 @@ class VerifyPanel:
         reference, else computed now (in the caller's thread)."""
         cur, ref = self._current, self._reference
         key = (tuple(pairs), None if ref is None else (ref[0].tobytes(), ref[1]))
-        if cur is not None and cur.key == key:
+        if cur is not None and cur.key[:2] == key:  # one shot: the pairs and the reference decide
             return cur.report
         return verify_pairs(pairs, self.app.depth, self.app.camera, result=result,
                             T_reference=None if ref is None else ref[0], scene_points_lidar=self._scene_points)

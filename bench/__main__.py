@@ -61,6 +61,13 @@ def main(argv=None) -> int:
     p.add_argument("--workers", type=int, default=2,
                    help="processes for the accuracy trials (default 2); speed is always timed in one process")
     args = p.parse_args(argv)
+    if not args.quick:
+        try:
+            import matplotlib  # noqa: F401  (the committed report carries its plots)
+        except ImportError:
+            print("python -m bench: the full report needs matplotlib for its plots; "
+                  "run `pip install -e .[bench]` first (or use --quick)", file=sys.stderr)
+            return 2
 
     import os
 

@@ -16,26 +16,29 @@ corners (the committed ``real_data/pairs`` cells: foreground corners chosen
 by a fixed rule), each pixel off its projection under the published pose by
 5-15 px (uniform length, uniform direction), no ``precision_px`` (the app's
 default) -- then the 20 proposals of a :class:`GuidedSession` with the camera
-image, once without the screen (``screen=None``: the code before issue 20)
-and once with the default :class:`calib_core.guide.evidence.ProposalScreen`
-(``max_ellipse_px`` set to the app's limit for that image, as the app does).
+image, once without the screen (``screen=None``) and once with the app's
+:class:`calib_core.guide.evidence.ProposalScreen` (``max_ellipse_px`` set to
+the app's limit for that image).  ``--before FILE`` adds the rows of a run on
+older code (run this file with that code on the path), so one table shows
+before and after.
 
-Each proposal is judged by this module's own measures (none of them is the
-screen's code):
+Each proposal is judged from its laser point projected with the *published*
+pose, by this module's own measures (none of them is the proposal code):
 
-* **on a clean corner**: its laser point, projected with the *published*
-  pose, has an image corner passing :func:`calib_core.guide.image_corners.clean_corner`
-  (strength, L/X shape, isolation) within one cell footprint (at least 3 px); the
-  footprint is measured here by projecting the neighbouring beams;
-  **on a strong corner**: the same without the shape and isolation tests
-  (``lam_min >= 0.01``, the issue's machine check);
-* **3-sigma radius** and **fits the loupe**: the radius is at most half the
-  app's camera loupe side at zoom 1 (47 px for KITTI, 72 px for 1920 px), or
-  at most the app's limit (the loupe zoomed out one step);
-* **off vegetation**: at least :data:`MIN_EXPLAINED` of the near-side points
-  of its 5 x 5 window lie within 3 range-noise of at most two planes found
-  by RANSAC here (foliage scatters in depth and fails);
-* **off far background**: range at most :data:`FAR_M`.
+* **corner**: an OpenCV Harris corner (``cv2.goodFeaturesToTrack``) within
+  :data:`ON_CORNER_PX` and isolated (at most :data:`MAX_RIVALS` others within
+  :data:`ISOLATION_PX`), the laser window explained by at most two RANSAC
+  planes (not vegetation), not on a RANSAC ground plane, not beyond
+  :data:`FAR_M`; also reported: a Harris corner within 3 px, within one cell
+  footprint (measured by projecting the neighbouring beams);
+* **3-sigma radius**, **fits the loupe** at zoom 1 (half the camera loupe's
+  side) and within the app's limit (the loupe zoomed out one step);
+* **off vegetation**, **off far background** (range > :data:`FAR_M`), **off
+  the ground**.
+
+``--crops DIR`` saves, for the first trial with the screen, the photo and the
+scan rendered from the camera under the published pose side by side around
+each proposal's true projection: what a person judging it looks at.
 """
 
 from __future__ import annotations
@@ -50,7 +53,6 @@ import numpy as np
 
 from calib_core.cameras import load_camera
 from calib_core.guide.evidence import ProposalScreen
-from calib_core.guide.image_corners import CornerGate, clean_corner, strongest_near
 from calib_core.guide.session import GuidedSession
 from calib_core.io.images import load_image_rgb
 from calib_core.io.scan_readers import load_scan
@@ -184,68 +186,148 @@ def footprint_px(scene: RealScene, rc) -> float:
     return max(steps) if steps else np.nan
 
 
+# Independent image-corner and ground measures (OpenCV's Harris detector and a RANSAC ground plane written here,
+# not the proposal code's structure tensor or planes).
+#: Harris corners: relative quality, minimum spacing (px), block size (px).
+HARRIS_QUALITY, HARRIS_MIN_DIST, HARRIS_BLOCK = 0.01, 3, 5
+#: A proposal's true projection is on a corner when a Harris corner lies within this many px...
+ON_CORNER_PX = 3.0
+#: ...and the corner is isolated when at most this many other Harris corners lie within ISOLATION_PX of it.
+ISOLATION_PX, MAX_RIVALS = 10.0, 2
+#: A point within this distance (m) of the scan's ground plane is on the ground.
+GROUND_TOL_M = 0.15
+
+
+def harris_corners(image: np.ndarray) -> np.ndarray:
+    """(M, 2) ``(u, v)`` of OpenCV's Harris corners (goodFeaturesToTrack) of an RGB image."""
+    import cv2
+
+    gray = cv2.cvtColor(np.asarray(image), cv2.COLOR_RGB2GRAY)
+    c = cv2.goodFeaturesToTrack(gray, 20000, HARRIS_QUALITY, HARRIS_MIN_DIST, blockSize=HARRIS_BLOCK,
+                                useHarrisDetector=True, k=0.04)
+    return np.zeros((0, 2)) if c is None else c.reshape(-1, 2).astype(np.float64)
+
+
+def harris_verdict(corners_uv: np.ndarray, uv: np.ndarray) -> tuple[bool, bool]:
+    """(a Harris corner within ON_CORNER_PX of ``uv``, and that corner isolated)."""
+    if not np.all(np.isfinite(uv)) or len(corners_uv) == 0:
+        return False, False
+    d = np.linalg.norm(corners_uv - np.asarray(uv, dtype=np.float64).reshape(1, 2), axis=1)
+    k = int(np.argmin(d))
+    if d[k] > ON_CORNER_PX:
+        return False, False
+    rivals = int((np.linalg.norm(corners_uv - corners_uv[k], axis=1) <= ISOLATION_PX).sum()) - 1
+    return True, rivals <= MAX_RIVALS
+
+
+def ground_plane(depth, rng: np.random.Generator, hypotheses: int = 400) -> tuple[np.ndarray, float]:
+    """The scan's ground: the RANSAC plane (unit normal ``n``, offset ``d``: ``n . x = d``) with the most
+    points within GROUND_TOL_M among planes tilted at most 20 deg from the lidar's xy plane."""
+    P = depth.points[depth.valid]
+    P = P[rng.choice(len(P), size=min(len(P), 20000), replace=False)]
+    idx = rng.integers(0, len(P), size=(hypotheses, 3))
+    n = np.cross(P[idx[:, 1]] - P[idx[:, 0]], P[idx[:, 2]] - P[idx[:, 0]])
+    norm = np.linalg.norm(n, axis=1)
+    good = norm > 1e-9
+    n = n[good] / norm[good, None]
+    n *= np.sign(n[:, 2:3] + 1e-12)
+    n, a = n[n[:, 2] >= np.cos(np.radians(20.0))], P[idx[good, 0]][n[:, 2] >= np.cos(np.radians(20.0))]
+    d = np.einsum("hj,hj->h", n, a)
+    count = (np.abs(P @ n.T - d[None]) <= GROUND_TOL_M).sum(axis=0)
+    best = int(np.argmax(count))
+    return n[best], float(d[best])
+
+
+def on_ground(depth, rc, plane: tuple[np.ndarray, float], half: int = 2) -> bool:
+    """The cell's point and most of its window's valid points lie on the ground plane."""
+    n, d = plane
+    H, W = depth.shape
+    r, c = int(rc[0]), int(rc[1])
+    rows = np.arange(max(r - half, 0), min(r + half + 1, H))
+    cols = np.mod(np.arange(c - half, c + half + 1), W)
+    P = depth.points[np.ix_(rows, cols)][depth.valid[np.ix_(rows, cols)]]
+    here = abs(float(depth.points[r, c] @ n) - d) <= GROUND_TOL_M
+    return bool(here and len(P) and np.mean(np.abs(P @ n - d) <= GROUND_TOL_M) >= 0.6)
+
+
 @dataclass
 class Judged:
     """Measures of one trial's proposals (one entry per proposal)."""
 
-    on_corner: list
-    strong: list
+    reclick: list
+    harris: list
+    harris_footprint: list
+    corner: list
     radius_px: list
     fits_loupe: list
     fits_zoomed: list
     vegetation: list
     far: list
+    ground: list
     reason: str | None = None
 
 
-def judge(scene: RealScene, corners, props, noise_m: float, loupe_px: int, max_ellipse_px: float,
-          rng: np.random.Generator) -> Judged:
-    out = Judged([], [], [], [], [], [], [], getattr(props, "reason", None))
+def judge(scene: RealScene, harris: np.ndarray, plane, props, noise_m: float, loupe_px: int,
+          max_ellipse_px: float, rng: np.random.Generator) -> Judged:
+    """The benchmark's own verdict on each proposal (module docstring), from its true projection."""
+    out = Judged([], [], [], [], [], [], [], [], [], [], getattr(props, "reason", None))
     for p in props:
         uv, ok = scene.camera.project(transform_points(scene.T_published, np.asarray(p.laser_xyz)[None]))
-        radius = max(3.0, np.nan_to_num(footprint_px(scene, p.laser_rc), nan=3.0))
-        peak, strength = strongest_near(corners, uv, radius)
-        out.on_corner.append(bool(ok[0] and clean_corner(corners, peak, CornerGate())[0]))
-        out.strong.append(bool(ok[0] and strength[0] >= CornerGate().min_strength))
+        near, isolated = harris_verdict(harris, uv[0]) if ok[0] else (False, False)
+        foot = max(ON_CORNER_PX, np.nan_to_num(footprint_px(scene, p.laser_rc), nan=ON_CORNER_PX))
+        d = np.linalg.norm(harris - uv[0], axis=1) if len(harris) and ok[0] else np.array([np.inf])
+        veg = explained_by_two_planes(scene.depth, p.laser_rc, PLANE_TOL_NOISE * noise_m, rng) < MIN_EXPLAINED
+        ground = on_ground(scene.depth, p.laser_rc, plane)
+        far = float(np.linalg.norm(p.laser_xyz)) > FAR_M
+        out.reclick.append(p.replaces is not None)
+        out.harris.append(bool(near))
+        out.harris_footprint.append(bool(d.min() <= foot))
+        out.corner.append(bool(near and isolated and not veg and not ground and not far))
         out.radius_px.append(p.radius_3sigma_px)
         out.fits_loupe.append(p.radius_3sigma_px <= loupe_px / 2)
         out.fits_zoomed.append(p.radius_3sigma_px <= max_ellipse_px)
-        out.vegetation.append(explained_by_two_planes(scene.depth, p.laser_rc, PLANE_TOL_NOISE * noise_m, rng)
-                              < MIN_EXPLAINED)
-        out.far.append(float(np.linalg.norm(p.laser_xyz)) > FAR_M)
+        out.vegetation.append(veg)
+        out.far.append(far)
+        out.ground.append(ground)
     return out
 
 
-def candidate_ceiling(scene: RealScene, corners) -> tuple[int, float, float, float]:
-    """Every laser candidate the camera sees under the published pose: their number, the shares whose
-    projection lies on a clean / strong image corner (what any choice among them can reach) and their
-    median cell footprint (px)."""
+def candidate_ceiling(scene: RealScene, harris: np.ndarray, plane, noise_m: float) -> tuple[int, float, float]:
+    """Every laser candidate the camera sees under the published pose: their number, the share whose true
+    projection is a corner by the benchmark's verdict (what any choice among them can reach) and their median
+    cell footprint (px)."""
     from calib_core.guide.candidates import find_candidates
     from calib_core.guide.visibility import visible_in_camera
 
     cand = find_candidates(scene.depth)
     scan_points, _ = scene.depth.valid_points()
     uv, seen = visible_in_camera(scene.camera, scene.T_published, scan_points, cand.points_lidar)
-    clean, strong, feet = [], [], []
+    rng = np.random.default_rng(BENCH_SEED)
+    verdict, feet = [], []
     for i in np.flatnonzero(seen):
-        feet.append(footprint_px(scene, cand.rows_cols[i]))
-        radius = max(3.0, np.nan_to_num(feet[-1], nan=3.0))
-        peak, s = strongest_near(corners, uv[i][None], radius)
-        clean.append(bool(clean_corner(corners, peak, CornerGate())[0]))
-        strong.append(bool(s[0] >= CornerGate().min_strength))
-    return len(clean), float(np.mean(clean)), float(np.mean(strong)), float(np.nanmedian(feet))
+        rc = cand.rows_cols[i]
+        feet.append(footprint_px(scene, rc))
+        near, isolated = harris_verdict(harris, uv[i])
+        verdict.append(near and isolated and not on_ground(scene.depth, rc, plane)
+                       and np.linalg.norm(cand.points_lidar[i]) <= FAR_M
+                       and explained_by_two_planes(scene.depth, rc, PLANE_TOL_NOISE * noise_m, rng) >= MIN_EXPLAINED)
+    return len(verdict), float(np.mean(verdict)), float(np.nanmedian(feet))
+
+
+ARMS = {"none": "no screen", "screen": "screen"}
 
 
 def run_scene(name: str, scene: RealScene, trials: int) -> dict:
-    """Before and after the screen over ``trials`` trials: arm -> list of Judged."""
-    from calib_core.guide.image_corners import corner_image
-
-    corners = corner_image(scene.image)
+    """Each arm over ``trials`` trials: arm -> list of Judged."""
     noise = range_noise_m(scene.depth)
     loupe = loupe_side_px(scene.camera.width, scene.camera.height)
     screen = app_screen(scene.camera.width, scene.camera.height)
-    out: dict = {"before": [], "after": [], "loupe_px": loupe, "max_ellipse_px": screen.max_ellipse_px,
-                 "noise_m": noise, "ceiling": candidate_ceiling(scene, corners)}
+    screens = {"none": None, "screen": screen}
+    harris = harris_corners(scene.image)
+    plane = ground_plane(scene.depth, np.random.default_rng(BENCH_SEED))
+    out: dict = {arm: [] for arm in ARMS}
+    out.update({"loupe_px": loupe, "max_ellipse_px": screen.max_ellipse_px, "noise_m": noise,
+                "ceiling": candidate_ceiling(scene, harris, plane, noise), "props": []})
     session = None
     for k in range(trials):
         rng = np.random.default_rng([BENCH_SEED, k])
@@ -255,50 +337,85 @@ def run_scene(name: str, scene: RealScene, trials: int) -> dict:
         else:  # the scan's candidates and corners are computed once
             session.pairs = list(pairs)
             session._update_state()
-        for arm, scr in (("before", None), ("after", screen)):
+        for arm, scr in screens.items():
             session.propose_options["screen"] = scr
             props = session.proposals(N_PROPOSALS)
-            out[arm].append(judge(scene, corners, props, noise, loupe, screen.max_ellipse_px,
+            out[arm].append(judge(scene, harris, plane, props, noise, loupe, screen.max_ellipse_px,
                                   np.random.default_rng([BENCH_SEED, k, 1])))
-        log(f"{name} trial {k + 1}/{trials}: {len(out['before'][-1].radius_px)} proposals before, "
-            f"{len(out['after'][-1].radius_px)} after")
+            if arm == "screen":
+                out["props"].append(list(props))
+        log(f"{name} trial {k + 1}/{trials}: " + ", ".join(f"{len(out[a][-1].radius_px)} {a}" for a in ARMS))
     return out
 
 
-def _share(judged: list, attr: str) -> tuple[float, int]:
-    values = [v for j in judged for v in getattr(j, attr)]
+def _share(judged: list, attr: str, new_only: bool = False) -> tuple[float, int]:
+    values = [v for j in judged for v, re in zip(getattr(j, attr), j.reclick) if not (new_only and re)]
     return (float(np.mean(values)) if values else float("nan")), len(values)
 
 
 def table(results: dict, trials: int) -> list[str]:
-    """The before / after table (markdown)."""
+    """The arms' table (markdown)."""
     pct = (lambda x: "-" if not np.isfinite(x) else f"{100 * x:.0f} %")  # noqa: E731
     lines = [
-        f"| scene | proposals | shown ({trials} trials x 20) | true projection on a clean image corner | "
-        "on a strong image corner | median 3-sigma radius | fits the loupe at zoom 1 | fits the app's limit | "
-        f"off vegetation | off far background (> {FAR_M:.0f} m) | trials with none |",
-        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        f"| scene | proposals | shown ({trials} trials, at most 20 each) | of them re-clicks | corner (bench verdict) | "
+        "corner, new cells only | Harris corner within 3 px | Harris within one cell footprint | "
+        "median 3-sigma radius | fits the loupe at zoom 1 | fits the app's limit | off vegetation | "
+        f"off far background (> {FAR_M:.0f} m) | off the ground | trials with none |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for name, res in results.items():
-        for arm in ("before", "after"):
+        for arm, label in ARMS.items():
             js = res[arm]
-            on, n = _share(js, "on_corner")
-            strong, _ = _share(js, "strong")
-            fit, _ = _share(js, "fits_loupe")
-            fit_z, _ = _share(js, "fits_zoomed")
-            veg, _ = _share(js, "vegetation")
-            far, _ = _share(js, "far")
+            corner, n = _share(js, "corner")
+            corner_new, n_new = _share(js, "corner", new_only=True)
             radii = [v for j in js for v in j.radius_px]
             med = f"{np.median(radii):.1f} px" if radii else "-"
             empty = sum(1 for j in js if not j.radius_px)
-            label = "before (no screen)" if arm == "before" else "after (screen)"
-            lines.append(f"| {name} (loupe {res['loupe_px']} px, limit {res['max_ellipse_px']:.0f} px) | {label} | {n} | "
-                         f"{pct(on)} | {pct(strong)} | {med} | {pct(fit)} | {pct(fit_z)} | {pct(1 - veg)} | "
-                         f"{pct(1 - far)} | {empty} |")
-        n_all, clean_all, strong_all, _ = res["ceiling"]
-        lines.append(f"| {name} | every laser candidate the camera sees (published pose) | {n_all} | {pct(clean_all)} | "
-                     f"{pct(strong_all)} | | | | | | |")
+            lines.append(
+                f"| {name} (loupe {res['loupe_px']} px, limit {res['max_ellipse_px']:.0f} px) | {label} | {n} | "
+                f"{n - n_new} | {pct(corner)} | {pct(corner_new)} ({n_new}) | {pct(_share(js, 'harris')[0])} | "
+                f"{pct(_share(js, 'harris_footprint')[0])} | {med} | {pct(_share(js, 'fits_loupe')[0])} | "
+                f"{pct(_share(js, 'fits_zoomed')[0])} | {pct(1 - _share(js, 'vegetation')[0])} | "
+                f"{pct(1 - _share(js, 'far')[0])} | {pct(1 - _share(js, 'ground')[0])} | {empty} |")
+        n_all, share_all, _ = res["ceiling"]
+        lines.append(f"| {name} | every laser candidate the camera sees (published pose) | {n_all} | | "
+                     f"{pct(share_all)} | | | | | | | | | | |")
     return lines
+
+
+def save_crops(scene: RealScene, props: list, folder: Path, half: int = 40, scale: int = 4) -> list[Path]:
+    """For each proposal a PNG: the photo (left) and the scan rendered from the camera under the *published*
+    calibration (right, range-shaded), both cropped around the proposal's true projection (a green cross) and
+    magnified ``scale`` times -- what a person judging "is this a corner?" looks at."""
+    import cv2
+
+    from calib_core.render import render_from_camera, shade_render
+
+    folder.mkdir(parents=True, exist_ok=True)
+    render = render_from_camera(scene.depth, scene.camera, scene.T_published)
+    rgba = shade_render(render, scene.depth, "range")
+    shaded = np.where(rgba[..., 3:4] > 0, rgba[..., :3], 40).astype(np.uint8)
+    H, W = scene.image.shape[:2]
+    out = []
+    for k, p in enumerate(props):
+        uv, ok = scene.camera.project(transform_points(scene.T_published, np.asarray(p.laser_xyz)[None]))
+        if not ok[0]:
+            continue
+        u, v = np.rint(uv[0]).astype(int)
+        tiles = []
+        for img in (scene.image, shaded):
+            pad = np.pad(img, ((half, half), (half, half), (0, 0)))
+            tile = cv2.resize(pad[v:v + 2 * half + 1, u:u + 2 * half + 1], None, fx=scale, fy=scale,
+                              interpolation=cv2.INTER_NEAREST)
+            c = half * scale + scale // 2
+            cv2.drawMarker(tile, (c, c), (0, 255, 0), cv2.MARKER_CROSS, 24, 1)
+            tiles.append(tile)
+        name = folder / f"p{k:02d}_{'reclick' if p.replaces is not None else p.kind}_r{p.laser_rc[0]}_c{p.laser_rc[1]}.png"
+        cv2.imwrite(str(name), cv2.cvtColor(np.concatenate([tiles[0], np.full((tiles[0].shape[0], 8, 3), 255,
+                                                                               np.uint8), tiles[1]], axis=1),
+                                           cv2.COLOR_RGB2BGR))
+        out.append(name)
+    return out
 
 
 DOC = REPO / "docs" / "guide_performance.md"
@@ -331,33 +448,40 @@ def markdown(results: dict, trials: int, seconds: float, load: tuple) -> str:
         f"{seconds:.0f} s; load average at the start and the end {load[0]:.2f}, {load[1]:.2f} (2 cores, shared). "
         "Each trial: 5 rough pairs made by eye (cells of the committed real_data pairs, pixels 5-15 px off their "
         "projection under the published calibration, no precision given), then the first 20 proposals with the "
-        "camera image, without the screen (the code before issue 20, `screen=None`; the same proposals as on "
-        "main) and with the app's screen (`ProposalScreen` with `max_ellipse_px` = half the app's camera loupe "
-        "zoomed out one step). The measures are the benchmark's own (module docstring): *clean* corner = "
-        "`clean_corner` (strength, L/X shape, isolation) within one cell footprint of the laser point's "
-        "projection under the published calibration; *strong* = `lam_min >= 0.01` there; *vegetation* = fewer "
-        f"than {100 * MIN_EXPLAINED:.0f} % of the window's near-side points within {PLANE_TOL_NOISE:.0f} range "
-        f"noise of at most two RANSAC planes; *far* = range > {FAR_M:.0f} m. Re-clicks of the rough pairs are "
-        "proposals too and are counted; the screen keeps them even beyond its range limit (the person chose "
-        "those corners, and a rough pair left as it was biases the solve), which is all that is left on far "
-        "background after it.",
+        "camera image: without a screen (`screen=None`) and with the app's screen (`ProposalScreen`, "
+        "`max_ellipse_px` = half the camera loupe zoomed out one step). The verdict is the benchmark's own, from each proposal's laser point projected with the "
+        "*published* calibration: *corner* = an OpenCV Harris corner (`goodFeaturesToTrack`, quality "
+        f"{HARRIS_QUALITY}, block {HARRIS_BLOCK}) within {ON_CORNER_PX:.0f} px with at most {MAX_RIVALS} other "
+        f"Harris corners within {ISOLATION_PX:.0f} px of it, and the laser window explained by at most two RANSAC "
+        f"planes (>= {100 * MIN_EXPLAINED:.0f} % of its near-side points within {PLANE_TOL_NOISE:.0f} range noise: "
+        "not vegetation), not on the ground (a RANSAC ground plane fitted here, +-"
+        f"{GROUND_TOL_M:.2f} m) and not beyond {FAR_M:.0f} m. Re-clicks of the rough pairs are proposals too "
+        "and are counted; the column *new cells only* leaves them out.",
         "",
     ]
     lines += table(results, trials)
     ceil = {name: res["ceiling"] for name, res in results.items()}
     if ceil:
-        lines += ["", "What limits the clean share (measured here): of every laser candidate the camera sees, "
+        lines += ["", "The limit (measured here): of every laser candidate the camera sees, "
                   + ", ".join(f"{100 * c[1]:.0f} % ({name})" for name, c in ceil.items())
-                  + " have a clean image corner at their true projection, so no choice among them makes most "
-                  "proposals clean: the candidates are the limit, not the ranking or the screen.  Their median "
-                  "cell footprint is " + ", ".join(f"{c[3]:.1f} px ({name})" for name, c in ceil.items())
-                  + ": a footprint limit of 2-3 px would leave no proposal on these 64-beam scans, so the screen's "
-                  f"limit is {ProposalScreen().max_footprint_px:.0f} px (it drops irregular cells) and far cells "
-                  f"go by range ({ProposalScreen().max_range_m:.0f} m)."]
-    reasons = sorted({j.reason for res in results.values() for j in res["after"] if j.reason})
+                  + " are a corner by this verdict at their true projection; their median cell footprint is "
+                  + ", ".join(f"{c[2]:.1f} px ({name})" for name, c in ceil.items()) + "."]
+    reasons = sorted({j.reason for res in results.values() for j in res["screen"] if j.reason})
     if reasons:
         lines += ["", "Reasons shown when a trial had no proposal: " + "; ".join(f"\"{r}\"" for r in reasons) + "."]
     return "\n".join(lines)
+
+
+def with_rows_before(md: str, before: str, label: str) -> str:
+    """``md`` with the proposal rows of an older run's table (``before``) inserted after its own table, their
+    proposals column prefixed with ``label``."""
+    rows = [line for line in before.splitlines() if line.startswith("| ") and "| scene |" not in line
+            and "every laser candidate" not in line]
+    rows = [line.replace(" | no screen | ", f" | {label}: no screen | ").replace(" | screen | ", f" | {label}: screen | ")
+            for line in rows]
+    lines = md.splitlines()
+    last = max(i for i, line in enumerate(lines) if line.startswith("|"))
+    return "\n".join(lines[:last + 1] + rows + lines[last + 1:])
 
 
 def main(argv=None) -> int:
@@ -365,6 +489,13 @@ def main(argv=None) -> int:
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--trials", type=int, default=5, help="trials per scene (default 5)")
+    ap.add_argument("--crops", type=Path, default=None,
+                    help="save photo | render crops around each proposal of the first trial (with the screen) here")
+    ap.add_argument("--before", type=Path, default=None,
+                    help="the printed output of this benchmark run on older code: its table rows are added, "
+                         "labelled with --before-label")
+    ap.add_argument("--before-label", default="before",
+                    help="label of the --before rows (e.g. the commit they were measured on)")
     ap.add_argument("--write", action="store_true",
                     help="write the section into docs/guide_performance.md (between its markers)")
     args = ap.parse_args(argv)
@@ -372,14 +503,22 @@ def main(argv=None) -> int:
     load0 = os.getloadavg()[0]
     results = {}
     if kitti_available():
-        results["KITTI 000002"] = run_scene("KITTI 000002", load_kitti(), args.trials)
+        scene = load_kitti()
+        results["KITTI 000002"] = run_scene("KITTI 000002", scene, args.trials)
+        if args.crops:
+            save_crops(scene, results["KITTI 000002"]["props"][0], args.crops / "kitti")
     else:
         log(f"KITTI data not found at {KITTI}; skipped")
     if manual_available():
-        results["PJLab manual_calib"] = run_scene("PJLab manual_calib", load_manual(), args.trials)
+        scene = load_manual()
+        results["PJLab manual_calib"] = run_scene("PJLab manual_calib", scene, args.trials)
+        if args.crops:
+            save_crops(scene, results["PJLab manual_calib"]["props"][0], args.crops / "pjlab")
     else:
         log(f"manual_calib data not found at {MANUAL}; skipped")
     md = markdown(results, args.trials, time.time() - t0, (load0, os.getloadavg()[0]))
+    if args.before is not None:
+        md = with_rows_before(md, args.before.read_text(), args.before_label)
     print(md)
     if args.write:
         write_section(md)

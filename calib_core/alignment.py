@@ -1,4 +1,5 @@
-"""The maths of the rough alignment by drag: mounting presets, turning the view about the camera centre.
+"""The maths of the rough alignment: mounting presets, turning the view about the camera centre (by drag), and the
+rotation that 2 or 3 pairs fix before a full solve (:func:`fit_rotation_about_centre`).
 
 Frames: the lidar frame is x forward, y left, z up; the camera frame is OpenCV's, x right, y down,
 z forward (the optical axis).  ``T_camera_lidar`` (4, 4) maps lidar points (metres) into the camera
@@ -191,3 +192,70 @@ def focal_px_estimate(camera) -> float:
         raise CalibError(f"cannot estimate a focal length: the camera model has no rays at the image centre "
                          f"({camera!r})")
     return float(np.mean(focals))
+
+
+#: Fewest pairs :func:`fit_rotation_about_centre` needs: two non-parallel directions fix a rotation.
+MIN_ROTATION_PAIRS = 2
+
+
+def fit_rotation_about_centre(T_camera_lidar, points_lidar, bearings_camera, weights=None) -> np.ndarray:
+    """The rotation that best turns the pairs' laser points onto their clicked bearings, the camera centre kept.
+
+    Before 4 pairs there is no full solve, but 2 or 3 pairs already fix the rotation well when the rough
+    translation is close (lidar and camera a few cm to dm apart, corners metres away).  The camera centre in the
+    lidar frame, ``c = -R0^T t0`` of the rough pose, is kept; the directions ``u_i = (X_i - c) / |X_i - c|`` (lidar
+    frame) must turn into the unit bearings ``b_i`` (camera frame).  That is Wahba's problem: the rotation
+    maximising ``sum w_i b_i . (R u_i)`` is ``R = U diag(1, 1, det(U V^T)) V^T`` from the SVD ``U S V^T`` of
+    ``B = sum w_i b_i u_i^T`` (Kabsch).  Closed form: it does not depend on the rough rotation, only on ``c``.
+
+    Parameters
+    ----------
+    T_camera_lidar : (4, 4) array_like
+        The rough pose (maps lidar points, metres, into the camera frame); only its camera centre is used.
+    points_lidar : (N, 3) array_like
+        Laser points of the pairs, lidar frame (x forward, y left, z up), metres.  N >= 2.
+    bearings_camera : (N, 3) array_like
+        Bearings of the clicked pixels in the camera frame (OpenCV: x right, y down, z forward); any length.
+    weights : (N,) array_like, optional
+        Positive weights (e.g. ``1 / pixel_sigma**2``); default all 1.
+
+    Returns
+    -------
+    (4, 4) float64
+        ``[R | -R c]``: the fitted rotation, the same camera centre ``c`` in the lidar frame.
+
+    Raises
+    ------
+    CalibError
+        Fewer than :data:`MIN_ROTATION_PAIRS` pairs, a laser point at the camera centre, non-finite input, or
+        directions that do not fix a rotation (all parallel, in the lidar or the camera frame).
+    """
+    T = as_transform(T_camera_lidar)
+    X = np.asarray(points_lidar, dtype=float).reshape(-1, 3)
+    b = np.asarray(bearings_camera, dtype=float).reshape(-1, 3)
+    n = len(X)
+    if len(b) != n:
+        raise CalibError(f"{n} laser points but {len(b)} bearings")
+    if n < MIN_ROTATION_PAIRS:
+        raise CalibError(f"a rotation needs at least {MIN_ROTATION_PAIRS} pairs, got {n}")
+    w = np.ones(n) if weights is None else np.asarray(weights, dtype=float).reshape(n)
+    if not (np.isfinite(X).all() and np.isfinite(b).all() and np.isfinite(w).all() and (w > 0).all()):
+        raise CalibError("laser points, bearings and weights must be finite (weights positive)")
+    centre = -T[:3, :3].T @ T[:3, 3]
+    d = X - centre
+    dist, blen = np.linalg.norm(d, axis=1), np.linalg.norm(b, axis=1)
+    if (dist < 1e-6).any() or (blen < 1e-12).any():
+        raise CalibError("a laser point lies at the camera centre (or a bearing is zero): no direction to turn")
+    u, b = d / dist[:, None], b / blen[:, None]
+    B = (w[:, None] * b).T @ u  # sum w_i b_i u_i^T
+    U, S, Vt = np.linalg.svd(B)
+    # Parallel directions leave a rotation about them free: B then has rank 1.
+    cross_u = np.linalg.norm(np.cross(u[:, None, :], u[None, :, :]), axis=2).max()
+    cross_b = np.linalg.norm(np.cross(b[:, None, :], b[None, :, :]), axis=2).max()
+    if S[1] < 1e-9 * max(S[0], 1e-300) or cross_u < 1e-6 or cross_b < 1e-6:
+        raise CalibError("the pairs' directions are parallel: they do not fix a rotation; pick corners apart")
+    R = U @ np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))]) @ Vt
+    out = np.eye(4)
+    out[:3, :3] = R
+    out[:3, 3] = -R @ centre
+    return out

@@ -108,7 +108,7 @@ def test_guided_pairs_beat_the_start_and_keep_their_tags(app, scene, truth, tmp_
 
     assert d.press_guide("Next pair") == []
     assert d.wait_guide()
-    cells, reclicked = [], set()
+    cells, reclicked, sides = [], set(), []
     for k in range(N_GUIDED):
         proposal = d.guide_proposal
         assert proposal is not None
@@ -119,6 +119,11 @@ def test_guided_pairs_beat_the_start_and_keep_their_tags(app, scene, truth, tmp_
         assert np.allclose(d.loupe_view("camera")["center"], proposal.pixel, atol=0.5)
         radius = 3.0 * np.sqrt(np.linalg.eigvalsh(proposal.pixel_cov).max())
         assert d.loupe_view("camera")["size"] >= 2 * radius and radius <= app.guide.screen.max_ellipse_px
+        # The zoom stays steady between proposals: the loupe's side grows only when an ellipse needs more.
+        sides.append(d.loupe_view("camera")["size"])
+        assert sides[-1] >= max(sides[:-1], default=0)
+        if len(sides) > 1 and sides[-1] > sides[-2]:
+            assert 2 * radius + 4.0 > sides[-2]
         click = true_click(scene, truth, proposal, rng)
         if proposal.replaces is not None:
             # A re-click of a rough pair: that pair is selected, and the click moves its pixel.
@@ -138,7 +143,9 @@ def test_guided_pairs_beat_the_start_and_keep_their_tags(app, scene, truth, tmp_
             # One click in the camera loupe completes the pair.
             assert d.click_loupe_camera(*click) == [] and d.wait_guide()
             target = app.state.get(half.id)
-        assert target.complete and target.source == "guided" and target.precision_px == pytest.approx(CLICK_SIGMA_PX)
+        # A re-click refines a hand pair: it keeps its source ("clicked") and gets the guided click's precision.
+        source = "clicked" if proposal.replaces is not None else "guided"
+        assert target.complete and target.source == source and target.precision_px == pytest.approx(CLICK_SIGMA_PX)
         assert np.allclose(target.pixel, click, atol=0.05)
     assert d.wait_idle()
     err = pose_error(app.result.T_camera_lidar, truth)
@@ -158,9 +165,10 @@ def test_guided_pairs_beat_the_start_and_keep_their_tags(app, scene, truth, tmp_
     n_new = N_GUIDED - len(reclicked)
     print(f"{N_GUIDED} guided clicks: {n_new} new pairs, {len(reclicked)} re-clicks of the 4 clicked pairs")
     assert len(complete) == 4 + n_new >= N_GUIDED
-    assert [p.source for p in complete] == ["guided" if p.id in reclicked else "clicked" for p in complete[:4]] + [
-        "guided"] * n_new
-    assert all(p.precision_px == pytest.approx(CLICK_SIGMA_PX) for p in complete if p.source == "guided")
+    assert [p.source for p in complete] == ["clicked"] * 4 + ["guided"] * n_new
+    assert f"Pairs: 4 clicked, {n_new} guided" in d.guide_panel
+    assert all(p.precision_px == pytest.approx(CLICK_SIGMA_PX) for p in complete
+               if p.source == "guided" or p.id in reclicked)
     assert [(p.source, p.precision_px) for p in app.state.pairs()] == [(p.source, p.precision_px) for p in complete]
     before = {p.id: (p.source, p.precision_px, p.laser_rc, p.pixel) for p in app.state.picks}
     valid, size = app.depth.valid, (app.camera.width, app.camera.height)

@@ -29,6 +29,8 @@ ROOT = Path(__file__).resolve().parents[1]
 PJLAB = ROOT.parent / "shared" / "data" / "pjlab_opencalib_lidar2camera" / "auto_calib"
 PAIRS = ROOT / "real_data" / "pairs" / "auto_calib_pairs.yaml"
 N_GUIDED = 12
+#: Fewest guided pairs the screen must offer here (it proposes only clear corners, issue 20).
+MIN_GUIDED = 6
 
 
 def rough_extrinsic(T: np.ndarray, degrees: float = 2.0, metres: float = 0.20) -> np.ndarray:
@@ -69,8 +71,12 @@ def test_guided_pairs_on_the_real_scan_from_a_rough_extrinsic(tmp_path):
         assert d.wait_idle() and len(app.state.complete_picks()) == 5
         assert d.press_guide("Next pair") == [] and d.wait_guide()
         actions, two_click = 1, 0
+        made = 0
         for k in range(N_GUIDED):
             proposal, half = d.guide_proposal, app.state.pending()
+            if proposal is None:  # the screen proposes only clear corners: they may run out
+                break
+            made += 1
             if proposal.replaces is not None:  # a re-click: the pair is selected, the click moves its pixel
                 half = app.state.get(app.state.selected)
             assert half is not None and half.laser_rc == tuple(proposal.laser_rc)
@@ -85,16 +91,18 @@ def test_guided_pairs_on_the_real_scan_from_a_rough_extrinsic(tmp_path):
             assert d.click_loupe_camera(*click) == [] and d.wait_guide()
             actions += 1
             done = app.state.get(half.id)
-            assert done.complete and done.source == "guided" and done.precision_px == pytest.approx(0.3)
+            # A re-click refines the hand pair: it keeps its source ("clicked"), with the guided click's precision.
+            source = "clicked" if proposal.replaces is not None else "guided"
+            assert done.complete and done.source == source and done.precision_px == pytest.approx(0.3)
         assert d.wait_idle()
         T = app.result.T_camera_lidar
     finally:
         app.stop()
     rot = rotation_angle_deg(T[:3, :3], published[:3, :3])
     trans = float(np.linalg.norm(T[:3, 3] - published[:3, 3]))
-    print(f"\nPJLab auto_calib from 5 rough pairs (5-15 px): {N_GUIDED} guided pairs in {actions} actions "
-          f"({actions / N_GUIDED:.2f} per pair; {two_click} needed a full-image click first); "
+    print(f"\nPJLab auto_calib from 5 rough pairs (5-15 px): {made} guided pairs in {actions} actions "
+          f"({actions / max(made, 1):.2f} per pair; {two_click} needed a full-image click first); "
           f"{rot:.3f} deg, {100 * trans:.2f} cm from the published calibration")
     # Issue 9's real-scene target (there with 5 rough + 20 guided pairs): within 0.1 deg and 5 cm.
     assert rot <= 0.1 and trans <= 0.05
-    assert actions / N_GUIDED <= 1.5
+    assert made >= MIN_GUIDED and actions / made <= 1.5

@@ -190,7 +190,7 @@ def test_every_change_is_on_disk_before_it_returns_and_restored(tmp_path):
     s.close()  # what the app's stop() does: the YAML itself holds everything, the journal is gone
     assert not journal.exists() and not list(tmp_path.glob("*.tmp"))
     data = yaml.safe_load(path.read_text())
-    assert data["pairs"] == [{"id": 2, "laser_rc": [7, 8], "laser_xyz": None, "pixel": [33.0, 44.0]}]
+    assert data["pairs"] == [{"id": 2, "laser_rc": [7, 8], "laser_xyz": None, "pixel": [33.0, 44.0], "shot": 0}]
 
     # "Restart": a new state on the session file.
     t = make_state(tmp_path)
@@ -301,7 +301,7 @@ def test_a_failed_yaml_update_is_reported_retried_and_loses_nothing(tmp_path):
     path.rmdir()  # the disk is fixed: the kept change is written, nothing was lost
     s.flush_session()
     assert yaml.safe_load(path.read_text())["pairs"] == [{"id": 1, "laser_rc": [3, 4], "laser_xyz": None,
-                                                          "pixel": None}]
+                                                          "pixel": None, "shot": 0}]
     s.close()
 
 

@@ -114,10 +114,11 @@ def test_guided_pairs_in_headless_chromium(tmp_path):
                 page.mouse.click(x, y)
                 actions += 1
 
-                def placed():
+                def placed():  # a re-click keeps its pair's source ("clicked")
                     got = app.state.get(target)
                     return (got.pixel is not None and np.hypot(*np.subtract(got.pixel, click_px)) < 0.1
-                            and got.source == "guided" and got.precision_px == CLICK_SIGMA_PX)
+                            and got.source == ("clicked" if prop.replaces is not None else "guided")
+                            and got.precision_px == CLICK_SIGMA_PX)
 
                 wait_for(placed, f"guided pair {k + 1}: the loupe click to place the pixel")
                 assert len(app.state.complete_picks()) == 4 + n_new

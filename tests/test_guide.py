@@ -87,7 +87,7 @@ def test_proposals_are_visible_and_their_ellipses_calibrated(scene, truth):
     pairs = simulate_pairs(scene, 6, np.random.default_rng(3), 0.3)
     session = GuidedSession(scene.depth, scene.camera, pairs, image=scene.image)
     props = session.proposals(60)
-    assert len(props) >= 30
+    assert len(props) >= 20  # the clear-evidence screen proposes fewer, better cells (issue 20)
     xyz = np.array([p.laser_xyz for p in props])
     # Visible: in the image under the true pose, and nothing of the room mesh between camera and point.
     _, in_img = scene.camera.project(transform_points(scene.T_camera_lidar, xyz))

@@ -281,7 +281,7 @@ def test_serve_refuses_a_session_it_cannot_restore_before_loading_the_scene(tmp_
         capture_output=True, text=True, timeout=120, cwd=REPO,
     )
     assert proc.returncode == 2, proc.stderr
-    assert proc.stderr.splitlines() == [f"error: {session}: session version 999 is newer than this ba-calib reads (1); update ba-calib"]
+    assert proc.stderr.splitlines() == [f"error: {session}: session version 999 is newer than this ba-calib reads ({SESSION_VERSION}); update ba-calib"]
 
 
 def test_check_session_file_reads_sessions_and_plain_pairs_files(tmp_path):

@@ -19,6 +19,11 @@ moved to the near-side cell at the corner's tip (:func:`snap_to_corner_cell`,
 the cell a person picks), and where that still misses the person moves the
 cell in the BA loupe (:mod:`.laser_noise` models the offset).
 
+A third kind, ``marking``, is a corner of the scan's intensity image (a
+painted road marking, a sign's border) where the scan has an intensity
+field (:func:`intensity_log_image`): on a flat road it is the only corner
+the laser and the photo share.
+
 Gradients are clipped to a fixed magnitude before the structure tensor, so a
 small step corners as well as a large one and the thresholds are absolute
 (fractions of the clipped magnitude), the same on any scan.  Cells next to a
@@ -32,18 +37,18 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-__all__ = ["Candidates", "KINDS", "find_candidates", "corner_response", "depth_discontinuity", "near_region_width",
+__all__ = ["Candidates", "KINDS", "find_candidates", "intensity_log_image", "corner_response", "depth_discontinuity", "near_region_width",
            "plane_residual_m", "snap_to_corner_cell"]
 
 #: Feature kinds; duplicates within ``min_distance`` keep the first kind.
-KINDS = ("depth_jump", "junction")
+KINDS = ("depth_jump", "junction", "marking")
 
 #: Clipped gradient magnitude per cell and kind: log range (1.5 % of the range), unit normal (about 11 deg).
-_GRADIENT_CLIP = {"depth_jump": 0.015, "junction": 0.2}
+_GRADIENT_CLIP = {"depth_jump": 0.015, "junction": 0.2, "marking": 0.5}
 #: Near-side share of a 7x7 window below / above which a depth-jump peak is a corner (1/2 = straight edge).
 _MAX_CONVEX_SHARE, _MIN_CONCAVE_SHARE = 0.4, 0.7
 #: Structure-tensor window per kind, cells.
-_WINDOW = {"depth_jump": 3, "junction": 5}
+_WINDOW = {"depth_jump": 3, "junction": 5, "marking": 3}
 
 
 @dataclass(frozen=True)
@@ -171,6 +176,29 @@ def near_fraction(depth, rows_cols: np.ndarray, half: int = 3) -> np.ndarray:
     return np.where(hi - lo >= 0.005, frac, np.nan)
 
 
+def intensity_log_image(depth) -> tuple[np.ndarray, np.ndarray] | None:
+    """The scan's per-cell intensity as a log image and where it is defined, or None (no intensity field).
+
+    ``log(I - I_1 + 0.05 max(|I_1|, 1))`` with ``I_1`` the 1st percentile:
+    a step of 0.5 is a contrast of about 65 %, whatever the sensor's
+    intensity scale.
+    """
+    from ..display_images import find_intensity
+
+    found = find_intensity(depth.meta.get("field_images"))
+    if found is None:
+        return None
+    values = np.asarray(found[1], dtype=np.float64)
+    if values.shape != tuple(depth.shape):
+        return None
+    ok = np.asarray(depth.valid, dtype=bool) & np.isfinite(values)
+    if not ok.any():
+        return None
+    lo = float(np.percentile(values[ok], 1))
+    log_i = np.log(np.maximum(np.where(ok, values, lo) - lo, 0.0) + 0.05 * max(abs(lo), 1.0))
+    return log_i.astype(np.float32), ok
+
+
 def find_candidates(depth, threshold: float = 0.5, min_distance: int = 1, min_spacing_m: float = 0.01) -> Candidates:
     """Corner cells of a depth matrix (module docstring).
 
@@ -200,10 +228,15 @@ def find_candidates(depth, threshold: float = 0.5, min_distance: int = 1, min_sp
         "junction": surface_normals(depth),
     }
     masks = {"depth_jump": np.ones_like(valid), "junction": valid}
+    intensity = intensity_log_image(depth)
+    if intensity is not None:
+        images["marking"], masks["marking"] = intensity
     taken = np.zeros(depth.shape, dtype=bool)
     k = 2 * min_distance + 1
     rcs, kinds, strengths = [], [], []
     for i, name in enumerate(KINDS):
+        if name not in images:
+            continue
         g = _GRADIENT_CLIP[name]
         resp = corner_response(images[name], masks[name], _WINDOW[name], g)
         unit = g * g * (2.0 if name == "junction" else 1.0)

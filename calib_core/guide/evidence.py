@@ -28,13 +28,29 @@ Laser side
     ``max_range_m`` and, through their metric size, by ``max_cell_m`` of
     :func:`~calib_core.guide.propose.propose`.
 
+    *A corner of its own kind* (the by-eye runs declined flat asphalt,
+    curbs, junctions on a flat door, shadows at an object's foot):
+    a depth-jump cell needs a step of ``min_depth_step`` (log range) against
+    *returns* (``min_far_share`` of its window; dropouts are filled first,
+    :func:`fill_holes`, so a hole in a surface is no step) and the near side
+    must be a corner of the object, not a straight stretch of its edge
+    (``max_convex_share`` / ``min_concave_share``; its outline turns,
+    ``min_edge_turn``).  Plane junctions need a
+    fine scan (``max_junction_footprint_px``).  Nothing on the ground
+    (:func:`ground_plane`: ``max_ground_share`` of the window within
+    ``ground_tol_m``) or lower than ``min_height_m`` above it, except
+    ``marking`` candidates (intensity corners of painted road markings) well
+    inside the road (``min_marking_ground_share``, ``min_marking_strength``).
+
 Image side
     *One dominant corner inside the 3-sigma ellipse* (:func:`dominant_corner`):
     the local maxima of the structure tensor's ``lam_min``
     (:mod:`.image_corners`) inside the ellipse; the strongest must be at least
     ``min_corner_strength``, an L or X corner (``lam_min / lam_max >=
     min_corner_ratio``) and ``min_corner_dominance`` times stronger than the
-    second strongest.
+    second strongest, and not a repeated texture: at most ``max_rivals``
+    corners of ``rival_fraction`` of its strength within ``rival_radius_px``
+    of it (:func:`corner_rivals`: a fence, a railing, foliage, a window grid).
 
     *Inside the scan.*  Cells in the first or last ``scan_edge_rows`` rows
     of the depth matrix are left out: the scan's top or bottom beam cannot show
@@ -69,6 +85,17 @@ __all__ = [
     "corner_peaks",
     "dominant_corner",
     "ellipse_box_margin_px",
+    "ground_plane",
+    "height_above_ground_m",
+    "ground_cells",
+    "window_share",
+    "normal_span",
+    "intensity_corner",
+    "corner_rivals",
+    "fill_holes",
+    "far_side_share",
+    "near_edge_turn",
+    "intensity_edge_turn",
 ]
 
 #: Largest 3-sigma radius (px) of a proposal by default: an 80 px disc, about the app's camera loupe for a
@@ -124,6 +151,57 @@ class ProposalScreen:
         ellipse cannot hide clutter just next to it.
     scan_edge_rows : int
         Cells in this many first and last rows of the depth matrix are not proposed.
+    ground_tol_m : float
+        Cells within this distance (m) of the scan's ground plane are ground cells (:func:`ground_cells`).
+    max_ground_share : float
+        A cell on the ground whose window is more than this share (0..1) ground is not proposed, unless it
+        is a corner of a painted marking in the scan's intensity (:func:`intensity_corner`).
+    min_height_m : float
+        Cells lower than this (m) above the ground plane are not proposed (markings aside): where an object
+        meets the road (a tyre, a curb, a door's foot) the photo shows shadow, not a corner.
+    min_intensity_corner : float
+        Smallest intensity corner measure of a painted-marking corner (:func:`intensity_corner`).
+    min_marking_ground_share : float
+        A ``marking`` candidate (an intensity corner) is proposed only on a ground cell whose window is at
+        least this share ground: a painted corner lies inside the road, not where a wall or a door meets it;
+        its bright side's outline must turn by ``min_edge_turn`` (:func:`intensity_edge_turn`: a stripe's
+        corner, not its side).
+    min_marking_strength : float
+        Smallest corner measure of a ``marking`` candidate (:attr:`calib_core.guide.candidates.Candidates.strength`,
+        units of the squared gradient clip): rough asphalt makes weaker intensity corners (KITTI 000002's road:
+        median 0.74; PJLab manual_calib's crossing stripes: median 1.78).
+    min_junction_span : float
+        A plane-junction cell needs the smallest eigenvalue of its window's normals' ``mean n n^T``
+        (:func:`normal_span`: 0 for one or two planes, above 0 for three) at least this.  Off (0) by
+        default: on the sample's box corners the 5 x 5 window often holds only two faces' cells (0.01 lost
+        3 of 16 correct guided pairs there), and on coarse scans ``max_junction_footprint_px`` already
+        leaves junctions out.
+    min_depth_step : float
+        A depth-jump cell needs a step of log range of at least this between neighbouring cells
+        (:func:`calib_core.guide.candidates.depth_discontinuity`; 0.15 is a 16 % range step: two walls a
+        metre apart at 30 m are one surface to a person).
+    min_far_share : float
+        A depth-jump cell needs at least this share of its 7 x 7 window to be returns behind the step
+        (:func:`far_side_share`): no corners against dropouts or glass.
+    max_convex_share, min_concave_share : float
+        The near side of the step (dropouts filled, :func:`fill_holes`) must cover at most the first or at
+        least the second share of the 7 x 7 window (:func:`calib_core.guide.candidates.near_fraction`):
+        a corner of the object, not a straight stretch of its edge.
+    min_edge_turn : float
+        A depth-jump cell's near-side outline must turn by at least this (:func:`near_edge_turn`, 0 along a
+        straight edge, 0.5-0.6 at a box's corner): a roof line or a pole's side is no corner, however it
+        steps through the cells.
+    max_junction_footprint_px : float
+        Plane-junction cells are proposed only where one cell step is at most this long in the image
+        (:func:`cell_footprint_px`): on a 64-beam scan (5-8 px per cell) the normals of a 5 x 5 window mix
+        several objects and cannot tell a three-plane corner from a flat door (the by-eye runs declined
+        every junction proposed; the benchmark's verdict found none of 20 to be a corner); a dense
+        rotating scanner's (the sample's, under 2 px) show the corners of boxes and rooms.
+    rival_radius_px, rival_fraction : float
+        Image corners within ``rival_radius_px`` of the dominant corner with at least ``rival_fraction`` of
+        its strength are its rivals (:func:`corner_rivals`)...
+    max_rivals : int
+        ...and a corner with more rivals is a repeated texture (fence, railing, foliage), not proposed.
     """
 
     max_ellipse_px: float = DEFAULT_MAX_ELLIPSE_PX
@@ -138,9 +216,25 @@ class ProposalScreen:
     min_planar_cells: int = 4
     min_corner_strength: float = 0.01
     min_corner_ratio: float = 0.3
-    min_corner_dominance: float = 2.0
+    min_corner_dominance: float = 3.0
     min_search_px: float = 4.0
-    scan_edge_rows: int = 2
+    scan_edge_rows: int = 3
+    ground_tol_m: float = 0.2
+    max_ground_share: float = 0.5
+    min_height_m: float = 0.3
+    min_intensity_corner: float = 0.25
+    min_marking_ground_share: float = 0.9
+    min_marking_strength: float = 1.0
+    min_junction_span: float = 0.0
+    min_depth_step: float = 0.15
+    max_junction_footprint_px: float = 3.0
+    min_edge_turn: float = 0.3
+    min_far_share: float = 0.15
+    max_convex_share: float = 0.4
+    min_concave_share: float = 0.7
+    rival_radius_px: float = 12.0
+    rival_fraction: float = 0.3
+    max_rivals: int = 1
 
     def __post_init__(self) -> None:
         for name, value in vars(self).items():
@@ -341,3 +435,236 @@ def ellipse_box_margin_px(pixels: np.ndarray, pixel_cov: np.ndarray, width: int,
     hv = 3.0 * np.sqrt(np.maximum(C[:, 1, 1], 0.0))
     m = np.minimum.reduce([p[:, 0] - hu, (width - 1) - (p[:, 0] + hu), p[:, 1] - hv, (height - 1) - (p[:, 1] + hv)])
     return np.where(np.isfinite(m), m, -np.inf)
+
+
+def ground_plane(depth, tol_m: float, bottom_share: float = 0.25,
+                 min_inliers: float = 0.3) -> tuple[np.ndarray, float] | None:
+    """The scan's ground plane ``n . x = d`` (unit ``n`` facing the sensor side, lidar frame, metres), or None.
+
+    The ground is the plane most of the bottom rows' points lie on (the lowest
+    beams of a vehicle lidar hit the road): the median surface normal of the
+    cells in the last ``bottom_share`` of the rows and the median offset
+    ``n . x``, refined twice by a least-squares fit to the points within
+    ``tol_m`` (metres).  It is a ground plane only when at least
+    ``min_inliers`` of those bottom cells lie on it.
+    """
+    from .candidates import surface_normals
+
+    valid = np.asarray(depth.valid, dtype=bool)
+    H = depth.shape[0]
+    bottom = valid.copy()
+    bottom[: H - max(int(round(bottom_share * H)), 1)] = False
+    if bottom.sum() < 10:
+        return None
+    normals = surface_normals(depth)[bottom]
+    P = depth.points[bottom]
+    n = np.median(normals, axis=0)
+    if np.linalg.norm(n) < 1e-6:
+        return None
+    n /= np.linalg.norm(n)
+    d = float(np.median(P @ n))
+    for _ in range(2):  # least-squares refinement on the inliers
+        inl = np.abs(P @ n - d) <= tol_m
+        if inl.sum() < 3:
+            return None
+        Q = P[inl]
+        centre = Q.mean(axis=0)
+        m = np.linalg.eigh(np.cov((Q - centre).T))[1][:, 0]
+        n = m if m @ n >= 0 else -m
+        d = float(centre @ n)
+    if np.mean(np.abs(P @ n - d) <= tol_m) < min_inliers:
+        return None
+    if d > 0:  # face the sensor: the lidar origin on the positive side (n . 0 - d > 0)
+        n, d = -n, -d
+    return n, d
+
+
+def height_above_ground_m(depth, plane: tuple[np.ndarray, float] | None) -> np.ndarray:
+    """Signed distance (m) of every cell's point from the ground plane, positive on the sensor's side, (H, W);
+    +inf everywhere without a plane, NaN at invalid cells."""
+    if plane is None:
+        return np.full(depth.shape, np.inf)
+    n, d = plane
+    h = np.nan_to_num(depth.points) @ n - d
+    return np.where(np.asarray(depth.valid, dtype=bool), h, np.nan)
+
+
+def ground_cells(depth, tol_m: float, bottom_share: float = 0.25, min_inliers: float = 0.3) -> np.ndarray:
+    """Cells within ``tol_m`` (m) of the scan's :func:`ground_plane`, (H, W) bool (all False without one)."""
+    with np.errstate(invalid="ignore"):
+        return np.abs(height_above_ground_m(depth, ground_plane(depth, tol_m, bottom_share, min_inliers))) <= tol_m
+
+
+def window_share(mask: np.ndarray, depth, rows_cols: np.ndarray, half: int = 2) -> np.ndarray:
+    """Share of the valid cells of each cell's ``(2 half + 1)^2`` window where ``mask`` holds, (N,)."""
+    rows, cols, support = _support(depth, rows_cols, half, step_log=np.inf)
+    m = np.asarray(mask, dtype=bool)[rows, cols] & support
+    return m.sum(axis=(1, 2)) / np.maximum(support.sum(axis=(1, 2)), 1)
+
+
+def normal_span(depth, rows_cols: np.ndarray, half: int = 2) -> np.ndarray:
+    """Eigenvalues (N, 3), ascending, of the mean ``n n^T`` of the surface normals in each cell's window.
+
+    One plane: two eigenvalues near 0.  Two planes (an edge where they meet,
+    e.g. a wall on the ground, or a fold of one surface): the smallest near 0.
+    Three planes (a box or building corner): all three clearly above 0.
+    """
+    from .candidates import surface_normals
+
+    rows, cols, support = _support(depth, rows_cols, half, step_log=np.inf)
+    N = surface_normals(depth)[rows, cols]  # (n, k, k, 3)
+    w = support[..., None].astype(np.float64)
+    M = np.einsum("nabi,nabj->nij", N * w, N) / np.maximum(support.sum(axis=(1, 2)), 1)[:, None, None]
+    return np.linalg.eigvalsh(M)
+
+
+def intensity_corner(depth, rows_cols: np.ndarray, min_strength: float = 0.25, window: int = 3) -> np.ndarray:
+    """Whether each cell is a corner of the scan's intensity image (painted marking), (N,) bool.
+
+    The Shi-Tomasi measure of the log intensity
+    (:func:`calib_core.guide.candidates.intensity_log_image`, gradients
+    clipped at 0.5, i.e. a 65 % contrast step) over a ``window``-cell box,
+    at least ``min_strength`` in units of the squared clip, anywhere in the
+    cell's 3 x 3 neighbourhood.  All False when the scan has no intensity.
+    """
+    from .candidates import corner_response, intensity_log_image
+
+    rc = np.asarray(rows_cols, dtype=np.int64).reshape(-1, 2)
+    found = intensity_log_image(depth)
+    if found is None or len(rc) == 0:
+        return np.zeros(len(rc), dtype=bool)
+    clip = 0.5
+    resp = corner_response(found[0], found[1], window, clip) / clip**2
+    resp = cv2.dilate(resp.astype(np.float32), np.ones((3, 3), np.uint8))
+    return resp[rc[:, 0], rc[:, 1]] >= min_strength
+
+
+def corner_rivals(peaks: np.ndarray, peak_uv: np.ndarray, strength: np.ndarray, radius_px: float,
+                  fraction: float) -> np.ndarray:
+    """Number of other image corners within ``radius_px`` of each corner at least ``fraction`` of its strength, (N,).
+
+    A corner of a fence, a railing, a window grid or foliage has many such
+    rivals (a repeated texture); an isolated corner has none.  Peaks within
+    2 px of the corner itself are its own.
+    """
+    p = np.asarray(peak_uv, dtype=np.float64).reshape(-1, 2)
+    if len(p) == 0:
+        return np.zeros(0, dtype=np.int64)
+    R = int(np.ceil(radius_px))
+    H, W = peaks.shape
+    off = np.arange(-R, R + 1)
+    du, dv = np.meshgrid(off, off)
+    ring = ((du**2 + dv**2) <= radius_px**2) & ((du**2 + dv**2) > 4)
+    us = np.rint(p[:, 0]).astype(np.int64)[:, None, None] + du[None]
+    vs = np.rint(p[:, 1]).astype(np.int64)[:, None, None] + dv[None]
+    on = (us >= 0) & (us < W) & (vs >= 0) & (vs < H) & ring[None]
+    vals = np.where(on, peaks[np.clip(vs, 0, H - 1), np.clip(us, 0, W - 1)], 0.0)
+    thr = fraction * np.asarray(strength, dtype=np.float64)
+    return ((vals >= np.maximum(thr, 1e-12)[:, None, None]) & (vals > 0)).sum(axis=(1, 2))
+
+
+def fill_holes(depth, min_valid_neighbours: int = 5):
+    """The depth matrix with isolated no-return cells (dropouts inside a surface) filled, a copy.
+
+    A no-return cell with at least ``min_valid_neighbours`` returns among
+    its 8 neighbours gets their median range (and the point along its own
+    beam), so a dropout does not read as a depth step; larger no-return
+    regions (sky, glass, beyond range) stay.
+    """
+    import dataclasses
+
+    valid = np.asarray(depth.valid, dtype=bool)
+    wrap = bool(depth.meta.get("wrap_cols", False))
+    R = _neighbours(np.where(valid, depth.range_m, np.nan).astype(np.float64), wrap, np.nan)
+    R = np.delete(R, 4, axis=2)  # the cell itself
+    n = np.isfinite(R).sum(axis=2)
+    hole = ~valid & (n >= min_valid_neighbours) & np.all(np.isfinite(depth.directions), axis=2)
+    if not hole.any():
+        return depth
+    with np.errstate(all="ignore"):
+        med = np.nanmedian(R[hole], axis=1)
+    rng_m = np.array(depth.range_m, dtype=np.float64, copy=True)
+    rng_m[hole] = med
+    pts = np.array(depth.points, dtype=np.float64, copy=True)
+    pts[hole] = med[:, None] * depth.directions[hole]
+    return dataclasses.replace(depth, range_m=rng_m, points=pts, valid=valid | hole)
+
+
+def far_side_share(depth, rows_cols: np.ndarray, min_step: float, half: int = 3) -> np.ndarray:
+    """Share of each cell's ``(2 half + 1)^2`` window that is a *return* at least ``min_step`` farther in log
+    range than the cell, (N,).
+
+    A corner a person can see in both views has a background behind it; a
+    "step" against no-return cells (dropouts on dark asphalt, glass) shows
+    nothing in the photo.
+    """
+    rc = np.asarray(rows_cols, dtype=np.int64).reshape(-1, 2)
+    rows, cols, support = _support(depth, rc, half, step_log=np.inf)
+    lr = np.log(np.where(support, depth.range_m[rows, cols], 1.0))
+    own = np.log(np.maximum(depth.range_m[rc[:, 0], rc[:, 1]], 1e-6))
+    far = support & (lr >= own[:, None, None] + min_step)
+    return far.mean(axis=(1, 2))
+
+
+def near_edge_turn(depth, rows_cols: np.ndarray, half: int = 3) -> np.ndarray:
+    """How much the near side's outline turns inside each cell's window: ``lam_min / lam_max`` of the structure
+    tensor of the near-side mask (Sobel over the ``(2 half + 1)^2`` window), (N,), 0..1.
+
+    Near 0 along a straight depth edge, however slanted or stair-stepped in the
+    cells (a roof line, a wall's side); clearly above 0 where the outline turns
+    (an object's corner).  The near side is the cells below the midpoint of the
+    window's log ranges (no return counts as far); 0 without a step.
+    """
+    from .candidates import _log_range_windows
+
+    rc = np.asarray(rows_cols, dtype=np.int64).reshape(-1, 2)
+    if len(rc) == 0:
+        return np.zeros(0)
+    lr, _ = _log_range_windows(depth, rc, half + 1)
+    lo, hi = lr.min(axis=(1, 2)), lr.max(axis=(1, 2))
+    near = (lr < (0.5 * (lo + hi))[:, None, None]).astype(np.float64)
+    return np.where(hi - lo >= 0.005, _mask_turn(near), 0.0)
+
+
+def intensity_edge_turn(depth, rows_cols: np.ndarray, half: int = 3) -> np.ndarray:
+    """:func:`near_edge_turn` of the bright side of the scan's log intensity
+    (:func:`calib_core.guide.candidates.intensity_log_image`, split at the window's
+    midpoint), (N,): clearly above 0 at a painted marking's corner, near 0 along a
+    stripe's side; 0 without intensity or contrast (a 0.5 step of log intensity), or where the bright
+    side is speckle (fewer than 70 % of its cells have two bright 4-neighbours, or fewer than 4 cells)."""
+    from .candidates import intensity_log_image
+
+    rc = np.asarray(rows_cols, dtype=np.int64).reshape(-1, 2)
+    found = intensity_log_image(depth)
+    if found is None or len(rc) == 0:
+        return np.zeros(len(rc))
+    log_i, ok = found
+    H, W = depth.shape
+    off = np.arange(-half - 1, half + 2)
+    rows = np.clip(rc[:, 0, None, None] + off[None, :, None], 0, H - 1)
+    cols = np.clip(rc[:, 1, None, None] + off[None, None, :], 0, W - 1)
+    inside = ok[rows, cols]
+    li = np.where(inside, log_i[rows, cols], np.nan)
+    with np.errstate(invalid="ignore"):
+        lo, hi = np.nanmin(li, axis=(1, 2)), np.nanmax(li, axis=(1, 2))
+        bright = (li > (0.5 * (lo + hi))[:, None, None]).astype(np.float64)
+    # A marking is a solid bright region: most of its cells have two or more bright 4-neighbours.
+    # Speckle (noise on dark asphalt, retro-reflector bloom) has isolated bright cells.
+    pad = np.pad(bright, ((0, 0), (1, 1), (1, 1)))
+    neighbours = pad[:, :-2, 1:-1] + pad[:, 2:, 1:-1] + pad[:, 1:-1, :-2] + pad[:, 1:-1, 2:]
+    n_bright = bright.sum(axis=(1, 2))
+    solid = ((neighbours >= 2) & (bright > 0)).sum(axis=(1, 2)) / np.maximum(n_bright, 1)
+    coherent = (n_bright >= 4) & (solid >= 0.7)
+    return np.where((np.nan_to_num(hi - lo) >= 0.5) & coherent, _mask_turn(bright), 0.0)
+
+
+def _mask_turn(mask: np.ndarray) -> np.ndarray:
+    """``lam_min / lam_max`` of the structure tensor of binary windows ``(N, k, k)`` (gradients at the inner cells)."""
+    near = mask
+    # Central differences inside the (2 half + 3)^2 window: gradients at the inner (2 half + 1)^2 cells.
+    gx = 0.5 * (near[:, 1:-1, 2:] - near[:, 1:-1, :-2])
+    gy = 0.5 * (near[:, 2:, 1:-1] - near[:, :-2, 1:-1])
+    a, b, c = (gx * gx).sum(axis=(1, 2)), (gx * gy).sum(axis=(1, 2)), (gy * gy).sum(axis=(1, 2))
+    root = np.sqrt(np.maximum(0.25 * (a - c) ** 2 + b * b, 0.0))
+    lam_max, lam_min = 0.5 * (a + c) + root, 0.5 * (a + c) - root
+    return np.where(lam_max > 0, lam_min / np.maximum(lam_max, 1e-12), 0.0)

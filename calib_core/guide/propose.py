@@ -37,10 +37,12 @@ import numpy as np
 
 from ..errors import CalibError
 from ..io.atomic import write_yaml_atomic
-from .candidates import KINDS, Candidates, find_candidates
+from .candidates import KINDS, Candidates, depth_discontinuity, find_candidates, near_fraction
 from .corner_probability import WEIGHTS, corner_features, corner_probability, laser_features, scan_range_noise_m
 from .evidence import (REASON_NO_EVIDENCE, REASON_ROUGH_ALIGNMENT, ProposalScreen, cell_footprint_px, corner_peaks,
-                       dominant_corner, ellipse_box_margin_px, local_plane_residual_m, planar_share)
+                       corner_rivals, dominant_corner, ellipse_box_margin_px, far_side_share, fill_holes, ground_plane,
+                       height_above_ground_m, intensity_corner, intensity_edge_turn, local_plane_residual_m,
+                       near_edge_turn, normal_span, planar_share, window_share)
 from .image_corners import CornerImage, content_mask, strongest_near
 from .information import d_optimal_gain, pair_noise, pixel_jacobians, pose_pixel_covariance
 from .laser_noise import DEFAULT_CELL_SIGMA, DEFAULT_RANGE_SIGMA_M, PICK_CELL_SIGMA, cell_covariance
@@ -436,6 +438,58 @@ def _screen(depth, camera, cand: Candidates, pixels, pixel_cov, J_point, ok, scr
     share, n_planar = planar_share(depth, cand.rows_cols, plane_residual, tol_m, screen.plane_half)
     evidence["planar"][:] = share
     cut("not planar", (share >= screen.min_planar_share) & (n_planar >= screen.min_planar_cells))
+    # The kind's own evidence: a real depth step, or three planes (not a fold of one surface).
+    junction = cand.kind == KINDS.index("junction")
+    marking = cand.kind == KINDS.index("marking")
+    sel = np.flatnonzero(ok)
+    span = np.zeros(len(ok))
+    step = np.zeros(len(ok))
+    far = np.zeros(len(ok))
+    near_share = np.full(len(ok), 0.5)
+    turn = np.zeros(len(ok))
+    if sel.size:
+        filled = fill_holes(depth)
+        span[sel] = normal_span(depth, cand.rows_cols[sel], screen.plane_half)[:, 0]
+        step[sel] = depth_discontinuity(filled, cand.rows_cols[sel])
+        far[sel] = far_side_share(filled, cand.rows_cols[sel], screen.min_depth_step)
+        near_share[sel] = np.nan_to_num(near_fraction(filled, cand.rows_cols[sel]), nan=0.5)
+        turn[sel] = near_edge_turn(filled, cand.rows_cols[sel])
+    cut("junction of fewer than three planes", ~junction | (span >= screen.min_junction_span))
+    cut("junction on a coarse scan", ~junction | (foot <= screen.max_junction_footprint_px))
+    depth_jump = ~junction & ~marking
+    cut("depth step too small", ~depth_jump | ((step >= screen.min_depth_step) & (far >= screen.min_far_share)))
+    cut("straight depth edge", ~depth_jump | (near_share <= screen.max_convex_share)
+        | (near_share >= screen.min_concave_share))
+    cut("depth edge does not turn", ~depth_jump | (turn >= screen.min_edge_turn))
+    # Nothing on the ground unless it is a painted-marking corner in intensity.
+    sel = np.flatnonzero(ok)
+    if sel.size:
+        plane = ground_plane(depth, screen.ground_tol_m)
+        height = height_above_ground_m(depth, plane)
+        with np.errstate(invalid="ignore"):
+            ground = np.abs(height) <= screen.ground_tol_m
+        on_ground = np.zeros(len(ok), dtype=bool)
+        inside_road = np.zeros(len(ok), dtype=bool)
+        rc = cand.rows_cols[sel]
+        share_ground = window_share(ground, depth, rc, screen.plane_half)
+        on_ground[sel] = ground[rc[:, 0], rc[:, 1]] & (share_ground > screen.max_ground_share)
+        inside_road[sel] = ground[rc[:, 0], rc[:, 1]] & (share_ground >= screen.min_marking_ground_share)
+        painted = marking.copy()
+        g = np.flatnonzero(on_ground & ~marking)
+        if g.size:
+            painted[g] = intensity_corner(depth, cand.rows_cols[g], screen.min_intensity_corner)
+        cut("on the ground", ~on_ground | painted)
+        low = np.zeros(len(ok), dtype=bool)
+        low[sel] = np.nan_to_num(height[rc[:, 0], rc[:, 1]], nan=np.inf) < screen.min_height_m
+        cut("at the foot of an object", ~low | marking)
+        # Intensity corners off the road are door frames, retro-reflectors, shading: not painted markings.
+        cut("intensity corner off the ground", ~marking | inside_road)
+        cut("weak intensity corner", ~marking | (cand.strength >= screen.min_marking_strength))
+        mark_turn = np.zeros(len(ok))
+        m = np.flatnonzero(ok & marking)
+        if m.size:
+            mark_turn[m] = intensity_edge_turn(depth, cand.rows_cols[m])
+        cut("marking edge does not turn", ~marking | (mark_turn >= screen.min_edge_turn))
     radius = 3.0 * np.sqrt(np.maximum(np.linalg.eigvalsh(np.where(ok[:, None, None], pixel_cov, 0.0))[:, -1], 0.0))
     fits = radius <= screen.max_ellipse_px
     too_big = ok & ~fits
@@ -451,8 +505,10 @@ def _screen(depth, camera, cand: Candidates, pixels, pixel_cov, J_point, ok, scr
         pv = np.clip(np.rint(np.nan_to_num(pixels[:, 1])).astype(np.int64), 0, H_img - 1)
         cut("border", inside[pv, pu] >= radius + screen.border_margin_px)
         sel = np.flatnonzero(ok)
-        _, first, second, ratio = dominant_corner(corner_image, corner_peaks(corner_image), pixels[sel],
-                                                  pixel_cov[sel], screen.min_search_px)
+        peaks = corner_peaks(corner_image)
+        peak_uv, first, second, ratio = dominant_corner(corner_image, peaks, pixels[sel], pixel_cov[sel],
+                                                        screen.min_search_px)
+        rivals = corner_rivals(peaks, peak_uv, first, screen.rival_radius_px, screen.rival_fraction)
         strength[sel] = first
         with np.errstate(divide="ignore", invalid="ignore"):
             dominance = np.where(second > 0, first / np.where(second > 0, second, 1.0), np.inf)
@@ -461,6 +517,9 @@ def _screen(depth, camera, cand: Candidates, pixels, pixel_cov, J_point, ok, scr
         clean[sel] = ((first >= screen.min_corner_strength) & (ratio >= screen.min_corner_ratio)
                       & (dominance >= screen.min_corner_dominance))
         cut("no dominant image corner", clean)
+        isolated = np.ones(len(ok), dtype=bool)
+        isolated[sel] = rivals <= screen.max_rivals
+        cut("repeated image texture", isolated)
     return ok, smallest
 
 

@@ -32,7 +32,7 @@ from .yaml_files import finite_vector, read_yaml_mapping
 
 SESSION_FORMAT = "ba-calib-session"
 #: The newest session version this code reads.
-SESSION_VERSION = 1
+SESSION_VERSION = 2  # 2: shots (``shots:``, each pick's ``shot``); 1: one shot
 #: Ids and ``next_id`` are below this (they are stored as 32-bit integers by the UI).
 MAX_ID = 2**31 - 1
 
@@ -105,10 +105,12 @@ def parse_session(data: dict[str, Any], where: str, max_pairs: int = MAX_PAIRS) 
         at = f"{where}: pair {i}"
         if not isinstance(e, dict) or "id" not in e:
             raise CalibError(f"{at}: expected a mapping with an id")
-        unknown = set(e) - {"id", "laser_rc", "laser_xyz", "pixel"}
+        unknown = set(e) - {"id", "laser_rc", "laser_xyz", "pixel", "source", "precision_px", "check", "shot"}
         if unknown:
             raise CalibError(f"{at}: unknown key(s) {sorted(map(str, unknown))}"[:300])
         pick_id = _whole(e["id"], f"{at} id", 0, MAX_ID)
+        if "shot" in e:
+            _whole(e["shot"], f"{at} shot", 0, MAX_ID)
         if pick_id in seen:
             raise CalibError(f"{at}: duplicate id {pick_id}")
         seen.add(pick_id)

@@ -84,6 +84,9 @@ def calibrate(pairs: Sequence[Any], depth: Any, camera: Any, *, cost: str = "ang
         points, bearings, camera=camera, pixels=pixels, cost=cost, pair_ids=[all_ids[i] for i in fit],
         pixel_sigma=sigmas, laser_cov_m2=laser_cov, **options,
     )
+    from .quality import with_leave_one_out  # leave-one-out errors and leverages: does the fit flatter few pairs?
+
+    with_leave_one_out(result, points, pixels, camera, sigmas, [all_ids[i] for i in fit])
     if checks:
         T = result.T_camera_lidar
         cp, cb, cpx = resolve_pairs([pairs[i] for i in checks], depth, camera)

@@ -30,6 +30,14 @@ __all__ = [
     "pairs_in_fit",
     "NEAR_SINGULAR_DEG",
     "orientation_notes",
+    "LeaveOneOut",
+    "leave_one_out_estimate",
+    "leave_one_out_reasons",
+    "with_leave_one_out",
+    "LOO_FACTOR",
+    "LOO_FLOOR_PX",
+    "LOO_NOISY_PX",
+    "HIGH_LEVERAGE",
 ]
 
 STATUSES = ("ok", "warning", "unreliable")
@@ -99,6 +107,8 @@ class Quality:
 
     status: str = "ok"
     reasons: list[str] = field(default_factory=list)
+    #: The pairs' leave-one-out errors and leverages (:func:`with_leave_one_out`), None when not computed.
+    leave_one_out: "LeaveOneOut | None" = field(default=None, compare=False, repr=False)
 
     def __post_init__(self) -> None:
         if self.status not in STATUSES:
@@ -211,3 +221,255 @@ def orientation_notes(R_camera_lidar: np.ndarray) -> list[str]:
             "rotation's own uncertainty); read roll/pitch/yaw, the matrix or the quaternion"
         )
     return notes
+
+
+# --------------------------------------------------------------------------------------
+# leave-one-out: does the fit error flatter a few pairs?
+# --------------------------------------------------------------------------------------
+
+#: The pairs' leave-one-out error (RMS) above this many times what the fit's own residuals predict: a warning.
+LOO_FACTOR = 2.0
+#: ... but only when the mean leave-one-out error is above this (px): below it the pairs are fine anyway.
+LOO_FLOOR_PX = 2.0
+#: Mean leave-one-out error (px) above which the clicks are too far off for "ok": 3x the 1.5 px per axis expected
+#: of a click and a laser pick is 4.5 px per axis, a mean 2-D error of 1.25 x 4.5 = 5.6 px; rounded up.
+LOO_NOISY_PX = 6.0
+#: A pair whose 2x2 hat-matrix block has an eigenvalue above this carries the pose: a mistake in it shows in
+#: its own residual at most ``1 - HIGH_LEVERAGE`` (10 %) of its size along that direction.
+HIGH_LEVERAGE = 0.9
+
+
+@dataclass(frozen=True)
+class LeaveOneOut:
+    """Each fit pair's error under the pose fitted without it, from the hat matrix of the fit (no refit).
+
+    For a least-squares fit with Jacobian ``J`` (pixels per pose parameter, rows weighted by ``1 / sigma``) the
+    hat matrix ``H = J (J^T J)^-1 J^T`` maps the clicks to the fitted pixels; pair ``i``'s 2x2 block ``H_ii`` says
+    how much of its own error the pose absorbs.  Its residual under the pose fitted *without* it is then
+    ``(I - H_ii)^-1 e_i`` (exact for a linear model; the pose is near-linear over pixel-sized errors, which
+    ``tests/test_leave_one_out.py`` checks against refits).
+
+    Attributes
+    ----------
+    loo_px : (n,) ndarray
+        Leave-one-out error of each pair in the fit, px (NaN where it has no pixel or the pose needs it whole).
+    fit_px : (n,) ndarray
+        Its residual under the fit, px.
+    leverage : (n,) ndarray
+        Largest eigenvalue of ``H_ii``, in [0, 1]: 1 means the pose follows that pair's click whatever it is.
+    ids : list of int
+        The pairs' ids (for the messages).
+    expected_loo_rms_px : float
+        The RMS leave-one-out error the fit's own residuals predict (``s^2 trace((I - H_ii)^-1)``, with ``s`` the
+        residual scale over ``2 n - 6`` degrees of freedom), px; NaN when unknown.
+    """
+
+    loo_px: np.ndarray
+    fit_px: np.ndarray
+    leverage: np.ndarray
+    ids: list
+    expected_loo_rms_px: float
+
+    @property
+    def mean_px(self) -> float:
+        """Mean leave-one-out error over the pairs that have one, px (NaN if none)."""
+        finite = self.loo_px[np.isfinite(self.loo_px)]
+        return float(finite.mean()) if finite.size else float("nan")
+
+    @property
+    def rms_px(self) -> float:
+        finite = self.loo_px[np.isfinite(self.loo_px)]
+        return float(np.sqrt(np.mean(finite**2))) if finite.size else float("nan")
+
+
+#: Gauss-Newton steps from the solve's pose to the optimum of the weighted pixel cost (2 are within 0.01 px on
+#: the by-eye sessions; each costs one projection of the pairs).
+GAUSS_NEWTON_STEPS = 3
+
+
+def _rotation_from_vector(phi: np.ndarray) -> np.ndarray:
+    """Rodrigues: the rotation by ``|phi|`` radians about ``phi``."""
+    angle = float(np.linalg.norm(phi))
+    if angle < 1e-12:
+        return np.eye(3)
+    k = phi / angle
+    K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.eye(3) + math.sin(angle) * K + (1.0 - math.cos(angle)) * (K @ K)
+
+
+def _pixel_jacobian(camera, points_camera: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``d pixel / d (delta, t)`` (n, 2, 6) for ``X_c = exp(delta) X_c + t`` by central differences of the
+    projection, the pixels (n, 2) and whether each point projects (n,)."""
+    n = len(points_camera)
+    h = 1e-6 * np.maximum(np.linalg.norm(points_camera, axis=1), 1e-3)
+    steps = np.concatenate([np.eye(3), -np.eye(3)])
+    shifted = points_camera[None, :, :] + steps[:, None, :] * h[None, :, None]
+    proj, ok = camera.project(np.concatenate([points_camera, shifted.reshape(-1, 3)]))
+    proj = np.asarray(proj, np.float64)
+    ok = np.asarray(ok, bool).reshape(7, n).all(axis=0)
+    moved = proj[n:].reshape(6, n, 2)
+    dp_dx = np.transpose((moved[:3] - moved[3:]) / (2.0 * h[None, :, None]), (1, 2, 0))  # (n, 2, 3)
+    X = points_camera
+    skew = np.zeros((n, 3, 3))  # [X]_x; d(exp(delta) X)/d delta = -[X]_x
+    skew[:, 0, 1], skew[:, 0, 2], skew[:, 1, 2] = -X[:, 2], X[:, 1], -X[:, 0]
+    skew[:, 1, 0], skew[:, 2, 0], skew[:, 2, 1] = X[:, 2], -X[:, 1], X[:, 0]
+    dX = np.concatenate([-skew, np.broadcast_to(np.eye(3), skew.shape)], axis=2)  # (n, 3, 6)
+    return dp_dx @ dX, proj[:n], ok & np.isfinite(dp_dx).all(axis=(1, 2))
+
+
+def leave_one_out_estimate(
+    T_camera_lidar: np.ndarray,
+    points_lidar: np.ndarray,
+    pixels: np.ndarray,
+    camera,
+    pixel_sigma: np.ndarray | None = None,
+    ids=None,
+) -> LeaveOneOut | None:
+    """Leave-one-out errors and leverages of the pairs of a fit, from its hat matrix (:class:`LeaveOneOut`).
+
+    Parameters
+    ----------
+    T_camera_lidar : (4, 4) array
+        The fitted pose (maps lidar points, metres, into the camera frame).
+    points_lidar, pixels : (n, 3), (n, 2) arrays
+        The pairs in the fit: laser points (lidar frame, m) and clicked pixels (px).
+    camera : CameraModel
+    pixel_sigma : (n,) array, optional
+        1-sigma of each click (px), as the fit weighed them; None: all alike.
+    ids : sequence, optional
+        The pairs' ids, for messages (default positions).
+
+    Returns
+    -------
+    LeaveOneOut or None
+        None with fewer than :data:`MIN_PAIRS_FOR_ERROR` pairs with a pixel (the residuals then say nothing of the
+        error: :func:`error_estimate_reason`) or when the pose is undetermined by them.
+    """
+    T = np.array(T_camera_lidar, np.float64)
+    pts = np.asarray(points_lidar, np.float64).reshape(-1, 3)
+    pix = np.asarray(pixels, np.float64).reshape(-1, 2)
+    n = len(pts)
+    ids = list(range(n)) if ids is None else list(ids)
+    w = np.ones(n) if pixel_sigma is None else 1.0 / np.asarray(pixel_sigma, np.float64).reshape(n)
+    loo, fit, lev = np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan)
+    # The hat matrix holds at the optimum of the weighted pixel cost: a few Gauss-Newton steps take the given
+    # pose there (the solve's own cost weighs pairs a little differently: angles, the laser pick).
+    for _ in range(GAUSS_NEWTON_STEPS + 1):
+        J, proj, ok = _pixel_jacobian(camera, pts @ T[:3, :3].T + T[:3, 3])
+        e = proj - pix
+        ok &= np.isfinite(e).all(axis=1) & np.isfinite(w) & (w > 0)
+        m = int(ok.sum())
+        if m < MIN_PAIRS_FOR_ERROR:
+            return None
+        Jw = J[ok] * w[ok, None, None]  # (m, 2, 6)
+        rw = e[ok] * w[ok, None]  # (m, 2)
+        N = np.einsum("kai,kaj->ij", Jw, Jw)
+        if not np.isfinite(N).all() or np.linalg.cond(N) > 1e12:
+            return None
+        Ninv = np.linalg.inv(N)
+        step = -Ninv @ np.einsum("kai,ka->i", Jw, rw)  # (delta, t): X_c -> exp(delta) X_c + t
+        if not np.isfinite(step).all():
+            return None
+        if _ == GAUSS_NEWTON_STEPS or np.linalg.norm(step[:3]) < 1e-9 and np.linalg.norm(step[3:]) < 1e-9:
+            break
+        R_step = _rotation_from_vector(step[:3])
+        T[:3, :3], T[:3, 3] = R_step @ T[:3, :3], R_step @ T[:3, 3] + step[3:]
+    fit[ok] = np.hypot(e[ok, 0], e[ok, 1])
+    H = Jw @ Ninv @ np.transpose(Jw, (0, 2, 1))  # (m, 2, 2) diagonal blocks of the hat matrix
+    H = 0.5 * (H + np.transpose(H, (0, 2, 1)))
+    tr, det = H[:, 0, 0] + H[:, 1, 1], H[:, 0, 0] * H[:, 1, 1] - H[:, 0, 1] * H[:, 1, 0]
+    lev[ok] = np.clip(0.5 * tr + np.sqrt(np.maximum(0.25 * tr**2 - det, 0.0)), 0.0, 1.0)
+    A = np.eye(2) - H
+    detA = A[:, 0, 0] * A[:, 1, 1] - A[:, 0, 1] * A[:, 1, 0]
+    carried = detA <= 1e-9  # the pose follows this click wholly: no prediction without it
+    adj = np.stack([np.stack([A[:, 1, 1], -A[:, 0, 1]], -1), np.stack([-A[:, 1, 0], A[:, 0, 0]], -1)], 1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        Ainv = adj / detA[:, None, None]
+        z = np.einsum("kab,kb->ka", Ainv, rw)  # weighted leave-one-out residuals
+        loo[ok] = np.where(carried, np.nan, np.hypot(z[:, 0], z[:, 1])) / w[ok]
+        s2 = float(np.sum(rw**2)) / (2 * m - 6)
+        # Each pair's expected squared error, px^2: s^2 trace((I - H_ii)^-1) / w_i^2.
+        expected = s2 * np.where(carried, np.nan, Ainv[:, 0, 0] + Ainv[:, 1, 1]) / w[ok] ** 2
+        expected_rms = float(np.sqrt(np.nanmean(expected))) if np.isfinite(expected).any() else float("nan")
+    return LeaveOneOut(loo_px=loo, fit_px=fit, leverage=lev, ids=ids, expected_loo_rms_px=expected_rms)
+
+
+def leave_one_out_reasons(loo: LeaveOneOut | None, fit_mean_px: float | None = None) -> list[str]:
+    """Warnings when the fit error flatters a few pairs (one line each; empty when it does not).
+
+    ``fit_mean_px`` is the fit error as shown (the solve's mean residual, px); default the mean of ``loo.fit_px``.
+
+    * The pairs' mean leave-one-out error is over :data:`LOO_NOISY_PX`: clicks the pose was not fitted to land
+      that far off, whatever the fit error says (the residuals of few pairs understate it: at 6 pairs the pose
+      absorbs half of every click's error).
+    * Their RMS is over :data:`LOO_FACTOR` times what the fit's own residuals predict for it (and the mean over
+      :data:`LOO_FLOOR_PX`): the pose bends towards pairs whose errors it hides.
+    * A pair has a leverage over :data:`HIGH_LEVERAGE`: the pose rests on it, and an error in it would hardly
+      show in its residual.
+    """
+    if loo is None:
+        return []
+    reasons: list[str] = []
+    rms, expected, mean = loo.rms_px, loo.expected_loo_rms_px, loo.mean_px
+    fit_mean = float(np.nanmean(loo.fit_px)) if fit_mean_px is None else float(fit_mean_px)
+    if math.isfinite(mean) and mean > LOO_NOISY_PX:
+        reasons.append(
+            f"pairs left out of the fit err {mean:.1f} px on average (above {LOO_NOISY_PX:g} px; the fit error is "
+            f"{fit_mean:.2f} px): the clicks are off by several pixels; check the pairs with the largest error "
+            "left out, add well-spread pairs"
+        )
+    elif math.isfinite(rms) and math.isfinite(expected) and rms > LOO_FACTOR * expected and mean > LOO_FLOOR_PX:
+        reasons.append(
+            f"pairs left out of the fit err {mean:.1f} px on average against a fit error of {fit_mean:.2f} px "
+            f"({rms / expected:.1f}x what the residuals predict): the pose bends to fit a few pairs; "
+            "check the pairs with the largest error left out, add well-spread pairs"
+        )
+    carried = [i for i in range(len(loo.ids)) if np.isfinite(loo.leverage[i]) and loo.leverage[i] > HIGH_LEVERAGE]
+    if carried:
+        worst = max(carried, key=lambda i: loo.leverage[i])
+        names = ", ".join(str(loo.ids[i]) for i in carried[:5]) + (" ..." if len(carried) > 5 else "")
+        reasons.append(
+            f"the pose rests on pair{'s' if len(carried) > 1 else ''} {names} (leverage up to "
+            f"{loo.leverage[worst]:.2f}: an error there shows only {100 * (1 - loo.leverage[worst]):.0f} % in its "
+            "residual); add pairs near it and elsewhere"
+        )
+    return reasons
+
+
+def with_leave_one_out(result, points_lidar, pixels, camera, pixel_sigma=None, pair_ids=None):
+    """Add the leave-one-out check to a solve's result in place: ``result.quality`` (with its
+    :attr:`Quality.leave_one_out`) and ``result.warnings`` get :func:`leave_one_out_reasons`.
+
+    Parameters
+    ----------
+    result : CalibrationResult
+        The fit of these pairs (its ``inliers`` select the pairs in the fit).
+    points_lidar, pixels : (n, 3), (n, 2) arrays
+        All the pairs the solve was given (lidar frame, m; px), in its order.
+    pixel_sigma : (n,) array, optional
+        As given to the solve.
+    pair_ids : sequence, optional
+        As given to the solve (default positions).
+
+    Returns
+    -------
+    CalibrationResult
+        ``result`` itself.
+    """
+    if camera is None or pixels is None:
+        return result
+    inliers = getattr(result, "inliers", None)
+    keep = np.ones(len(points_lidar), bool) if inliers is None else np.asarray(inliers, bool)
+    all_ids = list(range(len(keep))) if pair_ids is None else list(pair_ids)
+    ids = [all_ids[i] for i in np.flatnonzero(keep)]
+    sig = None if pixel_sigma is None else np.asarray(pixel_sigma, np.float64)[keep]
+    loo = leave_one_out_estimate(result.T_camera_lidar, np.asarray(points_lidar)[keep],
+                                 np.asarray(pixels)[keep], camera, sig, ids)
+    old = result.quality
+    new_reasons = [r for r in leave_one_out_reasons(loo, getattr(result, "mean_px", None)) if r not in old.reasons]
+    status = old.status if (old.status == "unreliable" or not new_reasons) else "warning"
+    reasons = list(old.reasons) + new_reasons
+    result.quality = Quality(status, reasons, leave_one_out=loo)
+    notes = [w for w in result.warnings if w not in old.reasons]
+    result.warnings = reasons + notes
+    return result
