@@ -256,3 +256,43 @@ def test_a_small_window_gives_the_photo_and_the_render_the_room():
     # A whole 360 deg strip is never cut into slivers 1 x 4 (each a quarter of the photo's width).
     photo, ba, n_cols = shown_widths((1920, 1200), (1800, 64), 3.24)
     assert n_cols in (1, 2) and ba >= 0.45 * photo
+
+
+def test_after_a_ba_loupe_click_the_camera_loupe_moves_only_if_the_prediction_leaves_its_middle(driver):
+    from calib_core.transforms import transform_points
+
+    d, app = driver, driver.app
+    reset(d)
+    assert d.wait_idle() and app.result is not None
+    T = app.result.T_camera_lidar
+
+    def predicted(cell) -> np.ndarray:  # the solved pose's projection of the cell, computed here
+        uv, ok = app.camera.project(transform_points(T, app.depth.cell_points(np.array([cell]))))
+        assert ok[0]
+        return uv[0]
+
+    key = app.ba_keys[0]
+    valid = app.depth.valid
+    cols = app.ba_window.columns
+    row, col = next((r, int(c)) for r in range(60, 120) for c in cols[200:400] if valid[r, c] and valid[r, c + 1])
+    assert d.click_cell(key, row, col) == []  # the full BA image: both loupes framed
+    pid = app.state.pending().id
+    crop = app.loupes.camera_crop
+    assert crop.center == pytest.approx(tuple(predicted((row, col))), abs=0.01)
+    # The next cell, in the BA loupe: its prediction stays in the camera loupe's middle, which does not move.
+    near = predicted((row, col + 1)) - [crop.u0, crop.v0]
+    assert np.all((0.15 * crop.n <= near) & (near <= 0.85 * crop.n - 1)), near
+    assert d.click_loupe_cell(row, col + 1) == [] and app.state.get(pid).laser_rc == (row, col + 1)
+    assert app.loupes.camera_crop == crop
+    # A cell farther off in the BA loupe whose prediction leaves the camera loupe's middle: the camera loupe frames it.
+    ba = app.loupes.ba_crop
+
+    def off_middle(cell) -> bool:
+        xy = predicted(cell) - [crop.u0, crop.v0]
+        return not np.all((0.15 * crop.n <= xy) & (xy <= 0.85 * crop.n - 1))
+
+    far = next((r, c) for c in range(ba.col0 + 1, ba.col0 + ba.n_cols - 1)
+               for r in range(ba.row0 + 1, ba.row0 + ba.n_rows - 1) if valid[r, c] and off_middle((r, c)))
+    assert d.click_loupe_cell(*far) == [] and app.state.get(pid).laser_rc == far
+    assert app.loupes.camera_crop.center == pytest.approx(tuple(predicted(far)), abs=0.01)
+    reset(d)
