@@ -135,7 +135,6 @@ class PageBuilder:
         self._camera_title.text = title
 
 
-
 def install_page_script(server: Any, source: str) -> bool:
     """Run the fixed script ``source`` in every tab of ``server``, present and future (viser replays it to new
     tabs); False if this viser cannot (then the page works without it: e.g. Escape does nothing)."""
