@@ -660,7 +660,7 @@ def solve_shots(
     unchecked = len(shots) >= 2 and not checks
     if unchecked:
         reasons.append(UNCHECKED_REASON)
-    if len(shots) >= 2 and checks:
+    if len(shots) >= 2 and not unchecked:
         active = [k for k in everyone if len(shots[k].fit_positions)]
         held_options = {k: v for k, v in options.items() if k != "initial_T_camera_lidar"}
         while True:
@@ -718,7 +718,7 @@ def solve_shots(
         reports.append(ShotReport(k, s.name, s.n_pairs, len(s.fit_positions), int(s.check.sum()), k in kept,
                                   sorted(skip), _finite_mean(px), _finite_std(px), _finite_mean(deg), _finite_std(deg)))
     loso: list[LeaveOneShotOut] = []
-    if len(shots) >= 2 and checks:
+    if len(shots) >= 2 and not unchecked:
         for k, s in enumerate(shots):
             if k in named:  # the final fit was made without it
                 consistent = set(named_tests[k].consistent.tolist())
