@@ -903,6 +903,7 @@ def propose_shots(
     images: dict[int, np.ndarray] | None = None,
     click_sigma_px: float | None = None,
     state=None,
+    shot_options: dict[int, dict] | None = None,
 ) -> tuple[list[ShotProposal], Any]:
     """The ``n`` best next pairs over all shots, best first, ranked by one D-optimal gain.
 
@@ -921,6 +922,10 @@ def propose_shots(
         Click noise of a guided pair (default :data:`calib_core.guide.GUIDED_CLICK_SIGMA_PX`).
     state : PoseState, optional
         The joint pose and covariance, if already known (:func:`joint_pose_state`).
+    shot_options : dict shot -> dict, optional
+        More keyword arguments of :func:`calib_core.guide.propose` for that shot's search (e.g. the app's
+        cached ``candidates`` and ``corner_image``, its ``screen``); a ``corner_image`` given here is used
+        instead of one computed from ``images``.
 
     Returns
     -------
@@ -952,9 +957,11 @@ def propose_shots(
         used = [tuple(p.laser_rc) for p in s.pairs if p.laser_rc is not None]
         rough = [(i, tuple(p.laser_rc), DEFAULT_CLICK_SIGMA_PX if p.precision_px is None else p.precision_px)
                  for i, p in enumerate(s.pairs) if p.laser_rc is not None and not p.check]
-        corners = corner_image(images[k]) if k in images else None
+        extra = dict((shot_options or {}).get(k, {}))
+        corners = extra.pop("corner_image") if "corner_image" in extra else (
+            corner_image(images[k]) if k in images else None)
         props = propose(s.depth, camera, state, n, exclude_rc=used, click_sigma_px=sigma, corner_image=corners,
-                        reclick=rough)
+                        reclick=rough, **extra)
         if not props:
             continue
         rc = np.array([p.laser_rc for p in props], dtype=np.int64)
