@@ -20,7 +20,7 @@ from calib_core.transforms import transform_points
 
 from .ba_view import ColumnWindow, covering_window
 from .live_solver import LiveSolver
-from .shot_solve import checked_bundle, joint_bundle
+from .shot_solve import checked_bundle, joint_bundle, pairs_in_3d
 from .state import AnnotationState
 from .ui_common import MIN_PAIRS, SolveBundle, CloudUpdate
 
@@ -128,6 +128,9 @@ class LiveSolveCoordinator:
                     app.cloud.show_camera(None)
                     if len(picks) >= 2:  # 2-3 pairs fix the rotation: line the render and loupes up (issue 20)
                         app.post(lambda pairs=[p.to_pair() for p in picks]: app.align.fit_to_pairs(pairs))
+        if (solve_job is None and not self.solving and self._cloud_worker is not None
+                and not self._stopped):  # the 3-D pane's pair marks (a solve's cloud job draws them too)
+            self._cloud_worker.submit(0, self._bundle)
         # Not while this thread holds the UI lock: the solver could not redraw before the wait ends.
         if solve_job is not None and not app.ui_lock.held_here() and self._wait_shown(solve_job, SHOW_WAIT_S):
             return
@@ -270,9 +273,14 @@ class LiveSolveCoordinator:
             if facing is not None:
                 self._facing = facing
 
-    def _cloud_job(self, bundle: SolveBundle) -> CloudUpdate:
+    def _cloud_job(self, bundle: SolveBundle | None) -> CloudUpdate | None:
         # Decided when the job runs: a tab may have left or entered the 3-D view meanwhile.
         app = self.app
+        pairs = pairs_in_3d(app)
+        with app.ui_lock:
+            app.cloud.show_pairs(*pairs)
+        if bundle is None:  # only the pair marks (no solve shown)
+            return None
         t0 = time.perf_counter()
         T = bundle.result.T_camera_lidar
         colors = self._cloud_colors(T) if app.view.any_tab_in_3d() and app.cloud.shows is not bundle else None
@@ -286,6 +294,8 @@ class LiveSolveCoordinator:
             traceback.print_exception(error)
             return
         app = self.app
+        if update is None:
+            return
         with app.ui_lock:
             if self._stopped or update.bundle is not self._bundle:
                 return  # superseded: the newer solve queued its own

@@ -183,3 +183,24 @@ def shots_markdown(joint: JointSolve, active: int) -> str:
         rows.append(f"| {rep.index}{shown} | {rep.n_pairs} | {err} | {loso_px} | {loso_deg} | {offset} | {flag} |")
     notes = [f"Shot {e.shot}, leave-one-shot-out: {md_escape(e.note)}" for e in solved.leave_one_shot_out if e.note]
     return "  \n".join(lines) + "\n\n" + "\n".join(rows) + ("\n\n" + "  \n".join(notes) if notes else "")
+
+
+def pairs_in_3d(app: Any) -> tuple[np.ndarray, list[str], np.ndarray]:
+    """What the 3-D pane marks: every shot's pairs' laser points (lidar frame, metres; NaN where the cell has
+    no return), their labels (the pair number; ``S<shot>·<id>`` with several shots) and shots.
+
+    All shots share the rig's lidar frame, so every shot's pairs are drawn together: the spread the joint solve
+    sees (the cloud shown is the shown shot's scan)."""
+    picks = [p for p in app.state.all_picks if p.laser_rc is not None or p.laser_xyz is not None]
+    several = len(app.shot_scenes) > 1
+    points = np.full((len(picks), 3), np.nan)
+    for i, p in enumerate(picks):  # a few tens of pairs: one lookup each
+        if p.laser_xyz is not None:
+            points[i] = p.laser_xyz
+        elif p.shot < len(app.shot_scenes):
+            depth = app.shot_scenes[p.shot].depth
+            r, c = p.laser_rc
+            if 0 <= r < depth.shape[0] and 0 <= c < depth.shape[1] and depth.valid[r, c]:
+                points[i] = depth.points[r, c]
+    labels = [f"S{p.shot}\u00b7{p.id}" if several else str(p.id) for p in picks]
+    return points, labels, np.array([p.shot for p in picks], np.int64)

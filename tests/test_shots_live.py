@@ -88,3 +88,59 @@ def test_the_app_shows_the_joint_fit_then_the_checked_one(tmp_path, two_shots):
         assert app.live.last_checks_shown() >= app.live.last_click_to_update() > 0
     finally:
         server.stop()
+
+
+def test_the_3d_pane_labels_every_pair_with_its_shot(tmp_path, two_shots):
+    """Every shot's pairs are marked in the 3-D pane at their laser point (the cell's point in that shot's
+    scan, lidar frame), labelled ``S<shot>·<id>``; a pair of fewer than 4 (no solve yet) too."""
+    from app.serving import ShotServer
+    from calib_core.io.scan_readers import load_scan
+
+    s0, s1, scan1, image1 = two_shots
+    server = ShotServer([(SAMPLE / "scan.npz", SAMPLE / "image.png"), (scan1, image1)], SAMPLE / "camera.yaml",
+                        session_path=tmp_path / "session.yaml", port=0)
+    rng = np.random.default_rng(8)
+    scans = [load_scan(SAMPLE / "scan.npz"), load_scan(scan1)]
+    try:
+        server.state.import_pairs(simulate_pairs(s0, 2, rng))
+        app = server.load(1)
+        assert app.wait_idle(120)
+        assert app.live.bundle is None  # 2 pairs: no solve, but marked
+        want = {f"S0\u00b7{p.id}": scans[0].points[p.laser_rc] for p in app.state.all_picks}
+        assert set(app.cloud.pair_labels) == set(want)
+        app.state.import_pairs(simulate_pairs(s1, 3, rng))
+        assert app.wait_idle(120) and app.live.bundle is not None
+        want = {f"S{p.shot}\u00b7{p.id}": scans[p.shot].points[p.laser_rc] for p in app.state.all_picks}
+        labels = app.cloud.pair_labels
+        assert set(labels) == set(want) and len(want) == 5
+        for text, xyz in want.items():
+            np.testing.assert_allclose(labels[text], xyz, atol=1e-6)
+        app.state.undo()  # shot 1's three pairs go: so do their marks
+        assert app.wait_idle(120) and set(app.cloud.pair_labels) == {t for t in want if t.startswith("S0")}
+    finally:
+        server.stop()
+
+
+def test_the_rough_pose_is_kept_when_switching_shots_before_any_solve(tmp_path, two_shots):
+    from app.serving import ShotServer
+
+    s0, _, scan1, image1 = two_shots
+    server = ShotServer([(SAMPLE / "scan.npz", SAMPLE / "image.png"), (scan1, image1)], SAMPLE / "camera.yaml",
+                        session_path=tmp_path / "session.yaml", port=0)
+    try:
+        app = server.load(0)
+        server.state.import_pairs(simulate_pairs(s0, 1, np.random.default_rng(2)))  # one pair: no solve
+        rough = s0.T_camera_lidar.copy()
+        rough[:3, 3] += 0.05
+        app.align.adopt(rough)  # as Align's buttons do
+        assert app.wait_idle(60)
+        app = server.load(1)
+        assert app.wait_idle(60) and app.live.bundle is None
+        T, source = app.loupe_support.view_pose()
+        assert source == "rough"
+        np.testing.assert_array_equal(T, rough)
+        app = server.load(0)
+        assert app.wait_idle(60)
+        np.testing.assert_array_equal(app.loupe_support.view_pose()[0], rough)
+    finally:
+        server.stop()
