@@ -76,8 +76,8 @@ __all__ = [
 #: Chance, per calibration, that a shot which agrees with the others is named (family-wise).
 DEFAULT_ALPHA = 0.01
 #: The quality reason of a joint fit whose shots were not yet checked against each other (``checks=False``).
-UNCHECKED_REASON = ("the shots have not been checked against each other yet (leave-one-shot-out and the "
-                    "disagreeing-shot test follow)")
+UNCHECKED_REASON = ("checking shots…: the shots have not been checked against each other yet "
+                    "(leave-one-shot-out and the disagreeing-shot test follow)")
 #: Hypotheses of a shot's common offset tried at most (pairs of its pairs, drawn with a fixed seed beyond).
 MAX_OFFSET_HYPOTHESES = 300
 
