@@ -429,6 +429,7 @@ class GuidePanel(GuideShotsMixin):
         self._start_current()
 
     def _on_auto(self, on: bool) -> None:
+        self._refuse_auto_across_shots(on)
         self._auto = on
         self._on_state_change(self.state)  # recompute with (or without) the gate
 

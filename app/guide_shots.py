@@ -13,6 +13,8 @@ from __future__ import annotations
 
 from typing import Any, Callable
 
+from calib_core.errors import CalibError
+
 from .guide_support import ShotGuide
 
 
@@ -104,6 +106,12 @@ class GuideShotsMixin:
             self.show_shot(self.shot_of(p))
         self._refresh()
         return True
+
+    def _refuse_auto_across_shots(self, on: bool) -> None:
+        """Auto-accept gates a proposal on the shown photo's corners; across shots it is not offered (yet)."""
+        if on and self._shots is not None:
+            self._cb_auto.value = False
+            raise CalibError("auto-accept is not offered in a session of several shots: use Next pair")
 
     def resume(self) -> None:
         """Go on with a guided session started on another shot's page: frame this shot's best proposal."""

@@ -97,3 +97,19 @@ def test_guided_picking_ranks_across_shots_and_switches_shot_by_itself(tmp_path,
               f"{rotation_angle_deg(T[:3, :3], truth[:3, :3]):.3f} deg from the truth")
     finally:
         server.stop()
+
+
+def test_auto_accept_is_refused_across_shots_with_one_line(tmp_path, two_shots):
+    from app.serving import ShotServer
+
+    _, _, scan1, image1 = two_shots
+    server = ShotServer([(SAMPLE / "scan.npz", SAMPLE / "image.png"), (scan1, image1)], SAMPLE / "camera.yaml",
+                        session_path=tmp_path / "session.yaml", port=0)
+    try:
+        app = server.load(0)
+        d = AppDriver(app)
+        notes = d.set_auto_accept(True)
+        assert len(notes) == 1 and "several shots" in " ".join(notes[0]), notes
+        assert app.guide._auto is False
+    finally:
+        server.stop()
