@@ -14,7 +14,7 @@ import numpy as np
 
 from calib_core.errors import CalibError
 from calib_core.overlays import colorize_points, columns_seen_by_camera
-from calib_core.pairs import Pair, resolve_pairs
+from calib_core.pairs import resolve_pairs
 from calib_core.solve import calibrate
 from calib_core.transforms import transform_points
 
