@@ -117,8 +117,12 @@ def ba_grid_columns(ba_aspect: float, n_images: int = 4, view_aspect: float = VI
     the whole block (images, gaps, titles) is fitted into a view of width /
     height ``view_aspect``.  Ties keep the earlier candidate (2 x 2).  With
     ``above_height`` (world units of images above the block: the camera view
-    and the camera-view render), the whole column is fitted, and the score is
-    the BA images' width times the camera image's (both as shown).
+    and the camera-view render), the whole page is fitted (that column and the
+    loupe column right of it, :func:`loupe_areas`), and the score is the BA
+    images' width times the square of the camera image's (all as shown): the
+    photo and the render are where a person picks pairs, so a small window
+    gives them the room first (by-eye runs: a 1920-wide photo was shown 390 px
+    wide at 1400 x 900 with the BA panes 2 x 2 below it).
     """
     best, best_score = BA_GRID_COLUMNS[0], -1.0
     for n_cols in BA_GRID_COLUMNS:
@@ -126,8 +130,12 @@ def ba_grid_columns(ba_aspect: float, n_images: int = 4, view_aspect: float = VI
         n_rows = -(-n_images // n_cols)
         slot_w = (CAMERA_WIDTH - (n_cols - 1) * GAP) / n_cols
         block_h = n_rows * (slot_w / ba_aspect + GAP + LABEL_HEIGHT)
-        fit = max(CAMERA_WIDTH / view_aspect, above_height + block_h)
-        score = slot_w / fit * (CAMERA_WIDTH / fit if above_height > 0 else 1.0)
+        if above_height > 0:
+            height = above_height + block_h
+            fit = max((CAMERA_WIDTH + 3 * GAP + loupe_side(height)) / view_aspect, height)
+            score = slot_w / fit * (CAMERA_WIDTH / fit) ** 2
+        else:
+            score = slot_w / max(CAMERA_WIDTH / view_aspect, block_h)
         if score > best_score * (1 + 1e-9):
             best, best_score = n_cols, score
     return best
@@ -228,10 +236,15 @@ def loupe_areas(main_bounds: tuple[float, float, float, float]) -> dict[str, Lou
     """
     x0, y0, x1, y1 = main_bounds
     top = y0 - LABEL_HEIGHT  # the camera title sits above the camera image
-    side = min(max((y1 - top - GAP - LABEL_HEIGHT) / 2.0, 2.5), 6.0)
+    side = loupe_side(y1 - top)
     left = x1 + 3 * GAP
     return {"camera": LoupeArea(left, y0, side, side),
             "ba": LoupeArea(left, y0 + side + GAP + LABEL_HEIGHT, side, side)}
+
+
+def loupe_side(height: float) -> float:
+    """The side of each of the two square loupes beside a main block ``height`` world units tall (titles included)."""
+    return min(max((height - GAP - LABEL_HEIGHT) / 2.0, 2.5), 6.0)
 
 
 def bounds_of(slots: list[ImageSlot]) -> tuple[float, float, float, float]:

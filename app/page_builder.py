@@ -11,6 +11,28 @@ import numpy as np
 
 from .ui_common import md_escape
 
+#: Notifications at the bottom right, over the lower end of the control panel: never over the images and loupes,
+#: which the app frames left of the panel.  (viser puts them at the top left, over the photo; in the by-eye runs a
+#: click meant for a toast's close button moved a pending point.)  A fixed string: no user text.
+PAGE_CSS = ("<style>.mantine-Notifications-root{top:auto!important;bottom:1em!important;left:auto!important;"
+            "right:1em!important}</style>")
+#: Escape presses the "Cancel pair" button (viser sends no key events to Python).  Not while typing in a box or
+#: with a dialog open.  A fixed string, run once per tab.
+ESCAPE_JS = """
+if (!window.__baCalibEscape) {
+  window.__baCalibEscape = true;
+  document.addEventListener("keydown", (event) => {
+    if (event.key !== "Escape" || event.repeat) return;
+    const t = event.target;
+    if (t && (t.tagName === "INPUT" || t.tagName === "TEXTAREA" || t.isContentEditable)) return;
+    if (document.querySelector(".mantine-Modal-content")) return;
+    const button = Array.from(document.querySelectorAll("button")).find(
+      (b) => b.textContent.trim() === "Cancel pair");
+    if (button) button.click();
+  });
+}
+"""
+
 INTRO = (
     "Click a point in any **BA image** or in the **camera-view laser** render (the scan seen from the camera, "
     "below the photo) and the same point in the **camera image** (either order) "
@@ -39,7 +61,9 @@ class PageBuilder:
         self.folder_lock = threading.Lock()
         gui, scene = app.server.gui, app.server.scene
         gui.configure_theme(control_width="large", show_share_button=False, dark_mode=False)
-        gui.add_markdown(f"**{md_escape(app.title)}**  \n" + INTRO)
+        self.intro = gui.add_markdown(f"**{md_escape(app.title)}**  \n" + INTRO)  # the pair actions go above it
+        gui.add_html(PAGE_CSS, order=1e9)  # last in the panel: the style sheet shows nothing
+        install_page_script(app.server, ESCAPE_JS)
         backdrop = scene.add_image(
             "/annot/backdrop", np.full((2, 2, 3), 238, np.uint8), 600.0, 600.0, format="png", position=(0.0, 0.0, 0.5)
         )
@@ -110,3 +134,14 @@ class PageBuilder:
         self._camera_title.position = (x0, y0 - 0.03, -0.01)
         self._camera_title.text = title
 
+
+def install_page_script(server: Any, source: str) -> bool:
+    """Run the fixed script ``source`` in every tab of ``server``, present and future (viser replays it to new
+    tabs); False if this viser cannot (then the page works without it: e.g. Escape does nothing)."""
+    try:
+        from viser._messages import RunJavascriptMessage  # how viser itself sends plotly.js
+
+        server.gui._websock_interface.queue_message(RunJavascriptMessage(source=source))
+    except (ImportError, AttributeError, TypeError):
+        return False
+    return True

@@ -18,6 +18,12 @@ from .layout import RENDER_KEY
 from .security import upload_display_name
 from .ui_common import MIN_PAIRS, PICK_RADII, SNAP_RADIUS_PX, IMPORT_CHOICES, md_escape
 
+#: The buttons at the top of the control panel ("Next pair" is guided picking's own).
+PAIR_ACTIONS = ("Undo", "Cancel pair", "Next pair")
+#: After a refining click in one loupe the other keeps its view while the pair's other end lies at least this
+#: share of its side from its edges.
+STEADY_MARGIN = 0.15
+
 
 class PairsPanel:
     """The "Pairs" folder of one :class:`app.server.CalibrationApp` (``app.pairs_panel``) and the clicks on the images.
@@ -32,7 +38,16 @@ class PairsPanel:
         self.app = app
         self._last_click: dict[int, tuple] = {}  # client id -> ("ba", key, row, col) or ("camera", u, v)
         self._last_pick: dict[Any, tuple] = {}  # client id -> (kind, pick id, "full" | "loupe")
+        self._loupes_pick: int | None = None  # the pair the loupes were last framed on (refining it keeps them still)
         gui, guard = app.server.gui, app.guard
+        # The pair actions first in the panel, near the loupes: in the by-eye trials Undo and Next pair were many
+        # wheel scrolls apart.  Buttons above the status line, so that they never move as the text changes.
+        top = app.page.intro.order
+        self.pair_action_callback = self._on_pair_action_event
+        self._bg_actions = gui.add_button_group("Pair", PAIR_ACTIONS, order=top - 1.0)
+        self._bg_actions.on_click(self.pair_action_callback)
+        self._md_status = gui.add_markdown("", order=top - 0.5)
+        self._guarded_pair_action = guard(self.on_pair_action)
         self.folder = gui.add_folder("Pairs")
         with self.folder:
             self._md_pairs = gui.add_markdown("")
@@ -55,6 +70,11 @@ class PairsPanel:
     def text(self) -> str:
         """The panel's summary as shown (markdown)."""
         return str(self._md_pairs.content)
+
+    @property
+    def status(self) -> str:
+        """The status line under the pair actions at the top of the panel (markdown; empty when nothing waits)."""
+        return str(self._md_status.content)
 
     @property
     def dropdown_value(self) -> str:
@@ -103,8 +123,14 @@ class PairsPanel:
                 ids, uv = app.overlays.predicted_pixels({pending.id: pending})
                 if ids:
                     lines.append(f"Predicted camera pixel: ({uv[0, 0]:.1f}, {uv[0, 1]:.1f}) (cross in the image).")
+            status = []
+            if pending is not None:
+                status.append(f"Pair {pending.id} waits for a {need} click (**Cancel pair** or Esc drops it).")
             if selected is not None:
                 lines.append(f"**Pair {selected} selected:** clicks now move its ends (Deselect to add pairs).")
+                status.append(f"Pair {selected} selected: the next click moves it (**Cancel pair** deselects).")
+            if self._md_status.content != "  \n".join(status):
+                self._md_status.content = "  \n".join(status)
             if total < MIN_PAIRS:
                 lines.append(f"Pick {MIN_PAIRS - total} more to calibrate.")
             lines.append(f"Undo: {'yes' if state.can_undo else 'no'}, redo: {'yes' if state.can_redo else 'no'}")
@@ -140,7 +166,7 @@ class PairsPanel:
         """Scan cell ``(row, col)`` under display pixel ``uv`` of BA slot ``key`` (window applied)."""
         return self.app.ba_window.cell_at(uv, self.app.depth.shape[0])
 
-    def _target_of_click(self, key: str, uv: tuple[float, float]) -> tuple:
+    def _target_of_click(self, key: str, uv: tuple[float, float], client: Any = None) -> tuple:
         """``("ba", key, row, col)`` or ``("camera", u, v)`` (original pixel) under display pixel ``uv`` of ``key``."""
         if key.startswith("loupe_"):
             target = self.app.loupes.target_at(key[len("loupe_"):], uv)
@@ -152,7 +178,8 @@ class PairsPanel:
                 target = ("camera", *map(float, refine_click_to_corner(self.app.image_gray, target[1:], SNAP_RADIUS_PX)))
             return target
         if key == RENDER_KEY:  # the camera-view render: the laser cell drawn there, an ordinary laser end
-            return self.app.render_pane.target_at(uv)
+            # A click on a thin outline may land a screen pixel beside it: snap within a few screen pixels.
+            return self.app.render_pane.target_at(uv, screen_units=self.app.view.units_per_screen_px(client))
         if key in self.app.ba_keys:
             if self.app.state.view.snap:
                 shown = self.app.display.ba_display(key)[:, self.app.ba_window.columns]
@@ -171,7 +198,7 @@ class PairsPanel:
         kind (BA or camera) refines that click: it moves the end just made.
         Then the loupes frame the click and the other end (clicked or predicted).
         """
-        target = self._target_of_click(key, uv)
+        target = self._target_of_click(key, uv, client)
         # The loupes are re-framed right after the change: their marks are drawn once, for the new view.
         with self.app.overlays.loupe_marks_after():
             return self._apply_click(key, target, pick_id, client)
@@ -188,6 +215,9 @@ class PairsPanel:
             ids = {p.id: p for p in self.app.state.picks}
             if last[1] in ids and self.app.state.selected is None:
                 pick_id = last[1]  # refine the end the full-image click just made
+        # A click with a pair selected moves it; then the selection ends, so that the next click starts or
+        # continues a new pair instead of moving this one again (by-eye trial: a laser end jumped to an unrelated cell).
+        moves_selected = pick_id is None and self.app.state.selected is not None
         if kind == "ba":
             _, ba_key, row, col = target
             try:
@@ -204,12 +234,51 @@ class PairsPanel:
             _, u, v = target
             out = self.app.state.move_pixel(pick_id, u, v) if pick_id is not None else self.app.state.click_pixel(u, v)
             last_click = ("camera", u, v)
+        if moves_selected:
+            self.app.state.select(None)
         if client is not None:
             self._last_click[cid] = last_click
         self._last_pick[cid] = (kind, out, source)
+        if source == "loupe" and out == self._loupes_pick:
+            # A refining click inside a loupe: the loupes keep their crops (the next click may be planned from this
+            # look); the clicked loupe's title names the new cell or pixel.  The other loupe moves only if the
+            # pair's other end (or its prediction) would leave its middle.
+            self.app.loupes.show_click(kind, target[2:] if kind == "ba" else target[1:])
+            self._keep_other_end_shown(kind, out)
+            return out
+        self._loupes_pick = out
         self._frame_loupes(target, out, recentre=source == "full",
                            render_uv=self.app.render_pane.last_pixel if key == RENDER_KEY else None)
         return out
+
+    def _keep_other_end_shown(self, clicked: str, pick_id: int) -> None:
+        """After a refining click in loupe ``clicked``: frame the other loupe on pick ``pick_id``'s other end (or
+        its prediction) only if that is not inside the middle of what it shows (a margin of
+        :data:`STEADY_MARGIN` of its side)."""
+        loupes, support = self.app.loupes, self.app.loupe_support
+        pick = next((p for p in self.app.state.picks if p.id == pick_id), None)
+        if pick is None or (clicked == "camera" and loupes.shows_render):
+            return  # the laser loupe shows the camera loupe's crop of the render: both stay
+        if clicked == "ba":
+            uv = pick.pixel if pick.pixel is not None else (
+                None if pick.laser_rc is None else support.predict_pixel(*pick.laser_rc))
+            if uv is not None and not self._well_inside("camera", (uv[0], uv[1])):
+                loupes.frame_camera(*uv)
+            return
+        cell = pick.laser_rc if pick.laser_rc is not None else (
+            None if pick.pixel is None else support.predict_cell(*pick.pixel))
+        if cell is not None and not self._well_inside("ba", (cell[1], cell[0])):
+            loupes.frame_ba(loupes.ba_crop.key, *cell)
+
+    def _well_inside(self, kind: str, target: tuple[float, float]) -> bool:
+        """Does loupe ``kind`` show ``target`` (``(col, row)`` of a cell or an original pixel) away from its edges?"""
+        shown = self.app.loupes.display_of(kind, target)
+        if shown is None:
+            return False
+        slot = self.app.loupes.slot(kind)
+        mx, my = STEADY_MARGIN * slot.width_px, STEADY_MARGIN * slot.height_px
+        return (mx - 0.5 <= shown[0] <= slot.width_px - 0.5 - mx
+                and my - 0.5 <= shown[1] <= slot.height_px - 0.5 - my)
 
     def _frame_loupes(self, target: tuple, pick_id: int, recentre: bool,
                       render_uv: tuple[float, float] | None = None) -> None:
@@ -291,6 +360,36 @@ class PairsPanel:
             return
         value = str(event.value)
         self.app.state.select(None if value == "none" else int(value.split()[0].lstrip("#")))
+
+    async def _on_pair_action_event(self, event: Any) -> None:
+        """A press in the pair actions at the top: "Next pair" is guided picking's own button, the others queue
+        :meth:`on_pair_action` (both on the ordered action worker)."""
+        if str(getattr(event.target, "value", "")) == "Next pair":
+            await self.app.guide.callback("Next pair")(event)
+        else:
+            await self._guarded_pair_action(event)
+
+    def on_pair_action(self, event: Any) -> None:
+        """"Undo" or "Cancel pair" at the top of the panel."""
+        if event.value == "Undo":
+            if not self.app.state.undo():
+                raise CalibError("nothing to undo")
+        elif event.value == "Cancel pair":
+            self.cancel_pair()
+
+    def cancel_pair(self) -> None:
+        """Drop the half-made pair in one undoable step (else end the selection); CalibError if neither."""
+        state = self.app.state
+        pending = state.pending()
+        if pending is None:
+            if state.selected is None:
+                raise CalibError("no half-made pair to cancel and no pair selected")
+            state.select(None)
+            return
+        state.delete(pending.id)
+        loupes = getattr(self.app, "loupes", None)
+        if loupes is not None and loupes.camera_crop.cov_px2 is not None:  # a guided proposal's ellipse goes too
+            loupes.frame_camera(*loupes.camera_crop.center)
 
     def on_edit(self, event: Any) -> None:
         action = event.value

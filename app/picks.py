@@ -279,3 +279,21 @@ def next_number(picks: Sequence[Pick]) -> int:
     pair below the highest keeps the others' numbers (and colours) as they are.
     """
     return max((int(p.id) for p in picks), default=0) + 1
+
+
+def joins_newest_step(undo: Sequence[Snapshot], current: Snapshot, new: Snapshot) -> bool:
+    """Does the change ``current`` -> ``new`` join the newest undo step ``undo[-1]`` instead of making its own?
+
+    Yes for a re-click of a half-made pair's end (its laser cell or pixel clicked again, the pair still
+    incomplete) when the newest step made or changed only that half pair: one undo then drops the half pair,
+    not each re-click in turn.
+    """
+    changed = set(current.picks) ^ set(new.picks)
+    ids = {p.id for p in changed}
+    if (not undo or len(ids) != 1 or any(p.complete for p in changed) or len(current.picks) != len(new.picks)
+            or not current.shots == new.shots == undo[-1].shots):
+        return False
+    (pick_id,) = ids
+    before = undo[-1].picks
+    return not any(p.complete for p in before if p.id == pick_id) and (
+        [p for p in before if p.id != pick_id] == [p for p in current.picks if p.id != pick_id])

@@ -39,8 +39,12 @@ OVERLAY_NODE = "/annot/render_over"
 NO_RETURN_RGB = (30, 30, 34)
 #: Outside the render in a loupe crop.
 PAD_RGB = (60, 60, 60)
-#: A click on a pixel without a return takes the nearest rendered pixel this close (render pixels).
+#: A click on a pixel without a return takes the nearest rendered pixel this close (render pixels) ...
 NEAREST_PX = 4
+#: ... or this close in screen pixels when the pane is shown small (a click aimed at a thin outline lands a pixel
+#: or two beside it), at most :data:`NEAREST_MAX_PX` render pixels.
+SNAP_SCREEN_PX = 2.0
+NEAREST_MAX_PX = 24
 TEXTURE_TEXELS = 320  # as app.loupes: texels along a loupe texture's side
 #: A new solve is rendered at most this often (seconds): a burst of clicks solves many times, each render costs a
 #: core for 0.1-0.3 s.  Drags and the Align buttons render at once.
@@ -306,16 +310,16 @@ class RenderPane:
         self._worker.stop()
 
     # ------------------------------------------------------------------ clicks
-    def cell_at_pixel(self, u: float, v: float) -> tuple[int, int] | None:
+    def cell_at_pixel(self, u: float, v: float, radius_px: float = NEAREST_PX) -> tuple[int, int] | None:
         """Scan cell ``(row, col)`` the render draws at original-size pixel ``(u, v)``, or at the nearest rendered
-        pixel within :data:`NEAREST_PX`; None if none."""
+        pixel within ``radius_px`` render pixels; None if none."""
         shown = self.current
         if shown is None:
             return None
         cells = shown.render.cell_rc
         h, w = cells.shape[:2]
         iu, iv = int(math.floor(u + 0.5)), int(math.floor(v + 0.5))
-        r = NEAREST_PX
+        r = int(math.ceil(radius_px))
         u0, u1, v0, v1 = max(iu - r, 0), min(iu + r + 1, w), max(iv - r, 0), min(iv + r + 1, h)
         if u0 >= u1 or v0 >= v1:
             return None
@@ -323,23 +327,31 @@ class RenderPane:
         vv, uu = np.mgrid[v0:v1, u0:u1]
         d2 = np.where(window[..., 0] >= 0, (uu - u) ** 2 + (vv - v) ** 2, np.inf)
         k = int(np.argmin(d2))
-        if not np.isfinite(d2.flat[k]) or d2.flat[k] > r * r:
+        if not np.isfinite(d2.flat[k]) or d2.flat[k] > radius_px * radius_px:
             return None
         row, col = window.reshape(-1, 2)[k]
         return int(row), int(col)
 
-    def target_at(self, uv: tuple[float, float], display: bool = True) -> tuple:
+    def target_at(self, uv: tuple[float, float], display: bool = True, screen_units: float | None = None) -> tuple:
         """``("ba", key, row, col)``: the laser cell under pixel ``uv`` of the pane (``display``: in the camera
         view's framing; else an original camera pixel).  ``key``: the BA image the laser loupe falls back to.
-        CalibError when the render shows no return there."""
+
+        Where the render shows no return, the nearest rendered pixel counts if it lies within :data:`NEAREST_PX`
+        render pixels or, with ``screen_units`` (world units per screen pixel in the clicking tab), within
+        :data:`SNAP_SCREEN_PX` screen pixels (at most :data:`NEAREST_MAX_PX` render pixels).  CalibError when
+        there is none."""
         if self.current is None:
             raise CalibError("the camera-view render is not ready yet; try again in a moment")
+        radius = float(NEAREST_PX)
+        if display and screen_units is not None:
+            per_px = self.app.view.slot_of(RENDER_KEY).units_per_px  # world units per pane pixel
+            radius = float(min(max(radius, SNAP_SCREEN_PX * screen_units / per_px), NEAREST_MAX_PX))
         if display:
             raw, ok = self.app.view.camera_view.pixels_from_display(np.array([uv], np.float64))
             if not ok[0]:
                 raise CalibError("the camera does not see that part of the panorama; click inside the picture")
             uv = (float(raw[0, 0]), float(raw[0, 1]))
-        cell = self.cell_at_pixel(float(uv[0]), float(uv[1]))
+        cell = self.cell_at_pixel(float(uv[0]), float(uv[1]), radius)
         if cell is None:
             raise CalibError("no laser return here: click where the camera-view render shows the scan")
         self.last_pixel = (float(uv[0]), float(uv[1]))

@@ -33,7 +33,8 @@ import numpy as np
 from calib_core.errors import CalibError
 from calib_core.pairs import PAIR_SOURCES, Pair, load_pairs_yaml, save_pairs_yaml
 
-from .picks import Pick, ShotFiles, Snapshot, checked_picks, new_ends, next_number, session_data
+from .picks import (Pick, ShotFiles, Snapshot, checked_picks, joins_newest_step, new_ends, next_number,
+                    session_data)
 from .session_store import SessionStore, compact_at_exit, forget_at_exit
 from .state_shots import StateShots
 from .view_settings import ViewSettings
@@ -450,7 +451,7 @@ class AnnotationState(StateShots):
         if snap == self._snap:
             return
         before = self._checkpoint_locked()
-        self._undo.append(self._snap)
+        self._undo += [] if joins_newest_step(self._undo, self._snap, snap) else [self._snap]
         del self._undo[:-MAX_HISTORY]
         self._redo = []
         self._snap = snap

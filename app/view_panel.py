@@ -125,7 +125,8 @@ class ViewPanel:
         """The title of BA image ``key`` (with the shown columns when they are not all)."""
         w = self._ba_window
         title = self.app.display.ba_title(key)
-        if w.is_full:
+        side_by_side = len({round(self.slots[k].center[1], 6) for k in self.app.ba_keys}) == 1
+        if w.is_full or side_by_side:  # four narrow panes in a row: a longer title would run into the next one
             return title
         last = (w.start + w.width - 1) % w.n_cols
         return f"{title} (columns {w.start}-{last} of {w.n_cols})"
@@ -309,6 +310,16 @@ class ViewPanel:
         cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
         look = np.array([cx + (w_px - usable_px) / 2 * units_per_px, cy, 0.0])
         self._apply_camera(client, look + np.array([0.0, 0.0, -dist]), look, np.array([0.0, -1.0, 0.0]), fov)
+
+    def units_per_screen_px(self, client: Any) -> float | None:
+        """World units per canvas pixel on the annotation plane in tab ``client`` (None: no camera reported yet)."""
+        try:
+            cam = client.camera
+            dist = abs(float(cam.look_at[2]) - float(cam.position[2]))
+            units = 2.0 * dist * math.tan(float(cam.fov) / 2.0) / max(int(cam.image_height), 1)
+        except (AssertionError, AttributeError, TypeError, ValueError):
+            return None
+        return units if math.isfinite(units) and units > 0.0 else None
 
     def _zoom(self, client: Any, factor: float = 1.0, centre: np.ndarray | None = None,
               units_per_screen_px: float | None = None, min_units: float = 0.0) -> None:

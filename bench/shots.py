@@ -186,21 +186,18 @@ def detector(scenes, trials: int, clean_trials: int, rng, n_shots: int = 3, per:
     return out
 
 
-def pjlab_two_scenes(draws: int = 40) -> dict | None:
-    """The PJLab two-scene data (one rig): 3 pairs per scene by tools/make_real_pairs.py's rule, pixel = the
-    published calibration's projection + N(0, 1 px) from ``default_rng(1000 + 2 draw + scene)``; the joint solve
-    against the published T, and whether one scene alone solves.  None when the data is absent."""
+TWO_SCENES = REPO.parent / "shared" / "data" / "pjlab_opencalib_two_scenes"
+
+
+def load_two_scenes():
+    """The PJLab two-scene data: ``[(depth, camera, T_published), ...]`` for scene1 and scene2 (each read from its
+    ``calib.txt``) and tools/make_real_pairs.py's pair rule (its module); None when the data is absent."""
     import importlib.util
 
     from calib_core.cameras.pinhole import PinholeCamera
-    from calib_core.errors import CalibError
     from calib_core.io.scan_readers import load_scan
-    from calib_core.pairs import Pair
-    from calib_core.solve import calibrate
-    from calib_core.transforms import rotation_angle_deg
 
-    data = REPO.parent / "shared" / "data" / "pjlab_opencalib_two_scenes"
-    if not (data / "scene1" / "calib.pcd").is_file():
+    if not (TWO_SCENES / "scene1" / "calib.pcd").is_file():
         return None
     spec = importlib.util.spec_from_file_location("make_real_pairs", REPO / "tools" / "make_real_pairs.py")
     rule = importlib.util.module_from_spec(spec)
@@ -208,20 +205,44 @@ def pjlab_two_scenes(draws: int = 40) -> dict | None:
     scenes = []
     for name in ("scene1", "scene2"):
         values = {}
-        for line in (data / name / "calib.txt").read_text().splitlines():
+        for line in (TWO_SCENES / name / "calib.txt").read_text().splitlines():
             key, _, rest = line.partition(":")
             values[key.strip()] = np.array(rest.split(), dtype=float)
         T = np.eye(4)
         T[:3] = values["T"].reshape(3, 4)
         cam = PinholeCamera(values["K"].reshape(3, 3), values["D"], 1920, 1200)
-        scenes.append((load_scan(data / name / "calib.pcd"), cam, T))
+        scenes.append((load_scan(TWO_SCENES / name / "calib.pcd"), cam, T))
+    return scenes, rule
+
+
+def rough_pairs(scenes, rule, draw: int, n: int = 3) -> list[list]:
+    """Each scene's ``n`` rough pairs of noise draw ``draw``: the first ``n`` of the rule's farthest-point order,
+    pixel = the published calibration's projection + N(0, 1 px) from ``default_rng(1000 + 2 draw + scene)``."""
+    from calib_core.pairs import Pair
+
+    out = []
+    for k, (depth, cam, T) in enumerate(scenes):
+        entries = rule.select_pairs(depth, cam, T, 1000 + 2 * draw + k)[:n]
+        out.append([Pair(tuple(e["laser_rc"]), None, tuple(e["pixel"])) for e in entries])
+    return out
+
+
+def pjlab_two_scenes(draws: int = 40) -> dict | None:
+    """The PJLab two-scene data (one rig): 3 pairs per scene (:func:`rough_pairs`); the joint solve against the
+    published T, and whether one scene alone solves.  None when the data is absent."""
+    from calib_core.errors import CalibError
+    from calib_core.solve import calibrate
+    from calib_core.transforms import rotation_angle_deg
+
+    loaded = load_two_scenes()
+    if loaded is None:
+        return None
+    scenes, rule = loaded
     T_pub = scenes[0][2]
     rot, trans, alone_errors = [], [], set()
     for draw in range(draws):
         shots = []
-        for k, (depth, cam, T) in enumerate(scenes):
-            entries = rule.select_pairs(depth, cam, T, 1000 + 2 * draw + k)[:3]
-            pairs = [Pair(tuple(e["laser_rc"]), None, tuple(e["pixel"])) for e in entries]
+        for (depth, cam, _), pairs in zip(scenes, rough_pairs(scenes, rule, draw)):
             try:
                 calibrate(pairs, depth, cam)
             except CalibError as exc:
@@ -308,12 +329,13 @@ def report(acc, loso, det, command: str, seconds: float, pjlab: dict | None = No
     return "\n".join(lines)
 
 
-def write_section(text: str, doc: Path = DOC) -> None:
-    """Replace this benchmark's section of ``docs/performance.md`` (or append it); the rest stays."""
+def write_section(text: str, doc: Path = DOC, section: str = SECTION) -> None:
+    """Replace a benchmark's section (the ``## `` heading ``section``, this one's by default) of
+    ``docs/performance.md``, or append it; the rest stays."""
     old = doc.read_text()
-    if SECTION in old:
-        start = old.index(SECTION)
-        nxt = old.find("\n## ", start + len(SECTION))
+    if section in old:
+        start = old.index(section)
+        nxt = old.find("\n## ", start + len(section))
         new = old[:start] + text.rstrip() + "\n" + ("" if nxt < 0 else old[nxt:])
     else:
         new = old.rstrip() + "\n\n" + text.rstrip() + "\n"

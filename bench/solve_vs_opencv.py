@@ -13,8 +13,9 @@ Sections
    * ``solve_extrinsics`` -- the whole public solve: input checks, whitening
      (one ``camera.project``), DLT start, compiled LM, outlier check,
      covariance, quality verdict, pixel residuals (one more ``camera.project``);
-   * ``pose_core`` -- the compiled solve alone (frames, DLT, LM, covariance),
-     given the whitening: the same work as OpenCV's pair below;
+   * the same with a laser-point covariance per pair (``laser_cov_m2``, 1 cm
+     per axis): what the app and ``calibrate()`` pass for whole-cell picks (a
+     second whitening at the first optimum and a second LM);
    * OpenCV ``solvePnP(SOLVEPNP_SQPNP)`` + ``solvePnPRefineLM`` (pinhole only:
      OpenCV has no OCam model).
 
@@ -134,8 +135,7 @@ def _clock(fn, reps: int) -> tuple[float, float]:
 
 
 def speed(quick: bool) -> list[dict]:
-    from calib_core.solve import kernels, solve_extrinsics
-    from calib_core.solve.whiten import whitening
+    from calib_core.solve import solve_extrinsics
     from calib_core.synthetic import load_sample
 
     rows = []
@@ -148,14 +148,14 @@ def speed(quick: bool) -> list[dict]:
             trials = (4 if quick else 40) if n < 1000 else (3 if quick else 16)
             reps = 7 if n < 1000 else 5
             rng = np.random.default_rng([BENCH_SEED, 12, n])
-            t: dict = {k: [] for k in ("full", "norobust", "core", "opencv", "robust")}
+            t: dict = {k: [] for k in ("full", "norobust", "laser", "opencv", "robust")}
+            laser_cov = np.broadcast_to(1e-4 * np.eye(3), (n, 3, 3))
             for _ in range(trials):
                 pl, brg, px = random_pairs(cam, n, rng, T)
-                F = kernels.bearing_frames(brg)
-                W, _ = whitening(n, camera=cam, frames=F)
                 t["full"].append(_clock(lambda: solve_extrinsics(pl, brg, camera=cam, pixels=px), reps))
                 t["norobust"].append(_clock(lambda: solve_extrinsics(pl, brg, camera=cam, pixels=px, robust=False), reps))
-                t["core"].append(_clock(lambda: kernels.pose_core(pl, brg, W, 200), reps))
+                t["laser"].append(_clock(lambda: solve_extrinsics(pl, brg, camera=cam, pixels=px,
+                                                                  laser_cov_m2=laser_cov), reps))
                 if cam_name == "pinhole":
                     t["opencv"].append(_clock(lambda: _opencv(cam, pl, px), reps))
                 # 10 % gross outliers (at least one): stray clicks 30-80 px off.
@@ -173,9 +173,9 @@ def speed(quick: bool) -> list[dict]:
                 row[k], row[k + "_wall"] = float(np.median(arr[:, 1])), float(np.median(arr[:, 0]))
             rows.append(row)
             log(f"  speed {cam_name} n={n} (CPU time): full {1e3 * row['full']:.3f} ms, robust=False "
-                f"{1e3 * row['norobust']:.3f} ms, core {1e3 * row['core']:.3f} ms, "
+                f"{1e3 * row['norobust']:.3f} ms, laser term {1e3 * row['laser']:.3f} ms, "
                 f"opencv {1e3 * row['opencv']:.3f} ms, robust (10 % outliers) {1e3 * row['robust']:.3f} ms; wall: "
-                f"full {1e3 * row['full_wall']:.3f}, core {1e3 * row['core_wall']:.3f}, "
+                f"full {1e3 * row['full_wall']:.3f}, laser term {1e3 * row['laser_wall']:.3f}, "
                 f"opencv {1e3 * row['opencv_wall']:.3f}")
     return rows
 
@@ -419,19 +419,20 @@ def markdown(jit, sp, pin_rows, omni_rows, cov, load, quick, cmd, laser=None, po
     L.append("*whole*: the public `solve_extrinsics(points, bearings, camera=, pixels=)` with its defaults: input "
              "checks, whitening, DLT start, LM, the outlier test (the robust LO-MSAC search runs only when a residual "
              "exceeds the threshold: never on these clean pairs), covariance, quality verdict, pixel residuals. "
-             "*robust=False*: the same without the outlier test. *10 % outliers*: the whole solve on pairs with 10 % "
+             "*robust=False*: the same without the outlier test. *with `laser_cov_m2`*: the same with a laser-point "
+             "covariance per pair (1 cm per axis), as the app and `calibrate()` pass for whole-cell picks. *10 % outliers*: the whole solve on pairs with 10 % "
              "stray clicks (30-80 px off), where the robust search runs and finds them.\n")
-    L.append("| camera | n | trials | `solve_extrinsics` (whole) | robust=False | `pose_core` (compiled solve) | "
-             "OpenCV SQPnP + RefineLM | whole / OpenCV | core / OpenCV | whole, 10 % outliers (robust search) |")
+    L.append("| camera | n | trials | `solve_extrinsics` (whole) | robust=False | with `laser_cov_m2` (as the app) | "
+             "OpenCV SQPnP + RefineLM | whole / OpenCV | with laser / OpenCV | whole, 10 % outliers (robust search) |")
     L.append("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for r in sp:
         def ms(k):
             return f"{1e3 * r[k]:.3f} ms ({1e3 * r[k + '_wall']:.3f})" if np.isfinite(r[k]) else "n/a (no OCam model)"
         ratio_full = r["full"] / r["opencv"] if np.isfinite(r["opencv"]) else float("nan")
-        ratio_core = r["core"] / r["opencv"] if np.isfinite(r["opencv"]) else float("nan")
-        L.append(f"| {r['camera']} | {r['n']} | {r['trials']} | {ms('full')} | {ms('norobust')} | {ms('core')} | "
+        ratio_laser = r["laser"] / r["opencv"] if np.isfinite(r["opencv"]) else float("nan")
+        L.append(f"| {r['camera']} | {r['n']} | {r['trials']} | {ms('full')} | {ms('norobust')} | {ms('laser')} | "
                  f"{ms('opencv')} | "
-                 f"{ratio_full:.2f} | {ratio_core:.2f} | {ms('robust')} |")
+                 f"{ratio_full:.2f} | {ratio_laser:.2f} | {ms('robust')} |")
     L.append("\n## Accuracy on the pinhole variant: ours vs OpenCV, same pairs\n")
     L.append("Mean rotation error (deg) and translation error (cm) against the ground truth; ours = `calibrate` "
              "(whitened angular cost with the laser-pick term, robust). Pairs: `simulate_pairs` on the sample's pinhole "

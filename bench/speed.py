@@ -379,7 +379,7 @@ def solve_parts(bs: BenchScene, rep: SpeedReport, reps: Callable[[int], int], n:
     F = kernels.bearing_frames(brg)
     W, _ = whitening(n, camera=sc.camera, frames=F)
     R0, t0, _ = kernels.dlt_pose(pts, brg)
-    R, t, _, _ = kernels.lm_refine(R0, t0, pts, F, W, 200)
+    R, t, _, _, _ = kernels.lm_refine(R0, t0, pts, F, W, 200)
     inl = np.ones(n, dtype=bool)
     parts = [
         ("whole solve_extrinsics", lambda: S.solve_extrinsics(pts, brg, camera=sc.camera, pixels=px)),
@@ -389,7 +389,6 @@ def solve_parts(bs: BenchScene, rep: SpeedReport, reps: Callable[[int], int], n:
         ("lm_refine (whitened angular LM, compiled)", lambda: kernels.lm_refine(R0, t0, pts, F, W, 200)),
         ("finish + covariance (compiled)", lambda: kernels.covariance(kernels.finish(R, t, pts, F, W, inl)[2], 1.0)),
         ("pixel residuals (camera.project)", lambda: sc.camera.project(pts @ R.T + t)),
-        ("pose_core (frames + DLT + LM + covariance, one compiled call)", lambda: kernels.pose_core(pts, brg, W, 200)),
     ]
     sub = SpeedReport()
     for label, fn in parts:

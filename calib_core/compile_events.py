@@ -1,8 +1,8 @@
 """Hear when the package first compiles a numba kernel, without importing numba.
 
 A kernel found in numba's disk cache loads in milliseconds; a cache miss (the
-first run after an install or an update) compiles for seconds, the fused solve
-for about a minute.  A command-line tool registers a callback here before it
+first run after an install or an update) compiles for seconds; the whole solve
+for about 25 s of CPU.  A command-line tool registers a callback here before it
 starts, so it can say why it is quiet (:mod:`calib_core._jit` reports the
 first compile of the process).
 """

@@ -923,9 +923,9 @@ def propose_shots(
     state : PoseState, optional
         The joint pose and covariance, if already known (:func:`joint_pose_state`).
     shot_options : dict shot -> dict, optional
-        More keyword arguments of :func:`calib_core.guide.propose` for that shot's search (e.g. the app's
-        cached ``candidates`` and ``corner_image``, its ``screen``); a ``corner_image`` given here is used
-        instead of one computed from ``images``.
+        More keyword arguments of :func:`calib_core.guide.propose` for that shot, e.g. its scan's precomputed
+        ``candidates`` and ``plane_residual`` (a loop over many proposals computes them once per scan),
+        or its photo's ``corner_image`` (used instead of one computed from ``images``).
 
     Returns
     -------

@@ -2,8 +2,9 @@
 
 numba compiles a kernel on its first call, or loads it from the disk cache
 (:mod:`._jit`).  The app runs :func:`warm_up` in a background thread at
-start-up so that no click waits for a compile; ``.ci/run`` and the test
-session run it ahead of the tests.  The layering: :mod:`._jit` (the
+start-up so that no click waits for a compile (until it is done, small calls
+run interpreted: :class:`._jit.Kernel`); ``.ci/run`` and the test session
+run it ahead of the tests.  The layering: :mod:`._jit` (the
 decorator) below every module with kernels, this module above them all, so
 that no module with kernels imports another one back.
 """
@@ -53,9 +54,12 @@ def warm_up(modules: Iterable[str] = KERNEL_MODULES) -> dict[str, float]:
     unknown = [name for name in modules if name not in KERNEL_MODULES]
     if unknown:
         raise ValueError(f"no kernels to warm up in {', '.join(unknown)}; known: {', '.join(KERNEL_MODULES)}")
+    from ._jit import compiling
+
     seconds = {}
     for name in modules:
         t0 = time.perf_counter()
-        importlib.import_module(name).warm_up()
+        with compiling():  # this thread compiles; others run the kernels interpreted meanwhile
+            importlib.import_module(name).warm_up()
         seconds[name] = time.perf_counter() - t0
     return seconds

@@ -22,7 +22,8 @@ print("done")
 
 
 def _run(code: str, cache: Path) -> subprocess.CompletedProcess:
-    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache), PYTHONPATH=str(REPO))
+    # BA_CALIB_INTERPRET_S=0: compile at the first call (else a few small calls run interpreted, uncompiled).
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache), PYTHONPATH=str(REPO), BA_CALIB_INTERPRET_S="0")
     return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, env=env, cwd=REPO)
 
 

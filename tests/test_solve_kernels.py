@@ -29,17 +29,40 @@ def test_dlt_recovers_a_noise_free_pose_and_refuses_coplanar_points():
     assert not ok
 
 
-def test_pose_core_matches_the_public_solve():
-    rng = np.random.default_rng(4)
+def _geodesic_residuals(R, t, points, frames):
+    """Independent of the kernels: ``theta * y_12 / |y_12|`` with ``y = F_i (R p_i + t)`` (paper eq. 7)."""
+    y = np.einsum("nij,nj->ni", frames, points @ R.T + t)
+    rho = np.linalg.norm(y[:, :2], axis=1)
+    theta = np.arctan2(rho, y[:, 2])
+    return (theta / rho)[:, None] * y[:, :2]
+
+
+def test_lm_reaches_the_true_pose_and_returns_the_normal_matrix_there():
     T, points, bearings = random_scene(4, 30, near=2.0)
-    noisy = perturb(bearings, 1e-3, rng)
+    noisy = perturb(bearings, 1e-3, np.random.default_rng(4))
+    F = kernels.bearing_frames(noisy)
     W = np.broadcast_to(np.eye(2), (30, 2, 2)).copy()
-    R, t, cov, it, status = kernels.pose_core(points, noisy, W, 200)
-    res = solve_extrinsics(points, noisy)
+    # Start 3 deg and 10 cm off the truth.
+    R0 = Rotation.from_rotvec([0.03, -0.02, 0.04]).as_matrix() @ T[:3, :3]
+    t0 = T[:3, 3] + [0.1, -0.05, 0.05]
+    R, t, it, status, H = kernels.lm_refine(R0, t0, points, F, W, 200)
     assert status == 1 and 1 <= it < 50
-    np.testing.assert_allclose(R, res.T_camera_lidar[:3, :3], atol=1e-9)
-    np.testing.assert_allclose(t, res.T_camera_lidar[:3, 3], atol=1e-9)
-    assert np.all(np.isfinite(cov)) and np.allclose(cov, cov.T)
+    # The optimum: the gradient of the independent cost vanishes (central differences, left perturbation).
+    h = 1e-6
+    J = np.empty((60, 6))
+    for k in range(6):
+        d = np.zeros(6)
+        d[k] = h
+        Rp, Rm = Rotation.from_rotvec(d[:3]).as_matrix() @ R, Rotation.from_rotvec(-d[:3]).as_matrix() @ R
+        J[:, k] = (_geodesic_residuals(Rp, t + d[3:], points, F) - _geodesic_residuals(Rm, t - d[3:], points, F)
+                   ).ravel() / (2 * h)
+    r = _geodesic_residuals(R, t, points, F).ravel()
+    assert np.linalg.norm(J.T @ r) < 1e-9 * np.linalg.norm(J.T @ J) ** 0.5
+    # H is J^T J at the returned pose.
+    np.testing.assert_allclose(H, J.T @ J, rtol=1e-5, atol=1e-6 * np.abs(H).max())
+    # Near the truth: 1 mrad noise on 30 pairs 2-10 m away.
+    assert np.degrees(Rotation.from_matrix(R @ T[:3, :3].T).magnitude()) < 0.5
+    assert np.linalg.norm(t - T[:3, 3]) < 0.05
 
 
 def test_whitened_residual_is_the_pixel_error_to_first_order():

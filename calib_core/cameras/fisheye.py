@@ -21,7 +21,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from ..errors import CalibError
-from .kernels import fisheye_bearing, FISHEYE_PARAMS, fisheye_project, MODEL_FISHEYE, _F_D
+from .kernels import fisheye_bearing, FISHEYE_PARAMS, fisheye_project, _F_D
 from .base import as_pixels, as_points_keep_float32, empty_projection, register_camera_model
 from .params import param_image_size, param_matrix, param_vector, require_keys
 
@@ -84,8 +84,6 @@ class FisheyeCamera:
         self._prm[: _F_D] = (K[0, 0], K[0, 1], K[0, 2], K[1, 1], K[1, 2], self.theta_max, self.theta_d_max,
                                      self.width, self.height)
         self._prm[_F_D :] = self.D
-        #: ``(model code, parameters, table)`` for compiled callers (:func:`.kernels.project_model`).
-        self.compiled_projection = (MODEL_FISHEYE, self._prm, np.zeros((1, 2)))
 
     def project(self, points: Any) -> tuple[np.ndarray, np.ndarray]:
         """Pixels of points in the OpenCV camera frame (metres).

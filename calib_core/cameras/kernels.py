@@ -23,7 +23,7 @@ import math
 
 import numpy as np
 
-from .._jit import kernel
+from .._jit import tiered_kernel as kernel
 
 # -- pinhole parameter vector --------------------------------------------------------
 _P_FX, _P_FY, _P_CX, _P_CY, _P_RMAX, _P_W, _P_H, _P_TILT = range(8)
@@ -59,34 +59,24 @@ def _blank(pixels, valid, i):
 
 # ------------------------------------------------------------------ pinhole
 @kernel
-def _pinhole_distort(x, y, p):
-    """OpenCV's radial, tangential and thin-prism distortion of one normalised point (no tilt)."""
-    k1, k2, p1, p2, k3 = p[_P_K], p[_P_K + 1], p[_P_K + 2], p[_P_K + 3], p[_P_K + 4]
-    k4, k5, k6 = p[_P_K + 5], p[_P_K + 6], p[_P_K + 7]
-    s1, s2, s3, s4 = p[_P_K + 8], p[_P_K + 9], p[_P_K + 10], p[_P_K + 11]
+def _pinhole_distortion(x, y, k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4):
+    """OpenCV's radial, tangential and thin-prism distortion of one normalised point (no tilt), and its
+    Jacobian: ``xd, yd, d(xd)/dx, d(xd)/dy, d(yd)/dx, d(yd)/dy``.
+
+    The one copy of the polynomial (``project`` and ``bearing`` both call it; compiled inline, so a caller
+    that ignores the Jacobian does not compute it).  Coefficients as scalars: a caller keeps them in
+    locals, which keeps its loop on SIMD lanes.
+    """
     r2 = x * x + y * y
-    radial = (1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1.0 + r2 * (k4 + r2 * (k5 + r2 * k6)))
+    num = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    den = 1.0 + r2 * (k4 + r2 * (k5 + r2 * k6))
+    radial = num / den
     xy2 = 2.0 * x * y
     r4 = r2 * r2
     xd = x * radial + (p1 * xy2 + p2 * (r2 + 2.0 * x * x)) + (s1 * r2 + s2 * r4)
     yd = y * radial + (p1 * (r2 + 2.0 * y * y) + p2 * xy2) + (s3 * r2 + s4 * r4)
-    return xd, yd
-
-
-@kernel
-def _pinhole_distort_jacobian(x, y, p):
-    """Distorted point and ``d(xd, yd)/d(x, y)`` of one normalised point (no tilt)."""
-    k1, k2, p1, p2, k3 = p[_P_K], p[_P_K + 1], p[_P_K + 2], p[_P_K + 3], p[_P_K + 4]
-    k4, k5, k6 = p[_P_K + 5], p[_P_K + 6], p[_P_K + 7]
-    s1, s2, s3, s4 = p[_P_K + 8], p[_P_K + 9], p[_P_K + 10], p[_P_K + 11]
-    r2 = x * x + y * y
-    num = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-    den = 1.0 + r2 * (k4 + r2 * (k5 + r2 * k6))
     dnum = k1 + r2 * (2.0 * k2 + 3.0 * r2 * k3)
     dden = k4 + r2 * (2.0 * k5 + 3.0 * r2 * k6)
-    radial = num / den
-    xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x) + s1 * r2 + s2 * r2 * r2
-    yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y + s3 * r2 + s4 * r2 * r2
     d_radial = (dnum * den - num * dden) / (den * den)  # d radial / d r2
     gx, gy = 2.0 * x, 2.0 * y
     j_xx = radial + x * d_radial * gx + 2.0 * p1 * y + 6.0 * p2 * x + (s1 + 2.0 * s2 * r2) * gx
@@ -129,8 +119,7 @@ def pinhole_project(points, p, pixels, valid):
 
     Not projectable: ``Z <= 0``, a non-finite coordinate, or an undistorted
     radius beyond ``r_max``.  By chunks: a branch-free loop (SIMD lanes)
-    into chunk buffers, then the stores.  (The distortion is written out
-    here as in :func:`_pinhole_distort`, which ``bearing`` uses.)
+    into chunk buffers, then the stores.
     """
     fx, fy, cx, cy, r_max = p[_P_FX], p[_P_FY], p[_P_CX], p[_P_CY], p[_P_RMAX]
     u_hi, v_hi = p[_P_W] - 0.5, p[_P_H] - 0.5
@@ -153,13 +142,8 @@ def pinhole_project(points, p, pixels, valid):
             X, Y, Z = np.float64(points[i, 0]), np.float64(points[i, 1]), np.float64(points[i, 2])
             x = X / Z
             y = Y / Z
-            r2 = x * x + y * y
-            ok = (Z > 0.0) & (Z < np.inf) & np.isfinite(X) & np.isfinite(Y) & (math.sqrt(r2) <= r_max)
-            radial = (1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1.0 + r2 * (k4 + r2 * (k5 + r2 * k6)))
-            xy2 = 2.0 * x * y
-            r4 = r2 * r2
-            xd = x * radial + (p1 * xy2 + p2 * (r2 + 2.0 * x * x)) + (s1 * r2 + s2 * r4)
-            yd = y * radial + (p1 * (r2 + 2.0 * y * y) + p2 * xy2) + (s3 * r2 + s4 * r4)
+            ok = (Z > 0.0) & (Z < np.inf) & np.isfinite(X) & np.isfinite(Y) & (math.sqrt(x * x + y * y) <= r_max)
+            xd, yd, _, _, _, _ = _pinhole_distortion(x, y, k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4)
             w = t20 * xd + t21 * yd + t22
             xt = (t00 * xd + t01 * yd + t02) / w
             yt = (t10 * xd + t11 * yd + t12) / w
@@ -181,6 +165,9 @@ def pinhole_bearing(uv, p, table_r, table_rd, rays):
     """
     tilt = p[_P_TILT] != 0.0
     r_max = p[_P_RMAX]
+    k1, k2, p1, p2, k3 = p[_P_K], p[_P_K + 1], p[_P_K + 2], p[_P_K + 3], p[_P_K + 4]
+    k4, k5, k6 = p[_P_K + 5], p[_P_K + 6], p[_P_K + 7]
+    s1, s2, s3, s4 = p[_P_K + 8], p[_P_K + 9], p[_P_K + 10], p[_P_K + 11]
     last = table_rd.shape[0] - 1
     for i in range(uv.shape[0]):
         xd = (uv[i, 0] - p[_P_CX]) / p[_P_FX]
@@ -201,7 +188,7 @@ def pinhole_bearing(uv, p, table_r, table_rd, rays):
         scale = r0 / rd if rd > 0.0 else 1.0
         x, y = xd * scale, yd * scale
         for _ in range(30):
-            fx, fy, jxx, jxy, jyx, jyy = _pinhole_distort_jacobian(x, y, p)
+            fx, fy, jxx, jxy, jyx, jyy = _pinhole_distortion(x, y, k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4)
             ex, ey = fx - xd, fy - yd
             det = jxx * jyy - jxy * jyx
             dx = (jyy * ex - jxy * ey) / det
@@ -215,7 +202,7 @@ def pinhole_bearing(uv, p, table_r, table_rd, rays):
             y -= shrink * dy
             if not step > 1e-15 * (1.0 + math.sqrt(x * x + y * y)):
                 break
-        fx, fy = _pinhole_distort(x, y, p)
+        fx, fy, _, _, _, _ = _pinhole_distortion(x, y, k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4)
         residual = math.sqrt((fx - xd) ** 2 + (fy - yd) ** 2)
         ok = (np.isfinite(x) and np.isfinite(y) and residual <= 1e-10 * (1.0 + rd)
               and math.sqrt(x * x + y * y) <= r_max)
@@ -384,23 +371,4 @@ def ocam_bearing(uv, p, pol, rays):
             zp = zp * rho + pol[k]
         norm = math.sqrt(xp * xp + yp * yp + zp * zp)
         rays[i, 0], rays[i, 1], rays[i, 2] = yp / norm, xp / norm, -zp / norm  # OCam (x, y, z) -> OpenCV
-
-
-#: Model codes of :func:`project_model` (a camera's ``compiled_projection``).
-MODEL_PINHOLE, MODEL_FISHEYE, MODEL_OCAM = 0, 1, 2
-
-
-@kernel
-def project_model(model, p, table, points, pixels, valid):
-    """``project`` of the model with code ``model``, for callers that are compiled themselves.
-
-    ``(model, p, table)`` is a camera's ``compiled_projection``; ``table`` is
-    only read by OCam (the others get a dummy ``(1, 2)`` array).
-    """
-    if model == MODEL_PINHOLE:
-        pinhole_project(points, p, pixels, valid)
-    elif model == MODEL_FISHEYE:
-        fisheye_project(points, p, pixels, valid)
-    else:
-        ocam_project(points, p, table, pixels, valid)
 

@@ -43,7 +43,7 @@ from numpy.polynomial import polynomial as npoly
 from ..errors import CalibError
 from ..io.atomic import write_bytes_atomic
 from ..io.input_files import MAX_CAMERA_BYTES, read_input_text
-from .kernels import MODEL_OCAM, ocam_bearing, ocam_project, _O_INVSTEP
+from .kernels import ocam_bearing, ocam_project, _O_INVSTEP
 from .base import as_pixels, as_points_keep_float32, empty_projection, register_camera_model
 from .params import param_float, param_image_size, param_vector, require_keys
 
@@ -190,8 +190,6 @@ class OCamCamera:
         prm32 = self._prm.copy()
         prm32[_O_INVSTEP] = (m - 1) / self._s_max
         self._fast_tables = {np.dtype(np.float64): (self._prm, table), np.dtype(np.float32): (prm32, coarse)}
-        #: ``(model code, parameters, table)`` for compiled callers (:func:`.kernels.project_model`).
-        self.compiled_projection = (MODEL_OCAM, self._prm, table)
 
     def rho_from_angle(self, alpha: np.ndarray) -> np.ndarray:
         """Radius (pixels) at which rays at ``alpha`` rad from the axis land.

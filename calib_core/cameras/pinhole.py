@@ -28,7 +28,6 @@ import numpy as np
 
 from ..errors import CalibError
 from .kernels import (
-    MODEL_PINHOLE,
     pinhole_bearing,
     PINHOLE_PARAMS,
     pinhole_project,
@@ -143,8 +142,6 @@ class PinholeCamera:
         self._prm_project, self._prm_bearing = prm.copy(), prm.copy()
         self._prm_project[_P_T :] = self._tilt.ravel()
         self._prm_bearing[_P_T :] = self._tilt_inv.ravel()
-        #: ``(model code, parameters, table)`` for compiled callers (:func:`.kernels.project_model`).
-        self.compiled_projection = (MODEL_PINHOLE, self._prm_project, np.zeros((1, 2)))
 
     # -- F: camera -> image ---------------------------------------------------
     def project(self, points: Any) -> tuple[np.ndarray, np.ndarray]:

@@ -23,7 +23,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from .._jit import tiered_kernel as kernel
 
 __all__ = [
     "whitened_residuals",
@@ -35,10 +35,8 @@ __all__ = [
     "so3_exp",
 ]
 
-_JIT = dict(cache=True, nogil=True, fastmath=False)
 
-
-@njit(**_JIT)
+@kernel
 def so3_exp(phi):
     """``exp([phi]_x)`` (Rodrigues), with the Taylor series near 0."""
     x, y, z = phi[0], phi[1], phi[2]
@@ -69,7 +67,7 @@ def so3_exp(phi):
 _SERIES_X = 0.05
 
 
-@njit(**_JIT)
+@kernel
 def _pair(R, t, P, F, W, i, out_z, out_J, want_J):
     """Whitened residual (2,) of pair ``i`` into ``out_z`` and, if asked, its Jacobian (2, 6) into ``out_J``.
 
@@ -128,7 +126,7 @@ def _pair(R, t, P, F, W, i, out_z, out_J, want_J):
     return theta
 
 
-@njit(**_JIT)
+@kernel
 def whitened_residuals(R, t, P, F, W):
     """Whitened residuals ``(N, 2)`` and geodesic angles ``(N,)`` (radians) at pose ``(R, t)``."""
     n = P.shape[0]
@@ -142,7 +140,7 @@ def whitened_residuals(R, t, P, F, W):
     return z, theta
 
 
-@njit(**_JIT)
+@kernel
 def jacobian(R, t, P, F, W):
     """Whitened Jacobian ``(2N, 6)`` at ``(R, t)`` w.r.t. ``(delta, t)`` (left perturbation, delta = 0)."""
     n = P.shape[0]
@@ -153,7 +151,7 @@ def jacobian(R, t, P, F, W):
     return J
 
 
-@njit(**_JIT)
+@kernel
 def normal_equations(R, t, P, F, W):
     """``H = J^T J`` (6, 6), ``g = J^T z`` (6,) and ``cost = sum |z_i|^2`` at ``(R, t)``.
 
@@ -223,58 +221,49 @@ def normal_equations(R, t, P, F, W):
     return H, g, cost
 
 
-@njit(**_JIT)
-def _cholesky_solve(A, b):
-    """Solve ``A x = b`` for a symmetric positive-definite 6x6 ``A``; ok False if it is not."""
-    n = A.shape[0]
-    L = np.zeros((n, n))
-    for j in range(n):
-        s = A[j, j]
-        for k in range(j):
-            s -= L[j, k] * L[j, k]
-        if not s > 0.0:
-            return b * 0.0, False
-        L[j, j] = math.sqrt(s)
-        for i in range(j + 1, n):
-            s = A[i, j]
-            for k in range(j):
-                s -= L[i, k] * L[j, k]
-            L[i, j] = s / L[j, j]
-    y = np.empty(n)
-    for i in range(n):
-        s = b[i]
-        for k in range(i):
-            s -= L[i, k] * y[k]
-        y[i] = s / L[i, i]
-    x = np.empty(n)
-    for i in range(n - 1, -1, -1):
-        s = y[i]
-        for k in range(i + 1, n):
-            s -= L[k, i] * x[k]
-        x[i] = s / L[i, i]
-    return x, True
+@kernel
+def lm_refine(R0, t0, P, F, W, max_iter):
+    """Levenberg-Marquardt on the whitened angular cost.
 
+    Each iteration solves ``(H + lam diag(H)) dx = -g`` (Marquardt's scaling,
+    so radians and metres need no common unit), accepts the step if the cost
+    drops and then lowers ``lam``, else raises it.  Stops when the predicted
+    or actual decrease is at the cost's rounding level, the step is
+    negligible, or after ``max_iter`` normal-equation evaluations.
 
-@njit(**_JIT)
-def _lm(R0, t0, P, F, W, max_iter):
-    """:func:`lm_refine`, also returning the normal matrix ``H`` and the cost at the returned pose."""
+    Returns
+    -------
+    R : (3, 3), t : (3,)
+    iterations : int
+        Normal-equation evaluations.
+    status : int
+        1 converged, 0 iteration limit, -1 singular normal equations, -2 non-finite cost.
+    H : (6, 6)
+        The normal matrix ``J^T J`` at the returned pose (the covariance needs no second pass).
+    """
     R = R0.copy()
     t = t0.copy()
     lam = 1e-4
     H, g, cost = normal_equations(R, t, P, F, W)
     if not np.isfinite(cost):
-        return R, t, 1, -2, H, cost
+        return R, t, 1, -2, H
     it = 1
     A = np.empty((6, 6))
+    L = np.empty((6, 6))
+    dx = np.empty(6)
     while it < max_iter:
         for a in range(6):
             for b in range(6):
                 A[a, b] = H[a, b]
             A[a, a] = H[a, a] * (1.0 + lam) + 1e-300
-        dx, ok = _cholesky_solve(A, -g)
-        if not ok:
+        ok = _cholesky(A, L)
+        if ok:
+            for a in range(6):
+                dx[a] = -g[a]
+            _chol_solve_inplace(L, dx)
+        else:
             if lam > 1e12:
-                return R, t, it, -1, H, cost
+                return R, t, it, -1, H
             lam *= 10.0
             continue
         # Predicted decrease -g.dx: at the noise floor of the cost nothing is left to gain
@@ -283,7 +272,7 @@ def _lm(R0, t0, P, F, W, max_iter):
         for a in range(6):
             gd -= g[a] * dx[a]
         if gd <= 1e-13 * cost or cost <= 1e-300:
-            return R, t, it, 1, H, cost
+            return R, t, it, 1, H
         R_new = so3_exp(dx[:3]) @ R
         t_new = t + dx[3:]
         # One pass gives the new cost and, if the step is taken, the next normal equations.
@@ -302,39 +291,17 @@ def _lm(R0, t0, P, F, W, max_iter):
             R, t, H, g, cost = R_new, t_new, H_new, g_new, cost_new
             lam = max(lam / 10.0, 1e-12)
             if small_step or decrease <= 1e-11 * cost or cost <= 1e-300:
-                return R, t, it, 1, H, cost
+                return R, t, it, 1, H
         else:
             if small_step:
-                return R, t, it, 1, H, cost
+                return R, t, it, 1, H
             lam *= 10.0
             if lam > 1e16:
-                return R, t, it, 1, H, cost  # no descent direction left: a minimum to rounding
-    return R, t, it, 0, H, cost
+                return R, t, it, 1, H  # no descent direction left: a minimum to rounding
+    return R, t, it, 0, H
 
 
-@njit(**_JIT)
-def lm_refine(R0, t0, P, F, W, max_iter):
-    """Levenberg-Marquardt on the whitened angular cost.
-
-    Each iteration solves ``(H + lam diag(H)) dx = -g`` (Marquardt's scaling,
-    so radians and metres need no common unit), accepts the step if the cost
-    drops and then lowers ``lam``, else raises it.  Stops when the predicted
-    or actual decrease is at the cost's rounding level, the step is
-    negligible, or after ``max_iter`` normal-equation evaluations.
-
-    Returns
-    -------
-    R : (3, 3), t : (3,)
-    iterations : int
-        Normal-equation evaluations.
-    status : int
-        1 converged, 0 iteration limit, -1 singular normal equations, -2 non-finite cost.
-    """
-    R, t, it, status, _, _ = _lm(R0, t0, P, F, W, max_iter)
-    return R, t, it, status
-
-
-@njit(**_JIT)
+@kernel
 def score_poses(Rs, ts, P, F, W):
     """Squared whitened residual norms ``(K, N)`` of K candidate poses ``Rs (K, 3, 3)``, ``ts (K, 3)``."""
     K = Rs.shape[0]
@@ -350,13 +317,13 @@ def score_poses(Rs, ts, P, F, W):
     return out
 
 
-@njit(**_JIT)
+@kernel
 def _det3(A):
     return (A[0, 0] * (A[1, 1] * A[2, 2] - A[1, 2] * A[2, 1]) - A[0, 1] * (A[1, 0] * A[2, 2] - A[1, 2] * A[2, 0])
             + A[0, 2] * (A[1, 0] * A[2, 1] - A[1, 1] * A[2, 0]))
 
 
-@njit(**_JIT)
+@kernel
 def _polar3(A):
     """Rotation nearest to ``A`` (3x3, ``det A > 0``) and the mean of its singular values.
 
@@ -397,7 +364,7 @@ def _polar3(A):
     return X, scale / 3.0
 
 
-@njit(**_JIT)
+@kernel
 def _cholesky(A, L):
     """Lower Cholesky factor of a symmetric positive-definite ``A`` into ``L``; False if it is not."""
     n = A.shape[0]
@@ -418,7 +385,7 @@ def _cholesky(A, L):
     return True
 
 
-@njit(**_JIT)
+@kernel
 def _chol_solve_inplace(L, x):
     n = L.shape[0]
     for i in range(n):
@@ -433,7 +400,7 @@ def _chol_solve_inplace(L, x):
         x[i] = s / L[i, i]
 
 
-@njit(**_JIT)
+@kernel
 def _null_vector(M):
     """Unit eigenvector of the smallest eigenvalue of a PSD ``M``, and False if a second one is near zero.
 
@@ -486,7 +453,7 @@ def _null_vector(M):
     return x, lam1 > 1e-10 * tr
 
 
-@njit(**_JIT)
+@kernel
 def dlt_pose(P, B):
     """Linear pose from n >= 6 bearings: ``b_i x (R p_i + t) = 0`` solved for the 12 entries of ``[R | t]``.
 
@@ -597,7 +564,7 @@ def dlt_pose(P, B):
     return R, t, True
 
 
-@njit(**_JIT)
+@kernel
 def bearing_frames(B):
     """Rows ``e1, e2, b`` of an orthonormal right-handed frame per unit bearing, ``(N, 3, 3)``.
 
@@ -625,7 +592,7 @@ def bearing_frames(B):
     return F
 
 
-@njit(**_JIT)
+@kernel
 def finish(R, t, P, F, W, inliers, want_H=True):
     """Everything the report needs at the final pose, in one pass.
 
@@ -657,7 +624,11 @@ def finish(R, t, P, F, W, inliers, want_H=True):
     zi = np.empty(2)
     k = 0
     for i in range(n):
-        theta[i] = _pair(R, t, P, F, W, i, zi, Ji, inliers[i] and want_H)
+        # Constant Jacobian flags: a flag known only at run time keeps _pair from being inlined (5x slower).
+        if inliers[i] and want_H:
+            theta[i] = _pair(R, t, P, F, W, i, zi, Ji, True)
+        else:
+            theta[i] = _pair(R, t, P, F, W, i, zi, Ji, False)
         z[i, 0], z[i, 1] = zi[0], zi[1]
         if inliers[i]:
             ssr += z[i, 0] * z[i, 0] + z[i, 1] * z[i, 1]
@@ -701,7 +672,76 @@ def finish(R, t, P, F, W, inliers, want_H=True):
     return z, theta, H, ssr, stats
 
 
-@njit(**_JIT)
+@kernel
+def fit_pose(P, B, F, W, R0, t0, use_dlt, max_iter):
+    """The start and the LM of :func:`calib_core.solve.solve_extrinsics` in one call.
+
+    Start: :func:`dlt_pose` on the bearings ``B`` when ``use_dlt``, else ``(R0, t0)``; then
+    :func:`lm_refine` on the whitened angular cost.
+
+    Returns
+    -------
+    R, t : the optimum; R_start, t_start : the start
+    iterations : int
+    status : int
+        As :func:`lm_refine`; -3 when the DLT start failed (fewer than 6 pairs, coplanar points).
+    H : (6, 6) normal matrix at ``(R, t)``
+    z : (N, 2) whitened residuals at ``(R, t)`` (for the outlier test)
+    """
+    if use_dlt:
+        R_start, t_start, ok = dlt_pose(P, B)
+        if not ok:
+            return R_start, t_start, R_start, t_start, 0, -3, np.zeros((6, 6)), np.zeros((P.shape[0], 2))
+    else:
+        R_start, t_start = R0.copy(), t0.copy()
+    R, t, it, status, H = lm_refine(R_start, t_start, P, F, W, max_iter)
+    z, _ = whitened_residuals(R, t, P, F, W)
+    return R, t, R_start, t_start, it, status, H, z
+
+
+@kernel
+def pose_report(R, t, P, F, W, inliers, H_given, have_H, ssr_given, known_noise, t_factor, prior_sigma):
+    """The figures of the final pose in one call: :func:`finish`, the residual scale, the covariance and sigmas.
+
+    Parameters
+    ----------
+    H_given : (6, 6), have_H : bool
+        The normal matrix at this pose when the caller has it (the LM's; the pixel cost's).
+    ssr_given : float
+        Sum of squared residuals to use instead of the angular one (the pixel cost's); < 0: none.
+    known_noise : bool
+        The residuals are in units of a known noise: sigma = 1 (the covariance is the Cramer-Rao bound).
+    t_factor : float
+        Student-t factor of ``2 m - 6`` degrees of freedom (m inliers), widening the estimated sigma.
+    prior_sigma : float
+        Sigma when there is no redundancy (``2 m <= 6``): the expected noise, or inf.
+
+    Returns
+    -------
+    theta : (N,) geodesic angles, rad; H : (6, 6); stats : (7,) as :func:`finish`
+    noise_scale : float, ``sqrt(SSR / (2 m - 6))`` (NaN without redundancy)
+    cov : (6, 6), condition : float, as :func:`covariance`
+    sigma_t : (3,) m; sigma_rpy : (3,) deg; sigma_rotation : float, deg (:func:`rotation_sigma_deg`)
+    """
+    z, theta, H, ssr, stats = finish(R, t, P, F, W, inliers, not have_H)
+    if have_H:
+        H = H_given
+    if ssr_given >= 0.0:
+        ssr = ssr_given
+    dof = 2 * int(stats[6]) - 6
+    noise_scale = math.sqrt(ssr / dof) if dof > 0 else np.nan
+    if known_noise:
+        sigma = 1.0
+    elif dof > 0:
+        sigma = noise_scale * t_factor
+    else:
+        sigma = prior_sigma
+    cov, condition = covariance(H, sigma)
+    sigma_t, sigma_rpy = rpy_sigmas(R, cov)
+    return theta, H, stats, noise_scale, cov, condition, sigma_t, sigma_rpy, rotation_sigma_deg(cov)
+
+
+@kernel
 def rotation_sigma_deg(cov):
     """1-sigma of the rotation along its worst axis, degrees: ``sqrt(max eig(cov[:3, :3]))``.
 
@@ -718,7 +758,7 @@ def rotation_sigma_deg(cov):
     return math.degrees(math.sqrt(max(w[2], 0.0)))
 
 
-@njit(**_JIT)
+@kernel
 def rpy_sigmas(R, cov):
     """1-sigma of ``t`` (m) and of roll, pitch, yaw (deg) from the covariance of ``(delta, t)`` at ``R``.
 
@@ -748,7 +788,7 @@ def rpy_sigmas(R, cov):
     return st, sr
 
 
-@njit(**_JIT)
+@kernel
 def covariance(H, sigma):
     """``sigma^2 H^-1`` via the Jacobi-scaled eigen-decomposition; ``(cov, condition)``.
 
@@ -779,7 +819,7 @@ def covariance(H, sigma):
     return cov, cond
 
 
-@njit(**_JIT)
+@kernel
 def _first_close(X, radius, angular):
     """First pair ``(i, j)`` (i < j in sorted-by-x scan order) closer than ``radius``; (-1, -1) if none.
 
@@ -808,7 +848,7 @@ def _first_close(X, radius, angular):
     return -1, -1
 
 
-@njit(**_JIT)
+@kernel
 def pair_checks(P, B, same_point_m, same_bearing_rad):
     """The degeneracy figures of :func:`calib_core.solve.checks.validate_pairs` in one pass.
 
@@ -874,31 +914,7 @@ def pair_checks(P, B, same_point_m, same_bearing_rad):
     return bad_point, bad_bearing, norms, same_p, same_b, sv, cos_min
 
 
-@njit(**_JIT)
-def pose_core(P, B, W, max_iter):
-    """The compiled solve alone: frames, linear DLT start, LM and covariance scale, one call.
-
-    No input checks, no outlier search, no report: what
-    :func:`calib_core.solve.solve_extrinsics` runs inside, exposed for the
-    benchmark against OpenCV's SQPnP + ``solvePnPRefineLM`` (which do neither).
-
-    Returns
-    -------
-    R, t, cov (6, 6) with the residual-variance scale ``SSR / (2N - 6)``, iterations, status
-    (as :func:`lm_refine`; -3 when the DLT start fails).
-    """
-    F = bearing_frames(B)
-    R0, t0, ok = dlt_pose(P, B)
-    if not ok:
-        return R0, t0, np.full((6, 6), np.inf), 0, -3
-    R, t, it, status, H, cost = _lm(R0, t0, P, F, W, max_iter)
-    dof = 2 * P.shape[0] - 6
-    sigma = math.sqrt(cost / dof) if dof > 0 else np.inf
-    cov, cond = covariance(H, sigma)
-    return R, t, cov, it, status
-
-
-@njit(**_JIT)
+@kernel
 def _rigid_fit_one(src, dst, out):
     """Least-squares rigid ``T_dst_src`` of (N, 3) point sets into ``out`` (4, 4): Arun's SVD with
     Umeyama's reflection fix (see :mod:`calib_core.solve.rigid`)."""
@@ -932,7 +948,7 @@ def _rigid_fit_one(src, dst, out):
     out[3, 3] = 1.0
 
 
-@njit(**_JIT)
+@kernel
 def rigid_fit_batch(src, dst):
     """:func:`_rigid_fit_one` over a batch: ``src, dst (M, N, 3)`` -> ``(M, 4, 4)``."""
     M = src.shape[0]
@@ -942,7 +958,7 @@ def rigid_fit_batch(src, dst):
     return out
 
 
-@njit(**_JIT)
+@kernel
 def _cubic_largest_root(A, B, C):
     """Largest real root of ``m^3 + A m^2 + B m + C`` (Cardano / trigonometric form, Newton-polished)."""
     P = B - A * A / 3.0
@@ -966,7 +982,7 @@ def _cubic_largest_root(A, B, C):
     return m
 
 
-@njit(**_JIT)
+@kernel
 def _quartic_real_roots(c4, c3, c2, c1, c0, out):
     """Real roots of ``c4 x^4 + ... + c0`` by Ferrari's method, Newton-polished; returns their count.
 
@@ -1022,7 +1038,7 @@ def _quartic_real_roots(c4, c3, c2, c1, c0, out):
     return k
 
 
-@njit(**_JIT)
+@kernel
 def _triangle_pose(p, pc, out):
     """Rigid ``T`` with ``pc = R p + t`` for two congruent triangles (3, 3), from their edge frames."""
     Fl = np.empty((3, 3))
@@ -1049,7 +1065,7 @@ def _triangle_pose(p, pc, out):
     out[3, 3] = 1.0
 
 
-@njit(**_JIT)
+@kernel
 def p3p_grunert(P, B):
     """All P3P poses of M triples (Grunert, in the notation of Haralick et al. 1994).
 
@@ -1135,7 +1151,7 @@ def p3p_grunert(P, B):
     return Ts[:K], tri[:K]
 
 
-@njit(**_JIT)
+@kernel
 def tangent_probes(F, h):
     """Directions ``b +- h e1``, ``b +- h e2`` of every bearing frame, stacked ``(4N, 3)`` in that order."""
     n = F.shape[0]
@@ -1149,7 +1165,7 @@ def tangent_probes(F, h):
     return out
 
 
-@njit(**_JIT)
+@kernel
 def probe_jacobians(uv, h):
     """``d pixel / d tangent`` ``(N, 2, 2)`` from the pixels of :func:`tangent_probes`, and ``ok (N,)``:
     finite with a non-zero determinant."""

@@ -37,6 +37,7 @@ from .kernels import (
     lm_refine,
     normal_equations,
     rpy_sigmas,
+    so3_exp,
     whitened_residuals,
 )
 
@@ -50,6 +51,8 @@ __all__ = [
     "pixel_jacobian",
     "refine_pose",
     "refine_angular",
+    "refine_angular_normal",
+    "lm_failure",
     "bearing_frames",
     "rpy_jacobian",
     "pose_covariance",
@@ -79,7 +82,8 @@ _UNPROJECTABLE_PX = 1e4
 
 def _so3_matrix(phi: np.ndarray, a: float, b: float, d: float) -> np.ndarray:
     """``d I + a [phi]_x + b phi phi^T`` built from Python floats in one array call
-    (numpy's per-call overhead dominates for one 3x3 matrix)."""
+    (numpy's per-call overhead dominates for one 3x3 matrix).  (``exp([phi]_x)`` itself is
+    :func:`.kernels.so3_exp`.)"""
     x, y, z = float(phi[0]), float(phi[1]), float(phi[2])
     bx, by, bz = b * x, b * y, b * z
     return np.array(
@@ -89,22 +93,6 @@ def _so3_matrix(phi: np.ndarray, a: float, b: float, d: float) -> np.ndarray:
             [bx * z - a * y, by * z + a * x, d + bz * z],
         ]
     )
-
-
-def _rotation_matrix(phi: np.ndarray) -> np.ndarray:
-    """``exp([phi]_x)`` by Rodrigues' formula, ``cos I + (sin/theta) [phi]_x + ((1 - cos)/theta^2) phi phi^T``.
-
-    Plain arithmetic: scipy's ``Rotation.from_rotvec`` costs more than the
-    rest of a residual evaluation for a few pairs.
-    """
-    theta2 = float(phi[0]) ** 2 + float(phi[1]) ** 2 + float(phi[2]) ** 2
-    if theta2 < 1e-8:  # theta < 1e-4: Taylor series, exact to float rounding
-        cos, a, b = 1.0 - theta2 / 2 + theta2**2 / 24, 1.0 - theta2 / 6, 0.5 - theta2 / 24
-    else:
-        theta = math.sqrt(theta2)
-        cos = math.cos(theta)
-        a, b = math.sin(theta) / theta, (1.0 - cos) / theta2
-    return _so3_matrix(phi, a, b, cos)
 
 
 def _left_jacobian_so3(phi: np.ndarray) -> np.ndarray:
@@ -178,7 +166,7 @@ def log_map_residuals(points_camera: np.ndarray, bearings_camera: np.ndarray, E:
 
 
 def _pose(x: np.ndarray, R0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    return _rotation_matrix(x[:3]) @ R0, x[3:]
+    return so3_exp(np.ascontiguousarray(x[:3], dtype=np.float64)) @ R0, x[3:]
 
 
 def angular_jacobian(
@@ -346,19 +334,36 @@ def refine_angular(
     CalibError
         The normal equations are singular or the cost is not finite.
     """
+    T, iterations, _ = refine_angular_normal(T_initial, points_lidar, frames, W)
+    return T, iterations
+
+
+def refine_angular_normal(
+    T_initial: np.ndarray, points_lidar: np.ndarray, frames: np.ndarray, W: np.ndarray | None = None
+) -> tuple[np.ndarray, int, np.ndarray]:
+    """:func:`refine_angular`, also returning the normal matrix ``J^T J`` (6, 6) at the returned pose,
+    columns ``(delta, t)`` (rad, m): the covariance at the optimum needs no second pass over the pairs."""
     P = np.ascontiguousarray(points_lidar, dtype=np.float64)
     W = _identity_W(len(P)) if W is None else np.ascontiguousarray(W, dtype=np.float64)
     T0 = np.asarray(T_initial, dtype=np.float64)
-    R, t, iterations, status = lm_refine(
+    R, t, iterations, status, H = lm_refine(
         np.ascontiguousarray(T0[:3, :3]), np.ascontiguousarray(T0[:3, 3]), P, frames, W, LM_MAX_ITER
     )
-    if status == -2 or not (np.all(np.isfinite(R)) and np.all(np.isfinite(t))):
-        raise CalibError("Levenberg-Marquardt (angular) failed: the cost is not finite at the initial pose")
-    if status == -1:
-        raise CalibError("Levenberg-Marquardt (angular) failed: the normal equations are singular (degenerate pairs)")
+    failure = lm_failure(status, R, t)
+    if failure:
+        raise CalibError(failure)
     T = np.eye(4)
     T[:3, :3], T[:3, 3] = R, t
-    return T, int(iterations)
+    return T, int(iterations), H
+
+
+def lm_failure(status: int, R: np.ndarray, t: np.ndarray) -> str | None:
+    """Why the angular LM (:func:`.kernels.lm_refine`, status as there) gave no pose, or None."""
+    if status == -2 or not math.isfinite(float(R.sum()) + float(t.sum())):
+        return "Levenberg-Marquardt (angular) failed: the cost is not finite at the initial pose"
+    if status == -1:
+        return "Levenberg-Marquardt (angular) failed: the normal equations are singular (degenerate pairs)"
+    return None
 
 
 def rpy_jacobian(R: np.ndarray) -> np.ndarray:

@@ -297,7 +297,7 @@ def robust_fit(
         if inliers.sum() < 3:
             break
         idx = np.flatnonzero(inliers)
-        R, t, it, _status = lm_refine(R, t, points[idx], frames[idx], W[idx], LM_MAX_ITER)
+        R, t, it, _status, _ = lm_refine(R, t, points[idx], frames[idx], W[idx], LM_MAX_ITER)
         iterations += it
         z, _ = whitened_residuals(R, t, points, frames, W)
         r2 = np.einsum("ij,ij->i", z, z)
@@ -331,7 +331,7 @@ def _grow(R, t, inliers, points, frames, W, k, scale, floor):
         if inliers[j]:
             continue
         idx = np.flatnonzero(inliers | (np.arange(len(inliers)) == j))
-        R2, t2, it, _status = lm_refine(R, t, points[idx], frames[idx], W[idx], LM_MAX_ITER)
+        R2, t2, it, _status, _ = lm_refine(R, t, points[idx], frames[idx], W[idx], LM_MAX_ITER)
         iterations += it
         z2, _ = whitened_residuals(R2, t2, points, frames, W)
         r2_new = np.einsum("ij,ij->i", z2, z2)

@@ -237,6 +237,16 @@ class AppDriver(RenderDriver):
         return self._fire(self.app.guard(self.app.pairs_panel.on_edit), SimpleNamespace(client=self.tab,
                                                                               target=SimpleNamespace(value=name)))
 
+    def press_pair_action(self, name: str) -> list[tuple[str, str]]:
+        """Press one of the pair actions at the top of the panel: ``Undo``, ``Cancel pair``, ``Next pair``."""
+        return self._fire(self.app.pairs_panel.pair_action_callback, SimpleNamespace(
+            client=self.tab, target=SimpleNamespace(value=name)))
+
+    @property
+    def pair_status(self) -> str:
+        """The status line under the pair actions at the top of the panel."""
+        return self.app.pairs_panel.status
+
     def upload_pairs(self, name: str, content: bytes, answer: str | None = "Append") -> list[tuple[str, str]]:
         """Upload a pairs file through this tab's "Import pairs YAML" button; the notifications it gave.
 
