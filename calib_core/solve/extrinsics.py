@@ -91,9 +91,9 @@ def sigma_coverage(n_pairs: int) -> tuple[float, float]:
     return float(2 * stdtr(dof, f) - 1), float(2 * stdtr(dof, 2 * f) - 1)
 
 
-def _check_pair_ids(pair_ids: object, n: int) -> list[int]:
+def _check_pair_ids(pair_ids: object, n: int) -> list[int] | range:
     if pair_ids is None:
-        return list(range(n))
+        return range(n)  # indexed like the list, without building it
     ids = np.asarray(pair_ids)
     if ids.shape != (n,) or not np.issubdtype(ids.dtype, np.integer):
         raise CalibError(f"pair_ids must be {n} whole numbers, one per pair, got {ids.dtype} of shape {ids.shape}")

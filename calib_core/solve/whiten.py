@@ -186,16 +186,19 @@ def whitening(
     W : (N, 2, 2) ndarray
     unit : {"noise", "px", "sigma", "rad"}
     """
-    s = np.ones(n) if pixel_sigma is None else pixel_sigma
     if noise_rad is not None:
         return np.broadcast_to(np.eye(2) / noise_rad, (n, 2, 2)).copy(), "noise"
+    if camera is not None:
+        A, ok = tangent_to_pixel(camera, frames)  # px/rad: the whitened residual is the linearised pixel error
+        unit = "px" if pixel_sigma is None else "sigma"
+        if laser_tangent_cov is None and pixel_sigma is None and ok.all():
+            return A, unit  # the common case first, without the arrays below
+    s = np.ones(n) if pixel_sigma is None else pixel_sigma
     eye = np.broadcast_to(np.eye(2), (n, 2, 2))
     if camera is None:
         return eye / s[:, None, None], "rad"
-    A, ok = tangent_to_pixel(camera, frames)  # px/rad: the whitened residual is the linearised pixel error
-    unit = "px" if pixel_sigma is None else "sigma"
     if laser_tangent_cov is None and ok.all():
-        return (A if pixel_sigma is None else A / s[:, None, None]), unit
+        return A / s[:, None, None], unit
     det = A[:, 0, 0] * A[:, 1, 1] - A[:, 0, 1] * A[:, 1, 0]
     if not ok.any():
         return eye / s[:, None, None], "rad"
