@@ -31,7 +31,7 @@ from .refine import (
 )
 from .result import CalibrationResult
 from .robust import inlier_k, robust_fit, robust_scale
-from .whiten import check_pixel_sigma, laser_tangent_covariance, whitening
+from .whiten import check_pixel_sigma, laser_tangent_covariance, tangent_to_pixel, whitening
 
 __all__ = ["COSTS", "NOISY_FACTOR", "PRIOR_PX", "sigma_coverage", "solve_extrinsics", "student_t_factor", "warm_up"]
 
@@ -230,12 +230,16 @@ def solve_extrinsics(
     frames = bearing_frames(bearings)
     whiten_camera = camera if cost != "geodesic" else None
 
+    tangent = []  # tangent_to_pixel of the camera at the bearings: pose-free, computed once
+
     def whiten(T_at: np.ndarray | None) -> tuple[np.ndarray, str]:
         lt = None
         if laser_cov is not None and T_at is not None and whiten_camera is not None:
             lt = laser_tangent_covariance(T_at, points, frames, laser_cov)
+        if whiten_camera is not None and noise_rad is None and not tangent:
+            tangent.append(tangent_to_pixel(whiten_camera, frames))
         return whitening(n, camera=whiten_camera, frames=frames, pixel_sigma=sigmas, noise_rad=noise_rad,
-                         laser_tangent_cov=lt)
+                         laser_tangent_cov=lt, tangent=tangent[0] if tangent else None)
 
     W, unit = whiten(None)
     # Expected scale of the whitened residuals, for the outlier test: the known noise, or the

@@ -1215,3 +1215,54 @@ def probe_jacobians(uv, h):
         det = A[i, 0, 0] * A[i, 1, 1] - A[i, 0, 1] * A[i, 1, 0]
         ok[i] = np.isfinite(det) and det != 0.0
     return A, ok
+
+
+@kernel
+def laser_bearing_cov(R, t, P, F, S):
+    """``Sigma_i = E_i R S_i R^T E_i^T / |R p_i + t|^2`` (N, 2, 2), rad^2: a laser point's covariance
+    ``S_i`` (N, 3, 3), m^2, seen as the error of its bearing (``E_i`` the first two rows of ``F_i``);
+    see :func:`calib_core.solve.whiten.laser_tangent_covariance`."""
+    n = P.shape[0]
+    out = np.empty((n, 2, 2))
+    A = np.empty((2, 3))
+    AS = np.empty((2, 3))
+    for i in range(n):
+        d2 = 0.0
+        for r in range(3):
+            c = R[r, 0] * P[i, 0] + R[r, 1] * P[i, 1] + R[r, 2] * P[i, 2] + t[r]
+            d2 += c * c
+        for a in range(2):
+            for k in range(3):
+                A[a, k] = F[i, a, 0] * R[0, k] + F[i, a, 1] * R[1, k] + F[i, a, 2] * R[2, k]
+        for a in range(2):
+            for k in range(3):
+                AS[a, k] = A[a, 0] * S[i, 0, k] + A[a, 1] * S[i, 1, k] + A[a, 2] * S[i, 2, k]
+        for a in range(2):
+            for b in range(2):
+                out[i, a, b] = (AS[a, 0] * A[b, 0] + AS[a, 1] * A[b, 1] + AS[a, 2] * A[b, 2]) / d2
+    return out
+
+
+@kernel
+def laser_whitening(A, s, L):
+    """``W_i = chol(C_i)^-1`` (N, 2, 2) with ``C_i = s_i^2 A_i^-1 A_i^-T + L_i``: the click's covariance in
+    the tangent plane (``A_i`` px/rad, ``s_i`` px) plus the laser term ``L_i`` (rad^2); ``W^T W = C^-1``
+    (:func:`calib_core.solve.whiten.whitening`)."""
+    n = A.shape[0]
+    W = np.zeros((n, 2, 2))
+    for i in range(n):
+        a00, a01, a10, a11 = A[i, 0, 0], A[i, 0, 1], A[i, 1, 0], A[i, 1, 1]
+        det = a00 * a11 - a01 * a10
+        # J = s A^-1
+        j00, j01 = a11 / det * s[i], -a01 / det * s[i]
+        j10, j11 = -a10 / det * s[i], a00 / det * s[i]
+        c00 = j00 * j00 + j01 * j01 + L[i, 0, 0]
+        c10 = j10 * j00 + j11 * j01 + L[i, 1, 0]
+        c11 = j10 * j10 + j11 * j11 + L[i, 1, 1]
+        l00 = math.sqrt(c00)
+        l10 = c10 / l00
+        l11 = math.sqrt(max(c11 - l10 * l10, 1e-300))
+        W[i, 0, 0] = 1.0 / l00
+        W[i, 1, 1] = 1.0 / l11
+        W[i, 1, 0] = -l10 / (l00 * l11)
+    return W
