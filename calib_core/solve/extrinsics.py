@@ -18,7 +18,7 @@ from .checks import (
     validate_pairs,
     validate_pixels,
 )
-from .kernels import bearing_frames, fit_pose, pose_report, whitened_residuals
+from .kernels import bearing_frames, fit_pose, pixel_errors, pose_report, whitened_residuals
 from .quality import Quality, geometry_reasons, orientation_notes
 from .refine import (
     LM_MAX_ITER,
@@ -47,21 +47,13 @@ PRIOR_PX = 1.5
 NOISY_FACTOR = 3.0
 
 
-def _mean_std(values: np.ndarray) -> tuple[float, float]:
-    finite = values[np.isfinite(values)]
-    if finite.size == 0:
-        return float("nan"), float("nan")
-    # sum and dot instead of .mean() / .std(): the same figures, a quarter of the call overhead.
-    mean = float(finite.sum()) / finite.size
-    dev = finite - mean
-    return mean, math.sqrt(float(dev @ dev) / finite.size)
-
-
-def _pixel_errors(camera: Any, T: np.ndarray, points_lidar: np.ndarray, pixels: np.ndarray) -> np.ndarray:
+def _pixel_errors(camera: Any, T: np.ndarray, points_lidar: np.ndarray, pixels: np.ndarray,
+                  inliers: np.ndarray) -> tuple[np.ndarray, float, float, int]:
+    """Pixel errors (NaN where not projectable), their mean and std over the inliers, and how many
+    inliers have none (:func:`.kernels.pixel_errors`)."""
     projected, valid = camera.project(points_lidar @ T[:3, :3].T + T[:3, 3])
-    diff = np.asarray(projected, dtype=np.float64) - pixels
-    err = np.hypot(diff[:, 0], diff[:, 1])
-    return np.where(np.asarray(valid, dtype=bool) & np.isfinite(err), err, np.nan)
+    return pixel_errors(np.ascontiguousarray(projected, dtype=np.float64), np.ascontiguousarray(valid, dtype=bool),
+                        np.ascontiguousarray(pixels, dtype=np.float64), inliers)
 
 
 @functools.lru_cache(maxsize=256)
@@ -265,7 +257,7 @@ def solve_extrinsics(
         else:
             R, t, _, _, it, status, H, z = fit_pose(points, bearings, frames, W, np.ascontiguousarray(T_start[:3, :3]),
                                                    np.ascontiguousarray(T_start[:3, 3]), False, LM_MAX_ITER)
-        failure = lm_failure(status, R, t)
+        failure = lm_failure(status, R, t) if status < 0 else None  # (fit_pose: -2 for a non-finite pose)
         if failure:
             if not robust:
                 raise CalibError(failure)
@@ -344,16 +336,15 @@ def solve_extrinsics(
         if pixels is None:
             projected, valid = camera.project(bearings)
             pixels = np.where(np.asarray(valid, dtype=bool)[:, None], np.asarray(projected, dtype=np.float64), np.nan)
-        residual_px = _pixel_errors(camera, T, points, pixels)
-        off = np.flatnonzero(~np.isfinite(residual_px[idx]))
-        if off.size:
+        residual_px, mean_px, std_px, n_off = _pixel_errors(camera, T, points, pixels, inliers)
+        if n_off:
+            off = np.flatnonzero(~np.isfinite(residual_px[idx]))
             warnings.append(
                 f"pairs {_ids_text([ids[idx[i]] for i in off])} do not reproject into the image; their pixel error is NaN"
             )
     else:
-        residual_px = np.full(n, np.nan)
+        residual_px, mean_px, std_px = np.full(n, np.nan), math.nan, math.nan
     mean_deg, std_deg = math.degrees(stats[0]), math.degrees(stats[1])
-    mean_px, std_px = _mean_std(residual_px[idx])
     outliers = np.flatnonzero(~inliers).tolist()
     outlier_ids = [ids[i] for i in outliers]
 

@@ -703,7 +703,8 @@ def fit_pose(P, B, F, W, R0, t0, use_dlt, max_iter):
     R, t : the optimum; R_start, t_start : the start
     iterations : int
     status : int
-        As :func:`lm_refine`; -3 when the DLT start failed (fewer than 6 pairs, coplanar points).
+        As :func:`lm_refine` (-2 also for a non-finite optimum); -3 when the DLT start failed (fewer than 6
+        pairs, coplanar points).
     H : (6, 6) normal matrix at ``(R, t)``
     z : (N, 2) whitened residuals at ``(R, t)`` (for the outlier test)
     """
@@ -714,6 +715,8 @@ def fit_pose(P, B, F, W, R0, t0, use_dlt, max_iter):
     else:
         R_start, t_start = R0.copy(), t0.copy()
     R, t, it, status, H, z = _lm(R_start, t_start, P, F, W, max_iter)
+    if not np.isfinite(R.sum() + t.sum()):
+        status = -2  # as lm_failure: the caller need not look at the pose
     return R, t, R_start, t_start, it, status, H, z
 
 
@@ -1266,3 +1269,44 @@ def laser_whitening(A, s, L):
         W[i, 1, 1] = 1.0 / l11
         W[i, 1, 0] = -l10 / (l00 * l11)
     return W
+
+
+@kernel
+def pixel_errors(projected, valid, pixels, inliers):
+    """Pixel error of every pair and its mean and std over the inliers, in one pass.
+
+    Parameters
+    ----------
+    projected : (N, 2) projected laser points, px; valid : (N,) bool, projectable into the image
+    pixels : (N, 2) clicked pixels, px; inliers : (N,) bool
+
+    Returns
+    -------
+    err : (N,) px, NaN where the point does not project or the pixel is not finite
+    mean, std : float, over the inliers' finite errors (NaN if none)
+    n_off : int, inliers without a finite error
+    """
+    n = pixels.shape[0]
+    err = np.empty(n)
+    total = 0.0
+    m = 0
+    n_off = 0
+    for i in range(n):
+        e = math.hypot(projected[i, 0] - pixels[i, 0], projected[i, 1] - pixels[i, 1])
+        if not (valid[i] and np.isfinite(e)):
+            e = np.nan
+        err[i] = e
+        if inliers[i]:
+            if e == e:
+                total += e
+                m += 1
+            else:
+                n_off += 1
+    if m == 0:
+        return err, np.nan, np.nan, n_off
+    mean = total / m
+    var = 0.0
+    for i in range(n):
+        if inliers[i] and err[i] == err[i]:
+            var += (err[i] - mean) ** 2
+    return err, mean, math.sqrt(var / m), n_off
