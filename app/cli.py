@@ -44,7 +44,7 @@ from .cli_toolchain import cmd_bag_extract, cmd_bag_info, cmd_export
 #: ``solve`` wrote the file but the calibration's quality status is ``unreliable``.
 EXIT_UNRELIABLE = 3
 #: Said once when a command has to compile a kernel (numba's disk cache is empty after an install).
-COMPILE_NOTICE = ("ba-calib: compiling numba kernels on first use (once after an install or an update: seconds "
+COMPILE_NOTICE = ("ba-calib: compiling the numba kernels on first use (once after an install or an update: seconds "
                   "each, up to about half a minute of CPU for all; later runs load them from the cache) ...")
 
 
