@@ -281,10 +281,11 @@ def solve_extrinsics(
     # median residual sets the scale.  A noisier-than-expected set just takes the robust path.
     inliers = np.ones(n, dtype=bool)
     hypotheses = 0
+    searched = False
     scale_ref = max(prior, floor) if prior is not None else max(robust_scale(r2), floor)
     if robust and r2.max() >= (inlier_k(n) * scale_ref) ** 2:
         fit = robust_fit(points, bearings, frames, W, prior, T[:3, :3], T[:3, 3], min_scale=floor)
-        hypotheses = fit.hypotheses
+        hypotheses, searched = fit.hypotheses, True
         iterations += fit.iterations
         H_at_T = None
         if fit.inliers.sum() >= 3:
@@ -298,7 +299,7 @@ def solve_extrinsics(
             if keep.size >= 3:
                 T, more = refine_angular(T, points[keep], frames[keep], W[keep])
                 iterations += more
-    idx = np.flatnonzero(inliers)
+    idx = np.flatnonzero(inliers) if searched else np.arange(n)  # (no search ran: all pairs are in)
     n_in = idx.size
     if cost == "pixel" and n_in >= 3:
         bad = np.nonzero(~np.all(np.isfinite(pixels[idx]), axis=1))[0]
@@ -345,7 +346,7 @@ def solve_extrinsics(
     else:
         residual_px, mean_px, std_px = np.full(n, np.nan), math.nan, math.nan
     mean_deg, std_deg = math.degrees(stats[0]), math.degrees(stats[1])
-    outliers = np.flatnonzero(~inliers).tolist()
+    outliers = np.flatnonzero(~inliers).tolist() if searched else []
     outlier_ids = [ids[i] for i in outliers]
 
     unreliable: list[str] = []
