@@ -24,7 +24,7 @@ from .candidates import find_candidates
 from .corner_probability import laser_features, scan_range_noise_m
 from ..solve.calibrate import pair_ids_and_sigmas
 from ..solve.quality import MIN_PAIRS_FOR_ERROR
-from .evidence import ProposalScreen, local_plane_residual_m, no_new_corner_note
+from .evidence import REASON_NO_EVIDENCE, ProposalScreen, local_plane_residual_m, no_new_corner_note
 from .image_corners import CornerImage, corner_image
 from .pose_state import DEFAULT_CLICK_SIGMA_PX, PoseState, current_pose
 from .propose import GUIDED_CLICK_SIGMA_PX, Proposal, Proposals, propose
@@ -123,7 +123,9 @@ class GuidedSession:
                         **options)
         skipped = set(self.skipped)
         if screen is not None and not any(p.replaces is None for p in props):
-            props.note = no_new_corner_note(props.screened)
+            # Only the ellipses too large: the rough-alignment reason (with its figures) says what to do.
+            rough_alignment = not props and props.reason is not None and props.reason != REASON_NO_EVIDENCE
+            props.note = props.reason if rough_alignment else no_new_corner_note(props.screened)
         return props.like(([p for p in props if p.laser_rc not in skipped]
                            + [p for p in props if p.laser_rc in skipped])[:n])
 
