@@ -4,7 +4,6 @@ the Edit buttons (undo, redo, deselect, delete), Clear all, and importing a pair
 from __future__ import annotations
 
 import tempfile
-import threading
 from pathlib import Path
 from typing import Any, Callable
 
@@ -14,11 +13,11 @@ import viser
 from calib_core.errors import CalibError
 from calib_core.pairs import Pair, load_pairs_yaml
 from calib_core.panorama import refine_click_to_corner
-from calib_core.solve.quality import NO_ERROR_ESTIMATE, error_estimate_reason, pairs_in_fit
 
 from .layout import RENDER_KEY
+from .pair_bar import PairBar
 from .security import upload_display_name
-from .ui_common import MIN_PAIRS, PICK_RADII, SNAP_RADIUS_PX, IMPORT_CHOICES, _fmt, md_escape
+from .ui_common import MIN_PAIRS, PICK_RADII, SNAP_RADIUS_PX, IMPORT_CHOICES, md_escape
 
 #: The buttons at the top of the control panel ("Next pair" is guided picking's own).
 PAIR_ACTIONS = ("Undo", "Cancel pair", "Next pair")
@@ -48,12 +47,10 @@ class PairsPanel:
         self.pair_action_callback = self._on_pair_action_event
         self._bg_actions = gui.add_button_group("Pair", PAIR_ACTIONS, order=top - 1.0)
         self._bg_actions.on_click(self.pair_action_callback)
-        # The live solve's figures in one line right under the buttons (the Calibration folder is far down).
-        self._md_live = gui.add_markdown("", order=top - 0.75)
         self._md_status = gui.add_markdown("", order=top - 0.5)
-        # Guided picking's state (which proposal, what to click, why nothing is proposed) where "Next pair" is.
-        self._md_guide = gui.add_markdown("", order=top - 0.45)
-        self._guide_lock = threading.Lock()
+        # The live solve's figures right under the buttons, guided picking's status under the pair status.
+        self.bar = PairBar(gui, live_order=top - 0.75, guide_order=top - 0.45)
+        self.show_guide_status = self.bar.show_guide_status  # the Guide panel's hook
         self._guarded_pair_action = guard(self.on_pair_action)
         self.folder = gui.add_folder("Pairs")
         with self.folder:
@@ -82,44 +79,6 @@ class PairsPanel:
     def status(self) -> str:
         """The status line under the pair actions at the top of the panel (markdown; empty when nothing waits)."""
         return str(self._md_status.content)
-
-    @property
-    def live_line(self) -> str:
-        """The live solve's one-line summary at the top of the panel (markdown; empty before the first solve)."""
-        return str(self._md_live.content)
-
-    @property
-    def guide_status(self) -> str:
-        """Guided picking's status at the top of the panel (markdown; empty while no guided session runs)."""
-        return str(self._md_guide.content)
-
-    def show_guide_status(self, guiding: bool, lines: list[str]) -> None:
-        """Show guided picking's status ``lines`` (markdown, already escaped) under the pair actions while a guided
-        session runs (``guiding``); clear it otherwise.  Called by the Guide panel from any thread."""
-        text = ("**Guided:** " + "  \n".join(lines)) if guiding and lines else ""
-        with self._guide_lock:
-            if self._md_guide.content != text:
-                self._md_guide.content = text
-
-    def _live_summary(self) -> str:
-        """"N pairs · mean X px · left out Y px · Quality: ok" of the live solve shown (figures it published)."""
-        live = getattr(self.app, "live", None)
-        bundle = getattr(live, "bundle", None)
-        r = getattr(bundle, "result", None)
-        if r is None:
-            return ""
-        n_fit = pairs_in_fit(r)
-        quality = getattr(r, "quality", None)
-        status = str(getattr(quality, "status", "ok"))
-        loo = getattr(quality, "leave_one_out", None)
-        loo_mean = float("nan") if loo is None else loo.mean_px
-        if error_estimate_reason(n_fit) is None:
-            errors = f"mean {_fmt(r.mean_px, 2)} px · left out {_fmt(loo_mean, 2)} px"
-        else:
-            errors = f"mean: {NO_ERROR_ESTIMATE}"
-        shown = "UNRELIABLE" if status == "unreliable" else status
-        solving = " · solving…" if getattr(live, "solving", False) else ""
-        return f"**{n_fit} pairs · {errors} · Quality: {shown}**{solving}"
 
     @property
     def dropdown_value(self) -> str:
@@ -176,9 +135,7 @@ class PairsPanel:
                 status.append(f"Pair {selected} selected: the next click moves it (**Cancel pair** deselects).")
             if self._md_status.content != "  \n".join(status):
                 self._md_status.content = "  \n".join(status)
-            live = self._live_summary()
-            if self._md_live.content != live:
-                self._md_live.content = live
+            self.bar.show_live(getattr(app, "live", None))
             if total < MIN_PAIRS:
                 lines.append(f"Pick {MIN_PAIRS - total} more to calibrate.")
             lines.append(f"Undo: {'yes' if state.can_undo else 'no'}, redo: {'yes' if state.can_redo else 'no'}")

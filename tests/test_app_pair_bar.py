@@ -46,7 +46,7 @@ def click_pairs(d: AppDriver, scene, n: int, noise_px: float = 1.0, first: int =
 def test_reclicks_skipped_or_stopped_do_not_come_back_and_the_bar_says_why(app, scene):
     d = AppDriver(app)
     click_pairs(d, scene, 4)
-    assert d.pairs_panel and app.pairs_panel.guide_status == ""  # no guided session yet: nothing in the bar
+    assert d.pairs_panel and app.pairs_panel.bar.guide_status == ""  # no guided session yet: nothing in the bar
     app.guide.screen = ProposalScreen(max_range_m=0.5, max_ellipse_px=app.guide.screen.max_ellipse_px)
     assert d.press_pair_action("Next pair") == [] and d.wait_guide()
     shown = []
@@ -58,18 +58,18 @@ def test_reclicks_skipped_or_stopped_do_not_come_back_and_the_bar_says_why(app, 
         rid = app.state.selected
         shown.append(rid)
         # The pair bar, at the top, says which proposal and what to click (not only the Guided folder).
-        bar = app.pairs_panel.guide_status
+        bar = app.pairs_panel.bar.guide_status
         assert f"re-click of pair {rid}" in bar and f"Pair {rid} (selected)" in bar
         assert "No new corner passes the checks here" in bar
         if len(shown) == 2:  # Stop declines it too; Next pair then shows another pair
             assert d.press_guide("Stop") == [] and d.wait_guide()
-            assert app.pairs_panel.guide_status == ""
+            assert app.pairs_panel.bar.guide_status == ""
             assert d.press_pair_action("Next pair") == [] and d.wait_guide()
         else:
             assert d.press_guide("Skip") == [] and d.wait_guide()
     assert len(shown) == len(set(shown)) and 1 <= len(shown) <= 4, shown
     assert d.guide_proposal is None
-    bar = app.pairs_panel.guide_status.replace("\\", "")  # markdown escapes
+    bar = app.pairs_panel.bar.guide_status.replace("\\", "")  # markdown escapes
     m = re.search(r"No new corner passes the checks here \((\d+) candidates? left out: most for far\); go on by hand",
                   bar)
     assert m and int(m.group(1)) > 0, bar
@@ -84,12 +84,12 @@ def test_the_live_line_shows_the_solve_figures_at_the_top(app, scene):
         assert app.state.undo()
         undone += 1
     assert d.wait_idle() and len(app.state.pairs()) == 4
-    assert "4 pairs · mean: no error estimate yet · Quality:" in app.pairs_panel.live_line
+    assert "4 pairs · mean: no error estimate yet · Quality:" in app.pairs_panel.bar.live_line
     for _ in range(undone):
         assert app.state.redo()
     assert d.wait_idle() and len(app.state.pairs()) == 7
     r = app.result
-    line = app.pairs_panel.live_line
+    line = app.pairs_panel.bar.live_line
     m = re.fullmatch(r"\*\*(\d+) pairs · mean ([0-9.]+) px · left out ([0-9.]+) px · Quality: (ok|warning|UNRELIABLE)"
                      r"\*\*", line)
     assert m, line
