@@ -30,17 +30,15 @@ from .pose_state import DEFAULT_CLICK_SIGMA_PX, PoseState, current_pose
 from .propose import GUIDED_CLICK_SIGMA_PX, Proposal, Proposals, propose
 from .visibility import visible_in_camera
 
-__all__ = ["GuidedSession", "RECLICK_MIN_LEVERAGE", "RECLICK_MIN_LOO_PX", "RECLICK_LOO_FACTOR"]
+__all__ = ["GuidedSession", "RECLICK_MIN_LEVERAGE", "RECLICK_MIN_LOO_PX"]
 
 #: A re-click helps clearly when the pose rests on the pair: the largest eigenvalue of its 2x2 hat-matrix block
 #: is at least this (the pose takes half or more of that click's error, so a precise click moves the pose).
 RECLICK_MIN_LEVERAGE = 0.5
 #: ... or when the pair lands this far off the pose fitted without it (px; 3x the 1.5 px per axis of a click and
-#: a whole-cell laser pick) ...
+#: a whole-cell laser pick): a precise click there moves the pose (rough by-eye pairs left un-re-clicked bias the
+#: solve: tests/test_app_guided_real.py).
 RECLICK_MIN_LOO_PX = 4.5
-#: ... and at least this many times the median leave-one-out error of the pairs (it stands out: when every pair
-#: is that far off, the clicks' recognition is the trouble and re-clicking one does not fix it).
-RECLICK_LOO_FACTOR = 2.0
 
 
 class GuidedSession:
@@ -137,8 +135,7 @@ class GuidedSession:
         * Exactly 4: all (8 equations for 6 unknowns: the pose rests on every pair, mean leverage 0.75).
         * 5 or more: from the solve's leave-one-out check (:class:`calib_core.solve.quality.LeaveOneOut`):
           a pair whose leverage is at least :data:`RECLICK_MIN_LEVERAGE`, or whose error under the pose fitted
-          without it is at least :data:`RECLICK_MIN_LOO_PX` and :data:`RECLICK_LOO_FACTOR` times the pairs'
-          median; a pair the robust solve left out as an outlier (a re-click at its predicted pixel can set it
+          without it is at least :data:`RECLICK_MIN_LOO_PX`; a pair the robust solve left out as an outlier (a re-click at its predicted pixel can set it
           right).  None when the check is not available.
         """
         fit_index = [i for i, p in enumerate(self.pairs) if not p.check]
@@ -151,11 +148,9 @@ class GuidedSession:
             return set()
         ids, _ = pair_ids_and_sigmas([self.pairs[i] for i in fit_index])  # the ids the solve named its pairs by
         index_of = dict(zip(ids, fit_index))
-        errors = np.asarray(loo.loo_px, np.float64)
-        median = float(np.nanmedian(errors)) if np.isfinite(errors).any() else np.nan
         worthy = set()
-        for pid, err, lev in zip(loo.ids, errors, np.asarray(loo.leverage, np.float64)):
-            far = np.isfinite(err) and err >= RECLICK_MIN_LOO_PX and err >= RECLICK_LOO_FACTOR * median
+        for pid, err, lev in zip(loo.ids, np.asarray(loo.loo_px, np.float64), np.asarray(loo.leverage, np.float64)):
+            far = np.isfinite(err) and err >= RECLICK_MIN_LOO_PX
             carried = (np.isfinite(lev) and lev >= RECLICK_MIN_LEVERAGE) or not np.isfinite(err)
             if (far or carried) and pid in index_of:
                 worthy.add(index_of[pid])
