@@ -184,6 +184,20 @@ def covering_window(columns_seen: np.ndarray, wrap: bool, margin: int = 0, quant
     return ColumnWindow.make(first, end - first, n, wrap)
 
 
+def steady_window(shown: ColumnWindow, wanted: ColumnWindow, slack: float = 1.25) -> ColumnWindow:
+    """``wanted``, but with ``shown``'s width when that still covers it and is at most ``slack`` times wider.
+
+    The page's layout follows the window's width, and a new solve changes the camera-facing window by a few
+    columns: keeping the width (the window re-centred on ``wanted``) keeps the panes from jumping under the
+    person's pointer in the middle of a session.
+    """
+    if (shown.n_cols != wanted.n_cols or shown.wrap != wanted.wrap or shown.is_full or wanted.is_full
+            or not wanted.width <= shown.width <= slack * wanted.width):
+        return wanted
+    start = wanted.start - (shown.width - wanted.width) // 2
+    return ColumnWindow.make(start, shown.width, wanted.n_cols, wanted.wrap)
+
+
 def texture_factor(width_cells: int, height_cells: int, max_side: int = MAX_TEXTURE_SIDE,
                    max_texels: int = MAX_TEXELS, max_factor: int = MAX_TEXTURE_FACTOR) -> int:
     """Texels per cell side for a nearest-neighbour enlarged texture of ``width_cells`` x ``height_cells`` cells.

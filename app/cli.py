@@ -44,8 +44,8 @@ from .cli_toolchain import cmd_bag_extract, cmd_bag_info, cmd_export
 #: ``solve`` wrote the file but the calibration's quality status is ``unreliable``.
 EXIT_UNRELIABLE = 3
 #: Said once when a command has to compile a kernel (numba's disk cache is empty after an install).
-COMPILE_NOTICE = ("ba-calib: compiling the numba kernels on first use (once after an install or an update, "
-                  "about a minute; later runs load them from the cache) ...")
+COMPILE_NOTICE = ("ba-calib: compiling the numba kernels on first use (once after an install or an update: seconds "
+                  "each, up to about half a minute of CPU for all; later runs load them from the cache) ...")
 
 
 @dataclass(frozen=True)
@@ -355,7 +355,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SystemExit as exc:
         return int(exc.code or 0) if isinstance(exc.code, int) else EXIT_USAGE
     noise = Noise()
-    # A first run after an install compiles the kernels for about a minute: say so instead of going quiet.
+    # A first run after an install compiles what it needs (small solves run interpreted): say so, not go quiet.
     compile_events.on_first_compile(lambda _name: noise.say(COMPILE_NOTICE))
     try:
         check_args(args)

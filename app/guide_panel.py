@@ -13,9 +13,8 @@ moves its pixel (0.3 px; it keeps its source, e.g. ``clicked``).
 One click on the camera (loupe or image) completes the pair through the
 ordinary pick logic; when the new proposals arrive the next one is started
 and framed by itself, so a guided pair costs one click.  "Skip" moves the half
-pick to the next proposal (a skipped new cell comes back last, a skipped or
-stopped re-click never), "Not a corner" drops the cell for good, "Stop" removes the half pick.  Undo works on these
-picks as on any other.
+pick to the next proposal (it comes back last; a re-click never), "Not a corner" drops the cell for good,
+"Stop" removes the half pick (and a re-click shown, for good).  Undo works on these picks as on any other.
 
 Proposals pass the clear-evidence screen of :mod:`calib_core.guide.evidence`
 with a 3-sigma radius of at most half the camera loupe's side zoomed out one
@@ -31,6 +30,9 @@ text.
 With "Auto-accept" on, proposals whose camera corner passes the strict gate
 of :mod:`calib_core.guide.auto_accept` are added as pairs tagged ``auto``
 (one undoable step per batch).
+
+With several shots, proposals are ranked across all of them and the page switches to the next proposal's
+shot by itself (:mod:`app.guide_shots`).
 
 All maths is :mod:`calib_core.guide`; this module routes buttons and draws text.
 """
@@ -50,6 +52,7 @@ from calib_core.guide.evidence import ProposalScreen
 from calib_core.guide.session import GuidedSession
 from calib_core.pairs import Pair
 
+from .guide_shots import GuideShotsMixin
 from .guide_support import ELLIPSE_MARGIN_PX, live_quality, max_ellipse_px_for, rank_proposals
 from .live_solver import LiveSolver
 from .state import AnnotationState
@@ -58,7 +61,7 @@ from .ui_common import MIN_PAIRS, md_escape
 BUTTONS = ("Next pair", "Skip", "Not a corner", "Stop")
 
 
-class GuidePanel:
+class GuidePanel(GuideShotsMixin):
     """The Guide folder of the control panel and the guided-picking flow.
 
     Parameters
@@ -99,6 +102,8 @@ class GuidePanel:
         solve shown (:class:`calib_core.solve.quality.Quality`), or None.
     order : float, optional
         Position of the folder in the control panel.
+    shots : callable, optional
+        ``shots()`` -> ``(depths, images, shown shot)`` of every shot of a session of several (else None).
     """
 
     def __init__(self, gui: Any, state: AnnotationState, depth: Any, camera: Any, image: np.ndarray, *,
@@ -108,7 +113,9 @@ class GuidePanel:
                  order: float | None = None, auto_gate: AutoGate | None = None,
                  click_source: Callable[[int], str | None] = lambda pick_id: None,
                  on_start: Callable[[], None] = lambda: None,
-                 solve_quality: Callable[[], tuple | None] = lambda: None, on_status: Callable | None = None) -> None:
+                 solve_quality: Callable[[], tuple | None] = lambda: None,
+                 shots: Callable[[], Any] | None = None, on_status: Callable | None = None) -> None:
+        self._init_shots(shots)
         self.state, self.depth, self.camera, self.image = state, depth, camera, image
         self._solve_quality, self._on_status = solve_quality, on_status or (lambda guiding, lines: None)  # pair bar
         self._job_quality: tuple | None = None  # (pairs, status, reasons) of the guide's own solve, last job
@@ -214,7 +221,7 @@ class GuidePanel:
 
     def _on_state_change(self, state: AnnotationState) -> None:
         """After any change of the pairs: resubmit the proposals when the complete pairs changed."""
-        pairs = state.pairs()
+        pairs = self._pairs_now(state)  # the shown shot's, or with several shots every shot's
         T0 = self._initial_T()
         key = (tuple(pairs), None if T0 is None else np.asarray(T0, dtype=np.float64).tobytes(), self._auto)
         with self._lock:
@@ -263,6 +270,8 @@ class GuidePanel:
 
     def _job(self, payload: tuple) -> tuple:
         """On the worker: sync the session with the pairs, rank, and (optionally) gate for auto-accept."""
+        if self._shots is not None:
+            return self._shots_job(payload)
         key, pairs, T0, skipped, dropped, auto = payload
         if self._session is None:
             self._session = GuidedSession(self.depth, self.camera, pairs, T_initial=T0, image=self.image)
@@ -288,7 +297,7 @@ class GuidePanel:
             waiting = half.laser_rc if half is not None else next(
                 (rc for rc, pid in self._reclick_of.items() if pid == self._reclick), None)
             cells = [tuple(p.laser_rc) for p in props]
-            index = cells.index(waiting) if waiting in cells else 0
+            index = self._first_index(props, cells, waiting)
             self._proposals, self._index, self._shown_key = props, index, key
             self._auto_pairs = auto_pairs
             self._pending_posts += 1
@@ -321,24 +330,18 @@ class GuidePanel:
             with self._lock:
                 self._pending_posts -= 1
 
-    def _guided_half(self):
-        """The pending pick if it is a guided half (laser end only), else None."""
-        p = self.state.pending()
-        return p if p is not None and p.source == "guided" and p.pixel is None else None
-
     def _reclick_id(self, p: Proposal | None) -> int | None:
-        return None if p is None or p.replaces is None else self._reclick_of.get(tuple(p.laser_rc))
-
-    def _end_reclick(self) -> None:
-        if self._reclick is not None:
-            self._reclick = None
-            self.state.select(None)
+        if p is None or p.replaces is None or self.shot_of(p) != self.active_shot:
+            return None
+        return self._reclick_of.get(tuple(p.laser_rc))
 
     def _start_current(self, quiet: bool = False) -> None:
         """Make (or move) the guided half pick at the shown proposal -- or, for a re-click, select the rough
         pair so the next camera click moves its pixel -- and frame the loupes on it."""
         p = self.current
         self._end_reclick()
+        if self._elsewhere(p):  # in another shot: that shot is shown, and its panel goes on
+            return
         if p is None:
             self._refresh()
             return
@@ -382,7 +385,7 @@ class GuidePanel:
     def _unreliable(self) -> str | None:
         """The first reason why the calibration of the current pairs is unreliable (the live solve's verdict,
         else the guide's own solve of the same pairs), or None (reliable, or not known yet)."""
-        pairs = tuple(self.state.pairs())
+        pairs = self._quality_pairs()
         for known in (self._solve_quality(), self._job_quality):
             if known is not None and tuple(known[0]) == pairs:
                 return (str(known[2][0]) if known[2] else "the solve's verdict") if known[1] == "unreliable" else None
@@ -390,14 +393,13 @@ class GuidePanel:
 
     def _on_button(self, label: str) -> None:
         if label == "Stop":
-            p = self.current
-            if self._guiding and p is not None and p.replaces is not None:  # a re-click declined: not offered again
-                self._drop_current(p)
+            if self._guiding and self.current is not None and self.current.replaces is not None:
+                self._drop_current(self.current)  # a re-click declined: not offered again
             self._guiding = self._want_next = False
             self._guided_side = 0.0
             self._drop_unfinished()
             return
-        if not self._active(len(self.state.complete_picks())):
+        if not self._active(self._n_complete()):
             raise CalibError(f"guided picking starts after {MIN_PAIRS} pairs or an imported initial extrinsic")
         reason = self._unreliable()
         if reason is not None:
@@ -427,28 +429,17 @@ class GuidePanel:
     def _drop_current(self, p: Proposal) -> None:
         with self._lock:  # the shown proposal ``p``, for good
             self._dropped.append(tuple(p.laser_rc))
-            del self._proposals[self._index]
+            self._delete_proposal(self._index)
             self._index = 0 if self._index >= len(self._proposals) else self._index
 
-    def _drop_unfinished(self) -> None:
-        """End a re-click, delete the guided pair still waiting for its camera click and take the proposal's
-        ellipse off the camera loupe."""
-        self._end_reclick()
-        half = self._guided_half()
-        if half is not None:
-            self.state.delete(half.id)
-        loupes = self._loupes()
-        if loupes is not None and loupes.camera_crop.cov_px2 is not None:
-            loupes.frame_camera(*loupes.camera_crop.center)
-        self._refresh()
-
     def _on_auto(self, on: bool) -> None:
+        self._refuse_auto_across_shots(on)
         self._auto = on
         self._on_state_change(self.state)  # recompute with (or without) the gate
 
     # ---------------------------------------------------------------- drawing
     def _refresh(self) -> None:
-        n = len(self.state.complete_picks())
+        n = self._n_complete()
         active = self._active(n)
         with self._lock:
             busy, error, props, index, reason = self._busy, self._error, self._proposals, self._index, self._reason
@@ -477,7 +468,7 @@ class GuidePanel:
             lines.append(f"Proposal {index + 1} of {len(props)}: cell (row {p.laser_rc[0]}, col {p.laser_rc[1]}), "
                          f"{what}, gain {p.gain:.3f}")
             lines.append(f"Predicted pixel ({p.pixel[0]:.1f}, {p.pixel[1]:.1f}), 3σ ±{major:.1f} px")
-            lines += [f"{md_escape(props.note)}."] if getattr(props, "note", None) else []
+            lines += self.shot_lines(p) + ([f"{md_escape(props.note)}."] if getattr(props, "note", None) else [])
             half = self.state.pending()
             if self._reclick is not None and self._reclick_id(p) == self._reclick:
                 lines.append(f"Pair {self._reclick} (selected): re-click its corner in the camera loupe.")
@@ -504,4 +495,6 @@ def attach_guide_panel(app: Any) -> GuidePanel:
                       loupes=lambda: getattr(app, "loupes", None), ba_key=app.ba_keys[0],
                       order=app.pairs_folder.order + 0.5,
                       click_source=app.camera_click_source, on_start=app.forget_last_picks,
-                      solve_quality=lambda: live_quality(app), on_status=app.pairs_panel.show_guide_status)
+                      solve_quality=lambda: live_quality(app), on_status=app.pairs_panel.show_guide_status,
+                      shots=None if len(app.shot_scenes) < 2 else lambda: (
+                          [sc.depth for sc in app.shot_scenes], [sc.image for sc in app.shot_scenes], app.active_shot))

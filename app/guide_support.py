@@ -76,3 +76,60 @@ def live_quality(app: Any) -> tuple | None:
     bundle = app.live.bundle
     quality = getattr(getattr(bundle, "result", None), "quality", None)
     return None if quality is None else (tuple(bundle.pairs), quality.status, list(quality.reasons))
+
+
+class ShotGuide:
+    """Guided picking across the shots of a session (issue 21), on the guide's worker thread.
+
+    Proposals are :func:`calib_core.shots.propose_shots` (what ``ba-calib propose --shot`` ranks): every
+    shot's scan searched under the joint pose of all shots' pairs, merged by one D-optimal gain.  Each
+    shot's candidate cells and its photo's corner image are found once and kept.
+
+    Parameters
+    ----------
+    depths, images : lists, one per shot
+        Each shot's depth matrix and RGB photo.
+    camera : CameraModel
+        The one camera of every shot.
+    """
+
+    def __init__(self, depths: list, images: list, camera: Any) -> None:
+        self.depths, self.images, self.camera = list(depths), list(images), camera
+        self._cache: dict[int, dict] = {}
+
+    def _options(self, k: int, screen: ProposalScreen) -> dict:
+        from calib_core.guide.candidates import find_candidates
+        from calib_core.guide.image_corners import corner_image
+
+        if k not in self._cache:
+            self._cache[k] = {"candidates": find_candidates(self.depths[k]),
+                              "corner_image": corner_image(self.images[k])}
+        return {**self._cache[k], "screen": screen}
+
+    def rank(self, pairs_by_shot: list, ids_by_shot: list, T0, dropped: list, active: int,
+             screen: ProposalScreen) -> tuple:
+        """Proposals over every shot for the pairs ``pairs_by_shot`` (each shot's, ids ``ids_by_shot``).
+
+        Returns
+        -------
+        props : calib_core.guide.Proposals
+            At most :data:`N_PROPOSALS`, best first; cells of the shown shot ``active`` in ``dropped``
+            ("Not a corner") left out.
+        shot_of : list of int
+            The shot of each proposal.
+        reclick_of : dict
+            Cell -> pick id of the pair each re-click proposal of the shown shot replaces.
+        """
+        from calib_core.guide.propose import Proposals
+        from calib_core.shots import Shot, propose_shots
+
+        shots = [Shot.from_pairs(pairs, self.depths[k], self.camera, name=f"shot {k}")
+                 for k, pairs in enumerate(pairs_by_shot)]
+        gone = set(map(tuple, dropped))
+        ranked, _ = propose_shots(shots, self.camera, N_PROPOSALS + len(gone), T_initial=T0,
+                                  shot_options={k: self._options(k, screen) for k in range(len(shots))})
+        kept = [sp for sp in ranked if not (sp.shot == active and tuple(sp.proposal.laser_rc) in gone)][:N_PROPOSALS]
+        props = Proposals([sp.proposal for sp in kept], None if kept else "no cell of any shot qualifies")
+        reclick_of = {tuple(sp.proposal.laser_rc): ids_by_shot[active][sp.proposal.replaces]
+                      for sp in kept if sp.shot == active and sp.proposal.replaces is not None}
+        return props, [sp.shot for sp in kept], reclick_of

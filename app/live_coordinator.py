@@ -14,19 +14,29 @@ import numpy as np
 
 from calib_core.errors import CalibError
 from calib_core.overlays import colorize_points, columns_seen_by_camera
-from calib_core.pairs import Pair, resolve_pairs
+from calib_core.pairs import resolve_pairs
 from calib_core.solve import calibrate
 from calib_core.transforms import transform_points
 
 from .ba_view import ColumnWindow, covering_window
 from .live_solver import LiveSolver
-from .shot_solve import joint_bundle
+from .shot_solve import checked_bundle, joint_bundle, pairs_in_3d
 from .state import AnnotationState
 from .ui_common import MIN_PAIRS, SolveBundle, CloudUpdate
 
 #: How long a change of the pairs waits for its solve's redraw (which draws the change too) before the changing
 #: thread redraws it itself: one redraw per click when the solve is quick, the moved marker never later than this.
 SHOW_WAIT_S = 0.03
+#: Several shots: show the joint fit first and check the shots against each other in the solver's next job
+#: (False: both in one job, as before issue 21's speed target; ``bench.app_click --shots-in-one-job``).
+CHECKS_FOLLOW = True
+
+
+class _CheckShots:
+    """The solver's second job of a change in a session of several shots: the shown joint fit's shot checks."""
+
+    def __init__(self, bundle: SolveBundle) -> None:
+        self.bundle = bundle
 
 
 class LiveSolveCoordinator:
@@ -49,6 +59,10 @@ class LiveSolveCoordinator:
         self._result_floor = 0
         self._change_time: tuple[int, float] = (0, 0.0)  # (job, perf_counter) of the last change of the pairs
         self._last_update: tuple[float, float] | None = None  # (click-to-update seconds, perf_counter published)
+        self._last_checks: float | None = None  # seconds from the change to its shots' checks shown
+        self._shot_cache: dict = {}  # each shot's resolved pairs (app.shot_solve.make_shots)
+        #: CPU seconds of the solver thread's last jobs, by kind ("solve", "joint fit", "shot checks"): benchmarks.
+        self.solve_cpu: dict[str, float] = {}
         self._facing: ColumnWindow | None = None  # from the last good solve it was computed for
         self._facing_of: SolveBundle | None = None  # the solve ``_facing`` was computed for
         self._stopped = False
@@ -114,6 +128,9 @@ class LiveSolveCoordinator:
                     app.cloud.show_camera(None)
                     if len(picks) >= 2:  # 2-3 pairs fix the rotation: line the render and loupes up (issue 20)
                         app.post(lambda pairs=[p.to_pair() for p in picks]: app.align.fit_to_pairs(pairs))
+        if (solve_job is None and not self.solving and self._cloud_worker is not None
+                and not self._stopped):  # the 3-D pane's pair marks (a solve's cloud job draws them too)
+            self._cloud_worker.submit(0, self._bundle)
         # Not while this thread holds the UI lock: the solver could not redraw before the wait ends.
         if solve_job is not None and not app.ui_lock.held_here() and self._wait_shown(solve_job, SHOW_WAIT_S):
             return
@@ -141,12 +158,27 @@ class LiveSolveCoordinator:
             n_complete = sum(1 for p in app.state.all_picks if p.complete)
             app.calibration_panel.show(self._bundle, self.solve_error, self.solving, n_complete)
 
-    def _solve_job(self, payload: tuple[list[int], list[Pair], list[int]]) -> SolveBundle:
+    def _solve_job(self, payload: Any) -> SolveBundle:
         """The solve and what the error display and the 2-D overlays need (the cloud comes later)."""
+        c0 = time.thread_time()
+        kind = ("shot checks" if isinstance(payload, _CheckShots) else
+                "joint fit" if len(self.app.shot_scenes) > 1 and CHECKS_FOLLOW else "solve")
+        try:
+            return self._solve_payload(payload)
+        finally:
+            self.solve_cpu[kind] = time.thread_time() - c0
+
+    def _solve_payload(self, payload: Any) -> SolveBundle:
         app = self.app
+        if isinstance(payload, _CheckShots):  # the shown joint fit's leave-one-shot-out and disagreement test
+            return checked_bundle(app, payload.bundle)
         ids, pairs, shot_of = payload
-        if len(app.shot_scenes) > 1:  # several shots: one joint solve (app.shot_solve)
-            return joint_bundle(app, ids, pairs, shot_of)
+        if len(app.shot_scenes) > 1:
+            # Several shots: the joint fit is shown first; its shots' checks are this thread's next job
+            # (_on_solved), so a click costs the joint fit, and the status is never "ok" before the checks ran.
+            if not CHECKS_FOLLOW:
+                return joint_bundle(app, ids, pairs, shot_of)
+            return joint_bundle(app, ids, pairs, shot_of, checks=False, cache=self._shot_cache)
         t0 = time.perf_counter()
         points, _, pixels = resolve_pairs(pairs, app.depth, app.camera)
         # The pairs carry their pick ids, so the solve names outliers and warnings by the ids the page shows.
@@ -177,13 +209,20 @@ class LiveSolveCoordinator:
                 else:
                     self._bundle = bundle
                     self.solve_error = None
+                    if bundle.shots is not None and not bundle.shots.solved.checked and job == self._job:
+                        self._solver.submit(job, _CheckShots(bundle))  # under the UI lock: no newer change lost
                     if app.view.any_tab_in_3d():  # else the hidden 3-D pane gets it with its colours (cloud job)
                         app.cloud.show_camera(bundle.result.T_camera_lidar)
                 self.redraw()
             change_job, change_time = self._change_time
             if job == change_job:  # after the batch was handed to viser
                 now = time.perf_counter()
-                self._last_update = (now - change_time, now)
+                if bundle is not None and bundle.shots is not None and bundle.shots.solved.checked:
+                    self._last_checks = now - change_time
+                    if len(bundle.shots.shots) < 2 or self._last_update is None or self._last_update[1] < change_time:
+                        self._last_update = (now - change_time, now)  # no unchecked fit was shown first
+                else:
+                    self._last_update = (now - change_time, now)
         with self._shown:
             self._shown_job = max(self._shown_job, job)
             self._shown.notify_all()
@@ -234,9 +273,14 @@ class LiveSolveCoordinator:
             if facing is not None:
                 self._facing = facing
 
-    def _cloud_job(self, bundle: SolveBundle) -> CloudUpdate:
+    def _cloud_job(self, bundle: SolveBundle | None) -> CloudUpdate | None:
         # Decided when the job runs: a tab may have left or entered the 3-D view meanwhile.
         app = self.app
+        pairs = pairs_in_3d(app)
+        with app.ui_lock:
+            app.cloud.show_pairs(*pairs)
+        if bundle is None:  # only the pair marks (no solve shown)
+            return None
         t0 = time.perf_counter()
         T = bundle.result.T_camera_lidar
         colors = self._cloud_colors(T) if app.view.any_tab_in_3d() and app.cloud.shows is not bundle else None
@@ -250,6 +294,8 @@ class LiveSolveCoordinator:
             traceback.print_exception(error)
             return
         app = self.app
+        if update is None:
+            return
         with app.ui_lock:
             if self._stopped or update.bundle is not self._bundle:
                 return  # superseded: the newer solve queued its own
@@ -289,6 +335,10 @@ class LiveSolveCoordinator:
         """
         last = self._last_update
         return None if last is None else last[0]
+
+    def last_checks_shown(self) -> float | None:
+        """Seconds from the last change of the pairs to its shots' checks shown (several shots), else None."""
+        return self._last_checks
 
     @property
     def last_update_time(self) -> float | None:

@@ -58,26 +58,55 @@ def by_shot(ids: Sequence[int], pairs: Sequence[Pair], shot_of: Sequence[int]) -
 
 
 def make_shots(pairs: Sequence[Pair], shot_of: np.ndarray, depths: Sequence[Any], camera: Any,
-               names: Sequence[str] = ()) -> list[Shot]:
-    """One :class:`calib_core.shots.Shot` per scan of ``depths``, holding its pairs (``shot_of``: each pair's)."""
+               names: Sequence[str] = (), cache: dict | None = None) -> list[Shot]:
+    """One :class:`calib_core.shots.Shot` per scan of ``depths``, holding its pairs (``shot_of``: each pair's).
+
+    ``cache`` (a dict the caller keeps) holds each shot's last resolved pairs: a click changes one shot, and
+    the others' pairs are not resolved again (their scans, pairs and names are the key)."""
     out = []
     for k, depth in enumerate(depths):
         mine = [p for p, s in zip(pairs, shot_of) if s == k]
-        out.append(Shot.from_pairs(mine, depth, camera, name=names[k] if k < len(names) else f"shot {k}"))
+        name = names[k] if k < len(names) else f"shot {k}"
+        key = (id(depth), id(camera), name, tuple(mine))
+        hit = None if cache is None else cache.get(k)
+        if hit is not None and hit[0] == key:
+            out.append(hit[1])
+            continue
+        shot = Shot.from_pairs(mine, depth, camera, name=name)
+        if cache is not None:
+            cache[k] = (key, shot)
+        out.append(shot)
     return out
 
 
-def joint_bundle(app: Any, ids: Sequence[int], pairs: Sequence[Pair], shot_of: Sequence[int]) -> SolveBundle:
+def joint_bundle(app: Any, ids: Sequence[int], pairs: Sequence[Pair], shot_of: Sequence[int], *,
+                 checks: bool = True, cache: dict | None = None) -> SolveBundle:
     """The live solve of every shot's pairs: a :class:`SolveBundle` whose rows are in shot order.
 
     The clicked pixels and moved laser points of other shots than the one shown are NaN: the panes of the
-    shown shot draw only its own pairs; the table, the quality and Verify count them all.
+    shown shot draw only its own pairs; the table, the quality and Verify count them all.  ``checks=False``:
+    the joint fit alone, shown first (never ``ok``: :data:`calib_core.shots.UNCHECKED_REASON`);
+    :func:`checked_bundle` adds the shots' checks.  ``cache``: as for :func:`make_shots`.
     """
     t0 = time.perf_counter()
     ids, pairs, shot_of = by_shot(ids, pairs, shot_of)
     names = [shot_name(f) for f in app.state.shots]
-    shots = make_shots(pairs, shot_of, [sc.depth for sc in app.shot_scenes], app.camera, names)
-    solved = solve_shots(shots, app.camera)
+    shots = make_shots(pairs, shot_of, [sc.depth for sc in app.shot_scenes], app.camera, names, cache)
+    return _bundle(app, ids, pairs, shot_of, shots, solve_shots(shots, app.camera, checks=checks), t0)
+
+
+def checked_bundle(app: Any, bundle: SolveBundle) -> SolveBundle:
+    """``bundle`` (a joint fit of :func:`joint_bundle` with ``checks=False``) with the shots' checks:
+    leave-one-shot-out and the disagreement test, which may leave a shot out and so move the pose."""
+    t0 = time.perf_counter()
+    joint = bundle.shots
+    solved = solve_shots(joint.shots, app.camera)
+    return _bundle(app, bundle.pick_ids, bundle.pairs, joint.shot_of, joint.shots, solved,
+                   t0 - bundle.seconds)
+
+
+def _bundle(app: Any, ids: Sequence[int], pairs: Sequence[Pair], shot_of: np.ndarray, shots: list[Shot],
+            solved: ShotsResult, t0: float) -> SolveBundle:
     T = solved.result.T_camera_lidar
     points = np.concatenate([s.points_lidar for s in shots]).reshape(-1, 3)
     pixels = np.concatenate([s.pixels for s in shots]).reshape(-1, 2).copy()
@@ -115,7 +144,10 @@ def joint_document(joint: JointSolve, camera: Any, base_dir: Any = None) -> dict
 
 def joint_export(app: Any, joint: JointSolve) -> tuple[bytes, Path | None]:
     """Export of a joint solve: the YAML to download (camera inline), also written to ``app.output_path``
-    (camera named relative to it) when set; as :meth:`app.export_panel.ExportPanel.export_extrinsics`."""
+    (camera named relative to it) when set; as :meth:`app.export_panel.ExportPanel.export_extrinsics`.
+    A joint fit whose shots were not checked yet is checked first (the file always has them)."""
+    if not joint.solved.checked:
+        joint = JointSolve(solve_shots(joint.shots, app.camera), joint.shots, joint.shot_of)
     if app.output_path is not None:
         write_yaml_atomic(app.output_path, joint_document(joint, app.camera, base_dir=app.output_path.parent))
     with tempfile.TemporaryDirectory() as tmp:
@@ -151,3 +183,24 @@ def shots_markdown(joint: JointSolve, active: int) -> str:
         rows.append(f"| {rep.index}{shown} | {rep.n_pairs} | {err} | {loso_px} | {loso_deg} | {offset} | {flag} |")
     notes = [f"Shot {e.shot}, leave-one-shot-out: {md_escape(e.note)}" for e in solved.leave_one_shot_out if e.note]
     return "  \n".join(lines) + "\n\n" + "\n".join(rows) + ("\n\n" + "  \n".join(notes) if notes else "")
+
+
+def pairs_in_3d(app: Any) -> tuple[np.ndarray, list[str], np.ndarray]:
+    """What the 3-D pane marks: every shot's pairs' laser points (lidar frame, metres; NaN where the cell has
+    no return), their labels (the pair number; ``S<shot>·<id>`` with several shots) and shots.
+
+    All shots share the rig's lidar frame, so every shot's pairs are drawn together: the spread the joint solve
+    sees (the cloud shown is the shown shot's scan)."""
+    picks = [p for p in app.state.all_picks if p.laser_rc is not None or p.laser_xyz is not None]
+    several = len(app.shot_scenes) > 1
+    points = np.full((len(picks), 3), np.nan)
+    for i, p in enumerate(picks):  # a few tens of pairs: one lookup each
+        if p.laser_xyz is not None:
+            points[i] = p.laser_xyz
+        elif p.shot < len(app.shot_scenes):
+            depth = app.shot_scenes[p.shot].depth
+            r, c = p.laser_rc
+            if 0 <= r < depth.shape[0] and 0 <= c < depth.shape[1] and depth.valid[r, c]:
+                points[i] = depth.points[r, c]
+    labels = [f"S{p.shot}\u00b7{p.id}" if several else str(p.id) for p in picks]
+    return points, labels, np.array([p.shot for p in picks], np.int64)

@@ -5,7 +5,9 @@ live solve: :mod:`app.shot_solve`).  "Show this shot" restarts the app on anothe
 (:meth:`app.serving.ShotServer.load`, through the server's request queue, as the "Bag frame" folder does):
 the page reconnects showing that shot's camera image, laser panes, loupes and render.  "Add this shot"
 loads a scan and its photo, named by their paths on the machine that serves the page, and adds them as a
-new shot in one undoable step (Pairs → Undo removes it again), then shows it.
+new shot in one undoable step (Pairs → Undo removes it again), then shows it.  Guided picking asks for
+the shot of its next proposal the same way (:meth:`ShotsPanel.show_for_guide`), and the page shown then goes
+on with the guided session.
 """
 
 from __future__ import annotations
@@ -47,6 +49,12 @@ class ShotsPanel:
         self.add_button.on_click(app.guard(self._on_add))
         app.state.subscribe(self._on_state_change)
         self._on_state_change(app.state)
+        guide = getattr(app, "guide", None)
+        if guide is not None:  # guided picking across shots: its next proposal may be in another shot
+            guide.show_shot = self.show_for_guide
+            if getattr(server, "resume_guided", False):  # this page was shown for a guided session: go on
+                server.resume_guided = False
+                app.post(guide.resume)
 
     @staticmethod
     def _options(state: Any) -> tuple[str, ...]:
@@ -81,6 +89,11 @@ class ShotsPanel:
             raise CalibError("give the new shot's scan and photo (their paths on the machine serving the page)")
         k = self.server.add_shot(scan, image)
         self.request(k)
+
+    def show_for_guide(self, shot: int) -> None:
+        """Guided picking's next proposal is in shot ``shot``: show it, and go on guiding there."""
+        self.server.resume_guided = True
+        self.request(shot)
 
     def request(self, shot: int) -> None:
         """Ask the serving loop to show shot ``shot`` (the app restarts on it; the page reconnects)."""

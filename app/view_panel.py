@@ -13,7 +13,7 @@ import numpy as np
 from calib_core.errors import CalibError
 from calib_core.viewpoint import viewpoint_behind_camera
 
-from .ba_view import ColumnWindow, ba_texture, texture_factor
+from .ba_view import ColumnWindow, ba_texture, steady_window, texture_factor
 from .camera_view import CameraView
 from .layout import RENDER_KEY, ImageSlot, bounds_of, layout_with_render
 from .settled_updates import settled
@@ -107,7 +107,8 @@ class ViewPanel:
         if mode == "all":
             return ColumnWindow.full(self.app.depth.shape[1], self.app.wrap_cols)
         if mode == "camera" and self.app.live.facing is not None:
-            return self.app.live.facing
+            shown = getattr(self, "_ba_window", None)  # None while the panel is being built
+            return self.app.live.facing if shown is None else steady_window(shown, self.app.live.facing)
         return self._ba_custom
 
     @property

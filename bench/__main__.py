@@ -45,6 +45,20 @@ def _commit() -> str:
         return "unknown"
 
 
+def _kept_sections(path: Path) -> str:
+    """The sections other benchmarks write into ``path`` themselves (``python -m bench.shots --write`` and the
+    like, whose titles name their module): kept as they are, since this run does not re-measure them."""
+    if not path.exists():
+        return ""
+    kept, keep = [], False
+    for line in path.read_text().splitlines(keepends=True):
+        if line.startswith("## "):
+            keep = "`bench.shots" in line
+        if keep:
+            kept.append(line)
+    return ("\n" + "".join(kept)) if kept else ""
+
+
 def _status(ok: bool) -> str:
     return "PASS" if ok else "**MISS**"
 
@@ -169,6 +183,7 @@ def main(argv=None) -> int:
         load=(load_start, os.getloadavg()[0]), vs_md=vs_md,
     )
     md += "\n" + organize.markdown(org)
+    md += _kept_sections(out / "performance.md")
     (out / "performance.md").write_text(md)
     log(f"wrote {out / 'performance.md'} and {perf}/*.png in {run_s:.0f} s")
 

@@ -2,6 +2,9 @@
 
 ``python -m bench.solve_vs_opencv [--quick] [--out FILE]`` prints the tables and
 writes them as markdown (default ``docs/perf/solve_vs_opencv.md``).
+``python -m bench.solve_vs_opencv --only-speed`` measures the speed section alone (seconds) and
+replaces that section in the existing report, saying when and at what load it was measured;
+the other sections keep the figures of their own run.
 
 Sections
 --------
@@ -413,26 +416,7 @@ def markdown(jit, sp, pin_rows, omni_rows, cov, load, quick, cmd, laser=None, po
         L.append(f"| {label} | {imp:.2f} s | {first:.2f} s | {1e3 * second:.2f} ms |")
     L.append("\n`warm_up()` compiles (cold cache) or loads (warm cache, `cache=True`) every solve kernel; the app "
              "calls it in a background thread at start so that no click waits for a compile.\n")
-    L.append("## Speed, same pairs to every method\n")
-    L.append("Median CPU time of this process per solve (`time.process_time`: not inflated when other jobs preempt "
-             "us); the median wall times follow in brackets.\n")
-    L.append("*whole*: the public `solve_extrinsics(points, bearings, camera=, pixels=)` with its defaults: input "
-             "checks, whitening, DLT start, LM, the outlier test (the robust LO-MSAC search runs only when a residual "
-             "exceeds the threshold: never on these clean pairs), covariance, quality verdict, pixel residuals. "
-             "*robust=False*: the same without the outlier test. *with `laser_cov_m2`*: the same with a laser-point "
-             "covariance per pair (1 cm per axis), as the app and `calibrate()` pass for whole-cell picks. *10 % outliers*: the whole solve on pairs with 10 % "
-             "stray clicks (30-80 px off), where the robust search runs and finds them.\n")
-    L.append("| camera | n | trials | `solve_extrinsics` (whole) | robust=False | with `laser_cov_m2` (as the app) | "
-             "OpenCV SQPnP + RefineLM | whole / OpenCV | with laser / OpenCV | whole, 10 % outliers (robust search) |")
-    L.append("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
-    for r in sp:
-        def ms(k):
-            return f"{1e3 * r[k]:.3f} ms ({1e3 * r[k + '_wall']:.3f})" if np.isfinite(r[k]) else "n/a (no OCam model)"
-        ratio_full = r["full"] / r["opencv"] if np.isfinite(r["opencv"]) else float("nan")
-        ratio_laser = r["laser"] / r["opencv"] if np.isfinite(r["opencv"]) else float("nan")
-        L.append(f"| {r['camera']} | {r['n']} | {r['trials']} | {ms('full')} | {ms('norobust')} | {ms('laser')} | "
-                 f"{ms('opencv')} | "
-                 f"{ratio_full:.2f} | {ratio_laser:.2f} | {ms('robust')} |")
+    L += speed_section(sp)
     L.append("\n## Accuracy on the pinhole variant: ours vs OpenCV, same pairs\n")
     L.append("Mean rotation error (deg) and translation error (cm) against the ground truth; ours = `calibrate` "
              "(whitened angular cost with the laser-pick term, robust). Pairs: `simulate_pairs` on the sample's pinhole "
@@ -514,6 +498,47 @@ def markdown(jit, sp, pin_rows, omni_rows, cov, load, quick, cmd, laser=None, po
     return "\n".join(L) + "\n"
 
 
+SPEED_HEADING = "## Speed, same pairs to every method"
+
+
+def speed_section(sp: list[dict]) -> list[str]:
+    """The markdown lines of the speed section (heading included)."""
+    L = [f"{SPEED_HEADING}\n"]
+    L.append("Median CPU time of this process per solve (`time.process_time`: not inflated when other jobs preempt "
+             "us); the median wall times follow in brackets.\n")
+    L.append("*whole*: the public `solve_extrinsics(points, bearings, camera=, pixels=)` with its defaults: input "
+             "checks, whitening, DLT start, LM, the outlier test (the robust LO-MSAC search runs only when a residual "
+             "exceeds the threshold: never on these clean pairs), covariance, quality verdict, pixel residuals. "
+             "*robust=False*: the same without the outlier test. *with `laser_cov_m2`*: the same with a laser-point "
+             "covariance per pair (1 cm per axis), as the app and `calibrate()` pass for whole-cell picks. *10 % outliers*: the whole solve on pairs with 10 % "
+             "stray clicks (30-80 px off), where the robust search runs and finds them.\n")
+    L.append("| camera | n | trials | `solve_extrinsics` (whole) | robust=False | with `laser_cov_m2` (as the app) | "
+             "OpenCV SQPnP + RefineLM | whole / OpenCV | with laser / OpenCV | whole, 10 % outliers (robust search) |")
+    L.append("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    for r in sp:
+        def ms(k):
+            return f"{1e3 * r[k]:.3f} ms ({1e3 * r[k + '_wall']:.3f})" if np.isfinite(r[k]) else "n/a (no OCam model)"
+        ratio_full = r["full"] / r["opencv"] if np.isfinite(r["opencv"]) else float("nan")
+        ratio_laser = r["laser"] / r["opencv"] if np.isfinite(r["opencv"]) else float("nan")
+        L.append(f"| {r['camera']} | {r['n']} | {r['trials']} | {ms('full')} | {ms('norobust')} | {ms('laser')} | "
+                 f"{ms('opencv')} | "
+                 f"{ratio_full:.2f} | {ratio_laser:.2f} | {ms('robust')} |")
+    return L
+
+
+def replace_speed_section(md: str, sp: list[dict], load: tuple[float, float], cmd: str) -> str:
+    """``md`` (a whole report) with its speed section measured anew; the other sections as they were."""
+    start = md.index(SPEED_HEADING)
+    end = md.find("\n## ", start + len(SPEED_HEADING))
+    end = len(md) if end < 0 else end + 1
+    L = speed_section(sp)
+    L.insert(1, f"This section alone was measured anew by `{cmd}` on "
+                f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())} (load average (1 min) {load[0]:.1f} at the "
+                f"start and {load[1]:.1f} at the end, {os.cpu_count()} shared cores); the other sections are from the "
+                "run named at the top.\n")
+    return md[:start] + "\n".join(L) + "\n\n" + md[end:].lstrip("\n")
+
+
 def run(quick: bool, skip=()) -> dict:
     """Every section; ``{"jit", "speed", "pin_rows", "omni_rows", "coverage", "laser", "load"}``."""
     load0 = os.getloadavg()[0]
@@ -550,9 +575,23 @@ def main(argv=None) -> int:
     p.add_argument("--quick", action="store_true")
     p.add_argument("--out", type=Path, default=None)
     p.add_argument("--skip", nargs="*", default=[], choices=["jit", "speed", "accuracy", "coverage"])
+    p.add_argument("--only-speed", action="store_true",
+                   help="measure the speed section alone and replace it in the existing report (--out or the default)")
     args = p.parse_args(argv)
     out = args.out or (REPO / "bench" / "out" / "quick" / "solve_vs_opencv.md" if args.quick
                        else REPO / "docs" / "perf" / "solve_vs_opencv.md")
+    if args.only_speed:
+        from calib_core.solve import warm_up
+
+        warm_up()
+        load0 = os.getloadavg()[0]
+        sp = speed(args.quick)
+        cmd = "python -m bench.solve_vs_opencv --only-speed" + (" --quick" if args.quick else "")
+        md = replace_speed_section(out.read_text(), sp, (load0, os.getloadavg()[0]), cmd)
+        out.write_text(md)
+        log(f"wrote the speed section of {out}")
+        print("\n".join(speed_section(sp)))
+        return 0
     res = run(args.quick, args.skip)
     cmd = "python -m bench.solve_vs_opencv" + (" --quick" if args.quick else "")
     print(write(res, args.quick, out, cmd))

@@ -372,6 +372,7 @@ def solve_parts(bs: BenchScene, rep: SpeedReport, reps: Callable[[int], int], n:
 
     from calib_core import solve as S
     from calib_core.solve import kernels
+    from calib_core.solve.checks import validate_pairs
     from calib_core.solve.whiten import whitening
 
     sc = bs.scene
@@ -379,16 +380,21 @@ def solve_parts(bs: BenchScene, rep: SpeedReport, reps: Callable[[int], int], n:
     F = kernels.bearing_frames(brg)
     W, _ = whitening(n, camera=sc.camera, frames=F)
     R0, t0, _ = kernels.dlt_pose(pts, brg)
-    R, t, _, _, _ = kernels.lm_refine(R0, t0, pts, F, W, 200)
+    R, t, _, _, H = kernels.lm_refine(R0, t0, pts, F, W, 200)
     inl = np.ones(n, dtype=bool)
+    eye3, zero3 = np.eye(3), np.zeros(3)
     parts = [
         ("whole solve_extrinsics", lambda: S.solve_extrinsics(pts, brg, camera=sc.camera, pixels=px)),
-        ("validate_pairs (input checks, compiled pass)", lambda: S.validate_pairs(pts, brg)),
+        ("validate_pairs (input checks, compiled pass)", lambda: validate_pairs(pts, brg)),
         ("whitening (one camera.project of 4N probes)", lambda: whitening(n, camera=sc.camera, frames=F)),
         ("dlt_pose (linear start, compiled)", lambda: kernels.dlt_pose(pts, brg)),
         ("lm_refine (whitened angular LM, compiled)", lambda: kernels.lm_refine(R0, t0, pts, F, W, 200)),
-        ("finish + covariance (compiled)", lambda: kernels.covariance(kernels.finish(R, t, pts, F, W, inl)[2], 1.0)),
-        ("pixel residuals (camera.project)", lambda: sc.camera.project(pts @ R.T + t)),
+        ("fit_pose (DLT start + LM, the solve's one compiled call)",
+         lambda: kernels.fit_pose(pts, brg, F, W, eye3, zero3, True, 200)),
+        ("pose_report (residuals, covariance, sigmas: one compiled call)",
+         lambda: kernels.pose_report(R, t, pts, F, W, inl, H, True, -1.0, False, 1.0, 1.5)),
+        ("pixel residuals (camera.project + pixel_errors)",
+         lambda: kernels.pixel_errors(*sc.camera.project(pts @ R.T + t), px, inl)),
     ]
     sub = SpeedReport()
     for label, fn in parts:

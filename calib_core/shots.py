@@ -70,10 +70,14 @@ __all__ = [
     "shots_extrinsics_document",
     "format_shots",
     "DEFAULT_ALPHA",
+    "UNCHECKED_REASON",
 ]
 
 #: Chance, per calibration, that a shot which agrees with the others is named (family-wise).
 DEFAULT_ALPHA = 0.01
+#: The quality reason of a joint fit whose shots were not yet checked against each other (``checks=False``).
+UNCHECKED_REASON = ("checking shots…: the shots have not been checked against each other yet "
+                    "(leave-one-shot-out and the disagreeing-shot test follow)")
 #: Hypotheses of a shot's common offset tried at most (pairs of its pairs, drawn with a fixed seed beyond).
 MAX_OFFSET_HYPOTHESES = 300
 
@@ -358,6 +362,10 @@ class ShotsResult:
         Two shots that disagree when neither can be told to be the wrong one.
     pair_ids : list of list of int
         Each shot's pair ids as the joint solve names them.
+    checked : bool
+        False for the joint fit alone (``solve_shots(..., checks=False)`` with two shots or more): no
+        leave-one-shot-out nor disagreement test has run, and :data:`UNCHECKED_REASON` keeps the
+        status from ``ok``.
     """
 
     result: CalibrationResult
@@ -369,6 +377,7 @@ class ShotsResult:
     disagreeing: list[int]
     undecided: list[int]
     pair_ids: list[list[int]]
+    checked: bool = True
 
 
 # --------------------------------------------------------------------------------------
@@ -595,6 +604,7 @@ def solve_shots(
     cost: str = "angular",
     detect: bool = True,
     alpha: float = DEFAULT_ALPHA,
+    checks: bool = True,
     **options: Any,
 ) -> ShotsResult:
     """Solve ``T_camera_lidar`` from the pairs of all shots together, and check the shots against each other.
@@ -609,6 +619,10 @@ def solve_shots(
         Test every shot against the others and leave a disagreeing one out (two shots or more).
     alpha : float
         Chance per calibration of naming a shot that agrees (module docstring).
+    checks : bool
+        False: the joint fit alone, without leave-one-shot-out and the disagreement test (a fraction of
+        the time, for a live display that shows the checked result a moment later).  With two shots or
+        more its status is then never ``ok`` (:data:`UNCHECKED_REASON`) and ``checked`` is False.
     **options
         Passed to :func:`calib_core.solve.solve_extrinsics` (``robust``, ``initial_T_camera_lidar``, ...).
 
@@ -643,7 +657,10 @@ def solve_shots(
     named_tests: dict[int, ShotTest] = {}
     undecided: list[int] = []
     reasons: list[str] = []
-    if len(shots) >= 2:
+    unchecked = len(shots) >= 2 and not checks
+    if unchecked:
+        reasons.append(UNCHECKED_REASON)
+    if len(shots) >= 2 and not unchecked:
         active = [k for k in everyone if len(shots[k].fit_positions)]
         held_options = {k: v for k, v in options.items() if k != "initial_T_camera_lidar"}
         while True:
@@ -701,7 +718,7 @@ def solve_shots(
         reports.append(ShotReport(k, s.name, s.n_pairs, len(s.fit_positions), int(s.check.sum()), k in kept,
                                   sorted(skip), _finite_mean(px), _finite_std(px), _finite_mean(deg), _finite_std(deg)))
     loso: list[LeaveOneShotOut] = []
-    if len(shots) >= 2:
+    if len(shots) >= 2 and not unchecked:
         for k, s in enumerate(shots):
             if k in named:  # the final fit was made without it
                 consistent = set(named_tests[k].consistent.tolist())
@@ -715,7 +732,7 @@ def solve_shots(
                                         f"the other shots ({others} fit pairs) do not determine a pose alone"))
     tests.update(named_tests)
     return ShotsResult(result, final_rows.shot, final_rows.position, reports, loso,
-                       [tests[k] for k in sorted(tests)], named, undecided, ids)
+                       [tests[k] for k in sorted(tests)], named, undecided, ids, checked=not unchecked)
 
 
 def _with_checks(result: CalibrationResult, shots: Sequence[Shot], kept: list[int], rows: _Rows, camera):
@@ -907,7 +924,8 @@ def propose_shots(
         The joint pose and covariance, if already known (:func:`joint_pose_state`).
     shot_options : dict shot -> dict, optional
         More keyword arguments of :func:`calib_core.guide.propose` for that shot, e.g. its scan's precomputed
-        ``candidates`` and ``plane_residual`` (a loop over many proposals computes them once per scan).
+        ``candidates`` and ``plane_residual`` (a loop over many proposals computes them once per scan),
+        or its photo's ``corner_image`` (used instead of one computed from ``images``).
 
     Returns
     -------
@@ -939,9 +957,11 @@ def propose_shots(
         used = [tuple(p.laser_rc) for p in s.pairs if p.laser_rc is not None]
         rough = [(i, tuple(p.laser_rc), DEFAULT_CLICK_SIGMA_PX if p.precision_px is None else p.precision_px)
                  for i, p in enumerate(s.pairs) if p.laser_rc is not None and not p.check]
-        corners = corner_image(images[k]) if k in images else None
+        extra = dict((shot_options or {}).get(k, {}))
+        corners = extra.pop("corner_image") if "corner_image" in extra else (
+            corner_image(images[k]) if k in images else None)
         props = propose(s.depth, camera, state, n, exclude_rc=used, click_sigma_px=sigma, corner_image=corners,
-                        reclick=rough, **(shot_options or {}).get(k, {}))
+                        reclick=rough, **extra)
         if not props:
             continue
         rc = np.array([p.laser_rc for p in props], dtype=np.int64)

@@ -21,7 +21,7 @@ def pytest_sessionstart(session):
     """Compile every numba kernel once, before the first test.
 
     On a fresh checkout numba's disk cache is empty and compiling all kernels
-    takes about a minute (longer on a loaded machine).  The app compiles them
+    takes about half a minute of CPU (longer on a loaded machine).  The app compiles them
     in a background thread, so without this the first app test's wait for its
     live solve would also wait for the compiler, and could time out.  With a
     warm cache this loads the kernels in about a second.

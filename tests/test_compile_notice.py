@@ -1,4 +1,4 @@
-"""A first run compiles the kernels for about a minute: the CLI says so once, and a cached run says nothing."""
+"""A first run compiles the kernels (about half a minute of CPU for all): the CLI says so once, and a cached run says nothing."""
 
 from __future__ import annotations
 

@@ -30,7 +30,7 @@ res = solve_extrinsics(points_lidar, bearings, camera=cam, pixels=pixels)
 print("rotation error", float(np.abs(res.T_camera_lidar[:3, :3] - R).max()))
 print("translation error", float(np.abs(res.T_camera_lidar[:3, 3] - t).max()))
 print("max px", float(np.nanmax(res.residual_px)))
-print("lm compiled", bool(kernels.lm_refine.dispatcher.signatures))
+print("lm compiled", bool(kernels.fit_pose.dispatcher.signatures))
 """
 
 

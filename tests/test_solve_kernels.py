@@ -150,3 +150,32 @@ def test_geodesic_cost_is_eq7_unweighted():
     pix = solve_extrinsics(points, b, camera=cam, pixels=clicked, cost="pixel")
     # The whitened angular cost is the pixel cost to first order: the two optima nearly coincide.
     assert max(pose_error(wh.T_camera_lidar, pix.T_camera_lidar)) < 0.1 * max(pose_error(geo.T_camera_lidar, pix.T_camera_lidar)) + 1e-6
+
+
+def test_laser_term_of_the_whitening_against_a_sampled_bearing_error():
+    """The laser term and the whitening with it, against independent truth: bearings of laser points drawn
+    from their covariance (the tangent-plane spread of the moved point's direction), and W^T W = C^-1."""
+    from calib_core.solve.whiten import laser_tangent_covariance
+
+    cam, T, points, pixels = pinhole_scene(5, 6)
+    bearings = cam.bearing(pixels)
+    F = kernels.bearing_frames(bearings)
+    rng = np.random.default_rng(3)
+    G = rng.normal(size=(6, 3, 3)) * 0.02
+    S = G @ np.swapaxes(G, 1, 2)  # laser covariances, m^2
+    L = laser_tangent_covariance(T, points, F, S)
+    R, t = T[:3, :3], T[:3, 3]
+    for i in range(6):
+        X = rng.multivariate_normal(points[i], S[i], size=20000) @ R.T + t
+        u = X / np.linalg.norm(X, axis=1, keepdims=True)
+        tangent = u @ F[i, :2].T  # the moved bearing in the pair's tangent plane, rad to first order
+        np.testing.assert_allclose(L[i], np.cov(tangent.T), rtol=0.05, atol=0.05 * np.abs(L[i]).max())
+    sig = np.linspace(0.5, 2.0, 6)
+    W, unit = whitening(6, camera=cam, frames=F, pixel_sigma=sig, laser_tangent_cov=L)
+    assert unit == "sigma"
+    A, _ = whitening(6, camera=cam, frames=F)  # px/rad, the camera's own Jacobian
+    for i in range(6):
+        Ainv = np.linalg.inv(A[i])
+        C = sig[i] ** 2 * Ainv @ Ainv.T + L[i]
+        np.testing.assert_allclose(W[i].T @ W[i], np.linalg.inv(C), rtol=1e-9)
+        assert W[i, 0, 1] == 0.0  # lower triangular: the inverse of C's Cholesky factor

@@ -102,18 +102,16 @@ def validate_pairs(points_lidar: object, bearings_camera: object) -> tuple[np.nd
     if n < MIN_PAIRS:
         raise CalibError(f"need at least {MIN_PAIRS} pairs to solve the pose, got {n}")
     # One compiled pass computes every figure; the messages are chosen here, in order.
-    bad_p, bad_b, norms, same_p, same_b, sv, cos_min = pair_checks(points, bearings, SAME_POINT_M, SAME_BEARING_RAD)
+    bad_p, bad_b, zero_b, off_b, norms, bearings, same_p, same_b, sv, cos_min = pair_checks(
+        points, bearings, SAME_POINT_M, SAME_BEARING_RAD, UNIT_TOLERANCE)
     if bad_p >= 0:
         raise CalibError(f"pair {bad_p}: laser point is not finite (NaN or inf)")
     if bad_b >= 0:
         raise CalibError(f"pair {bad_b}: bearing is not finite (NaN or inf)")
-    if norms.min() < 1e-12:
-        raise CalibError(f"pair {int(np.argmin(norms))}: bearing has zero length")
-    off = np.abs(norms - 1) > UNIT_TOLERANCE
-    if off.any():
-        i = int(np.argmax(off))
-        raise CalibError(f"pair {i}: bearing is not a unit vector (norm {norms[i]:.6g})")
-    bearings = bearings / norms[:, None]
+    if zero_b >= 0:
+        raise CalibError(f"pair {zero_b}: bearing has zero length")
+    if off_b >= 0:
+        raise CalibError(f"pair {off_b}: bearing is not a unit vector (norm {norms[off_b]:.6g})")
     if same_p[0] >= 0:
         raise CalibError(f"pairs {same_p[0]} and {same_p[1]} use the same laser point")
     if same_b[0] >= 0:
@@ -143,8 +141,8 @@ def validate_pixels(pixels: object, n: int) -> np.ndarray:
     px = as_rows(pixels, "pixels", 2, single_row=False)
     if len(px) != n:
         raise CalibError(f"got {len(px)} pixels for {n} pairs")
-    bad = np.nonzero(~np.all(np.isfinite(px), axis=1))[0]
-    if bad.size:
+    if not np.isfinite(px).all():
+        bad = np.nonzero(~np.all(np.isfinite(px), axis=1))[0]
         raise CalibError(f"pair {bad[0]}: pixel is not finite (NaN or inf)")
     return px
 

@@ -18,7 +18,7 @@ from .checks import (
     validate_pairs,
     validate_pixels,
 )
-from .kernels import bearing_frames, fit_pose, pose_report, whitened_residuals
+from .kernels import bearing_frames, fit_pose, pixel_errors, pose_report, whitened_residuals
 from .quality import Quality, geometry_reasons, orientation_notes
 from .refine import (
     LM_MAX_ITER,
@@ -31,7 +31,7 @@ from .refine import (
 )
 from .result import CalibrationResult
 from .robust import inlier_k, robust_fit, robust_scale
-from .whiten import check_pixel_sigma, laser_tangent_covariance, whitening
+from .whiten import check_pixel_sigma, laser_tangent_covariance, tangent_to_pixel, whitening
 
 __all__ = ["COSTS", "NOISY_FACTOR", "PRIOR_PX", "sigma_coverage", "solve_extrinsics", "student_t_factor", "warm_up"]
 
@@ -47,21 +47,13 @@ PRIOR_PX = 1.5
 NOISY_FACTOR = 3.0
 
 
-def _mean_std(values: np.ndarray) -> tuple[float, float]:
-    finite = values[np.isfinite(values)]
-    if finite.size == 0:
-        return float("nan"), float("nan")
-    # sum and dot instead of .mean() / .std(): the same figures, a quarter of the call overhead.
-    mean = float(finite.sum()) / finite.size
-    dev = finite - mean
-    return mean, math.sqrt(float(dev @ dev) / finite.size)
-
-
-def _pixel_errors(camera: Any, T: np.ndarray, points_lidar: np.ndarray, pixels: np.ndarray) -> np.ndarray:
+def _pixel_errors(camera: Any, T: np.ndarray, points_lidar: np.ndarray, pixels: np.ndarray,
+                  inliers: np.ndarray) -> tuple[np.ndarray, float, float, int]:
+    """Pixel errors (NaN where not projectable), their mean and std over the inliers, and how many
+    inliers have none (:func:`.kernels.pixel_errors`)."""
     projected, valid = camera.project(points_lidar @ T[:3, :3].T + T[:3, 3])
-    diff = np.asarray(projected, dtype=np.float64) - pixels
-    err = np.hypot(diff[:, 0], diff[:, 1])
-    return np.where(np.asarray(valid, dtype=bool) & np.isfinite(err), err, np.nan)
+    return pixel_errors(np.ascontiguousarray(projected, dtype=np.float64), np.ascontiguousarray(valid, dtype=bool),
+                        np.ascontiguousarray(pixels, dtype=np.float64), inliers)
 
 
 @functools.lru_cache(maxsize=256)
@@ -91,9 +83,9 @@ def sigma_coverage(n_pairs: int) -> tuple[float, float]:
     return float(2 * stdtr(dof, f) - 1), float(2 * stdtr(dof, 2 * f) - 1)
 
 
-def _check_pair_ids(pair_ids: object, n: int) -> list[int]:
+def _check_pair_ids(pair_ids: object, n: int) -> list[int] | range:
     if pair_ids is None:
-        return list(range(n))
+        return range(n)  # indexed like the list, without building it
     ids = np.asarray(pair_ids)
     if ids.shape != (n,) or not np.issubdtype(ids.dtype, np.integer):
         raise CalibError(f"pair_ids must be {n} whole numbers, one per pair, got {ids.dtype} of shape {ids.shape}")
@@ -230,12 +222,16 @@ def solve_extrinsics(
     frames = bearing_frames(bearings)
     whiten_camera = camera if cost != "geodesic" else None
 
+    tangent = []  # tangent_to_pixel of the camera at the bearings: pose-free, computed once
+
     def whiten(T_at: np.ndarray | None) -> tuple[np.ndarray, str]:
         lt = None
         if laser_cov is not None and T_at is not None and whiten_camera is not None:
             lt = laser_tangent_covariance(T_at, points, frames, laser_cov)
+        if whiten_camera is not None and noise_rad is None and not tangent:
+            tangent.append(tangent_to_pixel(whiten_camera, frames))
         return whitening(n, camera=whiten_camera, frames=frames, pixel_sigma=sigmas, noise_rad=noise_rad,
-                         laser_tangent_cov=lt)
+                         laser_tangent_cov=lt, tangent=tangent[0] if tangent else None)
 
     W, unit = whiten(None)
     # Expected scale of the whitened residuals, for the outlier test: the known noise, or the
@@ -261,7 +257,7 @@ def solve_extrinsics(
         else:
             R, t, _, _, it, status, H, z = fit_pose(points, bearings, frames, W, np.ascontiguousarray(T_start[:3, :3]),
                                                    np.ascontiguousarray(T_start[:3, 3]), False, LM_MAX_ITER)
-        failure = lm_failure(status, R, t)
+        failure = lm_failure(status, R, t) if status < 0 else None  # (fit_pose: -2 for a non-finite pose)
         if failure:
             if not robust:
                 raise CalibError(failure)
@@ -285,10 +281,11 @@ def solve_extrinsics(
     # median residual sets the scale.  A noisier-than-expected set just takes the robust path.
     inliers = np.ones(n, dtype=bool)
     hypotheses = 0
+    searched = False
     scale_ref = max(prior, floor) if prior is not None else max(robust_scale(r2), floor)
     if robust and r2.max() >= (inlier_k(n) * scale_ref) ** 2:
         fit = robust_fit(points, bearings, frames, W, prior, T[:3, :3], T[:3, 3], min_scale=floor)
-        hypotheses = fit.hypotheses
+        hypotheses, searched = fit.hypotheses, True
         iterations += fit.iterations
         H_at_T = None
         if fit.inliers.sum() >= 3:
@@ -302,7 +299,7 @@ def solve_extrinsics(
             if keep.size >= 3:
                 T, more = refine_angular(T, points[keep], frames[keep], W[keep])
                 iterations += more
-    idx = np.flatnonzero(inliers)
+    idx = np.flatnonzero(inliers) if searched else np.arange(n)  # (no search ran: all pairs are in)
     n_in = idx.size
     if cost == "pixel" and n_in >= 3:
         bad = np.nonzero(~np.all(np.isfinite(pixels[idx]), axis=1))[0]
@@ -340,17 +337,16 @@ def solve_extrinsics(
         if pixels is None:
             projected, valid = camera.project(bearings)
             pixels = np.where(np.asarray(valid, dtype=bool)[:, None], np.asarray(projected, dtype=np.float64), np.nan)
-        residual_px = _pixel_errors(camera, T, points, pixels)
-        off = np.flatnonzero(~np.isfinite(residual_px[idx]))
-        if off.size:
+        residual_px, mean_px, std_px, n_off = _pixel_errors(camera, T, points, pixels, inliers)
+        if n_off:
+            off = np.flatnonzero(~np.isfinite(residual_px[idx]))
             warnings.append(
                 f"pairs {_ids_text([ids[idx[i]] for i in off])} do not reproject into the image; their pixel error is NaN"
             )
     else:
-        residual_px = np.full(n, np.nan)
+        residual_px, mean_px, std_px = np.full(n, np.nan), math.nan, math.nan
     mean_deg, std_deg = math.degrees(stats[0]), math.degrees(stats[1])
-    mean_px, std_px = _mean_std(residual_px[idx])
-    outliers = np.flatnonzero(~inliers).tolist()
+    outliers = np.flatnonzero(~inliers).tolist() if searched else []
     outlier_ids = [ids[i] for i in outliers]
 
     unreliable: list[str] = []

@@ -153,7 +153,13 @@ def jacobian(R, t, P, F, W):
 
 @kernel
 def normal_equations(R, t, P, F, W):
-    """``H = J^T J`` (6, 6), ``g = J^T z`` (6,) and ``cost = sum |z_i|^2`` at ``(R, t)``.
+    """``H = J^T J`` (6, 6), ``g = J^T z`` (6,) and ``cost = sum |z_i|^2`` at ``(R, t)``."""
+    return _normal_equations_into(R, t, P, F, W, np.empty((P.shape[0], 2)))
+
+
+@kernel
+def _normal_equations_into(R, t, P, F, W, Z):
+    """:func:`normal_equations`, also writing the whitened residuals into ``Z`` (N, 2).
 
     The 21 distinct entries of ``H`` and the 6 of ``g`` are summed in scalars (registers),
     not in arrays: about half the time per pair."""
@@ -165,6 +171,7 @@ def normal_equations(R, t, P, F, W):
     for i in range(P.shape[0]):
         _pair(R, t, P, F, W, i, z, J, True)
         z0, z1 = z[0], z[1]
+        Z[i, 0], Z[i, 1] = z0, z1
         cost += z0 * z0 + z1 * z1
         u0, u1, u2, u3, u4, u5 = J[0, 0], J[0, 1], J[0, 2], J[0, 3], J[0, 4], J[0, 5]
         v0, v1, v2, v3, v4, v5 = J[1, 0], J[1, 1], J[1, 2], J[1, 3], J[1, 4], J[1, 5]
@@ -223,6 +230,13 @@ def normal_equations(R, t, P, F, W):
 
 @kernel
 def lm_refine(R0, t0, P, F, W, max_iter):
+    """Levenberg-Marquardt on the whitened angular cost: ``(R, t, iterations, status, H)`` of :func:`_lm`."""
+    R, t, it, status, H, _ = _lm(R0, t0, P, F, W, max_iter)
+    return R, t, it, status, H
+
+
+@kernel
+def _lm(R0, t0, P, F, W, max_iter):
     """Levenberg-Marquardt on the whitened angular cost.
 
     Each iteration solves ``(H + lam diag(H)) dx = -g`` (Marquardt's scaling,
@@ -240,13 +254,17 @@ def lm_refine(R0, t0, P, F, W, max_iter):
         1 converged, 0 iteration limit, -1 singular normal equations, -2 non-finite cost.
     H : (6, 6)
         The normal matrix ``J^T J`` at the returned pose (the covariance needs no second pass).
+    Z : (N, 2)
+        The whitened residuals at the returned pose (the outlier test needs no second pass).
     """
     R = R0.copy()
     t = t0.copy()
     lam = 1e-4
-    H, g, cost = normal_equations(R, t, P, F, W)
+    Z = np.empty((P.shape[0], 2))
+    Z_new = np.empty((P.shape[0], 2))
+    H, g, cost = _normal_equations_into(R, t, P, F, W, Z)
     if not np.isfinite(cost):
-        return R, t, 1, -2, H
+        return R, t, 1, -2, H, Z
     it = 1
     A = np.empty((6, 6))
     L = np.empty((6, 6))
@@ -263,7 +281,7 @@ def lm_refine(R0, t0, P, F, W, max_iter):
             _chol_solve_inplace(L, dx)
         else:
             if lam > 1e12:
-                return R, t, it, -1, H
+                return R, t, it, -1, H, Z
             lam *= 10.0
             continue
         # Predicted decrease -g.dx: at the noise floor of the cost nothing is left to gain
@@ -272,11 +290,11 @@ def lm_refine(R0, t0, P, F, W, max_iter):
         for a in range(6):
             gd -= g[a] * dx[a]
         if gd <= 1e-13 * cost or cost <= 1e-300:
-            return R, t, it, 1, H
+            return R, t, it, 1, H, Z
         R_new = so3_exp(dx[:3]) @ R
         t_new = t + dx[3:]
         # One pass gives the new cost and, if the step is taken, the next normal equations.
-        H_new, g_new, cost_new = normal_equations(R_new, t_new, P, F, W)
+        H_new, g_new, cost_new = _normal_equations_into(R_new, t_new, P, F, W, Z_new)
         it += 1
         step = 0.0
         scale = 0.0
@@ -289,16 +307,17 @@ def lm_refine(R0, t0, P, F, W, max_iter):
         if np.isfinite(cost_new) and cost_new <= cost:
             decrease = cost - cost_new
             R, t, H, g, cost = R_new, t_new, H_new, g_new, cost_new
+            Z, Z_new = Z_new, Z
             lam = max(lam / 10.0, 1e-12)
             if small_step or decrease <= 1e-11 * cost or cost <= 1e-300:
-                return R, t, it, 1, H
+                return R, t, it, 1, H, Z
         else:
             if small_step:
-                return R, t, it, 1, H
+                return R, t, it, 1, H, Z
             lam *= 10.0
             if lam > 1e16:
-                return R, t, it, 1, H  # no descent direction left: a minimum to rounding
-    return R, t, it, 0, H
+                return R, t, it, 1, H, Z  # no descent direction left: a minimum to rounding
+    return R, t, it, 0, H, Z
 
 
 @kernel
@@ -684,7 +703,8 @@ def fit_pose(P, B, F, W, R0, t0, use_dlt, max_iter):
     R, t : the optimum; R_start, t_start : the start
     iterations : int
     status : int
-        As :func:`lm_refine`; -3 when the DLT start failed (fewer than 6 pairs, coplanar points).
+        As :func:`lm_refine` (-2 also for a non-finite optimum); -3 when the DLT start failed (fewer than 6
+        pairs, coplanar points).
     H : (6, 6) normal matrix at ``(R, t)``
     z : (N, 2) whitened residuals at ``(R, t)`` (for the outlier test)
     """
@@ -694,8 +714,9 @@ def fit_pose(P, B, F, W, R0, t0, use_dlt, max_iter):
             return R_start, t_start, R_start, t_start, 0, -3, np.zeros((6, 6)), np.zeros((P.shape[0], 2))
     else:
         R_start, t_start = R0.copy(), t0.copy()
-    R, t, it, status, H = lm_refine(R_start, t_start, P, F, W, max_iter)
-    z, _ = whitened_residuals(R, t, P, F, W)
+    R, t, it, status, H, z = _lm(R_start, t_start, P, F, W, max_iter)
+    if not np.isfinite(R.sum() + t.sum()):
+        status = -2  # as lm_failure: the caller need not look at the pose
     return R, t, R_start, t_start, it, status, H, z
 
 
@@ -849,16 +870,17 @@ def _first_close(X, radius, angular):
 
 
 @kernel
-def pair_checks(P, B, same_point_m, same_bearing_rad):
+def pair_checks(P, B, same_point_m, same_bearing_rad, unit_tolerance):
     """The degeneracy figures of :func:`calib_core.solve.checks.validate_pairs` in one pass.
 
     Returns
     -------
     bad_point, bad_bearing : int
         First pair with a non-finite laser point / bearing, or -1.
-    bad_norm : int
-        First pair whose bearing norm is off 1 (checked by the caller's tolerance), -1 if all finite.
+    zero_bearing, off_unit : int
+        First pair whose bearing norm is below 1e-12 / more than ``unit_tolerance`` off 1, or -1.
     norms : (N,) bearing norms
+    U : (N, 3) the bearings divided by their norms
     same_point, same_bearing : (2,) int
         A pair of pairs with the same laser point / bearing, or (-1, -1).
     singular : (3,) singular values of the centred laser points, descending
@@ -869,49 +891,66 @@ def pair_checks(P, B, same_point_m, same_bearing_rad):
     n = P.shape[0]
     bad_point = -1
     bad_bearing = -1
+    zero_bearing = -1
+    off_unit = -1
     norms = np.empty(n)
-    for i in range(n):
-        if bad_point < 0 and not (np.isfinite(P[i, 0]) and np.isfinite(P[i, 1]) and np.isfinite(P[i, 2])):
-            bad_point = i
-        if bad_bearing < 0 and not (np.isfinite(B[i, 0]) and np.isfinite(B[i, 1]) and np.isfinite(B[i, 2])):
-            bad_bearing = i
-        norms[i] = math.sqrt(B[i, 0] ** 2 + B[i, 1] ** 2 + B[i, 2] ** 2)
+    U = np.empty((n, 3))
     same_p = np.full(2, -1)
     same_b = np.full(2, -1)
     sv = np.zeros(3)
     cos_min = np.nan
-    if bad_point >= 0 or bad_bearing >= 0:
-        return bad_point, bad_bearing, norms, same_p, same_b, sv, cos_min
-    U = np.empty((n, 3))
+    # Scalars, not row views (``mu += P[i]``): numba's views cost more than the sums here.
+    m0 = m1 = m2 = s0 = s1 = s2 = 0.0
     for i in range(n):
-        inv = 1.0 / norms[i] if norms[i] > 0.0 else 0.0
-        for k in range(3):
-            U[i, k] = B[i, k] * inv
+        p0, p1, p2 = P[i, 0], P[i, 1], P[i, 2]
+        b0, b1, b2 = B[i, 0], B[i, 1], B[i, 2]
+        if bad_point < 0 and not (np.isfinite(p0) and np.isfinite(p1) and np.isfinite(p2)):
+            bad_point = i
+        if bad_bearing < 0 and not (np.isfinite(b0) and np.isfinite(b1) and np.isfinite(b2)):
+            bad_bearing = i
+        norm = math.sqrt(b0 * b0 + b1 * b1 + b2 * b2)
+        norms[i] = norm
+        if zero_bearing < 0 and norm < 1e-12:
+            zero_bearing = i
+        if off_unit < 0 and abs(norm - 1.0) > unit_tolerance:
+            off_unit = i
+        if norm > 0.0:  # a division, not a reciprocal's product: the bearings numpy's ``B / norms`` gives
+            u0, u1, u2 = b0 / norm, b1 / norm, b2 / norm
+        else:
+            u0 = u1 = u2 = 0.0
+        U[i, 0], U[i, 1], U[i, 2] = u0, u1, u2
+        m0 += p0
+        m1 += p1
+        m2 += p2
+        s0 += u0
+        s1 += u1
+        s2 += u2
+    if bad_point >= 0 or bad_bearing >= 0 or zero_bearing >= 0 or off_unit >= 0:
+        return bad_point, bad_bearing, zero_bearing, off_unit, norms, U, same_p, same_b, sv, cos_min
     same_p[0], same_p[1] = _first_close(P, same_point_m, False)
     same_b[0], same_b[1] = _first_close(U, same_bearing_rad, True)
-    mu = np.zeros(3)
+    m0, m1, m2 = m0 / n, m1 / n, m2 / n
+    c00 = c01 = c02 = c11 = c12 = c22 = 0.0
     for i in range(n):
-        mu += P[i]
-    mu /= n
-    C = np.zeros((3, 3))
-    for i in range(n):
-        for a in range(3):
-            for b in range(3):
-                C[a, b] += (P[i, a] - mu[a]) * (P[i, b] - mu[b])
+        d0, d1, d2 = P[i, 0] - m0, P[i, 1] - m1, P[i, 2] - m2
+        c00 += d0 * d0
+        c01 += d0 * d1
+        c02 += d0 * d2
+        c11 += d1 * d1
+        c12 += d1 * d2
+        c22 += d2 * d2
+    C = np.array([[c00, c01, c02], [c01, c11, c12], [c02, c12, c22]])
     w = np.linalg.eigvalsh(C)
     for k in range(3):
         sv[k] = math.sqrt(max(w[2 - k], 0.0))
-    s = np.zeros(3)
-    for i in range(n):
-        s += U[i]
-    sn = math.sqrt(s[0] ** 2 + s[1] ** 2 + s[2] ** 2)
+    sn = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
     if sn > 0.0:
         cos_min = 1.0
         for i in range(n):
-            c = (U[i, 0] * s[0] + U[i, 1] * s[1] + U[i, 2] * s[2]) / sn
+            c = (U[i, 0] * s0 + U[i, 1] * s1 + U[i, 2] * s2) / sn
             if c < cos_min:
                 cos_min = c
-    return bad_point, bad_bearing, norms, same_p, same_b, sv, cos_min
+    return bad_point, bad_bearing, zero_bearing, off_unit, norms, U, same_p, same_b, sv, cos_min
 
 
 @kernel
@@ -1179,3 +1218,95 @@ def probe_jacobians(uv, h):
         det = A[i, 0, 0] * A[i, 1, 1] - A[i, 0, 1] * A[i, 1, 0]
         ok[i] = np.isfinite(det) and det != 0.0
     return A, ok
+
+
+@kernel
+def laser_bearing_cov(R, t, P, F, S):
+    """``Sigma_i = E_i R S_i R^T E_i^T / |R p_i + t|^2`` (N, 2, 2), rad^2: a laser point's covariance
+    ``S_i`` (N, 3, 3), m^2, seen as the error of its bearing (``E_i`` the first two rows of ``F_i``);
+    see :func:`calib_core.solve.whiten.laser_tangent_covariance`."""
+    n = P.shape[0]
+    out = np.empty((n, 2, 2))
+    A = np.empty((2, 3))
+    AS = np.empty((2, 3))
+    for i in range(n):
+        d2 = 0.0
+        for r in range(3):
+            c = R[r, 0] * P[i, 0] + R[r, 1] * P[i, 1] + R[r, 2] * P[i, 2] + t[r]
+            d2 += c * c
+        for a in range(2):
+            for k in range(3):
+                A[a, k] = F[i, a, 0] * R[0, k] + F[i, a, 1] * R[1, k] + F[i, a, 2] * R[2, k]
+        for a in range(2):
+            for k in range(3):
+                AS[a, k] = A[a, 0] * S[i, 0, k] + A[a, 1] * S[i, 1, k] + A[a, 2] * S[i, 2, k]
+        for a in range(2):
+            for b in range(2):
+                out[i, a, b] = (AS[a, 0] * A[b, 0] + AS[a, 1] * A[b, 1] + AS[a, 2] * A[b, 2]) / d2
+    return out
+
+
+@kernel
+def laser_whitening(A, s, L):
+    """``W_i = chol(C_i)^-1`` (N, 2, 2) with ``C_i = s_i^2 A_i^-1 A_i^-T + L_i``: the click's covariance in
+    the tangent plane (``A_i`` px/rad, ``s_i`` px) plus the laser term ``L_i`` (rad^2); ``W^T W = C^-1``
+    (:func:`calib_core.solve.whiten.whitening`)."""
+    n = A.shape[0]
+    W = np.zeros((n, 2, 2))
+    for i in range(n):
+        a00, a01, a10, a11 = A[i, 0, 0], A[i, 0, 1], A[i, 1, 0], A[i, 1, 1]
+        det = a00 * a11 - a01 * a10
+        # J = s A^-1
+        j00, j01 = a11 / det * s[i], -a01 / det * s[i]
+        j10, j11 = -a10 / det * s[i], a00 / det * s[i]
+        c00 = j00 * j00 + j01 * j01 + L[i, 0, 0]
+        c10 = j10 * j00 + j11 * j01 + L[i, 1, 0]
+        c11 = j10 * j10 + j11 * j11 + L[i, 1, 1]
+        l00 = math.sqrt(c00)
+        l10 = c10 / l00
+        l11 = math.sqrt(max(c11 - l10 * l10, 1e-300))
+        W[i, 0, 0] = 1.0 / l00
+        W[i, 1, 1] = 1.0 / l11
+        W[i, 1, 0] = -l10 / (l00 * l11)
+    return W
+
+
+@kernel
+def pixel_errors(projected, valid, pixels, inliers):
+    """Pixel error of every pair and its mean and std over the inliers, in one pass.
+
+    Parameters
+    ----------
+    projected : (N, 2) projected laser points, px; valid : (N,) bool, projectable into the image
+    pixels : (N, 2) clicked pixels, px; inliers : (N,) bool
+
+    Returns
+    -------
+    err : (N,) px, NaN where the point does not project or the pixel is not finite
+    mean, std : float, over the inliers' finite errors (NaN if none)
+    n_off : int, inliers without a finite error
+    """
+    n = pixels.shape[0]
+    err = np.empty(n)
+    total = 0.0
+    m = 0
+    n_off = 0
+    for i in range(n):
+        e = math.hypot(projected[i, 0] - pixels[i, 0], projected[i, 1] - pixels[i, 1])
+        if not (valid[i] and np.isfinite(e)):
+            e = np.nan
+        err[i] = e
+        if inliers[i]:
+            if e == e:
+                total += e
+                m += 1
+            else:
+                n_off += 1
+    if m == 0:
+        return err, np.nan, np.nan, n_off
+    mean = total / m
+    var = 0.0
+    for i in range(n):
+        if inliers[i] and err[i] == err[i]:
+            var += (err[i] - mean) ** 2
+    return err, mean, math.sqrt(var / m), n_off

@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import CalibError
-from .kernels import probe_jacobians, tangent_probes
+from .kernels import laser_bearing_cov, laser_whitening, probe_jacobians, tangent_probes
 
 __all__ = ["tangent_to_pixel", "whitening", "check_pixel_sigma", "cell_pick_covariance",
            "laser_tangent_covariance", "PICK_CELL_SIGMA", "PICK_RANGE_SIGMA_M"]
@@ -128,11 +128,10 @@ def laser_tangent_covariance(T_camera_lidar: np.ndarray, points_lidar: np.ndarra
     moved point over its range), so ``Sigma_i = E_i R S_i R^T E_i^T / |P_i|^2``.
     """
     T = np.asarray(T_camera_lidar, dtype=np.float64)
-    R = T[:3, :3]
-    P = points_lidar @ R.T + T[:3, 3]
-    A = np.einsum("nij,jk->nik", frames[:, :2, :], R)  # E_i R, (N, 2, 3)
-    S = np.einsum("nij,njk,nlk->nil", A, laser_cov_m2, A)
-    return S / np.einsum("ij,ij->i", P, P)[:, None, None]
+    return laser_bearing_cov(np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3]),
+                             np.ascontiguousarray(points_lidar, dtype=np.float64),
+                             np.ascontiguousarray(frames, dtype=np.float64),
+                             np.ascontiguousarray(laser_cov_m2, dtype=np.float64))
 
 
 def tangent_to_pixel(camera: Any, frames: np.ndarray) -> np.ndarray:
@@ -168,6 +167,7 @@ def whitening(
     pixel_sigma: np.ndarray | None = None,
     noise_rad: float | None = None,
     laser_tangent_cov: np.ndarray | None = None,
+    tangent: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, str]:
     """Whitening matrices ``W (N, 2, 2)`` and the unit of the whitened residuals.
 
@@ -181,41 +181,38 @@ def whitening(
     * neither: ``W_i = I / sigma_i`` (radians; ``pixel_sigma`` then only sets
       relative weights).
 
+    ``tangent``: :func:`tangent_to_pixel` of ``camera`` and ``frames`` when the caller has it (it does
+    not depend on the pose: a second whitening at a new pose reuses it).
+
     Returns
     -------
     W : (N, 2, 2) ndarray
     unit : {"noise", "px", "sigma", "rad"}
     """
-    s = np.ones(n) if pixel_sigma is None else pixel_sigma
     if noise_rad is not None:
         return np.broadcast_to(np.eye(2) / noise_rad, (n, 2, 2)).copy(), "noise"
+    if camera is not None:
+        # px/rad: the whitened residual is the linearised pixel error.
+        A, ok = tangent_to_pixel(camera, frames) if tangent is None else tangent
+        unit = "px" if pixel_sigma is None else "sigma"
+        if laser_tangent_cov is None and pixel_sigma is None and ok.all():
+            return A, unit  # the common case first, without the arrays below
+    s = np.ones(n) if pixel_sigma is None else pixel_sigma
     eye = np.broadcast_to(np.eye(2), (n, 2, 2))
     if camera is None:
         return eye / s[:, None, None], "rad"
-    A, ok = tangent_to_pixel(camera, frames)  # px/rad: the whitened residual is the linearised pixel error
-    unit = "px" if pixel_sigma is None else "sigma"
     if laser_tangent_cov is None and ok.all():
-        return (A if pixel_sigma is None else A / s[:, None, None]), unit
+        return A / s[:, None, None], unit
     det = A[:, 0, 0] * A[:, 1, 1] - A[:, 0, 1] * A[:, 1, 0]
     if not ok.any():
         return eye / s[:, None, None], "rad"
     if not ok.all():
         # A probe the camera cannot project: the median isotropic px-per-radian of the other pairs.
+        A = A.copy()  # (the caller's ``tangent`` stays as it was)
         A[~ok] = np.eye(2) * float(np.median(np.sqrt(np.abs(det[ok]))))
         det = np.where(ok, det, A[:, 0, 0] * A[:, 1, 1])
     if laser_tangent_cov is None:
         return A / s[:, None, None], unit
     # C = s^2 A^-1 A^-T + Sigma_L (rad^2) = L L^T (2x2 Cholesky, closed form); W = L^-1, W^T W = C^-1.
-    Ainv = np.empty_like(A)
-    Ainv[:, 0, 0], Ainv[:, 1, 1] = A[:, 1, 1] / det, A[:, 0, 0] / det
-    Ainv[:, 0, 1], Ainv[:, 1, 0] = -A[:, 0, 1] / det, -A[:, 1, 0] / det
-    Js = Ainv * s[:, None, None]
-    C = Js @ np.swapaxes(Js, 1, 2) + laser_tangent_cov
-    l00 = np.sqrt(C[:, 0, 0])
-    l10 = C[:, 1, 0] / l00
-    l11 = np.sqrt(np.maximum(C[:, 1, 1] - l10**2, 1e-300))
-    W = np.zeros_like(C)
-    W[:, 0, 0] = 1.0 / l00
-    W[:, 1, 1] = 1.0 / l11
-    W[:, 1, 0] = -l10 / (l00 * l11)
-    return W, ("px" if pixel_sigma is None else "sigma")
+    return laser_whitening(np.ascontiguousarray(A), np.ascontiguousarray(s, dtype=np.float64),
+                           np.ascontiguousarray(laser_tangent_cov, dtype=np.float64)), unit

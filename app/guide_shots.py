@@ -1,0 +1,153 @@
+"""Guided picking across the shots of a session (issue 21), and small helpers of the guided flow: a mixin of
+:class:`app.guide_panel.GuidePanel` (which stays within the file-size limit).
+
+With several shots the proposals are ranked across all of them (:class:`app.guide_support.ShotGuide`, the
+ranking of ``ba-calib propose --shot``) and guided picking starts once all shots together have 4 pairs (or an
+initial extrinsic is imported), whatever the shown shot has.  When the proposal to frame next is in another
+shot, the panel asks the app to show that shot (``show_shot``, set by :class:`app.shots_panel.ShotsPanel`);
+the page restarts on it and the new panel resumes the guided session (:meth:`GuideShotsMixin.resume`),
+framing the best proposal of the shot it now shows.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Callable
+
+from calib_core.errors import CalibError
+
+from .guide_support import ShotGuide
+
+
+class GuideShotsMixin:
+    """What :class:`app.guide_panel.GuidePanel` does differently with several shots (``shots`` given)."""
+
+    def _init_shots(self, shots: Callable[[], Any] | None) -> None:
+        #: ``shots()`` -> ``(depths, images, active shot)`` of every shot; None: a one-shot session.
+        self._shots = shots
+        #: ``show_shot(k)`` asks the app to show shot ``k`` (set by the Shots folder); None: not offered.
+        self.show_shot: Callable[[int], None] | None = None
+        self._prop_shots: list[int] | None = None  # the shot of each proposal (several shots)
+        self._shot_guide: ShotGuide | None = None  # only touched on the worker thread
+        self._resumed = False  # the page was switched to this shot by a guided session: frame its best
+
+    @property
+    def active_shot(self) -> int:
+        return 0 if self._shots is None else int(self._shots()[2])
+
+    def joint_pairs(self, state: Any) -> tuple:
+        """Every shot's complete picks as ``(shot, id, Pair)``, in shot order then creation order (the live
+        joint solve's row order)."""
+        picks = [p for p in state.all_picks if p.complete]
+        return tuple((p.shot, p.id, p.to_pair()) for p in sorted(picks, key=lambda p: p.shot))
+
+    def _pairs_now(self, state: Any) -> tuple:
+        """The pairs guided picking follows: the shown shot's (one shot) or every shot's."""
+        return tuple(state.pairs()) if self._shots is None else self.joint_pairs(state)
+
+    def _n_complete(self) -> int:
+        return len(self._pairs_now(self.state))
+
+    def _quality_pairs(self) -> tuple:
+        """The pairs as the live solve lists them (its verdict is about those)."""
+        if self._shots is None:
+            return tuple(self.state.pairs())
+        return tuple(pair for _, _, pair in self.joint_pairs(self.state))
+
+    def _shots_job(self, payload: tuple) -> tuple:
+        """On the worker: proposals across every shot (no auto-accept, no guide-side verdict)."""
+        key, joint, T0, skipped, dropped, auto = payload
+        depths, images, active = self._shots()
+        if self._shot_guide is None:
+            self._shot_guide = ShotGuide(depths, images, self.camera)
+        n = len(depths)
+        pairs_by_shot = [[pair for s, _, pair in joint if s == k] for k in range(n)]
+        ids_by_shot = [[i for s, i, _ in joint if s == k] for k in range(n)]
+        props, shot_of, reclick_of = self._shot_guide.rank(pairs_by_shot, ids_by_shot, T0, dropped, active,
+                                                           self.screen)
+        props.shots = shot_of
+        return key, props, [], reclick_of, None
+
+    def _first_index(self, props: Any, cells: list, waiting: Any) -> int:
+        """Which proposal to show first: the one a guided half pick waits for, after a switch the best of the
+        shown shot, else the best."""
+        shots = getattr(props, "shots", None)
+        self._prop_shots = shots
+        if shots is None:
+            return cells.index(waiting) if waiting in cells else 0
+        here = [i for i, k in enumerate(shots) if k == self.active_shot]
+        hit = [i for i in here if cells[i] == waiting]
+        if hit:
+            return hit[0]
+        if self._resumed and here:
+            self._resumed = False
+            return here[0]
+        return 0
+
+    def shot_of(self, p: Any) -> int:
+        """The shot of proposal ``p`` (the shown shot with one shot)."""
+        shots = self._prop_shots
+        if shots is not None:
+            for q, k in zip(self._proposals, shots):
+                if q is p:
+                    return k
+        return self.active_shot
+
+    def _delete_proposal(self, index: int) -> None:
+        del self._proposals[index]
+        if self._prop_shots is not None:
+            del self._prop_shots[index]
+
+    def _elsewhere(self, p: Any) -> bool:
+        """The proposal to frame is in another shot: ask for that shot (the panel there resumes guiding)."""
+        if p is None or self.shot_of(p) == self.active_shot:
+            return False
+        self._drop_unfinished()
+        if self.show_shot is not None and self._guiding:
+            self.show_shot(self.shot_of(p))
+        self._refresh()
+        return True
+
+    def _refuse_auto_across_shots(self, on: bool) -> None:
+        """Auto-accept gates a proposal on the shown photo's corners; across shots it is not offered (yet)."""
+        if on and self._shots is not None:
+            self._cb_auto.value = False
+            raise CalibError("auto-accept is not offered in a session of several shots: use Next pair")
+
+    def resume(self) -> None:
+        """Go on with a guided session started on another shot's page: frame this shot's best proposal."""
+        self._guiding = self._want_next = self._resumed = True
+        self.update()
+
+    def shot_lines(self, p: Any) -> list[str]:
+        """The panel's lines about the shown proposal's shot (several shots), markdown."""
+        if self._shots is None:
+            return []
+        k, shown = self.shot_of(p), self.active_shot
+        if k == shown:
+            return [f"In shot {k} (shown); proposals are ranked across all shots."]
+        if self.show_shot is not None and self._guiding:
+            return [f"**Next proposal is in shot {k}**: showing shot {k} (the page reconnects)."]
+        return [f"**Next proposal is in shot {k}**: show shot {k} (Shots folder) to pick it."]
+
+    # ---------------------------------------------------------------- the guided flow's small steps
+    def _guided_half(self):
+        """The pending pick if it is a guided half (laser end only), else None."""
+        p = self.state.pending()
+        return p if p is not None and p.source == "guided" and p.pixel is None else None
+
+    def _end_reclick(self) -> None:
+        if self._reclick is not None:
+            self._reclick = None
+            self.state.select(None)
+
+    def _drop_unfinished(self) -> None:
+        """End a re-click, delete the guided pair still waiting for its camera click and take the proposal's
+        ellipse off the camera loupe."""
+        self._end_reclick()
+        half = self._guided_half()
+        if half is not None:
+            self.state.delete(half.id)
+        loupes = self._loupes()
+        if loupes is not None and loupes.camera_crop.cov_px2 is not None:
+            loupes.frame_camera(*loupes.camera_crop.center)
+        self._refresh()
