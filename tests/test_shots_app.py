@@ -392,9 +392,10 @@ def test_a_session_shot_whose_files_are_gone_is_named(tmp_path, two_shots):
     assert str(err.value) == f"shot 1 (listed in the session {session}): the scan {scan} does not exist"
 
 
-def test_serve_bag_frames_opens_one_session_of_three_shots(tmp_path, monkeypatch):
-    """``serve --bag BAG --frames 3`` on an MCAP bag of three clouds and images (tests/bag_helpers.py): the
-    three frames are written as shots and served as one session of three shots."""
+@pytest.mark.parametrize("kind", ["ros1", "sqlite3", "mcap"])
+def test_serve_bag_frames_opens_one_session_of_three_shots(tmp_path, monkeypatch, kind):
+    """``serve --bag BAG --frames 3`` on a ROS 1, a ROS 2 sqlite and an MCAP bag of three clouds and images
+    (tests/bag_helpers.py): the three frames are written as shots and served as one session of three shots."""
     from bag_helpers import CloudSpec, SceneBag, write_bag
 
     import app.serving
@@ -406,7 +407,7 @@ def test_serve_bag_frames_opens_one_session_of_three_shots(tmp_path, monkeypatch
     spec = CloudSpec({a: cloud.xyz[:, i].copy() for i, a in enumerate("xyz")}, organized_shape=cloud.organized_shape)
     image = load_image_rgb(SAMPLE / "image.png")
     images = [image, image[::-1].copy(), image[:, ::-1].copy()]
-    bag = write_bag(tmp_path / "bag", "mcap", SceneBag(clouds=[spec] * 3, cloud_times=[50.0, 51.0, 52.0],
+    bag = write_bag(tmp_path / ("bag.bag" if kind == "ros1" else "bag"), kind, SceneBag(clouds=[spec] * 3, cloud_times=[50.0, 51.0, 52.0],
                                                        images=images, image_times=[50.0, 51.0, 52.0]))
     served = {}
     monkeypatch.setattr(app.serving, "serve", lambda *a, **k: served.update(args=a, kwargs=k))
