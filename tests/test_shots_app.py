@@ -406,9 +406,10 @@ def test_serve_bag_frames_opens_one_session_of_three_shots(tmp_path, monkeypatch
     cloud = read_point_cloud(SAMPLE / "scan.npz")
     spec = CloudSpec({a: cloud.xyz[:, i].copy() for i, a in enumerate("xyz")}, organized_shape=cloud.organized_shape)
     image = load_image_rgb(SAMPLE / "image.png")
-    images = [image, image[::-1].copy(), image[:, ::-1].copy()]
-    bag = write_bag(tmp_path / ("bag.bag" if kind == "ros1" else "bag"), kind, SceneBag(clouds=[spec] * 3, cloud_times=[50.0, 51.0, 52.0],
-                                                       images=images, image_times=[50.0, 51.0, 52.0]))
+    images = [image, image[::-1].copy(), image[:, ::-1].copy(), image[::-1, ::-1].copy()]
+    times = [50.0, 51.0, 52.0, 53.0]
+    bag = write_bag(tmp_path / ("bag.bag" if kind == "ros1" else "bag"), kind,
+                    SceneBag(clouds=[spec] * 4, cloud_times=times, images=images, image_times=times))
     served = {}
     monkeypatch.setattr(app.serving, "serve", lambda *a, **k: served.update(args=a, kwargs=k))
     session = tmp_path / "session.yaml"
@@ -417,12 +418,22 @@ def test_serve_bag_frames_opens_one_session_of_three_shots(tmp_path, monkeypatch
     assert args.func(args) == 0
     shots = served["kwargs"]["shots"]
     assert len(shots) == 3 and served["args"][2] == SAMPLE / "camera.yaml"
-    server = ShotServer(shots, served["args"][2], session_path=served["kwargs"]["session_path"], port=0)
+    server = ShotServer(shots, served["args"][2], session_path=served["kwargs"]["session_path"], port=0,
+                        bag_frames=served["kwargs"]["shot_bag"])
     try:
         assert server.state.n_shots == 3
-        for k in (0, 2):
+        shown = []
+        for k in range(3):
             app_k = server.load(k)
-            assert np.array_equal(app_k.image, images[k])  # each shot shows its own frame's photo
+            shown.append(next(i for i, im in enumerate(images) if np.array_equal(app_k.image, im)))
+        assert len(set(shown)) == 3  # each shot shows its own frame's photo
+        # The frame left out is added from the Shots panel: one undoable step.
+        left = ({0, 1, 2, 3} - set(shown)).pop()
+        k = server.panel.add_bag_frame(left)
+        assert (k, server.state.n_shots) == (3, 4)
+        assert np.array_equal(server.load(3).image, images[left])
+        server.state.undo()
+        assert server.state.n_shots == 3
     finally:
         server.stop()
     with pytest.raises(CalibError, match="give --bag too"):
