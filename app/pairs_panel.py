@@ -216,10 +216,15 @@ class PairsPanel:
         kind, source = target[0], ("loupe" if key.startswith("loupe_") else "full")
         cid = None if client is None else client.client_id
         last = self._last_pick.get(cid)
-        if pick_id is None and source == "loupe" and last is not None and last[0] == kind and last[2] == "full":
+        if pick_id is None and source == "loupe" and self.app.state.selected is None:
             ids = {p.id: p for p in self.app.state.picks}
-            if last[1] in ids and self.app.state.selected is None:
+            if last is not None and last[0] == kind and last[2] == "full" and last[1] in ids:
                 pick_id = last[1]  # refine the end the full-image click just made
+            elif self.app.state.pending() is None and self._loupes_pick in ids and \
+                    (ids[self._loupes_pick].has_laser if kind == "ba" else ids[self._loupes_pick].pixel is not None):
+                # The loupes show a finished pair: a click in them refines its end rather than starting a pair
+                # (by-eye runs 1 and 4); a new pair starts on the full images.
+                pick_id = self._loupes_pick
         # A click with a pair selected moves it; then the selection ends, so that the next click starts or
         # continues a new pair instead of moving this one again (by-eye trial: a laser end jumped to an unrelated cell).
         moves_selected = pick_id is None and self.app.state.selected is not None

@@ -40,9 +40,16 @@ def test_loupe_clicks_map_back_exactly_and_refine_the_full_image_click(tmp_path,
         (pick,) = app.state.picks
         assert pick.laser_rc == (row, col)
         assert np.hypot(pick.pixel[0] - u, pick.pixel[1] - v) < 1e-6
-        # A second loupe click is a new end, not another refinement.
+        # While the loupes show this finished pair, a second loupe click refines it again (by-eye runs 1 and 4:
+        # a new pair there surprised the person); a new pair starts on the full images.
         assert d.click_loupe_camera(u + 1.25, v) == []
-        assert len(app.state.picks) == 2 and app.state.picks[1].pixel == pytest.approx((u + 1.25, v))
+        (pick,) = app.state.picks
+        assert pick.pixel == pytest.approx((u + 1.25, v)) and pick.laser_rc == (row, col)
+        assert d.click_loupe_cell(row, col + 1) == []  # the laser loupe refines the laser end the same way
+        (pick,) = app.state.picks
+        assert pick.laser_rc == (row, col + 1)
+        assert d.click_cell("vertical", row + 5, col + 5) == []  # the full image: a new pair
+        assert len(app.state.picks) == 2
         # Outside the image: refused with one line, nothing changes.
         app.loupes.frame_camera(2.0, 2.0)
         notes = d.click("loupe_camera", (0.0, 0.0))
