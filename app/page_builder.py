@@ -39,8 +39,8 @@ INTRO = (
     "to make a pair. No pose yet? **Align** first: a preset, then drag the render onto the photo. "
     "**Shift+click** a marker to select its pair; then clicks move it. "
     "**Drag** a marker to move it. The two **loupes** on the right magnify the last click and the "
-    "predicted other end; click in them for exact cells and sub-pixel points (a loupe click right after a "
-    "click on the full image refines it). Wheel zooms on the view centre, right-drag pans. "
+    "predicted other end; click in them for exact cells and sub-pixel points (a loupe click refines the pair "
+    "they show; a new pair starts on the full images). Wheel zooms on the view centre, right-drag pans. "
     "**BA columns** shows only part of a wide scan, e.g. the part facing the camera."
 )
 
