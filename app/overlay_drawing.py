@@ -32,6 +32,7 @@ class OverlayDrawing:
         self._loupe_marks_held = 0  # > 0: refresh() leaves the loupes' marks to loupe_marks_after()
         self._labels_drawn: dict[str, tuple[str, tuple]] | None = None  # number labels as last sent
         self._camera_view_drawn: str | None = None  # the camera view whose markers are drawn
+        app.subscribe_solve(lambda shown: self.refresh())  # the reprojection overlays follow the solve shown
 
     def invalidate(self) -> None:
         """Redraw the camera-view overlays on the next :meth:`refresh` even if their inputs look unchanged."""
@@ -158,7 +159,7 @@ class OverlayDrawing:
         app = self.app
         slot = app.camera_slot()
         bundle = None if app.state.view.hide_marks else app.solve_bundle
-        camera, cview = app.camera, app.view.camera_view
+        camera, cview = app.camera, app.camera_view
         # Skipped when neither the solve, the view nor the picks it colours changed (e.g. a click on a BA image).
         self._draw_predictions(slot, predictions)  # cheap, changes with every BA click
         view = app.state.view
