@@ -1,9 +1,10 @@
-"""The live-solve coordinator: every change of the pairs is solved in a worker thread (:class:`app.live_solver.LiveSolver`),
-shown when done (one redraw, which also draws the change itself: the panels and the overlays subscribe to what the
-solve shows, :meth:`LiveSolveCoordinator.subscribe`, and to each finished solve, :meth:`~LiveSolveCoordinator.subscribe_solved`,
-as they subscribe to the pairs with ``state.subscribe``), then the 3-D pane's camera frame and cloud colours
-(:class:`app.cloud_pane.CloudPane`; at once only while a tab shows 3-D), the camera-facing column window and
-the scan projected for the loupes' predictions are computed in their own thread.  The maths is :func:`calib_core.solve.calibrate` and :mod:`calib_core.overlays`."""
+"""The live-solve coordinator: every change of the pairs is solved in a worker thread
+(:class:`app.live_solver.LiveSolver`) and shown when done, in one redraw that also draws the change itself.  The
+overlays and panels subscribe to what the solve shows (:meth:`LiveSolveCoordinator.subscribe`) and to each
+finished solve (:meth:`~LiveSolveCoordinator.subscribe_solved`), as they subscribe to the pairs with
+``state.subscribe``.  Then the 3-D pane's camera frame and cloud colours (:class:`app.cloud_pane.CloudPane`; at once
+only while a tab shows 3-D), the camera-facing column window and the scan projected for the loupes' predictions are
+computed in their own thread.  The maths is :func:`calib_core.solve.calibrate` and :mod:`calib_core.overlays`."""
 
 from __future__ import annotations
 

@@ -171,6 +171,7 @@ class CalibrationApp:
             self.align = AlignPanel(self, order=self.pairs_folder.order - 0.5)  # rough pose; first folder
             self.loupes = Loupes(self)  # the magnified BA and camera panes (public: frame_ba, frame_camera)
             self.format_export = FormatExportPanel(self)  # verify: its own widgets (formats, reference import)
+            self.display.subscribe(self._on_display_change)
             self.server.on_client_connect(self._on_connect)
             self.server.on_client_disconnect(self._on_disconnect)
             self.live.start()
@@ -202,6 +203,20 @@ class CalibrationApp:
             self.view.set_view(client, "all")
         except Exception:
             traceback.print_exc()
+
+    def _on_display_change(self, what: str) -> None:
+        """What the laser panes show changed (:meth:`DisplayPanel.subscribe`): redraw the panes, loupe and marks."""
+        if what in ("marks", "edges"):
+            if what == "edges":
+                self.overlays.invalidate()  # redraw the overlays with the new blend
+            self.overlays.refresh()  # "Hide marks": the marks' redraws depend on it, only they are sent
+            return
+        keys = {"contrast": self.ba_keys, "last_pane": self.ba_keys[-1:]}.get(what, ())
+        with self.ui_lock, self.server.atomic():
+            for key in keys:
+                title = {"title": self.view.ba_title(key)} if what == "last_pane" else {}
+                self.page.set_ba(key, texture=self.view.ba_texture(key), **title)
+        self.loupes.refresh()
 
     def _on_disconnect(self, client: Any) -> None:
         self.pairs_panel.forget_tab(client.client_id)
