@@ -76,6 +76,7 @@ class LiveSolveCoordinator:
         self._cloud_worker: LiveSolver | None = None
         self._shown_listeners: list[Callable[[SolveShown], None]] = []
         self._solved_listeners: list[Callable[[SolveShown], None]] = []
+        self._facing_listeners: list[Callable[[], None]] = []
 
     def subscribe(self, listener: Callable[[SolveShown], None]) -> None:
         """Call ``listener(shown)`` whenever what the solve shows is redrawn: a solve finished or failed, a solve
@@ -87,6 +88,11 @@ class LiveSolveCoordinator:
         """Call ``listener(shown)`` after each finished solve (or failed one) has been shown, outside the UI lock:
         for follow-up work that must not hold up the redraw (the camera-view render)."""
         self._solved_listeners.append(listener)
+
+    def subscribe_facing(self, listener: Callable[[], None]) -> None:
+        """Call ``listener()`` when the camera-facing column window (:attr:`facing`) was recomputed while the BA
+        panes follow it (``ba_window_mode == "camera"``); on the cloud worker's thread: post UI work."""
+        self._facing_listeners.append(listener)
 
     def shown(self) -> SolveShown:
         """What the solve shows now."""
@@ -237,7 +243,7 @@ class LiveSolveCoordinator:
                     self.solve_error = None
                     if bundle.shots is not None and not bundle.shots.solved.checked and job == self._job:
                         self._solver.submit(job, _CheckShots(bundle))  # under the UI lock: no newer change lost
-                    if app.view.any_tab_in_3d():  # else the hidden 3-D pane gets it with its colours (cloud job)
+                    if app.cloud.visible:  # a tab shows 3-D; else the hidden pane gets it with its colours (cloud job)
                         app.cloud.show_camera(bundle.result.T_camera_lidar)
                 self.redraw()
             change_job, change_time = self._change_time
@@ -309,7 +315,7 @@ class LiveSolveCoordinator:
             return None
         t0 = time.perf_counter()
         T = bundle.result.T_camera_lidar
-        colors = self._cloud_colors(T) if app.view.any_tab_in_3d() and app.cloud.shows is not bundle else None
+        colors = self._cloud_colors(T) if app.cloud.visible and app.cloud.shows is not bundle else None
         facing_done = app.state.view.ba_window_mode == "camera" and self._facing_of is not bundle
         facing = self._facing_window(T) if facing_done else None
         app.loupe_support.projection(T)  # the loupes' camera-to-cell predictions, ready before the next click
@@ -332,8 +338,8 @@ class LiveSolveCoordinator:
             if update.facing_done:
                 self._set_facing(update.bundle, update.facing)
         if update.facing_done and app.state.view.ba_window_mode == "camera" and not self._stopped:
-            # In the action worker, so a click is never mapped through a window that changed under it.
-            app.post(app.view.apply_ba_window)
+            for listener in list(self._facing_listeners):
+                listener()
 
     def wait_idle(self, timeout: float = 30.0) -> bool:
         """Block until queued user actions are applied and the live solver and the cloud worker are idle."""

@@ -174,6 +174,9 @@ class CalibrationApp:
             self.display.subscribe(self._on_display_change)
             self.server.on_client_connect(self._on_connect)
             self.server.on_client_disconnect(self._on_disconnect)
+            self.subscribe_solved(lambda shown: self.render_pane.request())  # the render follows the solve shown
+            # In the action worker, so a click is never mapped through a window that changed under it.
+            self.live.subscribe_facing(lambda: self.post(self.view.apply_ba_window))
             self.live.start()
             self.guide = attach_guide_panel(self)  # guided picking (app/guide_panel.py)
             self.state.subscribe(self.live.on_state_change)
@@ -181,7 +184,6 @@ class CalibrationApp:
             self.state.subscribe(self.align.on_pairs_change)  # 2-3 pairs turn the rough pose to fit them
             self.align.on_pairs_change(self.state)
             self.state.subscribe(self.render_pane.on_state_change)  # after the live solve's: sees its bundle
-            self.subscribe_solved(lambda shown: self.render_pane.request())  # the render follows the solve shown
             self.render_pane.request()
             self.verify_panel = VerifyPanel(self)  # verify: check pairs, leave-one-out, heat map, reference, plots
             self.export_panel.verification = self.verify_panel.report_for  # the YAML carries the Verify report

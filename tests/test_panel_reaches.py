@@ -120,8 +120,7 @@ ALLOWED: dict[str, dict[str, int]] = {
         "render_pane.plain_drag_callback": 1, "render_pane.set_blend": 1},
     "app.guide_panel": {"loupes": 1},
     "app.live_coordinator": {"cloud.show_camera": 3, "cloud.show_colors": 1, "cloud.show_pairs": 1, "cloud.shows": 1,
-        "loupe_support.projection": 1, "loupe_support.view_pose": 1, "view.any_tab_in_3d": 2, "view.apply_ba_window":
-        1},
+        "cloud.visible": 2, "loupe_support.projection": 1, "loupe_support.view_pose": 1},
     "app.loupe_support": {"align.adopt": 1, "align.folder": 1, "align.show": 1, "guide": 1, "live.bundle": 3,
         "live.ensure_facing": 1, "live.show_panels": 1, "loupes.zoom": 1, "overlays.invalidate": 1,
         "overlays.refresh": 1, "page.folder_lock": 1, "render_pane": 1, "render_pane.request": 1,
@@ -221,7 +220,7 @@ def mutual_reaches(graph: dict[str, set[str]]) -> list[tuple[str, str]]:
 MUTUAL = [
     ("app.align_panel", "app.loupe_support"), ("app.align_panel", "app.pairs_panel"),
     ("app.align_panel", "app.render_pane"), ("app.live_coordinator", "app.loupe_support"),
-    ("app.live_coordinator", "app.view_panel"), ("app.loupe_support", "app.render_pane"),
+    ("app.loupe_support", "app.render_pane"),
     ("app.loupe_support", "app.view_panel"), ("app.loupes", "app.render_pane"), ("app.page_builder", "app.pairs_panel"),
     ("app.page_builder", "app.view_panel"), ("app.pairs_panel", "app.render_pane"),
     ("app.pairs_panel", "app.view_panel"),
