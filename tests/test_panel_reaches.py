@@ -127,7 +127,7 @@ ALLOWED: dict[str, dict[str, int]] = {
         "view.apply_ba_window": 1},
     "app.loupes": {"display.loupe_image": 2, "render_pane": 1, "render_pane.current": 1, "render_pane.loupe_texture":
         1, "render_pane.loupe_title": 1, "render_pane.pixel_of_cells": 2, "render_pane.target_at": 1},
-    "app.overlay_drawing": {"loupes": 1, "loupes.display_of": 1, "loupes.draw_marks": 2},
+    "app.overlay_drawing": {"loupes.display_of": 1},
     "app.page_builder": {"pairs_panel": 1, "view.camera_view": 1},
     "app.pairs_panel": {"align.drag_enabled": 1, "display.ba_display": 2, "guide.callback": 1, "loupe_support": 1,
         "loupe_support.predict_cell": 1, "loupe_support.predict_pixel": 1, "loupes": 2, "loupes.ba_crop": 2,
