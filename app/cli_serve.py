@@ -86,11 +86,10 @@ def _serve_bag_shots(args: argparse.Namespace) -> int:
         raise CalibError("give --frames N, or the frames by hand with --time or --index, not both")
     session = args.session if args.session is not None else (
         Path.cwd() / f"{Path(args.bag).absolute().name}.ba-calib-session.yaml")
-    shots = shots_from_bag(args.bag, frames=args.frames, times=args.time if by_hand == "times" else None,
-                           indices=args.index if by_hand == "indices" else None,
-                           out_dir=args.frames_dir or default_frames_dir(args.bag, session),
-                           cloud_topic=args.cloud_topic, image_topic=args.image_topic,
-                           camera_info_topic=args.camera_info_topic)
+    source = dict(bag=args.bag, out_dir=args.frames_dir or default_frames_dir(args.bag, session),
+                  cloud_topic=args.cloud_topic, image_topic=args.image_topic, camera_info_topic=args.camera_info_topic)
+    shots = shots_from_bag(frames=args.frames, times=args.time if by_hand == "times" else None,
+                           indices=args.index if by_hand == "indices" else None, **source)
     for note in shots.notes:
         print(f"ba-calib: {note}", flush=True)
     for k, shot in enumerate(shots):
@@ -98,7 +97,7 @@ def _serve_bag_shots(args: argparse.Namespace) -> int:
     camera = args.camera if args.camera is not None else shots.camera
     if camera is None:
         raise CalibError(f"{args.bag}: no CameraInfo topic; give the camera file with --camera")
-    serve(None, None, camera, shots=[(shot.scan, shot.image) for shot in shots], session_path=session,
+    serve(None, None, camera, shots=[(shot.scan, shot.image) for shot in shots], shot_bag=source, session_path=session,
           output_path=args.output, host=args.host, port=args.port, scan_options=scan_options(args),
           image_size=tuple(args.image_size) if args.image_size else None,
           initial_extrinsics_path=args.initial_extrinsics or shots.initial_extrinsics, kitti_camera=args.kitti_camera)

@@ -13,9 +13,8 @@ moves its pixel (0.3 px; it keeps its source, e.g. ``clicked``).
 One click on the camera (loupe or image) completes the pair through the
 ordinary pick logic; when the new proposals arrive the next one is started
 and framed by itself, so a guided pair costs one click.  "Skip" moves the half
-pick to the next proposal (the skipped one comes back last), "Not a corner"
-drops the cell for good, "Stop" removes the half pick.  Undo works on these
-picks as on any other.
+pick to the next proposal (it comes back last; a re-click never), "Not a corner" drops the cell for good,
+"Stop" removes the half pick (and a re-click shown, for good).  Undo works on these picks as on any other.
 
 Proposals pass the clear-evidence screen of :mod:`calib_core.guide.evidence`
 with a 3-sigma radius of at most half the camera loupe's side zoomed out one
@@ -115,10 +114,10 @@ class GuidePanel(GuideShotsMixin):
                  click_source: Callable[[int], str | None] = lambda pick_id: None,
                  on_start: Callable[[], None] = lambda: None,
                  solve_quality: Callable[[], tuple | None] = lambda: None,
-                 shots: Callable[[], Any] | None = None) -> None:
+                 shots: Callable[[], Any] | None = None, on_status: Callable | None = None) -> None:
         self._init_shots(shots)
         self.state, self.depth, self.camera, self.image = state, depth, camera, image
-        self._solve_quality = solve_quality
+        self._solve_quality, self._on_status = solve_quality, on_status or (lambda guiding, lines: None)  # pair bar
         self._job_quality: tuple | None = None  # (pairs, status, reasons) of the guide's own solve, last job
         self._reason: str | None = None  # why the last proposals are empty
         #: The screen of the proposals; its 3-sigma limit follows the camera loupe (:func:`max_ellipse_px_for`).
@@ -292,7 +291,7 @@ class GuidePanel(GuideShotsMixin):
             key, props, auto_pairs, self._reclick_of, self._job_quality = result
             self._busy = False
             self._error = None
-            self._reason = props.reason
+            self._reason = props.reason or getattr(props, "note", None)  # the note: no new corner passed the screen
             # A guided pick still waiting for its click (e.g. after an undo) keeps its proposal shown.
             half = self._guided_half()
             waiting = half.laser_rc if half is not None else next(
@@ -394,6 +393,8 @@ class GuidePanel(GuideShotsMixin):
 
     def _on_button(self, label: str) -> None:
         if label == "Stop":
+            if self._guiding and self.current is not None and self.current.replaces is not None:
+                self._drop_current(self.current)  # a re-click declined: not offered again
             self._guiding = self._want_next = False
             self._guided_side = 0.0
             self._drop_unfinished()
@@ -411,14 +412,11 @@ class GuidePanel(GuideShotsMixin):
             ready = not self._busy and self._shown_key == self._submitted
             p = self.current if ready else None
             if label in ("Skip", "Not a corner") and p is not None:
-                if label == "Skip":
+                if label == "Skip" and p.replaces is None:  # a skipped re-click goes for good (no cycling back)
                     self._skipped.append(tuple(p.laser_rc))
                     self._index = (self._index + 1) % len(self._proposals)
                 else:
-                    self._dropped.append(tuple(p.laser_rc))
-                    self._delete_proposal(self._index)
-                    if self._index >= len(self._proposals):
-                        self._index = 0
+                    self._drop_current(p)
         if not ready:  # framed as soon as the proposals are in
             self._want_next = True
             self._refresh()
@@ -427,6 +425,12 @@ class GuidePanel(GuideShotsMixin):
             self._drop_unfinished()
             return
         self._start_current()
+
+    def _drop_current(self, p: Proposal) -> None:
+        with self._lock:  # the shown proposal ``p``, for good
+            self._dropped.append(tuple(p.laser_rc))
+            self._delete_proposal(self._index)
+            self._index = 0 if self._index >= len(self._proposals) else self._index
 
     def _on_auto(self, on: bool) -> None:
         self._refuse_auto_across_shots(on)
@@ -453,7 +457,8 @@ class GuidePanel(GuideShotsMixin):
         elif not (self._guiding or self._auto):
             lines.append("Press **Next pair**: the tool proposes where to click next and frames it in the loupes.")
         elif not props:
-            lines.append(f"No proposal: {md_escape(reason or 'none left')}.")
+            shown = md_escape(reason or "none left")
+            lines.append(f"{shown}." if shown.startswith("No new") else f"No proposal: {shown}.")
         elif not self._guiding:
             lines.append(f"{len(props)} proposals for auto-accept.")
         else:
@@ -463,7 +468,7 @@ class GuidePanel(GuideShotsMixin):
             lines.append(f"Proposal {index + 1} of {len(props)}: cell (row {p.laser_rc[0]}, col {p.laser_rc[1]}), "
                          f"{what}, gain {p.gain:.3f}")
             lines.append(f"Predicted pixel ({p.pixel[0]:.1f}, {p.pixel[1]:.1f}), 3σ ±{major:.1f} px")
-            lines += self.shot_lines(p)
+            lines += self.shot_lines(p) + ([f"{md_escape(props.note)}."] if getattr(props, "note", None) else [])
             half = self.state.pending()
             if self._reclick is not None and self._reclick_id(p) == self._reclick:
                 lines.append(f"Pair {self._reclick} (selected): re-click its corner in the camera loupe.")
@@ -474,6 +479,7 @@ class GuidePanel(GuideShotsMixin):
                              f"image is coarse), or press **Next pair**.")
             elif self._guiding:
                 lines.append("Press **Next pair** to continue.")
+        self._on_status(self._guiding, lines[1:])
         counts = {s: 0 for s in ("clicked", "guided", "auto")}
         for pick in self.state.complete_picks():
             counts[pick.source] = counts.get(pick.source, 0) + 1
@@ -489,6 +495,6 @@ def attach_guide_panel(app: Any) -> GuidePanel:
                       loupes=lambda: getattr(app, "loupes", None), ba_key=app.ba_keys[0],
                       order=app.pairs_folder.order + 0.5,
                       click_source=app.camera_click_source, on_start=app.forget_last_picks,
-                      solve_quality=lambda: live_quality(app),
+                      solve_quality=lambda: live_quality(app), on_status=app.pairs_panel.show_guide_status,
                       shots=None if len(app.shot_scenes) < 2 else lambda: (
                           [sc.depth for sc in app.shot_scenes], [sc.image for sc in app.shot_scenes], app.active_shot))

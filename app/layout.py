@@ -231,20 +231,21 @@ class LoupeArea:
 def loupe_areas(main_bounds: tuple[float, float, float, float]) -> dict[str, LoupeArea]:
     """Two loupe areas, ``"camera"`` above ``"ba"``, in a column right of the camera and BA images.
 
-    Each is square, half the height of the main block (titles included), so
-    that the whole page (images and loupes) fits a typical browser view at once.
+    Each is square, half the height of the main block (titles included, and the camera loupe's legend line
+    under it), so that the whole page (images and loupes) fits a typical browser view at once.
     """
     x0, y0, x1, y1 = main_bounds
     top = y0 - LABEL_HEIGHT  # the camera title sits above the camera image
     side = loupe_side(y1 - top)
     left = x1 + 3 * GAP
     return {"camera": LoupeArea(left, y0, side, side),
-            "ba": LoupeArea(left, y0 + side + GAP + LABEL_HEIGHT, side, side)}
+            "ba": LoupeArea(left, y0 + side + GAP + 2 * LABEL_HEIGHT, side, side)}
 
 
 def loupe_side(height: float) -> float:
-    """The side of each of the two square loupes beside a main block ``height`` world units tall (titles included)."""
-    return min(max((height - GAP - LABEL_HEIGHT) / 2.0, 2.5), 6.0)
+    """The side of each of the two square loupes beside a main block ``height`` world units tall (titles and the
+    camera loupe's legend line included)."""
+    return min(max((height - GAP - 2 * LABEL_HEIGHT) / 2.0, 2.5), 6.0)
 
 
 def bounds_of(slots: list[ImageSlot]) -> tuple[float, float, float, float]:

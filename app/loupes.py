@@ -25,6 +25,7 @@ from calib_core.errors import CalibError
 from calib_core.predict import ellipse_outline
 
 from .layout import ImageSlot, LoupeArea, bounds_of, loupe_areas
+from .loupe_marks import LEGEND, ba_title, camera_title, draw_camera_marks, tick_segments
 from .ui_common import marker_segments
 
 #: Columns the BA loupe shows at zoom 1, and the camera loupe's crop side for a 640 px wide image.
@@ -113,6 +114,9 @@ class Loupes:
             area = self.areas[kind]
             self._titles[kind] = scene.add_label(f"/annot/titles/loupe_{kind}", "", position=(area.x0, area.y0 - 0.03, -0.01),
                                                  anchor="bottom-left", font_screen_scale=0.9)
+        # Which camera-loupe mark is which, in the line layout.loupe_areas keeps free under that loupe.
+        self._legend = scene.add_label("/annot/titles/loupe_legend", LEGEND, position=self._legend_position(),
+                                       anchor="top-left", font_screen_scale=0.8)
         self._handles["ba"] = scene.add_image(node_name("ba"), self._ba_texture(), 1.0, 1.0, format="png")
         self._handles["camera"] = scene.add_image(node_name("camera"), self._camera_texture(), 1.0, 1.0, format="png")
         for kind, handle in self._handles.items():
@@ -213,8 +217,18 @@ class Loupes:
             for kind in KINDS:
                 area = self.areas[kind]
                 self._titles[kind].position = (area.x0, area.y0 - 0.03, -0.01)
+                self._legend.position = self._legend_position()
                 self._place(kind)
                 self._draw_marks(kind)  # their marks follow the slots
+
+    def _legend_position(self) -> tuple[float, float, float]:
+        cam = self.areas["camera"]
+        return (cam.x0, cam.y0 + cam.height + 0.03, -0.01)
+
+    @property
+    def legend(self) -> str:
+        """The legend line under the camera loupe."""
+        return str(self._legend.text)
 
     def texture(self, kind: str) -> np.ndarray:
         """The loupe's current texture (what the page shows)."""
@@ -284,8 +298,11 @@ class Loupes:
         crop = self.ba_crop if kind == "ba" else self.camera_crop
         main = app.slots.get(crop.key) if kind == "ba" else app.camera_slot()
         # Only the ends this loupe draws: moving a pixel leaves the BA loupe's marks alone, and vice versa.
-        ends = tuple((p.id, p.laser_rc if kind == "ba" else p.pixel) for p in picks)
+        ends = tuple((p.id, p.laser_rc if kind == "ba" else (p.pixel, p.laser_rc)) for p in picks)
         inputs = (crop, self._slots[kind], ends, main, app.ba_window, hidden)
+        if kind == "camera":  # the pairs' laser points are drawn projected under the current pose
+            pose = app.pose()
+            inputs += (None if pose is None else np.asarray(pose, np.float64).tobytes(),)
         if kind == "ba" and self._render_on():
             inputs += (self.camera_crop, id(app.render_pane.current))
         if self._marks_of.get(kind) == inputs:
@@ -330,25 +347,17 @@ class Loupes:
         nodes.lines("/annot/loupe/ba_marks", segs, seg_cols, thickness=2.5)
 
     def _draw_camera_marks(self, picks: list) -> None:
-        nodes = self.app.nodes
-        # Camera loupe: clicked pixels as rings, the framed centre (prediction) as a hollow black-white marker.
-        s, c = self._slots["camera"], self.camera_crop
-        px = np.array([p.pixel for p in picks if p.pixel is not None], np.float64).reshape(-1, 2)
-        cols = np.array([p.color for p in picks if p.pixel is not None], np.uint8).reshape(-1, 3)
-        xy = px - [c.u0, c.v0]
-        inside = np.array([s.contains(p) for p in xy], bool)
-        r = max(3.0, 0.06 * c.n) * s.units_per_px
-        segs = marker_segments(s.world_from_pixel(xy[inside], z_offset=-0.01), r)
-        seg_cols = np.repeat(cols[inside], len(segs) // max(int(inside.sum()), 1) * 2, axis=0).reshape(-1, 2, 3)
-        nodes.lines("/annot/loupe/camera_marks", segs, seg_cols, thickness=2.5)
+        # Camera loupe: clicks as crosses, the pairs' laser points projected as rings (app.loupe_marks).
+        draw_camera_marks(self.app, self._slots["camera"], self.camera_crop, picks, self.app.pose())
 
     def _draw_camera_centre(self) -> None:
-        """The camera loupe's framed centre (hollow black-white marker) and its 3-sigma ellipse: they follow the crop."""
+        """The camera loupe's framed centre (four black-white ticks: neither a click's cross nor a laser point's ring)
+        and its 3-sigma ellipse: they follow the crop."""
         nodes = self.app.nodes
         s, c = self._slots["camera"], self.camera_crop
         centre = s.world_from_pixel(np.array([c.center]) - [c.u0, c.v0], z_offset=-0.012)
         rr = max(2.0, 0.05 * c.n) * s.units_per_px
-        hollow = marker_segments(centre, rr, ticks=True)
+        hollow = tick_segments(centre, rr)
         nodes.lines("/annot/loupe/camera_centre_halo", hollow + [0, 0, 0.001], np.full(hollow.shape, 0, np.uint8),
                     thickness=4.0)
         nodes.lines("/annot/loupe/camera_centre", hollow, np.full(hollow.shape, 255, np.uint8), thickness=1.5)
@@ -468,13 +477,10 @@ class Loupes:
         if kind == "ba":
             c = self.ba_crop
             row, col = self._clicked.get("ba", c.center)
-            rng = self.app.depth.range_m[row, col]
-            shown = f"{rng:.2f} m" if self.app.depth.valid[row, col] and np.isfinite(rng) else "no return"
-            name = self.app.display.loupe_image(c.key)[1]
-            return f"{name} loupe: row {row}, column {col}, range {shown} ({c.n_cols} columns shown)"
+            rng = float(self.app.depth.range_m[row, col]) if self.app.depth.valid[row, col] else None
+            return ba_title(self.app.display.loupe_image(c.key)[1], row, col, rng)  # short: fits the loupe
         c = self.camera_crop
-        u, v = self._clicked.get("camera", c.center)
-        return f"Camera loupe (original image): ({u:.1f}, {v:.1f}), {c.n} x {c.n} px shown"
+        return camera_title(*self._clicked.get("camera", c.center), c.n)
 
     def _show(self, kind: str) -> None:
         """Send the loupe's new texture, size and title, and redraw its marks (in one message batch)."""

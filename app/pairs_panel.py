@@ -15,6 +15,7 @@ from calib_core.pairs import Pair, load_pairs_yaml
 from calib_core.panorama import refine_click_to_corner
 
 from .layout import RENDER_KEY
+from .pair_bar import PairBar
 from .security import upload_display_name
 from .ui_common import MIN_PAIRS, PICK_RADII, SNAP_RADIUS_PX, IMPORT_CHOICES, md_escape
 
@@ -47,6 +48,9 @@ class PairsPanel:
         self._bg_actions = gui.add_button_group("Pair", PAIR_ACTIONS, order=top - 1.0)
         self._bg_actions.on_click(self.pair_action_callback)
         self._md_status = gui.add_markdown("", order=top - 0.5)
+        # The live solve's figures right under the buttons, guided picking's status under the pair status.
+        self.bar = PairBar(gui, live_order=top - 0.75, guide_order=top - 0.45)
+        self.show_guide_status = self.bar.show_guide_status  # the Guide panel's hook
         self._guarded_pair_action = guard(self.on_pair_action)
         self.folder = gui.add_folder("Pairs")
         with self.folder:
@@ -131,6 +135,7 @@ class PairsPanel:
                 status.append(f"Pair {selected} selected: the next click moves it (**Cancel pair** deselects).")
             if self._md_status.content != "  \n".join(status):
                 self._md_status.content = "  \n".join(status)
+            self.bar.show_live(getattr(app, "live", None))
             if total < MIN_PAIRS:
                 lines.append(f"Pick {MIN_PAIRS - total} more to calibrate.")
             lines.append(f"Undo: {'yes' if state.can_undo else 'no'}, redo: {'yes' if state.can_redo else 'no'}")

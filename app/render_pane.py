@@ -443,10 +443,7 @@ class RenderPane:
 
     def loupe_title(self, center: tuple[float, float], n: int) -> str:
         """The laser loupe's title while it shows the render: the cell at the crop's centre and its range."""
+        from .loupe_marks import render_title
+
         cell = self.cell_at_pixel(*center)
-        if cell is None:
-            what = "no return at the centre"
-        else:
-            rng = self.app.depth.range_m[cell]
-            what = f"row {cell[0]}, column {cell[1]}, range {rng:.2f} m"
-        return f"Camera-view laser loupe (same crop as the camera loupe): {what}, {n} x {n} px shown"
+        return render_title(cell, None if cell is None else float(self.app.depth.range_m[cell]))

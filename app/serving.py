@@ -228,10 +228,12 @@ class ShotServer:
     def __init__(self, shots: Sequence[tuple[Any, Any]], camera_path: str | os.PathLike, *,
                  session_path: str | os.PathLike | None = None, scan_options: dict | None = None,
                  image_size: tuple[int, int] | None = None, kitti_camera: int | None = None,
-                 max_cloud_points: int = MAX_CLOUD_POINTS, **app_options: Any) -> None:
+                 max_cloud_points: int = MAX_CLOUD_POINTS, bag_frames: dict | None = None,
+                 **app_options: Any) -> None:
         if not shots:
             raise CalibError("no shot given: give --shot SCAN IMAGE at least once")
         self.camera_path = Path(camera_path)
+        self.bag_frames = bag_frames  # shots_from_bag's arguments but the choice: the Shots panel adds frames
         self.session_path = (Path.cwd() / f"{Path(shots[0][0]).stem}.ba-calib-session.yaml" if session_path is None
                              else Path(session_path))
         self._load_options = dict(scan_options=scan_options, image_size=image_size, kitti_camera=kitti_camera,
@@ -337,6 +339,7 @@ def serve(
     bag: BagSource | None = None,
     kitti_camera: int | None = None,
     shots: Sequence[tuple[Any, Any]] | None = None,
+    shot_bag: dict | None = None,
 ) -> None:
     """Serve the annotation app until Ctrl+C; prints the URL (with the access token off loopback).
 
@@ -361,7 +364,7 @@ def serve(
             server = BagServer(bag, initial_extrinsics_path=initial_extrinsics_path, **options)
             app = server.load()
         elif shots is not None:
-            server = ShotServer(shots, camera_path, session_path=session_path,
+            server = ShotServer(shots, camera_path, session_path=session_path, bag_frames=shot_bag,
                                 initial_extrinsics_path=initial_extrinsics_path, **options)
             app = server.load()
         else:

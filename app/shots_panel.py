@@ -48,6 +48,12 @@ class ShotsPanel:
             self.scan_text = gui.add_text("New shot: scan", "", hint="Path of the scan on the machine serving the page")
             self.image_text = gui.add_text("New shot: photo", "", hint="Path of the photo taken with that scan")
             self.add_button = gui.add_button("Add this shot", hint="One undoable step (Pairs: Undo removes it)")
+            if getattr(server, "bag_frames", None) is not None:  # served from a bag: add another of its frames
+                self.frame_number = gui.add_number("Bag frame (cloud index)", 0, min=0, step=1,
+                                                   hint="0-based index of the bag's cloud (ba-calib bag frames)")
+                self.add_frame_button = gui.add_button("Add this bag frame",
+                                                       hint="Extracts the frame and adds it as a shot: one undoable step")
+                self.add_frame_button.on_click(app.guard(lambda _: self.add_bag_frame(int(self.frame_number.value))))
         self.show_button.on_click(app.guard(self.show_chosen))
         self.add_button.on_click(app.guard(self._on_add))
         app.state.subscribe(self._on_state_change)
@@ -91,6 +97,16 @@ class ShotsPanel:
             raise CalibError("give the new shot's scan and photo (their paths on the machine serving the page)")
         k = self.server.add_shot(scan, image)
         self.request(k)
+
+    def add_bag_frame(self, index: int) -> int:
+        """Extract cloud ``index`` of the served bag with its image, add it as a shot (one undoable step) and
+        show it; returns the shot's index."""
+        from calib_core.io.bag_frames import shots_from_bag
+
+        frame = shots_from_bag(indices=[int(index)], **self.server.bag_frames)[0]
+        k = self.server.add_shot(frame.scan, frame.image)
+        self.request(k)
+        return k
 
     def show_for_guide(self, shot: int) -> None:
         """Guided picking's next proposal is in shot ``shot``: show it, and go on guiding there."""

@@ -142,13 +142,13 @@ def test_the_loupe_title_names_the_latest_click(tmp_path, scene):
         d = AppDriver(app)
         rough = (row + 2, col - 3)
         assert d.click_cell("vertical", *rough) == []
-        assert f"row {rough[0]}, column {rough[1]}," in d.loupe_title("ba")
+        assert f"r{rough[0]} c{rough[1]} ·" in d.loupe_title("ba")
         assert d.click_loupe_cell(row, col) == []  # the refining click, inside the loupe
         assert app.state.picks[0].laser_rc == (row, col)
         title = d.loupe_title("ba")
         # The cell clicked last, and that cell's range (read from the scan here, not from the app's title code).
-        assert f"row {row}, column {col}, range {scene.depth.range_m[row, col]:.2f} m" in title, title
-        assert f"row {rough[0]}, column {rough[1]}," not in title
+        assert f"r{row} c{col} · {scene.depth.range_m[row, col]:.2f} m" in title, title
+        assert f"r{rough[0]} c{rough[1]} ·" not in title
         # The camera loupe likewise: a rough click, then a sub-pixel refinement inside the loupe.
         assert d.click_camera(u + 4.0, v - 3.0) == []
         assert f"({u + 4.0:.1f}, {v - 3.0:.1f})" in d.loupe_title("camera")
@@ -157,7 +157,7 @@ def test_the_loupe_title_names_the_latest_click(tmp_path, scene):
         assert f"({u + 0.3:.1f}, {v - 0.2:.1f})" in d.loupe_title("camera"), d.loupe_title("camera")
         # Framing the loupe somewhere else (a click on the full image) names that place again.
         assert d.click_cell("vertical", *rough) == []
-        assert f"row {rough[0]}, column {rough[1]}," in d.loupe_title("ba")
+        assert f"r{rough[0]} c{rough[1]} ·" in d.loupe_title("ba")
     finally:
         app.stop()
 

@@ -228,4 +228,7 @@ def test_screen_on_real_frames(name, loader, present):
         props = proposals_of(session, 20, screen)
         shown += len(props)
         check_screen(props, depth, camera, session.state.T_camera_lidar, session.corners, screen)
-    assert shown >= 10
+        assert props or props.reason  # nothing proposed: the person is told why
+    # Not a vacuous check.  (10 before re-clicks were limited to the pairs where they clearly help: each trial
+    # then offered a re-click of every one of its 5 rough pairs.)
+    assert shown >= 4

@@ -392,9 +392,10 @@ def test_a_session_shot_whose_files_are_gone_is_named(tmp_path, two_shots):
     assert str(err.value) == f"shot 1 (listed in the session {session}): the scan {scan} does not exist"
 
 
-def test_serve_bag_frames_opens_one_session_of_three_shots(tmp_path, monkeypatch):
-    """``serve --bag BAG --frames 3`` on an MCAP bag of three clouds and images (tests/bag_helpers.py): the
-    three frames are written as shots and served as one session of three shots."""
+@pytest.mark.parametrize("kind", ["ros1", "sqlite3", "mcap"])
+def test_serve_bag_frames_opens_one_session_of_three_shots(tmp_path, monkeypatch, kind):
+    """``serve --bag BAG --frames 3`` on a ROS 1, a ROS 2 sqlite and an MCAP bag of three clouds and images
+    (tests/bag_helpers.py): the three frames are written as shots and served as one session of three shots."""
     from bag_helpers import CloudSpec, SceneBag, write_bag
 
     import app.serving
@@ -405,9 +406,10 @@ def test_serve_bag_frames_opens_one_session_of_three_shots(tmp_path, monkeypatch
     cloud = read_point_cloud(SAMPLE / "scan.npz")
     spec = CloudSpec({a: cloud.xyz[:, i].copy() for i, a in enumerate("xyz")}, organized_shape=cloud.organized_shape)
     image = load_image_rgb(SAMPLE / "image.png")
-    images = [image, image[::-1].copy(), image[:, ::-1].copy()]
-    bag = write_bag(tmp_path / "bag", "mcap", SceneBag(clouds=[spec] * 3, cloud_times=[50.0, 51.0, 52.0],
-                                                       images=images, image_times=[50.0, 51.0, 52.0]))
+    images = [image, image[::-1].copy(), image[:, ::-1].copy(), image[::-1, ::-1].copy()]
+    times = [50.0, 51.0, 52.0, 53.0]
+    bag = write_bag(tmp_path / ("bag.bag" if kind == "ros1" else "bag"), kind,
+                    SceneBag(clouds=[spec] * 4, cloud_times=times, images=images, image_times=times))
     served = {}
     monkeypatch.setattr(app.serving, "serve", lambda *a, **k: served.update(args=a, kwargs=k))
     session = tmp_path / "session.yaml"
@@ -416,12 +418,22 @@ def test_serve_bag_frames_opens_one_session_of_three_shots(tmp_path, monkeypatch
     assert args.func(args) == 0
     shots = served["kwargs"]["shots"]
     assert len(shots) == 3 and served["args"][2] == SAMPLE / "camera.yaml"
-    server = ShotServer(shots, served["args"][2], session_path=served["kwargs"]["session_path"], port=0)
+    server = ShotServer(shots, served["args"][2], session_path=served["kwargs"]["session_path"], port=0,
+                        bag_frames=served["kwargs"]["shot_bag"])
     try:
         assert server.state.n_shots == 3
-        for k in (0, 2):
+        shown = []
+        for k in range(3):
             app_k = server.load(k)
-            assert np.array_equal(app_k.image, images[k])  # each shot shows its own frame's photo
+            shown.append(next(i for i, im in enumerate(images) if np.array_equal(app_k.image, im)))
+        assert len(set(shown)) == 3  # each shot shows its own frame's photo
+        # The frame left out is added from the Shots panel: one undoable step.
+        left = ({0, 1, 2, 3} - set(shown)).pop()
+        k = server.panel.add_bag_frame(left)
+        assert (k, server.state.n_shots) == (3, 4)
+        assert np.array_equal(server.load(3).image, images[left])
+        server.state.undo()
+        assert server.state.n_shots == 3
     finally:
         server.stop()
     with pytest.raises(CalibError, match="give --bag too"):

@@ -145,6 +145,8 @@ def _published(path):
 def test_pjlab_two_scenes_guided_across_shots_reaches_the_target():
     """From the joint rough solve (3 + 3 pairs, 1 px), 20 guided clicks (0.5 px, each the top clickable proposal
     over both scenes) land within 0.05 deg / 2 cm of the published calibration, with clicks in both scenes.
+    The simulated click needs no checking by eye, so every candidate is proposed (``screen=None``); with the
+    person screen on (the app's and ``propose``'s default) the proposals run out earlier, still in both scenes.
     Draws 0 and 1 of ``bench.shots_guided`` (the full table: ``python -m bench.shots_guided``)."""
     from bench.shots import load_two_scenes, rough_pairs
     from bench.shots_guided import guided_trial, scan_caches
@@ -160,17 +162,24 @@ def test_pjlab_two_scenes_guided_across_shots_reaches_the_target():
     cached, _ = propose_shots(shots, camera, 5, click_sigma_px=0.5, state=state, shot_options=caches)
     assert [(a.shot, a.proposal.laser_rc, a.proposal.gain) for a in plain] == \
         [(b.shot, b.proposal.laser_rc, b.proposal.gain) for b in cached]
+    open_caches = scan_caches(scenes, person_screen=False)
     for draw in (0, 1):
-        trial = guided_trial(scenes, rule, draw, np.random.default_rng((20070101, draw, 0)), caches)
-        assert len(trial.shot_of_click) == 20
-        T = trial.T_final
-        rot = rotation_angle_deg(T[:3, :3], T_pub[:3, :3])
-        trans_cm = 100 * float(np.linalg.norm(T[:3, 3] - T_pub[:3, 3]))
-        per_scene = np.bincount(trial.shot_of_click, minlength=2)
-        print(f"draw {draw}: rough {trial.errors[0][0]:.3f} deg / {trial.errors[0][1]:.2f} cm -> 20 guided "
-              f"{rot:.4f} deg / {trans_cm:.2f} cm; clicks per scene {per_scene.tolist()}; "
-              f"{sum(trial.inside_3sigma)} of 20 inside 3 sigma")
-        assert rot <= 0.05 and trans_cm <= 2.0
-        assert per_scene.min() > 0
-        assert trial.status == "ok"
-        assert rot < trial.errors[0][0]  # the guided pairs improved on the rough solve
+        for options, name in ((open_caches, "every candidate"), (caches, "person screen")):
+            trial = guided_trial(scenes, rule, draw, np.random.default_rng((20070101, draw, 0)), options)
+            T = trial.T_final
+            rot = rotation_angle_deg(T[:3, :3], T_pub[:3, :3])
+            trans_cm = 100 * float(np.linalg.norm(T[:3, 3] - T_pub[:3, 3]))
+            per_scene = np.bincount(trial.shot_of_click, minlength=2)
+            print(f"draw {draw}, {name}: rough {trial.errors[0][0]:.3f} deg / {trial.errors[0][1]:.2f} cm -> "
+                  f"{len(trial.shot_of_click)} guided {rot:.4f} deg / {trans_cm:.2f} cm; clicks per scene "
+                  f"{per_scene.tolist()}; {sum(trial.inside_3sigma)} inside 3 sigma")
+            assert per_scene.min() > 0
+            assert trial.status == "ok"
+            assert rot < trial.errors[0][0]  # the guided pairs improved on the rough solve
+            if name == "every candidate":
+                assert len(trial.shot_of_click) == 20
+                assert rot <= 0.05 and trans_cm <= 2.0
+            else:
+                # Only cells a person can check: fewer, and the trial stops when none is left.
+                assert 8 <= len(trial.shot_of_click) <= 20
+                assert trans_cm < trial.errors[0][1]

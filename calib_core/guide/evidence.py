@@ -79,6 +79,7 @@ __all__ = [
     "DEFAULT_MAX_ELLIPSE_PX",
     "REASON_ROUGH_ALIGNMENT",
     "REASON_NO_EVIDENCE",
+    "no_new_corner_note",
     "local_plane_residual_m",
     "planar_share",
     "cell_footprint_px",
@@ -111,6 +112,28 @@ REASON_NO_EVIDENCE = (
     "no laser cell here has clear, isolated corner evidence in both the scan and the image; "
     "pick the next pairs by hand"
 )
+
+#: Counts of the screen that are not about new cells (re-clicks of existing pairs).
+RECLICK_SCREEN_KEYS = ("reclick ellipse or border",)
+
+
+def no_new_corner_note(screened: dict) -> str:
+    """What the app says when no new cell passes the screen: how many candidates it left out and the test that
+    left out most, e.g. "No new corner passes the checks here (412 candidates left out: most for not planar);
+    go on by hand".
+
+    Parameters
+    ----------
+    screened : dict of str to int
+        Cells left out per test (:attr:`calib_core.guide.propose.Proposals.screened`).
+    """
+    counts = {k: int(v) for k, v in screened.items() if k not in RECLICK_SCREEN_KEYS and int(v) > 0}
+    if not counts:
+        return "No new corner passes the checks here (no candidate in view); go on by hand"
+    n = sum(counts.values())
+    most = max(counts, key=lambda k: counts[k])
+    return (f"No new corner passes the checks here ({n} candidate{'s' if n != 1 else ''} left out: most for "
+            f"{most}); go on by hand")
 
 
 @dataclass(frozen=True)

@@ -145,17 +145,23 @@ class Proposals(list):
         (:data:`.evidence.REASON_ROUGH_ALIGNMENT` or :data:`.evidence.REASON_NO_EVIDENCE`).
     screened : dict of str to int
         Cells left out by each test of the screen (empty without a screen).
+    note : str or None
+        Set when no *new* cell passed the screen, even if re-clicks of existing pairs are proposed
+        (:func:`.evidence.no_new_corner_note`): the app shows it instead of cycling through re-clicks.
     """
 
-    def __init__(self, items=(), reason: str | None = None, screened: dict | None = None) -> None:
+    def __init__(self, items=(), reason: str | None = None, screened: dict | None = None,
+                 note: str | None = None) -> None:
         super().__init__(items)
         self.reason = reason
         self.screened = dict(screened or {})
+        self.note = note
 
     def like(self, items) -> "Proposals":
-        """Other items with this result's reason (when they are empty) and counts."""
+        """Other items with this result's reason (when they are empty), counts and note."""
         items = list(items)
-        return Proposals(items, None if items else (self.reason or "no proposal left"), self.screened)
+        return Proposals(items, None if items else (self.note or self.reason or "no proposal left"), self.screened,
+                         self.note)
 
 
 def _cell_extent_m(laser_cov: np.ndarray, range_sigma_m: float, cell_sigma: float) -> np.ndarray:

@@ -3,9 +3,13 @@
 What the app's "next pair" action and the benchmark's simulated person
 drive: after every accepted pair the pose, its covariance and the proposals
 are recomputed.  Rough pairs (clicked without guidance) are proposed for a
-re-click in the loupe when that adds more information than a new pair; the
-re-click replaces them.  The candidates of the scan, and which of them the camera
-sees, are computed once.
+re-click in the loupe when that adds more information than a new pair *and*
+would clearly help (:meth:`GuidedSession.reclick_worthy`: the pose rests on
+the pair, or the pair lands far off the pose fitted without it); the re-click
+replaces them.  A re-click skipped or declined once is not proposed again in
+the session.  When no new cell passes the screen, :attr:`Proposals.note` says
+so (how many candidates were left out, and mostly why).  The candidates of
+the scan, and which of them the camera sees, are computed once.
 """
 
 from __future__ import annotations
@@ -18,13 +22,23 @@ from ..pairs import Pair, resolve_pairs
 from ..solve import CalibrationResult, calibrate
 from .candidates import find_candidates
 from .corner_probability import laser_features, scan_range_noise_m
-from .evidence import ProposalScreen, local_plane_residual_m
+from ..solve.calibrate import pair_ids_and_sigmas
+from ..solve.quality import MIN_PAIRS_FOR_ERROR
+from .evidence import REASON_NO_EVIDENCE, ProposalScreen, local_plane_residual_m, no_new_corner_note
 from .image_corners import CornerImage, corner_image
 from .pose_state import DEFAULT_CLICK_SIGMA_PX, PoseState, current_pose
 from .propose import GUIDED_CLICK_SIGMA_PX, Proposal, Proposals, propose
 from .visibility import visible_in_camera
 
-__all__ = ["GuidedSession"]
+__all__ = ["GuidedSession", "RECLICK_MIN_LEVERAGE", "RECLICK_MIN_LOO_PX"]
+
+#: A re-click helps clearly when the pose rests on the pair: the largest eigenvalue of its 2x2 hat-matrix block
+#: is at least this (the pose takes half or more of that click's error, so a precise click moves the pose).
+RECLICK_MIN_LEVERAGE = 0.5
+#: ... or when the pair lands this far off the pose fitted without it (px; 3x the 1.5 px per axis of a click and
+#: a whole-cell laser pick): a precise click there moves the pose (rough by-eye pairs left un-re-clicked bias the
+#: solve: tests/test_app_guided_real.py).
+RECLICK_MIN_LOO_PX = 4.5
 
 
 class GuidedSession:
@@ -90,10 +104,12 @@ class GuidedSession:
         """The ``n`` best next pairs under the current state (skipped ones go last); when there are
         none, :attr:`Proposals.reason` says why."""
         used = [p.laser_rc for p in self.pairs if p.laser_rc is not None] + self.dropped
-        dropped = set(self.dropped)  # "Not a corner" on a re-click: do not propose that re-click again
+        # A re-click skipped or declined ("Not a corner") once is not proposed again in this session.
+        declined = set(map(tuple, self.dropped)) | set(map(tuple, self.skipped))
+        worthy = self.reclick_worthy() if self.reclicks else set()
         rough = [(i, p.laser_rc, DEFAULT_CLICK_SIGMA_PX if p.precision_px is None else p.precision_px)
                  for i, p in enumerate(self.pairs) if p.laser_rc is not None and not p.check
-                 and tuple(p.laser_rc) not in dropped] if self.reclicks else []
+                 and tuple(p.laser_rc) not in declined and i in worthy]
         fit = [p for p in self.pairs if not p.check]
         paired_points = resolve_pairs(fit, self.depth, self.camera)[0] if fit else None
         options = dict(self.propose_options)
@@ -104,8 +120,42 @@ class GuidedSession:
                         laser_evidence=self._laser_evidence, plane_residual=self._residual_for(screen),
                         **options)
         skipped = set(self.skipped)
+        if screen is not None and not any(p.replaces is None for p in props):
+            # Only the ellipses too large: the rough-alignment reason (with its figures) says what to do.
+            rough_alignment = not props and props.reason is not None and props.reason != REASON_NO_EVIDENCE
+            props.note = props.reason if rough_alignment else no_new_corner_note(props.screened)
         return props.like(([p for p in props if p.laser_rc not in skipped]
                            + [p for p in props if p.laser_rc in skipped])[:n])
+
+    def reclick_worthy(self) -> set[int]:
+        """Indices (in :attr:`pairs`) of the pairs whose re-click in the loupe would clearly help.
+
+        * Fewer than 4 pairs in the fit: none (the pose is the imported extrinsic; the pairs do not enter it yet,
+          and new pairs are what is missing).
+        * Exactly 4: all (8 equations for 6 unknowns: the pose rests on every pair, mean leverage 0.75).
+        * 5 or more: from the solve's leave-one-out check (:class:`calib_core.solve.quality.LeaveOneOut`):
+          a pair whose leverage is at least :data:`RECLICK_MIN_LEVERAGE`, or whose error under the pose fitted
+          without it is at least :data:`RECLICK_MIN_LOO_PX`; a pair the robust solve left out as an outlier (a re-click at its predicted pixel can set it
+          right).  None when the check is not available.
+        """
+        fit_index = [i for i, p in enumerate(self.pairs) if not p.check]
+        if len(fit_index) < MIN_PAIRS_FOR_ERROR - 1:
+            return set()
+        if len(fit_index) < MIN_PAIRS_FOR_ERROR:
+            return set(fit_index)
+        loo = getattr(getattr(self.state, "quality", None), "leave_one_out", None)
+        if loo is None:
+            return set()
+        ids, _ = pair_ids_and_sigmas([self.pairs[i] for i in fit_index])  # the ids the solve named its pairs by
+        index_of = dict(zip(ids, fit_index))
+        worthy = set()
+        for pid, err, lev in zip(loo.ids, np.asarray(loo.loo_px, np.float64), np.asarray(loo.leverage, np.float64)):
+            far = np.isfinite(err) and err >= RECLICK_MIN_LOO_PX
+            carried = (np.isfinite(lev) and lev >= RECLICK_MIN_LEVERAGE) or not np.isfinite(err)
+            if (far or carried) and pid in index_of:
+                worthy.add(index_of[pid])
+        in_fit = {index_of[pid] for pid in loo.ids if pid in index_of}
+        return worthy | (set(fit_index) - in_fit)  # the outliers the robust solve left out
 
     def accept(self, proposal: Proposal, pixel, source: str = "guided", precision_px: float | None = None,
                laser_rc: tuple[int, int] | None = None) -> Pair:

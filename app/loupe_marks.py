@@ -1,0 +1,88 @@
+"""The loupes' titles, legend and camera-loupe marks (what :mod:`app.loupes` draws over its textures).
+
+By-eye walkthrough (issue 20): the laser loupe's title ("Camera-view laser loupe (same crop as the camera loupe):
+row 4, column 893, range 10...") ran under the control panel, and after a refining click it was not clear which
+mark was the photo point and which the projected laser point.  So the titles are short (they fit the loupe's
+width: :data:`TITLE_MAX_CHARS`), and the camera loupe draws each pair's **click as a cross** ("+") and its **laser
+point projected** under the current pose **as a plain ring** ("O"), with a legend line under the loupe; the
+loupe's framed centre is four ticks only (a crosshair gap, neither of the two).  Display only: the projection is
+:func:`calib_core.overlays.project_lidar_points`.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from calib_core.overlays import project_lidar_points
+
+from .ui_common import marker_segments
+
+#: The longest loupe title, characters.  The titles' font is viser's 12 CSS px screen em x 0.9 (about 6 px a
+#: character, 7 at most); at 1400 x 900 a loupe is about 320 (KITTI) to 410 (PJLab) screen px wide
+#: (``tests/test_loupe_titles.py``), and the old 60-105 character titles ran on under the control panel.
+TITLE_MAX_CHARS = 44
+#: The line under the camera loupe saying which mark is which (printable ASCII and the middle dot only:
+#: no glyph the page's fonts may lack).
+LEGEND = "+ your click · O laser point projected"
+
+
+def ba_title(name: str, row: int, col: int, range_m: float | None) -> str:
+    """The laser loupe's title for scan cell ``(row, col)`` of the ``name`` image: e.g.
+    ``"Range loupe · r4 c893 · 10.20 m"``; ``range_m`` None: no return there."""
+    shown = "no return" if range_m is None or not np.isfinite(range_m) else f"{range_m:.2f} m"
+    return f"{name} loupe · r{row} c{col} · {shown}"
+
+
+def render_title(cell: tuple[int, int] | None, range_m: float | None) -> str:
+    """The laser loupe's title while it shows the camera-view render (same crop as the camera loupe)."""
+    return "Render loupe · no return here" if cell is None else ba_title("Render", cell[0], cell[1], range_m)
+
+
+def camera_title(u: float, v: float, n: int) -> str:
+    """The camera loupe's title: the original-image pixel named (click or centre) and the crop side, px."""
+    return f"Photo loupe · ({u:.1f}, {v:.1f}) · {n} px"
+
+
+def cross_segments(centres: np.ndarray, half: float) -> np.ndarray:
+    """Line segments ``(N * 2, 2, 3)`` of a "+" of half-length ``half`` (world units) at each world point."""
+    c = np.asarray(centres, dtype=np.float64).reshape(-1, 3)
+    arms = np.array([[[-half, 0, 0], [half, 0, 0]], [[0, -half, 0], [0, half, 0]]], dtype=np.float64)
+    return (c[:, None, None, :] + arms[None]).reshape(-1, 2, 3)
+
+
+def tick_segments(centres: np.ndarray, radius: float) -> np.ndarray:
+    """Four ticks from ``radius`` to ``0.4 * radius`` around each world point (a crosshair with a gap, no ring)."""
+    c = np.asarray(centres, dtype=np.float64).reshape(-1, 3)
+    d = np.array([[1.0, 0, 0], [-1.0, 0, 0], [0, 1.0, 0], [0, -1.0, 0]])
+    ticks = np.stack([radius * d, 0.4 * radius * d], axis=1)
+    return (c[:, None, None, :] + ticks[None]).reshape(-1, 2, 3)
+
+
+def _colours(cols: np.ndarray, n_segments: int, n_marks: int) -> np.ndarray:
+    return np.repeat(cols, n_segments // max(n_marks, 1) * 2, axis=0).reshape(-1, 2, 3)
+
+
+def draw_camera_marks(app: Any, slot: Any, crop: Any, picks: list, pose: np.ndarray | None) -> None:
+    """The camera loupe's marks: each pair's clicked pixel as a cross and its laser cell projected under ``pose``
+    as a ring, both in the pair's colour (only those the loupe shows)."""
+    nodes = app.nodes
+    r = max(3.0, 0.06 * crop.n) * slot.units_per_px
+    clicked = [p for p in picks if p.pixel is not None]
+    px = np.array([p.pixel for p in clicked], np.float64).reshape(-1, 2) - [crop.u0, crop.v0]
+    cols = np.array([p.color for p in clicked], np.uint8).reshape(-1, 3)
+    inside = np.array([slot.contains(p) for p in px], bool)
+    segs = cross_segments(slot.world_from_pixel(px[inside], z_offset=-0.01), r)
+    nodes.lines("/annot/loupe/camera_marks", segs, _colours(cols[inside], len(segs), int(inside.sum())),
+                thickness=2.5)
+    cells = [p for p in picks if p.laser_rc is not None]
+    segs, seg_cols = np.empty((0, 2, 3)), np.empty((0, 2, 3), np.uint8)
+    if pose is not None and cells:
+        uv, ok = project_lidar_points(pose, app.camera, app.depth.cell_points(np.array([p.laser_rc for p in cells])))
+        xy = np.asarray(uv, np.float64).reshape(-1, 2) - [crop.u0, crop.v0]
+        keep = np.asarray(ok, bool) & np.array([slot.contains(p) for p in xy], bool)
+        segs = marker_segments(slot.world_from_pixel(xy[keep], z_offset=-0.009), 0.8 * r, ticks=False)
+        seg_cols = _colours(np.array([p.color for p in cells], np.uint8).reshape(-1, 3)[keep], len(segs),
+                            int(keep.sum()))
+    nodes.lines("/annot/loupe/camera_laser", segs, seg_cols, thickness=2.0)
