@@ -59,6 +59,7 @@ class AlignPanel:
         self._history: list[np.ndarray | None] = []
         self._drag: dict | None = None  # the drag in progress: its start pose and pixel, and its slot
         self._fitted_to: tuple | None = None  # the pair ids the rough pose was last turned to fit (shown)
+        self._pairs_seen: tuple | None = None  # every shot's complete pairs at the last change (on_pairs_change)
         gui, guard = app.server.gui, app.guard
         self.folder = gui.add_folder("Align (rough pose)", order=order)
         with self.folder:
@@ -135,8 +136,19 @@ class AlignPanel:
             self.folder.expand_by_default = source != "solve"
 
     # ------------------------------------------------------------------ changes of the rough pose
+    def on_pairs_change(self, state: Any) -> None:
+        """When the complete pairs (of every shot) changed and are 2 or 3, queue :meth:`fit_to_pairs` on the action
+        worker (subscribed to the state, after the live solve)."""
+        picks = [p for p in state.all_picks if p.complete]
+        seen = tuple((p.id, p.shot, p.to_pair()) for p in picks)
+        if seen == self._pairs_seen:
+            return
+        self._pairs_seen = seen
+        if MIN_ROTATION_PAIRS <= len(picks) < MIN_PAIRS:  # 2-3 pairs fix the rotation: line the render up (issue 20)
+            self.app.post(lambda pairs=[p.to_pair() for p in picks]: self.fit_to_pairs(pairs))
+
     def _check_unsolved(self) -> None:
-        if self.app.live.bundle is not None:
+        if self.app.solve_bundle is not None:
             raise CalibError(f"{MIN_PAIRS}+ pairs are solved: the page shows that calibration, not the rough pose "
                              f"(the rough pose is for starting; delete pairs to go back to it)")
 
@@ -148,7 +160,7 @@ class AlignPanel:
         """Make ``T_camera_lidar`` the rough pose (None: none), remembering the old one for "Undo align step";
         ``fitted_to``: the ids of the pairs it was turned to fit (None: a step by hand)."""
         self._fitted_to = fitted_to
-        old = self.app.loupe_support.initial_T_camera_lidar
+        old = self.app.initial_T_camera_lidar
         self._history.append(None if old is None else np.array(old))
         del self._history[:-MAX_HISTORY]
         self.app.loupe_support.adopt_rough_pose(T_camera_lidar)
@@ -158,7 +170,7 @@ class AlignPanel:
         """Before the first solve, turn the rough pose so that 2 or 3 complete ``pairs`` line up (the camera centre
         kept; :func:`calib_core.alignment.fit_rotation_about_centre`), as one align step.
 
-        Called on the action worker after the complete pairs changed (:mod:`app.live_coordinator`).  Does nothing
+        Called on the action worker after the complete pairs changed (:meth:`on_pairs_change`).  Does nothing
         (returns False) with fewer than 2 or with 4+ pairs, once a solve is shown, when the pairs changed again
         meanwhile, when a pair is guided (guided picking proposes from the rough pose it was started on: turning
         it would reshuffle the proposals under the person), or when their directions are parallel (no rotation
@@ -166,7 +178,7 @@ class AlignPanel:
         """
         app = self.app
         current = [p.to_pair() for p in app.state.picks if p.complete]
-        if (app.live.bundle is not None or current != list(pairs)
+        if (app.solve_bundle is not None or current != list(pairs)
                 or not MIN_ROTATION_PAIRS <= len(pairs) < MIN_PAIRS
                 or any(getattr(p, "source", None) == "guided" for p in pairs)):
             return False
@@ -258,7 +270,7 @@ class AlignPanel:
     def _on_shift_drag(self, event: Any) -> None:
         if not self.drag_enabled:
             return
-        key = next((k for k, node in self.drag_nodes().items() if node is event.target), self.app.view.camera_view.key)
+        key = next((k for k, node in self.drag_nodes().items() if node is event.target), self.app.camera_view.key)
         self.on_drag(key, event)
 
     def on_drag(self, key: str, event: Any) -> None:
@@ -292,9 +304,9 @@ class AlignPanel:
     def _pixel(self, key: str, world: Any) -> np.ndarray | None:
         """Original camera pixel of a world point on the render or the camera view (None: the camera does not
         see there, e.g. the edge of a panorama)."""
-        slot = self.app.view.slot_of(RENDER_KEY) if key == RENDER_KEY else self.app.camera_slot()
+        slot = self.app.slots[RENDER_KEY] if key == RENDER_KEY else self.app.camera_slot()
         display = slot.pixel_from_world(np.asarray(world, np.float64)[None])
-        raw, ok = self.app.view.camera_view.pixels_from_display(display)
+        raw, ok = self.app.camera_view.pixels_from_display(display)
         return raw[0] if ok[0] else None
 
     def _dragged(self, drag: dict, pixel: np.ndarray, modifier: Any) -> np.ndarray:

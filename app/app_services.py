@@ -5,6 +5,11 @@ Panels (:mod:`app.guide_panel`, :mod:`app.verify_panel`, :mod:`app.export_panel`
 these names, never its private members, so the app's insides can change
 without touching them.  :class:`AppServices` is a structural type: the app
 satisfies it, a test may pass anything else that does.
+
+``tests/test_panel_reaches.py`` enforces it: an ``app/`` module (but the composition roots ``app/server.py`` and
+``app/serving.py``) that uses ``app.<name>`` must find ``name`` here, or among the sibling panels that test
+counts, each of whose remaining uses it lists (a list that only shrinks: panels talk through the state, the live
+solve's events and these services).
 """
 
 from __future__ import annotations
@@ -87,10 +92,6 @@ class AppServices(Protocol):
         The scene's diffed line, point and label nodes (a redraw sends only what changed).
     pairs_folder
         The "Pairs" folder (panels place themselves relative to its ``order``).
-    display : app.display_panel.DisplayPanel
-        What the laser panes show (``loupe_image(key)``: the BA loupe's grey image and its name).
-    loupes : app.loupes.Loupes
-        The two loupes (``frame_ba``, ``frame_camera``); absent while the page is being built.
     output_path, session_path : Path or None
         Where "Download extrinsics YAML" also writes; the session file.
     solve_bundle, result
@@ -102,6 +103,20 @@ class AppServices(Protocol):
         The shot these panes show (0-based; ``state.picks`` are its picks, ``state.all_picks`` every shot's).
     shot_scenes : list of app.prepared_scene.PreparedScene
         Every shot's scene, in shot order (one for a one-shot session); the live solve uses them all.
+    scene_data : app.prepared_scene.PreparedScene
+        This shot's scene (``depth``, ``camera``, ``image`` ... above are its parts).
+    ba_gray, image_gray : dict, ndarray
+        The BA images' grey levels by key, and the camera image's.
+    cloud_points_lidar : ndarray, shape (K, 3)
+        The points the 3-D pane shows, lidar frame (metres).
+    camera_view : app.camera_view.CameraView
+        The visible camera view (raw image or panorama).
+    camera_views : dict
+        The camera views (:class:`app.camera_view.CameraView`: ``raw``, and ``panorama`` for wide lenses), by key.
+    title : str
+        The page title.
+    actions : app.action_queue.ActionQueue
+        The ordered worker every user action runs on (``busy``: an action runs or waits).
     """
 
     server: Any
@@ -119,8 +134,6 @@ class AppServices(Protocol):
     all_points_lidar: np.ndarray
     nodes: Any
     pairs_folder: Any
-    display: Any
-    loupes: Any
     output_path: Any
     session_path: Any
     solve_bundle: Any
@@ -128,6 +141,20 @@ class AppServices(Protocol):
     initial_T_camera_lidar: np.ndarray | None
     active_shot: int
     shot_scenes: list
+    scene_data: Any
+    ba_gray: dict
+    image_gray: np.ndarray
+    cloud_points_lidar: np.ndarray
+    camera_view: Any
+    camera_views: dict
+    title: str
+    actions: Any
+
+    def subscribe_solve(self, listener: Callable[[Any], None]) -> None:
+        """Call ``listener(shown)`` (:class:`app.ui_common.SolveShown`) on every redraw of what the live solve shows."""
+
+    def subscribe_solved(self, listener: Callable[[Any], None]) -> None:
+        """Call ``listener(shown)`` after each finished solve is shown (outside the UI lock)."""
 
     def guard(self, fn: Callable[[Any], None]) -> Callable:
         """A viser callback that queues ``fn(action)`` on the ordered action worker (errors become notifications)."""
@@ -137,6 +164,9 @@ class AppServices(Protocol):
 
     def notify(self, client: Any, title: str, body: str, color: str = "red") -> None:
         """A notification in tab ``client`` (None: every tab)."""
+
+    def pose(self) -> np.ndarray | None:
+        """``T_camera_lidar`` predictions use: the last good solve, else the imported rough pose, else None."""
 
     def camera_slot(self) -> Any:
         """The page slot of the visible camera view."""

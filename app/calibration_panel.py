@@ -12,7 +12,7 @@ import numpy as np
 from calib_core.solve.quality import NO_ERROR_ESTIMATE, error_estimate_reason, pairs_in_fit
 from calib_core.transforms import rpy_deg_from_R, viewing_direction
 
-from .ui_common import MIN_PAIRS, QUALITY_BADGES, SolveBundle, md_escape, _fmt
+from .ui_common import MIN_PAIRS, QUALITY_BADGES, SolveBundle, SolveShown, md_escape, _fmt
 
 #: The characters the panel may show besides printable ASCII: ones every sans-serif font of the page's
 #: stack has (Arial / Liberation Sans, Roboto, Helvetica, DejaVu Sans).
@@ -42,6 +42,10 @@ class CalibrationPanel:
     def table_text(self) -> str:
         """The per-pair residual table as shown (markdown)."""
         return str(self.md_table.content)
+
+    def on_solve_shown(self, shown: SolveShown) -> None:
+        """Show what the live solve shows (subscribed to it: :meth:`app.server.CalibrationApp.subscribe_solve`)."""
+        self.show(shown.bundle, shown.error, shown.solving, shown.n_complete)
 
     def show(self, bundle: SolveBundle | None, error: str | None, solving: bool, n_complete: int) -> None:
         """Show the last good solve ``bundle`` (None: none yet), the last solve's ``error``, whether a solve

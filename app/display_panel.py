@@ -5,7 +5,7 @@ BA-edge overlay's opacity, and "Hide marks" (every mark off, to see the corner u
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -24,14 +24,27 @@ class DisplayPanel:
     the View folder (:meth:`add_last_pane_control`, :meth:`add_edge_control`).
     Public: :meth:`ba_display`, :meth:`ba_title`,
     :meth:`loupe_image`, :meth:`loupe_sources`, :attr:`loupe_source`,
-    :meth:`last_pane_sources`, :attr:`last_pane_source`, :attr:`edge_opacity`
+    :meth:`last_pane_sources`, :attr:`last_pane_source`, :attr:`edge_opacity`,
+    :meth:`subscribe` (what shows the laser panes redraws on its changes)
     and the widgets' handlers (``on_*``).
     """
 
     def __init__(self, app: Any) -> None:
         self.app = app
         self._shown_gray: dict[str, np.ndarray] = {}
+        self._listeners: list[Callable[[str], None]] = []
         self._recontrast()
+
+    def subscribe(self, listener: Callable[[str], None]) -> None:
+        """Call ``listener(what)`` after each change of what the laser panes show, on the changing thread:
+        ``"loupe"`` (the BA loupe's image), ``"last_pane"`` (the last laser pane's image and title),
+        ``"contrast"`` (every laser pane's grey levels; called under the UI lock), ``"marks"`` ("Hide marks")
+        or ``"edges"`` (the BA-edge overlay's opacity)."""
+        self._listeners.append(listener)
+
+    def _publish(self, what: str) -> None:
+        for listener in list(self._listeners):
+            listener(what)
 
     def add_loupe_controls(self, gui: Any) -> None:
         """The "BA loupe shows", "Laser contrast" and "Hide marks" widgets, where ``gui`` adds now."""
@@ -129,7 +142,7 @@ class DisplayPanel:
         if source not in self.loupe_sources():
             return
         self.app.state.set_view(loupe_shows=source)
-        self.app.loupes.refresh()
+        self._publish("loupe")
 
     def on_last_pane_source(self, event: Any) -> None:
         """The "Last laser pane" dropdown: the bottom pane's image (its texture, title and the loupe follow)."""
@@ -139,36 +152,27 @@ class DisplayPanel:
         if source not in self.last_pane_sources():
             return
         self.app.state.set_view(last_pane_shows=source if source in self.app.scene_data.laser_images else "")
-        app = self.app
-        key = app.ba_keys[-1]
-        with app.ui_lock:
-            app.page.set_ba(key, texture=app.view.ba_texture(key), title=app.view.ba_title(key))
-        app.loupes.refresh()
+        self._publish("last_pane")
 
     def on_contrast(self, event: Any) -> None:
         """The "Laser contrast" slider: new grey levels for the laser panes and the BA loupe."""
         if event.client is None or event.value != event.target.value:
             return  # our own update, or a newer slider position is queued behind this one
         self.app.state.set_view(contrast=float(event.value))  # clipped to CONTRAST_RANGE
-        app = self.app
-        with app.ui_lock:
+        with self.app.ui_lock:
             self._recontrast()
-            with app.server.atomic():
-                for key in app.ba_keys:
-                    app.page.set_ba(key, texture=app.view.ba_texture(key))
-            app.loupes.refresh()
+            self._publish("contrast")
 
     def on_hide_marks(self, event: Any) -> None:
         """The "Hide marks" checkbox: every mark on the images and in the loupes off (or back)."""
         if event.client is None:
             return
         self.app.state.set_view(hide_marks=bool(event.value))
-        self.app.overlays.refresh()  # the marks' redraws depend on the setting: only they are sent
+        self._publish("marks")
 
     def on_edge_opacity(self, event: Any) -> None:
         """The "BA-edge opacity" slider."""
         if event.client is None or event.value != event.target.value:
             return
         self.app.state.set_view(edge_opacity=float(event.value))  # clipped to EDGE_OPACITY_RANGE
-        self.app.overlays.invalidate()  # redraw the overlays with the new blend
-        self.app.overlays.refresh()
+        self._publish("edges")

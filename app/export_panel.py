@@ -15,7 +15,7 @@ from __future__ import annotations
 import tempfile
 import threading
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 import viser
@@ -38,11 +38,18 @@ class ExportPanel:
     ----------
     app : app.app_services.AppServices
         Also read: ``solve_bundle`` (the last good solve), ``depth``, ``camera``, ``image``,
-        ``output_path``, ``session_path`` and ``verify_panel`` (if built yet).
+        ``output_path`` and ``session_path``.
+
+    Attributes
+    ----------
+    verification : callable or None
+        ``verification(pairs, result)`` -> the :class:`calib_core.verify.VerifyReport` the YAML carries
+        (the Verify panel's :meth:`app.verify_panel.VerifyPanel.report_for`, wired by the app; None: none).
     """
 
     def __init__(self, app: Any) -> None:
         self.app = app
+        self.verification: Callable[[list, Any], Any] | None = None
         gui = app.server.gui
         with gui.add_folder("Export"):
             self._btn_yaml = gui.add_button("Download extrinsics YAML", icon=viser.Icon.DOWNLOAD, color="green")
@@ -88,8 +95,7 @@ class ExportPanel:
         if bundle.shots is not None:  # several shots: per-shot residuals and leave-one-shot-out (app.shot_solve)
             return joint_export(app, bundle.shots)
         r = bundle.result
-        panel = getattr(app, "verify_panel", None)
-        report = panel.report_for(bundle.pairs, r) if panel is not None else None
+        report = self.verification(bundle.pairs, r) if self.verification is not None else None
         if app.output_path is not None:
             doc, _ = extrinsics_document(r, bundle.pairs, app.depth, app.camera, base_dir=app.output_path.parent,
                                          report=report)
@@ -107,12 +113,18 @@ class FormatExportPanel:
     Parameters
     ----------
     app : CalibrationApp
-        Read: ``result`` (the last good solve), ``verify_panel`` (gets the
-        imported reference); actions go through ``app.guard``.
+        Read: ``result`` (the last good solve); actions go through ``app.guard``.
+
+    Attributes
+    ----------
+    reference_listeners : list of callable
+        Each is called ``listener(T_camera_lidar, name)`` when a reference extrinsic is imported (the Verify
+        panel's :meth:`app.verify_panel.VerifyPanel.set_reference`, subscribed by the app).
     """
 
     def __init__(self, app: Any) -> None:
         self.app = app
+        self.reference_listeners: list[Callable[[np.ndarray, str], None]] = []
         self._upload_lock = threading.Lock()
         gui = app.server.gui
         guard = app.guard
@@ -229,9 +241,8 @@ class FormatExportPanel:
             parsed = parse_extrinsics(text, lidar_frame=hint[0], camera_frame=hint[1])
         except CalibError as exc:
             raise CalibError(f"{shown}: {exc}") from None
-        panel = getattr(self.app, "verify_panel", None)
-        if panel is not None:
-            panel.set_reference(parsed.T_camera_lidar, shown)
+        for listener in self.reference_listeners:
+            listener(parsed.T_camera_lidar, shown)
         self.app.notify(client, "Reference imported",
                          f"{shown} ({parsed.format}) is compared with the calibration in Verify", color="green")
         return parsed.T_camera_lidar

@@ -73,7 +73,7 @@ def rank_proposals(session: GuidedSession, pairs: list, T0, skipped: list, dropp
 
 def live_quality(app: Any) -> tuple | None:
     """``(pairs solved, status, reasons)`` of the live solve shown, or None (none yet)."""
-    bundle = app.live.bundle
+    bundle = app.solve_bundle
     quality = getattr(getattr(bundle, "result", None), "quality", None)
     return None if quality is None else (tuple(bundle.pairs), quality.status, list(quality.reasons))
 

@@ -1,14 +1,17 @@
-"""The live-solve coordinator: every change of the pairs is solved in a worker thread (:class:`app.live_solver.LiveSolver`),
-shown when done (one redraw, which also draws the change itself), then the 3-D pane's camera frame and cloud colours
-(:class:`app.cloud_pane.CloudPane`; at once only while a tab shows 3-D), the camera-facing column window and
-the scan projected for the loupes' predictions are computed in their own thread.  The maths is :func:`calib_core.solve.calibrate` and :mod:`calib_core.overlays`."""
+"""The live-solve coordinator: every change of the pairs is solved in a worker thread
+(:class:`app.live_solver.LiveSolver`) and shown when done, in one redraw that also draws the change itself.  The
+overlays and panels subscribe to what the solve shows (:meth:`LiveSolveCoordinator.subscribe`) and to each
+finished solve (:meth:`~LiveSolveCoordinator.subscribe_solved`), as they subscribe to the pairs with
+``state.subscribe``.  Then the 3-D pane's camera frame and cloud colours (:class:`app.cloud_pane.CloudPane`; at once
+only while a tab shows 3-D), the camera-facing column window and the scan projected for the loupes' predictions are
+computed in their own thread.  The maths is :func:`calib_core.solve.calibrate` and :mod:`calib_core.overlays`."""
 
 from __future__ import annotations
 
 import threading
 import time
 import traceback
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -22,7 +25,7 @@ from .ba_view import ColumnWindow, covering_window
 from .live_solver import LiveSolver
 from .shot_solve import checked_bundle, joint_bundle, pairs_in_3d
 from .state import AnnotationState
-from .ui_common import MIN_PAIRS, SolveBundle, CloudUpdate
+from .ui_common import MIN_PAIRS, SolveBundle, SolveShown, CloudUpdate
 
 #: How long a change of the pairs waits for its solve's redraw (which draws the change too) before the changing
 #: thread redraws it itself: one redraw per click when the solve is quick, the moved marker never later than this.
@@ -44,7 +47,8 @@ class LiveSolveCoordinator:
 
     Public: :attr:`bundle` (the last good solve), :attr:`solve_error`,
     :attr:`solving`, :attr:`facing` (the scan columns the camera sees),
-    :meth:`on_state_change` (subscribed to the state), :meth:`wait_idle`,
+    :meth:`on_state_change` (subscribed to the state), :meth:`subscribe` and
+    :meth:`subscribe_solved` (its events), :meth:`wait_idle`,
     :meth:`last_click_to_update`.  :meth:`start` starts its two worker
     threads, :meth:`stop` ends them.
     """
@@ -70,6 +74,43 @@ class LiveSolveCoordinator:
         self._shown_job = 0  # the newest job whose solve was shown
         self._solver: LiveSolver | None = None
         self._cloud_worker: LiveSolver | None = None
+        self._shown_listeners: list[Callable[[SolveShown], None]] = []
+        self._solved_listeners: list[Callable[[SolveShown], None]] = []
+        self._facing_listeners: list[Callable[[], None]] = []
+
+    def subscribe(self, listener: Callable[[SolveShown], None]) -> None:
+        """Call ``listener(shown)`` whenever what the solve shows is redrawn: a solve finished or failed, a solve
+        started, the pairs changed, the pose predictions use changed.  Called under the UI lock, inside the
+        redraw's one message batch, in the order subscribed; the markers and overlays first, then the panels."""
+        self._shown_listeners.append(listener)
+
+    def subscribe_solved(self, listener: Callable[[SolveShown], None]) -> None:
+        """Call ``listener(shown)`` after each finished solve (or failed one) has been shown, outside the UI lock:
+        for follow-up work that must not hold up the redraw (the camera-view render)."""
+        self._solved_listeners.append(listener)
+
+    def subscribe_facing(self, listener: Callable[[], None]) -> None:
+        """Call ``listener()`` when the camera-facing column window (:attr:`facing`) was recomputed while the BA
+        panes follow it (``ba_window_mode == "camera"``); on the cloud worker's thread: post UI work."""
+        self._facing_listeners.append(listener)
+
+    def shown(self) -> SolveShown:
+        """What the solve shows now."""
+        n_complete = sum(1 for p in self.app.state.all_picks if p.complete)
+        return SolveShown(self._bundle, self.solve_error, self.solving, n_complete)
+
+    @staticmethod
+    def _publish(listeners: list, shown: SolveShown) -> None:
+        """Call every listener, even after one failed (the panels follow the state even if a drawing failed);
+        then raise the first failure."""
+        failure = None
+        for listener in list(listeners):
+            try:
+                listener(shown)
+            except Exception as exc:
+                failure = failure or exc
+        if failure is not None:
+            raise failure
 
     def start(self) -> None:
         """Start the solver thread and, after each solve shown, the cloud colours' and facing window's thread."""
@@ -126,8 +167,6 @@ class LiveSolveCoordinator:
                     self.solve_error = None
                     self.solving = False
                     app.cloud.show_camera(None)
-                    if len(picks) >= 2:  # 2-3 pairs fix the rotation: line the render and loupes up (issue 20)
-                        app.post(lambda pairs=[p.to_pair() for p in picks]: app.align.fit_to_pairs(pairs))
         if (solve_job is None and not self.solving and self._cloud_worker is not None
                 and not self._stopped):  # the 3-D pane's pair marks (a solve's cloud job draws them too)
             self._cloud_worker.submit(0, self._bundle)
@@ -137,13 +176,10 @@ class LiveSolveCoordinator:
         self.redraw()
 
     def redraw(self) -> None:
-        """Redraw markers, overlays and both panels from the state as it is now."""
+        """Redraw markers, overlays and the panels from the state as it is now (every :meth:`subscribe` listener)."""
         app = self.app
         with app.ui_lock, app.server.atomic():
-            try:
-                app.overlays.refresh()
-            finally:
-                self.show_panels()  # the panels follow the state even if a drawing failed
+            self._publish(self._shown_listeners, self.shown())
 
     def _wait_shown(self, job: int, timeout: float) -> bool:
         """Wait until the solve of ``job`` (or a newer one) has been shown; False on timeout."""
@@ -151,12 +187,8 @@ class LiveSolveCoordinator:
             return self._shown.wait_for(lambda: self._shown_job >= job or self._stopped, timeout) and not self._stopped
 
     def show_panels(self) -> None:
-        """Show the pairs panel and the calibration panel as they are now."""
-        app = self.app
-        with app.ui_lock:
-            app.pairs_panel.refresh()
-            n_complete = sum(1 for p in app.state.all_picks if p.complete)
-            app.calibration_panel.show(self._bundle, self.solve_error, self.solving, n_complete)
+        """Redraw what the solve shows (:meth:`redraw`; the name app/loupe_support.py calls)."""
+        self.redraw()
 
     def _solve_job(self, payload: Any) -> SolveBundle:
         """The solve and what the error display and the 2-D overlays need (the cloud comes later)."""
@@ -211,7 +243,7 @@ class LiveSolveCoordinator:
                     self.solve_error = None
                     if bundle.shots is not None and not bundle.shots.solved.checked and job == self._job:
                         self._solver.submit(job, _CheckShots(bundle))  # under the UI lock: no newer change lost
-                    if app.view.any_tab_in_3d():  # else the hidden 3-D pane gets it with its colours (cloud job)
+                    if app.cloud.visible:  # a tab shows 3-D; else the hidden pane gets it with its colours (cloud job)
                         app.cloud.show_camera(bundle.result.T_camera_lidar)
                 self.redraw()
             change_job, change_time = self._change_time
@@ -227,7 +259,7 @@ class LiveSolveCoordinator:
             self._shown_job = max(self._shown_job, job)
             self._shown.notify_all()
         self.request_cloud()
-        app.render_pane.request()  # the camera-view render follows the solve shown
+        self._publish(self._solved_listeners, self.shown())  # e.g. the camera-view render follows the solve shown
 
     def request_cloud(self) -> None:
         """Queue what the current solve still owes: cloud colours if a tab shows 3-D, the facing window in camera
@@ -283,7 +315,7 @@ class LiveSolveCoordinator:
             return None
         t0 = time.perf_counter()
         T = bundle.result.T_camera_lidar
-        colors = self._cloud_colors(T) if app.view.any_tab_in_3d() and app.cloud.shows is not bundle else None
+        colors = self._cloud_colors(T) if app.cloud.visible and app.cloud.shows is not bundle else None
         facing_done = app.state.view.ba_window_mode == "camera" and self._facing_of is not bundle
         facing = self._facing_window(T) if facing_done else None
         app.loupe_support.projection(T)  # the loupes' camera-to-cell predictions, ready before the next click
@@ -306,8 +338,8 @@ class LiveSolveCoordinator:
             if update.facing_done:
                 self._set_facing(update.bundle, update.facing)
         if update.facing_done and app.state.view.ba_window_mode == "camera" and not self._stopped:
-            # In the action worker, so a click is never mapped through a window that changed under it.
-            app.post(app.view.apply_ba_window)
+            for listener in list(self._facing_listeners):
+                listener()
 
     def wait_idle(self, timeout: float = 30.0) -> bool:
         """Block until queued user actions are applied and the live solver and the cloud worker are idle."""

@@ -5,7 +5,7 @@
 from __future__ import annotations
 
 import contextlib
-from typing import Any, Iterator
+from typing import Any, Callable, Iterator
 
 import numpy as np
 
@@ -22,7 +22,8 @@ class OverlayDrawing:
     It owns what it last drew from (so a redraw only sends what changed) and
     where the pick ends are drawn (:meth:`pick_ends`, also what Shift+click and
     drags hit).  :meth:`refresh` redraws; :meth:`invalidate` forces the next
-    redraw of the camera-view overlays.
+    redraw of the camera-view overlays; :meth:`subscribe` tells others (the
+    loupes, which draw the same marks magnified) that the marks were redrawn.
     """
 
     def __init__(self, app: Any) -> None:
@@ -32,6 +33,17 @@ class OverlayDrawing:
         self._loupe_marks_held = 0  # > 0: refresh() leaves the loupes' marks to loupe_marks_after()
         self._labels_drawn: dict[str, tuple[str, tuple]] | None = None  # number labels as last sent
         self._camera_view_drawn: str | None = None  # the camera view whose markers are drawn
+        self._marks_listeners: list[Callable[[], None]] = []
+        app.subscribe_solve(lambda shown: self.refresh())  # the reprojection overlays follow the solve shown
+
+    def subscribe(self, listener: Callable[[], None]) -> None:
+        """Call ``listener()`` after each redraw of the marks (under the UI lock, in the redraw's message batch),
+        or once at the end of a :meth:`loupe_marks_after` block."""
+        self._marks_listeners.append(listener)
+
+    def _marks_drawn(self) -> None:
+        for listener in list(self._marks_listeners):
+            listener()
 
     def invalidate(self) -> None:
         """Redraw the camera-view overlays on the next :meth:`refresh` even if their inputs look unchanged."""
@@ -71,8 +83,8 @@ class OverlayDrawing:
                         app.nodes.label(name, text, pos)
                 self._labels_drawn = labels
             self._draw_overlays(picks, predictions)
-            if getattr(app, "loupes", None) is not None and not self._loupe_marks_held:  # None while building
-                app.loupes.draw_marks()
+            if not self._loupe_marks_held:
+                self._marks_drawn()
 
     @contextlib.contextmanager
     def loupe_marks_after(self) -> Iterator[None]:
@@ -90,7 +102,7 @@ class OverlayDrawing:
             with app.ui_lock, app.server.atomic():
                 self._loupe_marks_held -= 1
                 if not self._loupe_marks_held:
-                    app.loupes.draw_marks()  # nothing is sent for a loupe whose marks are up to date
+                    self._marks_drawn()  # nothing is sent for a loupe whose marks are up to date
 
     def pick_ends(self, key: str) -> tuple[list[int], np.ndarray]:
         """Ids and display pixels of the pick ends drawn on slot ``key`` (a BA key, camera view or ``loupe_*``)."""
@@ -158,7 +170,7 @@ class OverlayDrawing:
         app = self.app
         slot = app.camera_slot()
         bundle = None if app.state.view.hide_marks else app.solve_bundle
-        camera, cview = app.camera, app.view.camera_view
+        camera, cview = app.camera, app.camera_view
         # Skipped when neither the solve, the view nor the picks it colours changed (e.g. a click on a BA image).
         self._draw_predictions(slot, predictions)  # cheap, changes with every BA click
         view = app.state.view

@@ -159,7 +159,9 @@ class CalibrationApp:
             self.page = PageBuilder(self)  # theme, intro text, backdrop
             self.pairs_panel = PairsPanel(self)  # "Pairs" folder and the clicks on the images
             self.pairs_folder = self.pairs_panel.folder  # guided picking goes below it
+            self.subscribe_solve(lambda shown: self.pairs_panel.refresh())  # after the overlays' (OverlayDrawing)
             self.calibration_panel = CalibrationPanel(self.server.gui)
+            self.subscribe_solve(self.calibration_panel.on_solve_shown)
             self.view = ViewPanel(self)  # "View" folder, the BA column window, the page layout, each tab's camera
             self.export_panel = ExportPanel(self)
             self.page.add_images({k: self.view.ba_texture(k) for k in self.ba_keys},
@@ -168,16 +170,25 @@ class CalibrationApp:
             self.render_pane = RenderPane(self)  # the scan seen from the camera, below the camera image
             self.align = AlignPanel(self, order=self.pairs_folder.order - 0.5)  # rough pose; first folder
             self.loupes = Loupes(self)  # the magnified BA and camera panes (public: frame_ba, frame_camera)
+            self.overlays.subscribe(self.loupes.draw_marks)  # the loupes show the marks magnified
             self.format_export = FormatExportPanel(self)  # verify: its own widgets (formats, reference import)
+            self.display.subscribe(self._on_display_change)
             self.server.on_client_connect(self._on_connect)
             self.server.on_client_disconnect(self._on_disconnect)
+            self.subscribe_solved(lambda shown: self.render_pane.request())  # the render follows the solve shown
+            # In the action worker, so a click is never mapped through a window that changed under it.
+            self.live.subscribe_facing(lambda: self.post(self.view.apply_ba_window))
             self.live.start()
             self.guide = attach_guide_panel(self)  # guided picking (app/guide_panel.py)
             self.state.subscribe(self.live.on_state_change)
             self.live.on_state_change(self.state)
+            self.state.subscribe(self.align.on_pairs_change)  # 2-3 pairs turn the rough pose to fit them
+            self.align.on_pairs_change(self.state)
             self.state.subscribe(self.render_pane.on_state_change)  # after the live solve's: sees its bundle
             self.render_pane.request()
             self.verify_panel = VerifyPanel(self)  # verify: check pairs, leave-one-out, heat map, reference, plots
+            self.export_panel.verification = self.verify_panel.report_for  # the YAML carries the Verify report
+            self.format_export.reference_listeners.append(self.verify_panel.set_reference)
         except BaseException:
             self.actions.stop()
             if hasattr(self, "render_pane"):
@@ -195,6 +206,20 @@ class CalibrationApp:
             self.view.set_view(client, "all")
         except Exception:
             traceback.print_exc()
+
+    def _on_display_change(self, what: str) -> None:
+        """What the laser panes show changed (:meth:`DisplayPanel.subscribe`): redraw the panes, loupe and marks."""
+        if what in ("marks", "edges"):
+            if what == "edges":
+                self.overlays.invalidate()  # redraw the overlays with the new blend
+            self.overlays.refresh()  # "Hide marks": the marks' redraws depend on it, only they are sent
+            return
+        keys = {"contrast": self.ba_keys, "last_pane": self.ba_keys[-1:]}.get(what, ())
+        with self.ui_lock, self.server.atomic():
+            for key in keys:
+                title = {"title": self.view.ba_title(key)} if what == "last_pane" else {}
+                self.page.set_ba(key, texture=self.view.ba_texture(key), **title)
+        self.loupes.refresh()
 
     def _on_disconnect(self, client: Any) -> None:
         self.pairs_panel.forget_tab(client.client_id)
@@ -221,6 +246,9 @@ class CalibrationApp:
     slots = property(lambda self: self.view.slots, doc="Where each image lies on the page, by key.")
     ba_window = property(lambda self: self.view.ba_window, doc="The scan columns the BA images show.")
 
+    camera_view = property(lambda self: self.view.camera_view,
+                           doc="The visible camera view (:class:`app.camera_view.CameraView`: raw or panorama).")
+
     def camera_slot(self) -> Any:
         """The page slot of the visible camera view."""
         return self.view.camera_slot()
@@ -244,6 +272,16 @@ class CalibrationApp:
     def forget_last_picks(self) -> None:
         """Forget every tab's last click (the next loupe click adds an end)."""
         self.pairs_panel.forget_last_picks()
+
+    def subscribe_solve(self, listener: Callable[[Any], None]) -> None:
+        """Call ``listener(shown)`` (:class:`app.ui_common.SolveShown`) on every redraw of what the live solve
+        shows (:meth:`LiveSolveCoordinator.subscribe`: under the UI lock, in the redraw's message batch)."""
+        self.live.subscribe(listener)
+
+    def subscribe_solved(self, listener: Callable[[Any], None]) -> None:
+        """Call ``listener(shown)`` after each finished solve is shown, outside the UI lock
+        (:meth:`LiveSolveCoordinator.subscribe_solved`)."""
+        self.live.subscribe_solved(listener)
 
     solve_bundle = property(lambda self: self.live.bundle, doc="The last good solve (:class:`SolveBundle`), or None.")
     result = property(lambda self: getattr(self.live.bundle, "result", None),

@@ -306,7 +306,7 @@ class ShotServer:
                                   shot_scenes=self.scenes[:n], **options)
         from .shots_panel import ShotsPanel
 
-        self.panel = ShotsPanel(self.app, self)
+        self.panel = ShotsPanel(self.app, self, guide=self.app.guide)
         return self.app
 
     def _on_save_error(self, message: str) -> None:

@@ -30,9 +30,12 @@ class ShotsPanel:
         actions go through ``app.guard``.
     server : ShotServer
         ``requests`` (a queue of shot indices the serving loop loads) and ``add_shot``.
+    guide : app.guide_panel.GuidePanel, optional
+        Guided picking across shots: it asks this folder to show the shot of its next proposal (``show_shot``),
+        and resumes on a page shown for it.
     """
 
-    def __init__(self, app: Any, server: Any) -> None:
+    def __init__(self, app: Any, server: Any, guide: Any = None) -> None:
         self.app, self.server = app, server
         self.requested: int | None = None  # the shot asked for (the page reconnects to it)
         gui = app.server.gui
@@ -55,7 +58,6 @@ class ShotsPanel:
         self.add_button.on_click(app.guard(self._on_add))
         app.state.subscribe(self._on_state_change)
         self._on_state_change(app.state)
-        guide = getattr(app, "guide", None)
         if guide is not None:  # guided picking across shots: its next proposal may be in another shot
             guide.show_shot = self.show_for_guide
             if getattr(server, "resume_guided", False):  # this page was shown for a guided session: go on

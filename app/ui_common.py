@@ -97,6 +97,19 @@ class SolveBundle:
     shots: Any = None  # calib_core.shots.ShotsResult when the session has several shots (app.shot_solve)
 
 
+@dataclass(frozen=True, eq=False)
+class SolveShown:
+    """What the live solve shows now (:meth:`app.live_coordinator.LiveSolveCoordinator.subscribe` passes it).
+
+    ``bundle``: the last good solve, or None; ``error``: the last solve's failure, or None; ``solving``: a solve
+    of newer pairs runs; ``n_complete``: the complete pairs of every shot."""
+
+    bundle: SolveBundle | None
+    error: str | None
+    solving: bool
+    n_complete: int
+
+
 @dataclass(eq=False)
 class CloudUpdate:
     """What the 3-D pane and the camera-facing BA window need from a solve; computed after it is shown."""

@@ -1,0 +1,259 @@
+"""No app module reaches into a sibling panel through the app object, beyond the reaches listed here (issue 22).
+
+A *reach* is a use of ``app.<part>`` (``app`` a name, or ``self.app``) in one ``app/`` module, where ``<part>``
+is one of the app's panels or panes (:data:`PARTS`) that the module does not own: ``self.app.loupes.frame_ba(...)``
+in ``app/pairs_panel.py`` is one; so are ``getattr(app, "guide", None)`` and ``hasattr(app, "loupes")``.  The
+composition roots (:data:`ROOTS`: the app, which builds and wires the parts, and the shot server, which builds the
+app) are not counted.  Panels talk through the app's services (:class:`app.app_services.AppServices`): the state
+and its ``subscribe``, the live solve's events (``subscribe_solve``, ``subscribe_solved``), ``post``; and every
+other ``app.<name>`` a module uses must be one of those services (enforced here too).
+
+The count is read from the sources with :mod:`ast`.  :data:`ALLOWED` lists every reach left, as
+``module -> {part.attribute: count}``; the test fails on a new reach (or a higher count) and on a listed one that
+is gone (so the list only shrinks).  Run this file as a script to print the counts per module
+(``python tests/test_panel_reaches.py``; with ``--allowed``, the table to paste below).
+"""
+
+from __future__ import annotations
+
+import ast
+import inspect
+from collections import Counter
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+
+#: The app's parts that are panels or panes (attribute of :class:`app.server.CalibrationApp` -> its module).
+PARTS = {
+    "display": "app.display_panel", "live": "app.live_coordinator", "loupe_support": "app.loupe_support",
+    "overlays": "app.overlay_drawing", "cloud": "app.cloud_pane", "page": "app.page_builder",
+    "pairs_panel": "app.pairs_panel", "calibration_panel": "app.calibration_panel", "view": "app.view_panel",
+    "export_panel": "app.export_panel", "format_export": "app.export_panel", "render_pane": "app.render_pane",
+    "align": "app.align_panel", "loupes": "app.loupes", "guide": "app.guide_panel",
+    "verify_panel": "app.verify_panel",
+}
+#: Attributes of the app set in its constructor that are services, not panels (see app/app_services.py).
+SERVICES = {
+    "warm_up", "scan_path", "image_path", "camera_path", "output_path", "session_path", "title", "scene_data",
+    "shot_scenes", "depth", "camera", "image", "ba_keys", "ba_gray", "image_gray", "all_points_lidar",
+    "cloud_points_lidar", "ba_cell_aspect", "wrap_cols", "camera_views", "camera_sizes", "state", "active_shot",
+    "ui_lock", "access", "server", "actions", "host", "port", "url", "nodes", "pairs_folder",
+}
+
+
+#: The composition roots: they build the parts and wire them to each other.
+ROOTS = ("app.server", "app.serving")
+
+
+def _is_app(node: ast.AST) -> bool:
+    """``app`` or ``self.app``."""
+    return (isinstance(node, ast.Name) and node.id == "app") or (
+        isinstance(node, ast.Attribute) and node.attr == "app" and isinstance(node.value, ast.Name)
+        and node.value.id == "self")
+
+
+def reaches_in(source: str, own_parts: set[str] = frozenset()) -> Counter:
+    """``Counter`` of ``"part.attribute"`` (``"part"`` when used bare) for every reach in ``source``."""
+    found: Counter = Counter()
+    tree = ast.parse(source)
+    parents = {child: node for node in ast.walk(tree) for child in ast.iter_child_nodes(node)}
+    for node in ast.walk(tree):
+        part = None
+        if isinstance(node, ast.Attribute) and node.attr in PARTS and _is_app(node.value):
+            part = node.attr
+            parent = parents.get(node)
+            if isinstance(parent, ast.Attribute) and parent.value is node:
+                part = f"{part}.{parent.attr}"
+        elif (isinstance(node, ast.Call) and isinstance(node.func, ast.Name)
+              and node.func.id in ("getattr", "hasattr", "setattr") and len(node.args) >= 2
+              and _is_app(node.args[0]) and isinstance(node.args[1], ast.Constant) and node.args[1].value in PARTS):
+            part = node.args[1].value
+        if part is not None and part.split(".")[0] not in own_parts:
+            found[part] += 1
+    return found
+
+
+def app_modules(root: Path = REPO) -> dict[str, Path]:
+    """Every ``app/*.py`` but the composition roots, by dotted name."""
+    paths = {f"app.{path.stem}": path for path in sorted((root / "app").glob("*.py"))}
+    return {module: path for module, path in paths.items() if module not in ROOTS}
+
+
+def app_names_used(source: str) -> set[str]:
+    """Every ``name`` of ``app.<name>`` / ``self.app.<name>`` in ``source`` (``getattr(app, "name")`` too)."""
+    names = set()
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Attribute) and _is_app(node.value):
+            names.add(node.attr)
+        elif (isinstance(node, ast.Call) and isinstance(node.func, ast.Name)
+              and node.func.id in ("getattr", "hasattr", "setattr") and len(node.args) >= 2
+              and _is_app(node.args[0]) and isinstance(node.args[1], ast.Constant)):
+            names.add(str(node.args[1].value))
+    return names
+
+
+def service_names() -> set[str]:
+    """The names :class:`app.app_services.AppServices` promises panels: its attributes and methods."""
+    from app.app_services import AppServices
+
+    return set(AppServices.__annotations__) | {n for n, v in vars(AppServices).items() if inspect.isfunction(v)}
+
+
+def app_reaches(root: Path = REPO) -> dict[str, Counter]:
+    """Module -> its reaches, for every ``app/*.py`` but the composition roots."""
+    out = {}
+    for module, path in app_modules(root).items():
+        own = {part for part, owner in PARTS.items() if owner == module}
+        found = reaches_in(path.read_text(encoding="utf-8"), own)
+        if found:
+            out[module] = found
+    return out
+
+
+#: Every reach left (issue 22 item 3: each should become a state or event subscription, or a service).
+#: The files of the loupes, the pairs and view panels, the layout and the render pane were being reworked
+#: when this list was made; their reaches are for a later round.
+ALLOWED: dict[str, dict[str, int]] = {
+    "app.align_panel": {"loupe_support.adopt_rough_pose": 2, "loupe_support.imported_T_camera_lidar": 2,
+        "loupe_support.view_pose": 2, "page.image_handle": 1, "pairs_panel.make_drag_handler": 1, "render_pane": 1,
+        "render_pane.add_controls": 1, "render_pane.drag_nodes": 1, "render_pane.overlay_drag_callback": 1,
+        "render_pane.plain_drag_callback": 1, "render_pane.set_blend": 1},
+    "app.guide_panel": {"loupes": 1, "pairs_panel.show_guide_status": 1},
+    "app.live_coordinator": {"cloud.show_camera": 3, "cloud.show_colors": 1, "cloud.show_pairs": 1, "cloud.shows": 1,
+        "cloud.visible": 2, "loupe_support.projection": 1, "loupe_support.view_pose": 1},
+    "app.loupe_support": {"align.adopt": 1, "align.folder": 1, "align.show": 1, "guide": 1, "live.bundle": 3,
+        "live.ensure_facing": 1, "live.show_panels": 1, "loupes.zoom": 1, "overlays.invalidate": 1,
+        "overlays.refresh": 1, "page.folder_lock": 1, "render_pane": 1, "render_pane.request": 1,
+        "view.apply_ba_window": 1},
+    "app.loupes": {"display.loupe_image": 2, "render_pane": 1, "render_pane.current": 1, "render_pane.loupe_texture":
+        1, "render_pane.loupe_title": 1, "render_pane.pixel_of_cells": 2, "render_pane.target_at": 1},
+    "app.overlay_drawing": {"loupes.display_of": 1},
+    "app.page_builder": {"pairs_panel": 1, "view.camera_view": 1},
+    "app.pairs_panel": {"align.drag_enabled": 1, "display.ba_display": 2, "guide.callback": 1, "live": 1,
+        "loupe_support": 1, "loupe_support.predict_cell": 1, "loupe_support.predict_pixel": 1, "loupes": 2,
+        "loupes.ba_crop": 2, "loupes.display_of": 1, "loupes.frame_ba": 4, "loupes.frame_camera": 4,
+        "loupes.show_click": 3, "loupes.show_render": 1, "loupes.shows_render": 1, "loupes.slot": 1,
+        "loupes.target_at": 1, "overlays.loupe_marks_after": 1, "overlays.pick_ends": 1, "overlays.predicted_pixels":
+        1, "overlays.ring_radius": 1, "page.folder_lock": 1, "page.intro": 1, "render_pane.last_pixel": 1,
+        "render_pane.target_at": 1, "view.camera_view": 3, "view.slot_of": 3, "view.slots": 1,
+        "view.units_per_screen_px": 1},
+    "app.render_pane": {"align": 3, "live.bundle": 1, "loupe_support.view_pose": 1, "loupes": 1, "loupes.ba_crop": 1,
+        "pairs_panel.click_at": 1, "pairs_panel.make_drag_handler": 1, "view.camera_view": 5, "view.slot_of": 3},
+    "app.view_panel": {"cloud.visible": 1, "display.add_edge_control": 1, "display.add_last_pane_control": 1,
+        "display.add_loupe_controls": 1, "display.ba_display": 1, "display.ba_title": 1, "live.bundle": 2,
+        "live.ensure_facing": 1, "live.facing": 4, "live.request_cloud": 1, "loupe_support.on_loupe_zoom": 1,
+        "loupes": 2, "loupes.relayout": 1, "loupes.slot": 3, "overlays.refresh": 2, "page.set_ba": 1,
+        "page.show_camera_view": 1, "pairs_panel.last_click": 1, "render_pane": 1, "render_pane.place": 1},
+}
+
+
+def test_the_count_finds_each_kind_of_reach():
+    """The counter itself, on made-up source: direct and via ``self.app``, bare, getattr; not other objects."""
+    source = (
+        "def f(self, app, other):\n"
+        "    app.loupes.frame_ba(1)\n"
+        "    self.app.loupes.frame_ba(2)\n"
+        "    x = self.app.view\n"
+        "    getattr(app, 'guide', None)\n"
+        "    other.loupes.frame_ba(3)\n"  # not the app
+        "    app.state.subscribe(f)\n"  # a service
+        "    self.view.refresh()\n"  # its own part
+    )
+    assert reaches_in(source) == Counter({"loupes.frame_ba": 2, "view": 1, "guide": 1})
+    assert reaches_in(source, {"loupes"}) == Counter({"view": 1, "guide": 1})
+
+
+def test_every_part_of_the_app_is_a_listed_panel_or_service():
+    """A new attribute of the app must be classed here, so a new panel cannot be reached without being counted."""
+    tree = ast.parse((REPO / "app" / "server.py").read_text(encoding="utf-8"))
+    init = next(n for n in ast.walk(tree) if isinstance(n, ast.FunctionDef) and n.name == "__init__")
+    names = set()
+    for node in ast.walk(init):
+        targets = node.targets if isinstance(node, ast.Assign) else []
+        for target in targets:
+            for t in (target.elts if isinstance(target, ast.Tuple) else [target]):
+                if isinstance(t, ast.Attribute) and isinstance(t.value, ast.Name) and t.value.id == "self":
+                    names.add(t.attr)
+    public = {n for n in names if not n.startswith("_")}
+    assert public - set(PARTS) - SERVICES == set()
+    assert set(PARTS) <= public
+
+
+def test_app_modules_use_only_the_promised_services_or_counted_parts():
+    """AppServices is the list of what a panel may use of the app, beyond the sibling parts counted here."""
+    services = service_names()
+    assert not services & set(PARTS), "a part is counted as a reach, not promised as a service"
+    unlisted = sorted(f"{m}: app.{n}" for m, path in app_modules().items()
+                      for n in app_names_used(path.read_text(encoding="utf-8")) - services - set(PARTS))
+    assert unlisted == [], ("app modules using app names AppServices does not promise (add them there with what "
+                            "they are, or use a service):\n  " + "\n  ".join(unlisted))
+
+
+def test_the_services_check_sees_names_and_getattr():
+    assert app_names_used("def f(self, app):\n    app.state.x\n    self.app.secret()\n    getattr(app, 'g', 1)\n"
+                          "    other.hidden\n") == {"state", "secret", "g"}
+
+
+def test_no_new_reach_into_a_sibling_panel():
+    found = {m: dict(c) for m, c in app_reaches().items()}
+    new = sorted(f"{m}: app.{r} x{n} (allowed {ALLOWED.get(m, {}).get(r, 0)})"
+                 for m, c in found.items() for r, n in c.items() if n > ALLOWED.get(m, {}).get(r, 0))
+    assert new == [], ("app modules reaching into sibling panels (use the state, the live solve's events or a "
+                       "service of app/app_services.py instead):\n  " + "\n  ".join(new))
+    gone = sorted(f"{m}: app.{r} allowed x{n}, found x{found.get(m, {}).get(r, 0)}"
+                  for m, c in ALLOWED.items() for r, n in c.items() if found.get(m, {}).get(r, 0) < n)
+    assert gone == [], "reaches removed: lower ALLOWED to match (the list only shrinks):\n  " + "\n  ".join(gone)
+
+
+def reach_graph(reaches: dict[str, Counter]) -> dict[str, set[str]]:
+    """Module -> the modules of the parts it reaches."""
+    return {m: {PARTS[r.split(".")[0]] for r in c} for m, c in reaches.items()}
+
+
+def mutual_reaches(graph: dict[str, set[str]]) -> list[tuple[str, str]]:
+    """The pairs of modules that reach into each other (a hidden cycle: neither can change alone), sorted."""
+    return sorted({tuple(sorted((a, b))) for a in graph for b in graph[a] if a in graph.get(b, ())})
+
+
+#: Pairs of modules that still reach into each other (the hidden cycles of issue 22: view <-> pairs panel,
+#: view <-> live solve, live solve <-> loupe support, ...).  Only shrinks.
+MUTUAL = [
+    ("app.align_panel", "app.loupe_support"), ("app.align_panel", "app.pairs_panel"),
+    ("app.align_panel", "app.render_pane"), ("app.guide_panel", "app.pairs_panel"),
+    ("app.live_coordinator", "app.loupe_support"),
+    ("app.loupe_support", "app.render_pane"),
+    ("app.loupe_support", "app.view_panel"), ("app.loupes", "app.render_pane"), ("app.page_builder", "app.pairs_panel"),
+    ("app.page_builder", "app.view_panel"), ("app.pairs_panel", "app.render_pane"),
+    ("app.pairs_panel", "app.view_panel"),
+    ("app.render_pane", "app.view_panel"),
+]
+
+
+def test_mutual_reaches_are_found_and_only_the_listed_ones_remain():
+    assert mutual_reaches({"a": {"b", "c"}, "b": {"a"}, "c": {"d"}, "d": set()}) == [("a", "b")]
+    assert mutual_reaches(reach_graph(app_reaches())) == MUTUAL
+
+
+if __name__ == "__main__":
+    import sys
+    import textwrap
+
+    reaches = app_reaches()
+    if "--allowed" in sys.argv:  # the ALLOWED table as it is now, to paste above after removing reaches
+        print("ALLOWED: dict[str, dict[str, int]] = {")
+        for module, found in reaches.items():
+            items = ", ".join(f'"{r}": {n}' for r, n in sorted(found.items()))
+            print(textwrap.fill(f'    "{module}": {{{items}}},', 118, subsequent_indent=" " * 8,
+                                break_long_words=False, break_on_hyphens=False))
+        print("}")
+        sys.exit(0)
+    total = 0
+    for module, found in reaches.items():
+        n = sum(found.values())
+        total += n
+        print(f"{module}: {n} reaches into {len({r.split('.')[0] for r in found})} parts: "
+              + ", ".join(f"{r} x{c}" if c > 1 else r for r, c in sorted(found.items())))
+    edges = sum(len({r.split('.')[0] for r in f}) for f in reaches.values())
+    print(f"total: {total} reaches, {edges} module->part edges, {len(reaches)} modules")
+    mutual = mutual_reaches(reach_graph(reaches))
+    print(f"{len(mutual)} pairs of modules reaching into each other: " + ", ".join(f"{a} <-> {b}" for a, b in mutual))
