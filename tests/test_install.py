@@ -116,8 +116,9 @@ def test_wheel_install_serves_the_sample_from_another_folder(tmp_path):
          "--pairs", str(sample / "pairs.yaml"), "-o", "e.yaml"], cwd=elsewhere, env=env,
     )  # fmt: skip
     assert solved.returncode == 0, solved.stderr
-    # A fresh install has no compiled solve yet (the server was stopped long before its warm-up reached it):
-    # the command says why it is quiet for a minute.
-    assert "ba-calib: compiling the numba kernels on first use" in solved.stderr, solved.stderr
+    # A fresh install has no compiled solve yet (the server was stopped long before its warm-up reached it): the
+    # solve's small kernels run their Python source instead of compiling first, so the command neither waits for
+    # the compiler nor announces it (calib_core._jit's tiered kernels; tests/test_compile_notice.py covers the notice).
+    assert "compiling the numba kernels" not in solved.stderr, solved.stderr
     T = np.array(yaml.safe_load((elsewhere / "e.yaml").read_text())["T_camera_lidar"]["matrix"])
     assert np.linalg.norm(T[:3, 3] - ref[:3, 3]) < 0.05
