@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import io
+import math
 import socket
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 from repo_paths import SAMPLE
 
@@ -136,3 +138,18 @@ class AnnotationTab:
             if np.abs(rgb.mean(axis=0) - 238.0).max() < 12:
                 return False
         return True
+
+
+def screen_rect(camera, canvas: dict, bounds) -> tuple[float, float, float, float]:
+    """Screen rectangle (CSS px) of a world rectangle on the annotation plane, as the tab's camera shows it."""
+    import viser.transforms as vtf
+
+    x0, y0, x1, y1 = bounds
+    corners = np.array([[x0, y0, 0.0], [x1, y1, 0.0]])
+    R = vtf.SO3(np.asarray(camera.wxyz)).as_matrix()  # viser's camera frame: +z forward, +y down (OpenCV)
+    local = (corners - np.asarray(camera.position)) @ R
+    f = (camera.image_height / 2) / math.tan(camera.fov / 2)
+    u = f * local[:, 0] / local[:, 2] + camera.image_width / 2
+    v = f * local[:, 1] / local[:, 2] + camera.image_height / 2
+    sx, sy = canvas["width"] / camera.image_width, canvas["height"] / camera.image_height
+    return (canvas["x"] + u[0] * sx, canvas["y"] + v[0] * sy, canvas["x"] + u[1] * sx, canvas["y"] + v[1] * sy)

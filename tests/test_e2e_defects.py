@@ -18,10 +18,9 @@ import math
 import time
 from pathlib import Path
 
-import numpy as np
 import pytest
 
-from browser_helpers import CHROMIUM, CHROMIUM_ARGS, TIMEOUT_S, free_port, page_text, wait_for
+from browser_helpers import CHROMIUM, CHROMIUM_ARGS, TIMEOUT_S, free_port, page_text, screen_rect, wait_for
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "data" / "pjlab_opencalib_lidar2camera" / "auto_calib"
@@ -51,21 +50,6 @@ UPLOTS_JS = """() => Object.values(window.__viserTestpoints?.uplots || {}).map(t
     time: t.chart.scales.x.time, lengths: t.chart.data.map(a => a === null ? -1 : a.length),
     y: [t.chart.scales.y?.min ?? null, t.chart.scales.y?.max ?? null], ticks: t.chart.axes[0]._values,
     title: t.chart.title ?? ''}))"""
-
-
-def screen_rect(camera, canvas: dict, bounds) -> tuple[float, float, float, float]:
-    """Screen rectangle (CSS px) of a world rectangle on the annotation plane, as the tab's camera shows it."""
-    import viser.transforms as vtf
-
-    x0, y0, x1, y1 = bounds
-    corners = np.array([[x0, y0, 0.0], [x1, y1, 0.0]])
-    R = vtf.SO3(np.asarray(camera.wxyz)).as_matrix()  # viser's camera frame: +z forward, +y down (OpenCV)
-    local = (corners - np.asarray(camera.position)) @ R
-    f = (camera.image_height / 2) / math.tan(camera.fov / 2)
-    u = f * local[:, 0] / local[:, 2] + camera.image_width / 2
-    v = f * local[:, 1] / local[:, 2] + camera.image_height / 2
-    sx, sy = canvas["width"] / camera.image_width, canvas["height"] / camera.image_height
-    return (canvas["x"] + u[0] * sx, canvas["y"] + v[0] * sy, canvas["x"] + u[1] * sx, canvas["y"] + v[1] * sy)
 
 
 def is_number(text: str) -> bool:

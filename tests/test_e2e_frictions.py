@@ -12,14 +12,12 @@ screen, projected here) and the app's pairs after a key press.
 
 from __future__ import annotations
 
-import math
 import os
 from pathlib import Path
 
-import numpy as np
 import pytest
 
-from browser_helpers import CHROMIUM, TIMEOUT_S, AnnotationTab, page_text, start_sample_app, wait_for
+from browser_helpers import CHROMIUM, TIMEOUT_S, AnnotationTab, page_text, screen_rect, start_sample_app, wait_for
 from calib_core.pairs import load_pairs_yaml
 from repo_paths import SAMPLE
 
@@ -37,21 +35,6 @@ RECT_JS = """([text, exact]) => {
     && !Array.from(e.children).some(c => has(c)));
   if (!all.length) return null;
   const r = all[0].getBoundingClientRect(); return [r.left, r.top, r.right, r.bottom]; }"""
-
-
-def screen_rect(camera, canvas: dict, bounds) -> tuple[float, float, float, float]:
-    """Screen rectangle (CSS px) of a world rectangle on the annotation plane, as the tab's camera shows it."""
-    import viser.transforms as vtf
-
-    x0, y0, x1, y1 = bounds
-    corners = np.array([[x0, y0, 0.0], [x1, y1, 0.0]])
-    R = vtf.SO3(np.asarray(camera.wxyz)).as_matrix()  # viser's camera frame: +z forward, +y down (OpenCV)
-    local = (corners - np.asarray(camera.position)) @ R
-    f = (camera.image_height / 2) / math.tan(camera.fov / 2)
-    u = f * local[:, 0] / local[:, 2] + camera.image_width / 2
-    v = f * local[:, 1] / local[:, 2] + camera.image_height / 2
-    sx, sy = canvas["width"] / camera.image_width, canvas["height"] / camera.image_height
-    return (canvas["x"] + u[0] * sx, canvas["y"] + v[0] * sy, canvas["x"] + u[1] * sx, canvas["y"] + v[1] * sy)
 
 
 def overlaps(a, b) -> bool:
