@@ -117,7 +117,7 @@ def accuracy_vs_shots(scenes, trials: int, rng) -> list[dict]:
     plans = (("total 30 pairs", {1: 30, 2: 15, 3: 10, 5: 6}), ("10 pairs per shot", {1: 10, 2: 10, 3: 10, 5: 10}))
     for mode, counts in plans:
         for n_shots, per in counts.items():
-            rot, tra, px = [], [], []
+            rot, tra = [], []
             for t in range(trials):
                 order = rng.permutation(len(scenes))[:n_shots]
                 shots = [make_shot(scenes[i], per, rng) for i in order]
@@ -189,29 +189,42 @@ def detector(scenes, trials: int, clean_trials: int, rng, n_shots: int = 3, per:
 TWO_SCENES = REPO.parent / "shared" / "data" / "pjlab_opencalib_two_scenes"
 
 
-def load_two_scenes():
-    """The PJLab two-scene data: ``[(depth, camera, T_published), ...]`` for scene1 and scene2 (each read from its
-    ``calib.txt``) and tools/make_real_pairs.py's pair rule (its module); None when the data is absent."""
+def read_calib_txt(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """K (3x3), D (k1 k2 p1 p2) and the published ``T_camera_lidar`` (4x4, metres) from the dataset's calib.txt
+    (``K: 9 numbers``, ``D: ...``, ``T: 12 numbers``, row-major ``[R | t]``), read here apart from calib_core."""
+    values = {}
+    for line in Path(path).read_text().splitlines():
+        key, _, rest = line.partition(":")
+        values[key.strip()] = np.array(rest.split(), dtype=float)
+    T = np.eye(4)
+    T[:3] = values["T"].reshape(3, 4)
+    return values["K"].reshape(3, 3), values["D"], T
+
+
+def pair_rule():
+    """tools/make_real_pairs.py (a script, not a package module) as a module: its ``select_pairs`` is the fixed rule
+    (foreground corners, nearest first, farthest-point in the image)."""
     import importlib.util
 
+    spec = importlib.util.spec_from_file_location("make_real_pairs", REPO / "tools" / "make_real_pairs.py")
+    rule = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(rule)
+    return rule
+
+
+def load_two_scenes():
+    """The PJLab two-scene data: ``[(depth, camera, T_published), ...]`` for scene1 and scene2 (each read from its
+    ``calib.txt``) and tools/make_real_pairs.py's pair rule (:func:`pair_rule`); None when the data is absent."""
     from calib_core.cameras.pinhole import PinholeCamera
     from calib_core.io.scan_readers import load_scan
 
     if not (TWO_SCENES / "scene1" / "calib.pcd").is_file():
         return None
-    spec = importlib.util.spec_from_file_location("make_real_pairs", REPO / "tools" / "make_real_pairs.py")
-    rule = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(rule)
+    rule = pair_rule()
     scenes = []
     for name in ("scene1", "scene2"):
-        values = {}
-        for line in (TWO_SCENES / name / "calib.txt").read_text().splitlines():
-            key, _, rest = line.partition(":")
-            values[key.strip()] = np.array(rest.split(), dtype=float)
-        T = np.eye(4)
-        T[:3] = values["T"].reshape(3, 4)
-        cam = PinholeCamera(values["K"].reshape(3, 3), values["D"], 1920, 1200)
-        scenes.append((load_scan(TWO_SCENES / name / "calib.pcd"), cam, T))
+        K, D, T = read_calib_txt(TWO_SCENES / name / "calib.txt")
+        scenes.append((load_scan(TWO_SCENES / name / "calib.pcd"), PinholeCamera(K, D, 1920, 1200), T))
     return scenes, rule
 
 

@@ -50,3 +50,13 @@ def write_second_shot(out_dir: Path) -> tuple[SampleScene, SampleScene, Path, Pa
     save_depth_npz(scan_path, depth)
     save_image_rgb(image_path, image)
     return on_rig(sample), on_rig(scene), scan_path, image_path
+
+
+def sample_shot_server(session_path: Path, *more_shots: tuple[Path, Path], **options):
+    """A :class:`app.serving.ShotServer` on the sample (shot 0) and ``more_shots`` ``(scan, image)``, the sample's
+    camera, a free port unless ``port`` is given."""
+    from app.serving import ShotServer
+
+    options.setdefault("port", 0)
+    return ShotServer([(SAMPLE / "scan.npz", SAMPLE / "image.png"), *more_shots], SAMPLE / "camera.yaml",
+                      session_path=session_path, **options)

@@ -19,9 +19,8 @@ from calib_core.synthetic import load_sample, simulate_pairs
 from calib_core.synthetic.picks import MAX_LASER_PICK_ERROR_M, laser_picks
 from calib_core.transforms import rotation_angle_deg, transform_points
 
-from app.server import CalibrationApp
 from app.state import AnnotationState
-from app_driver import AppDriver
+from app_driver import AppDriver, sample_app
 from repo_paths import SAMPLE
 
 N_GUIDED = 10
@@ -51,8 +50,7 @@ def truth():
 
 @pytest.fixture
 def app(tmp_path):
-    a = CalibrationApp(SAMPLE / "scan.npz", SAMPLE / "image.png", SAMPLE / "camera.yaml",
-                       session_path=tmp_path / "session.yaml", port=0)
+    a = sample_app(tmp_path / "session.yaml")
     yield a
     a.stop()
 

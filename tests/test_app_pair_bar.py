@@ -17,8 +17,7 @@ from calib_core.guide.evidence import ProposalScreen
 from calib_core.synthetic import load_sample, simulate_pairs
 from calib_core.transforms import transform_points
 
-from app.server import CalibrationApp
-from app_driver import AppDriver
+from app_driver import AppDriver, sample_app
 from repo_paths import SAMPLE
 
 
@@ -29,8 +28,7 @@ def scene():
 
 @pytest.fixture
 def app(tmp_path):
-    a = CalibrationApp(SAMPLE / "scan.npz", SAMPLE / "image.png", SAMPLE / "camera.yaml",
-                       session_path=tmp_path / "session.yaml", port=0)
+    a = sample_app(tmp_path / "session.yaml")
     yield a
     a.stop()
 

@@ -8,11 +8,11 @@ is computed here from the formulas that generated its /tf or odometry); the PJLa
 
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
 
 import numpy as np
 import pytest
+from bench.shots import TWO_SCENES, pair_rule, read_calib_txt
 from bag_helpers import CloudSpec, SceneBag, _header, _typestore, camera_info, pointcloud2, tf_message
 from scipy.spatial.transform import Rotation
 
@@ -20,9 +20,7 @@ from calib_core.errors import CalibError
 from calib_core.io.bag_frames import FrameTable, choose_frames, read_frame_table, shots_from_bag
 from calib_core.io.images import load_image_rgb
 from cli_helpers import one_error_line, run_cli
-from repo_paths import REPO
 
-TWO_SCENES = REPO.parent / "shared" / "data" / "pjlab_opencalib_two_scenes"
 KINDS = ["ros1", "sqlite3", "mcap"]
 
 
@@ -248,16 +246,6 @@ def test_by_hand_and_bad_requests_give_one_line(kind, tmp_path):
 # ----------------------------------------------------------------------------- real frames: the two PJLab scenes
 
 
-def _read_calib_txt(path: Path):
-    values = {}
-    for line in path.read_text().splitlines():
-        key, _, rest = line.partition(":")
-        values[key.strip()] = np.array(rest.split(), dtype=float)
-    T = np.eye(4)
-    T[:3] = values["T"].reshape(3, 4)
-    return values["K"].reshape(3, 3), values["D"], T
-
-
 def _nearest_rotation(R: np.ndarray) -> np.ndarray:
     U, _, Vt = np.linalg.svd(R)
     return U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
@@ -272,12 +260,10 @@ def two_scenes():
     from calib_core.io.scan_readers import load_scan, read_point_cloud
     from calib_core.pairs import Pair
 
-    spec = importlib.util.spec_from_file_location("make_real_pairs", REPO / "tools" / "make_real_pairs.py")
-    rule = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(rule)
+    rule = pair_rule()
     scenes = []
     for k, name in enumerate(("scene1", "scene2")):
-        K, D, T = _read_calib_txt(TWO_SCENES / name / "calib.txt")
+        K, D, T = read_calib_txt(TWO_SCENES / name / "calib.txt")
         camera = PinholeCamera(K, D, 1920, 1200)
         depth = load_scan(TWO_SCENES / name / "calib.pcd")
         entries = rule.select_pairs(depth, camera, T, 500 + k)

@@ -10,14 +10,11 @@ seeds 0 and 1, one rig); independent solves of the concatenated pairs made here 
 from __future__ import annotations
 
 import dataclasses
-import importlib.util
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from calib_core.errors import CalibError
-from calib_core.pairs import Pair
 from calib_core.shots import Shot, leave_one_shot_out, propose_shots, solve_shots
 from calib_core.solve import calibrate, solve_extrinsics
 from calib_core.synthetic import load_sample, make_sample_scene, simulate_pairs
@@ -278,36 +275,12 @@ def test_proposals_across_shots_have_valid_shots_and_calibrated_ellipses(rooms):
 # ----------------------------------------------------------------------------- PJLab: two road scenes, one rig
 
 
-def _read_calib_txt(path: Path):
-    """K (3x3), D (k1 k2 p1 p2) and T_camera_lidar (4x4) from the dataset's calib.txt."""
-    values = {}
-    for line in path.read_text().splitlines():
-        key, _, rest = line.partition(":")
-        values[key.strip()] = np.array(rest.split(), dtype=float)
-    T = np.eye(4)
-    T[:3] = values["T"].reshape(3, 4)
-    return values["K"].reshape(3, 3), values["D"], T
-
-
-def _pair_rule():
-    """tools/make_real_pairs.py's fixed rule (foreground corners, nearest first, farthest-point in the image)."""
-    spec = importlib.util.spec_from_file_location("make_real_pairs", REPO / "tools" / "make_real_pairs.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module.select_pairs
-
-
 @pytest.mark.realdata
 @pytest.mark.skipif(not (TWO_SCENES / "scene1" / "calib.pcd").is_file(), reason=f"no data at {TWO_SCENES}")
 def test_pjlab_two_scenes_three_pairs_each_solve_together_not_alone():
-    from calib_core.cameras.pinhole import PinholeCamera
-    from calib_core.io.scan_readers import load_scan
+    from bench.shots import load_two_scenes, rough_pairs
 
-    select_pairs = _pair_rule()
-    scenes = []
-    for name in ("scene1", "scene2"):
-        K, D, T = _read_calib_txt(TWO_SCENES / name / "calib.txt")
-        scenes.append((load_scan(TWO_SCENES / name / "calib.pcd"), PinholeCamera(K, D, 1920, 1200), T))
+    scenes, rule = load_two_scenes()
     T_pub = scenes[0][2]
     np.testing.assert_allclose(scenes[1][2], T_pub)  # one rig: one published calibration
     camera = scenes[0][1]
@@ -317,9 +290,7 @@ def test_pjlab_two_scenes_three_pairs_each_solve_together_not_alone():
     # not every draw (a single draw with seeds 21 and 22 gave 0.16 deg and 11.5 cm), hence the share asserted.
     for draw in range(40):
         shots = []
-        for k, (depth, cam, T) in enumerate(scenes):
-            entries = select_pairs(depth, cam, T, 1000 + 2 * draw + k)[:3]
-            pairs = [Pair(tuple(e["laser_rc"]), None, tuple(e["pixel"])) for e in entries]
+        for k, ((depth, cam, _), pairs) in enumerate(zip(scenes, rough_pairs(scenes, rule, draw))):
             if draw == 0:  # neither scene alone can be solved from its three pairs
                 with pytest.raises(CalibError, match="at least 4 pairs"):
                     calibrate(pairs, depth, cam)

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 import yaml
 from cli_helpers import one_error_line, run_cli
-from shots_helpers import write_second_shot
+from shots_helpers import sample_shot_server, write_second_shot
 
 from app.picks import ShotFiles
 from app.state import AnnotationState
@@ -178,11 +178,9 @@ def test_an_old_one_shot_session_opens_as_one_shot(tmp_path):
 
 
 def _serve_two(tmp_path, two_shots, n0=6, n1=6, seed=0):
-    from app.serving import ShotServer
 
     s0, s1, scan1, image1 = two_shots
-    server = ShotServer([(SAMPLE / "scan.npz", SAMPLE / "image.png"), (scan1, image1)], SAMPLE / "camera.yaml",
-                        session_path=tmp_path / "session.yaml", port=0)
+    server = sample_shot_server(tmp_path / "session.yaml", (scan1, image1))
     rng = np.random.default_rng(seed)
     pairs0, pairs1 = simulate_pairs(s0, n0, rng), simulate_pairs(s1, n1, rng)
     return server, pairs0, pairs1
@@ -295,12 +293,10 @@ def test_serve_shot_bad_input_is_one_line(tmp_path, two_shots):
 
 
 def test_the_shots_panel_switches_shots_and_an_undone_shot_is_left(tmp_path, two_shots):
-    from app.serving import ShotServer
     from app.session_store import peek_session
 
     _, _, scan1, image1 = two_shots
-    server = ShotServer([(SAMPLE / "scan.npz", SAMPLE / "image.png")], SAMPLE / "camera.yaml",
-                        session_path=tmp_path / "session.yaml", port=0)
+    server = sample_shot_server(tmp_path / "session.yaml")
     try:
         app = server.load()
         assert server.add_shot(scan1, image1) == 1  # what "Add this shot" does before asking for it
@@ -338,18 +334,19 @@ def test_serve_two_real_road_scenes_three_pairs_each(tmp_path):
     """The two PJLab scenes of one rig as two shots: 3 pairs per scene (the published calibration's
     projections of real corners plus 1 px noise, tools/make_real_pairs.py's rule, as tests/test_shots.py
     takes them) solve in the app together, to the published calibration."""
-    from test_shots import _errors, _pair_rule, _read_calib_txt
+    from bench.shots import pair_rule, read_calib_txt
+    from test_shots import _errors
 
     from app.serving import ShotServer
     from calib_core.cameras import save_camera_yaml
     from calib_core.cameras.pinhole import PinholeCamera
     from calib_core.pairs import Pair
 
-    K, D, T_pub = _read_calib_txt(TWO_SCENES / "scene1" / "calib.txt")
+    K, D, T_pub = read_calib_txt(TWO_SCENES / "scene1" / "calib.txt")
     save_camera_yaml(PinholeCamera(K, D, 1920, 1200), tmp_path / "camera.yaml")
     server = ShotServer([(TWO_SCENES / n / "calib.pcd", TWO_SCENES / n / "calib.jpg") for n in ("scene1", "scene2")],
                         tmp_path / "camera.yaml", session_path=tmp_path / "session.yaml", port=0)
-    select_pairs = _pair_rule()
+    select_pairs = pair_rule().select_pairs
     try:
         per_shot = []
         for k in (0, 1):

@@ -16,7 +16,7 @@ import queue
 import numpy as np
 import pytest
 from app_driver import AppDriver
-from shots_helpers import write_second_shot
+from shots_helpers import sample_shot_server, write_second_shot
 
 from calib_core.io.images import load_image_rgb
 from calib_core.shots import Shot, propose_shots
@@ -39,12 +39,10 @@ def _true_click(camera, truth, proposal, rng) -> np.ndarray:
 
 
 def test_guided_picking_ranks_across_shots_and_switches_shot_by_itself(tmp_path, two_shots):
-    from app.serving import ShotServer
 
     s0, s1, scan1, image1 = two_shots
     truth = s0.T_camera_lidar
-    server = ShotServer([(SAMPLE / "scan.npz", SAMPLE / "image.png"), (scan1, image1)], SAMPLE / "camera.yaml",
-                        session_path=tmp_path / "session.yaml", port=0)
+    server = sample_shot_server(tmp_path / "session.yaml", (scan1, image1))
     rng = np.random.default_rng(4)
     pairs0, pairs1 = simulate_pairs(s0, 5, rng), simulate_pairs(s1, 2, rng)
     try:
@@ -100,11 +98,9 @@ def test_guided_picking_ranks_across_shots_and_switches_shot_by_itself(tmp_path,
 
 
 def test_auto_accept_is_refused_across_shots_with_one_line(tmp_path, two_shots):
-    from app.serving import ShotServer
 
     _, _, scan1, image1 = two_shots
-    server = ShotServer([(SAMPLE / "scan.npz", SAMPLE / "image.png"), (scan1, image1)], SAMPLE / "camera.yaml",
-                        session_path=tmp_path / "session.yaml", port=0)
+    server = sample_shot_server(tmp_path / "session.yaml", (scan1, image1))
     try:
         app = server.load(0)
         d = AppDriver(app)

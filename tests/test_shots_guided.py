@@ -129,17 +129,6 @@ def test_an_image_for_a_shot_that_does_not_exist_is_one_clear_error(rooms):
 # ----------------------------------------------------------------------------- PJLab: the guided loop
 
 
-def _published(path):
-    """T_camera_lidar (4x4) from the dataset's calib.txt ("T: 12 numbers", row-major [R | t])."""
-    for line in path.read_text().splitlines():
-        key, _, rest = line.partition(":")
-        if key.strip() == "T":
-            T = np.eye(4)
-            T[:3] = np.array(rest.split(), dtype=float).reshape(3, 4)
-            return T
-    raise AssertionError(f"no T in {path}")
-
-
 @pytest.mark.realdata
 @pytest.mark.skipif(not (TWO_SCENES / "scene1" / "calib.pcd").is_file(), reason=f"no data at {TWO_SCENES}")
 def test_pjlab_two_scenes_guided_across_shots_reaches_the_target():
@@ -148,12 +137,12 @@ def test_pjlab_two_scenes_guided_across_shots_reaches_the_target():
     The simulated click needs no checking by eye, so every candidate is proposed (``screen=None``); with the
     person screen on (the app's and ``propose``'s default) the proposals run out earlier, still in both scenes.
     Draws 0 and 1 of ``bench.shots_guided`` (the full table: ``python -m bench.shots_guided``)."""
-    from bench.shots import load_two_scenes, rough_pairs
+    from bench.shots import load_two_scenes, read_calib_txt, rough_pairs
     from bench.shots_guided import guided_trial, scan_caches
 
     scenes, rule = load_two_scenes()
-    T_pub = _published(TWO_SCENES / "scene1" / "calib.txt")
-    np.testing.assert_allclose(_published(TWO_SCENES / "scene2" / "calib.txt"), T_pub)
+    T_pub = read_calib_txt(TWO_SCENES / "scene1" / "calib.txt")[2]
+    np.testing.assert_allclose(read_calib_txt(TWO_SCENES / "scene2" / "calib.txt")[2], T_pub)
     camera = scenes[0][1]
     caches = scan_caches(scenes)
     # The cached scan products give the very proposals of the default path (what `propose --shot` computes).

@@ -12,7 +12,7 @@ import dataclasses
 
 import numpy as np
 import pytest
-from shots_helpers import write_second_shot
+from shots_helpers import sample_shot_server, write_second_shot
 
 from calib_core.shots import UNCHECKED_REASON, Shot, solve_shots
 from calib_core.synthetic import simulate_pairs
@@ -51,11 +51,9 @@ def test_the_joint_fit_without_checks_is_the_checked_fit_and_never_ok(two_shots)
 
 
 def test_the_app_shows_the_joint_fit_then_the_checked_one(tmp_path, two_shots):
-    from app.serving import ShotServer
 
     s0, s1, scan1, image1 = two_shots
-    server = ShotServer([(SAMPLE / "scan.npz", SAMPLE / "image.png"), (scan1, image1)], SAMPLE / "camera.yaml",
-                        session_path=tmp_path / "session.yaml", port=0)
+    server = sample_shot_server(tmp_path / "session.yaml", (scan1, image1))
     rng = np.random.default_rng(3)
     pairs0, pairs1 = simulate_pairs(s0, 6, rng), simulate_pairs(s1, 6, rng)
     try:
@@ -93,12 +91,10 @@ def test_the_app_shows_the_joint_fit_then_the_checked_one(tmp_path, two_shots):
 def test_the_3d_pane_labels_every_pair_with_its_shot(tmp_path, two_shots):
     """Every shot's pairs are marked in the 3-D pane at their laser point (the cell's point in that shot's
     scan, lidar frame), labelled ``S<shot>·<id>``; a pair of fewer than 4 (no solve yet) too."""
-    from app.serving import ShotServer
     from calib_core.io.scan_readers import load_scan
 
     s0, s1, scan1, image1 = two_shots
-    server = ShotServer([(SAMPLE / "scan.npz", SAMPLE / "image.png"), (scan1, image1)], SAMPLE / "camera.yaml",
-                        session_path=tmp_path / "session.yaml", port=0)
+    server = sample_shot_server(tmp_path / "session.yaml", (scan1, image1))
     rng = np.random.default_rng(8)
     scans = [load_scan(SAMPLE / "scan.npz"), load_scan(scan1)]
     try:
@@ -122,11 +118,9 @@ def test_the_3d_pane_labels_every_pair_with_its_shot(tmp_path, two_shots):
 
 
 def test_the_rough_pose_is_kept_when_switching_shots_before_any_solve(tmp_path, two_shots):
-    from app.serving import ShotServer
 
     s0, _, scan1, image1 = two_shots
-    server = ShotServer([(SAMPLE / "scan.npz", SAMPLE / "image.png"), (scan1, image1)], SAMPLE / "camera.yaml",
-                        session_path=tmp_path / "session.yaml", port=0)
+    server = sample_shot_server(tmp_path / "session.yaml", (scan1, image1))
     try:
         app = server.load(0)
         server.state.import_pairs(simulate_pairs(s0, 1, np.random.default_rng(2)))  # one pair: no solve
