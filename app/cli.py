@@ -31,6 +31,7 @@ from .cli_guard import (  # noqa: F401  (with_default_command, load_camera_from_
     with_default_command,
 )
 from .cli_common import (  # noqa: F401  (default_sample_dir, format_summary, scan_options: public here too)
+    add_bag_topic_args,
     add_scan_args,
     default_sample_dir,
     format_summary,
@@ -330,9 +331,7 @@ def build_parser() -> argparse.ArgumentParser:
         "has only one of its type.",
     )
     q.add_argument("bag", type=Path, help="a .bag file, or a ROS 2 bag folder (or a file in it)")
-    q.add_argument("--cloud-topic", default=None, help="sensor_msgs/PointCloud2 topic")
-    q.add_argument("--image-topic", default=None, help="sensor_msgs/Image or CompressedImage topic")
-    q.add_argument("--camera-info-topic", default=None, help="sensor_msgs/CameraInfo topic")
+    add_bag_topic_args(q)
     which = q.add_mutually_exclusive_group()
     which.add_argument("--time", type=float, default=None, help="the cloud nearest to this many seconds after the bag's start")
     which.add_argument("--index", type=int, default=None, help="the cloud with this 0-based index on its topic (default 0)")

@@ -55,6 +55,13 @@ def add_scan_args(p: argparse.ArgumentParser, required: bool = True) -> None:
     p.add_argument("--max-points", type=int, default=None, metavar="N", help="largest cloud (points or grid cells) a scan file may hold (default 5,000,000)")
 
 
+def add_bag_topic_args(p: argparse.ArgumentParser) -> None:
+    """The topic choices of every command that reads frames of a bag (default: the bag's only topic of a type)."""
+    p.add_argument("--cloud-topic", default=None, help="sensor_msgs/PointCloud2 topic")
+    p.add_argument("--image-topic", default=None, help="sensor_msgs/Image or CompressedImage topic")
+    p.add_argument("--camera-info-topic", default=None, help="sensor_msgs/CameraInfo topic")
+
+
 def scan_options(args: argparse.Namespace) -> dict:
     opts: dict = {"organize": args.organize}
     for key in ("beams", "h_res_deg", "v_res_deg", "sensor_origin", "bin_columns", "max_points"):

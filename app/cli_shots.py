@@ -6,6 +6,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from .cli_common import add_bag_topic_args
+
 
 def add_shot_args(p: argparse.ArgumentParser, *, images: bool = False) -> None:
     """``--shot SCAN PAIRS`` (repeatable) and, for ``propose``, ``--image-for-shot K IMAGE``."""
@@ -143,9 +145,7 @@ def add_bag_frames_parser(bag_sub) -> None:
         "smallest stamp gap. Prints one line per shot: 'shot K: SCAN IMAGE STAMP ...'.",
     )
     q.add_argument("bag", type=Path, help="a .bag file, or a ROS 2 bag folder (or a file in it)")
-    q.add_argument("--cloud-topic", default=None, help="sensor_msgs/PointCloud2 topic")
-    q.add_argument("--image-topic", default=None, help="sensor_msgs/Image or CompressedImage topic")
-    q.add_argument("--camera-info-topic", default=None, help="sensor_msgs/CameraInfo topic")
+    add_bag_topic_args(q)
     which = q.add_mutually_exclusive_group(required=True)
     which.add_argument("--frames", type=int, default=None, help="this many frames, spread over the bag and still")
     which.add_argument("--time", type=float, nargs="+", default=None,
