@@ -15,6 +15,84 @@ from calib_core.solve.quality import NO_ERROR_ESTIMATE, error_estimate_reason, p
 
 from .ui_common import _fmt
 
+#: Keeps the pair bar (the pair actions, the live line, the pair status, the guided line: the panel's rows above the
+#: intro) in view while the control panel scrolls: each scroll shifts those rows down by what scrolled away, over the
+#: rows below (in run 4, 15 of 67 actions were panel scrolls back to it).  A shift rather than ``position: sticky``:
+#: an ``overflow: hidden`` box between the rows and viser's scroll area defeats sticky.  Also the keys viser does not
+#: send to Python: Delete / Backspace press Edit -> Delete while a pair is selected; Ctrl+Z (Cmd+Z) presses the top
+#: Undo and Ctrl+Shift+Z / Ctrl+Y Edit -> Redo, taking the key from whatever widget has the focus (in run 4 Ctrl+Z
+#: in the page reset the "Render over photo" slider); not while typing in a text area.  A fixed string: no user text.
+PAIR_BAR_JS = """
+if (!window.__baCalibPairBar) {
+  window.__baCalibPairBar = true;
+  const INTRO = "Click a point in any";
+  const button = (label, root) => Array.from((root || document).querySelectorAll("button")).find(
+    (b) => b.textContent.trim() === label);
+  const barRows = () => {
+    const cancel = button("Cancel pair");
+    if (!cancel) return null;
+    let row = cancel;
+    while (row.parentElement && !Array.from(row.parentElement.children).some(
+      (c) => c !== row && c.textContent.includes(INTRO))) row = row.parentElement;
+    if (!row.parentElement) return null;
+    const rows = [];
+    for (let e = row; e && !e.textContent.includes(INTRO); e = e.nextElementSibling) rows.push(e);
+    return rows;
+  };
+  const pin = () => {
+    const rows = barRows();
+    if (!rows || !rows.length) return;
+    const viewport = rows[0].closest(".mantine-ScrollArea-viewport");
+    if (!viewport) return;
+    const shifted = parseFloat(rows[0].dataset.baShift || "0");
+    const shift = Math.max(0, viewport.scrollTop);  // the rows head the scrolled content: they stay put
+    if (shift === shifted && rows[0].dataset.baPinned) return;
+    const paper = rows[0].closest(".mantine-Paper-root");
+    const background = paper ? getComputedStyle(paper).backgroundColor : "white";
+    rows.forEach((e, i) => {
+      e.dataset.baPinned = "1";
+      e.dataset.baShift = String(shift);
+      e.style.position = "relative";
+      e.style.zIndex = "5";
+      e.style.background = background;
+      e.style.transform = shift > 0 ? `translateY(${shift}px)` : "";
+      // The first row also covers the scroll area's top padding, the last one casts a line over what scrolls.
+      const shadows = [];
+      if (shift > 0 && i === 0) shadows.push(`0 -12px 0 0 ${background}`);
+      if (shift > 0 && i === rows.length - 1) shadows.push("0 4px 4px -3px rgba(0,0,0,0.25)");
+      e.style.boxShadow = shadows.join(", ");
+    });
+  };
+  document.addEventListener("scroll", pin, true);
+  setInterval(pin, 250);
+  document.addEventListener("keydown", (event) => {
+    const t = event.target;
+    if (document.querySelector(".mantine-Modal-content")) return;
+    if (t && (t.tagName === "TEXTAREA" || t.isContentEditable)) return;
+    const inBox = t && t.tagName === "INPUT";
+    const key = event.key.toLowerCase();
+    const command = event.ctrlKey || event.metaKey;
+    let label = null;
+    if (command && !event.altKey && key === "z") label = event.shiftKey ? "Redo" : "Undo";
+    else if (command && !event.altKey && key === "y") label = "Redo";
+    else if (!command && !inBox && (event.key === "Delete" || event.key === "Backspace")) {
+      const rows = barRows();
+      if (rows && rows.some((e) => / selected: /.test(e.textContent))) label = "Delete";
+    }
+    if (!label) return;
+    event.preventDefault();
+    event.stopPropagation();
+    if (event.repeat) return;
+    if (document.activeElement && document.activeElement.blur) document.activeElement.blur();
+    const rows = barRows();
+    const top = label === "Undo" && rows ? button("Undo", rows[0]) : null;
+    const target = top || Array.from(document.querySelectorAll("button")).filter(
+      (b) => b.textContent.trim() === label).pop();
+    if (target) target.click();
+  }, true);
+}
+"""
+
 
 def live_summary(live: Any) -> str:
     """``"N pairs · mean X px · left out Y px · Quality: ok"`` (markdown) of the solve ``live.bundle`` shows, or ""

@@ -15,7 +15,8 @@ from calib_core.pairs import Pair, load_pairs_yaml
 from calib_core.panorama import refine_click_to_corner
 
 from .layout import RENDER_KEY
-from .pair_bar import PairBar
+from .page_builder import install_page_script
+from .pair_bar import PAIR_BAR_JS, PairBar
 from .security import upload_display_name
 from .ui_common import MIN_PAIRS, PICK_RADII, SNAP_RADIUS_PX, IMPORT_CHOICES, md_escape
 
@@ -51,6 +52,7 @@ class PairsPanel:
         # The live solve's figures right under the buttons, guided picking's status under the pair status.
         self.bar = PairBar(gui, live_order=top - 0.75, guide_order=top - 0.45)
         self.show_guide_status = self.bar.show_guide_status  # the Guide panel's hook
+        install_page_script(app.server, PAIR_BAR_JS)  # the bar stays in view; Delete and Ctrl+Z keys
         self._guarded_pair_action = guard(self.on_pair_action)
         self.folder = gui.add_folder("Pairs")
         with self.folder:
