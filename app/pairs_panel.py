@@ -11,14 +11,13 @@ import numpy as np
 import viser
 
 from calib_core.errors import CalibError
-from calib_core.pairs import Pair, load_pairs_yaml
 from calib_core.panorama import refine_click_to_corner
 
 from .layout import RENDER_KEY
 from .page_builder import install_page_script
 from .pair_bar import PAIR_BAR_JS, PairBar
-from .security import upload_display_name
-from .ui_common import MIN_PAIRS, PICK_RADII, SNAP_RADIUS_PX, IMPORT_CHOICES, md_escape
+from .pairs_import import import_upload
+from .ui_common import MIN_PAIRS, PICK_RADII, SNAP_RADIUS_PX
 
 #: The buttons at the top of the control panel ("Next pair" is guided picking's own).
 PAIR_ACTIONS = ("Undo", "Cancel pair", "Next pair")
@@ -230,6 +229,7 @@ class PairsPanel:
         # A click with a pair selected moves it; then the selection ends, so that the next click starts or
         # continues a new pair instead of moving this one again (by-eye trial: a laser end jumped to an unrelated cell).
         moves_selected = pick_id is None and self.app.state.selected is not None
+        refined = None if pick_id is None else next((p for p in self.app.state.picks if p.id == pick_id), None)
         if kind == "ba":
             _, ba_key, row, col = target
             try:
@@ -248,6 +248,10 @@ class PairsPanel:
             last_click = ("camera", u, v)
         if moves_selected:
             self.app.state.select(None)
+        if refined is not None and refined in self.app.state.picks:  # run 4: refining clicks that moved nothing
+            what = f"the same cell (row {target[2]}, column {target[3]})" if kind == "ba" else "the same pixel"
+            self.app.notify(client, "No change", f"Pair {out}: {what} as before; click one cell or pixel farther "
+                                                 "off to move it.", color="yellow")
         if client is not None:
             self._last_click[cid] = last_click
         self._last_pick[cid] = (kind, out, source)
@@ -429,64 +433,14 @@ class PairsPanel:
 
     def _on_upload(self, event: Any) -> None:
         f = event.value  # this tab's button: no other tab's upload can have replaced it
-        self._import_upload(event.client, getattr(f, "name", ""), getattr(f, "content", b""))
+        import_upload(self.app, event.client, getattr(f, "name", ""), getattr(f, "content", b""))
 
     def receive_upload(self, client: Any, name: str, content: bytes, wait: bool = False) -> None:
         """Import an uploaded pairs file as the upload button of ``client`` does (through the action queue).
 
         The outcome is notified to ``client``; with ``wait``, returns once it is applied.
         """
-        self.app.post(lambda: self._import_upload(client, name, content), client=client, wait=wait)
-
-    def _import_upload(self, client: Any, name: str, content: bytes) -> None:
-        # The client's file name is only ever shown, never used as a path.
-        shown = upload_display_name(name)
-        if not content:
-            raise CalibError(f"{shown}: the file is empty")
-        with tempfile.TemporaryDirectory() as tmp:
-            path = Path(tmp) / "upload.yaml"
-            path.write_bytes(content)
-            try:
-                pairs = load_pairs_yaml(path)
-                self.app.state.check_import(pairs)  # a file not of this scene is refused before asking anything
-            except CalibError as exc:
-                raise CalibError(str(exc).replace(str(path), shown)) from None
-        if not self.app.state.picks or client is None or not hasattr(client, "gui"):
-            self._finish_import(client, shown, pairs, "Append")
-            return
-        self._ask_import(client, shown, pairs)
-
-    def _ask_import(self, client: Any, shown: str, pairs: list[Pair]) -> None:
-        """Ask this tab whether the uploaded pairs replace the current ones or are added to them."""
-        duplicates = self.app.state.count_duplicates(pairs)
-        modal = client.gui.add_modal("Import pairs")
-        with modal:
-            client.gui.add_markdown(
-                f"{md_escape(shown)} has {len(pairs)} pairs; there are {len(self.app.state.picks)} pairs now.  \n"
-                f"**Append** adds them ({duplicates} exact duplicates are skipped); **Replace all** removes the "
-                f"current pairs first. Undo reverses either.")
-            for label in IMPORT_CHOICES:
-                button = client.gui.add_button(label, color="red" if label == "Replace all" else None)
-
-                def answer(event: Any, label: str = label) -> None:
-                    modal.close()
-                    self._finish_import(event.client, shown, pairs, label)
-
-                button.on_click(self.app.guard(answer))
-
-    def _finish_import(self, client: Any, shown: str, pairs: list[Pair], choice: str) -> None:
-        if choice not in ("Append", "Replace all"):
-            return  # Cancel
-        replace = choice == "Replace all"
-        before = len(self.app.state.picks)
-        ids = self.app.state.import_pairs(pairs, replace_existing=replace)
-        skipped = len(pairs) - len(ids)
-        what = f"{len(ids)} pairs added from {shown}"
-        if replace:
-            what = f"{before} pairs replaced by {len(ids)} from {shown}"
-        if skipped:
-            what += f", {skipped} exact duplicates skipped"
-        self.app.notify(client, "Pairs imported", what + " (undo reverses this)", color="green")
+        self.app.post(lambda: import_upload(self.app, client, name, content), client=client, wait=wait)
 
     def on_clear(self, event: Any) -> None:
         n = len(self.app.state.picks)

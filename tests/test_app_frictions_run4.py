@@ -1,0 +1,63 @@
+"""Frictions of by-eye run 4 (docs/by_eye.md, "Frictions recorded in run 4"), driven without a browser.
+
+* A click in the laser loupe after a finished pair refines that pair's laser end (it showed the render's crop and
+  started a new pair); a refining click that changes nothing says so ("same cell").
+* The top Undo says which half of a pair it took back.
+
+Truth: the clicks made here, the state's own pairs, and the camera-view render recomputed here with
+:func:`calib_core.render.render_from_camera`.  The browser half (the pinned pair bar, Delete and Ctrl+Z keys) is in
+``tests/test_e2e_pair_bar_keys.py``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from browser_helpers import start_sample_app
+from calib_core.pairs import load_pairs_yaml
+from repo_paths import SAMPLE
+from test_app_frictions import rendered, reset, return_pixel
+
+
+@pytest.fixture(scope="module")
+def driver(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("frictions4")
+    app, d = start_sample_app(tmp, load_pairs_yaml(SAMPLE / "pairs.yaml")[:6])
+    try:
+        assert d.set_panorama(False) == []  # raw view: render pixels are original pixels
+        assert d.wait_render()
+        yield d
+    finally:
+        app.stop()
+
+
+def test_a_laser_loupe_click_after_a_finished_pair_refines_it_and_same_cell_says_so(driver):
+    d, app = driver, driver.app
+    reset(d)
+    cells = rendered(d)
+    n = len(app.state.picks)
+    u, v = return_pixel(cells, (420.0, 300.0))
+    # Camera first, then the render: a finished pair, and the laser loupe shows the render's crop.
+    assert d.click_camera(float(u) + 0.3, float(v) - 0.2) == []
+    assert d.click_render(float(u), float(v)) == []
+    pid = app.state.picks[-1].id
+    assert app.state.get(pid).complete and app.state.pending() is None and len(app.state.picks) == n + 1
+    assert app.loupes.shows_render
+    crop = app.loupes.camera_crop
+    # A click in the laser loupe, 3 px right: the finished pair's laser end moves there, no new pair.
+    want = tuple(int(x) for x in cells[v, u + 3])
+    assert want != app.state.get(pid).laser_rc
+    assert d.click("loupe_ba", (u + 3.0 - crop.u0, v - crop.v0)) == []
+    assert len(app.state.picks) == n + 1 and app.state.get(pid).laser_rc == want
+    # The same cell again: nothing changes, and the person is told so.
+    before = app.state.picks
+    notes = d.click("loupe_ba", (u + 3.0 - crop.u0, v - crop.v0))
+    assert app.state.picks == before
+    assert len(notes) == 1 and "same cell" in notes[0][1].lower(), notes
+    # The camera loupe likewise, at the same pixel.
+    notes = d.click("loupe_camera", d.loupe_display_pixel("camera", app.state.get(pid).pixel))
+    assert app.state.picks == before
+    assert len(notes) == 1 and "same" in notes[0][1].lower(), notes
+    app.state.delete(pid)
+    reset(d)
