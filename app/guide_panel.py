@@ -424,7 +424,7 @@ class GuidePanel(GuideShotsMixin):
         if self.current is None:
             self._drop_unfinished()
             return
-        self._start_current()
+        self._start_unless_reclick_after(label, p)
 
     def _drop_current(self, p: Proposal) -> None:
         with self._lock:  # the shown proposal ``p``, for good
@@ -470,7 +470,7 @@ class GuidePanel(GuideShotsMixin):
             lines.append(f"Predicted pixel ({p.pixel[0]:.1f}, {p.pixel[1]:.1f}), 3σ ±{major:.1f} px")
             lines += self.shot_lines(p) + ([f"{md_escape(props.note)}."] if getattr(props, "note", None) else [])
             half = self.state.pending()
-            if self._reclick is not None and self._reclick_id(p) == self._reclick:
+            if self._reclick is not None and self._reclick_id(p) == self._reclick == self.state.selected:
                 lines.append(f"Pair {self._reclick} (selected): re-click its corner in the camera loupe.")
             elif half is not None and half.source == "guided" and half.laser_rc == tuple(p.laser_rc):
                 lines.append(f"Pair {half.id}: click the corner in the camera loupe.")

@@ -135,6 +135,17 @@ class GuideShotsMixin:
         p = self.state.pending()
         return p if p is not None and p.source == "guided" and p.pixel is None else None
 
+    def _start_unless_reclick_after(self, label: str, declined: Any) -> None:
+        """Start the shown proposal, except a re-click right after the re-click ``declined`` was skipped or refused
+        (``label``): its pair is not selected behind the person's back (run 4: a plain click then moved it);
+        **Next pair** selects it."""
+        if label in ("Skip", "Not a corner") and getattr(declined, "replaces", None) is not None \
+                and self._reclick_id(self.current) is not None:
+            self._end_reclick()
+            self._refresh()
+            return
+        self._start_current()
+
     def _end_reclick(self) -> None:
         if self._reclick is not None:
             self._reclick = None

@@ -47,24 +47,40 @@ def test_reclicks_skipped_or_stopped_do_not_come_back_and_the_bar_says_why(app, 
     assert d.pairs_panel and app.pairs_panel.bar.guide_status == ""  # no guided session yet: nothing in the bar
     app.guide.screen = ProposalScreen(max_range_m=0.5, max_ellipse_px=app.guide.screen.max_ellipse_px)
     assert d.press_pair_action("Next pair") == [] and d.wait_guide()
-    shown = []
+    shown, skipped = [], False
     for _ in range(12):  # at most 4 re-clicks (4 pairs); before the fix Skip cycled through them for ever
         p = d.guide_proposal
         if p is None:
             break
         assert p.replaces is not None  # no new cell passes this screen
+        if skipped:  # run 4: after a Skip the next re-click's pair is not selected behind the person's back ...
+            assert app.state.selected is None and "(selected)" not in app.pairs_panel.bar.guide_status
+            if len(shown) == 1:  # ... so a plain click starts a pair and moves none (Cancel pair drops it)
+                before = app.state.picks
+                assert d.click_camera(330.0, 250.0) == [] and d.wait_idle()
+                assert app.state.picks[:-1] == before and app.state.pending() is not None
+                assert d.press_pair_action("Cancel pair") == [] and d.wait_idle() and app.state.picks == before
+            assert d.press_pair_action("Next pair") == [] and d.wait_guide()  # Next pair selects it
+            assert d.guide_proposal == p
         rid = app.state.selected
+        assert rid is not None
         shown.append(rid)
         # The pair bar, at the top, says which proposal and what to click (not only the Guided folder).
         bar = app.pairs_panel.bar.guide_status
         assert f"re-click of pair {rid}" in bar and f"Pair {rid} (selected)" in bar
         assert "No new corner passes the checks here" in bar
+        if len(shown) == 1:  # the selection ended (Cancel pair): the bar no longer says "selected"
+            assert d.press_pair_action("Cancel pair") == [] and d.wait_guide() and app.state.selected is None
+            bar = app.pairs_panel.bar.guide_status
+            assert f"re-click of pair {rid}" in bar and "(selected)" not in bar, bar
+            assert d.press_pair_action("Next pair") == [] and d.wait_guide() and app.state.selected == rid
         if len(shown) == 2:  # Stop declines it too; Next pair then shows another pair
             assert d.press_guide("Stop") == [] and d.wait_guide()
             assert app.pairs_panel.bar.guide_status == ""
             assert d.press_pair_action("Next pair") == [] and d.wait_guide()
         else:
             assert d.press_guide("Skip") == [] and d.wait_guide()
+        skipped = len(shown) != 2
     assert len(shown) == len(set(shown)) and 1 <= len(shown) <= 4, shown
     assert d.guide_proposal is None
     bar = app.pairs_panel.bar.guide_status.replace("\\", "")  # markdown escapes
