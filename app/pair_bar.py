@@ -94,6 +94,29 @@ if (!window.__baCalibPairBar) {
 """
 
 
+def undo_note(before: list, after: list) -> str:
+    """What one undo took back, from the pairs ``before`` and ``after`` it (:class:`app.picks.Pick` lists), in
+    words: which pair, and which of its ends (in run 4 the top Undo removing only a pair's camera half surprised)."""
+    old, new = {p.id: p for p in before}, {p.id: p for p in after}
+    gone, back = sorted(old.keys() - new.keys()), sorted(new.keys() - old.keys())
+    if len(gone) == 1 and not back:
+        return f"Undone: pair {gone[0]} (its last end)."
+    if back and not gone:
+        return "Undone: the removal of pair" + (f" {back[0]}." if len(back) == 1 else f"s {', '.join(map(str, back))}.")
+    changed = [i for i in old.keys() & new.keys() if old[i] != new[i]]
+    if len(changed) != 1 or gone or back:
+        return "Undone: the last change of the pairs."
+    a, b = old[changed[0]], new[changed[0]]
+    for name, was, now, other in (("camera point", a.pixel, b.pixel, "laser end"),
+                                  ("laser end", a.laser_rc, b.laser_rc, "camera point")):
+        if was != now and now is None:
+            return (f"Undone: pair {b.id}'s {name}; its {other} waits for a new {name.split()[0]} click "
+                    "(Undo again drops it).")
+        if was != now:
+            return f"Undone: the move of pair {b.id}'s {name}."
+    return f"Undone: a change of pair {b.id}."
+
+
 def live_summary(live: Any) -> str:
     """``"N pairs · mean X px · left out Y px · Quality: ok"`` (markdown) of the solve ``live.bundle`` shows, or ""
     before the first solve.  N is the pairs in the fit; with too few for an error figure the mean says so."""

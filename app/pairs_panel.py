@@ -15,7 +15,7 @@ from calib_core.panorama import refine_click_to_corner
 
 from .layout import RENDER_KEY
 from .page_builder import install_page_script
-from .pair_bar import PAIR_BAR_JS, PairBar
+from .pair_bar import PAIR_BAR_JS, PairBar, undo_note
 from .pairs_import import import_upload
 from .ui_common import MIN_PAIRS, PICK_RADII, SNAP_RADIUS_PX
 
@@ -40,6 +40,7 @@ class PairsPanel:
         self._last_click: dict[int, tuple] = {}  # client id -> ("ba", key, row, col) or ("camera", u, v)
         self._last_pick: dict[Any, tuple] = {}  # client id -> (kind, pick id, "full" | "loupe")
         self._loupes_pick: int | None = None  # the pair the loupes were last framed on (refining it keeps them still)
+        self._undo_note: tuple[int, str] = (-1, "")  # (state version, what the last top Undo took back)
         gui, guard = app.server.gui, app.guard
         # The pair actions first in the panel, near the loupes: in the by-eye trials Undo and Next pair were many
         # wheel scrolls apart.  Buttons above the status line, so that they never move as the text changes.
@@ -128,7 +129,7 @@ class PairsPanel:
                 ids, uv = app.overlays.predicted_pixels({pending.id: pending})
                 if ids:
                     lines.append(f"Predicted camera pixel: ({uv[0, 0]:.1f}, {uv[0, 1]:.1f}) (cross in the image).")
-            status = []
+            status = [self._undo_note[1]] if self._undo_note[0] == state.version else []
             if pending is not None:
                 status.append(f"Pair {pending.id} waits for a {need} click (**Cancel pair** or Esc drops it).")
             if selected is not None:
@@ -387,9 +388,12 @@ class PairsPanel:
 
     def on_pair_action(self, event: Any) -> None:
         """"Undo" or "Cancel pair" at the top of the panel."""
-        if event.value == "Undo":
+        if event.value == "Undo":  # also Ctrl+Z: the status line says what went (which half of a pair)
+            before = self.app.state.picks
             if not self.app.state.undo():
                 raise CalibError("nothing to undo")
+            self._undo_note = (self.app.state.version, undo_note(before, self.app.state.picks))
+            self.refresh()
         elif event.value == "Cancel pair":
             self.cancel_pair()
 

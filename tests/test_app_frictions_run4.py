@@ -61,3 +61,34 @@ def test_a_laser_loupe_click_after_a_finished_pair_refines_it_and_same_cell_says
     assert len(notes) == 1 and "same" in notes[0][1].lower(), notes
     app.state.delete(pid)
     reset(d)
+
+
+def test_the_top_undo_says_which_half_of_a_pair_it_took_back(driver):
+    d, app = driver, driver.app
+    reset(d)
+    cells = rendered(d)
+    picks = app.state.picks
+    u, v = return_pixel(cells, (200.0, 250.0))
+    assert d.click_camera(float(u), float(v)) == [] and d.click_render(float(u), float(v)) == []
+    pid = app.state.picks[-1].id
+    assert app.state.get(pid).complete
+    # The render click completed the pair: Undo takes back its laser end; the camera point waits.
+    assert d.press_pair_action("Undo") == [] and d.wait_idle()
+    half = app.state.pending()
+    assert half.id == pid and half.pixel is not None and half.laser_rc is None
+    assert f"Undone: pair {pid}'s laser end; its camera point waits" in d.pair_status, d.pair_status
+    # Undo again: the half pair goes; the line names the pair.
+    assert d.press_pair_action("Undo") == [] and d.wait_idle()
+    assert app.state.picks == picks and f"Undone: pair {pid} (its last end)." in d.pair_status, d.pair_status
+    # A moved camera point, undone; a deleted pair, brought back.
+    first = picks[0]
+    app.state.move_pixel(first.id, first.pixel[0] + 2.0, first.pixel[1])
+    assert d.press_pair_action("Undo") == [] and app.state.picks == picks
+    assert f"Undone: the move of pair {first.id}'s camera point." in d.pair_status, d.pair_status
+    app.state.delete(first.id)
+    assert d.press_pair_action("Undo") == [] and app.state.picks == picks
+    assert f"Undone: the removal of pair {first.id}." in d.pair_status, d.pair_status
+    # The next change clears the line.
+    app.state.select(first.id)
+    assert d.wait_idle() and "Undone" not in d.pair_status
+    reset(d)
