@@ -276,7 +276,6 @@ class ViewPanel:
 
     def set_view(self, client: Any, mode: str) -> None:
         """Point one client's camera at the annotation images (``all``, ``camera``, ``ba``) or the 3-D cloud."""
-        cam = client.camera
         fov = math.radians(30.0)
         self._watch_canvas(client)
         self._framed[client.client_id] = mode != "3d"
@@ -302,7 +301,7 @@ class ViewPanel:
                 slots += [self.app.loupes.slot("ba"), self.app.loupes.slot("camera")]
         x0, y0, x1, y1 = bounds_of(slots)
         y0 -= 0.3  # room for the titles
-        w_px, h_px = max(cam.image_width, 1), max(cam.image_height, 1)
+        w_px, h_px = self._canvas_px(client)
         usable_px = w_px - PANEL_PX if w_px > 2 * PANEL_PX else w_px
         tan = math.tan(fov / 2)
         margin = 1.06
@@ -334,7 +333,7 @@ class ViewPanel:
         cam = client.camera
         try:
             position, look = np.asarray(cam.position, float), np.asarray(cam.look_at, float)
-            fov, w_px, h_px = float(cam.fov), max(int(cam.image_width), 1), max(int(cam.image_height), 1)
+            fov, (w_px, h_px) = float(cam.fov), self._canvas_px(client)
         except AssertionError:  # the tab has not reported its camera yet
             return
         tan = math.tan(fov / 2)
@@ -390,11 +389,24 @@ class ViewPanel:
         async def on_camera(camera: Any) -> None:  # every camera message, on viser's event loop: cheap
             cid = camera.client.client_id
             size = (int(camera.image_width), int(camera.image_height))
-            old, self._canvas_size[cid] = self._canvas_size.get(cid), size
-            if old is not None and min(old + size) > 0 and abs(size[0] * old[1] / (size[1] * old[0]) - 1.0) > 0.005:
+            old = self._canvas_size.get(cid)
+            if old is not None and min(old + size) > 0 and not _resized(old, size):
+                self._canvas_size[cid] = max(old, size)  # the full-resolution size, whatever the pixel ratio
+                return
+            self._canvas_size[cid] = size
+            if old is not None and min(old + size) > 0:
                 self.app.post(lambda: self._refit(camera.client), camera.client)
 
         client.camera.on_update(on_camera)
+
+    def _canvas_px(self, client: Any) -> tuple[int, int]:
+        """Tab ``client``'s canvas size in pixels at full resolution: viser reports it scaled down while the page
+        renders slowly; framing with that size (less :data:`PANEL_PX`) drew the page small at the top left
+        (by-eye run 4, after a pair)."""
+        cam = client.camera
+        size = (max(int(cam.image_width), 1), max(int(cam.image_height), 1))
+        full = self._canvas_size.get(client.client_id)
+        return full if full is not None and min(full) > 0 and not _resized(full, size) else size
 
     def _refit(self, client: Any) -> None:
         """Frame a resized tab again (the part of the canvas left of the control panel changed), unless its view
@@ -450,3 +462,9 @@ class ViewPanel:
                         and np.allclose(cam.look_at, target[1], atol=1e-4))
         except AssertionError:
             return False
+
+
+def _resized(old: tuple[int, int], new: tuple[int, int]) -> bool:
+    """Did a canvas go from size ``old`` to ``new`` by a resize (its shape changed by more than 2 %), rather than by
+    viser's adaptive pixel ratio (same shape, up to rounding of small sizes)?"""
+    return abs(new[0] * old[1] / (new[1] * old[0]) - 1.0) > 0.02

@@ -92,3 +92,43 @@ def test_the_top_undo_says_which_half_of_a_pair_it_took_back(driver):
     app.state.select(first.id)
     assert d.wait_idle() and "Undone" not in d.pair_status
     reset(d)
+
+
+def canvas_fraction(tab, bounds) -> np.ndarray:
+    """``(x0, y0, x1, y1)`` of world rectangle ``bounds`` as fractions of the tab's canvas (the fake camera looks
+    along +z as the app sets it)."""
+    cam = tab.camera
+    (a, b), (c, e) = cam.screen_of((bounds[0], bounds[1])), cam.screen_of((bounds[2], bounds[3]))
+    return np.array([a / cam.image_width, b / cam.image_height, c / cam.image_width, e / cam.image_height])
+
+
+def test_the_page_is_framed_the_same_whatever_pixel_ratio_the_tab_reports(driver):
+    """Run 4: after a pair the 2-D view re-framed itself, everything smaller at the top left.  viser reports the
+    canvas scaled down while the page renders slowly (same shape, rounded); framing with that size drew the page
+    small.  The page must take the same share of the canvas at any pixel ratio, and a scaled-down report is no
+    resize (the view stays)."""
+    import asyncio
+
+    from app_driver.fakes import FakeTab
+
+    app = driver.app
+    tab = FakeTab()
+    tab.camera.client = tab
+    app.view.set_view(tab, "all")
+    report = tab.camera.update_callbacks[-1]
+    asyncio.run(report(tab.camera))  # the tab's first report: 1400 x 900
+    app.view.set_view(tab, "all")
+    page = app.view.camera_slot().bounds()
+    full = canvas_fraction(tab, page)
+    assert 0.0 < full[0] < full[2] < 1.0 and 0.0 < full[1] < full[3] < 1.0
+    pose = (tab.camera.position, tab.camera.look_at)
+    # The page renders slowly: viser halves the resolution, and rounds a small one (1.4 % off the shape).
+    for size in ((700, 450), (281, 178)):
+        tab.camera.image_width, tab.camera.image_height = size
+        asyncio.run(report(tab.camera))
+        assert driver.wait_idle()
+        assert (tab.camera.position, tab.camera.look_at) == pose, size  # no re-framing: not a resize
+        np.testing.assert_allclose(canvas_fraction(tab, page), full, atol=0.01)
+        app.view.set_view(tab, "all")  # framed again at this ratio (e.g. View -> All): the same share
+        np.testing.assert_allclose(canvas_fraction(tab, page), full, atol=0.01)
+    app.view.forget_tab(tab.client_id)
