@@ -11,7 +11,7 @@ from __future__ import annotations
 import threading
 from typing import Any
 
-from calib_core.solve.quality import NO_ERROR_ESTIMATE, error_estimate_reason, pairs_in_fit
+from calib_core.solve.quality import LOO_NOISY_PX, NO_ERROR_ESTIMATE, error_estimate_reason, pairs_in_fit
 
 from .ui_common import _fmt
 
@@ -118,8 +118,8 @@ def undo_note(before: list, after: list) -> str:
 
 
 def live_summary(live: Any) -> str:
-    """``"N pairs · mean X px · left out Y px · Quality: ok"`` (markdown) of the solve ``live.bundle`` shows, or ""
-    before the first solve.  N is the pairs in the fit; with too few for an error figure the mean says so."""
+    """``"N pairs · mean X px · left out Y px (warning above L) · Quality: ok"`` (markdown) of the solve
+    ``live.bundle`` shows, or "" before the first solve.  N is the pairs in the fit; with too few for an error figure the mean says so."""
     bundle = getattr(live, "bundle", None)
     r = getattr(bundle, "result", None)
     if r is None:
@@ -130,7 +130,10 @@ def live_summary(live: Any) -> str:
     loo = getattr(quality, "leave_one_out", None)
     loo_mean = float("nan") if loo is None else loo.mean_px
     if error_estimate_reason(n_fit) is None:
-        errors = f"mean {_fmt(r.mean_px, 2)} px · left out {_fmt(loo_mean, 2)} px"
+        # The limit beside the figure: in run 4 Quality flipped between ok and warning on a 1-2 px re-click
+        # (left out 5.71 vs 6.06 px), with no hint that the figure sat on the limit.
+        errors = (f"mean {_fmt(r.mean_px, 2)} px · left out {_fmt(loo_mean, 2)} px "
+                  f"(warning above {LOO_NOISY_PX:g})")
     else:
         errors = f"mean: {NO_ERROR_ESTIMATE}"
     shown = "UNRELIABLE" if status == "unreliable" else status

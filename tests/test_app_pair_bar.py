@@ -104,7 +104,8 @@ def test_the_live_line_shows_the_solve_figures_at_the_top(app, scene):
     assert d.wait_idle() and len(app.state.pairs()) == 7
     r = app.result
     line = app.pairs_panel.bar.live_line
-    m = re.fullmatch(r"\*\*(\d+) pairs · mean ([0-9.]+) px · left out ([0-9.]+) px · Quality: (ok|warning|UNRELIABLE)"
+    m = re.fullmatch(r"\*\*(\d+) pairs · mean ([0-9.]+) px · left out ([0-9.]+) px \(warning above 6\) · "
+                     r"Quality: (ok|warning|UNRELIABLE)"
                      r"\*\*", line)
     assert m, line
     pairs = app.state.pairs()
