@@ -293,8 +293,8 @@ class Loupes:
     def _draw_marks(self, kind: str) -> None:
         """One loupe's marks and outline; skipped when neither its view, the picks nor the main view changed."""
         app = self.app
-        hidden = app.state.view.hide_marks  # "Hide marks": nothing drawn in or around the loupe
-        picks = () if hidden else app.state.picks
+        hidden = app.state.view.hide_marks  # "Hide marks": the outline on the main image; the loupe's stay (run 4)
+        picks = app.state.picks
         crop = self.ba_crop if kind == "ba" else self.camera_crop
         main = app.slots.get(crop.key) if kind == "ba" else app.camera_slot()
         # Only the ends this loupe draws: moving a pixel leaves the BA loupe's marks alone, and vice versa.
@@ -316,13 +316,13 @@ class Loupes:
         framing = (crop, self._slots[kind], main, app.ba_window, hidden)
         if self._framing_of.get(kind) != framing:
             self._framing_of[kind] = framing
+            if kind == "camera":
+                self._draw_camera_centre()
             if hidden:
-                for name in FRAMING_NODES[kind]:
-                    app.nodes.lines(name, np.empty((0, 2, 3)), (0, 0, 0))
+                app.nodes.lines(FRAMING_NODES[kind][-1], np.empty((0, 2, 3)), (0, 0, 0))  # the outline
             elif kind == "ba":
                 self._draw_ba_outline()
             else:
-                self._draw_camera_centre()
                 self._draw_camera_outline()
 
     def _draw_ba_marks(self, picks: list) -> None:
