@@ -61,6 +61,11 @@ class PairsPanel:
             self._dd_selected.on_update(guard(self.on_select_dropdown))
             self._bg_edit = gui.add_button_group("Edit", ("Undo", "Redo", "Deselect", "Delete"))
             self._bg_edit.on_click(guard(self.on_edit))
+            # Run 4: the per-pair table is read-only; testing a pair by leaving it out took the Verify panel.
+            self._btn_leave_out = gui.add_button("Leave selected pair out of the fit / put it back",
+                                                 hint="A pair left out is a check pair: not fitted, its error shown "
+                                                      "apart (undoable)")
+            self._btn_leave_out.on_click(guard(self.on_leave_out))
             self._btn_clear = gui.add_button("Clear all pairs (undoable)", color="red", icon=viser.Icon.TRASH)
             self._btn_clear.on_click(guard(self.on_clear))
             self.snap_checkbox = gui.add_checkbox("Snap clicks to corners", initial_value=app.state.view.snap,
@@ -138,6 +143,9 @@ class PairsPanel:
             if self._md_status.content != "  \n".join(status):
                 self._md_status.content = "  \n".join(status)
             self.bar.show_live(getattr(app, "live", None))
+            left_out = [f"#{p.id}" for p in complete if p.check]
+            if left_out:
+                lines.append(f"Left out of the fit (check pairs): {', '.join(left_out)}.")
             if total < MIN_PAIRS:
                 lines.append(f"Pick {MIN_PAIRS - total} more to calibrate.")
             lines.append(f"Undo: {'yes' if state.can_undo else 'no'}, redo: {'yes' if state.can_redo else 'no'}")
@@ -426,6 +434,13 @@ class PairsPanel:
             if sel is None:
                 raise CalibError("select a pair first (shift+click its marker or use the dropdown)")
             self.app.state.delete(sel)
+
+    def on_leave_out(self, event: Any) -> None:
+        """Leave the selected pair out of the fit (a check pair), or put it back."""
+        sel = self.app.state.selected
+        if sel is None:
+            raise CalibError("select a pair first (shift+click its marker or use the dropdown)")
+        self.app.state.set_check(sel, not self.app.state.get(sel).check)
 
     def add_upload_button(self, client: Any) -> None:
         """This tab's own "Import pairs YAML" button, in the shared Pairs folder above "Download pairs YAML"."""

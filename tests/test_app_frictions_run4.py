@@ -3,8 +3,10 @@
 * A click in the laser loupe after a finished pair refines that pair's laser end (it showed the render's crop and
   started a new pair); a refining click that changes nothing says so ("same cell").
 * The top Undo says which half of a pair it took back.
+* The 2-D view is framed the same at any pixel ratio the tab reports (it re-framed itself small, top left).
+* The selected pair can be left out of the fit (a check pair) and put back from the Pairs folder.
 
-Truth: the clicks made here, the state's own pairs, and the camera-view render recomputed here with
+Truth: the clicks made here, the state's own pairs, the solve's fitted pairs, and the camera-view render recomputed here with
 :func:`calib_core.render.render_from_camera`.  The browser half (the pinned pair bar, Delete and Ctrl+Z keys) is in
 ``tests/test_e2e_pair_bar_keys.py``.
 """
@@ -132,3 +134,28 @@ def test_the_page_is_framed_the_same_whatever_pixel_ratio_the_tab_reports(driver
         app.view.set_view(tab, "all")  # framed again at this ratio (e.g. View -> All): the same share
         np.testing.assert_allclose(canvas_fraction(tab, page), full, atol=0.01)
     app.view.forget_tab(tab.client_id)
+
+
+def test_leave_the_selected_pair_out_of_the_fit_and_put_it_back(driver):
+    from types import SimpleNamespace
+
+    from calib_core.solve.quality import pairs_in_fit
+
+    d, app = driver, driver.app
+    reset(d)
+    press = lambda: d._fire(app.guard(app.pairs_panel.on_leave_out),  # noqa: E731
+                            SimpleNamespace(client=d.tab, target=SimpleNamespace(value=None)))
+    notes = press()
+    assert len(notes) == 1 and "select a pair first" in notes[0][1]
+    assert d.wait_idle()
+    n = len(app.state.complete_picks())
+    assert pairs_in_fit(app.result) == n
+    pid = app.state.picks[2].id
+    app.state.select(pid)
+    assert press() == [] and d.wait_idle()
+    assert app.state.get(pid).check and pairs_in_fit(app.result) == n - 1
+    assert f"Left out of the fit (check pairs): #{pid}." in d.pairs_panel
+    assert press() == [] and d.wait_idle()
+    assert not app.state.get(pid).check and pairs_in_fit(app.result) == n
+    assert "Left out of the fit" not in d.pairs_panel
+    reset(d)
