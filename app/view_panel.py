@@ -16,6 +16,8 @@ from calib_core.viewpoint import viewpoint_behind_camera
 from .ba_view import ColumnWindow, ba_texture, steady_window, texture_factor
 from .camera_view import CameraView
 from .layout import RENDER_KEY, ImageSlot, bounds_of, layout_with_render
+from .loupe_wheel import LOUPE_WHEEL_JS, canvas_rects, send_loupe_rects
+from .page_builder import install_page_script
 from .settled_updates import settled
 from .ui_common import (
     MIN_PAIRS, CLOUD_ORIGIN, PANEL_PX, ZOOM_PX_PER_CELL, ZOOM_PX_PER_IMAGE_PX, ZOOM_STEP,
@@ -39,6 +41,8 @@ class ViewPanel:
         self._view_target: dict[int, tuple[np.ndarray, np.ndarray, float]] = {}
         self._framed: dict[int, bool] = {}  # client id -> its view is the app's framing (not zoomed since)
         self._canvas_size: dict[int, tuple[int, int] | None] = {}  # client id -> canvas size last reported
+        self._loupe_rects: dict[int, dict] = {}  # client id -> where the loupes lie on its canvas, as last sent
+        install_page_script(app.server, LOUPE_WHEEL_JS)  # the wheel over a loupe zooms the loupe
         self._ba_window = self._wanted_ba_window()
         self.slots: dict[str, ImageSlot] = self._layout()
         self._build_folder(app.server.gui)
@@ -264,6 +268,7 @@ class ViewPanel:
         self._view_target.pop(client_id, None)
         self._framed.pop(client_id, None)
         self._canvas_size.pop(client_id, None)
+        self._loupe_rects.pop(client_id, None)
         self._update_cloud_visibility()
 
     def any_tab_in_3d(self) -> bool:
@@ -298,7 +303,7 @@ class ViewPanel:
         else:
             slots = [self.camera_slot(), self.slots[RENDER_KEY]] + [self.slots[k] for k in self.app.ba_keys]
             if getattr(self.app, "loupes", None) is not None:  # the loupes are part of the page
-                slots += [self.app.loupes.slot("ba"), self.app.loupes.slot("camera")]
+                slots += [self.slot_of("loupe_ba"), self.slot_of("loupe_camera")]
         x0, y0, x1, y1 = bounds_of(slots)
         y0 -= 0.3  # room for the titles
         w_px, h_px = self._canvas_px(client)
@@ -388,6 +393,7 @@ class ViewPanel:
 
         async def on_camera(camera: Any) -> None:  # every camera message, on viser's event loop: cheap
             cid = camera.client.client_id
+            self._publish_loupes(camera.client, camera)
             size = (int(camera.image_width), int(camera.image_height))
             old = self._canvas_size.get(cid)
             if old is not None and min(old + size) > 0 and not _resized(old, size):
@@ -398,6 +404,20 @@ class ViewPanel:
                 self.app.post(lambda: self._refit(camera.client), camera.client)
 
         client.camera.on_update(on_camera)
+
+    def _publish_loupes(self, client: Any, camera: Any) -> None:
+        """Tell tab ``client`` where the loupes lie on its canvas under ``camera``, when that changed: a wheel over
+        a loupe zooms that loupe (:mod:`app.loupe_wheel`)."""
+        rects: dict = {}
+        if self._client_mode.get(client.client_id) not in (None, "3d"):
+            try:
+                bounds = {k: self.slot_of(f"loupe_{k}").bounds() for k in ("ba", "camera")}
+            except (AttributeError, KeyError):  # no loupes (yet)
+                bounds = {}
+            rects = canvas_rects(camera, bounds) or {}
+        if self._loupe_rects.get(client.client_id) != rects:
+            self._loupe_rects[client.client_id] = rects
+            send_loupe_rects(client, rects)
 
     def _canvas_px(self, client: Any) -> tuple[int, int]:
         """Tab ``client``'s canvas size in pixels at full resolution: viser reports it scaled down while the page

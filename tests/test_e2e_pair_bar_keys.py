@@ -5,6 +5,7 @@
 * Delete (or Backspace) deletes the selected pair, undoably, as Edit -> Delete does; nothing without a selection.
 * Ctrl+Z undoes the last pair change and leaves the sliders alone (in run 4 it reset "Render over photo": the
   browser's own undo in the slider's number box); Ctrl+Shift+Z redoes it.
+* The wheel over a loupe zooms that loupe and leaves the page's view alone (it zoomed the whole page).
 
 Truth comes from the browser (what is drawn at a point of the page: ``document.elementFromPoint``) and from the
 app's pairs and settings after the key presses.
@@ -104,5 +105,29 @@ def test_the_pair_bar_stays_in_view_and_delete_and_ctrl_z_keys(tmp_path):
             page.keyboard.press("Control+Shift+z")
             wait_for(lambda: app.state.pending() is not None and not app.actions.busy, "Ctrl+Shift+Z to redo it")
             assert abs(app.state.view.render_blend - 0.35) < 1e-9
+
+            # --- the wheel over a loupe zooms that loupe, and the page's view stays (run 4: it zoomed the page).
+            client = app.server.get_clients()[tab.cid]
+            wait_for(lambda: page.evaluate("() => Object.keys(window.__baLoupeRects || {}).length === 2"),
+                     "the loupes' places on the canvas")
+            view = (tuple(client.camera.position), tuple(client.camera.look_at))
+            for kind, label in (("camera", "loupe_camera"), ("ba", "loupe_ba")):
+                centre = driver.loupe_view(kind)["center"]
+                target = centre if kind == "camera" else (centre[1], centre[0])  # (col, row) of a cell
+                page.mouse.move(*tab.screen(label, target))
+                size = driver.loupe_view(kind)["size"]
+                page.mouse.wheel(0, -120)  # wheel up: magnify
+                wait_for(lambda: driver.loupe_view(kind)["size"] < size and not app.actions.busy,
+                         f"the wheel to magnify the {kind} loupe")
+                page.wait_for_timeout(300)
+                page.mouse.wheel(0, 120)  # wheel down: widen again
+                wait_for(lambda: driver.loupe_view(kind)["size"] == size and not app.actions.busy,
+                         f"the wheel to widen the {kind} loupe")
+            page.wait_for_timeout(500)
+            assert (tuple(client.camera.position), tuple(client.camera.look_at)) == view
+            # Beside the loupes the wheel still zooms the page.
+            page.mouse.move(*tab.screen("camera", (300.0, 250.0)))
+            page.mouse.wheel(0, -120)
+            wait_for(lambda: tuple(client.camera.position) != view[0], "the wheel beside the loupes to zoom the page")
     finally:
         app.stop()

@@ -142,7 +142,7 @@ ALLOWED: dict[str, dict[str, int]] = {
     "app.view_panel": {"cloud.visible": 1, "display.add_edge_control": 1, "display.add_last_pane_control": 1,
         "display.add_loupe_controls": 1, "display.ba_display": 1, "display.ba_title": 1, "live.bundle": 2,
         "live.ensure_facing": 1, "live.facing": 4, "live.request_cloud": 1, "loupe_support.on_loupe_zoom": 1,
-        "loupes": 2, "loupes.relayout": 1, "loupes.slot": 3, "overlays.refresh": 2, "page.set_ba": 1,
+        "loupes": 2, "loupes.relayout": 1, "loupes.slot": 1, "overlays.refresh": 2, "page.set_ba": 1,
         "page.show_camera_view": 1, "pairs_panel.last_click": 1, "render_pane": 1, "render_pane.place": 1},
 }
 
