@@ -119,7 +119,8 @@ def undo_note(before: list, after: list) -> str:
 
 def live_summary(live: Any) -> str:
     """``"N pairs · mean X px · left out Y px (warning above L) · Quality: ok"`` (markdown) of the solve
-    ``live.bundle`` shows, or "" before the first solve.  N is the pairs in the fit; with too few for an error figure the mean says so."""
+    ``live.bundle`` shows, or "" before the first solve.  N is the pairs in the fit; with too few for an error
+    figure the mean says so."""
     bundle = getattr(live, "bundle", None)
     r = getattr(bundle, "result", None)
     if r is None:

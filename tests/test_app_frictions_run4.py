@@ -5,9 +5,10 @@
 * The top Undo says which half of a pair it took back.
 * The 2-D view is framed the same at any pixel ratio the tab reports (it re-framed itself small, top left).
 * The selected pair can be left out of the fit (a check pair) and put back from the Pairs folder.
+* A BA-edge dot covers at most 2 photo pixels (they covered small corners).
 
-Truth: the clicks made here, the state's own pairs, the solve's fitted pairs, and the camera-view render recomputed here with
-:func:`calib_core.render.render_from_camera`.  The browser half (the pinned pair bar, Delete and Ctrl+Z keys) is in
+Truth: the clicks made here, the state's own pairs, the solve's fitted pairs, the camera-view render recomputed
+here with :func:`calib_core.render.render_from_camera`, and the tab's camera projected here.  The browser half (the pinned pair bar, Delete and Ctrl+Z keys) is in
 ``tests/test_e2e_pair_bar_keys.py``.
 """
 
@@ -159,3 +160,14 @@ def test_leave_the_selected_pair_out_of_the_fit_and_put_it_back(driver):
     assert not app.state.get(pid).check and pairs_in_fit(app.result) == n
     assert "Left out of the fit" not in d.pairs_panel
     reset(d)
+
+
+@pytest.mark.parametrize("width_px", [640, 1280, 1920, 4096])
+def test_edge_dots_cover_at_most_two_photo_pixels(width_px):
+    """Run 4: with 4+ pairs the blue BA-edge dots (2.9 px squares on a 1920 px photo) covered small corners."""
+    from app.layout import CAMERA_WIDTH
+    from app.overlay_drawing import edge_dot_size
+
+    units_per_px = CAMERA_WIDTH / width_px  # the photo is drawn CAMERA_WIDTH world units wide
+    size_px = edge_dot_size(units_per_px) / units_per_px
+    assert 1.6 - 1e-9 <= size_px <= 2.0 + 1e-9, size_px
