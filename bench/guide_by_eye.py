@@ -36,6 +36,13 @@ pose, by this module's own measures (none of them is the proposal code):
 * **off vegetation**, **off far background** (range > :data:`FAR_M`), **off
   the ground**.
 
+``--sessions`` starts instead from the by-eye walkthroughs' own pairs
+(``tests/by_eye_sessions/*.yaml`` and any ``--session SCENE=FILE``, SCENE
+``kitti`` or ``pjlab``): the proposals the app would offer next, judged as
+above, and for every test of the screen how many candidates it left out and
+how many of those the judge calls a corner -- at 3 px and, as a whole-cell
+pick can do no better, within one cell footprint (:func:`session_rows`).
+
 ``--crops DIR`` saves, for the first trial with the screen, the photo and the
 scan rendered from the camera under the published pose side by side around
 each proposal's true projection: what a person judging it looks at.
@@ -484,6 +491,74 @@ def with_rows_before(md: str, before: str, label: str) -> str:
     return "\n".join(lines[:last + 1] + rows + lines[last + 1:])
 
 
+SESSIONS = REPO / "tests" / "by_eye_sessions"
+
+
+def session_pairs(path: Path) -> list[Pair]:
+    """The complete pairs (a laser cell and a pixel) of a by-eye session or kept-session file, as the app has them."""
+    from calib_core.io.yaml_files import read_yaml_mapping
+
+    doc = read_yaml_mapping(path, "session file")
+    return [Pair(tuple(e["laser_rc"]), None, tuple(e["pixel"]), id=e.get("id"), precision_px=e.get("precision_px"))
+            for e in doc.get("pairs", []) if e.get("pixel") is not None and e.get("laser_rc") is not None]
+
+
+def corner_within_footprint(scene: RealScene, harris: np.ndarray, plane, noise_m: float, rc, xyz,
+                            rng: np.random.Generator) -> tuple[bool, bool]:
+    """The judge's corner verdict for one cell at 3 px, and with "within one cell footprint" instead of 3 px
+    (:func:`footprint_px`; a whole-cell pick's own error is up to about a footprint)."""
+    uv, ok = scene.camera.project(transform_points(scene.T_published, np.asarray(xyz, dtype=np.float64)[None]))
+    if not ok[0] or len(harris) == 0 or np.linalg.norm(xyz) > FAR_M or on_ground(scene.depth, rc, plane):
+        return False, False
+    d = np.linalg.norm(harris - uv[0], axis=1)
+    k = int(np.argmin(d))
+    isolated = int((np.linalg.norm(harris - harris[k], axis=1) <= ISOLATION_PX).sum()) - 1 <= MAX_RIVALS
+    if not isolated or explained_by_two_planes(scene.depth, rc, PLANE_TOL_NOISE * noise_m, rng) < MIN_EXPLAINED:
+        return False, False
+    foot = max(ON_CORNER_PX, np.nan_to_num(footprint_px(scene, rc), nan=ON_CORNER_PX))
+    return bool(d[k] <= ON_CORNER_PX), bool(d[k] <= foot)
+
+
+def session_rows(name: str, scene: RealScene, paths: list[Path]) -> list[str]:
+    """From each by-eye session's pairs: the app's next proposals (new cells judged) and the screen's left-out
+    cells per test with how many the judge calls a corner (markdown lines)."""
+    from collections import Counter
+
+    screen = app_screen(scene.camera.width, scene.camera.height)
+    harris = harris_corners(scene.image)
+    plane = ground_plane(scene.depth, np.random.default_rng(BENCH_SEED))
+    noise = range_noise_m(scene.depth)
+    lines = [f"### {name}: from the by-eye sessions", "",
+             "| session | pairs | proposals | new cells | new: corner at 3 px | new: corner within a footprint | "
+             "new: median 3-sigma radius | note |", "|---|---:|---:|---:|---:|---:|---:|---|"]
+    left, judged3, judgedf = Counter(), Counter(), Counter()
+    session = None
+    for path in paths:
+        pairs = session_pairs(path)
+        if session is None:
+            session = GuidedSession(scene.depth, scene.camera, pairs, image=scene.image)
+        else:
+            session.pairs = list(pairs)
+            session._update_state()
+        session.propose_options["screen"] = screen
+        props = session.proposals(N_PROPOSALS)
+        rng = np.random.default_rng(BENCH_SEED)
+        new = [p for p in props if p.replaces is None]
+        verdicts = [corner_within_footprint(scene, harris, plane, noise, p.laser_rc, p.laser_xyz, rng) for p in new]
+        radius = f"{np.median([p.radius_3sigma_px for p in new]):.1f} px" if new else "-"
+        lines.append(f"| {path.name if path.parent == SESSIONS else path} | {len(pairs)} | {len(props)} | {len(new)} | "
+                     f"{sum(v[0] for v in verdicts)} | {sum(v[1] for v in verdicts)} | {radius} | {props.note or ''} |")
+        for rc, test in zip(*props.left_out):
+            c3, cf = corner_within_footprint(scene, harris, plane, noise, rc, scene.depth.points[rc[0], rc[1]], rng)
+            left[str(test)] += 1
+            judged3[str(test)] += c3
+            judgedf[str(test)] += cf
+    lines += ["", f"Left out by the screen, summed over the {len(paths)} sessions: test: cells (of them a corner by "
+              "the judge at 3 px / within a footprint): "
+              + "; ".join(f"{t}: {n} ({judged3[t]} / {judgedf[t]})" for t, n in left.most_common()) + "."]
+    return lines
+
+
 def main(argv=None) -> int:
     import os
 
@@ -496,9 +571,28 @@ def main(argv=None) -> int:
                          "labelled with --before-label")
     ap.add_argument("--before-label", default="before",
                     help="label of the --before rows (e.g. the commit they were measured on)")
+    ap.add_argument("--sessions", action="store_true",
+                    help="start from the by-eye walkthroughs' pairs (tests/by_eye_sessions and --session) instead")
+    ap.add_argument("--session", action="append", default=[], metavar="SCENE=FILE",
+                    help="another by-eye session file (SCENE kitti or pjlab), with --sessions; may be repeated")
     ap.add_argument("--write", action="store_true",
                     help="write the section into docs/guide_performance.md (between its markers)")
     args = ap.parse_args(argv)
+    if args.sessions:
+        extra = {"kitti": [], "pjlab": []}
+        for item in args.session:
+            scene_name, _, file = item.partition("=")
+            if scene_name not in extra or not file:
+                ap.error(f"--session wants kitti=FILE or pjlab=FILE, got {item!r}")
+            extra[scene_name].append(Path(file))
+        lines = []
+        if kitti_available():
+            lines += session_rows("KITTI 000002", load_kitti(), sorted(SESSIONS.glob("kitti_*.yaml")) + extra["kitti"])
+        if manual_available():
+            lines += [""] + session_rows("PJLab manual_calib", load_manual(),
+                                         sorted(SESSIONS.glob("pjlab_*.yaml")) + extra["pjlab"])
+        print("\n".join(lines))
+        return 0
     t0 = time.time()
     load0 = os.getloadavg()[0]
     results = {}

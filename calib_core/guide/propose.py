@@ -148,20 +148,23 @@ class Proposals(list):
     note : str or None
         Set when no *new* cell passed the screen, even if re-clicks of existing pairs are proposed
         (:func:`.evidence.no_new_corner_note`): the app shows it instead of cycling through re-clicks.
+    left_out : ((M, 2) int ndarray, (M,) str ndarray)
+        The cells the screen left out and the first test each failed (the names of :attr:`screened`).
     """
 
     def __init__(self, items=(), reason: str | None = None, screened: dict | None = None,
-                 note: str | None = None) -> None:
+                 note: str | None = None, left_out: tuple | None = None) -> None:
         super().__init__(items)
         self.reason = reason
         self.screened = dict(screened or {})
         self.note = note
+        self.left_out = left_out if left_out is not None else (np.zeros((0, 2), np.int64), np.zeros(0, str))
 
     def like(self, items) -> "Proposals":
-        """Other items with this result's reason (when they are empty), counts and note."""
+        """Other items with this result's reason (when they are empty), counts, note and left-out cells."""
         items = list(items)
         return Proposals(items, None if items else (self.note or self.reason or "no proposal left"), self.screened,
-                         self.note)
+                         self.note, self.left_out)
 
 
 def _cell_extent_m(laser_cov: np.ndarray, range_sigma_m: float, cell_sigma: float) -> np.ndarray:
@@ -288,9 +291,10 @@ def propose(
     screened: dict[str, int] = {}
     evidence = {name: np.full(len(cand), np.nan) for name in ("planar", "footprint", "dominance")}
     smallest_ellipse = np.inf
+    why = np.full(len(cand), "", dtype=object)
     if screen is not None:
         ok, smallest_ellipse = _screen(depth, camera, cand, pixels, pixel_cov, J_point, ok, screen, corner_image,
-                                       plane_residual, screened, strength, evidence)
+                                       plane_residual, screened, strength, evidence, why)
     elif corner_image is not None:
         major = np.sqrt(np.maximum(np.linalg.eigvalsh(np.where(ok[:, None, None], pixel_cov, 0.0))[:, -1], 0.0))
         radius = np.clip(3.0 * major, 2.0, 12.0)
@@ -305,6 +309,7 @@ def propose(
         pu = np.clip(np.rint(np.nan_to_num(pixels[:, 0])).astype(np.int64), 0, W_img - 1)
         pv = np.clip(np.rint(np.nan_to_num(pixels[:, 1])).astype(np.int64), 0, H_img - 1)
         ok &= inside[pv, pu] >= np.maximum(radius, 6.0)
+    left_out = (cand.rows_cols[why != ""], why[why != ""].astype(str))
     probability = np.full(len(cand), np.nan)
     if corner_image is not None and ok.any():
         sel = np.flatnonzero(ok)
@@ -349,7 +354,7 @@ def propose(
             reason = REASON_ROUGH_ALIGNMENT.format(limit=screen.max_ellipse_px, smallest=smallest_ellipse)
         else:
             reason = REASON_NO_EVIDENCE
-        return Proposals([], reason, screened)
+        return Proposals([], reason, screened, left_out=left_out)
     if order not in ("d_optimal", "farthest", "random"):
         raise CalibError(f"unknown proposal order {order!r}; use d_optimal, farthest or random")
     if order == "random" and rng is None:
@@ -411,11 +416,12 @@ def propose(
             footprint_px=float(evidence["footprint"][i]),
             corner_dominance=float(evidence["dominance"][i]),
         ))
-    return Proposals(out, None if out else REASON_NO_EVIDENCE, screened)
+    return Proposals(out, None if out else REASON_NO_EVIDENCE, screened, left_out=left_out)
 
 
 def _screen(depth, camera, cand: Candidates, pixels, pixel_cov, J_point, ok, screen: ProposalScreen,
-            corner_image: CornerImage | None, plane_residual, screened: dict, strength, evidence: dict):
+            corner_image: CornerImage | None, plane_residual, screened: dict, strength, evidence: dict,
+            left_out: np.ndarray | None = None):
     """Apply the clear-evidence screen (:mod:`.evidence`) to the candidates still ``ok``.
 
     Fills ``screened`` (cells left out per test), ``strength`` (the dominant
@@ -429,6 +435,8 @@ def _screen(depth, camera, cand: Candidates, pixels, pixel_cov, J_point, ok, scr
     def cut(name: str, passes: np.ndarray) -> None:
         nonlocal ok
         screened[name] = screened.get(name, 0) + int((ok & ~passes).sum())
+        if left_out is not None:
+            left_out[ok & ~passes] = name
         ok &= passes
 
     rows = cand.rows_cols[:, 0]
