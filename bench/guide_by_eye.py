@@ -392,7 +392,7 @@ def table(results: dict, trials: int) -> list[str]:
 
 def save_crops(scene: RealScene, props: list, folder: Path, half: int = 40, scale: int = 4) -> list[Path]:
     """For each proposal a PNG: the photo (left) and the scan rendered from the camera under the *published*
-    calibration (right, range-shaded), both cropped around the proposal's true projection (a green cross) and
+    calibration (right, range-shaded; intensity-shaded for a ``marking``), both cropped around the proposal's true projection (a green cross) and
     magnified ``scale`` times -- what a person judging "is this a corner?" looks at."""
     import cv2
 
@@ -400,8 +400,13 @@ def save_crops(scene: RealScene, props: list, folder: Path, half: int = 40, scal
 
     folder.mkdir(parents=True, exist_ok=True)
     render = render_from_camera(scene.depth, scene.camera, scene.T_published)
-    rgba = shade_render(render, scene.depth, "range")
-    shaded = np.where(rgba[..., 3:4] > 0, rgba[..., :3], 40).astype(np.uint8)
+    shades = {}
+    for mode in ("range", "intensity"):  # markings show in the scan's intensity, not its range
+        try:
+            rgba = shade_render(render, scene.depth, mode)
+        except Exception:  # noqa: BLE001 - a scan without intensity: range only
+            continue
+        shades[mode] = np.where(rgba[..., 3:4] > 0, rgba[..., :3], 40).astype(np.uint8)
     H, W = scene.image.shape[:2]
     out = []
     for k, p in enumerate(props):
@@ -410,6 +415,7 @@ def save_crops(scene: RealScene, props: list, folder: Path, half: int = 40, scal
             continue
         u, v = np.rint(uv[0]).astype(int)
         tiles = []
+        shaded = shades.get("intensity" if p.kind == "marking" else "range", shades["range"])
         for img in (scene.image, shaded):
             pad = np.pad(img, ((half, half), (half, half), (0, 0)))
             tile = cv2.resize(pad[v:v + 2 * half + 1, u:u + 2 * half + 1], None, fx=scale, fy=scale,
@@ -519,6 +525,63 @@ def corner_within_footprint(scene: RealScene, harris: np.ndarray, plane, noise_m
     return bool(d[k] <= ON_CORNER_PX), bool(d[k] <= foot)
 
 
+def painted_corner(scene: RealScene, harris: np.ndarray, rc, xyz, contrast: float = 3.0, half: int = 2) -> bool:
+    """A ground cell at a painted marking's corner, by this module's own measures: an isolated Harris corner within
+    one cell footprint of its true projection, and the scan's raw intensity in its window spanning at least
+    ``contrast`` times (90th over 10th percentile: paint against asphalt)."""
+    from calib_core.display_images import find_intensity
+
+    found = find_intensity(scene.depth.meta.get("field_images"))
+    uv, ok = scene.camera.project(transform_points(scene.T_published, np.asarray(xyz, dtype=np.float64)[None]))
+    if found is None or not ok[0] or len(harris) == 0 or np.linalg.norm(xyz) > FAR_M:
+        return False
+    d = np.linalg.norm(harris - uv[0], axis=1)
+    k = int(np.argmin(d))
+    foot = max(ON_CORNER_PX, np.nan_to_num(footprint_px(scene, rc), nan=ON_CORNER_PX))
+    isolated = int((np.linalg.norm(harris - harris[k], axis=1) <= ISOLATION_PX).sum()) - 1 <= MAX_RIVALS
+    H, W = scene.depth.shape
+    r, c = int(rc[0]), int(rc[1])
+    rows, cols = np.arange(max(r - half, 0), min(r + half + 1, H)), np.arange(max(c - half, 0), min(c + half + 1, W))
+    values = np.asarray(found[1], dtype=np.float64)[np.ix_(rows, cols)][scene.depth.valid[np.ix_(rows, cols)]]
+    if d[k] > foot or not isolated or len(values) < 4:
+        return False
+    lo, hi = np.percentile(values, [10, 90])
+    return bool(hi >= contrast * max(lo, 1e-6))
+
+
+#: Steps of a continued session (:func:`walk_session`).
+WALK_STEPS = 15
+
+
+def walk_session(scene: RealScene, session: GuidedSession, pairs: list[Pair], harris, plane, noise_m: float,
+                 screen: ProposalScreen, steps: int = WALK_STEPS) -> list[tuple]:
+    """Go on from ``pairs`` as a person who clicks every proposal's true corner: each step takes the first
+    proposal (a re-click or a new cell), clicked at its laser point's projection under the published pose plus
+    0.5 px noise, and the session re-ranks.  Returns one ``(kind, rc, corner at 3 px, corner within a footprint,
+    painted corner, 3-sigma radius px, fits the loupe limit)`` per *new* cell offered at a step."""
+    rng = np.random.default_rng(BENCH_SEED)
+    session.pairs, session.skipped, session.dropped = list(pairs), [], []
+    session._update_state()
+    session.propose_options["screen"] = screen
+    offered = []
+    for _ in range(steps):
+        props = session.proposals(N_PROPOSALS)
+        if not props:
+            break
+        p = props[0]
+        uv, ok = scene.camera.project(transform_points(scene.T_published, np.asarray(p.laser_xyz)[None]))
+        if not ok[0]:
+            session.not_a_corner(p)
+            continue
+        if p.replaces is None:
+            c3, cf = corner_within_footprint(scene, harris, plane, noise_m, p.laser_rc, p.laser_xyz, rng)
+            painted = painted_corner(scene, harris, p.laser_rc, p.laser_xyz)
+            offered.append((p.kind, tuple(p.laser_rc), c3, cf, painted, p.radius_3sigma_px,
+                            p.radius_3sigma_px <= screen.max_ellipse_px))
+        session.accept(p, uv[0] + rng.normal(0.0, 0.5, 2))
+    return offered
+
+
 def session_rows(name: str, scene: RealScene, paths: list[Path]) -> list[str]:
     """From each by-eye session's pairs: the app's next proposals (new cells judged) and the screen's left-out
     cells per test with how many the judge calls a corner (markdown lines)."""
@@ -556,6 +619,18 @@ def session_rows(name: str, scene: RealScene, paths: list[Path]) -> list[str]:
     lines += ["", f"Left out by the screen, summed over the {len(paths)} sessions: test: cells (of them a corner by "
               "the judge at 3 px / within a footprint): "
               + "; ".join(f"{t}: {n} ({judged3[t]} / {judgedf[t]})" for t, n in left.most_common()) + "."]
+    lines += ["", f"Continued {WALK_STEPS} steps from each session (:func:`walk_session`: the first proposal "
+              "clicked at its true corner each step):", "",
+              "| session | new cells offered | corner at 3 px | corner within a footprint | painted-marking corner | "
+              "either | median 3-sigma radius | within the loupe limit | cells |", "|---|---:|---:|---:|---:|---:|---:|---:|---|"]
+    for path in paths:
+        walk = walk_session(scene, session, session_pairs(path), harris, plane, noise, screen)
+        n = len(walk)
+        either = sum(1 for w in walk if w[3] or w[4])
+        radius = f"{np.median([w[5] for w in walk]):.1f} px" if walk else "-"
+        lines.append(f"| {path.name if path.parent == SESSIONS else path} | {n} | {sum(w[2] for w in walk)} | "
+                     f"{sum(w[3] for w in walk)} | {sum(w[4] for w in walk)} | {either} | {radius} | "
+                     f"{sum(w[6] for w in walk)} | {' '.join(f'{w[0]}{list(w[1])}' for w in walk)} |")
     return lines
 
 

@@ -56,3 +56,65 @@ def test_left_out_cells_name_the_test_they_failed_on_a_real_by_eye_start():
     assert not proposed & set(map(tuple, rcs.tolist()))
     cand = {tuple(rc) for rc in session.candidates.rows_cols.tolist()}
     assert set(map(tuple, rcs.tolist())) <= cand
+
+
+PJLAB = ROOT.parent / "shared" / "data" / "pjlab_opencalib_lidar2camera" / "manual_calib"
+
+
+@pytest.mark.skipif(not (PJLAB / "0.pcd").is_file(), reason=f"PJLab manual_calib not found at {PJLAB}")
+def test_from_a_real_by_eye_start_the_guide_offers_painted_corners_a_person_can_check():
+    """PJLab manual_calib from the walkthrough's run-1 pairs (tests/by_eye_sessions): the app offered only re-clicks
+    there ("No new corner passes the checks here").  The crossing's stripes are painted corners in both views; the
+    guide must offer at least one new cell, and every new cell must be, judged here under the published
+    calibration with measures of this test (none of them the screen's): within one cell footprint of an isolated
+    photo corner (OpenCV's Shi-Tomasi detector), at a paint/asphalt boundary in the scan's raw intensity (90th
+    over 10th percentile of the 5 x 5 window at least 3), on a flat road (plane fit of the window's points),
+    with a cell footprint of at most 10 px (the neighbouring beams projected here) and a 3-sigma radius within
+    the app's loupe limit."""
+    import cv2
+
+    from app.guide_support import max_ellipse_px_for
+    from calib_core.display_images import find_intensity
+    from calib_core.transforms import transform_points
+
+    import json
+
+    depth = load_scan(PJLAB / "0.pcd")
+    camera = load_camera(PJLAB / "center_camera-intrinsic.json", image_size=(1920, 1200))
+    image = load_image_rgb(PJLAB / "0.png")
+    doc = json.loads((PJLAB / "top_center_lidar-to-center_camera-extrinsic.json").read_text())
+    T_ref = np.array(doc["top_center_lidar-to-center_camera-extrinsic"]["param"]["sensor_calib"]["data"], float)
+    pairs = load_pairs_yaml(ROOT / "tests" / "by_eye_sessions" / "pjlab_manual_run1.yaml")
+    limit = max_ellipse_px_for(camera.width, camera.height)
+    session = GuidedSession(depth, camera, pairs, image=image,
+                            screen=replace(ProposalScreen(), max_ellipse_px=limit))
+    new = [p for p in session.proposals(20) if p.replaces is None]
+    assert len(new) >= 1
+    gray = cv2.cvtColor(image, cv2.COLOR_RGB2GRAY)
+    corners = cv2.goodFeaturesToTrack(gray, 20000, 0.01, 3, blockSize=5).reshape(-1, 2)
+    intensity = np.asarray(find_intensity(depth.meta["field_images"])[1], dtype=np.float64)
+    H, W = depth.shape
+    for p in new:
+        r, c = p.laser_rc
+        uv, ok = camera.project(transform_points(T_ref, depth.points[r, c][None]))
+        steps = []
+        for a, b in (((r + 1, c), (r - 1, c)), ((r, c + 1), (r, c - 1))):
+            rays = np.stack([depth.directions[a], depth.directions[b]])
+            q, _ = camera.project(transform_points(T_ref, depth.range_m[r, c] * rays))
+            steps.append(np.linalg.norm(q[0] - q[1]) / 2)
+        footprint = max(steps)
+        d = np.linalg.norm(corners - uv[0], axis=1)
+        k = int(np.argmin(d))
+        rivals = int((np.linalg.norm(corners - corners[k], axis=1) <= 10).sum()) - 1
+        win = (slice(max(r - 2, 0), min(r + 3, H)), slice(max(c - 2, 0), min(c + 3, W)))
+        values = intensity[win][depth.valid[win]]
+        lo, hi = np.percentile(values, [10, 90])
+        P = depth.points[win][depth.valid[win]]
+        plane_rms = np.sqrt(np.linalg.eigvalsh(np.cov((P - P.mean(0)).T))[0])
+        print(f"{p.kind} {p.laser_rc}: {d[k]:.1f} px from a photo corner ({rivals} rivals), footprint "
+              f"{footprint:.1f} px, intensity p90/p10 {hi / max(lo, 1e-6):.1f}, plane rms {plane_rms * 100:.1f} cm, "
+              f"3-sigma {p.radius_3sigma_px:.1f} px")
+        assert ok[0] and footprint <= 10.0 and p.radius_3sigma_px <= limit
+        assert d[k] <= footprint and rivals <= 2
+        assert hi >= 3.0 * lo
+        assert plane_rms <= 0.05

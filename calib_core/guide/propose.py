@@ -39,7 +39,7 @@ from ..errors import CalibError
 from ..io.atomic import write_yaml_atomic
 from .candidates import KINDS, Candidates, depth_discontinuity, find_candidates, near_fraction
 from .corner_probability import WEIGHTS, corner_features, corner_probability, laser_features, scan_range_noise_m
-from .evidence import (REASON_NO_EVIDENCE, REASON_ROUGH_ALIGNMENT, ProposalScreen, cell_footprint_px, corner_peaks,
+from .evidence import (REASON_NO_EVIDENCE, REASON_ROUGH_ALIGNMENT, ProposalScreen, bright_fraction, cell_footprint_px, corner_peaks,
                        corner_rivals, dominant_corner, ellipse_box_margin_px, far_side_share, fill_holes, ground_plane,
                        height_above_ground_m, intensity_corner, intensity_edge_turn, local_plane_residual_m,
                        near_edge_turn, normal_span, planar_share, window_share)
@@ -504,6 +504,16 @@ def _screen(depth, camera, cand: Candidates, pixels, pixel_cov, J_point, ok, scr
         if m.size:
             mark_turn[m] = intensity_edge_turn(depth, cand.rows_cols[m])
         cut("marking edge does not turn", ~marking | (mark_turn >= screen.min_edge_turn))
+        # A corner of the paint (its bright side covers about 1/4 or 3/4 of the window), touching the cell: not
+        # a stripe's side banded ring by ring, nor a response peak on the asphalt next to the paint.
+        bright, touches = np.full(len(ok), 0.5), np.zeros(len(ok), dtype=bool)
+        m = np.flatnonzero(ok & marking)
+        if m.size:
+            share_m, touches[m] = bright_fraction(depth, cand.rows_cols[m])
+            bright[m] = np.nan_to_num(share_m, nan=0.5)
+        cut("straight marking edge", ~marking | (bright <= screen.max_convex_share)
+            | (bright >= screen.min_concave_share))
+        cut("marking corner off the paint", ~marking | touches)
     radius = 3.0 * np.sqrt(np.maximum(np.linalg.eigvalsh(np.where(ok[:, None, None], pixel_cov, 0.0))[:, -1], 0.0))
     fits = radius <= screen.max_ellipse_px
     too_big = ok & ~fits
