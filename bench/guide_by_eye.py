@@ -392,7 +392,8 @@ def table(results: dict, trials: int) -> list[str]:
 
 def save_crops(scene: RealScene, props: list, folder: Path, half: int = 40, scale: int = 4) -> list[Path]:
     """For each proposal a PNG: the photo (left) and the scan rendered from the camera under the *published*
-    calibration (right, range-shaded; intensity-shaded for a ``marking``), both cropped around the proposal's true projection (a green cross) and
+    calibration (right, range-shaded; intensity-shaded for a ``marking``), both cropped around the proposal's
+    true projection (a green cross) and
     magnified ``scale`` times -- what a person judging "is this a corner?" looks at."""
     import cv2
 
@@ -622,7 +623,8 @@ def session_rows(name: str, scene: RealScene, paths: list[Path]) -> list[str]:
     lines += ["", f"Continued {WALK_STEPS} steps from each session (:func:`walk_session`: the first proposal "
               "clicked at its true corner each step):", "",
               "| session | new cells offered | corner at 3 px | corner within a footprint | painted-marking corner | "
-              "either | median 3-sigma radius | within the loupe limit | cells |", "|---|---:|---:|---:|---:|---:|---:|---:|---|"]
+              "either | median 3-sigma radius | within the loupe limit | cells |",
+              "|---|---:|---:|---:|---:|---:|---:|---:|---|"]
     for path in paths:
         walk = walk_session(scene, session, session_pairs(path), harris, plane, noise, screen)
         n = len(walk)

@@ -118,3 +118,28 @@ def test_from_a_real_by_eye_start_the_guide_offers_painted_corners_a_person_can_
         assert d[k] <= footprint and rivals <= 2
         assert hi >= 3.0 * lo
         assert plane_rms <= 0.05
+
+
+@pytest.mark.skipif(not (PJLAB / "0.pcd").is_file(), reason=f"PJLab manual_calib not found at {PJLAB}")
+def test_no_proposal_says_rough_alignment_only_when_no_ellipse_fitted():
+    """PJLab from the walkthrough's run-2 pairs, no re-clicks: nothing is proposed.  Cells left out by the image
+    tests (which come after the ellipse test) had ellipses within the loupe, so "do a better rough alignment
+    first" would send the person the wrong way; the note must say that no new corner passes the checks."""
+    from app.guide_support import max_ellipse_px_for
+    from calib_core.guide.evidence import REASON_ROUGH_ALIGNMENT
+
+    depth = load_scan(PJLAB / "0.pcd")
+    camera = load_camera(PJLAB / "center_camera-intrinsic.json", image_size=(1920, 1200))
+    image = load_image_rgb(PJLAB / "0.png")
+    pairs = load_pairs_yaml(ROOT / "tests" / "by_eye_sessions" / "pjlab_manual_run2.yaml")
+    screen = replace(ProposalScreen(), max_ellipse_px=max_ellipse_px_for(camera.width, camera.height))
+    session = GuidedSession(depth, camera, pairs, image=image, reclicks=False, screen=screen)
+    props = session.proposals(20)
+    _, tests = props.left_out
+    after_ellipse = np.isin(tests, ["border", "no dominant image corner", "repeated image texture"])
+    print(f"{len(props)} proposals; {after_ellipse.sum()} left out after the ellipse test; "
+          f"{props.screened.get('ellipse larger than the loupe', 0)} by it; note: {props.note}")
+    assert len(props) == 0 and after_ellipse.any()
+    rough = REASON_ROUGH_ALIGNMENT.split("(")[0]
+    assert not props.note.startswith(rough)
+    assert props.note.startswith("No new corner passes the checks here")

@@ -39,10 +39,11 @@ from ..errors import CalibError
 from ..io.atomic import write_yaml_atomic
 from .candidates import KINDS, Candidates, depth_discontinuity, find_candidates, near_fraction
 from .corner_probability import WEIGHTS, corner_features, corner_probability, laser_features, scan_range_noise_m
-from .evidence import (REASON_NO_EVIDENCE, REASON_ROUGH_ALIGNMENT, ProposalScreen, bright_fraction, cell_footprint_px, corner_peaks,
-                       corner_rivals, dominant_corner, ellipse_box_margin_px, far_side_share, fill_holes, ground_plane,
-                       height_above_ground_m, intensity_corner, intensity_edge_turn, local_plane_residual_m,
-                       near_edge_turn, normal_span, planar_share, window_share)
+from .evidence import (REASON_NO_EVIDENCE, REASON_ROUGH_ALIGNMENT, ProposalScreen, bright_fraction,
+                       cell_footprint_px, corner_peaks, corner_rivals, dominant_corner, ellipse_box_margin_px,
+                       far_side_share, fill_holes, ground_plane, height_above_ground_m, intensity_corner,
+                       intensity_edge_turn, local_plane_residual_m, near_edge_turn, normal_span, planar_share,
+                       window_share)
 from .image_corners import CornerImage, content_mask, strongest_near
 from .information import d_optimal_gain, pair_noise, pixel_jacobians, pose_pixel_covariance
 from .laser_noise import DEFAULT_CELL_SIGMA, DEFAULT_RANGE_SIGMA_M, PICK_CELL_SIGMA, cell_covariance
@@ -290,11 +291,11 @@ def propose(
     strength = np.full(len(cand), np.nan)
     screened: dict[str, int] = {}
     evidence = {name: np.full(len(cand), np.nan) for name in ("planar", "footprint", "dominance")}
-    smallest_ellipse = np.inf
+    smallest_ellipse, some_fit = np.inf, False
     why = np.full(len(cand), "", dtype=object)
     if screen is not None:
-        ok, smallest_ellipse = _screen(depth, camera, cand, pixels, pixel_cov, J_point, ok, screen, corner_image,
-                                       plane_residual, screened, strength, evidence, why)
+        ok, smallest_ellipse, some_fit = _screen(depth, camera, cand, pixels, pixel_cov, J_point, ok, screen,
+                                                 corner_image, plane_residual, screened, strength, evidence, why)
     elif corner_image is not None:
         major = np.sqrt(np.maximum(np.linalg.eigvalsh(np.where(ok[:, None, None], pixel_cov, 0.0))[:, -1], 0.0))
         radius = np.clip(3.0 * major, 2.0, 12.0)
@@ -342,6 +343,7 @@ def propose(
             screened["reclick ellipse or border"] = int((fine & ~fits).sum())
             if (fine & ~fits).any():
                 smallest_ellipse = min(smallest_ellipse, float(major_re[fine & ~fits].min()))
+            some_fit |= bool((fine & fits).any())
             fine &= fits
         for k in np.flatnonzero(fine):
             extra[len(entries)] = (rows_re[k], rc_re[k], pts_re[k], pix_re[k], cov_re[k])
@@ -350,7 +352,8 @@ def propose(
         P = np.concatenate([P, np.ones(int(fine.sum()))])
         J = np.concatenate([J, Jp_re[fine]])
     if not entries:
-        if screen is not None and np.isfinite(smallest_ellipse):
+        # Rough alignment only when no ellipse fitted: else other tests left the cells out.
+        if screen is not None and np.isfinite(smallest_ellipse) and not some_fit:
             reason = REASON_ROUGH_ALIGNMENT.format(limit=screen.max_ellipse_px, smallest=smallest_ellipse)
         else:
             reason = REASON_NO_EVIDENCE
@@ -426,9 +429,9 @@ def _screen(depth, camera, cand: Candidates, pixels, pixel_cov, J_point, ok, scr
 
     Fills ``screened`` (cells left out per test), ``strength`` (the dominant
     image corner's ``lam_min``) and ``evidence`` (planar share, footprint,
-    dominance) in place.  Returns the new ``ok`` and the smallest 3-sigma
+    dominance) in place.  Returns the new ``ok``, the smallest 3-sigma
     radius among the cells with laser evidence that the ellipse test left
-    out (inf when it left none out).
+    out (inf when it left none out) and whether any such cell's ellipse fitted.
     """
     ok = ok.copy()
 
@@ -518,6 +521,7 @@ def _screen(depth, camera, cand: Candidates, pixels, pixel_cov, J_point, ok, scr
     fits = radius <= screen.max_ellipse_px
     too_big = ok & ~fits
     smallest = float(radius[too_big].min()) if too_big.any() else np.inf
+    some_fit = bool((ok & fits).any())
     cut("ellipse larger than the loupe", fits)
     cut("border", ellipse_box_margin_px(pixels, pixel_cov, camera.width, camera.height) >= screen.border_margin_px)
     if corner_image is not None and ok.any():
@@ -544,7 +548,7 @@ def _screen(depth, camera, cand: Candidates, pixels, pixel_cov, J_point, ok, scr
         isolated = np.ones(len(ok), dtype=bool)
         isolated[sel] = rivals <= screen.max_rivals
         cut("repeated image texture", isolated)
-    return ok, smallest
+    return ok, smallest, some_fit
 
 
 def proposals_to_dict(proposals: Sequence[Proposal], state: PoseState | None = None) -> dict:
