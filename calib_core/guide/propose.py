@@ -12,8 +12,9 @@ which the gain accounts for; cells wider than ``max_cell_m`` are dropped
 Each proposal's ``pixel_cov`` is the covariance of the true feature's pixel
 about the predicted one: the pose covariance propagated to the pixel plus the
 offset of the proposed cell from the feature (``cell_sigma`` cells, default
-one: a detected corner cell may sit a cell or two off), ``J_pose C J_pose^T +
-J_X Sigma_L J_X^T`` (px^2).
+one: a detected corner cell may sit a cell or two off; with the screen, a
+``marking`` cell that touches its paint corner :data:`MARKING_CELL_SIGMA`),
+``J_pose C J_pose^T + J_X Sigma_L J_X^T`` (px^2).
 
 With a :class:`.evidence.ProposalScreen` (the default) only cells with
 clear, isolated evidence in both views are proposed (:mod:`.evidence`:
@@ -56,6 +57,11 @@ __all__ = ["Proposal", "Proposals", "propose", "proposals_to_dict", "save_propos
 GUIDED_CLICK_SIGMA_PX = 0.3
 #: Cells wider than this (metres) are not proposed.
 DEFAULT_MAX_CELL_M = 0.2
+#: Offset (cells, 1-sigma) of a screened ``marking`` cell from its paint corner: the screen keeps only cells that
+#: touch the paint at a corner of it (:func:`.evidence.bright_fraction`), not the two cells' slack of a detected
+#: peak (:data:`.laser_noise.DEFAULT_CELL_SIGMA`).  Measured on PJLab manual_calib's stripe corners offered from
+#: the by-eye starts: 5-12.6 px (0.7-1.7 cells) from the photo's nearest corner at 7.5 px per cell.
+MARKING_CELL_SIGMA = 1.0
 #: Image-corner evidence needed at a proposal (structure-tensor lam_min, grey levels^2), when an image is given.
 DEFAULT_MIN_IMAGE_CORNER = 0.005
 
@@ -284,7 +290,12 @@ def propose(
             laser_evidence = np.asarray(laser_evidence)[keep]
     pixels, J_pose, J_point = pixel_jacobians(camera, state.T_camera_lidar, cand.points_lidar)
     laser_cov = cell_covariance(depth, cand.rows_cols, cell_sigma, range_sigma_m)
-    laser_px = J_point @ laser_cov @ np.swapaxes(J_point, 1, 2)
+    offset_cov = laser_cov.copy()
+    if screen is not None:  # a screened marking touches the paint's corner
+        marking = cand.kind == KINDS.index("marking")
+        offset_cov[marking] = cell_covariance(depth, cand.rows_cols[marking], min(cell_sigma, MARKING_CELL_SIGMA),
+                                              range_sigma_m)
+    laser_px = J_point @ offset_cov @ np.swapaxes(J_point, 1, 2)
     pixel_cov = pose_pixel_covariance(J_pose, state.covariance) + laser_px
     ok = np.all(np.isfinite(J_pose), axis=(1, 2)) & np.all(np.isfinite(pixel_cov), axis=(1, 2))
     ok &= _cell_extent_m(laser_cov, range_sigma_m, cell_sigma) <= max_cell_m
