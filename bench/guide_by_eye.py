@@ -271,13 +271,14 @@ class Judged:
     vegetation: list
     far: list
     ground: list
+    painted: list
     reason: str | None = None
 
 
 def judge(scene: RealScene, harris: np.ndarray, plane, props, noise_m: float, loupe_px: int,
           max_ellipse_px: float, rng: np.random.Generator) -> Judged:
     """The benchmark's own verdict on each proposal (module docstring), from its true projection."""
-    out = Judged([], [], [], [], [], [], [], [], [], [], getattr(props, "reason", None))
+    out = Judged([], [], [], [], [], [], [], [], [], [], [], getattr(props, "reason", None))
     for p in props:
         uv, ok = scene.camera.project(transform_points(scene.T_published, np.asarray(p.laser_xyz)[None]))
         near, isolated = harris_verdict(harris, uv[0]) if ok[0] else (False, False)
@@ -296,6 +297,7 @@ def judge(scene: RealScene, harris: np.ndarray, plane, props, noise_m: float, lo
         out.vegetation.append(veg)
         out.far.append(far)
         out.ground.append(ground)
+        out.painted.append(bool(ground and painted_corner(scene, harris, p.laser_rc, p.laser_xyz)))
     return out
 
 
@@ -365,10 +367,11 @@ def table(results: dict, trials: int) -> list[str]:
     pct = (lambda x: "-" if not np.isfinite(x) else f"{100 * x:.0f} %")  # noqa: E731
     lines = [
         f"| scene | proposals | shown ({trials} trials, at most 20 each) | of them re-clicks | corner (bench verdict) | "
-        "corner, new cells only | Harris corner within 3 px | Harris within one cell footprint | "
+        "corner, new cells only | painted-marking corner, new cells | Harris corner within 3 px | "
+        "Harris within one cell footprint | "
         "median 3-sigma radius | fits the loupe at zoom 1 | fits the app's limit | off vegetation | "
         f"off far background (> {FAR_M:.0f} m) | off the ground | trials with none |",
-        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for name, res in results.items():
         for arm, label in ARMS.items():
@@ -380,13 +383,14 @@ def table(results: dict, trials: int) -> list[str]:
             empty = sum(1 for j in js if not j.radius_px)
             lines.append(
                 f"| {name} (loupe {res['loupe_px']} px, limit {res['max_ellipse_px']:.0f} px) | {label} | {n} | "
-                f"{n - n_new} | {pct(corner)} | {pct(corner_new)} ({n_new}) | {pct(_share(js, 'harris')[0])} | "
+                f"{n - n_new} | {pct(corner)} | {pct(corner_new)} ({n_new}) | "
+                f"{pct(_share(js, 'painted', new_only=True)[0])} | {pct(_share(js, 'harris')[0])} | "
                 f"{pct(_share(js, 'harris_footprint')[0])} | {med} | {pct(_share(js, 'fits_loupe')[0])} | "
                 f"{pct(_share(js, 'fits_zoomed')[0])} | {pct(1 - _share(js, 'vegetation')[0])} | "
                 f"{pct(1 - _share(js, 'far')[0])} | {pct(1 - _share(js, 'ground')[0])} | {empty} |")
         n_all, share_all, _ = res["ceiling"]
         lines.append(f"| {name} | every laser candidate the camera sees (published pose) | {n_all} | | "
-                     f"{pct(share_all)} | | | | | | | | | | |")
+                     f"{pct(share_all)} | | | | | | | | | | | |")
     return lines
 
 
@@ -470,7 +474,9 @@ def markdown(results: dict, trials: int, seconds: float, load: tuple) -> str:
         f"planes (>= {100 * MIN_EXPLAINED:.0f} % of its near-side points within {PLANE_TOL_NOISE:.0f} range noise: "
         "not vegetation), not on the ground (a RANSAC ground plane fitted here, +-"
         f"{GROUND_TOL_M:.2f} m) and not beyond {FAR_M:.0f} m. Re-clicks of the rough pairs are proposals too "
-        "and are counted; the column *new cells only* leaves them out.",
+        "and are counted; the column *new cells only* leaves them out. *Painted-marking corner*: a new cell on that "
+        "ground plane with an isolated Harris corner within one cell footprint and the scan's raw intensity in its "
+        "5 x 5 window spanning 3x or more (90th over 10th percentile: paint against asphalt).",
         "",
     ]
     lines += table(results, trials)
