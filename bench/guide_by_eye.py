@@ -36,6 +36,13 @@ pose, by this module's own measures (none of them is the proposal code):
 * **off vegetation**, **off far background** (range > :data:`FAR_M`), **off
   the ground**.
 
+``--sessions`` starts instead from the by-eye walkthroughs' own pairs
+(``tests/by_eye_sessions/*.yaml`` and any ``--session SCENE=FILE``, SCENE
+``kitti`` or ``pjlab``): the proposals the app would offer next, judged as
+above, and for every test of the screen how many candidates it left out and
+how many of those the judge calls a corner -- at 3 px and, as a whole-cell
+pick can do no better, within one cell footprint (:func:`session_rows`).
+
 ``--crops DIR`` saves, for the first trial with the screen, the photo and the
 scan rendered from the camera under the published pose side by side around
 each proposal's true projection: what a person judging it looks at.
@@ -264,13 +271,14 @@ class Judged:
     vegetation: list
     far: list
     ground: list
+    painted: list
     reason: str | None = None
 
 
 def judge(scene: RealScene, harris: np.ndarray, plane, props, noise_m: float, loupe_px: int,
           max_ellipse_px: float, rng: np.random.Generator) -> Judged:
     """The benchmark's own verdict on each proposal (module docstring), from its true projection."""
-    out = Judged([], [], [], [], [], [], [], [], [], [], getattr(props, "reason", None))
+    out = Judged([], [], [], [], [], [], [], [], [], [], [], getattr(props, "reason", None))
     for p in props:
         uv, ok = scene.camera.project(transform_points(scene.T_published, np.asarray(p.laser_xyz)[None]))
         near, isolated = harris_verdict(harris, uv[0]) if ok[0] else (False, False)
@@ -289,6 +297,7 @@ def judge(scene: RealScene, harris: np.ndarray, plane, props, noise_m: float, lo
         out.vegetation.append(veg)
         out.far.append(far)
         out.ground.append(ground)
+        out.painted.append(bool(ground and painted_corner(scene, harris, p.laser_rc, p.laser_xyz)))
     return out
 
 
@@ -358,10 +367,11 @@ def table(results: dict, trials: int) -> list[str]:
     pct = (lambda x: "-" if not np.isfinite(x) else f"{100 * x:.0f} %")  # noqa: E731
     lines = [
         f"| scene | proposals | shown ({trials} trials, at most 20 each) | of them re-clicks | corner (bench verdict) | "
-        "corner, new cells only | Harris corner within 3 px | Harris within one cell footprint | "
+        "corner, new cells only | painted-marking corner, new cells | Harris corner within 3 px | "
+        "Harris within one cell footprint | "
         "median 3-sigma radius | fits the loupe at zoom 1 | fits the app's limit | off vegetation | "
         f"off far background (> {FAR_M:.0f} m) | off the ground | trials with none |",
-        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for name, res in results.items():
         for arm, label in ARMS.items():
@@ -373,19 +383,21 @@ def table(results: dict, trials: int) -> list[str]:
             empty = sum(1 for j in js if not j.radius_px)
             lines.append(
                 f"| {name} (loupe {res['loupe_px']} px, limit {res['max_ellipse_px']:.0f} px) | {label} | {n} | "
-                f"{n - n_new} | {pct(corner)} | {pct(corner_new)} ({n_new}) | {pct(_share(js, 'harris')[0])} | "
+                f"{n - n_new} | {pct(corner)} | {pct(corner_new)} ({n_new}) | "
+                f"{pct(_share(js, 'painted', new_only=True)[0])} | {pct(_share(js, 'harris')[0])} | "
                 f"{pct(_share(js, 'harris_footprint')[0])} | {med} | {pct(_share(js, 'fits_loupe')[0])} | "
                 f"{pct(_share(js, 'fits_zoomed')[0])} | {pct(1 - _share(js, 'vegetation')[0])} | "
                 f"{pct(1 - _share(js, 'far')[0])} | {pct(1 - _share(js, 'ground')[0])} | {empty} |")
         n_all, share_all, _ = res["ceiling"]
         lines.append(f"| {name} | every laser candidate the camera sees (published pose) | {n_all} | | "
-                     f"{pct(share_all)} | | | | | | | | | | |")
+                     f"{pct(share_all)} | | | | | | | | | | | |")
     return lines
 
 
 def save_crops(scene: RealScene, props: list, folder: Path, half: int = 40, scale: int = 4) -> list[Path]:
     """For each proposal a PNG: the photo (left) and the scan rendered from the camera under the *published*
-    calibration (right, range-shaded), both cropped around the proposal's true projection (a green cross) and
+    calibration (right, range-shaded; intensity-shaded for a ``marking``), both cropped around the proposal's
+    true projection (a green cross) and
     magnified ``scale`` times -- what a person judging "is this a corner?" looks at."""
     import cv2
 
@@ -393,8 +405,13 @@ def save_crops(scene: RealScene, props: list, folder: Path, half: int = 40, scal
 
     folder.mkdir(parents=True, exist_ok=True)
     render = render_from_camera(scene.depth, scene.camera, scene.T_published)
-    rgba = shade_render(render, scene.depth, "range")
-    shaded = np.where(rgba[..., 3:4] > 0, rgba[..., :3], 40).astype(np.uint8)
+    shades = {}
+    for mode in ("range", "intensity"):  # markings show in the scan's intensity, not its range
+        try:
+            rgba = shade_render(render, scene.depth, mode)
+        except Exception:  # noqa: BLE001 - a scan without intensity: range only
+            continue
+        shades[mode] = np.where(rgba[..., 3:4] > 0, rgba[..., :3], 40).astype(np.uint8)
     H, W = scene.image.shape[:2]
     out = []
     for k, p in enumerate(props):
@@ -403,6 +420,7 @@ def save_crops(scene: RealScene, props: list, folder: Path, half: int = 40, scal
             continue
         u, v = np.rint(uv[0]).astype(int)
         tiles = []
+        shaded = shades.get("intensity" if p.kind == "marking" else "range", shades["range"])
         for img in (scene.image, shaded):
             pad = np.pad(img, ((half, half), (half, half), (0, 0)))
             tile = cv2.resize(pad[v:v + 2 * half + 1, u:u + 2 * half + 1], None, fx=scale, fy=scale,
@@ -456,7 +474,9 @@ def markdown(results: dict, trials: int, seconds: float, load: tuple) -> str:
         f"planes (>= {100 * MIN_EXPLAINED:.0f} % of its near-side points within {PLANE_TOL_NOISE:.0f} range noise: "
         "not vegetation), not on the ground (a RANSAC ground plane fitted here, +-"
         f"{GROUND_TOL_M:.2f} m) and not beyond {FAR_M:.0f} m. Re-clicks of the rough pairs are proposals too "
-        "and are counted; the column *new cells only* leaves them out.",
+        "and are counted; the column *new cells only* leaves them out. *Painted-marking corner*: a new cell on that "
+        "ground plane with an isolated Harris corner within one cell footprint and the scan's raw intensity in its "
+        "5 x 5 window spanning 3x or more (90th over 10th percentile: paint against asphalt).",
         "",
     ]
     lines += table(results, trials)
@@ -484,6 +504,144 @@ def with_rows_before(md: str, before: str, label: str) -> str:
     return "\n".join(lines[:last + 1] + rows + lines[last + 1:])
 
 
+SESSIONS = REPO / "tests" / "by_eye_sessions"
+
+
+def session_pairs(path: Path) -> list[Pair]:
+    """The complete pairs (a laser cell and a pixel) of a by-eye session or kept-session file, as the app has them."""
+    from calib_core.io.yaml_files import read_yaml_mapping
+
+    doc = read_yaml_mapping(path, "session file")
+    return [Pair(tuple(e["laser_rc"]), None, tuple(e["pixel"]), id=e.get("id"), precision_px=e.get("precision_px"))
+            for e in doc.get("pairs", []) if e.get("pixel") is not None and e.get("laser_rc") is not None]
+
+
+def corner_within_footprint(scene: RealScene, harris: np.ndarray, plane, noise_m: float, rc, xyz,
+                            rng: np.random.Generator) -> tuple[bool, bool]:
+    """The judge's corner verdict for one cell at 3 px, and with "within one cell footprint" instead of 3 px
+    (:func:`footprint_px`; a whole-cell pick's own error is up to about a footprint)."""
+    uv, ok = scene.camera.project(transform_points(scene.T_published, np.asarray(xyz, dtype=np.float64)[None]))
+    if not ok[0] or len(harris) == 0 or np.linalg.norm(xyz) > FAR_M or on_ground(scene.depth, rc, plane):
+        return False, False
+    d = np.linalg.norm(harris - uv[0], axis=1)
+    k = int(np.argmin(d))
+    isolated = int((np.linalg.norm(harris - harris[k], axis=1) <= ISOLATION_PX).sum()) - 1 <= MAX_RIVALS
+    if not isolated or explained_by_two_planes(scene.depth, rc, PLANE_TOL_NOISE * noise_m, rng) < MIN_EXPLAINED:
+        return False, False
+    foot = max(ON_CORNER_PX, np.nan_to_num(footprint_px(scene, rc), nan=ON_CORNER_PX))
+    return bool(d[k] <= ON_CORNER_PX), bool(d[k] <= foot)
+
+
+def painted_corner(scene: RealScene, harris: np.ndarray, rc, xyz, contrast: float = 3.0, half: int = 2) -> bool:
+    """A ground cell at a painted marking's corner, by this module's own measures: an isolated Harris corner within
+    one cell footprint of its true projection, and the scan's raw intensity in its window spanning at least
+    ``contrast`` times (90th over 10th percentile: paint against asphalt)."""
+    from calib_core.display_images import find_intensity
+
+    found = find_intensity(scene.depth.meta.get("field_images"))
+    uv, ok = scene.camera.project(transform_points(scene.T_published, np.asarray(xyz, dtype=np.float64)[None]))
+    if found is None or not ok[0] or len(harris) == 0 or np.linalg.norm(xyz) > FAR_M:
+        return False
+    d = np.linalg.norm(harris - uv[0], axis=1)
+    k = int(np.argmin(d))
+    foot = max(ON_CORNER_PX, np.nan_to_num(footprint_px(scene, rc), nan=ON_CORNER_PX))
+    isolated = int((np.linalg.norm(harris - harris[k], axis=1) <= ISOLATION_PX).sum()) - 1 <= MAX_RIVALS
+    H, W = scene.depth.shape
+    r, c = int(rc[0]), int(rc[1])
+    rows, cols = np.arange(max(r - half, 0), min(r + half + 1, H)), np.arange(max(c - half, 0), min(c + half + 1, W))
+    values = np.asarray(found[1], dtype=np.float64)[np.ix_(rows, cols)][scene.depth.valid[np.ix_(rows, cols)]]
+    if d[k] > foot or not isolated or len(values) < 4:
+        return False
+    lo, hi = np.percentile(values, [10, 90])
+    return bool(hi >= contrast * max(lo, 1e-6))
+
+
+#: Steps of a continued session (:func:`walk_session`).
+WALK_STEPS = 15
+
+
+def walk_session(scene: RealScene, session: GuidedSession, pairs: list[Pair], harris, plane, noise_m: float,
+                 screen: ProposalScreen, steps: int = WALK_STEPS) -> list[tuple]:
+    """Go on from ``pairs`` as a person who clicks every proposal's true corner: each step takes the first
+    proposal (a re-click or a new cell), clicked at its laser point's projection under the published pose plus
+    0.5 px noise, and the session re-ranks.  Returns one ``(kind, rc, corner at 3 px, corner within a footprint,
+    painted corner, 3-sigma radius px, fits the loupe limit)`` per *new* cell offered at a step."""
+    rng = np.random.default_rng(BENCH_SEED)
+    session.pairs, session.skipped, session.dropped = list(pairs), [], []
+    session._update_state()
+    session.propose_options["screen"] = screen
+    offered = []
+    for _ in range(steps):
+        props = session.proposals(N_PROPOSALS)
+        if not props:
+            break
+        p = props[0]
+        uv, ok = scene.camera.project(transform_points(scene.T_published, np.asarray(p.laser_xyz)[None]))
+        if not ok[0]:
+            session.not_a_corner(p)
+            continue
+        if p.replaces is None:
+            c3, cf = corner_within_footprint(scene, harris, plane, noise_m, p.laser_rc, p.laser_xyz, rng)
+            painted = painted_corner(scene, harris, p.laser_rc, p.laser_xyz)
+            offered.append((p.kind, tuple(p.laser_rc), c3, cf, painted, p.radius_3sigma_px,
+                            p.radius_3sigma_px <= screen.max_ellipse_px))
+        session.accept(p, uv[0] + rng.normal(0.0, 0.5, 2))
+    return offered
+
+
+def session_rows(name: str, scene: RealScene, paths: list[Path]) -> list[str]:
+    """From each by-eye session's pairs: the app's next proposals (new cells judged) and the screen's left-out
+    cells per test with how many the judge calls a corner (markdown lines)."""
+    from collections import Counter
+
+    screen = app_screen(scene.camera.width, scene.camera.height)
+    harris = harris_corners(scene.image)
+    plane = ground_plane(scene.depth, np.random.default_rng(BENCH_SEED))
+    noise = range_noise_m(scene.depth)
+    lines = [f"### {name}: from the by-eye sessions", "",
+             "| session | pairs | proposals | new cells | new: corner at 3 px | new: corner within a footprint | "
+             "new: median 3-sigma radius | note |", "|---|---:|---:|---:|---:|---:|---:|---|"]
+    left, judged3, judgedf = Counter(), Counter(), Counter()
+    session = None
+    for path in paths:
+        pairs = session_pairs(path)
+        if session is None:
+            session = GuidedSession(scene.depth, scene.camera, pairs, image=scene.image)
+        else:
+            session.pairs = list(pairs)
+            session._update_state()
+        session.propose_options["screen"] = screen
+        props = session.proposals(N_PROPOSALS)
+        rng = np.random.default_rng(BENCH_SEED)
+        new = [p for p in props if p.replaces is None]
+        verdicts = [corner_within_footprint(scene, harris, plane, noise, p.laser_rc, p.laser_xyz, rng) for p in new]
+        radius = f"{np.median([p.radius_3sigma_px for p in new]):.1f} px" if new else "-"
+        lines.append(f"| {path.name if path.parent == SESSIONS else path} | {len(pairs)} | {len(props)} | {len(new)} | "
+                     f"{sum(v[0] for v in verdicts)} | {sum(v[1] for v in verdicts)} | {radius} | {props.note or ''} |")
+        for rc, test in zip(*props.left_out):
+            c3, cf = corner_within_footprint(scene, harris, plane, noise, rc, scene.depth.points[rc[0], rc[1]], rng)
+            left[str(test)] += 1
+            judged3[str(test)] += c3
+            judgedf[str(test)] += cf
+    lines += ["", f"Left out by the screen, summed over the {len(paths)} sessions: test: cells (of them a corner by "
+              "the judge at 3 px / within a footprint): "
+              + "; ".join(f"{t}: {n} ({judged3[t]} / {judgedf[t]})" for t, n in left.most_common()) + "."]
+    lines += ["", f"Continued {WALK_STEPS} steps from each session (:func:`walk_session`: the first proposal "
+              "clicked at its true corner each step):", "",
+              "| session | new cells offered | corner at 3 px | corner within a footprint | painted-marking corner | "
+              "either | median 3-sigma radius | within the loupe limit | cells |",
+              "|---|---:|---:|---:|---:|---:|---:|---:|---|"]
+    for path in paths:
+        walk = walk_session(scene, session, session_pairs(path), harris, plane, noise, screen)
+        n = len(walk)
+        either = sum(1 for w in walk if w[3] or w[4])
+        radius = f"{np.median([w[5] for w in walk]):.1f} px" if walk else "-"
+        lines.append(f"| {path.name if path.parent == SESSIONS else path} | {n} | {sum(w[2] for w in walk)} | "
+                     f"{sum(w[3] for w in walk)} | {sum(w[4] for w in walk)} | {either} | {radius} | "
+                     f"{sum(w[6] for w in walk)} | {' '.join(f'{w[0]}{list(w[1])}' for w in walk)} |")
+    return lines
+
+
 def main(argv=None) -> int:
     import os
 
@@ -496,9 +654,28 @@ def main(argv=None) -> int:
                          "labelled with --before-label")
     ap.add_argument("--before-label", default="before",
                     help="label of the --before rows (e.g. the commit they were measured on)")
+    ap.add_argument("--sessions", action="store_true",
+                    help="start from the by-eye walkthroughs' pairs (tests/by_eye_sessions and --session) instead")
+    ap.add_argument("--session", action="append", default=[], metavar="SCENE=FILE",
+                    help="another by-eye session file (SCENE kitti or pjlab), with --sessions; may be repeated")
     ap.add_argument("--write", action="store_true",
                     help="write the section into docs/guide_performance.md (between its markers)")
     args = ap.parse_args(argv)
+    if args.sessions:
+        extra = {"kitti": [], "pjlab": []}
+        for item in args.session:
+            scene_name, _, file = item.partition("=")
+            if scene_name not in extra or not file:
+                ap.error(f"--session wants kitti=FILE or pjlab=FILE, got {item!r}")
+            extra[scene_name].append(Path(file))
+        lines = []
+        if kitti_available():
+            lines += session_rows("KITTI 000002", load_kitti(), sorted(SESSIONS.glob("kitti_*.yaml")) + extra["kitti"])
+        if manual_available():
+            lines += [""] + session_rows("PJLab manual_calib", load_manual(),
+                                         sorted(SESSIONS.glob("pjlab_*.yaml")) + extra["pjlab"])
+        print("\n".join(lines))
+        return 0
     t0 = time.time()
     load0 = os.getloadavg()[0]
     results = {}

@@ -40,7 +40,12 @@ Laser side
     (:func:`ground_plane`: ``max_ground_share`` of the window within
     ``ground_tol_m``) or lower than ``min_height_m`` above it, except
     ``marking`` candidates (intensity corners of painted road markings) well
-    inside the road (``min_marking_ground_share``, ``min_marking_strength``).
+    inside the road (``min_marking_ground_share``, ``min_marking_strength``),
+    at a corner of the paint: its bright side covers at most
+    ``max_convex_share`` or at least ``min_concave_share`` of the 7 x 7
+    window and touches the cell (:func:`bright_fraction`; a 64-beam scan's
+    stripes are banded ring by ring, which makes corner-like peaks along their
+    sides and on the asphalt next to them).
 
 Image side
     *One dominant corner inside the 3-sigma ellipse* (:func:`dominant_corner`):
@@ -97,6 +102,7 @@ __all__ = [
     "far_side_share",
     "near_edge_turn",
     "intensity_edge_turn",
+    "bright_fraction",
 ]
 
 #: Largest 3-sigma radius (px) of a proposal by default: an 80 px disc, about the app's camera loupe for a
@@ -209,7 +215,8 @@ class ProposalScreen:
     max_convex_share, min_concave_share : float
         The near side of the step (dropouts filled, :func:`fill_holes`) must cover at most the first or at
         least the second share of the 7 x 7 window (:func:`calib_core.guide.candidates.near_fraction`):
-        a corner of the object, not a straight stretch of its edge.
+        a corner of the object, not a straight stretch of its edge; the same shares hold for a ``marking``
+        cell's bright side (:func:`bright_fraction`).
     min_edge_turn : float
         A depth-jump cell's near-side outline must turn by at least this (:func:`near_edge_turn`, 0 along a
         straight edge, 0.5-0.6 at a box's corner): a roof line or a pole's side is no corner, however it
@@ -679,6 +686,38 @@ def intensity_edge_turn(depth, rows_cols: np.ndarray, half: int = 3) -> np.ndarr
     solid = ((neighbours >= 2) & (bright > 0)).sum(axis=(1, 2)) / np.maximum(n_bright, 1)
     coherent = (n_bright >= 4) & (solid >= 0.7)
     return np.where((np.nan_to_num(hi - lo) >= 0.5) & coherent, _mask_turn(bright), 0.0)
+
+
+def bright_fraction(depth, rows_cols: np.ndarray, half: int = 3) -> tuple[np.ndarray, np.ndarray]:
+    """Share of each cell's ``(2 half + 1)^2`` window that is bright in the scan's log intensity
+    (:func:`calib_core.guide.candidates.intensity_log_image`): above the window's midpoint and within 0.5 of
+    its brightest cell; cells without intensity count as dark, (N,); NaN without contrast (a 0.5 step).
+    Also whether the cell or one of its 8 neighbours is bright, (N,) bool: a corner of the paint, not a
+    response peak on the asphalt two rows off it.
+
+    The intensity analogue of :func:`calib_core.guide.candidates.near_fraction`: about 1/4 at a painted
+    marking's corner, 1/2 along a stripe's side, where the rings' different gains (a 64-beam scan's stripes
+    are banded row by row) make corner-like peaks that are no corner of the paint.
+    """
+    from .candidates import intensity_log_image
+
+    rc = np.asarray(rows_cols, dtype=np.int64).reshape(-1, 2)
+    found = intensity_log_image(depth)
+    if found is None or len(rc) == 0:
+        return np.full(len(rc), np.nan), np.zeros(len(rc), dtype=bool)
+    log_i, ok = found
+    H, W = depth.shape
+    off = np.arange(-half, half + 1)
+    rows = np.clip(rc[:, 0, None, None] + off[None, :, None], 0, H - 1)
+    cols = np.clip(rc[:, 1, None, None] + off[None, None, :], 0, W - 1)
+    inside = ok[rows, cols]
+    li = np.where(inside, log_i[rows, cols], np.nan)
+    with np.errstate(invalid="ignore"):
+        lo, hi = np.nanmin(li, axis=(1, 2)), np.nanmax(li, axis=(1, 2))
+        # Within 0.5 (a 40 % intensity step) of the brightest: paint, not the rough asphalt's bright grains.
+        bright = inside & (li > np.maximum(0.5 * (lo + hi), hi - 0.5)[:, None, None])
+    share = np.where(np.nan_to_num(hi - lo) >= 0.5, bright.mean(axis=(1, 2)), np.nan)
+    return share, bright[:, half - 1:half + 2, half - 1:half + 2].any(axis=(1, 2))
 
 
 def _mask_turn(mask: np.ndarray) -> np.ndarray:

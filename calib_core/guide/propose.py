@@ -12,8 +12,9 @@ which the gain accounts for; cells wider than ``max_cell_m`` are dropped
 Each proposal's ``pixel_cov`` is the covariance of the true feature's pixel
 about the predicted one: the pose covariance propagated to the pixel plus the
 offset of the proposed cell from the feature (``cell_sigma`` cells, default
-one: a detected corner cell may sit a cell or two off), ``J_pose C J_pose^T +
-J_X Sigma_L J_X^T`` (px^2).
+one: a detected corner cell may sit a cell or two off; with the screen, a
+``marking`` cell that touches its paint corner :data:`MARKING_CELL_SIGMA`),
+``J_pose C J_pose^T + J_X Sigma_L J_X^T`` (px^2).
 
 With a :class:`.evidence.ProposalScreen` (the default) only cells with
 clear, isolated evidence in both views are proposed (:mod:`.evidence`:
@@ -39,10 +40,11 @@ from ..errors import CalibError
 from ..io.atomic import write_yaml_atomic
 from .candidates import KINDS, Candidates, depth_discontinuity, find_candidates, near_fraction
 from .corner_probability import WEIGHTS, corner_features, corner_probability, laser_features, scan_range_noise_m
-from .evidence import (REASON_NO_EVIDENCE, REASON_ROUGH_ALIGNMENT, ProposalScreen, cell_footprint_px, corner_peaks,
-                       corner_rivals, dominant_corner, ellipse_box_margin_px, far_side_share, fill_holes, ground_plane,
-                       height_above_ground_m, intensity_corner, intensity_edge_turn, local_plane_residual_m,
-                       near_edge_turn, normal_span, planar_share, window_share)
+from .evidence import (REASON_NO_EVIDENCE, REASON_ROUGH_ALIGNMENT, ProposalScreen, bright_fraction,
+                       cell_footprint_px, corner_peaks, corner_rivals, dominant_corner, ellipse_box_margin_px,
+                       far_side_share, fill_holes, ground_plane, height_above_ground_m, intensity_corner,
+                       intensity_edge_turn, local_plane_residual_m, near_edge_turn, normal_span, planar_share,
+                       window_share)
 from .image_corners import CornerImage, content_mask, strongest_near
 from .information import d_optimal_gain, pair_noise, pixel_jacobians, pose_pixel_covariance
 from .laser_noise import DEFAULT_CELL_SIGMA, DEFAULT_RANGE_SIGMA_M, PICK_CELL_SIGMA, cell_covariance
@@ -55,6 +57,11 @@ __all__ = ["Proposal", "Proposals", "propose", "proposals_to_dict", "save_propos
 GUIDED_CLICK_SIGMA_PX = 0.3
 #: Cells wider than this (metres) are not proposed.
 DEFAULT_MAX_CELL_M = 0.2
+#: Offset (cells, 1-sigma) of a screened ``marking`` cell from its paint corner: the screen keeps only cells that
+#: touch the paint at a corner of it (:func:`.evidence.bright_fraction`), not the two cells' slack of a detected
+#: peak (:data:`.laser_noise.DEFAULT_CELL_SIGMA`).  Measured on PJLab manual_calib's stripe corners offered from
+#: the by-eye starts: 5-12.6 px (0.7-1.7 cells) from the photo's nearest corner at 7.5 px per cell.
+MARKING_CELL_SIGMA = 1.0
 #: Image-corner evidence needed at a proposal (structure-tensor lam_min, grey levels^2), when an image is given.
 DEFAULT_MIN_IMAGE_CORNER = 0.005
 
@@ -148,20 +155,23 @@ class Proposals(list):
     note : str or None
         Set when no *new* cell passed the screen, even if re-clicks of existing pairs are proposed
         (:func:`.evidence.no_new_corner_note`): the app shows it instead of cycling through re-clicks.
+    left_out : ((M, 2) int ndarray, (M,) str ndarray)
+        The cells the screen left out and the first test each failed (the names of :attr:`screened`).
     """
 
     def __init__(self, items=(), reason: str | None = None, screened: dict | None = None,
-                 note: str | None = None) -> None:
+                 note: str | None = None, left_out: tuple | None = None) -> None:
         super().__init__(items)
         self.reason = reason
         self.screened = dict(screened or {})
         self.note = note
+        self.left_out = left_out if left_out is not None else (np.zeros((0, 2), np.int64), np.zeros(0, str))
 
     def like(self, items) -> "Proposals":
-        """Other items with this result's reason (when they are empty), counts and note."""
+        """Other items with this result's reason (when they are empty), counts, note and left-out cells."""
         items = list(items)
         return Proposals(items, None if items else (self.note or self.reason or "no proposal left"), self.screened,
-                         self.note)
+                         self.note, self.left_out)
 
 
 def _cell_extent_m(laser_cov: np.ndarray, range_sigma_m: float, cell_sigma: float) -> np.ndarray:
@@ -280,17 +290,23 @@ def propose(
             laser_evidence = np.asarray(laser_evidence)[keep]
     pixels, J_pose, J_point = pixel_jacobians(camera, state.T_camera_lidar, cand.points_lidar)
     laser_cov = cell_covariance(depth, cand.rows_cols, cell_sigma, range_sigma_m)
-    laser_px = J_point @ laser_cov @ np.swapaxes(J_point, 1, 2)
+    offset_cov = laser_cov.copy()
+    if screen is not None:  # a screened marking touches the paint's corner
+        marking = cand.kind == KINDS.index("marking")
+        offset_cov[marking] = cell_covariance(depth, cand.rows_cols[marking], min(cell_sigma, MARKING_CELL_SIGMA),
+                                              range_sigma_m)
+    laser_px = J_point @ offset_cov @ np.swapaxes(J_point, 1, 2)
     pixel_cov = pose_pixel_covariance(J_pose, state.covariance) + laser_px
     ok = np.all(np.isfinite(J_pose), axis=(1, 2)) & np.all(np.isfinite(pixel_cov), axis=(1, 2))
     ok &= _cell_extent_m(laser_cov, range_sigma_m, cell_sigma) <= max_cell_m
     strength = np.full(len(cand), np.nan)
     screened: dict[str, int] = {}
     evidence = {name: np.full(len(cand), np.nan) for name in ("planar", "footprint", "dominance")}
-    smallest_ellipse = np.inf
+    smallest_ellipse, some_fit = np.inf, False
+    why = np.full(len(cand), "", dtype=object)
     if screen is not None:
-        ok, smallest_ellipse = _screen(depth, camera, cand, pixels, pixel_cov, J_point, ok, screen, corner_image,
-                                       plane_residual, screened, strength, evidence)
+        ok, smallest_ellipse, some_fit = _screen(depth, camera, cand, pixels, pixel_cov, J_point, ok, screen,
+                                                 corner_image, plane_residual, screened, strength, evidence, why)
     elif corner_image is not None:
         major = np.sqrt(np.maximum(np.linalg.eigvalsh(np.where(ok[:, None, None], pixel_cov, 0.0))[:, -1], 0.0))
         radius = np.clip(3.0 * major, 2.0, 12.0)
@@ -305,6 +321,7 @@ def propose(
         pu = np.clip(np.rint(np.nan_to_num(pixels[:, 0])).astype(np.int64), 0, W_img - 1)
         pv = np.clip(np.rint(np.nan_to_num(pixels[:, 1])).astype(np.int64), 0, H_img - 1)
         ok &= inside[pv, pu] >= np.maximum(radius, 6.0)
+    left_out = (cand.rows_cols[why != ""], why[why != ""].astype(str))
     probability = np.full(len(cand), np.nan)
     if corner_image is not None and ok.any():
         sel = np.flatnonzero(ok)
@@ -337,6 +354,7 @@ def propose(
             screened["reclick ellipse or border"] = int((fine & ~fits).sum())
             if (fine & ~fits).any():
                 smallest_ellipse = min(smallest_ellipse, float(major_re[fine & ~fits].min()))
+            some_fit |= bool((fine & fits).any())
             fine &= fits
         for k in np.flatnonzero(fine):
             extra[len(entries)] = (rows_re[k], rc_re[k], pts_re[k], pix_re[k], cov_re[k])
@@ -345,11 +363,12 @@ def propose(
         P = np.concatenate([P, np.ones(int(fine.sum()))])
         J = np.concatenate([J, Jp_re[fine]])
     if not entries:
-        if screen is not None and np.isfinite(smallest_ellipse):
+        # Rough alignment only when no ellipse fitted: else other tests left the cells out.
+        if screen is not None and np.isfinite(smallest_ellipse) and not some_fit:
             reason = REASON_ROUGH_ALIGNMENT.format(limit=screen.max_ellipse_px, smallest=smallest_ellipse)
         else:
             reason = REASON_NO_EVIDENCE
-        return Proposals([], reason, screened)
+        return Proposals([], reason, screened, left_out=left_out)
     if order not in ("d_optimal", "farthest", "random"):
         raise CalibError(f"unknown proposal order {order!r}; use d_optimal, farthest or random")
     if order == "random" and rng is None:
@@ -411,24 +430,27 @@ def propose(
             footprint_px=float(evidence["footprint"][i]),
             corner_dominance=float(evidence["dominance"][i]),
         ))
-    return Proposals(out, None if out else REASON_NO_EVIDENCE, screened)
+    return Proposals(out, None if out else REASON_NO_EVIDENCE, screened, left_out=left_out)
 
 
 def _screen(depth, camera, cand: Candidates, pixels, pixel_cov, J_point, ok, screen: ProposalScreen,
-            corner_image: CornerImage | None, plane_residual, screened: dict, strength, evidence: dict):
+            corner_image: CornerImage | None, plane_residual, screened: dict, strength, evidence: dict,
+            left_out: np.ndarray | None = None):
     """Apply the clear-evidence screen (:mod:`.evidence`) to the candidates still ``ok``.
 
     Fills ``screened`` (cells left out per test), ``strength`` (the dominant
     image corner's ``lam_min``) and ``evidence`` (planar share, footprint,
-    dominance) in place.  Returns the new ``ok`` and the smallest 3-sigma
+    dominance) in place.  Returns the new ``ok``, the smallest 3-sigma
     radius among the cells with laser evidence that the ellipse test left
-    out (inf when it left none out).
+    out (inf when it left none out) and whether any such cell's ellipse fitted.
     """
     ok = ok.copy()
 
     def cut(name: str, passes: np.ndarray) -> None:
         nonlocal ok
         screened[name] = screened.get(name, 0) + int((ok & ~passes).sum())
+        if left_out is not None:
+            left_out[ok & ~passes] = name
         ok &= passes
 
     rows = cand.rows_cols[:, 0]
@@ -496,10 +518,21 @@ def _screen(depth, camera, cand: Candidates, pixels, pixel_cov, J_point, ok, scr
         if m.size:
             mark_turn[m] = intensity_edge_turn(depth, cand.rows_cols[m])
         cut("marking edge does not turn", ~marking | (mark_turn >= screen.min_edge_turn))
+        # A corner of the paint (its bright side covers about 1/4 or 3/4 of the window), touching the cell: not
+        # a stripe's side banded ring by ring, nor a response peak on the asphalt next to the paint.
+        bright, touches = np.full(len(ok), 0.5), np.zeros(len(ok), dtype=bool)
+        m = np.flatnonzero(ok & marking)
+        if m.size:
+            share_m, touches[m] = bright_fraction(depth, cand.rows_cols[m])
+            bright[m] = np.nan_to_num(share_m, nan=0.5)
+        cut("straight marking edge", ~marking | (bright <= screen.max_convex_share)
+            | (bright >= screen.min_concave_share))
+        cut("marking corner off the paint", ~marking | touches)
     radius = 3.0 * np.sqrt(np.maximum(np.linalg.eigvalsh(np.where(ok[:, None, None], pixel_cov, 0.0))[:, -1], 0.0))
     fits = radius <= screen.max_ellipse_px
     too_big = ok & ~fits
     smallest = float(radius[too_big].min()) if too_big.any() else np.inf
+    some_fit = bool((ok & fits).any())
     cut("ellipse larger than the loupe", fits)
     cut("border", ellipse_box_margin_px(pixels, pixel_cov, camera.width, camera.height) >= screen.border_margin_px)
     if corner_image is not None and ok.any():
@@ -526,7 +559,7 @@ def _screen(depth, camera, cand: Candidates, pixels, pixel_cov, J_point, ok, scr
         isolated = np.ones(len(ok), dtype=bool)
         isolated[sel] = rivals <= screen.max_rivals
         cut("repeated image texture", isolated)
-    return ok, smallest
+    return ok, smallest, some_fit
 
 
 def proposals_to_dict(proposals: Sequence[Proposal], state: PoseState | None = None) -> dict:
