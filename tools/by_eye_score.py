@@ -54,12 +54,15 @@ def main(argv: list[str] | None = None) -> int:
     camera = load_camera(args.camera)
     T_ref = load_extrinsics_any(args.reference)  # a KITTI calib file: rectified camera 2, the one its image shows
     session = read_yaml_mapping(args.session, "session file")
+    entries = [(k, e) for k, e in enumerate(session.get("pairs", [])) if e.get("pixel") is not None
+               and (e.get("laser_rc") is not None or e.get("laser_xyz") is not None)]
     pairs = [Pair(laser_rc=tuple(e["laser_rc"]) if e.get("laser_rc") is not None else None,
                   laser_xyz=tuple(e["laser_xyz"]) if e.get("laser_rc") is None else None,
-                  pixel=tuple(e["pixel"]), id=int(e.get("id", k + 1)))
-             for k, e in enumerate(session.get("pairs", [])) if e.get("pixel") is not None
-             and (e.get("laser_rc") is not None or e.get("laser_xyz") is not None)]
-    print(f"{len(pairs)} complete pairs")
+                  pixel=tuple(e["pixel"]), id=int(e.get("id", k + 1))) for k, e in entries]
+    # Check pairs (left out of the fit in the app) are scored but, as in the app, not solved with.
+    is_check = [bool(e.get("check", False)) for _, e in entries]
+    print(f"{len(pairs)} complete pairs" + (f" ({sum(is_check)} of them check pairs, left out of the fit)"
+                                            if any(is_check) else ""))
     if pairs:
         points, _, pixels = resolve_pairs(pairs, depth, camera)
         projected, ok = camera.project(transform_points(T_ref, points))
@@ -69,10 +72,15 @@ def main(argv: list[str] | None = None) -> int:
                   f"{e:.1f} px from the reference projection")
         print(f"pair errors: median {np.nanmedian(errors):.1f} px, range {np.nanmin(errors):.1f}-"
               f"{np.nanmax(errors):.1f} px")
-    if len(pairs) >= 4:
-        result = calibrate(pairs, depth, camera, robust=True)
+    fitted = [p for p, c in zip(pairs, is_check) if not c]
+    if len(fitted) >= 4:
+        result = calibrate(fitted, depth, camera, robust=True)
         angle, cm = pose_difference(result.T_camera_lidar, T_ref)
         print(f"result vs reference: {angle:.2f} deg, {cm:.1f} cm")
+    if any(is_check) and len(pairs) >= 4:
+        result = calibrate(pairs, depth, camera, robust=True)
+        angle, cm = pose_difference(result.T_camera_lidar, T_ref)
+        print(f"with the check pairs in the fit too: {angle:.2f} deg, {cm:.1f} cm")
     if args.actions:
         rows = [json.loads(line) for line in Path(args.actions).read_text().splitlines() if line.strip()]
         acts = [r for r in rows if r["action"]]
