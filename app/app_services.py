@@ -168,6 +168,10 @@ class AppServices(Protocol):
     def pose(self) -> np.ndarray | None:
         """``T_camera_lidar`` predictions use: the last good solve, else the imported rough pose, else None."""
 
+    def slot_of(self, key: str) -> Any:
+        """The page slot (:class:`app.layout.ImageSlot`) of click key ``key``: a BA key, a camera view, the render
+        (:data:`app.layout.RENDER_KEY`), ``loupe_ba`` or ``loupe_camera``."""
+
     def camera_slot(self) -> Any:
         """The page slot of the visible camera view."""
 

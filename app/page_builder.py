@@ -77,7 +77,7 @@ class PageBuilder:
         """Add the camera views and the BA images (``ba_textures``, titled ``ba_titles``) at their page slots."""
         app = self.app
         scene = app.server.scene
-        shown = app.view.camera_view.key
+        shown = app.camera_view.key
         for key, view in app.camera_views.items():
             s = app.slots[key]
             self._handles[key] = scene.add_image(

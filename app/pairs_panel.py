@@ -169,7 +169,7 @@ class PairsPanel:
     def make_click_handler(self, key: str) -> Callable:
         """The on-click callback of image slot ``key`` (a BA key, a camera view or ``loupe_*``): adds or moves an end."""
         def on_click(event: Any) -> None:
-            slot = self.app.view.slot_of(key)
+            slot = self.app.slot_of(key)
             uv = slot.pixel_from_ray(event.ray_origin, event.ray_direction)
             if uv is None or not slot.contains(uv):
                 raise CalibError("click landed outside the image")
@@ -200,10 +200,10 @@ class PairsPanel:
                 shown = self.app.display.ba_display(key)[:, self.app.ba_window.columns]
                 uv = tuple(refine_click_to_corner(shown, uv, 3.0))
             return ("ba", key, *self.cell_from_display(key, uv))
-        if key != self.app.view.camera_view.key:
+        if key != self.app.camera_view.key:
             raise CalibError("that camera view is hidden; click the visible one")
         if self.app.state.view.snap:
-            uv = tuple(refine_click_to_corner(self.app.view.camera_view.gray, uv, SNAP_RADIUS_PX))
+            uv = tuple(refine_click_to_corner(self.app.camera_view.gray, uv, SNAP_RADIUS_PX))
         return ("camera", *self._original_from_display(uv))
 
     def _click(self, key: str, uv: tuple[float, float], pick_id: int | None = None, client: Any = None) -> int:
@@ -337,7 +337,7 @@ class PairsPanel:
 
     def _original_from_display(self, uv: tuple[float, float]) -> tuple[float, float]:
         """Original camera pixel of a click on the visible camera view."""
-        raw, valid = self.app.view.camera_view.pixels_from_display(np.array([uv], dtype=np.float64))
+        raw, valid = self.app.camera_view.pixels_from_display(np.array([uv], dtype=np.float64))
         if not valid[0]:
             raise CalibError("the camera does not see that part of the panorama; click inside the picture")
         return float(raw[0, 0]), float(raw[0, 1])
@@ -346,7 +346,7 @@ class PairsPanel:
         ids, ends = self.app.overlays.pick_ends(key)
         if not ids:
             return None
-        slot = self.app.view.slot_of(key)
+        slot = self.app.slot_of(key)
         delta = ends - np.asarray(uv, dtype=np.float64)
         d = np.hypot(delta[:, 0] * slot.units_per_px, delta[:, 1] * slot.units_per_px_y)  # world units
         k = int(np.argmin(d))
@@ -355,7 +355,7 @@ class PairsPanel:
     def make_select_handler(self, key: str) -> Callable:
         """The Shift+click callback of image slot ``key``: selects the pair whose marker is nearest."""
         def on_shift_click(event: Any) -> None:
-            uv = self.app.view.slot_of(key).pixel_from_ray(event.ray_origin, event.ray_direction)
+            uv = self.app.slot_of(key).pixel_from_ray(event.ray_origin, event.ray_direction)
             pick_id = None if uv is None else self._nearest_pick(key, uv)
             self.app.state.select(pick_id)
 
@@ -365,7 +365,7 @@ class PairsPanel:
         def on_drag(event: Any) -> None:
             if event.phase != "end" or self.app.align.drag_enabled:  # aligning: the Align panel has this drag
                 return
-            slot = self.app.view.slots[key]
+            slot = self.app.slots[key]
             start = slot.pixel_from_world(np.asarray(event.start_position)[None])[0]
             end = slot.pixel_from_world(np.asarray(event.end_position)[None])[0]
             pick_id = self._nearest_pick(key, tuple(start))

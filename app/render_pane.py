@@ -116,7 +116,7 @@ class RenderPane:
     def _as_camera_view(self, make_handler: Any) -> Any:
         """A viser callback that hands the event to ``make_handler(key)`` of the camera view shown at that moment."""
         async def handler(event: Any) -> None:
-            await make_handler(self.app.view.camera_view.key)(event)
+            await make_handler(self.app.camera_view.key)(event)
 
         return handler
 
@@ -124,7 +124,7 @@ class RenderPane:
         """Put the pane where the layout says, in the camera view's framing, and the copy over the camera view."""
         app = self.app
         slot, cam = app.slots[RENDER_KEY], app.camera_slot()
-        placed = (slot, cam, app.view.camera_view.key)
+        placed = (slot, cam, app.camera_view.key)
         if placed == self._placed:
             return
         self._placed = placed
@@ -195,7 +195,7 @@ class RenderPane:
     # ------------------------------------------------------------------ rendering
     def view_pose(self) -> tuple[np.ndarray, str]:
         """The pose the render shows and where it comes from (a key of :data:`POSE_NAMES`)."""
-        if self.drag_pose is not None and self.app.live.bundle is None:
+        if self.drag_pose is not None and self.app.solve_bundle is None:
             return self.drag_pose, "drag"
         return self.app.loupe_support.view_pose()
 
@@ -268,7 +268,7 @@ class RenderPane:
 
     def _shown_texture(self, shown: ShownRender) -> np.ndarray:
         """The pane's texture: the render in the camera view's framing, over :data:`NO_RETURN_RGB`."""
-        view = self.app.view.camera_view
+        view = self.app.camera_view
         if view.key == "raw":
             return self.pane_texture(shown.rgba)
         return self.pane_texture(view.shown(shown.rgba))  # alpha 0 where the panorama sees past the camera
@@ -286,7 +286,7 @@ class RenderPane:
         shown = self.current
         visible = blend > 0.0 and shown is not None
         if visible:
-            rgba = self.app.view.camera_view.shown(shown.rgba).copy()
+            rgba = self.app.camera_view.shown(shown.rgba).copy()
             rgba[..., 3] = np.round(rgba[..., 3] * blend).astype(np.uint8)
             self._overlay.image = rgba
         if self._overlay.visible != visible:
@@ -344,10 +344,10 @@ class RenderPane:
             raise CalibError("the camera-view render is not ready yet; try again in a moment")
         radius = float(NEAREST_PX)
         if display and screen_units is not None:
-            per_px = self.app.view.slot_of(RENDER_KEY).units_per_px  # world units per pane pixel
+            per_px = self.app.slots[RENDER_KEY].units_per_px  # world units per pane pixel
             radius = float(min(max(radius, SNAP_SCREEN_PX * screen_units / per_px), NEAREST_MAX_PX))
         if display:
-            raw, ok = self.app.view.camera_view.pixels_from_display(np.array([uv], np.float64))
+            raw, ok = self.app.camera_view.pixels_from_display(np.array([uv], np.float64))
             if not ok[0]:
                 raise CalibError("the camera does not see that part of the panorama; click inside the picture")
             uv = (float(raw[0, 0]), float(raw[0, 1]))
@@ -371,7 +371,7 @@ class RenderPane:
 
     def _on_shift_click(self, event: Any) -> None:
         """Shift+click on the render: select the pair whose laser end is drawn nearest (as on the BA images)."""
-        slot = self.app.view.slot_of(RENDER_KEY)
+        slot = self.app.slots[RENDER_KEY]
         uv = slot.pixel_from_ray(event.ray_origin, event.ray_direction)
         picks = [p for p in self.app.state.picks if p.laser_rc is not None]
         if uv is None or not picks:
@@ -392,7 +392,7 @@ class RenderPane:
         if event.phase != "end":
             return
         moved = np.hypot(*(np.asarray(event.end_screen_pos) - np.asarray(event.start_screen_pos)))
-        slot = self.app.view.slot_of(RENDER_KEY)
+        slot = self.app.slots[RENDER_KEY]
         start = slot.pixel_from_world(np.asarray(event.start_position)[None])[0]
         if moved < 0.01 and slot.contains(start):  # display pixels, as a click gives them
             self.app.pairs_panel.click_at(RENDER_KEY, (float(start[0]), float(start[1])), event.client)

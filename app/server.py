@@ -249,6 +249,12 @@ class CalibrationApp:
     camera_view = property(lambda self: self.view.camera_view,
                            doc="The visible camera view (:class:`app.camera_view.CameraView`: raw or panorama).")
 
+    def slot_of(self, key: str) -> Any:
+        """The image slot of click key ``key``: a BA key, ``raw``, ``panorama``, ``loupe_ba`` or ``loupe_camera``."""
+        if key.startswith("loupe_"):
+            return self.loupes.slot(key[len("loupe_"):])
+        return self.view.slots[key]
+
     def camera_slot(self) -> Any:
         """The page slot of the visible camera view."""
         return self.view.camera_slot()

@@ -99,12 +99,6 @@ class ViewPanel:
         return layout_with_render(app.camera_sizes, self.camera_view.key, (self._ba_window.width, app.depth.shape[0]),
                                   app.ba_keys, app.ba_cell_aspect)
 
-    def slot_of(self, key: str) -> ImageSlot:
-        """The image slot of click key ``key``: a BA key, ``raw``, ``panorama``, ``loupe_ba`` or ``loupe_camera``."""
-        if key.startswith("loupe_"):
-            return self.app.loupes.slot(key[len("loupe_"):])
-        return self.slots[key]
-
     def _wanted_ba_window(self) -> ColumnWindow:
         """The column window the current mode asks for (custom until a solve says what the camera sees)."""
         mode = self.app.state.view.ba_window_mode
@@ -288,7 +282,7 @@ class ViewPanel:
             self._client_mode[client.client_id] = "3d"
             self._update_cloud_visibility()
             up = self._up_vector()
-            bundle = self.app.live.bundle
+            bundle = self.app.solve_bundle
             # Stand a little behind and above the solved camera, look where it looks (paper Fig. 9).
             eye, look = viewpoint_behind_camera(None if bundle is None else bundle.result.T_camera_lidar, up)
             pos, look = CLOUD_ORIGIN + eye, CLOUD_ORIGIN + look
@@ -303,7 +297,7 @@ class ViewPanel:
         else:
             slots = [self.camera_slot(), self.slots[RENDER_KEY]] + [self.slots[k] for k in self.app.ba_keys]
             if getattr(self.app, "loupes", None) is not None:  # the loupes are part of the page
-                slots += [self.slot_of("loupe_ba"), self.slot_of("loupe_camera")]
+                slots += [self.app.slot_of("loupe_ba"), self.app.slot_of("loupe_camera")]
         x0, y0, x1, y1 = bounds_of(slots)
         y0 -= 0.3  # room for the titles
         w_px, h_px = self._canvas_px(client)
@@ -411,7 +405,7 @@ class ViewPanel:
         rects: dict = {}
         if self._client_mode.get(client.client_id) not in (None, "3d"):
             try:
-                bounds = {k: self.slot_of(f"loupe_{k}").bounds() for k in ("ba", "camera")}
+                bounds = {k: self.app.slot_of(f"loupe_{k}").bounds() for k in ("ba", "camera")}
             except (AttributeError, KeyError):  # no loupes (yet)
                 bounds = {}
             rects = canvas_rects(camera, bounds) or {}
@@ -456,7 +450,7 @@ class ViewPanel:
     def _up_vector(self) -> np.ndarray:
         axis = UP_AXES.get(self.app.state.view.up_axis)
         if axis is None:
-            bundle = self.app.live.bundle
+            bundle = self.app.solve_bundle
             if bundle is None:
                 return np.array([0.0, 0.0, 1.0])
             R_lidar_camera = bundle.result.T_camera_lidar[:3, :3].T

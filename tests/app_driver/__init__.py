@@ -55,7 +55,7 @@ class AppDriver(RenderDriver):
         return self.tab.notifications[before:]
 
     def _ray(self, key: str, uv: tuple[float, float], **extra: Any) -> Any:
-        world = self.app.view.slot_of(key).world_from_pixel(np.asarray(uv, dtype=np.float64).reshape(1, 2))[0]
+        world = self.app.slot_of(key).world_from_pixel(np.asarray(uv, dtype=np.float64).reshape(1, 2))[0]
         return SimpleNamespace(ray_origin=tuple(world - [0.0, 0.0, 1.0]), ray_direction=(0.0, 0.0, 1.0),
                                client=self.tab, target=None, **extra)
 
@@ -153,12 +153,12 @@ class AppDriver(RenderDriver):
     def drawn_display_pixels(self, name: str, key: str) -> np.ndarray:
         """Display pixels ``(N, 2)`` on image ``key`` of the points scene node ``name`` draws (as sent to viser)."""
         world, _ = self.drawn_points(name)
-        return self.app.view.slot_of(key).pixel_from_world(world)
+        return self.app.slot_of(key).pixel_from_world(world)
 
     def drawn_segment_pixels(self, name: str, key: str) -> np.ndarray:
         """Display pixels ``(N, 2, 2)`` on image ``key`` of the line segments node ``name`` draws (padding dropped)."""
         segs = self.app.nodes.segments(name)
-        return self.app.view.slot_of(key).pixel_from_world(segs.reshape(-1, 3)).reshape(-1, 2, 2)
+        return self.app.slot_of(key).pixel_from_world(segs.reshape(-1, 3)).reshape(-1, 2, 2)
 
     def drawn_marker_pixels(self, key: str) -> np.ndarray:
         """Display pixels ``(N, 2)`` on image ``key`` of the pick markers drawn there: the centres of the rings as sent."""
@@ -167,7 +167,7 @@ class AppDriver(RenderDriver):
         segs = self.app.nodes.segments(f"/annot/markers/{key}/ring")
         per = len(marker_segments(np.zeros((1, 3)), 1.0, cell_half_size=(1.0, 1.0) if key in self.app.ba_keys else None))
         rings = segs.reshape(-1, per, 2, 3)[:, :RING_SEGMENTS, 0, :].astype(np.float64)
-        return self.app.view.slot_of(key).pixel_from_world(rings.mean(axis=1))
+        return self.app.slot_of(key).pixel_from_world(rings.mean(axis=1))
 
     def loupe_view(self, kind: str) -> dict:
         """What loupe ``kind`` shows: ``{"center", "size"}`` (+ ``"key"`` for BA): its centre cell ``(row, col)``

@@ -117,7 +117,7 @@ class RenderDriver:
         from original camera pixel ``start_uv`` to ``end_uv`` in ``steps`` moves: the start, update and end
         events viser sends, to every handler the node has for that button and modifier."""
         app = self.app
-        slot = app.view.slot_of(RENDER_KEY) if key == RENDER_KEY else app.camera_slot()
+        slot = app.slot_of(RENDER_KEY) if key == RENDER_KEY else app.camera_slot()
         node = app.align.drag_nodes()[key]
 
         def world(uv: Any) -> np.ndarray:
