@@ -7,7 +7,7 @@ the laser content follows the mouse (Shift+drag rolls it about the principal poi
 move the camera by 5 cm.  The render (and its copy over the photo) follows every drag at once; the rest of the page
 (predictions, BA columns, proposals, the session file) takes the new pose when the drag ends.
 
-The result is an ordinary initial extrinsic (``app.loupe_support``): predictions, loupes and proposals use it until
+The result is an ordinary initial extrinsic (``app.pose_source``): predictions, loupes and proposals use it until
 4 pairs are solved.  After the 2nd and the 3rd complete pair (:meth:`AlignPanel.fit_to_pairs`) the rough pose is turned
 about the camera centre so that those pairs line up (:func:`calib_core.alignment.fit_rotation_about_centre`): one
 ordinary align step, which "Undo align step" takes back and a drag or a turn button changes further.  The maths is :mod:`calib_core.alignment`; this panel only maps widgets and drags to it.
@@ -16,9 +16,12 @@ ordinary align step, which "Undo align step" takes back and a drag or a turn but
 from __future__ import annotations
 
 import math
+import tempfile
+from pathlib import Path
 from typing import Any
 
 import numpy as np
+import viser
 
 from calib_core.alignment import (
     MIN_ROTATION_PAIRS, MOUNTING_PRESETS, drag_to_rotation, fit_rotation_about_centre, focal_px_estimate, preset_T,
@@ -29,6 +32,8 @@ from calib_core.pairs import resolve_pairs
 from calib_core.transforms import invert_T, rotation_angle_deg
 
 from .layout import RENDER_KEY
+from .pose_source import read_extrinsics
+from .security import upload_display_name
 from .ui_common import MIN_PAIRS
 
 #: One press of a turn button turns the view this much (degrees); a move button moves the camera this far (metres).
@@ -68,7 +73,7 @@ class AlignPanel:
             self._bg_preset = gui.add_button_group("Camera looks along lidar", tuple(MOUNTING_PRESETS))
             self._bg_preset.on_click(guard(self.on_preset))
             self._bt_imported = gui.add_button("Back to the imported extrinsic",
-                                               disabled=app.loupe_support.imported_T_camera_lidar is None,
+                                               disabled=app.pose_source.imported_T_camera_lidar is None,
                                                hint="The extrinsic given at start (file or the bag's /tf_static)")
             self._bt_imported.on_click(guard(self.on_imported))
             self._cb_drag = gui.add_checkbox("Align by drag", initial_value=False,
@@ -113,7 +118,7 @@ class AlignPanel:
     def show(self) -> None:
         """Show the rough pose and what the render uses."""
         app = self.app
-        T, source = app.loupe_support.view_pose()
+        T, source = app.pose_source.view_pose()
         if source == "solve":
             line = (f"A calibration from {MIN_PAIRS}+ pairs is shown; the rough pose is used only with fewer pairs.")
         elif source == "default":
@@ -154,7 +159,7 @@ class AlignPanel:
 
     def _start_pose(self) -> np.ndarray:
         """The pose a step starts from: the rough pose, else the assumed '+x' view."""
-        return np.array(self.app.loupe_support.view_pose()[0], np.float64)
+        return np.array(self.app.pose_source.view_pose()[0], np.float64)
 
     def adopt(self, T_camera_lidar: np.ndarray | None, fitted_to: tuple | None = None) -> None:
         """Make ``T_camera_lidar`` the rough pose (None: none), remembering the old one for "Undo align step";
@@ -163,7 +168,7 @@ class AlignPanel:
         old = self.app.initial_T_camera_lidar
         self._history.append(None if old is None else np.array(old))
         del self._history[:-MAX_HISTORY]
-        self.app.loupe_support.adopt_rough_pose(T_camera_lidar)
+        self.app.pose_source.adopt_rough_pose(T_camera_lidar)
         self.show()
 
     def fit_to_pairs(self, pairs: list) -> bool:
@@ -226,15 +231,42 @@ class AlignPanel:
             raise CalibError("no align step to undo")
         self._check_unsolved()
         self._fitted_to = None
-        self.app.loupe_support.adopt_rough_pose(self._history.pop())
+        self.app.pose_source.adopt_rough_pose(self._history.pop())
         self.show()
 
     # ------------------------------------------------------------------ widget handlers
+    def add_upload_button(self, client: Any) -> None:
+        """This tab's "Import initial extrinsics" button, in the Align folder (each tab gets its own)."""
+        app = self.app
+        with app.page.folder_lock:
+            with self.folder:
+                button = client.gui.add_upload_button(
+                    "Import initial extrinsics", icon=viser.Icon.UPLOAD, mime_type="*/*",
+                    hint="A rough pose (any extrinsics format ba-calib reads): predictions and 'Facing the camera' "
+                         "work before 4 pairs")
+        button.on_upload(app.guard(lambda event: self.receive_initial_extrinsics(
+            event.client, getattr(event.value, "name", ""), getattr(event.value, "content", b""))))
+
+    def receive_initial_extrinsics(self, client: Any, name: str, content: bytes) -> None:
+        """Import an uploaded extrinsics file as the rough pose (the upload button's handler)."""
+        shown = upload_display_name(name)
+        if not content:
+            raise CalibError(f"{shown}: the file is empty")
+        suffix = Path(str(name)).suffix.lower()
+        suffix = suffix if suffix in (".yaml", ".yml", ".json", ".txt", ".urdf", ".xml", ".launch", ".py") else ".txt"
+        with tempfile.TemporaryDirectory() as tmp:
+            path = Path(tmp) / f"upload{suffix}"
+            path.write_bytes(content)
+            T = read_extrinsics(path, shown)
+        self.adopt(T)
+        self.app.notify(client, "Initial extrinsics imported",
+                        f"{shown}: predictions use it until {4} pairs are solved", color="green")
+
     def on_preset(self, event: Any) -> None:
         self.apply_preset(str(event.value))
 
     def on_imported(self, event: Any) -> None:
-        T = self.app.loupe_support.imported_T_camera_lidar
+        T = self.app.pose_source.imported_T_camera_lidar
         if T is None:
             raise CalibError("no extrinsic was imported at start")
         self._check_unsolved()

@@ -115,6 +115,9 @@ class AppServices(Protocol):
         The camera views (:class:`app.camera_view.CameraView`: ``raw``, and ``panorama`` for wide lenses), by key.
     title : str
         The page title.
+    pose_source : app.pose_source.PoseSource
+        The pose predictions, the render and the BA columns use (solved, else rough, else the "+x" preset), the
+        predictions both ways under it, and the rough pose (``adopt_rough_pose``; ``subscribe`` to its changes).
     actions : app.action_queue.ActionQueue
         The ordered worker every user action runs on (``busy``: an action runs or waits).
     """
@@ -149,6 +152,7 @@ class AppServices(Protocol):
     camera_views: dict
     title: str
     actions: Any
+    pose_source: Any
 
     def subscribe_solve(self, listener: Callable[[Any], None]) -> None:
         """Call ``listener(shown)`` (:class:`app.ui_common.SolveShown`) on every redraw of what the live solve shows."""

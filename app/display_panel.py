@@ -20,7 +20,7 @@ class DisplayPanel:
     """What the laser panes of one :class:`app.server.CalibrationApp` show (``app.display``).
 
     It owns the grey images as shown (contrast applied) and its widgets, which
-    the view panel places in the Loupes folder (:meth:`add_loupe_controls`) and
+    the loupes place in their folder (:meth:`add_loupe_controls`) and the view panel in
     the View folder (:meth:`add_last_pane_control`, :meth:`add_edge_control`).
     Public: :meth:`ba_display`, :meth:`ba_title`,
     :meth:`loupe_image`, :meth:`loupe_sources`, :attr:`loupe_source`,

@@ -187,7 +187,7 @@ class LiveSolveCoordinator:
             return self._shown.wait_for(lambda: self._shown_job >= job or self._stopped, timeout) and not self._stopped
 
     def show_panels(self) -> None:
-        """Redraw what the solve shows (:meth:`redraw`; the name app/loupe_support.py calls)."""
+        """Redraw what the solve shows (:meth:`redraw`; the name app/pose_source.py calls)."""
         self.redraw()
 
     def _solve_job(self, payload: Any) -> SolveBundle:
@@ -300,8 +300,8 @@ class LiveSolveCoordinator:
         if bundle is not None and self._facing_of is not bundle:
             self._set_facing(bundle, self._facing_window(bundle.result.T_camera_lidar))
         elif bundle is None:
-            # Before any solve: the rough pose, else the "+x" preset (app.loupe_support.view_pose).
-            facing = self._facing_window(self.app.loupe_support.view_pose()[0])
+            # Before any solve: the rough pose, else the "+x" preset (app.pose_source.view_pose).
+            facing = self._facing_window(self.app.pose_source.view_pose()[0])
             if facing is not None:
                 self._facing = facing
 
@@ -318,7 +318,7 @@ class LiveSolveCoordinator:
         colors = self._cloud_colors(T) if app.cloud.visible and app.cloud.shows is not bundle else None
         facing_done = app.state.view.ba_window_mode == "camera" and self._facing_of is not bundle
         facing = self._facing_window(T) if facing_done else None
-        app.loupe_support.projection(T)  # the loupes' camera-to-cell predictions, ready before the next click
+        app.pose_source.projection(T)  # the loupes' camera-to-cell predictions, ready before the next click
         return CloudUpdate(bundle, colors, facing_done, facing, time.perf_counter() - t0)
 
     def _on_cloud_done(self, job: int, update: CloudUpdate | None, error: BaseException | None) -> None:

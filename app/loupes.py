@@ -16,7 +16,6 @@ only: predictions come from :mod:`calib_core.predict`.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -25,12 +24,12 @@ from calib_core.errors import CalibError
 from calib_core.predict import ellipse_outline
 
 from .layout import ImageSlot, LoupeArea, bounds_of, loupe_areas
+from .loupe_crops import CAMERA_LOUPE_PX, BaCrop, CameraCrop, default_camera_crop_px, node_name, slot_key
 from .loupe_marks import LEGEND, ba_title, camera_title, draw_camera_marks, tick_segments
 from .ui_common import marker_segments
 
-#: Columns the BA loupe shows at zoom 1, and the camera loupe's crop side for a 640 px wide image.
+#: Columns the BA loupe shows at zoom 1 (the camera loupe's crop side: :data:`CAMERA_LOUPE_PX`).
 BA_LOUPE_COLUMNS = 32
-CAMERA_LOUPE_PX = 36
 ZOOM_FACTOR = 1.5
 BA_COLUMN_LIMITS = (8, 400)
 CAMERA_PX_LIMITS = (8, 1200)
@@ -43,48 +42,10 @@ FRAMING_NODES = {"ba": ("/annot/loupe/ba_outline",),
                             "/annot/loupe/camera_outline")}
 
 
-def default_camera_crop_px(width: int, height: int) -> int:
-    """The camera loupe's crop side (original-image px) at zoom 1: bigger images get a wider crop,
-    so a rough prediction still falls inside it."""
-    return int(min(max(CAMERA_LOUPE_PX, round(CAMERA_LOUPE_PX * max(width, height) / 640 / 1.5)), 160))
-
-
-def node_name(kind: str) -> str:
-    """Scene node of loupe ``kind`` (``"ba"`` or ``"camera"``)."""
-    return f"/annot/loupe_{kind}"
-
-
-def slot_key(kind: str) -> str:
-    """The click-routing key of loupe ``kind`` (what the app's click handler receives)."""
-    return f"loupe_{kind}"
-
-
-@dataclass(frozen=True)
-class BaCrop:
-    """The BA loupe's view: image ``key``, top-left cell ``(row0, col0)``, ``n_rows`` x ``n_cols`` cells."""
-
-    key: str
-    row0: int
-    col0: int
-    n_rows: int
-    n_cols: int
-    center: tuple[int, int]  # (row, col) framed
-
-
-@dataclass(frozen=True)
-class CameraCrop:
-    """The camera loupe's view: original-image pixels ``[u0, u0 + n)`` x ``[v0, v0 + n)``."""
-
-    u0: int
-    v0: int
-    n: int
-    center: tuple[float, float]
-    cov_px2: tuple | None  # 2x2 covariance of the framed point (pixels^2), drawn as a 3-sigma ellipse
-
-
 class Loupes:
     """The BA loupe and the camera loupe of one :class:`app.server.CalibrationApp`.
 
+    It owns the "Loupes" folder (the zoom buttons; the display panel adds its loupe widgets there).
     Public: :meth:`frame_ba`, :meth:`frame_camera`, :meth:`zoom`, :meth:`show_click`,
     :meth:`relayout`, :attr:`ba_crop`, :attr:`camera_crop`, :meth:`slot`,
     :meth:`target_at` (loupe pixel -> cell or original pixel) and
@@ -127,6 +88,21 @@ class Loupes:
         for kind in KINDS:
             self._place(kind)  # sends the size and place once; later only when they change
         self.refresh()
+        self._build_folder(app.server.gui)
+
+    def _build_folder(self, gui: Any) -> None:
+        """The "Loupes" folder: used while picking, so right below the Pairs folder, found without scrolling."""
+        self.folder = gui.add_folder("Loupes", order=self.app.pairs_folder.order + 0.25)
+        with self.folder:
+            zoom = gui.add_button_group("Loupe zoom", ("BA +", "BA -", "Camera +", "Camera -"))
+            zoom.on_click(self.app.guard(self.on_zoom))
+            self.app.display.add_loupe_controls(gui)  # what the BA loupe shows, the contrast, "Hide marks"
+
+    def on_zoom(self, event: Any) -> None:
+        """The "Loupe zoom" buttons: magnify or widen one loupe around the same centre."""
+        kind, step = {"BA +": ("ba", ZOOM_FACTOR), "BA -": ("ba", 1 / ZOOM_FACTOR),
+                      "Camera +": ("camera", ZOOM_FACTOR), "Camera -": ("camera", 1 / ZOOM_FACTOR)}[str(event.value)]
+        self.zoom(kind, step)
 
     # ------------------------------------------------------------------ public
     def frame_ba(self, key: str, row: int, col: int) -> None:

@@ -32,7 +32,7 @@ class PairsPanel:
     It owns its widgets (built here, where the folder goes on the page) and
     what each tab clicked last (:meth:`last_click`, :meth:`camera_click_source`).
     Every change goes through ``app.state``; the clicks are mapped through the
-    app's page layout, loupes and predictions (``app.loupe_support``).
+    app's page layout, loupes and predictions (``app.pose_source``).
     """
 
     def __init__(self, app: Any) -> None:
@@ -280,7 +280,7 @@ class PairsPanel:
         """After a refining click in loupe ``clicked``: frame the other loupe on pick ``pick_id``'s other end (or
         its prediction) only if that is not inside the middle of what it shows (a margin of
         :data:`STEADY_MARGIN` of its side)."""
-        loupes, support = self.app.loupes, self.app.loupe_support
+        loupes, support = self.app.loupes, self.app.pose_source
         pick = next((p for p in self.app.state.picks if p.id == pick_id), None)
         if pick is None or (clicked == "camera" and loupes.shows_render):
             return  # the laser loupe shows the camera loupe's crop of the render: both stay
@@ -320,7 +320,7 @@ class PairsPanel:
             elif render_uv is not None:
                 self.app.loupes.frame_camera(*render_uv)
             else:
-                predicted = self.app.loupe_support.predict_pixel(target[2], target[3])
+                predicted = self.app.pose_source.predict_pixel(target[2], target[3])
                 if predicted is not None:
                     self.app.loupes.frame_camera(*predicted)
         else:
@@ -331,7 +331,7 @@ class PairsPanel:
             if pick is not None and pick.laser_rc is not None:
                 self.app.loupes.frame_ba(self.app.loupes.ba_crop.key, *pick.laser_rc)
             else:
-                cell = self.app.loupe_support.predict_cell(target[1], target[2])
+                cell = self.app.pose_source.predict_cell(target[1], target[2])
                 if cell is not None:
                     self.app.loupes.frame_ba(self.app.loupes.ba_crop.key, *cell)
 

@@ -4,7 +4,7 @@ The render has the camera image's size and framing (:func:`calib_core.render.ren
 as the camera image is (raw, or unwrapped into the same panorama), so a corner sits at nearly the same place in
 the photo and in the render once the pose is roughly right.  The pose is the solve
 if there is one, else the rough pose (Align folder, imported or saved), else the "+x" preset
-(:meth:`app.loupe_support.LoupeSupport.view_pose`).  A click on the render picks the laser cell drawn there: an
+(:meth:`app.pose_source.PoseSource.view_pose`).  A click on the render picks the laser cell drawn there: an
 ordinary laser end, through the pairs panel like a BA click.  The same render can be drawn over the photo
 ("Render over photo"), and the laser loupe shows a crop of it after a click on it (:class:`app.loupes.Loupes`).
 
@@ -197,7 +197,7 @@ class RenderPane:
         """The pose the render shows and where it comes from (a key of :data:`POSE_NAMES`)."""
         if self.drag_pose is not None and self.app.solve_bundle is None:
             return self.drag_pose, "drag"
-        return self.app.loupe_support.view_pose()
+        return self.app.pose_source.view_pose()
 
     def on_state_change(self, state: Any) -> None:
         """After any change of the state: a new render if the pose or the shading changed, the markers redrawn."""

@@ -26,7 +26,6 @@ from .display_panel import DisplayPanel
 from .export_panel import ExportPanel, FormatExportPanel
 from .guide_panel import attach_guide_panel
 from .live_coordinator import LiveSolveCoordinator
-from .loupe_support import LoupeSupport, read_extrinsics
 from .loupes import Loupes
 from .overlay_drawing import OverlayDrawing
 from .page_builder import PageBuilder
@@ -40,11 +39,12 @@ from .ui_common import page_url
 from .verify_panel import VerifyPanel
 from .view_panel import ViewPanel
 from .picks import ShotFiles
+from .pose_source import PoseSource, read_extrinsics
 from .warm_up import WarmUp
 
 
 # The composition root: one object per concern, owning its state and widgets, as a public attribute: actions, display,
-# live, loupe_support, overlays, cloud, page, pairs_panel, calibration_panel, view, export_panel, loupes, format_export,
+# live, overlays, cloud, page, pairs_panel, calibration_panel, view, export_panel, loupes, format_export,
 # guide, verify_panel.  Panels use only the public services below (app/app_services.py).
 class CalibrationApp:
     """The annotation app on one scene; the viser server runs from construction.
@@ -136,7 +136,8 @@ class CalibrationApp:
         self.ui_lock = UiLock()  # public: held while the scene and the panels are redrawn
         self.display = DisplayPanel(self)  # the laser panes' grey levels, with the saved contrast
         self.live = LiveSolveCoordinator(self)  # the solve shown; its threads start with the page
-        self.loupe_support = LoupeSupport(self, initial_T)  # the pose predictions use (solved, else rough)
+        self.pose_source = PoseSource(self, initial_T)  # the pose predictions use (solved, else rough)
+        self.pose_source.subscribe(self._on_rough_pose)
         self.live.ensure_facing()  # from the rough pose, else the "+x" preset
 
         # -- server -------------------------------------------------------------------
@@ -202,7 +203,7 @@ class CalibrationApp:
     def _on_connect(self, client: Any) -> None:
         try:  # this tab's own upload buttons, then its view of the page
             self.pairs_panel.add_upload_button(client)
-            self.loupe_support.add_upload_button(client)
+            self.align.add_upload_button(client)
             self.view.set_view(client, "all")
         except Exception:
             traceback.print_exc()
@@ -220,6 +221,21 @@ class CalibrationApp:
                 title = {"title": self.view.ba_title(key)} if what == "last_pane" else {}
                 self.page.set_ba(key, texture=self.view.ba_texture(key), **title)
         self.loupes.refresh()
+
+    def _on_rough_pose(self) -> None:
+        """A new rough pose (:meth:`PoseSource.subscribe`): redraw predictions, the facing window and the render."""
+        if self.state.view.ba_window_mode == "camera" and self.live.bundle is None:
+            self.live.ensure_facing()
+            self.view.apply_ba_window()
+        if getattr(self, "render_pane", None) is not None:
+            self.render_pane.request()
+            self.align.show()
+        self.overlays.invalidate()
+        self.overlays.refresh()
+        self.live.show_panels()
+        guide = getattr(self, "guide", None)
+        if guide is not None:  # proposals can start from the imported pose
+            guide.update()
 
     def _on_disconnect(self, client: Any) -> None:
         self.pairs_panel.forget_tab(client.client_id)
@@ -295,9 +311,9 @@ class CalibrationApp:
 
     def pose(self) -> np.ndarray | None:
         """``T_camera_lidar`` predictions use: the last good solve, else the imported initial extrinsic, else None."""
-        return self.loupe_support.pose()
+        return self.pose_source.pose()
 
-    initial_T_camera_lidar = property(lambda self: self.loupe_support.initial_T_camera_lidar,
+    initial_T_camera_lidar = property(lambda self: self.pose_source.initial_T_camera_lidar,
                                       doc="The imported rough ``T_camera_lidar`` (None: none imported).")
 
     last_update_time = property(lambda self: self.live.last_update_time,

@@ -1,6 +1,6 @@
 """The view panel and the per-tab cameras: camera image raw or unwrapped, overlays on/off, the BA column window and
-the page layout that follows from it, the 2-D / 3-D views and zoom.  The View folder also holds the display
-panel's widgets and the loupe zoom buttons."""
+the page layout that follows from it, the 2-D / 3-D views and zoom.  The View folder also holds two of the display
+panel's widgets."""
 
 from __future__ import annotations
 
@@ -31,7 +31,7 @@ class ViewPanel:
     It owns the BA column window and the page layout that follows from it
     (:attr:`ba_window`, :attr:`slots`), which camera view is shown
     (:attr:`camera_view`), what each tab looks at, and the View folder (the
-    display panel's and the loupe zoom widgets are placed in it).  Built where
+    display panel's last-pane and edge widgets are placed in it).  Built where
     the folder goes on the page.
     """
 
@@ -50,12 +50,6 @@ class ViewPanel:
 
     def _build_folder(self, gui: Any) -> None:
         app, guard, view = self.app, self.app.guard, self.app.state.view
-        # The loupe controls are used while picking: right below the Pairs folder, found without scrolling.
-        self.loupes_folder = gui.add_folder("Loupes", order=app.pairs_folder.order + 0.25)
-        with self.loupes_folder:
-            loupe_zoom = gui.add_button_group("Loupe zoom", ("BA +", "BA -", "Camera +", "Camera -"))
-            loupe_zoom.on_click(guard(app.loupe_support.on_loupe_zoom))
-            app.display.add_loupe_controls(gui)
         self.folder = gui.add_folder("View")
         with self.folder:
             app.display.add_last_pane_control(gui)

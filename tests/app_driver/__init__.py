@@ -101,12 +101,12 @@ class AppDriver(RenderDriver):
 
     def press_loupe_zoom(self, label: str) -> list[tuple[str, str]]:
         """Press a "Loupe zoom" button: ``"BA +"``, ``"BA -"``, ``"Camera +"`` or ``"Camera -"``."""
-        return self._fire(self.app.guard(self.app.loupe_support.on_loupe_zoom), SimpleNamespace(
+        return self._fire(self.app.guard(self.app.loupes.on_zoom), SimpleNamespace(
             client=self.tab, target=SimpleNamespace(value=label)))
 
     def upload_initial_extrinsics(self, name: str, content: bytes) -> list[tuple[str, str]]:
         """Upload an extrinsics file through this tab's "Import initial extrinsics" button."""
-        support = self.app.loupe_support
+        support = self.app.align
         handler = self.app.guard(lambda action: support.receive_initial_extrinsics(action.client, name, content))
         return self._fire(handler, SimpleNamespace(client=self.tab, target=None))
 

@@ -51,7 +51,7 @@ class RenderDriver:
     @property
     def rough_pose(self) -> np.ndarray | None:
         """The rough ``T_camera_lidar`` predictions use before a solve (None: none)."""
-        return self.app.loupe_support.initial_T_camera_lidar
+        return self.app.pose_source.initial_T_camera_lidar
 
     @property
     def align_text(self) -> str:

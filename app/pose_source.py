@@ -1,25 +1,22 @@
-"""What the loupes need from the app: the pose to predict with (solved, else imported), predictions both ways,
-the initial-extrinsics import (constructor path or upload button), and the loupe zoom buttons.
+"""The pose the app predicts and renders with: the last good solve, else the rough pose (imported or aligned), else
+the "+x" mounting preset; predictions both ways under it, and the scan projected under it (cached per pose).
 
-The maths is :mod:`calib_core.predict`; this only picks the pose and caches per pose.
+A service of the app (``app.pose_source``: state and queries, no widgets).  A new rough pose is published to its
+subscribers (:meth:`PoseSource.subscribe`); the composition root redraws what depends on it.  The maths is
+:mod:`calib_core.predict`; this only picks the pose and caches per pose.
 """
 
 from __future__ import annotations
 
-import tempfile
 import threading
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
-import viser
 
 from calib_core.alignment import preset_T
 from calib_core.errors import CalibError
 from calib_core.predict import ProjectedScan, predict_pixel
-
-from .loupes import ZOOM_FACTOR
-from .security import upload_display_name
 
 #: The pose the render and the BA columns assume before any pose exists.
 DEFAULT_PRESET = "+x"
@@ -37,17 +34,18 @@ def read_extrinsics(path: Path, shown: str | None = None) -> np.ndarray:
         raise CalibError(str(exc).replace(str(path), shown)) from None
 
 
-class LoupeSupport:
-    """The pose the loupes predict with, of one :class:`app.server.CalibrationApp` (``app.loupe_support``).
+class PoseSource:
+    """The pose predictions use, of one :class:`app.server.CalibrationApp` (``app.pose_source``).
 
-    It owns the imported initial extrinsic (:attr:`initial_T_camera_lidar`)
-    and the scan projected under the current pose (cached per pose).  The
-    solve shown comes from ``app.live``.
+    It owns the rough pose (:attr:`initial_T_camera_lidar`), the extrinsic
+    given at start (:attr:`imported_T_camera_lidar`) and the scan projected
+    under the current pose (cached per pose).  The solve comes from the app's
+    ``solve_bundle`` service.
 
     Parameters
     ----------
     app : CalibrationApp
-        The app (its ``live``, ``camera``, ``depth``, ``all_points_lidar``, ``scene_data`` ...).
+        The app (its ``solve_bundle``, ``state``, ``camera``, ``depth``, ``all_points_lidar``, ``scene_data``).
     initial_T_camera_lidar : ndarray, shape (4, 4), optional
         A rough pose to predict with until a solve exists.
     """
@@ -57,6 +55,7 @@ class LoupeSupport:
         self.initial_T_camera_lidar: np.ndarray | None = None
         self._projected: tuple[bytes, ProjectedScan] | None = None
         self._projected_lock = threading.Lock()
+        self._listeners: list[Callable[[], None]] = []
         # The extrinsic given at start (file, bag's /tf_static); a rough pose saved in the session wins over it.
         self.imported_T_camera_lidar: np.ndarray | None = None
         if initial_T_camera_lidar is not None:
@@ -66,10 +65,14 @@ class LoupeSupport:
         if saved:
             self.set_initial_extrinsics(np.array(saved, np.float64).reshape(4, 4))
 
+    def subscribe(self, listener: Callable[[], None]) -> None:
+        """Call ``listener()`` after each new rough pose (:meth:`adopt_rough_pose`), on the adopting thread."""
+        self._listeners.append(listener)
+
     # ------------------------------------------------------------------ pose and predictions
     def pose(self) -> np.ndarray | None:
         """``T_camera_lidar`` predictions use: the last good solve, else the imported initial extrinsic, else None."""
-        bundle = self.app.live.bundle
+        bundle = self.app.solve_bundle
         if bundle is not None:
             return bundle.result.T_camera_lidar
         return self.initial_T_camera_lidar
@@ -77,7 +80,7 @@ class LoupeSupport:
     def view_pose(self) -> tuple[np.ndarray, str]:
         """The pose the camera-view render and the BA columns use, and where it comes from: the last good solve
         (``"solve"``), else the rough pose (``"rough"``), else the "+x" mounting preset (``"default"``)."""
-        bundle = self.app.live.bundle
+        bundle = self.app.solve_bundle
         if bundle is not None:
             return bundle.result.T_camera_lidar, "solve"
         if self.initial_T_camera_lidar is not None:
@@ -115,8 +118,7 @@ class LoupeSupport:
         if T is not None:
             self.projection(T)
 
-    # ------------------------------------------------------------------ initial extrinsics
-
+    # ------------------------------------------------------------------ the rough pose
     def set_initial_extrinsics(self, T_camera_lidar: np.ndarray | None) -> None:
         """Use ``T_camera_lidar`` (4x4) for predictions and "facing the camera" until a solve exists (None: forget it)."""
         if T_camera_lidar is not None:
@@ -128,58 +130,9 @@ class LoupeSupport:
         threading.Thread(target=self._warm_projection, name="ba-calib-projection", daemon=True).start()
 
     def adopt_rough_pose(self, T_camera_lidar: np.ndarray | None) -> None:
-        """Make ``T_camera_lidar`` the rough pose (None: none), save it in the session and redraw what uses it."""
+        """Make ``T_camera_lidar`` the rough pose (None: none), save it in the session and tell the subscribers."""
         self.set_initial_extrinsics(T_camera_lidar)
         saved = () if self.initial_T_camera_lidar is None else tuple(self.initial_T_camera_lidar.reshape(-1))
         self.app.state.set_view(rough_T_camera_lidar=saved)
-        self._after_initial_extrinsics()
-
-    def _after_initial_extrinsics(self) -> None:
-        """Redraw predictions and the facing window once an initial extrinsic is imported."""
-        app = self.app
-        if app.state.view.ba_window_mode == "camera" and app.live.bundle is None:
-            app.live.ensure_facing()
-            app.view.apply_ba_window()
-        if getattr(app, "render_pane", None) is not None:
-            app.render_pane.request()
-            app.align.show()
-        app.overlays.invalidate()
-        app.overlays.refresh()
-        app.live.show_panels()
-        guide = getattr(app, "guide", None)
-        if guide is not None:  # proposals can start from the imported pose
-            guide.update()
-
-    def add_upload_button(self, client: Any) -> None:
-        """This tab's "Import initial extrinsics" button, in the Align folder (each tab gets its own)."""
-        app = self.app
-        with app.page.folder_lock:
-            with app.align.folder:
-                button = client.gui.add_upload_button(
-                    "Import initial extrinsics", icon=viser.Icon.UPLOAD, mime_type="*/*",
-                    hint="A rough pose (any extrinsics format ba-calib reads): predictions and 'Facing the camera' "
-                         "work before 4 pairs")
-        button.on_upload(app.guard(lambda event: self.receive_initial_extrinsics(
-            event.client, getattr(event.value, "name", ""), getattr(event.value, "content", b""))))
-
-    def receive_initial_extrinsics(self, client: Any, name: str, content: bytes) -> None:
-        """Import an uploaded extrinsics file as the initial pose (the upload button's handler)."""
-        shown = upload_display_name(name)
-        if not content:
-            raise CalibError(f"{shown}: the file is empty")
-        suffix = Path(str(name)).suffix.lower()
-        suffix = suffix if suffix in (".yaml", ".yml", ".json", ".txt", ".urdf", ".xml", ".launch", ".py") else ".txt"
-        with tempfile.TemporaryDirectory() as tmp:
-            path = Path(tmp) / f"upload{suffix}"
-            path.write_bytes(content)
-            T = read_extrinsics(path, shown)
-        self.app.align.adopt(T)
-        app = self.app
-        app.notify(client, "Initial extrinsics imported",
-                     f"{shown}: predictions use it until {4} pairs are solved", color="green")
-
-    def on_loupe_zoom(self, event: Any) -> None:
-        """The "Loupe zoom" buttons: magnify or widen one loupe around the same centre."""
-        kind, step = {"BA +": ("ba", ZOOM_FACTOR), "BA -": ("ba", 1 / ZOOM_FACTOR),
-                      "Camera +": ("camera", ZOOM_FACTOR), "Camera -": ("camera", 1 / ZOOM_FACTOR)}[str(event.value)]
-        self.app.loupes.zoom(kind, step)
+        for listener in list(self._listeners):
+            listener()
