@@ -24,6 +24,7 @@ from calib_core.errors import CalibError
 from calib_core.predict import ellipse_outline
 
 from .layout import ImageSlot, LoupeArea, bounds_of, loupe_areas
+from .loupe_framing import PairClick, follow_click
 from .loupe_crops import CAMERA_LOUPE_PX, BaCrop, CameraCrop, default_camera_crop_px, node_name, slot_key
 from .loupe_marks import LEGEND, ba_title, camera_title, draw_camera_marks, tick_segments
 from .ui_common import marker_segments
@@ -176,6 +177,15 @@ class Loupes:
                 c = self.camera_crop
                 self.camera_crop = self._make_camera_crop(*c.center, c.cov_px2)
             self._show(kind)
+
+    def on_pair_click(self, click: PairClick) -> None:
+        """Follow a click on the images (:meth:`app.pairs_panel.PairsPanel.subscribe_clicks`)."""
+        follow_click(self, self.app, click)
+
+    def on_pair_cancelled(self) -> None:
+        """A half-made pair was cancelled: a guided proposal's ellipse in the camera loupe goes too."""
+        if self.camera_crop.cov_px2 is not None:
+            self.frame_camera(*self.camera_crop.center)
 
     def show_click(self, kind: str, point: tuple) -> None:
         """Name a click made inside loupe ``kind`` in its title: scan cell ``(row, col)`` (BA) or original pixel

@@ -14,6 +14,7 @@ from calib_core.errors import CalibError
 from calib_core.panorama import refine_click_to_corner
 
 from .layout import RENDER_KEY
+from .loupe_framing import PairClick
 from .page_builder import install_page_script
 from .pair_bar import PAIR_BAR_JS, PairBar, undo_note
 from .pairs_import import import_upload
@@ -21,9 +22,6 @@ from .ui_common import MIN_PAIRS, PICK_RADII, SNAP_RADIUS_PX
 
 #: The buttons at the top of the control panel ("Next pair" is guided picking's own).
 PAIR_ACTIONS = ("Undo", "Cancel pair", "Next pair")
-#: After a refining click in one loupe the other keeps its view while the pair's other end lies at least this
-#: share of its side from its edges.
-STEADY_MARGIN = 0.15
 
 
 class PairsPanel:
@@ -32,7 +30,7 @@ class PairsPanel:
     It owns its widgets (built here, where the folder goes on the page) and
     what each tab clicked last (:meth:`last_click`, :meth:`camera_click_source`).
     Every change goes through ``app.state``; the clicks are mapped through the
-    app's page layout, loupes and predictions (``app.pose_source``).
+    app's page layout, and published (:meth:`subscribe_clicks`: the loupes follow them).
     """
 
     def __init__(self, app: Any) -> None:
@@ -41,6 +39,8 @@ class PairsPanel:
         self._last_pick: dict[Any, tuple] = {}  # client id -> (kind, pick id, "full" | "loupe")
         self._loupes_pick: int | None = None  # the pair the loupes were last framed on (refining it keeps them still)
         self._undo_note: tuple[int, str] = (-1, "")  # (state version, what the last top Undo took back)
+        self._click_listeners: list[Callable[[PairClick], None]] = []
+        self._cancel_listeners: list[Callable[[], None]] = []
         gui, guard = app.server.gui, app.guard
         # The pair actions first in the panel, near the loupes: in the by-eye trials Undo and Next pair were many
         # wheel scrolls apart.  Buttons above the status line, so that they never move as the text changes.
@@ -91,6 +91,20 @@ class PairsPanel:
     def dropdown_value(self) -> str:
         """What the "Selected pair" dropdown shows."""
         return str(self._dd_selected.value)
+
+    # ------------------------------------------------------------------ events
+    def subscribe_clicks(self, listener: Callable[[PairClick], None]) -> None:
+        """Call ``listener(click)`` after each click on an image is applied (or refused by the state), on the
+        action worker, before the loupes' marks are drawn (the loupes follow the clicks)."""
+        self._click_listeners.append(listener)
+
+    def subscribe_cancel(self, listener: Callable[[], None]) -> None:
+        """Call ``listener()`` after "Cancel pair" dropped a half-made pair."""
+        self._cancel_listeners.append(listener)
+
+    def _publish_click(self, click: PairClick) -> None:
+        for listener in list(self._click_listeners):
+            listener(click)
 
     # ------------------------------------------------------------------ per-tab memory
     def last_click(self, client_id: int) -> tuple | None:
@@ -243,14 +257,10 @@ class PairsPanel:
             _, ba_key, row, col = target
             try:
                 out = self.app.state.move_laser(pick_id, row, col) if pick_id is not None else self.app.state.click_laser(row, col)
-            except CalibError:
-                if source == "full":  # e.g. a cell with no return: still bring the loupe there to pick a good one
-                    self.app.loupes.frame_ba(ba_key, row, col)
+            except CalibError:  # e.g. a cell with no return: the loupe still goes there, to pick a good one
+                self._publish_click(PairClick(key, target, None))
                 raise
             last_click: tuple = ("ba", ba_key, row, col)
-            # The laser loupe shows the render's crop after a click on the render (or in that loupe), else the BA's.
-            from_render = key == RENDER_KEY or (key == "loupe_ba" and self.app.loupes.shows_render)
-            self.app.loupes.show_render(from_render)
         else:
             _, u, v = target
             out = self.app.state.move_pixel(pick_id, u, v) if pick_id is not None else self.app.state.click_pixel(u, v)
@@ -264,76 +274,13 @@ class PairsPanel:
         if client is not None:
             self._last_click[cid] = last_click
         self._last_pick[cid] = (kind, out, source)
-        if source == "loupe" and out == self._loupes_pick:
-            # A refining click inside a loupe: the loupes keep their crops (the next click may be planned from this
-            # look); the clicked loupe's title names the new cell or pixel.  The other loupe moves only if the
-            # pair's other end (or its prediction) would leave its middle.
-            self.app.loupes.show_click(kind, target[2:] if kind == "ba" else target[1:])
-            self._keep_other_end_shown(kind, out)
+        if source == "loupe" and out == self._loupes_pick:  # a refining click inside a loupe: they keep their crops
+            self._publish_click(PairClick(key, target, out, refines_loupes=True))
             return out
         self._loupes_pick = out
-        self._frame_loupes(target, out, recentre=source == "full",
-                           render_uv=self.app.render_pane.last_pixel if key == RENDER_KEY else None)
+        self._publish_click(PairClick(key, target, out, render_uv=(
+            self.app.render_pane.last_pixel if key == RENDER_KEY else None)))
         return out
-
-    def _keep_other_end_shown(self, clicked: str, pick_id: int) -> None:
-        """After a refining click in loupe ``clicked``: frame the other loupe on pick ``pick_id``'s other end (or
-        its prediction) only if that is not inside the middle of what it shows (a margin of
-        :data:`STEADY_MARGIN` of its side)."""
-        loupes, support = self.app.loupes, self.app.pose_source
-        pick = next((p for p in self.app.state.picks if p.id == pick_id), None)
-        if pick is None or (clicked == "camera" and loupes.shows_render):
-            return  # the laser loupe shows the camera loupe's crop of the render: both stay
-        if clicked == "ba":
-            uv = pick.pixel if pick.pixel is not None else (
-                None if pick.laser_rc is None else support.predict_pixel(*pick.laser_rc))
-            if uv is not None and not self._well_inside("camera", (uv[0], uv[1])):
-                loupes.frame_camera(*uv)
-            return
-        cell = pick.laser_rc if pick.laser_rc is not None else (
-            None if pick.pixel is None else support.predict_cell(*pick.pixel))
-        if cell is not None and not self._well_inside("ba", (cell[1], cell[0])):
-            loupes.frame_ba(loupes.ba_crop.key, *cell)
-
-    def _well_inside(self, kind: str, target: tuple[float, float]) -> bool:
-        """Does loupe ``kind`` show ``target`` (``(col, row)`` of a cell or an original pixel) away from its edges?"""
-        shown = self.app.loupes.display_of(kind, target)
-        if shown is None:
-            return False
-        slot = self.app.loupes.slot(kind)
-        mx, my = STEADY_MARGIN * slot.width_px, STEADY_MARGIN * slot.height_px
-        return (mx - 0.5 <= shown[0] <= slot.width_px - 0.5 - mx
-                and my - 0.5 <= shown[1] <= slot.height_px - 0.5 - my)
-
-    def _frame_loupes(self, target: tuple, pick_id: int, recentre: bool,
-                      render_uv: tuple[float, float] | None = None) -> None:
-        """After a click: the clicked loupe on the click, the other loupe on the pair's other end or its prediction
-        (a click on the render: the camera loupe on the clicked pixel, the laser loupe showing the same crop)."""
-        pick = next((p for p in self.app.state.picks if p.id == pick_id), None)
-        if target[0] == "ba":
-            if recentre:
-                self.app.loupes.frame_ba(*target[1:])
-            else:  # a click inside the loupe: it keeps its view, its title names the new cell
-                self.app.loupes.show_click("ba", target[2:])
-            if pick is not None and pick.pixel is not None:
-                self.app.loupes.frame_camera(*pick.pixel)
-            elif render_uv is not None:
-                self.app.loupes.frame_camera(*render_uv)
-            else:
-                predicted = self.app.pose_source.predict_pixel(target[2], target[3])
-                if predicted is not None:
-                    self.app.loupes.frame_camera(*predicted)
-        else:
-            if recentre:
-                self.app.loupes.frame_camera(target[1], target[2])
-            else:
-                self.app.loupes.show_click("camera", target[1:])
-            if pick is not None and pick.laser_rc is not None:
-                self.app.loupes.frame_ba(self.app.loupes.ba_crop.key, *pick.laser_rc)
-            else:
-                cell = self.app.pose_source.predict_cell(target[1], target[2])
-                if cell is not None:
-                    self.app.loupes.frame_ba(self.app.loupes.ba_crop.key, *cell)
 
     def _original_from_display(self, uv: tuple[float, float]) -> tuple[float, float]:
         """Original camera pixel of a click on the visible camera view."""
@@ -415,9 +362,8 @@ class PairsPanel:
             state.select(None)
             return
         state.delete(pending.id)
-        loupes = getattr(self.app, "loupes", None)
-        if loupes is not None and loupes.camera_crop.cov_px2 is not None:  # a guided proposal's ellipse goes too
-            loupes.frame_camera(*loupes.camera_crop.center)
+        for listener in list(self._cancel_listeners):  # e.g. a guided proposal's ellipse in the camera loupe goes
+            listener()
 
     def on_edit(self, event: Any) -> None:
         action = event.value

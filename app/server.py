@@ -172,6 +172,8 @@ class CalibrationApp:
             self.align = AlignPanel(self, order=self.pairs_folder.order - 0.5)  # rough pose; first folder
             self.loupes = Loupes(self)  # the magnified BA and camera panes (public: frame_ba, frame_camera)
             self.overlays.subscribe(self.loupes.draw_marks)  # the loupes show the marks magnified
+            self.pairs_panel.subscribe_clicks(self.loupes.on_pair_click)  # the loupes follow each click
+            self.pairs_panel.subscribe_cancel(self.loupes.on_pair_cancelled)
             self.format_export = FormatExportPanel(self)  # verify: its own widgets (formats, reference import)
             self.display.subscribe(self._on_display_change)
             self.server.on_client_connect(self._on_connect)

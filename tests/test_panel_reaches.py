@@ -125,9 +125,7 @@ ALLOWED: dict[str, dict[str, int]] = {
         "render_pane.target_at": 1},
     "app.overlay_drawing": {"loupes.display_of": 1},
     "app.page_builder": {"pairs_panel": 1},
-    "app.pairs_panel": {"align.drag_enabled": 1, "display.ba_display": 2, "guide.callback": 1, "live": 1, "loupes": 2,
-        "loupes.ba_crop": 2, "loupes.display_of": 1, "loupes.frame_ba": 4, "loupes.frame_camera": 4,
-        "loupes.show_click": 3, "loupes.show_render": 1, "loupes.shows_render": 1, "loupes.slot": 1,
+    "app.pairs_panel": {"align.drag_enabled": 1, "display.ba_display": 2, "guide.callback": 1, "live": 1,
         "loupes.target_at": 1, "overlays.loupe_marks_after": 1, "overlays.pick_ends": 1, "overlays.predicted_pixels":
         1, "overlays.ring_radius": 1, "page.folder_lock": 1, "page.intro": 1, "render_pane.last_pixel": 1,
         "render_pane.target_at": 1, "view.units_per_screen_px": 1},
