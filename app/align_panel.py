@@ -100,7 +100,7 @@ class AlignPanel:
             node.on_drag(plain)
             # The pairs panel's marker drag (registered with the node) stands aside while aligning.
             marker = (app.render_pane.overlay_drag_callback if key == "camera_overlay"
-                      else app.pairs_panel.make_drag_handler(key))
+                      else app.make_drag_handler(key))
             self._callbacks[(key, None)] = [marker, plain]
         self.show()
 
@@ -238,7 +238,7 @@ class AlignPanel:
     def add_upload_button(self, client: Any) -> None:
         """This tab's "Import initial extrinsics" button, in the Align folder (each tab gets its own)."""
         app = self.app
-        with app.page.folder_lock:
+        with app.folder_lock:
             with self.folder:
                 button = client.gui.add_upload_button(
                     "Import initial extrinsics", icon=viser.Icon.UPLOAD, mime_type="*/*",

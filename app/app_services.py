@@ -72,6 +72,8 @@ class AppServices(Protocol):
         The pairs and the view settings (``state.view``); every change goes through it.
     ui_lock : UiLock
         Held while the scene and the panels are redrawn; hold it to read or change several widgets at once.
+    folder_lock : threading.Lock
+        Held while one tab's own widgets are added into a shared folder (one GUI context at a time).
     depth, camera, image
         The scan's depth matrix, the camera model and the camera image (original pixels).
     ba_keys : tuple of str
@@ -125,6 +127,7 @@ class AppServices(Protocol):
     server: Any
     state: AnnotationState
     ui_lock: UiLock
+    folder_lock: Any
     depth: Any
     camera: Any
     image: np.ndarray
@@ -184,6 +187,9 @@ class AppServices(Protocol):
 
     def make_click_handler(self, key: str) -> Callable:
         """The on-click callback of image slot ``key`` (adds or moves a pair end)."""
+
+    def make_drag_handler(self, key: str) -> Callable:
+        """The on-drag callback of image slot ``key`` (drags a pair end; a shaky click is a click)."""
 
     def make_select_handler(self, key: str) -> Callable:
         """The Shift+click callback of image slot ``key`` (selects the nearest pair)."""

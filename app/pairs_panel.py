@@ -33,7 +33,7 @@ class PairsPanel:
     app's page layout, and published (:meth:`subscribe_clicks`: the loupes follow them).
     """
 
-    def __init__(self, app: Any) -> None:
+    def __init__(self, app: Any, top: float) -> None:
         self.app = app
         self._last_click: dict[int, tuple] = {}  # client id -> ("ba", key, row, col) or ("camera", u, v)
         self._last_pick: dict[Any, tuple] = {}  # client id -> (kind, pick id, "full" | "loupe")
@@ -44,7 +44,7 @@ class PairsPanel:
         gui, guard = app.server.gui, app.guard
         # The pair actions first in the panel, near the loupes: in the by-eye trials Undo and Next pair were many
         # wheel scrolls apart.  Buttons above the status line, so that they never move as the text changes.
-        top = app.page.intro.order
+        # ``top``: the GUI order of the intro text, which they go just above.
         self.pair_action_callback = self._on_pair_action_event
         self._bg_actions = gui.add_button_group("Pair", PAIR_ACTIONS, order=top - 1.0)
         self._bg_actions.on_click(self.pair_action_callback)
@@ -390,7 +390,7 @@ class PairsPanel:
 
     def add_upload_button(self, client: Any) -> None:
         """This tab's own "Import pairs YAML" button, in the shared Pairs folder above "Download pairs YAML"."""
-        with self.app.page.folder_lock:  # a folder is one GUI context at a time
+        with self.app.folder_lock:  # a folder is one GUI context at a time
             with self.folder:
                 button = client.gui.add_upload_button("Import pairs YAML", icon=viser.Icon.UPLOAD, mime_type="*/*",
                                                       order=self._btn_pairs.order - 0.5)

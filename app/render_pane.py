@@ -103,7 +103,7 @@ class RenderPane:
         # The copy over the photo answers as the camera view under it does (same place, same pixels).
         self._overlay.on_click(self._as_camera_view(app.make_click_handler))
         self._overlay.on_click(modifier="shift")(self._as_camera_view(app.make_select_handler))
-        self.overlay_drag_callback = self._as_camera_view(app.pairs_panel.make_drag_handler)
+        self.overlay_drag_callback = self._as_camera_view(app.make_drag_handler)
         self._overlay.on_drag(self.overlay_drag_callback)
         self._worker = LiveSolver(self._render_job, self._on_rendered, name="ba-calib-render")
 

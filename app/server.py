@@ -9,6 +9,7 @@ loupes.  A BA click and a camera click, in either order, make a pair; from 4 pai
 from __future__ import annotations
 
 import os
+import threading
 import traceback
 from pathlib import Path
 from typing import Any, Callable
@@ -134,6 +135,7 @@ class CalibrationApp:
         self.session_path = self.state.session_path or self.session_path
         self.active_shot = self.state.active_shot  # the shot these panes show
         self.ui_lock = UiLock()  # public: held while the scene and the panels are redrawn
+        self.folder_lock = threading.Lock()  # held while one tab's own widgets go into a shared folder
         self.display = DisplayPanel(self)  # the laser panes' grey levels, with the saved contrast
         self.live = LiveSolveCoordinator(self)  # the solve shown; its threads start with the page
         self.pose_source = PoseSource(self, initial_T)  # the pose predictions use (solved, else rough)
@@ -158,7 +160,7 @@ class CalibrationApp:
             self.cloud = CloudPane(self.server.scene, self.cloud_points_lidar)  # the 3-D pane
             # The control panel's folders in page order; each panel builds its own widgets.
             self.page = PageBuilder(self)  # theme, intro text, backdrop
-            self.pairs_panel = PairsPanel(self)  # "Pairs" folder and the clicks on the images
+            self.pairs_panel = PairsPanel(self, top=self.page.intro.order)  # "Pairs" folder, clicks on the images
             self.pairs_folder = self.pairs_panel.folder  # guided picking goes below it
             self.subscribe_solve(lambda shown: self.pairs_panel.refresh())  # after the overlays' (OverlayDrawing)
             self.calibration_panel = CalibrationPanel(self.server.gui)
@@ -284,6 +286,10 @@ class CalibrationApp:
     def make_click_handler(self, key: str) -> Callable:
         """The on-click callback of image slot ``key`` (:meth:`PairsPanel.make_click_handler`)."""
         return self.pairs_panel.make_click_handler(key)
+
+    def make_drag_handler(self, key: str) -> Callable:
+        """The on-drag callback of image slot ``key`` (:meth:`PairsPanel.make_drag_handler`: moves a pair end)."""
+        return self.pairs_panel.make_drag_handler(key)
 
     def make_select_handler(self, key: str) -> Callable:
         """The Shift+click callback of image slot ``key`` (:meth:`PairsPanel.make_select_handler`)."""
