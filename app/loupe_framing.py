@@ -34,6 +34,8 @@ class PairClick:
         A click inside a loupe on the pair the loupes show: they keep their crops.
     render_uv : (u, v) or None
         The camera pixel of a click on the render (original pixels).
+    client_id : int or None
+        The tab that clicked (None: not from a tab).
     """
 
     key: str
@@ -41,6 +43,7 @@ class PairClick:
     pick_id: int | None
     refines_loupes: bool = False
     render_uv: tuple[float, float] | None = None
+    client_id: int | None = None
 
     @property
     def on_full_image(self) -> bool:

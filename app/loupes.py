@@ -194,6 +194,12 @@ class Loupes:
             self._clicked[kind] = tuple(point)
             self._titles[kind].text = self.title(kind)
 
+    def follow_layout(self, moved: bool) -> None:
+        """The page layout changed (:meth:`app.view_panel.ViewPanel.subscribe_layout`): if the images moved, the
+        loupes go beside the new images, not where the old ones ended."""
+        if moved:
+            self.relayout()
+
     def relayout(self) -> None:
         """Place both loupes beside the images again (the page layout changed, e.g. another BA column window)."""
         app = self.app

@@ -119,6 +119,11 @@ class PageBuilder:
         if title is not None:
             self._ba_titles[key].text = title
 
+    def show_ba_window(self, shown: Any) -> None:
+        """Show the BA images as :class:`app.view_panel.BaWindowShown` ``shown`` says (textures, places, titles)."""
+        for key, texture in shown.textures.items():
+            self.set_ba(key, texture=texture, slot=shown.slots[key], title=shown.titles[key])
+
     def show_camera_view(self, key: str, slot: Any, title: str) -> None:
         """Show camera view ``key`` (hide the other) with ``title`` above its ``slot``."""
         for k in self.app.camera_views:

@@ -28,14 +28,13 @@ class PairsPanel:
     """The "Pairs" folder of one :class:`app.server.CalibrationApp` (``app.pairs_panel``) and the clicks on the images.
 
     It owns its widgets (built here, where the folder goes on the page) and
-    what each tab clicked last (:meth:`last_click`, :meth:`camera_click_source`).
+    where each tab's last camera click landed (:meth:`camera_click_source`).
     Every change goes through ``app.state``; the clicks are mapped through the
     app's page layout, and published (:meth:`subscribe_clicks`: the loupes follow them).
     """
 
     def __init__(self, app: Any, top: float) -> None:
         self.app = app
-        self._last_click: dict[int, tuple] = {}  # client id -> ("ba", key, row, col) or ("camera", u, v)
         self._last_pick: dict[Any, tuple] = {}  # client id -> (kind, pick id, "full" | "loupe")
         self._loupes_pick: int | None = None  # the pair the loupes were last framed on (refining it keeps them still)
         self._undo_note: tuple[int, str] = (-1, "")  # (state version, what the last top Undo took back)
@@ -107,14 +106,6 @@ class PairsPanel:
             listener(click)
 
     # ------------------------------------------------------------------ per-tab memory
-    def last_click(self, client_id: int) -> tuple | None:
-        """Tab ``client_id``'s last click: ``("ba", key, row, col)`` or ``("camera", u, v)``, or None."""
-        return self._last_click.get(client_id)
-
-    def forget_tab(self, client_id: int) -> None:
-        """Forget what a closed tab clicked."""
-        self._last_click.pop(client_id, None)
-
     def camera_click_source(self, pick_id: int) -> str | None:
         """Where the last camera click on pick ``pick_id`` landed in its tab: ``"loupe"``, ``"full"`` or None."""
         for kind, pid, where in list(self._last_pick.values()):
@@ -254,32 +245,28 @@ class PairsPanel:
         moves_selected = pick_id is None and self.app.state.selected is not None
         refined = None if pick_id is None else next((p for p in self.app.state.picks if p.id == pick_id), None)
         if kind == "ba":
-            _, ba_key, row, col = target
+            _, _, row, col = target
             try:
                 out = self.app.state.move_laser(pick_id, row, col) if pick_id is not None else self.app.state.click_laser(row, col)
             except CalibError:  # e.g. a cell with no return: the loupe still goes there, to pick a good one
-                self._publish_click(PairClick(key, target, None))
+                self._publish_click(PairClick(key, target, None, client_id=cid))
                 raise
-            last_click: tuple = ("ba", ba_key, row, col)
         else:
             _, u, v = target
             out = self.app.state.move_pixel(pick_id, u, v) if pick_id is not None else self.app.state.click_pixel(u, v)
-            last_click = ("camera", u, v)
         if moves_selected:
             self.app.state.select(None)
         if refined is not None and refined in self.app.state.picks:  # run 4: refining clicks that moved nothing
             what = f"the same cell (row {target[2]}, column {target[3]})" if kind == "ba" else "the same pixel"
             self.app.notify(client, "No change", f"Pair {out}: {what} as before; click one cell or pixel farther "
                                                  "off to move it.", color="yellow")
-        if client is not None:
-            self._last_click[cid] = last_click
         self._last_pick[cid] = (kind, out, source)
         if source == "loupe" and out == self._loupes_pick:  # a refining click inside a loupe: they keep their crops
-            self._publish_click(PairClick(key, target, out, refines_loupes=True))
+            self._publish_click(PairClick(key, target, out, refines_loupes=True, client_id=cid))
             return out
         self._loupes_pick = out
         self._publish_click(PairClick(key, target, out, render_uv=(
-            self.app.render_pane.last_pixel if key == RENDER_KEY else None)))
+            self.app.render_pane.last_pixel if key == RENDER_KEY else None), client_id=cid))
         return out
 
     def _original_from_display(self, uv: tuple[float, float]) -> tuple[float, float]:

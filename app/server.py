@@ -166,16 +166,21 @@ class CalibrationApp:
             self.calibration_panel = CalibrationPanel(self.server.gui)
             self.subscribe_solve(self.calibration_panel.on_solve_shown)
             self.view = ViewPanel(self)  # "View" folder, the BA column window, the page layout, each tab's camera
+            self.view.subscribe_window(self.page.show_ba_window)  # the BA images follow the window and layout
+            self.view.subscribe_layout(lambda moved: self.overlays.refresh())  # the marks follow the images
             self.export_panel = ExportPanel(self)
             self.page.add_images({k: self.view.ba_texture(k) for k in self.ba_keys},
                                  {k: self.view.ba_title(k) for k in self.ba_keys})
             self.view.update_camera_title()
             self.render_pane = RenderPane(self)  # the scan seen from the camera, below the camera image
+            self.view.subscribe_window(lambda shown: self.render_pane.place())
             self.align = AlignPanel(self, order=self.pairs_folder.order - 0.5)  # rough pose; first folder
             self.loupes = Loupes(self)  # the magnified BA and camera panes (public: frame_ba, frame_camera)
             self.overlays.subscribe(self.loupes.draw_marks)  # the loupes show the marks magnified
             self.pairs_panel.subscribe_clicks(self.loupes.on_pair_click)  # the loupes follow each click
             self.pairs_panel.subscribe_cancel(self.loupes.on_pair_cancelled)
+            self.pairs_panel.subscribe_clicks(self.view.on_pair_click)  # "Zoom on last click"
+            self.view.subscribe_layout(self.loupes.follow_layout)  # after the marks' redraw
             self.format_export = FormatExportPanel(self)  # verify: its own widgets (formats, reference import)
             self.display.subscribe(self._on_display_change)
             self.server.on_client_connect(self._on_connect)
@@ -242,7 +247,6 @@ class CalibrationApp:
             guide.update()
 
     def _on_disconnect(self, client: Any) -> None:
-        self.pairs_panel.forget_tab(client.client_id)
         self.view.forget_tab(client.client_id)
 
     def _on_save_error(self, message: str) -> None:

@@ -6,7 +6,8 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Any
+from dataclasses import dataclass
+from typing import Any, Callable
 
 import numpy as np
 
@@ -23,6 +24,21 @@ from .ui_common import (
     MIN_PAIRS, CLOUD_ORIGIN, PANEL_PX, ZOOM_PX_PER_CELL, ZOOM_PX_PER_IMAGE_PX, ZOOM_STEP,
 )
 from .view_settings import BA_WINDOW_MODES, UP_AXES
+
+
+@dataclass(frozen=True)
+class BaWindowShown:
+    """What the BA images show after the column window or the page layout changed (the page places them).
+
+    Attributes
+    ----------
+    textures, titles, slots : dict
+        By BA key: the texture (cut to the window, enlarged), the title and the page slot.
+    """
+
+    textures: dict
+    titles: dict
+    slots: dict
 
 
 class ViewPanel:
@@ -42,6 +58,9 @@ class ViewPanel:
         self._framed: dict[int, bool] = {}  # client id -> its view is the app's framing (not zoomed since)
         self._canvas_size: dict[int, tuple[int, int] | None] = {}  # client id -> canvas size last reported
         self._loupe_rects: dict[int, dict] = {}  # client id -> where the loupes lie on its canvas, as last sent
+        self._last_click: dict[int, tuple] = {}  # client id -> ("ba", key, row, col) or ("camera", u, v)
+        self._window_listeners: list[Callable[[BaWindowShown], None]] = []
+        self._layout_listeners: list[Callable[[bool], None]] = []
         install_page_script(app.server, LOUPE_WHEEL_JS)  # the wheel over a loupe zooms the loupe
         self._ba_window = self._wanted_ba_window()
         self.slots: dict[str, ImageSlot] = self._layout()
@@ -82,6 +101,26 @@ class ViewPanel:
             app.display.add_edge_control(gui)
             up = gui.add_dropdown("3D up axis (lidar)", tuple(UP_AXES), initial_value=view.up_axis)
             up.on_update(guard(self.on_up_axis))
+
+    # ------------------------------------------------------------------ events
+    def subscribe_window(self, listener: Callable[[BaWindowShown], None]) -> None:
+        """Call ``listener(shown)`` when the BA column window or the page layout changed, under the UI lock and in
+        the change's message batch (the page's images and the render follow the new slots)."""
+        self._window_listeners.append(listener)
+
+    def subscribe_layout(self, listener: Callable[[bool], None]) -> None:
+        """Call ``listener(moved)`` after that, outside the message batch: ``moved`` when the slots changed size or
+        place (not only the first column shown), e.g. the marks are redrawn, the loupes placed beside the images."""
+        self._layout_listeners.append(listener)
+
+    def on_pair_click(self, click: Any) -> None:
+        """Remember each tab's last applied click (:meth:`app.pairs_panel.PairsPanel.subscribe_clicks`)."""
+        if click.pick_id is not None and click.client_id is not None:
+            self._last_click[click.client_id] = click.target
+
+    def last_click(self, client_id: int) -> tuple | None:
+        """Tab ``client_id``'s last click: ``("ba", key, row, col)`` or ``("camera", u, v)``, or None."""
+        return self._last_click.get(client_id)
 
     @property
     def ba_window(self) -> ColumnWindow:
@@ -135,17 +174,17 @@ class ViewPanel:
             self._ba_window = window
             old_slots, self.slots = self.slots, self._layout()
             with self.app.server.atomic():
-                for key in self.app.ba_keys:
-                    self.app.page.set_ba(key, texture=self.ba_texture(key), slot=self.slots[key],
-                                         title=self.ba_title(key))
-                if getattr(self.app, "render_pane", None) is not None:
-                    self.app.render_pane.place()
+                keys = self.app.ba_keys
+                shown = BaWindowShown({k: self.ba_texture(k) for k in keys}, {k: self.ba_title(k) for k in keys},
+                                      {k: self.slots[k] for k in keys})
+                for listener in list(self._window_listeners):
+                    listener(shown)
             self.sync_window_widgets(typed)
-        self.app.overlays.refresh()
-        if self.slots == old_slots:
+        moved = self.slots != old_slots
+        for listener in list(self._layout_listeners):
+            listener(moved)
+        if not moved:
             return  # same size (only the first column moved): keep every tab's zoom and pan
-        if getattr(self.app, "loupes", None) is not None:
-            self.app.loupes.relayout()  # beside the new images, not where the old ones ended
         clients = self.app.server.get_clients()
         for cid, mode in list(self._client_mode.items()):
             if mode != "3d" and cid in clients:
@@ -253,6 +292,7 @@ class ViewPanel:
     def forget_tab(self, client_id: int) -> None:
         """Forget a closed tab (the 3-D pane hides when no tab shows it)."""
         self._client_mode.pop(client_id, None)
+        self._last_click.pop(client_id, None)
         self._view_target.pop(client_id, None)
         self._framed.pop(client_id, None)
         self._canvas_size.pop(client_id, None)
@@ -347,7 +387,7 @@ class ViewPanel:
     def _zoom_on_last(self, client: Any) -> None:
         """Centre the last click and magnify one step (``ZOOM_STEP``), up to ``ZOOM_PX_PER_CELL`` per BA cell
         or ``ZOOM_PX_PER_IMAGE_PX`` per camera pixel: each press keeps the surroundings in view."""
-        last = self.app.pairs_panel.last_click(client.client_id)
+        last = self.last_click(client.client_id)
         if last is None:
             raise CalibError("nothing clicked yet in this tab: click a BA or camera image first")
         with self.app.ui_lock:

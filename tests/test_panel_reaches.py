@@ -132,8 +132,7 @@ ALLOWED: dict[str, dict[str, int]] = {
     "app.render_pane": {"align": 3, "loupes": 1, "loupes.ba_crop": 1, "pairs_panel.click_at": 1},
     "app.view_panel": {"cloud.visible": 1, "display.add_edge_control": 1, "display.add_last_pane_control": 1,
         "display.ba_display": 1, "display.ba_title": 1, "live.ensure_facing": 1, "live.facing": 4,
-        "live.request_cloud": 1, "loupes": 2, "loupes.relayout": 1, "overlays.refresh": 2, "page.set_ba": 1,
-        "page.show_camera_view": 1, "pairs_panel.last_click": 1, "render_pane": 1, "render_pane.place": 1},
+        "live.request_cloud": 1, "loupes": 1, "overlays.refresh": 1, "page.show_camera_view": 1},
 }
 
 
@@ -209,7 +208,7 @@ def mutual_reaches(graph: dict[str, set[str]]) -> list[tuple[str, str]]:
 #: view <-> live solve, live solve <-> loupe support, ...).  Only shrinks.
 MUTUAL = [
     ("app.align_panel", "app.render_pane"), ("app.guide_panel", "app.pairs_panel"), ("app.loupes",
-    "app.render_pane"), ("app.pairs_panel", "app.render_pane"), ("app.pairs_panel", "app.view_panel"),
+    "app.render_pane"), ("app.pairs_panel", "app.render_pane"),
 ]
 
 
