@@ -163,6 +163,10 @@ class AppServices(Protocol):
     def subscribe_solved(self, listener: Callable[[Any], None]) -> None:
         """Call ``listener(shown)`` after each finished solve is shown (outside the UI lock)."""
 
+    def solve_shown(self) -> Any:
+        """What the live solve shows now (:class:`app.ui_common.SolveShown`: the last good solve, its error, whether a
+        newer solve runs, the complete pairs), as its events pass it."""
+
     def guard(self, fn: Callable[[Any], None]) -> Callable:
         """A viser callback that queues ``fn(action)`` on the ordered action worker (errors become notifications)."""
 

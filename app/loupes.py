@@ -151,6 +151,12 @@ class Loupes:
                 self.shows_render = bool(on)
                 self._show("ba")
 
+    def on_render(self, what: str) -> None:
+        """The render pane changed (:meth:`app.render_pane.RenderPane.subscribe`): a new render is shown in the laser
+        loupe while that shows the render's crop."""
+        if what == "render" and self.shows_render:
+            self.refresh_ba()
+
     def refresh_ba(self) -> None:
         """Re-send the laser loupe (e.g. a new render arrived)."""
         with self.app.ui_lock:

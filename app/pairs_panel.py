@@ -147,7 +147,7 @@ class PairsPanel:
                 status.append(f"Pair {selected} selected: the next click moves it (**Cancel pair** deselects).")
             if self._md_status.content != "  \n".join(status):
                 self._md_status.content = "  \n".join(status)
-            self.bar.show_live(getattr(app, "live", None))
+            self.bar.show_live(app.solve_shown())
             left_out = [f"#{p.id}" for p in complete if p.check]
             if left_out:
                 lines.append(f"Left out of the fit (check pairs): {', '.join(left_out)}.")

@@ -18,7 +18,7 @@ import dataclasses
 import math
 import time
 import traceback
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -88,6 +88,7 @@ class RenderPane:
         self._marks_of: tuple | None = None
         self._stopped = False
         self._placed: tuple | None = None  # (render slot, camera slot, camera view) the nodes were placed for
+        self._listeners: list[Callable[[str], None]] = []
         scene = app.server.scene
         self._handle = scene.add_image(NODE, np.full((2, 2, 3), NO_RETURN_RGB, np.uint8), 1.0, 1.0, format="png")
         self._title = scene.add_label("/annot/titles/render", "Camera-view laser: rendering ...",
@@ -106,6 +107,16 @@ class RenderPane:
         self.overlay_drag_callback = self._as_camera_view(app.make_drag_handler)
         self._overlay.on_drag(self.overlay_drag_callback)
         self._worker = LiveSolver(self._render_job, self._on_rendered, name="ba-calib-render")
+
+    def subscribe(self, listener: Callable[[str], None]) -> None:
+        """Call ``listener(what)``: ``"pose"`` when the render is asked for a pose from another source (solve,
+        rough pose, preset, drag), on the requesting thread; ``"render"`` when a new render is shown, under the UI
+        lock and in its message batch."""
+        self._listeners.append(listener)
+
+    def _publish(self, what: str) -> None:
+        for listener in list(self._listeners):
+            listener(what)
 
     # ------------------------------------------------------------------ nodes the Align panel drags on
     @property
@@ -213,9 +224,8 @@ class RenderPane:
         key = (np.asarray(T, np.float64).tobytes(), mode, source)
         if key == self._requested:
             return
-        align = getattr(self.app, "align", None)
-        if align is not None and (self._requested is None or self._requested[2] != source):
-            align.show()  # its pose line says which pose is used (solve, rough pose, preset)
+        if self._requested is None or self._requested[2] != source:
+            self._publish("pose")  # e.g. the Align panel's pose line says which pose is used (solve, rough, preset)
         self._requested = key
         self._wanted = (np.array(T, np.float64), mode, source)
         self._job += 1
@@ -259,12 +269,7 @@ class RenderPane:
             self._title.text = self.title()
             self._show_overlay()
             self.draw_marks()
-            loupes = getattr(app, "loupes", None)
-            if loupes is not None and loupes.shows_render:
-                loupes.refresh_ba()
-            align = getattr(app, "align", None)
-            if align is not None:  # its pose line says which pose the render shows
-                align.show()
+            self._publish("render")  # e.g. the laser loupe showing its crop, the Align panel's pose line
 
     def _shown_texture(self, shown: ShownRender) -> np.ndarray:
         """The pane's texture: the render in the camera view's framing, over :data:`NO_RETURN_RGB`."""
