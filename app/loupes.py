@@ -24,12 +24,12 @@ from calib_core.errors import CalibError
 from calib_core.predict import ellipse_outline
 
 from .layout import ImageSlot, LoupeArea, bounds_of, loupe_areas
+from .loupe_crops import BaCrop, CameraCrop, default_camera_crop_px, node_name, slot_key
 from .loupe_framing import PairClick, follow_click
-from .loupe_crops import CAMERA_LOUPE_PX, BaCrop, CameraCrop, default_camera_crop_px, node_name, slot_key
 from .loupe_marks import LEGEND, ba_title, camera_title, draw_camera_marks, tick_segments
 from .ui_common import marker_segments
 
-#: Columns the BA loupe shows at zoom 1 (the camera loupe's crop side: :data:`CAMERA_LOUPE_PX`).
+#: Columns the BA loupe shows at zoom 1 (the camera loupe's crop side: :data:`app.loupe_crops.CAMERA_LOUPE_PX`).
 BA_LOUPE_COLUMNS = 32
 ZOOM_FACTOR = 1.5
 BA_COLUMN_LIMITS = (8, 400)

@@ -9,7 +9,6 @@ from typing import Any, Callable, Iterator
 
 import numpy as np
 
-from calib_core.overlays import project_lidar_points
 
 from .layout import ImageSlot
 from .state import Pick
@@ -231,20 +230,10 @@ class OverlayDrawing:
 
     def predictions(self, picks: dict[int, Pick]) -> list[tuple[int, np.ndarray]]:
         """Display pixels where the last good calibration expects picks that have only a BA end."""
-        ids, pixels = self.predicted_pixels(picks)
+        ids, pixels = self.app.pose_source.predicted_pixels(picks)
         uv, ok = self.app.display_from_pixels(pixels)
         return [(pid, uv[k]) for k, pid in enumerate(ids) if ok[k]]
 
-    def predicted_pixels(self, picks: dict[int, Pick]) -> tuple[list[int], np.ndarray]:
-        """Camera pixels where the last good calibration expects the picks that have only a laser cell."""
-        app = self.app
-        T = app.pose()  # the last good solve, else the imported initial extrinsic
-        pending = [p for p in picks.values() if p.laser_rc is not None and p.pixel is None]
-        if T is None or not pending:
-            return [], np.empty((0, 2))
-        points = app.depth.cell_points(np.array([p.laser_rc for p in pending]))
-        uv, ok = project_lidar_points(T, app.camera, points)
-        return [p.id for p, good in zip(pending, ok) if good], uv[ok]
 
 
 #: The widest a BA-edge dot is drawn, in photo pixels: in by-eye run 4 the dots (then squares of up to 2.9 pixels of a

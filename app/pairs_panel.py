@@ -136,7 +136,7 @@ class PairsPanel:
             if pending is not None:
                 need = "camera" if pending.pixel is None else "BA"
                 lines.append(f"Pair {pending.id} waits for a {need} click.")
-                ids, uv = app.overlays.predicted_pixels({pending.id: pending})
+                ids, uv = app.pose_source.predicted_pixels({pending.id: pending})
                 if ids:
                     lines.append(f"Predicted camera pixel: ({uv[0, 0]:.1f}, {uv[0, 1]:.1f}) (cross in the image).")
             status = [self._undo_note[1]] if self._undo_note[0] == state.version else []

@@ -16,6 +16,7 @@ import numpy as np
 
 from calib_core.alignment import preset_T
 from calib_core.errors import CalibError
+from calib_core.overlays import project_lidar_points
 from calib_core.predict import ProjectedScan, predict_pixel
 
 #: The pose the render and the BA columns assume before any pose exists.
@@ -100,6 +101,17 @@ class PoseSource:
         if T is None:
             return None
         return self.projection(T).cell_at(float(u), float(v))
+
+    def predicted_pixels(self, picks: dict) -> tuple[list[int], np.ndarray]:
+        """Original camera pixels ``(M, 2)`` where :meth:`pose` expects the picks (by id) that have only a laser
+        cell, and their ids (those in view only); none without a pose."""
+        T = self.pose()  # the last good solve, else the imported initial extrinsic
+        pending = [p for p in picks.values() if p.laser_rc is not None and p.pixel is None]
+        if T is None or not pending:
+            return [], np.empty((0, 2))
+        points = self.app.depth.cell_points(np.array([p.laser_rc for p in pending]))
+        uv, ok = project_lidar_points(T, self.app.camera, points)
+        return [p.id for p, good in zip(pending, ok) if good], uv[ok]
 
     def projection(self, T: np.ndarray) -> ProjectedScan:
         """Every scan point projected under ``T`` (cached per pose; built off the click path after a solve)."""

@@ -126,9 +126,8 @@ ALLOWED: dict[str, dict[str, int]] = {
         "render_pane.target_at": 1},
     "app.overlay_drawing": {"loupes.display_of": 1},
     "app.pairs_panel": {"align.drag_enabled": 1, "display.ba_display": 2, "guide.callback": 1, "loupes.target_at": 1,
-        "overlays.loupe_marks_after": 1, "overlays.pick_ends": 1, "overlays.predicted_pixels": 1,
-        "overlays.ring_radius": 1, "render_pane.last_pixel": 1, "render_pane.target_at": 1,
-        "view.units_per_screen_px": 1},
+        "overlays.loupe_marks_after": 1, "overlays.pick_ends": 1, "overlays.ring_radius": 1, "render_pane.last_pixel":
+        1, "render_pane.target_at": 1, "view.units_per_screen_px": 1},
     "app.render_pane": {"align": 1, "loupes.ba_crop": 1, "pairs_panel.click_at": 1},
     "app.view_panel": {"cloud.visible": 1, "display.add_edge_control": 1, "display.add_last_pane_control": 1,
         "display.ba_display": 1, "display.ba_title": 1, "live.ensure_facing": 1, "live.facing": 4,
