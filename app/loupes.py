@@ -7,10 +7,8 @@ pixels).  A click in a loupe maps back exactly: sub-pixel for the camera
 (the loupe shows the *original* image, whatever the main view shows), a whole
 scan cell for the BA loupe.
 
-The app moves them (:meth:`Loupes.frame_ba`, :meth:`Loupes.frame_camera`)
-after each click, to the click and to the other end's prediction; the zoom
-steps change how much they show around the same centre.  Display plumbing
-only: predictions come from :mod:`calib_core.predict`.
+They follow each click (:mod:`app.loupe_framing`: to the click and the other end's prediction); the zoom steps
+change how much they show around the same centre.  Display plumbing only (predictions: :mod:`calib_core.predict`).
 """
 
 from __future__ import annotations
@@ -27,6 +25,7 @@ from .layout import ImageSlot, LoupeArea, bounds_of, loupe_areas
 from .loupe_crops import BaCrop, CameraCrop, default_camera_crop_px, node_name, slot_key
 from .loupe_framing import PairClick, follow_click
 from .loupe_marks import LEGEND, ba_title, camera_title, draw_camera_marks, tick_segments
+from .render_pane import cell_at_pixel, loupe_texture, loupe_title, pixel_of_cells
 from .ui_common import marker_segments
 
 #: Columns the BA loupe shows at zoom 1 (the camera loupe's crop side: :data:`app.loupe_crops.CAMERA_LOUPE_PX`).
@@ -69,6 +68,7 @@ class Loupes:
         self._framing_of: dict[str, tuple] = {}  # kind -> inputs its outline (and centre marker) were drawn from
         self._clicked: dict[str, tuple] = {}  # kind -> the cell / pixel a click inside it chose: its title names it
         self.shows_render = False  # the laser loupe shows the camera-view render's crop (after a click on it)
+        self._render: Any = None  # the render the render pane shows (app.render_pane.ShownRender; on_render)
         scene = app.server.scene
         self._handles: dict[str, Any] = {}
         self._titles: dict[str, Any] = {}
@@ -151,11 +151,12 @@ class Loupes:
                 self.shows_render = bool(on)
                 self._show("ba")
 
-    def on_render(self, what: str) -> None:
-        """The render pane changed (:meth:`app.render_pane.RenderPane.subscribe`): a new render is shown in the laser
-        loupe while that shows the render's crop."""
-        if what == "render" and self.shows_render:
-            self.refresh_ba()
+    def on_render(self, what: str, shown: Any) -> None:
+        """A new render ``shown`` (:meth:`app.render_pane.RenderPane.subscribe`), in the laser loupe if it shows it."""
+        if what == "render":
+            self._render = shown
+            if self.shows_render:
+                self.refresh_ba()
 
     def refresh_ba(self) -> None:
         """Re-send the laser loupe (e.g. a new render arrived)."""
@@ -164,8 +165,7 @@ class Loupes:
 
     def _render_on(self) -> bool:
         """Does the laser loupe show the render now (asked for, and a render exists)?"""
-        pane = getattr(self.app, "render_pane", None)
-        return self.shows_render and pane is not None and pane.current is not None
+        return self.shows_render and self._render is not None
 
     def zoom(self, kind: str, factor: float) -> None:
         """Magnify loupe ``kind`` by ``factor`` (> 1 shows less, bigger) around the same centre."""
@@ -200,14 +200,11 @@ class Loupes:
             self._clicked[kind] = tuple(point)
             self._titles[kind].text = self.title(kind)
 
-    def follow_layout(self, moved: bool) -> None:
-        """The page layout changed (:meth:`app.view_panel.ViewPanel.subscribe_layout`): if the images moved, the
-        loupes go beside the new images, not where the old ones ended."""
-        if moved:
-            self.relayout()
-
-    def relayout(self) -> None:
-        """Place both loupes beside the images again (the page layout changed, e.g. another BA column window)."""
+    def relayout(self, moved: bool = True) -> None:
+        """Place both loupes beside the images again if they ``moved`` (the page layout changed, e.g. another BA
+        column window: :meth:`app.view_panel.ViewPanel.subscribe_layout`), not where the old ones ended."""
+        if not moved:
+            return
         app = self.app
         with app.ui_lock, app.server.atomic():
             main = list(app.slots.values())  # camera views, the camera-view render, BA images
@@ -244,7 +241,10 @@ class Loupes:
         x, y = float(uv[0]), float(uv[1])
         if kind == "ba" and self._render_on():
             c = self.camera_crop
-            return self.app.render_pane.target_at((c.u0 + x, c.v0 + y), display=False)
+            cell = cell_at_pixel(self._render, c.u0 + x, c.v0 + y)
+            if cell is None:
+                raise CalibError("no laser return here: click where the camera-view render shows the scan")
+            return ("ba", self.ba_crop.key, *cell)
         if kind == "ba":
             c = self.ba_crop
             n_rows, n_cols = self.app.depth.shape
@@ -267,7 +267,8 @@ class Loupes:
         original-image pixel ``(u, v)``; None when the loupe does not show it."""
         if kind == "ba" and self._render_on():  # where the render's pose draws the cell
             c = self.camera_crop
-            uv = self.app.render_pane.pixel_of_cells(np.array([[round(target[1]), round(target[0])]]))[0]
+            uv = pixel_of_cells(self._render, self.app.camera, self.app.depth,
+                                np.array([[round(target[1]), round(target[0])]]))[0]
             x, y = float(uv[0]) - c.u0, float(uv[1]) - c.v0
         elif kind == "ba":
             c = self.ba_crop
@@ -302,7 +303,7 @@ class Loupes:
             pose = app.pose()
             inputs += (None if pose is None else np.asarray(pose, np.float64).tobytes(),)
         if kind == "ba" and self._render_on():
-            inputs += (self.camera_crop, id(app.render_pane.current))
+            inputs += (self.camera_crop, id(self._render))
         if self._marks_of.get(kind) == inputs:
             return
         self._marks_of[kind] = inputs
@@ -336,7 +337,7 @@ class Loupes:
         hx, hy = 0.5 * s.units_per_px, 0.5 * s.units_per_px_y
         radius, cell = 1.6 * max(hx, hy), (hx, hy)
         if self._render_on():  # the render's crop: rings where the render's pose draws the cells
-            xy = app.render_pane.pixel_of_cells(rc) - [self.camera_crop.u0, self.camera_crop.v0]
+            xy = pixel_of_cells(self._render, app.camera, app.depth, rc) - [self.camera_crop.u0, self.camera_crop.v0]
             radius, cell = max(3.0, 0.06 * self.camera_crop.n) * s.units_per_px, None
         inside = np.array([s.contains(p) for p in xy], bool)
         segs = marker_segments(s.world_from_pixel(xy[inside], z_offset=-0.01), radius, cell_half_size=cell,
@@ -418,7 +419,7 @@ class Loupes:
     def _ba_texture(self) -> np.ndarray:
         if self._render_on():
             cc = self.camera_crop
-            return self.app.render_pane.loupe_texture(cc.u0, cc.v0, cc.n)
+            return loupe_texture(self._render, self.app.camera, cc.u0, cc.v0, cc.n)
         c = self.ba_crop
         gray = self.app.display.loupe_image(c.key)[0]
         n_rows, n_cols = gray.shape
@@ -471,7 +472,7 @@ class Loupes:
     def title(self, kind: str) -> str:
         """The loupe's title as the page shows it."""
         if kind == "ba" and self._render_on():
-            return self.app.render_pane.loupe_title(self.camera_crop.center, self.camera_crop.n)
+            return loupe_title(self._render, self.app.depth, self.camera_crop.center)
         if kind == "ba":
             c = self.ba_crop
             row, col = self._clicked.get("ba", c.center)

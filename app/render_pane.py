@@ -72,7 +72,7 @@ class RenderPane:
 
     It owns its scene nodes (the pane, its title, the copy drawn over the photo, the markers on it), the render
     worker, and the widgets it adds to the Align folder (:meth:`add_controls`).  Public: :attr:`current` (the
-    render the page shows), :meth:`request`, :meth:`target_at`, :meth:`pixel_of_cells` and the loupe helpers.
+    render the page shows), :meth:`request`, :meth:`target_at`, :meth:`pixel_of_cells`, :meth:`subscribe`.
     """
 
     def __init__(self, app: Any) -> None:
@@ -108,15 +108,19 @@ class RenderPane:
         self._overlay.on_drag(self.overlay_drag_callback)
         self._worker = LiveSolver(self._render_job, self._on_rendered, name="ba-calib-render")
 
-    def subscribe(self, listener: Callable[[str], None]) -> None:
-        """Call ``listener(what)``: ``"pose"`` when the render is asked for a pose from another source (solve,
-        rough pose, preset, drag), on the requesting thread; ``"render"`` when a new render is shown, under the UI
-        lock and in its message batch."""
-        self._listeners.append(listener)
+    def subscribe(self, listener: Callable[[str, ShownRender | None], None], replay: bool = False) -> None:
+        """Call ``listener(what, shown)`` with the render shown (:attr:`current`): ``what`` is ``"pose"`` when the
+        render is asked for a pose from another source (solve, rough pose, preset, drag), on the requesting thread,
+        ``"render"`` when a new render is shown, under the UI lock and in its message batch.  ``replay``: call it
+        now with the render shown, if any."""
+        with self.app.ui_lock:
+            self._listeners.append(listener)
+            if replay and self.current is not None:
+                listener("render", self.current)
 
     def _publish(self, what: str) -> None:
         for listener in list(self._listeners):
-            listener(what)
+            listener(what, self.current)
 
     # ------------------------------------------------------------------ nodes the Align panel drags on
     @property
@@ -275,15 +279,8 @@ class RenderPane:
         """The pane's texture: the render in the camera view's framing, over :data:`NO_RETURN_RGB`."""
         view = self.app.camera_view
         if view.key == "raw":
-            return self.pane_texture(shown.rgba)
-        return self.pane_texture(view.shown(shown.rgba))  # alpha 0 where the panorama sees past the camera
-
-    @staticmethod
-    def pane_texture(rgba: np.ndarray) -> np.ndarray:
-        """The pane's RGB texture: the shading over :data:`NO_RETURN_RGB` where there is no return."""
-        a = rgba[..., 3:4].astype(np.uint16)
-        bg = np.asarray(NO_RETURN_RGB, np.uint16)
-        return ((rgba[..., :3].astype(np.uint16) * a + bg * (255 - a) + 127) // 255).astype(np.uint8)
+            return pane_texture(shown.rgba)
+        return pane_texture(view.shown(shown.rgba))  # alpha 0 where the panorama sees past the camera
 
     def _show_overlay(self) -> None:
         """The render over the photo at the saved opacity (hidden at 0 and without a render)."""
@@ -316,26 +313,8 @@ class RenderPane:
 
     # ------------------------------------------------------------------ clicks
     def cell_at_pixel(self, u: float, v: float, radius_px: float = NEAREST_PX) -> tuple[int, int] | None:
-        """Scan cell ``(row, col)`` the render draws at original-size pixel ``(u, v)``, or at the nearest rendered
-        pixel within ``radius_px`` render pixels; None if none."""
-        shown = self.current
-        if shown is None:
-            return None
-        cells = shown.render.cell_rc
-        h, w = cells.shape[:2]
-        iu, iv = int(math.floor(u + 0.5)), int(math.floor(v + 0.5))
-        r = int(math.ceil(radius_px))
-        u0, u1, v0, v1 = max(iu - r, 0), min(iu + r + 1, w), max(iv - r, 0), min(iv + r + 1, h)
-        if u0 >= u1 or v0 >= v1:
-            return None
-        window = cells[v0:v1, u0:u1]
-        vv, uu = np.mgrid[v0:v1, u0:u1]
-        d2 = np.where(window[..., 0] >= 0, (uu - u) ** 2 + (vv - v) ** 2, np.inf)
-        k = int(np.argmin(d2))
-        if not np.isfinite(d2.flat[k]) or d2.flat[k] > radius_px * radius_px:
-            return None
-        row, col = window.reshape(-1, 2)[k]
-        return int(row), int(col)
+        """Scan cell ``(row, col)`` the render draws at original-size pixel ``(u, v)`` (:func:`cell_at_pixel`)."""
+        return cell_at_pixel(self.current, u, v, radius_px)
 
     def target_at(self, uv: tuple[float, float], display: bool = True, screen_units: float | None = None) -> tuple:
         """``("ba", key, row, col)``: the laser cell under pixel ``uv`` of the pane (``display``: in the camera
@@ -363,16 +342,8 @@ class RenderPane:
         return ("ba", self.app.loupes.ba_crop.key, *cell)
 
     def pixel_of_cells(self, rows_cols: np.ndarray) -> np.ndarray:
-        """Original camera pixels ``(N, 2)`` of scan cells ``(N, 2)`` under the shown render's pose (NaN: not in
-        view)."""
-        rc = np.asarray(rows_cols, np.int64).reshape(-1, 2)
-        out = np.full((len(rc), 2), np.nan)
-        shown = self.current
-        if shown is None or not len(rc):
-            return out
-        uv, ok = project_lidar_points(shown.T_camera_lidar, self.app.camera, self.app.depth.cell_points(rc))
-        out[ok] = uv[ok]
-        return out
+        """Original camera pixels of scan cells under the shown render's pose (:func:`pixel_of_cells`)."""
+        return pixel_of_cells(self.current, self.app.camera, self.app.depth, rows_cols)
 
     def _on_shift_click(self, event: Any) -> None:
         """Shift+click on the render: select the pair whose laser end is drawn nearest (as on the BA images)."""
@@ -432,23 +403,66 @@ class RenderPane:
         sel_segs = marker_segments(world[sel] + [0.0, 0.0, 0.003], 1.5 * self._ring_radius(slot))
         app.nodes.lines("/annot/selected/render", sel_segs, np.full(sel_segs.shape, 255, np.uint8), thickness=4.0)
 
-    # ------------------------------------------------------------------ the laser loupe's render crop
-    def loupe_texture(self, u0: int, v0: int, n: int) -> np.ndarray:
-        """The render's pixels ``[u0, u0 + n) x [v0, v0 + n)`` (the camera loupe's crop), enlarged by nearest
-        neighbour as the camera loupe is; :data:`PAD_RGB` outside the image."""
-        shown = self.current
-        h, w = self.app.camera.height, self.app.camera.width
-        pane = (np.full((h, w, 3), NO_RETURN_RGB, np.uint8) if shown is None else self.pane_texture(shown.rgba))
-        us, vs = u0 + np.arange(n), v0 + np.arange(n)
-        ok = ((vs >= 0) & (vs < h))[:, None] & ((us >= 0) & (us < w))[None, :]
-        crop = pane[np.clip(vs, 0, h - 1)][:, np.clip(us, 0, w - 1)]
-        crop = np.where(ok[..., None], crop, np.asarray(PAD_RGB, np.uint8)).astype(np.uint8)
-        k = max(1, TEXTURE_TEXELS // n)
-        return np.repeat(np.repeat(crop, k, axis=0), k, axis=1)
 
-    def loupe_title(self, center: tuple[float, float], n: int) -> str:
-        """The laser loupe's title while it shows the render: the cell at the crop's centre and its range."""
-        from .loupe_marks import render_title
+# ---------------------------------------------------------------------- a shown render's pixels and cells
+def pane_texture(rgba: np.ndarray) -> np.ndarray:
+    """The pane's RGB texture: the shading over :data:`NO_RETURN_RGB` where there is no return."""
+    a = rgba[..., 3:4].astype(np.uint16)
+    bg = np.asarray(NO_RETURN_RGB, np.uint16)
+    return ((rgba[..., :3].astype(np.uint16) * a + bg * (255 - a) + 127) // 255).astype(np.uint8)
 
-        cell = self.cell_at_pixel(*center)
-        return render_title(cell, None if cell is None else float(self.app.depth.range_m[cell]))
+
+def cell_at_pixel(shown: ShownRender | None, u: float, v: float,
+                  radius_px: float = NEAREST_PX) -> tuple[int, int] | None:
+    """Scan cell ``(row, col)`` render ``shown`` draws at original-size pixel ``(u, v)``, or at the nearest rendered
+    pixel within ``radius_px`` render pixels; None if none (or no render)."""
+    if shown is None:
+        return None
+    cells = shown.render.cell_rc
+    h, w = cells.shape[:2]
+    iu, iv = int(math.floor(u + 0.5)), int(math.floor(v + 0.5))
+    r = int(math.ceil(radius_px))
+    u0, u1, v0, v1 = max(iu - r, 0), min(iu + r + 1, w), max(iv - r, 0), min(iv + r + 1, h)
+    if u0 >= u1 or v0 >= v1:
+        return None
+    window = cells[v0:v1, u0:u1]
+    vv, uu = np.mgrid[v0:v1, u0:u1]
+    d2 = np.where(window[..., 0] >= 0, (uu - u) ** 2 + (vv - v) ** 2, np.inf)
+    k = int(np.argmin(d2))
+    if not np.isfinite(d2.flat[k]) or d2.flat[k] > radius_px * radius_px:
+        return None
+    row, col = window.reshape(-1, 2)[k]
+    return int(row), int(col)
+
+
+def pixel_of_cells(shown: ShownRender | None, camera: Any, depth: Any, rows_cols: np.ndarray) -> np.ndarray:
+    """Original camera pixels ``(N, 2)`` of scan cells ``(N, 2)`` under render ``shown``'s pose (NaN: not in view,
+    or no render)."""
+    rc = np.asarray(rows_cols, np.int64).reshape(-1, 2)
+    out = np.full((len(rc), 2), np.nan)
+    if shown is None or not len(rc):
+        return out
+    uv, ok = project_lidar_points(shown.T_camera_lidar, camera, depth.cell_points(rc))
+    out[ok] = uv[ok]
+    return out
+
+
+def loupe_texture(shown: ShownRender | None, camera: Any, u0: int, v0: int, n: int) -> np.ndarray:
+    """Render ``shown``'s pixels ``[u0, u0 + n) x [v0, v0 + n)`` (the camera loupe's crop), enlarged by nearest
+    neighbour as the camera loupe is; :data:`PAD_RGB` outside the image."""
+    h, w = camera.height, camera.width
+    pane = (np.full((h, w, 3), NO_RETURN_RGB, np.uint8) if shown is None else pane_texture(shown.rgba))
+    us, vs = u0 + np.arange(n), v0 + np.arange(n)
+    ok = ((vs >= 0) & (vs < h))[:, None] & ((us >= 0) & (us < w))[None, :]
+    crop = pane[np.clip(vs, 0, h - 1)][:, np.clip(us, 0, w - 1)]
+    crop = np.where(ok[..., None], crop, np.asarray(PAD_RGB, np.uint8)).astype(np.uint8)
+    k = max(1, TEXTURE_TEXELS // n)
+    return np.repeat(np.repeat(crop, k, axis=0), k, axis=1)
+
+
+def loupe_title(shown: ShownRender | None, depth: Any, center: tuple[float, float]) -> str:
+    """The laser loupe's title while it shows render ``shown``: the cell at the crop's centre and its range."""
+    from .loupe_marks import render_title
+
+    cell = cell_at_pixel(shown, *center)
+    return render_title(cell, None if cell is None else float(depth.range_m[cell]))

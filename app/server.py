@@ -175,14 +175,14 @@ class CalibrationApp:
             self.render_pane = RenderPane(self)  # the scan seen from the camera, below the camera image
             self.view.subscribe_window(lambda shown: self.render_pane.place())
             self.align = AlignPanel(self, order=self.pairs_folder.order - 0.5)  # rough pose; first folder
-            self.render_pane.subscribe(lambda what: self.align.show())  # its pose line names the render's pose
+            self.render_pane.subscribe(lambda what, shown: self.align.show())  # its pose line names the render's pose
             self.loupes = Loupes(self)  # the magnified BA and camera panes (public: frame_ba, frame_camera)
             self.overlays.subscribe(self.loupes.draw_marks)  # the loupes show the marks magnified
             self.pairs_panel.subscribe_clicks(self.loupes.on_pair_click)  # the loupes follow each click
             self.pairs_panel.subscribe_cancel(self.loupes.on_pair_cancelled)
             self.pairs_panel.subscribe_clicks(self.view.on_pair_click)  # "Zoom on last click"
-            self.view.subscribe_layout(self.loupes.follow_layout)  # after the marks' redraw
-            self.render_pane.subscribe(self.loupes.on_render)
+            self.view.subscribe_layout(self.loupes.relayout)  # after the marks' redraw
+            self.render_pane.subscribe(self.loupes.on_render, replay=True)  # the laser loupe can show its crop
             self.format_export = FormatExportPanel(self)  # verify: its own widgets (formats, reference import)
             self.display.subscribe(self._on_display_change)
             self.server.on_client_connect(self._on_connect)
