@@ -117,6 +117,8 @@ class AppServices(Protocol):
         The camera views (:class:`app.camera_view.CameraView`: ``raw``, and ``panorama`` for wide lenses), by key.
     title : str
         The page title.
+    laser_images : app.laser_images.LaserImages
+        The laser images as the page shows them (contrast applied; ``ba_display``, ``ba_title``, ``loupe_image``).
     pose_source : app.pose_source.PoseSource
         The pose predictions, the render and the BA columns use (solved, else rough, else the "+x" preset), the
         predictions both ways under it, and the rough pose (``adopt_rough_pose``; ``subscribe`` to its changes).
@@ -156,6 +158,7 @@ class AppServices(Protocol):
     title: str
     actions: Any
     pose_source: Any
+    laser_images: Any
 
     def subscribe_solve(self, listener: Callable[[Any], None]) -> None:
         """Call ``listener(shown)`` (:class:`app.ui_common.SolveShown`) on every redraw of what the live solve shows."""

@@ -421,7 +421,7 @@ class Loupes:
             cc = self.camera_crop
             return loupe_texture(self._render, self.app.camera, cc.u0, cc.v0, cc.n)
         c = self.ba_crop
-        gray = self.app.display.loupe_image(c.key)[0]
+        gray = self.app.laser_images.loupe_image(c.key)[0]
         n_rows, n_cols = gray.shape
         rows = c.row0 + np.arange(c.n_rows)
         cols = c.col0 + np.arange(c.n_cols)
@@ -477,7 +477,7 @@ class Loupes:
             c = self.ba_crop
             row, col = self._clicked.get("ba", c.center)
             rng = float(self.app.depth.range_m[row, col]) if self.app.depth.valid[row, col] else None
-            return ba_title(self.app.display.loupe_image(c.key)[1], row, col, rng)  # short: fits the loupe
+            return ba_title(self.app.laser_images.loupe_image(c.key)[1], row, col, rng)  # short: fits the loupe
         c = self.camera_crop
         return camera_title(*self._clicked.get("camera", c.center), c.n)
 

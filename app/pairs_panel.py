@@ -191,7 +191,7 @@ class PairsPanel:
         if key.startswith("loupe_"):
             target = self.app.loupes.target_at(key[len("loupe_"):], uv)
             if self.app.state.view.snap and target[0] == "ba":
-                col, row = refine_click_to_corner(self.app.display.ba_display(target[1]), (target[3], target[2]), 3.0)
+                col, row = refine_click_to_corner(self.app.laser_images.ba_display(target[1]), (target[3], target[2]), 3.0)
                 target = ("ba", target[1], int(np.clip(round(row), 0, self.app.depth.shape[0] - 1)),
                           int(round(col)) % self.app.depth.shape[1])
             elif self.app.state.view.snap:
@@ -202,7 +202,7 @@ class PairsPanel:
             return self.app.render_pane.target_at(uv, screen_units=self.app.view.units_per_screen_px(client))
         if key in self.app.ba_keys:
             if self.app.state.view.snap:
-                shown = self.app.display.ba_display(key)[:, self.app.ba_window.columns]
+                shown = self.app.laser_images.ba_display(key)[:, self.app.ba_window.columns]
                 uv = tuple(refine_click_to_corner(shown, uv, 3.0))
             return ("ba", key, *self.cell_from_display(key, uv))
         if key != self.app.camera_view.key:

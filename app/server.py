@@ -26,6 +26,7 @@ from .cloud_pane import CloudPane
 from .display_panel import DisplayPanel
 from .export_panel import ExportPanel, FormatExportPanel
 from .guide_panel import attach_guide_panel
+from .laser_images import LaserImages
 from .live_coordinator import LiveSolveCoordinator
 from .loupes import Loupes
 from .overlay_drawing import OverlayDrawing
@@ -136,7 +137,8 @@ class CalibrationApp:
         self.active_shot = self.state.active_shot  # the shot these panes show
         self.ui_lock = UiLock()  # public: held while the scene and the panels are redrawn
         self.folder_lock = threading.Lock()  # held while one tab's own widgets go into a shared folder
-        self.display = DisplayPanel(self)  # the laser panes' grey levels, with the saved contrast
+        self.laser_images = LaserImages(self)  # the laser panes' grey levels, with the saved contrast
+        self.display = DisplayPanel(self)  # their widgets (loupe source, last pane, contrast, hide marks, edges)
         self.live = LiveSolveCoordinator(self)  # the solve shown; its threads start with the page
         self.pose_source = PoseSource(self, initial_T)  # the pose predictions use (solved, else rough)
         self.pose_source.subscribe(self._on_rough_pose)

@@ -151,12 +151,12 @@ class ViewPanel:
     def ba_texture(self, key: str) -> np.ndarray:
         """The texture of BA image ``key``: its shown grey image, cut to the column window and enlarged."""
         window = self._ba_window
-        return ba_texture(self.app.display.ba_display(key), window, texture_factor(window.width, self.app.depth.shape[0]))
+        return ba_texture(self.app.laser_images.ba_display(key), window, texture_factor(window.width, self.app.depth.shape[0]))
 
     def ba_title(self, key: str) -> str:
         """The title of BA image ``key`` (with the shown columns when they are not all)."""
         w = self._ba_window
-        title = self.app.display.ba_title(key)
+        title = self.app.laser_images.ba_title(key)
         side_by_side = len({round(self.slots[k].center[1], 6) for k in self.app.ba_keys}) == 1
         if w.is_full or side_by_side:  # four narrow panes in a row: a longer title would run into the next one
             return title

@@ -38,7 +38,7 @@ SERVICES = {
     "shot_scenes", "depth", "camera", "image", "ba_keys", "ba_gray", "image_gray", "all_points_lidar",
     "cloud_points_lidar", "ba_cell_aspect", "wrap_cols", "camera_views", "camera_sizes", "state", "active_shot",
     "ui_lock", "access", "server", "actions", "host", "port", "url", "nodes", "pairs_folder", "pose_source",
-    "folder_lock",
+    "folder_lock", "laser_images",
 }
 
 
@@ -121,15 +121,15 @@ ALLOWED: dict[str, dict[str, int]] = {
     "app.guide_panel": {"loupes": 1, "pairs_panel.show_guide_status": 1},
     "app.live_coordinator": {"cloud.show_camera": 3, "cloud.show_colors": 1, "cloud.show_pairs": 1, "cloud.shows": 1,
         "cloud.visible": 2},
-    "app.loupes": {"display.add_loupe_controls": 1, "display.loupe_image": 2},
+    "app.loupes": {"display.add_loupe_controls": 1},
     "app.overlay_drawing": {"loupes.display_of": 1},
-    "app.pairs_panel": {"align.drag_enabled": 1, "display.ba_display": 2, "guide.callback": 1, "loupes.target_at": 1,
+    "app.pairs_panel": {"align.drag_enabled": 1, "guide.callback": 1, "loupes.target_at": 1,
         "overlays.loupe_marks_after": 1, "overlays.pick_ends": 1, "overlays.ring_radius": 1, "render_pane.last_pixel":
         1, "render_pane.target_at": 1, "view.units_per_screen_px": 1},
     "app.render_pane": {"align": 1, "loupes.ba_crop": 1, "pairs_panel.click_at": 1},
     "app.view_panel": {"cloud.visible": 1, "display.add_edge_control": 1, "display.add_last_pane_control": 1,
-        "display.ba_display": 1, "display.ba_title": 1, "live.ensure_facing": 1, "live.facing": 4,
-        "live.request_cloud": 1, "loupes": 1, "overlays.refresh": 1, "page.show_camera_view": 1},
+        "live.ensure_facing": 1, "live.facing": 4, "live.request_cloud": 1, "loupes": 1, "overlays.refresh": 1,
+        "page.show_camera_view": 1},
 }
 
 

@@ -111,12 +111,12 @@ class AppDriver(RenderDriver):
         return self._fire(handler, SimpleNamespace(client=self.tab, target=None))
 
     def choose_loupe_source(self, name: str) -> list[tuple[str, str]]:
-        """Choose what the BA loupe shows in its dropdown (see ``app.display.loupe_sources()``)."""
+        """Choose what the BA loupe shows in its dropdown (see ``app.laser_images.loupe_sources()``)."""
         return self._fire(self.app.guard(self.app.display.on_loupe_source), SimpleNamespace(
             client=self.tab, target=SimpleNamespace(value=name)))
 
     def choose_last_pane_source(self, name: str) -> list[tuple[str, str]]:
-        """Choose what the last laser pane shows in its dropdown (see ``app.display.last_pane_sources()``)."""
+        """Choose what the last laser pane shows in its dropdown (see ``app.laser_images.last_pane_sources()``)."""
         return self._fire(self.app.guard(self.app.display.on_last_pane_source), SimpleNamespace(
             client=self.tab, target=SimpleNamespace(value=name)))
 
