@@ -120,7 +120,7 @@ class PageBuilder:
             self._ba_titles[key].text = title
 
     def show_ba_window(self, shown: Any) -> None:
-        """Show the BA images as :class:`app.view_panel.BaWindowShown` ``shown`` says (textures, places, titles)."""
+        """Show the BA images as :class:`app.view_events.BaWindowShown` ``shown`` says (textures, places, titles)."""
         for key, texture in shown.textures.items():
             self.set_ba(key, texture=texture, slot=shown.slots[key], title=shown.titles[key])
 

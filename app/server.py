@@ -170,6 +170,8 @@ class CalibrationApp:
             self.view = ViewPanel(self)  # "View" folder, the BA column window, the page layout, each tab's camera
             self.view.subscribe_window(self.page.show_ba_window)  # the BA images follow the window and layout
             self.view.subscribe_layout(lambda moved: self.overlays.refresh())  # the marks follow the images
+            self.view.subscribe_camera_view(self.page.show_camera_view)
+            self.view.subscribe_3d(self._on_3d_view)
             self.export_panel = ExportPanel(self)
             self.page.add_images({k: self.view.ba_texture(k) for k in self.ba_keys},
                                  {k: self.view.ba_title(k) for k in self.ba_keys})
@@ -234,6 +236,11 @@ class CalibrationApp:
                 title = {"title": self.view.ba_title(key)} if what == "last_pane" else {}
                 self.page.set_ba(key, texture=self.view.ba_texture(key), **title)
         self.loupes.refresh()
+
+    def _on_3d_view(self, shown: bool) -> None:
+        """Some tab shows the 3-D view (or none does): the cloud shows, with the current solve's colours."""
+        self.cloud.visible = shown
+        self.live.request_cloud()  # a tab that switches to 3-D gets the current solve's colours
 
     def _on_rough_pose(self) -> None:
         """A new rough pose (:meth:`PoseSource.subscribe`): redraw predictions, the facing window and the render."""

@@ -6,8 +6,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -23,25 +22,11 @@ from .settled_updates import settled
 from .ui_common import (
     MIN_PAIRS, CLOUD_ORIGIN, PANEL_PX, ZOOM_PX_PER_CELL, ZOOM_PX_PER_IMAGE_PX, ZOOM_STEP,
 )
+from .view_events import BaWindowShown, ViewEvents
 from .view_settings import BA_WINDOW_MODES, UP_AXES
 
 
-@dataclass(frozen=True)
-class BaWindowShown:
-    """What the BA images show after the column window or the page layout changed (the page places them).
-
-    Attributes
-    ----------
-    textures, titles, slots : dict
-        By BA key: the texture (cut to the window, enlarged), the title and the page slot.
-    """
-
-    textures: dict
-    titles: dict
-    slots: dict
-
-
-class ViewPanel:
+class ViewPanel(ViewEvents):
     """The "View" folder of one :class:`app.server.CalibrationApp` and the per-tab cameras (``app.view``).
 
     It owns the BA column window and the page layout that follows from it
@@ -58,9 +43,7 @@ class ViewPanel:
         self._framed: dict[int, bool] = {}  # client id -> its view is the app's framing (not zoomed since)
         self._canvas_size: dict[int, tuple[int, int] | None] = {}  # client id -> canvas size last reported
         self._loupe_rects: dict[int, dict] = {}  # client id -> where the loupes lie on its canvas, as last sent
-        self._last_click: dict[int, tuple] = {}  # client id -> ("ba", key, row, col) or ("camera", u, v)
-        self._window_listeners: list[Callable[[BaWindowShown], None]] = []
-        self._layout_listeners: list[Callable[[bool], None]] = []
+        ViewEvents.__init__(self)
         install_page_script(app.server, LOUPE_WHEEL_JS)  # the wheel over a loupe zooms the loupe
         self._ba_window = self._wanted_ba_window()
         self.slots: dict[str, ImageSlot] = self._layout()
@@ -101,26 +84,6 @@ class ViewPanel:
             app.display.add_edge_control(gui)
             up = gui.add_dropdown("3D up axis (lidar)", tuple(UP_AXES), initial_value=view.up_axis)
             up.on_update(guard(self.on_up_axis))
-
-    # ------------------------------------------------------------------ events
-    def subscribe_window(self, listener: Callable[[BaWindowShown], None]) -> None:
-        """Call ``listener(shown)`` when the BA column window or the page layout changed, under the UI lock and in
-        the change's message batch (the page's images and the render follow the new slots)."""
-        self._window_listeners.append(listener)
-
-    def subscribe_layout(self, listener: Callable[[bool], None]) -> None:
-        """Call ``listener(moved)`` after that, outside the message batch: ``moved`` when the slots changed size or
-        place (not only the first column shown), e.g. the marks are redrawn, the loupes placed beside the images."""
-        self._layout_listeners.append(listener)
-
-    def on_pair_click(self, click: Any) -> None:
-        """Remember each tab's last applied click (:meth:`app.pairs_panel.PairsPanel.subscribe_clicks`)."""
-        if click.pick_id is not None and click.client_id is not None:
-            self._last_click[click.client_id] = click.target
-
-    def last_click(self, client_id: int) -> tuple | None:
-        """Tab ``client_id``'s last click: ``("ba", key, row, col)`` or ``("camera", u, v)``, or None."""
-        return self._last_click.get(client_id)
 
     @property
     def ba_window(self) -> ColumnWindow:
@@ -181,8 +144,7 @@ class ViewPanel:
                     listener(shown)
             self.sync_window_widgets(typed)
         moved = self.slots != old_slots
-        for listener in list(self._layout_listeners):
-            listener(moved)
+        self._publish_layout(moved)
         if not moved:
             return  # same size (only the first column moved): keep every tab's zoom and pan
         clients = self.app.server.get_clients()
@@ -219,7 +181,8 @@ class ViewPanel:
 
     def update_camera_title(self) -> None:
         """Show the visible camera view and its title on the page."""
-        self.app.page.show_camera_view(self.camera_view.key, self.camera_slot(), self.camera_view.title())
+        for listener in list(self._camera_view_listeners):
+            listener(self.camera_view.key, self.camera_slot(), self.camera_view.title())
 
     def on_view_checkbox(self, event: Any) -> None:
         with self.app.ui_lock:  # a drawing on another thread sees the old or the new camera view, never a mix
@@ -230,7 +193,7 @@ class ViewPanel:
         if was != self.camera_view.key:
             # The camera view changed size: the render follows its framing, the page is laid out and re-framed.
             self.apply_ba_window(relayout=True)
-        self.app.overlays.refresh()
+        self._publish_layout(False)  # the overlays shown changed
 
     def on_up_axis(self, event: Any) -> None:
         self.app.state.set_view(up_axis=str(event.value))
@@ -304,8 +267,9 @@ class ViewPanel:
         return any(m == "3d" for m in list(self._client_mode.values()))
 
     def _update_cloud_visibility(self) -> None:
-        self.app.cloud.visible = self.any_tab_in_3d()
-        self.app.live.request_cloud()  # a tab that switches to 3-D gets the current solve's colours
+        shown = self.any_tab_in_3d()
+        for listener in list(self._3d_listeners):
+            listener(shown)
 
     def set_view(self, client: Any, mode: str) -> None:
         """Point one client's camera at the annotation images (``all``, ``camera``, ``ba``) or the 3-D cloud."""
