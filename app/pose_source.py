@@ -1,5 +1,6 @@
 """The pose the app predicts and renders with: the last good solve, else the rough pose (imported or aligned), else
-the "+x" mounting preset; predictions both ways under it, and the scan projected under it (cached per pose).
+the "+x" mounting preset; predictions both ways under it, the scan projected under it (cached per pose) and the scan
+columns the camera sees under it (the BA panes' "camera" window).
 
 A service of the app (``app.pose_source``: state and queries, no widgets).  A new rough pose is published to its
 subscribers (:meth:`PoseSource.subscribe`); the composition root redraws what depends on it.  The maths is
@@ -16,8 +17,10 @@ import numpy as np
 
 from calib_core.alignment import preset_T
 from calib_core.errors import CalibError
-from calib_core.overlays import project_lidar_points
+from calib_core.overlays import columns_seen_by_camera, project_lidar_points
 from calib_core.predict import ProjectedScan, predict_pixel
+
+from .ba_view import ColumnWindow, covering_window
 
 #: The pose the render and the BA columns assume before any pose exists.
 DEFAULT_PRESET = "+x"
@@ -57,6 +60,8 @@ class PoseSource:
         self._projected: tuple[bytes, ProjectedScan] | None = None
         self._projected_lock = threading.Lock()
         self._listeners: list[Callable[[], None]] = []
+        self._facing: ColumnWindow | None = None  # from the last good solve it was computed for (else the view pose)
+        self._facing_of: Any = None  # the solve ``_facing`` was computed for
         # The extrinsic given at start (file, bag's /tf_static); a rough pose saved in the session wins over it.
         self.imported_T_camera_lidar: np.ndarray | None = None
         if initial_T_camera_lidar is not None:
@@ -129,6 +134,45 @@ class PoseSource:
         T = self.pose()
         if T is not None:
             self.projection(T)
+
+    # ------------------------------------------------------------------ the columns the camera sees
+    @property
+    def facing(self) -> ColumnWindow | None:
+        """The scan columns whose points the current pose projects into the camera image (None: not known); computed
+        by :meth:`ensure_facing` or, after a solve, by the live solve's follow-up work (:meth:`set_facing`)."""
+        return self._facing
+
+    def facing_due(self, bundle: Any) -> bool:
+        """Is the facing window of solve ``bundle`` still to be computed?"""
+        return self._facing_of is not bundle
+
+    def facing_window(self, T_camera_lidar: np.ndarray) -> ColumnWindow | None:
+        """The scan columns whose points project into the camera image under ``T_camera_lidar``, or None."""
+        seen = columns_seen_by_camera(self.app.depth, self.app.camera, T_camera_lidar)
+        n_cols = len(seen)
+        # A margin and coarse ends, so that the next solve usually keeps the same window.
+        step = max(1, round(n_cols / 225))
+        return covering_window(seen, self.app.wrap_cols, margin=step, quantum=step)
+
+    def set_facing(self, bundle: Any, facing: ColumnWindow | None) -> None:
+        """The facing window ``facing`` computed for solve ``bundle`` (ignored once a newer solve is shown)."""
+        with self.app.ui_lock:
+            if bundle is not self.app.solve_bundle:
+                return  # a newer solve is shown; its own window comes with it
+            self._facing_of = bundle
+            if facing is not None:  # the camera sees no column: keep the last window
+                self._facing = facing
+
+    def ensure_facing(self) -> None:
+        """Compute the camera-facing window of the current pose now, if not done yet (switch to camera mode)."""
+        bundle = self.app.solve_bundle
+        if bundle is not None and self._facing_of is not bundle:
+            self.set_facing(bundle, self.facing_window(bundle.result.T_camera_lidar))
+        elif bundle is None:
+            # Before any solve: the rough pose, else the "+x" preset.
+            facing = self.facing_window(self.view_pose()[0])
+            if facing is not None:
+                self._facing = facing
 
     # ------------------------------------------------------------------ the rough pose
     def set_initial_extrinsics(self, T_camera_lidar: np.ndarray | None) -> None:

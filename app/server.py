@@ -142,7 +142,7 @@ class CalibrationApp:
         self.live = LiveSolveCoordinator(self)  # the solve shown; its threads start with the page
         self.pose_source = PoseSource(self, initial_T)  # the pose predictions use (solved, else rough)
         self.pose_source.subscribe(self._on_rough_pose)
-        self.live.ensure_facing()  # from the rough pose, else the "+x" preset
+        self.pose_source.ensure_facing()  # from the rough pose, else the "+x" preset
 
         # -- server -------------------------------------------------------------------
         # Every request must name this server (Host, Origin) and, off loopback, carry the token.
@@ -245,7 +245,7 @@ class CalibrationApp:
     def _on_rough_pose(self) -> None:
         """A new rough pose (:meth:`PoseSource.subscribe`): redraw predictions, the facing window and the render."""
         if self.state.view.ba_window_mode == "camera" and self.live.bundle is None:
-            self.live.ensure_facing()
+            self.pose_source.ensure_facing()
             self.view.apply_ba_window()
         if getattr(self, "render_pane", None) is not None:
             self.render_pane.request()

@@ -100,9 +100,10 @@ class ViewPanel(ViewEvents):
         mode = self.app.state.view.ba_window_mode
         if mode == "all":
             return ColumnWindow.full(self.app.depth.shape[1], self.app.wrap_cols)
-        if mode == "camera" and self.app.live.facing is not None:
+        facing = self.app.pose_source.facing
+        if mode == "camera" and facing is not None:
             shown = getattr(self, "_ba_window", None)  # None while the panel is being built
-            return self.app.live.facing if shown is None else steady_window(shown, self.app.live.facing)
+            return facing if shown is None else steady_window(shown, facing)
         return self._ba_custom
 
     @property
@@ -228,7 +229,7 @@ class ViewPanel(ViewEvents):
             return
         mode = {label: m for m, label in BA_WINDOW_MODES.items()}.get(str(event.value), "all")
         self._set_ba_mode(mode)
-        if mode == "camera" and self.app.live.facing is None:
+        if mode == "camera" and self.app.pose_source.facing is None:
             self.app.notify(event.client, "No calibration yet",
                             f"Showing the columns set by the sliders; once {MIN_PAIRS} pairs are solved the BA images "
                             "show the columns the camera sees.", color="yellow")
@@ -248,7 +249,7 @@ class ViewPanel(ViewEvents):
         w = self._ba_custom if custom is None else custom
         self.app.state.set_view(ba_window_mode=mode, ba_window_start=int(w.start), ba_window_width=int(w.width))
         if mode == "camera":
-            self.app.live.ensure_facing()
+            self.app.pose_source.ensure_facing()
         self.apply_ba_window(typed)
         self.sync_window_widgets(typed)
 

@@ -127,8 +127,7 @@ ALLOWED: dict[str, dict[str, int]] = {
         "overlays.loupe_marks_after": 1, "overlays.pick_ends": 1, "overlays.ring_radius": 1, "render_pane.last_pixel":
         1, "render_pane.target_at": 1, "view.units_per_screen_px": 1},
     "app.render_pane": {"align": 1, "loupes.ba_crop": 1, "pairs_panel.click_at": 1},
-    "app.view_panel": {"display.add_edge_control": 1, "display.add_last_pane_control": 1, "live.ensure_facing": 1,
-        "live.facing": 4, "loupes": 1},
+    "app.view_panel": {"display.add_edge_control": 1, "display.add_last_pane_control": 1, "loupes": 1},
 }
 
 
