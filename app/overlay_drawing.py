@@ -12,7 +12,7 @@ import numpy as np
 
 from .layout import ImageSlot
 from .state import Pick
-from .ui_common import MARKER_SIZE, RING_CELLS, RING_MIN_RADIUS, EDGE_MIN_SIZE, marker_segments
+from .ui_common import MARKER_SIZE, PICK_RADII, RING_CELLS, RING_MIN_RADIUS, EDGE_MIN_SIZE, marker_segments
 
 
 class OverlayDrawing:
@@ -158,6 +158,17 @@ class OverlayDrawing:
         labels = {f"/annot/labels/{key}/{i}": (str(i), tuple(float(x) for x in w + offset)) for i, w in zip(ids, world)}
         self._marker_cache[key] = (inputs, labels)
         return labels
+
+    def nearest_pick(self, key: str, uv: tuple[float, float], slot: ImageSlot) -> int | None:
+        """The pair whose end marker on slot ``key`` (placed at ``slot``) is nearest display pixel ``uv``, if within
+        :data:`app.ui_common.PICK_RADII` ring radii; else None."""
+        ids, ends = self.pick_ends(key)
+        if not ids:
+            return None
+        delta = ends - np.asarray(uv, dtype=np.float64)
+        d = np.hypot(delta[:, 0] * slot.units_per_px, delta[:, 1] * slot.units_per_px_y)  # world units
+        k = int(np.argmin(d))
+        return ids[k] if d[k] <= PICK_RADII * self.ring_radius(slot) else None
 
     @staticmethod
     def ring_radius(slot: ImageSlot) -> float:

@@ -18,7 +18,7 @@ from .loupe_framing import PairClick
 from .page_builder import install_page_script
 from .pair_bar import PAIR_BAR_JS, PairBar, undo_note
 from .pairs_import import import_upload
-from .ui_common import MIN_PAIRS, PICK_RADII, SNAP_RADIUS_PX
+from .ui_common import MIN_PAIRS, SNAP_RADIUS_PX
 
 #: The buttons at the top of the control panel ("Next pair" is guided picking's own).
 PAIR_ACTIONS = ("Undo", "Cancel pair", "Next pair")
@@ -53,6 +53,7 @@ class PairsPanel:
         self.show_guide_status = self.bar.show_guide_status  # the Guide panel's hook
         install_page_script(app.server, PAIR_BAR_JS)  # the bar stays in view; Delete and Ctrl+Z keys
         self._guarded_pair_action = guard(self.on_pair_action)
+        self._next_pair: Callable | None = None  # guided picking's "Next pair" (set_next_pair_handler)
         self.folder = gui.add_folder("Pairs")
         with self.folder:
             self._md_pairs = gui.add_markdown("")
@@ -277,14 +278,7 @@ class PairsPanel:
         return float(raw[0, 0]), float(raw[0, 1])
 
     def _nearest_pick(self, key: str, uv: tuple[float, float]) -> int | None:
-        ids, ends = self.app.overlays.pick_ends(key)
-        if not ids:
-            return None
-        slot = self.app.slot_of(key)
-        delta = ends - np.asarray(uv, dtype=np.float64)
-        d = np.hypot(delta[:, 0] * slot.units_per_px, delta[:, 1] * slot.units_per_px_y)  # world units
-        k = int(np.argmin(d))
-        return ids[k] if d[k] <= PICK_RADII * self.app.overlays.ring_radius(slot) else None
+        return self.app.overlays.nearest_pick(key, uv, self.app.slot_of(key))
 
     def make_select_handler(self, key: str) -> Callable:
         """The Shift+click callback of image slot ``key``: selects the pair whose marker is nearest."""
@@ -320,11 +314,15 @@ class PairsPanel:
         value = str(event.value)
         self.app.state.select(None if value == "none" else int(value.split()[0].lstrip("#")))
 
+    def set_next_pair_handler(self, handler: Callable) -> None:
+        """The viser callback of the "Next pair" button in the pair actions (guided picking's own button)."""
+        self._next_pair = handler
+
     async def _on_pair_action_event(self, event: Any) -> None:
         """A press in the pair actions at the top: "Next pair" is guided picking's own button, the others queue
         :meth:`on_pair_action` (both on the ordered action worker)."""
         if str(getattr(event.target, "value", "")) == "Next pair":
-            await self.app.guide.callback("Next pair")(event)
+            await self._next_pair(event)
         else:
             await self._guarded_pair_action(event)
 

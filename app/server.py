@@ -196,6 +196,7 @@ class CalibrationApp:
             self.live.subscribe_facing(lambda: self.post(self.view.apply_ba_window))
             self.live.start()
             self.guide = attach_guide_panel(self)  # guided picking (app/guide_panel.py)
+            self.pairs_panel.set_next_pair_handler(self.guide.callback("Next pair"))  # its button in the pair actions
             self.state.subscribe(self.live.on_state_change)
             self.live.on_state_change(self.state)
             self.state.subscribe(self.align.on_pairs_change)  # 2-3 pairs turn the rough pose to fit them
