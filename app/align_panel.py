@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 import tempfile
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 import viser
@@ -65,6 +65,8 @@ class AlignPanel:
         self._drag: dict | None = None  # the drag in progress: its start pose and pixel, and its slot
         self._fitted_to: tuple | None = None  # the pair ids the rough pose was last turned to fit (shown)
         self._pairs_seen: tuple | None = None  # every shot's complete pairs at the last change (on_pairs_change)
+        self._drag_listeners: list[Callable[[np.ndarray | None, bool], None]] = []
+        self._drag_mode_listeners: list[Callable[[bool], None]] = []
         gui, guard = app.server.gui, app.guard
         self.folder = gui.add_folder("Align (rough pose)", order=order)
         with self.folder:
@@ -103,6 +105,21 @@ class AlignPanel:
                       else app.make_drag_handler(key))
             self._callbacks[(key, None)] = [marker, plain]
         self.show()
+
+    # ------------------------------------------------------------------ events
+    def subscribe_drag(self, listener: Callable[[np.ndarray | None, bool], None]) -> None:
+        """Call ``listener(T_camera_lidar, render)`` on the action worker during an alignment drag: the pose being
+        dragged (None once dropped) and whether to render it now (a dropped pose that changed is adopted instead,
+        which renders it)."""
+        self._drag_listeners.append(listener)
+
+    def subscribe_drag_mode(self, listener: Callable[[bool], None]) -> None:
+        """Call ``listener(on)`` when a tab ticks or unticks "Align by drag"."""
+        self._drag_mode_listeners.append(listener)
+
+    def _publish_drag(self, T_camera_lidar: np.ndarray | None, render: bool) -> None:
+        for listener in list(self._drag_listeners):
+            listener(T_camera_lidar, render)
 
     # ------------------------------------------------------------------ what the panel shows
     @property
@@ -282,11 +299,11 @@ class AlignPanel:
         self.undo()
 
     def on_drag_checkbox(self, event: Any) -> None:
-        """"Align by drag": while on, show the render over the photo (half opaque) if it was hidden."""
+        """"Align by drag" (e.g. the render shows over the photo while it is on)."""
         if event.client is None:
             return
-        if bool(event.value) and self.app.state.view.render_blend == 0.0:
-            self.app.render_pane.set_blend(0.5)
+        for listener in list(self._drag_mode_listeners):
+            listener(bool(event.value))
 
     # ------------------------------------------------------------------ drags
     def drag_callbacks(self, key: str, modifier: str | None) -> list:
@@ -308,7 +325,6 @@ class AlignPanel:
     def on_drag(self, key: str, event: Any) -> None:
         """One phase of a left-drag (``event.phase``: start, update, end) on slot ``key`` while "Align by drag" is
         on (called on the action worker, in order).  Plain drags turn the view, Shift+drags roll it."""
-        pane = self.app.render_pane
         if event.phase == "start":
             self._drag = None
             self._check_unsolved()  # refused once, at the start; the rest of that drag is ignored
@@ -323,15 +339,13 @@ class AlignPanel:
         T = drag["last"] if pixel is None else self._dragged(drag, pixel, event.modifier)  # off the picture: hold
         drag["last"] = T
         if event.phase != "end":
-            pane.drag_pose = T  # only the render follows each move; the rest waits for the drop
-            pane.request()
+            self._publish_drag(T, True)  # only the render follows each move; the rest waits for the drop
             return
         self._drag = None
-        pane.drag_pose = None
-        if np.allclose(T, drag["T0"]):
-            pane.request()
-            return
-        self.adopt(T)
+        unchanged = bool(np.allclose(T, drag["T0"]))
+        self._publish_drag(None, unchanged)
+        if not unchanged:
+            self.adopt(T)
 
     def _pixel(self, key: str, world: Any) -> np.ndarray | None:
         """Original camera pixel of a world point on the render or the camera view (None: the camera does not

@@ -199,6 +199,18 @@ class RenderPane:
             self._blink_back = blend
         self.set_blend(0.0 if blend > 0.0 else self._blink_back)
 
+    def show_drag_pose(self, T_camera_lidar: np.ndarray | None, render: bool) -> None:
+        """Render ``T_camera_lidar`` while an alignment drag turns the view (None: the drag ended), if ``render``
+        (:meth:`app.align_panel.AlignPanel.subscribe_drag`)."""
+        self.drag_pose = T_camera_lidar
+        if render:
+            self.request()
+
+    def on_align_drag_mode(self, on: bool) -> None:
+        """"Align by drag" ticked: show the render over the photo (half opaque) if it was hidden."""
+        if on and self.app.state.view.render_blend == 0.0:
+            self.set_blend(0.5)
+
     def set_blend(self, blend: float) -> None:
         """Draw the render over the photo with opacity ``blend`` (0 hides it), and save it."""
         view = self.app.state.set_view(render_blend=float(blend))  # clipped to RENDER_BLEND_RANGE

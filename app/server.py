@@ -180,6 +180,8 @@ class CalibrationApp:
             self.view.subscribe_window(lambda shown: self.render_pane.place())
             self.align = AlignPanel(self, order=self.pairs_folder.order - 0.5)  # rough pose; first folder
             self.render_pane.subscribe(lambda what, shown: self.align.show())  # its pose line names the render's pose
+            self.align.subscribe_drag(self.render_pane.show_drag_pose)  # the render follows an alignment drag
+            self.align.subscribe_drag_mode(self.render_pane.on_align_drag_mode)
             self.loupes = Loupes(self)  # the magnified BA and camera panes (public: frame_ba, frame_camera)
             self.overlays.subscribe(self.loupes.draw_marks)  # the loupes show the marks magnified
             self.pairs_panel.subscribe_clicks(self.loupes.on_pair_click)  # the loupes follow each click
