@@ -111,9 +111,11 @@ def app_reaches(root: Path = REPO) -> dict[str, Counter]:
     return out
 
 
-#: Every reach left (issue 22 item 3: each should become a state or event subscription, or a service).
-#: The files of the loupes, the pairs and view panels, the layout and the render pane were being reworked
-#: when this list was made; their reaches are for a later round.
+#: Every reach left (issue 22 item 3: each should become a state or event subscription, or a service).  Left for
+#: a later round: the live solve's cloud worker drives the 3-D pane (its work depends on what the pane shows); the
+#: pairs panel resolves a click on a loupe or the render through the part that draws it; the display panel's
+#: widgets sit in the View and Loupes folders; the Align panel drags on the render's nodes, whose plain drag hands
+#: over to it; the Guide panel (app/guide_panel.py) is another helper's.
 ALLOWED: dict[str, dict[str, int]] = {
     "app.align_panel": {"page.image_handle": 1, "render_pane.add_controls": 1, "render_pane.drag_nodes": 1,
         "render_pane.overlay_drag_callback": 1, "render_pane.plain_drag_callback": 1},
