@@ -7,7 +7,7 @@ the laser content follows the mouse (Shift+drag rolls it about the principal poi
 move the camera by 5 cm.  The render (and its copy over the photo) follows every drag at once; the rest of the page
 (predictions, BA columns, proposals, the session file) takes the new pose when the drag ends.
 
-The result is an ordinary initial extrinsic (``app.loupe_support``): predictions, loupes and proposals use it until
+The result is an ordinary initial extrinsic (``app.pose_source``): predictions, loupes and proposals use it until
 4 pairs are solved.  After the 2nd and the 3rd complete pair (:meth:`AlignPanel.fit_to_pairs`) the rough pose is turned
 about the camera centre so that those pairs line up (:func:`calib_core.alignment.fit_rotation_about_centre`): one
 ordinary align step, which "Undo align step" takes back and a drag or a turn button changes further.  The maths is :mod:`calib_core.alignment`; this panel only maps widgets and drags to it.
@@ -16,9 +16,12 @@ ordinary align step, which "Undo align step" takes back and a drag or a turn but
 from __future__ import annotations
 
 import math
-from typing import Any
+import tempfile
+from pathlib import Path
+from typing import Any, Callable
 
 import numpy as np
+import viser
 
 from calib_core.alignment import (
     MIN_ROTATION_PAIRS, MOUNTING_PRESETS, drag_to_rotation, fit_rotation_about_centre, focal_px_estimate, preset_T,
@@ -29,6 +32,8 @@ from calib_core.pairs import resolve_pairs
 from calib_core.transforms import invert_T, rotation_angle_deg
 
 from .layout import RENDER_KEY
+from .pose_source import read_extrinsics
+from .security import upload_display_name
 from .ui_common import MIN_PAIRS
 
 #: One press of a turn button turns the view this much (degrees); a move button moves the camera this far (metres).
@@ -60,6 +65,8 @@ class AlignPanel:
         self._drag: dict | None = None  # the drag in progress: its start pose and pixel, and its slot
         self._fitted_to: tuple | None = None  # the pair ids the rough pose was last turned to fit (shown)
         self._pairs_seen: tuple | None = None  # every shot's complete pairs at the last change (on_pairs_change)
+        self._drag_listeners: list[Callable[[np.ndarray | None, bool], None]] = []
+        self._drag_mode_listeners: list[Callable[[bool], None]] = []
         gui, guard = app.server.gui, app.guard
         self.folder = gui.add_folder("Align (rough pose)", order=order)
         with self.folder:
@@ -68,7 +75,7 @@ class AlignPanel:
             self._bg_preset = gui.add_button_group("Camera looks along lidar", tuple(MOUNTING_PRESETS))
             self._bg_preset.on_click(guard(self.on_preset))
             self._bt_imported = gui.add_button("Back to the imported extrinsic",
-                                               disabled=app.loupe_support.imported_T_camera_lidar is None,
+                                               disabled=app.pose_source.imported_T_camera_lidar is None,
                                                hint="The extrinsic given at start (file or the bag's /tf_static)")
             self._bt_imported.on_click(guard(self.on_imported))
             self._cb_drag = gui.add_checkbox("Align by drag", initial_value=False,
@@ -95,9 +102,24 @@ class AlignPanel:
             node.on_drag(plain)
             # The pairs panel's marker drag (registered with the node) stands aside while aligning.
             marker = (app.render_pane.overlay_drag_callback if key == "camera_overlay"
-                      else app.pairs_panel.make_drag_handler(key))
+                      else app.make_drag_handler(key))
             self._callbacks[(key, None)] = [marker, plain]
         self.show()
+
+    # ------------------------------------------------------------------ events
+    def subscribe_drag(self, listener: Callable[[np.ndarray | None, bool], None]) -> None:
+        """Call ``listener(T_camera_lidar, render)`` on the action worker during an alignment drag: the pose being
+        dragged (None once dropped) and whether to render it now (a dropped pose that changed is adopted instead,
+        which renders it)."""
+        self._drag_listeners.append(listener)
+
+    def subscribe_drag_mode(self, listener: Callable[[bool], None]) -> None:
+        """Call ``listener(on)`` when a tab ticks or unticks "Align by drag"."""
+        self._drag_mode_listeners.append(listener)
+
+    def _publish_drag(self, T_camera_lidar: np.ndarray | None, render: bool) -> None:
+        for listener in list(self._drag_listeners):
+            listener(T_camera_lidar, render)
 
     # ------------------------------------------------------------------ what the panel shows
     @property
@@ -113,7 +135,7 @@ class AlignPanel:
     def show(self) -> None:
         """Show the rough pose and what the render uses."""
         app = self.app
-        T, source = app.loupe_support.view_pose()
+        T, source = app.pose_source.view_pose()
         if source == "solve":
             line = (f"A calibration from {MIN_PAIRS}+ pairs is shown; the rough pose is used only with fewer pairs.")
         elif source == "default":
@@ -154,7 +176,7 @@ class AlignPanel:
 
     def _start_pose(self) -> np.ndarray:
         """The pose a step starts from: the rough pose, else the assumed '+x' view."""
-        return np.array(self.app.loupe_support.view_pose()[0], np.float64)
+        return np.array(self.app.pose_source.view_pose()[0], np.float64)
 
     def adopt(self, T_camera_lidar: np.ndarray | None, fitted_to: tuple | None = None) -> None:
         """Make ``T_camera_lidar`` the rough pose (None: none), remembering the old one for "Undo align step";
@@ -163,7 +185,7 @@ class AlignPanel:
         old = self.app.initial_T_camera_lidar
         self._history.append(None if old is None else np.array(old))
         del self._history[:-MAX_HISTORY]
-        self.app.loupe_support.adopt_rough_pose(T_camera_lidar)
+        self.app.pose_source.adopt_rough_pose(T_camera_lidar)
         self.show()
 
     def fit_to_pairs(self, pairs: list) -> bool:
@@ -226,15 +248,42 @@ class AlignPanel:
             raise CalibError("no align step to undo")
         self._check_unsolved()
         self._fitted_to = None
-        self.app.loupe_support.adopt_rough_pose(self._history.pop())
+        self.app.pose_source.adopt_rough_pose(self._history.pop())
         self.show()
 
     # ------------------------------------------------------------------ widget handlers
+    def add_upload_button(self, client: Any) -> None:
+        """This tab's "Import initial extrinsics" button, in the Align folder (each tab gets its own)."""
+        app = self.app
+        with app.folder_lock:
+            with self.folder:
+                button = client.gui.add_upload_button(
+                    "Import initial extrinsics", icon=viser.Icon.UPLOAD, mime_type="*/*",
+                    hint="A rough pose (any extrinsics format ba-calib reads): predictions and 'Facing the camera' "
+                         "work before 4 pairs")
+        button.on_upload(app.guard(lambda event: self.receive_initial_extrinsics(
+            event.client, getattr(event.value, "name", ""), getattr(event.value, "content", b""))))
+
+    def receive_initial_extrinsics(self, client: Any, name: str, content: bytes) -> None:
+        """Import an uploaded extrinsics file as the rough pose (the upload button's handler)."""
+        shown = upload_display_name(name)
+        if not content:
+            raise CalibError(f"{shown}: the file is empty")
+        suffix = Path(str(name)).suffix.lower()
+        suffix = suffix if suffix in (".yaml", ".yml", ".json", ".txt", ".urdf", ".xml", ".launch", ".py") else ".txt"
+        with tempfile.TemporaryDirectory() as tmp:
+            path = Path(tmp) / f"upload{suffix}"
+            path.write_bytes(content)
+            T = read_extrinsics(path, shown)
+        self.adopt(T)
+        self.app.notify(client, "Initial extrinsics imported",
+                        f"{shown}: predictions use it until {4} pairs are solved", color="green")
+
     def on_preset(self, event: Any) -> None:
         self.apply_preset(str(event.value))
 
     def on_imported(self, event: Any) -> None:
-        T = self.app.loupe_support.imported_T_camera_lidar
+        T = self.app.pose_source.imported_T_camera_lidar
         if T is None:
             raise CalibError("no extrinsic was imported at start")
         self._check_unsolved()
@@ -250,11 +299,11 @@ class AlignPanel:
         self.undo()
 
     def on_drag_checkbox(self, event: Any) -> None:
-        """"Align by drag": while on, show the render over the photo (half opaque) if it was hidden."""
+        """"Align by drag" (e.g. the render shows over the photo while it is on)."""
         if event.client is None:
             return
-        if bool(event.value) and self.app.state.view.render_blend == 0.0:
-            self.app.render_pane.set_blend(0.5)
+        for listener in list(self._drag_mode_listeners):
+            listener(bool(event.value))
 
     # ------------------------------------------------------------------ drags
     def drag_callbacks(self, key: str, modifier: str | None) -> list:
@@ -276,7 +325,6 @@ class AlignPanel:
     def on_drag(self, key: str, event: Any) -> None:
         """One phase of a left-drag (``event.phase``: start, update, end) on slot ``key`` while "Align by drag" is
         on (called on the action worker, in order).  Plain drags turn the view, Shift+drags roll it."""
-        pane = self.app.render_pane
         if event.phase == "start":
             self._drag = None
             self._check_unsolved()  # refused once, at the start; the rest of that drag is ignored
@@ -291,15 +339,13 @@ class AlignPanel:
         T = drag["last"] if pixel is None else self._dragged(drag, pixel, event.modifier)  # off the picture: hold
         drag["last"] = T
         if event.phase != "end":
-            pane.drag_pose = T  # only the render follows each move; the rest waits for the drop
-            pane.request()
+            self._publish_drag(T, True)  # only the render follows each move; the rest waits for the drop
             return
         self._drag = None
-        pane.drag_pose = None
-        if np.allclose(T, drag["T0"]):
-            pane.request()
-            return
-        self.adopt(T)
+        unchanged = bool(np.allclose(T, drag["T0"]))
+        self._publish_drag(None, unchanged)
+        if not unchanged:
+            self.adopt(T)
 
     def _pixel(self, key: str, world: Any) -> np.ndarray | None:
         """Original camera pixel of a world point on the render or the camera view (None: the camera does not

@@ -72,6 +72,8 @@ class AppServices(Protocol):
         The pairs and the view settings (``state.view``); every change goes through it.
     ui_lock : UiLock
         Held while the scene and the panels are redrawn; hold it to read or change several widgets at once.
+    folder_lock : threading.Lock
+        Held while one tab's own widgets are added into a shared folder (one GUI context at a time).
     depth, camera, image
         The scan's depth matrix, the camera model and the camera image (original pixels).
     ba_keys : tuple of str
@@ -115,6 +117,11 @@ class AppServices(Protocol):
         The camera views (:class:`app.camera_view.CameraView`: ``raw``, and ``panorama`` for wide lenses), by key.
     title : str
         The page title.
+    laser_images : app.laser_images.LaserImages
+        The laser images as the page shows them (contrast applied; ``ba_display``, ``ba_title``, ``loupe_image``).
+    pose_source : app.pose_source.PoseSource
+        The pose predictions, the render and the BA columns use (solved, else rough, else the "+x" preset), the
+        predictions both ways under it, and the rough pose (``adopt_rough_pose``; ``subscribe`` to its changes).
     actions : app.action_queue.ActionQueue
         The ordered worker every user action runs on (``busy``: an action runs or waits).
     """
@@ -122,6 +129,7 @@ class AppServices(Protocol):
     server: Any
     state: AnnotationState
     ui_lock: UiLock
+    folder_lock: Any
     depth: Any
     camera: Any
     image: np.ndarray
@@ -149,12 +157,18 @@ class AppServices(Protocol):
     camera_views: dict
     title: str
     actions: Any
+    pose_source: Any
+    laser_images: Any
 
     def subscribe_solve(self, listener: Callable[[Any], None]) -> None:
         """Call ``listener(shown)`` (:class:`app.ui_common.SolveShown`) on every redraw of what the live solve shows."""
 
     def subscribe_solved(self, listener: Callable[[Any], None]) -> None:
         """Call ``listener(shown)`` after each finished solve is shown (outside the UI lock)."""
+
+    def solve_shown(self) -> Any:
+        """What the live solve shows now (:class:`app.ui_common.SolveShown`: the last good solve, its error, whether a
+        newer solve runs, the complete pairs), as its events pass it."""
 
     def guard(self, fn: Callable[[Any], None]) -> Callable:
         """A viser callback that queues ``fn(action)`` on the ordered action worker (errors become notifications)."""
@@ -168,6 +182,10 @@ class AppServices(Protocol):
     def pose(self) -> np.ndarray | None:
         """``T_camera_lidar`` predictions use: the last good solve, else the imported rough pose, else None."""
 
+    def slot_of(self, key: str) -> Any:
+        """The page slot (:class:`app.layout.ImageSlot`) of click key ``key``: a BA key, a camera view, the render
+        (:data:`app.layout.RENDER_KEY`), ``loupe_ba`` or ``loupe_camera``."""
+
     def camera_slot(self) -> Any:
         """The page slot of the visible camera view."""
 
@@ -176,6 +194,9 @@ class AppServices(Protocol):
 
     def make_click_handler(self, key: str) -> Callable:
         """The on-click callback of image slot ``key`` (adds or moves a pair end)."""
+
+    def make_drag_handler(self, key: str) -> Callable:
+        """The on-drag callback of image slot ``key`` (drags a pair end; a shaky click is a click)."""
 
     def make_select_handler(self, key: str) -> Callable:
         """The Shift+click callback of image slot ``key`` (selects the nearest pair)."""

@@ -16,12 +16,11 @@ from typing import Any, Callable
 import numpy as np
 
 from calib_core.errors import CalibError
-from calib_core.overlays import colorize_points, columns_seen_by_camera
+from calib_core.overlays import colorize_points
 from calib_core.pairs import resolve_pairs
 from calib_core.solve import calibrate
 from calib_core.transforms import transform_points
 
-from .ba_view import ColumnWindow, covering_window
 from .live_solver import LiveSolver
 from .shot_solve import checked_bundle, joint_bundle, pairs_in_3d
 from .state import AnnotationState
@@ -46,7 +45,8 @@ class LiveSolveCoordinator:
     """The live solve of one :class:`app.server.CalibrationApp` (``app.live``): it owns the solve shown.
 
     Public: :attr:`bundle` (the last good solve), :attr:`solve_error`,
-    :attr:`solving`, :attr:`facing` (the scan columns the camera sees),
+    :attr:`solving`, :meth:`subscribe_facing` (the scan columns the camera sees,
+    :attr:`app.pose_source.PoseSource.facing`, were recomputed),
     :meth:`on_state_change` (subscribed to the state), :meth:`subscribe` and
     :meth:`subscribe_solved` (its events), :meth:`wait_idle`,
     :meth:`last_click_to_update`.  :meth:`start` starts its two worker
@@ -67,8 +67,6 @@ class LiveSolveCoordinator:
         self._shot_cache: dict = {}  # each shot's resolved pairs (app.shot_solve.make_shots)
         #: CPU seconds of the solver thread's last jobs, by kind ("solve", "joint fit", "shot checks"): benchmarks.
         self.solve_cpu: dict[str, float] = {}
-        self._facing: ColumnWindow | None = None  # from the last good solve it was computed for
-        self._facing_of: SolveBundle | None = None  # the solve ``_facing`` was computed for
         self._stopped = False
         self._shown = threading.Condition()  # notified when a solve has been shown (redrawn)
         self._shown_job = 0  # the newest job whose solve was shown
@@ -90,7 +88,7 @@ class LiveSolveCoordinator:
         self._solved_listeners.append(listener)
 
     def subscribe_facing(self, listener: Callable[[], None]) -> None:
-        """Call ``listener()`` when the camera-facing column window (:attr:`facing`) was recomputed while the BA
+        """Call ``listener()`` when the camera-facing column window (``app.pose_source.facing``) was recomputed while the BA
         panes follow it (``ba_window_mode == "camera"``); on the cloud worker's thread: post UI work."""
         self._facing_listeners.append(listener)
 
@@ -130,11 +128,6 @@ class LiveSolveCoordinator:
     def bundle(self) -> SolveBundle | None:
         """The last good solve with what was solved (pick ids, pairs), or None."""
         return self._bundle
-
-    @property
-    def facing(self) -> ColumnWindow | None:
-        """The scan columns whose points the current pose projects into the camera image (None: not known)."""
-        return self._facing
 
     def on_state_change(self, state: AnnotationState) -> None:
         """Submit the complete pairs for solving when they changed, then redraw (subscribed to the state).
@@ -187,7 +180,7 @@ class LiveSolveCoordinator:
             return self._shown.wait_for(lambda: self._shown_job >= job or self._stopped, timeout) and not self._stopped
 
     def show_panels(self) -> None:
-        """Redraw what the solve shows (:meth:`redraw`; the name app/loupe_support.py calls)."""
+        """Redraw what the solve shows (:meth:`redraw`; the name app/pose_source.py calls)."""
         self.redraw()
 
     def _solve_job(self, payload: Any) -> SolveBundle:
@@ -278,33 +271,6 @@ class LiveSolveCoordinator:
         has_color &= colors.any(axis=1)
         return np.where(has_color[:, None], colors, np.uint8(110)).astype(np.uint8)
 
-    def _facing_window(self, T_camera_lidar: np.ndarray) -> ColumnWindow | None:
-        """The scan columns whose points project into the camera image, or None."""
-        seen = columns_seen_by_camera(self.app.depth, self.app.camera, T_camera_lidar)
-        n_cols = len(seen)
-        # A margin and coarse ends, so that the next solve usually keeps the same window.
-        step = max(1, round(n_cols / 225))
-        return covering_window(seen, self.app.wrap_cols, margin=step, quantum=step)
-
-    def _set_facing(self, bundle: SolveBundle, facing: ColumnWindow | None) -> None:
-        with self.app.ui_lock:
-            if bundle is not self._bundle:
-                return  # a newer solve is shown; its own window comes with it
-            self._facing_of = bundle
-            if facing is not None:  # the camera sees no column: keep the last window
-                self._facing = facing
-
-    def ensure_facing(self) -> None:
-        """Compute the camera-facing window of the current pose now, if not done yet (switch to camera mode)."""
-        bundle = self._bundle
-        if bundle is not None and self._facing_of is not bundle:
-            self._set_facing(bundle, self._facing_window(bundle.result.T_camera_lidar))
-        elif bundle is None:
-            # Before any solve: the rough pose, else the "+x" preset (app.loupe_support.view_pose).
-            facing = self._facing_window(self.app.loupe_support.view_pose()[0])
-            if facing is not None:
-                self._facing = facing
-
     def _cloud_job(self, bundle: SolveBundle | None) -> CloudUpdate | None:
         # Decided when the job runs: a tab may have left or entered the 3-D view meanwhile.
         app = self.app
@@ -316,9 +282,9 @@ class LiveSolveCoordinator:
         t0 = time.perf_counter()
         T = bundle.result.T_camera_lidar
         colors = self._cloud_colors(T) if app.cloud.visible and app.cloud.shows is not bundle else None
-        facing_done = app.state.view.ba_window_mode == "camera" and self._facing_of is not bundle
-        facing = self._facing_window(T) if facing_done else None
-        app.loupe_support.projection(T)  # the loupes' camera-to-cell predictions, ready before the next click
+        facing_done = app.state.view.ba_window_mode == "camera" and app.pose_source.facing_due(bundle)
+        facing = app.pose_source.facing_window(T) if facing_done else None
+        app.pose_source.projection(T)  # the loupes' camera-to-cell predictions, ready before the next click
         return CloudUpdate(bundle, colors, facing_done, facing, time.perf_counter() - t0)
 
     def _on_cloud_done(self, job: int, update: CloudUpdate | None, error: BaseException | None) -> None:
@@ -336,7 +302,7 @@ class LiveSolveCoordinator:
                 if update.colors is not None:
                     app.cloud.show_colors(update.bundle, update.colors)
             if update.facing_done:
-                self._set_facing(update.bundle, update.facing)
+                app.pose_source.set_facing(update.bundle, update.facing)
         if update.facing_done and app.state.view.ba_window_mode == "camera" and not self._stopped:
             for listener in list(self._facing_listeners):
                 listener()

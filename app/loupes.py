@@ -7,16 +7,13 @@ pixels).  A click in a loupe maps back exactly: sub-pixel for the camera
 (the loupe shows the *original* image, whatever the main view shows), a whole
 scan cell for the BA loupe.
 
-The app moves them (:meth:`Loupes.frame_ba`, :meth:`Loupes.frame_camera`)
-after each click, to the click and to the other end's prediction; the zoom
-steps change how much they show around the same centre.  Display plumbing
-only: predictions come from :mod:`calib_core.predict`.
+They follow each click (:mod:`app.loupe_framing`: to the click and the other end's prediction); the zoom steps
+change how much they show around the same centre.  Display plumbing only (predictions: :mod:`calib_core.predict`).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -25,12 +22,14 @@ from calib_core.errors import CalibError
 from calib_core.predict import ellipse_outline
 
 from .layout import ImageSlot, LoupeArea, bounds_of, loupe_areas
+from .loupe_crops import BaCrop, CameraCrop, default_camera_crop_px, node_name, slot_key
+from .loupe_framing import PairClick, follow_click
 from .loupe_marks import LEGEND, ba_title, camera_title, draw_camera_marks, tick_segments
+from .render_pane import cell_at_pixel, loupe_texture, loupe_title, pixel_of_cells
 from .ui_common import marker_segments
 
-#: Columns the BA loupe shows at zoom 1, and the camera loupe's crop side for a 640 px wide image.
+#: Columns the BA loupe shows at zoom 1 (the camera loupe's crop side: :data:`app.loupe_crops.CAMERA_LOUPE_PX`).
 BA_LOUPE_COLUMNS = 32
-CAMERA_LOUPE_PX = 36
 ZOOM_FACTOR = 1.5
 BA_COLUMN_LIMITS = (8, 400)
 CAMERA_PX_LIMITS = (8, 1200)
@@ -43,48 +42,10 @@ FRAMING_NODES = {"ba": ("/annot/loupe/ba_outline",),
                             "/annot/loupe/camera_outline")}
 
 
-def default_camera_crop_px(width: int, height: int) -> int:
-    """The camera loupe's crop side (original-image px) at zoom 1: bigger images get a wider crop,
-    so a rough prediction still falls inside it."""
-    return int(min(max(CAMERA_LOUPE_PX, round(CAMERA_LOUPE_PX * max(width, height) / 640 / 1.5)), 160))
-
-
-def node_name(kind: str) -> str:
-    """Scene node of loupe ``kind`` (``"ba"`` or ``"camera"``)."""
-    return f"/annot/loupe_{kind}"
-
-
-def slot_key(kind: str) -> str:
-    """The click-routing key of loupe ``kind`` (what the app's click handler receives)."""
-    return f"loupe_{kind}"
-
-
-@dataclass(frozen=True)
-class BaCrop:
-    """The BA loupe's view: image ``key``, top-left cell ``(row0, col0)``, ``n_rows`` x ``n_cols`` cells."""
-
-    key: str
-    row0: int
-    col0: int
-    n_rows: int
-    n_cols: int
-    center: tuple[int, int]  # (row, col) framed
-
-
-@dataclass(frozen=True)
-class CameraCrop:
-    """The camera loupe's view: original-image pixels ``[u0, u0 + n)`` x ``[v0, v0 + n)``."""
-
-    u0: int
-    v0: int
-    n: int
-    center: tuple[float, float]
-    cov_px2: tuple | None  # 2x2 covariance of the framed point (pixels^2), drawn as a 3-sigma ellipse
-
-
 class Loupes:
     """The BA loupe and the camera loupe of one :class:`app.server.CalibrationApp`.
 
+    It owns the "Loupes" folder (the zoom buttons; the display panel adds its loupe widgets there).
     Public: :meth:`frame_ba`, :meth:`frame_camera`, :meth:`zoom`, :meth:`show_click`,
     :meth:`relayout`, :attr:`ba_crop`, :attr:`camera_crop`, :meth:`slot`,
     :meth:`target_at` (loupe pixel -> cell or original pixel) and
@@ -107,6 +68,7 @@ class Loupes:
         self._framing_of: dict[str, tuple] = {}  # kind -> inputs its outline (and centre marker) were drawn from
         self._clicked: dict[str, tuple] = {}  # kind -> the cell / pixel a click inside it chose: its title names it
         self.shows_render = False  # the laser loupe shows the camera-view render's crop (after a click on it)
+        self._render: Any = None  # the render the render pane shows (app.render_pane.ShownRender; on_render)
         scene = app.server.scene
         self._handles: dict[str, Any] = {}
         self._titles: dict[str, Any] = {}
@@ -127,6 +89,21 @@ class Loupes:
         for kind in KINDS:
             self._place(kind)  # sends the size and place once; later only when they change
         self.refresh()
+        self._build_folder(app.server.gui)
+
+    def _build_folder(self, gui: Any) -> None:
+        """The "Loupes" folder: used while picking, so right below the Pairs folder, found without scrolling."""
+        self.folder = gui.add_folder("Loupes", order=self.app.pairs_folder.order + 0.25)
+        with self.folder:
+            zoom = gui.add_button_group("Loupe zoom", ("BA +", "BA -", "Camera +", "Camera -"))
+            zoom.on_click(self.app.guard(self.on_zoom))
+            self.app.display.add_loupe_controls(gui)  # what the BA loupe shows, the contrast, "Hide marks"
+
+    def on_zoom(self, event: Any) -> None:
+        """The "Loupe zoom" buttons: magnify or widen one loupe around the same centre."""
+        kind, step = {"BA +": ("ba", ZOOM_FACTOR), "BA -": ("ba", 1 / ZOOM_FACTOR),
+                      "Camera +": ("camera", ZOOM_FACTOR), "Camera -": ("camera", 1 / ZOOM_FACTOR)}[str(event.value)]
+        self.zoom(kind, step)
 
     # ------------------------------------------------------------------ public
     def frame_ba(self, key: str, row: int, col: int) -> None:
@@ -174,6 +151,13 @@ class Loupes:
                 self.shows_render = bool(on)
                 self._show("ba")
 
+    def on_render(self, what: str, shown: Any) -> None:
+        """A new render ``shown`` (:meth:`app.render_pane.RenderPane.subscribe`), in the laser loupe if it shows it."""
+        if what == "render":
+            self._render = shown
+            if self.shows_render:
+                self.refresh_ba()
+
     def refresh_ba(self) -> None:
         """Re-send the laser loupe (e.g. a new render arrived)."""
         with self.app.ui_lock:
@@ -181,8 +165,7 @@ class Loupes:
 
     def _render_on(self) -> bool:
         """Does the laser loupe show the render now (asked for, and a render exists)?"""
-        pane = getattr(self.app, "render_pane", None)
-        return self.shows_render and pane is not None and pane.current is not None
+        return self.shows_render and self._render is not None
 
     def zoom(self, kind: str, factor: float) -> None:
         """Magnify loupe ``kind`` by ``factor`` (> 1 shows less, bigger) around the same centre."""
@@ -201,6 +184,15 @@ class Loupes:
                 self.camera_crop = self._make_camera_crop(*c.center, c.cov_px2)
             self._show(kind)
 
+    def on_pair_click(self, click: PairClick) -> None:
+        """Follow a click on the images (:meth:`app.pairs_panel.PairsPanel.subscribe_clicks`)."""
+        follow_click(self, self.app, click)
+
+    def on_pair_cancelled(self) -> None:
+        """A half-made pair was cancelled: a guided proposal's ellipse in the camera loupe goes too."""
+        if self.camera_crop.cov_px2 is not None:
+            self.frame_camera(*self.camera_crop.center)
+
     def show_click(self, kind: str, point: tuple) -> None:
         """Name a click made inside loupe ``kind`` in its title: scan cell ``(row, col)`` (BA) or original pixel
         ``(u, v)``.  The loupe keeps its view (the click was aimed in it)."""
@@ -208,8 +200,11 @@ class Loupes:
             self._clicked[kind] = tuple(point)
             self._titles[kind].text = self.title(kind)
 
-    def relayout(self) -> None:
-        """Place both loupes beside the images again (the page layout changed, e.g. another BA column window)."""
+    def relayout(self, moved: bool = True) -> None:
+        """Place both loupes beside the images again if they ``moved`` (the page layout changed, e.g. another BA
+        column window: :meth:`app.view_panel.ViewPanel.subscribe_layout`), not where the old ones ended."""
+        if not moved:
+            return
         app = self.app
         with app.ui_lock, app.server.atomic():
             main = list(app.slots.values())  # camera views, the camera-view render, BA images
@@ -246,7 +241,10 @@ class Loupes:
         x, y = float(uv[0]), float(uv[1])
         if kind == "ba" and self._render_on():
             c = self.camera_crop
-            return self.app.render_pane.target_at((c.u0 + x, c.v0 + y), display=False)
+            cell = cell_at_pixel(self._render, c.u0 + x, c.v0 + y)
+            if cell is None:
+                raise CalibError("no laser return here: click where the camera-view render shows the scan")
+            return ("ba", self.ba_crop.key, *cell)
         if kind == "ba":
             c = self.ba_crop
             n_rows, n_cols = self.app.depth.shape
@@ -269,7 +267,8 @@ class Loupes:
         original-image pixel ``(u, v)``; None when the loupe does not show it."""
         if kind == "ba" and self._render_on():  # where the render's pose draws the cell
             c = self.camera_crop
-            uv = self.app.render_pane.pixel_of_cells(np.array([[round(target[1]), round(target[0])]]))[0]
+            uv = pixel_of_cells(self._render, self.app.camera, self.app.depth,
+                                np.array([[round(target[1]), round(target[0])]]))[0]
             x, y = float(uv[0]) - c.u0, float(uv[1]) - c.v0
         elif kind == "ba":
             c = self.ba_crop
@@ -304,7 +303,7 @@ class Loupes:
             pose = app.pose()
             inputs += (None if pose is None else np.asarray(pose, np.float64).tobytes(),)
         if kind == "ba" and self._render_on():
-            inputs += (self.camera_crop, id(app.render_pane.current))
+            inputs += (self.camera_crop, id(self._render))
         if self._marks_of.get(kind) == inputs:
             return
         self._marks_of[kind] = inputs
@@ -338,7 +337,7 @@ class Loupes:
         hx, hy = 0.5 * s.units_per_px, 0.5 * s.units_per_px_y
         radius, cell = 1.6 * max(hx, hy), (hx, hy)
         if self._render_on():  # the render's crop: rings where the render's pose draws the cells
-            xy = app.render_pane.pixel_of_cells(rc) - [self.camera_crop.u0, self.camera_crop.v0]
+            xy = pixel_of_cells(self._render, app.camera, app.depth, rc) - [self.camera_crop.u0, self.camera_crop.v0]
             radius, cell = max(3.0, 0.06 * self.camera_crop.n) * s.units_per_px, None
         inside = np.array([s.contains(p) for p in xy], bool)
         segs = marker_segments(s.world_from_pixel(xy[inside], z_offset=-0.01), radius, cell_half_size=cell,
@@ -420,9 +419,9 @@ class Loupes:
     def _ba_texture(self) -> np.ndarray:
         if self._render_on():
             cc = self.camera_crop
-            return self.app.render_pane.loupe_texture(cc.u0, cc.v0, cc.n)
+            return loupe_texture(self._render, self.app.camera, cc.u0, cc.v0, cc.n)
         c = self.ba_crop
-        gray = self.app.display.loupe_image(c.key)[0]
+        gray = self.app.laser_images.loupe_image(c.key)[0]
         n_rows, n_cols = gray.shape
         rows = c.row0 + np.arange(c.n_rows)
         cols = c.col0 + np.arange(c.n_cols)
@@ -473,12 +472,12 @@ class Loupes:
     def title(self, kind: str) -> str:
         """The loupe's title as the page shows it."""
         if kind == "ba" and self._render_on():
-            return self.app.render_pane.loupe_title(self.camera_crop.center, self.camera_crop.n)
+            return loupe_title(self._render, self.app.depth, self.camera_crop.center)
         if kind == "ba":
             c = self.ba_crop
             row, col = self._clicked.get("ba", c.center)
             rng = float(self.app.depth.range_m[row, col]) if self.app.depth.valid[row, col] else None
-            return ba_title(self.app.display.loupe_image(c.key)[1], row, col, rng)  # short: fits the loupe
+            return ba_title(self.app.laser_images.loupe_image(c.key)[1], row, col, rng)  # short: fits the loupe
         c = self.camera_crop
         return camera_title(*self._clicked.get("camera", c.center), c.n)
 

@@ -9,11 +9,10 @@ from typing import Any, Callable, Iterator
 
 import numpy as np
 
-from calib_core.overlays import project_lidar_points
 
 from .layout import ImageSlot
 from .state import Pick
-from .ui_common import MARKER_SIZE, RING_CELLS, RING_MIN_RADIUS, EDGE_MIN_SIZE, marker_segments
+from .ui_common import MARKER_SIZE, PICK_RADII, RING_CELLS, RING_MIN_RADIUS, EDGE_MIN_SIZE, marker_segments
 
 
 class OverlayDrawing:
@@ -160,6 +159,17 @@ class OverlayDrawing:
         self._marker_cache[key] = (inputs, labels)
         return labels
 
+    def nearest_pick(self, key: str, uv: tuple[float, float], slot: ImageSlot) -> int | None:
+        """The pair whose end marker on slot ``key`` (placed at ``slot``) is nearest display pixel ``uv``, if within
+        :data:`app.ui_common.PICK_RADII` ring radii; else None."""
+        ids, ends = self.pick_ends(key)
+        if not ids:
+            return None
+        delta = ends - np.asarray(uv, dtype=np.float64)
+        d = np.hypot(delta[:, 0] * slot.units_per_px, delta[:, 1] * slot.units_per_px_y)  # world units
+        k = int(np.argmin(d))
+        return ids[k] if d[k] <= PICK_RADII * self.ring_radius(slot) else None
+
     @staticmethod
     def ring_radius(slot: ImageSlot) -> float:
         """Pick-marker ring radius on ``slot`` (world units): a few cells, never vanishingly small."""
@@ -231,20 +241,10 @@ class OverlayDrawing:
 
     def predictions(self, picks: dict[int, Pick]) -> list[tuple[int, np.ndarray]]:
         """Display pixels where the last good calibration expects picks that have only a BA end."""
-        ids, pixels = self.predicted_pixels(picks)
+        ids, pixels = self.app.pose_source.predicted_pixels(picks)
         uv, ok = self.app.display_from_pixels(pixels)
         return [(pid, uv[k]) for k, pid in enumerate(ids) if ok[k]]
 
-    def predicted_pixels(self, picks: dict[int, Pick]) -> tuple[list[int], np.ndarray]:
-        """Camera pixels where the last good calibration expects the picks that have only a laser cell."""
-        app = self.app
-        T = app.pose()  # the last good solve, else the imported initial extrinsic
-        pending = [p for p in picks.values() if p.laser_rc is not None and p.pixel is None]
-        if T is None or not pending:
-            return [], np.empty((0, 2))
-        points = app.depth.cell_points(np.array([p.laser_rc for p in pending]))
-        uv, ok = project_lidar_points(T, app.camera, points)
-        return [p.id for p, good in zip(pending, ok) if good], uv[ok]
 
 
 #: The widest a BA-edge dot is drawn, in photo pixels: in by-eye run 4 the dots (then squares of up to 2.9 pixels of a

@@ -1,10 +1,9 @@
 """The page of the app: the theme, the intro text, the backdrop and the annotation images' scene nodes (camera
-views and BA images with their titles, wired to the pairs panel's click handlers).  What the images show is set by
+views and BA images with their titles, wired to the app's click, select and drag handlers).  What the images show is set by
 the view panel (column window, camera view) and the display panel (contrast)."""
 
 from __future__ import annotations
 
-import threading
 from typing import Any
 
 import numpy as np
@@ -51,14 +50,11 @@ class PageBuilder:
     Construction sets the theme, adds the intro text (first in the control
     panel) and the backdrop; :meth:`add_images` adds the annotation images
     once the panels exist; the view and display panels change them through
-    :meth:`set_ba` and :meth:`show_camera_view`.  :attr:`folder_lock` is held
-    while a tab's own widgets are added to a shared folder.
+    :meth:`set_ba` and :meth:`show_camera_view`.
     """
 
     def __init__(self, app: Any) -> None:
         self.app = app
-        # Held while one tab's own widgets are added into a shared folder (one GUI context at a time).
-        self.folder_lock = threading.Lock()
         gui, scene = app.server.gui, app.server.scene
         gui.configure_theme(control_width="large", show_share_button=False, dark_mode=False)
         self.intro = gui.add_markdown(f"**{md_escape(app.title)}**  \n" + INTRO)  # the pair actions go above it
@@ -77,7 +73,7 @@ class PageBuilder:
         """Add the camera views and the BA images (``ba_textures``, titled ``ba_titles``) at their page slots."""
         app = self.app
         scene = app.server.scene
-        shown = app.view.camera_view.key
+        shown = app.camera_view.key
         for key, view in app.camera_views.items():
             s = app.slots[key]
             self._handles[key] = scene.add_image(
@@ -94,11 +90,10 @@ class PageBuilder:
             self._ba_titles[key] = scene.add_label(f"/annot/titles/{key}", ba_titles[key],
                                                   position=(x0, y0 - 0.03, -0.01), anchor="bottom-left",
                                                   font_screen_scale=0.9)
-        pairs = app.pairs_panel
         for key, handle in self._handles.items():
-            handle.on_click(pairs.make_click_handler(key))
-            handle.on_click(modifier="shift")(pairs.make_select_handler(key))
-            handle.on_drag(pairs.make_drag_handler(key))
+            handle.on_click(app.make_click_handler(key))
+            handle.on_click(modifier="shift")(app.make_select_handler(key))
+            handle.on_drag(app.make_drag_handler(key))
         self._camera_title = scene.add_label("/annot/titles/camera", "", position=(0, 0, -0.01), anchor="bottom-left",
                                             font_screen_scale=0.9)
 
@@ -123,6 +118,11 @@ class PageBuilder:
             self._ba_titles[key].position = (x0, y0 - 0.03, -0.01)
         if title is not None:
             self._ba_titles[key].text = title
+
+    def show_ba_window(self, shown: Any) -> None:
+        """Show the BA images as :class:`app.view_events.BaWindowShown` ``shown`` says (textures, places, titles)."""
+        for key, texture in shown.textures.items():
+            self.set_ba(key, texture=texture, slot=shown.slots[key], title=shown.titles[key])
 
     def show_camera_view(self, key: str, slot: Any, title: str) -> None:
         """Show camera view ``key`` (hide the other) with ``title`` above its ``slot``."""

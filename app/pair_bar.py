@@ -119,7 +119,7 @@ def undo_note(before: list, after: list) -> str:
 
 def live_summary(live: Any) -> str:
     """``"N pairs · mean X px · left out Y px (warning above L) · Quality: ok"`` (markdown) of the solve
-    ``live.bundle`` shows, or "" before the first solve.  N is the pairs in the fit; with too few for an error
+    ``live.bundle`` shows (``live``: a :class:`app.ui_common.SolveShown`), or "" before the first solve.  N is the pairs in the fit; with too few for an error
     figure the mean says so."""
     bundle = getattr(live, "bundle", None)
     r = getattr(bundle, "result", None)
@@ -168,7 +168,7 @@ class PairBar:
         return str(self._md_guide.content)
 
     def show_live(self, live: Any) -> None:
-        """Show :func:`live_summary` of the app's live solve ``live``."""
+        """Show :func:`live_summary` of what the live solve shows (``live``: :class:`app.ui_common.SolveShown`)."""
         text = live_summary(live)
         with self._lock:
             if self._md_live.content != text:

@@ -14,37 +14,36 @@ from calib_core.errors import CalibError
 from calib_core.panorama import refine_click_to_corner
 
 from .layout import RENDER_KEY
+from .loupe_framing import PairClick
 from .page_builder import install_page_script
 from .pair_bar import PAIR_BAR_JS, PairBar, undo_note
 from .pairs_import import import_upload
-from .ui_common import MIN_PAIRS, PICK_RADII, SNAP_RADIUS_PX
+from .ui_common import MIN_PAIRS, SNAP_RADIUS_PX
 
 #: The buttons at the top of the control panel ("Next pair" is guided picking's own).
 PAIR_ACTIONS = ("Undo", "Cancel pair", "Next pair")
-#: After a refining click in one loupe the other keeps its view while the pair's other end lies at least this
-#: share of its side from its edges.
-STEADY_MARGIN = 0.15
 
 
 class PairsPanel:
     """The "Pairs" folder of one :class:`app.server.CalibrationApp` (``app.pairs_panel``) and the clicks on the images.
 
     It owns its widgets (built here, where the folder goes on the page) and
-    what each tab clicked last (:meth:`last_click`, :meth:`camera_click_source`).
+    where each tab's last camera click landed (:meth:`camera_click_source`).
     Every change goes through ``app.state``; the clicks are mapped through the
-    app's page layout, loupes and predictions (``app.loupe_support``).
+    app's page layout, and published (:meth:`subscribe_clicks`: the loupes follow them).
     """
 
-    def __init__(self, app: Any) -> None:
+    def __init__(self, app: Any, top: float) -> None:
         self.app = app
-        self._last_click: dict[int, tuple] = {}  # client id -> ("ba", key, row, col) or ("camera", u, v)
         self._last_pick: dict[Any, tuple] = {}  # client id -> (kind, pick id, "full" | "loupe")
         self._loupes_pick: int | None = None  # the pair the loupes were last framed on (refining it keeps them still)
         self._undo_note: tuple[int, str] = (-1, "")  # (state version, what the last top Undo took back)
+        self._click_listeners: list[Callable[[PairClick], None]] = []
+        self._cancel_listeners: list[Callable[[], None]] = []
         gui, guard = app.server.gui, app.guard
         # The pair actions first in the panel, near the loupes: in the by-eye trials Undo and Next pair were many
         # wheel scrolls apart.  Buttons above the status line, so that they never move as the text changes.
-        top = app.page.intro.order
+        # ``top``: the GUI order of the intro text, which they go just above.
         self.pair_action_callback = self._on_pair_action_event
         self._bg_actions = gui.add_button_group("Pair", PAIR_ACTIONS, order=top - 1.0)
         self._bg_actions.on_click(self.pair_action_callback)
@@ -54,6 +53,7 @@ class PairsPanel:
         self.show_guide_status = self.bar.show_guide_status  # the Guide panel's hook
         install_page_script(app.server, PAIR_BAR_JS)  # the bar stays in view; Delete and Ctrl+Z keys
         self._guarded_pair_action = guard(self.on_pair_action)
+        self._next_pair: Callable | None = None  # guided picking's "Next pair" (set_next_pair_handler)
         self.folder = gui.add_folder("Pairs")
         with self.folder:
             self._md_pairs = gui.add_markdown("")
@@ -92,15 +92,21 @@ class PairsPanel:
         """What the "Selected pair" dropdown shows."""
         return str(self._dd_selected.value)
 
+    # ------------------------------------------------------------------ events
+    def subscribe_clicks(self, listener: Callable[[PairClick], None]) -> None:
+        """Call ``listener(click)`` after each click on an image is applied (or refused by the state), on the
+        action worker, before the loupes' marks are drawn (the loupes follow the clicks)."""
+        self._click_listeners.append(listener)
+
+    def subscribe_cancel(self, listener: Callable[[], None]) -> None:
+        """Call ``listener()`` after "Cancel pair" dropped a half-made pair."""
+        self._cancel_listeners.append(listener)
+
+    def _publish_click(self, click: PairClick) -> None:
+        for listener in list(self._click_listeners):
+            listener(click)
+
     # ------------------------------------------------------------------ per-tab memory
-    def last_click(self, client_id: int) -> tuple | None:
-        """Tab ``client_id``'s last click: ``("ba", key, row, col)`` or ``("camera", u, v)``, or None."""
-        return self._last_click.get(client_id)
-
-    def forget_tab(self, client_id: int) -> None:
-        """Forget what a closed tab clicked."""
-        self._last_click.pop(client_id, None)
-
     def camera_click_source(self, pick_id: int) -> str | None:
         """Where the last camera click on pick ``pick_id`` landed in its tab: ``"loupe"``, ``"full"`` or None."""
         for kind, pid, where in list(self._last_pick.values()):
@@ -131,7 +137,7 @@ class PairsPanel:
             if pending is not None:
                 need = "camera" if pending.pixel is None else "BA"
                 lines.append(f"Pair {pending.id} waits for a {need} click.")
-                ids, uv = app.overlays.predicted_pixels({pending.id: pending})
+                ids, uv = app.pose_source.predicted_pixels({pending.id: pending})
                 if ids:
                     lines.append(f"Predicted camera pixel: ({uv[0, 0]:.1f}, {uv[0, 1]:.1f}) (cross in the image).")
             status = [self._undo_note[1]] if self._undo_note[0] == state.version else []
@@ -142,7 +148,7 @@ class PairsPanel:
                 status.append(f"Pair {selected} selected: the next click moves it (**Cancel pair** deselects).")
             if self._md_status.content != "  \n".join(status):
                 self._md_status.content = "  \n".join(status)
-            self.bar.show_live(getattr(app, "live", None))
+            self.bar.show_live(app.solve_shown())
             left_out = [f"#{p.id}" for p in complete if p.check]
             if left_out:
                 lines.append(f"Left out of the fit (check pairs): {', '.join(left_out)}.")
@@ -169,7 +175,7 @@ class PairsPanel:
     def make_click_handler(self, key: str) -> Callable:
         """The on-click callback of image slot ``key`` (a BA key, a camera view or ``loupe_*``): adds or moves an end."""
         def on_click(event: Any) -> None:
-            slot = self.app.view.slot_of(key)
+            slot = self.app.slot_of(key)
             uv = slot.pixel_from_ray(event.ray_origin, event.ray_direction)
             if uv is None or not slot.contains(uv):
                 raise CalibError("click landed outside the image")
@@ -186,7 +192,7 @@ class PairsPanel:
         if key.startswith("loupe_"):
             target = self.app.loupes.target_at(key[len("loupe_"):], uv)
             if self.app.state.view.snap and target[0] == "ba":
-                col, row = refine_click_to_corner(self.app.display.ba_display(target[1]), (target[3], target[2]), 3.0)
+                col, row = refine_click_to_corner(self.app.laser_images.ba_display(target[1]), (target[3], target[2]), 3.0)
                 target = ("ba", target[1], int(np.clip(round(row), 0, self.app.depth.shape[0] - 1)),
                           int(round(col)) % self.app.depth.shape[1])
             elif self.app.state.view.snap:
@@ -197,13 +203,13 @@ class PairsPanel:
             return self.app.render_pane.target_at(uv, screen_units=self.app.view.units_per_screen_px(client))
         if key in self.app.ba_keys:
             if self.app.state.view.snap:
-                shown = self.app.display.ba_display(key)[:, self.app.ba_window.columns]
+                shown = self.app.laser_images.ba_display(key)[:, self.app.ba_window.columns]
                 uv = tuple(refine_click_to_corner(shown, uv, 3.0))
             return ("ba", key, *self.cell_from_display(key, uv))
-        if key != self.app.view.camera_view.key:
+        if key != self.app.camera_view.key:
             raise CalibError("that camera view is hidden; click the visible one")
         if self.app.state.view.snap:
-            uv = tuple(refine_click_to_corner(self.app.view.camera_view.gray, uv, SNAP_RADIUS_PX))
+            uv = tuple(refine_click_to_corner(self.app.camera_view.gray, uv, SNAP_RADIUS_PX))
         return ("camera", *self._original_from_display(uv))
 
     def _click(self, key: str, uv: tuple[float, float], pick_id: int | None = None, client: Any = None) -> int:
@@ -240,122 +246,44 @@ class PairsPanel:
         moves_selected = pick_id is None and self.app.state.selected is not None
         refined = None if pick_id is None else next((p for p in self.app.state.picks if p.id == pick_id), None)
         if kind == "ba":
-            _, ba_key, row, col = target
+            _, _, row, col = target
             try:
                 out = self.app.state.move_laser(pick_id, row, col) if pick_id is not None else self.app.state.click_laser(row, col)
-            except CalibError:
-                if source == "full":  # e.g. a cell with no return: still bring the loupe there to pick a good one
-                    self.app.loupes.frame_ba(ba_key, row, col)
+            except CalibError:  # e.g. a cell with no return: the loupe still goes there, to pick a good one
+                self._publish_click(PairClick(key, target, None, client_id=cid))
                 raise
-            last_click: tuple = ("ba", ba_key, row, col)
-            # The laser loupe shows the render's crop after a click on the render (or in that loupe), else the BA's.
-            from_render = key == RENDER_KEY or (key == "loupe_ba" and self.app.loupes.shows_render)
-            self.app.loupes.show_render(from_render)
         else:
             _, u, v = target
             out = self.app.state.move_pixel(pick_id, u, v) if pick_id is not None else self.app.state.click_pixel(u, v)
-            last_click = ("camera", u, v)
         if moves_selected:
             self.app.state.select(None)
         if refined is not None and refined in self.app.state.picks:  # run 4: refining clicks that moved nothing
             what = f"the same cell (row {target[2]}, column {target[3]})" if kind == "ba" else "the same pixel"
             self.app.notify(client, "No change", f"Pair {out}: {what} as before; click one cell or pixel farther "
                                                  "off to move it.", color="yellow")
-        if client is not None:
-            self._last_click[cid] = last_click
         self._last_pick[cid] = (kind, out, source)
-        if source == "loupe" and out == self._loupes_pick:
-            # A refining click inside a loupe: the loupes keep their crops (the next click may be planned from this
-            # look); the clicked loupe's title names the new cell or pixel.  The other loupe moves only if the
-            # pair's other end (or its prediction) would leave its middle.
-            self.app.loupes.show_click(kind, target[2:] if kind == "ba" else target[1:])
-            self._keep_other_end_shown(kind, out)
+        if source == "loupe" and out == self._loupes_pick:  # a refining click inside a loupe: they keep their crops
+            self._publish_click(PairClick(key, target, out, refines_loupes=True, client_id=cid))
             return out
         self._loupes_pick = out
-        self._frame_loupes(target, out, recentre=source == "full",
-                           render_uv=self.app.render_pane.last_pixel if key == RENDER_KEY else None)
+        self._publish_click(PairClick(key, target, out, render_uv=(
+            self.app.render_pane.last_pixel if key == RENDER_KEY else None), client_id=cid))
         return out
-
-    def _keep_other_end_shown(self, clicked: str, pick_id: int) -> None:
-        """After a refining click in loupe ``clicked``: frame the other loupe on pick ``pick_id``'s other end (or
-        its prediction) only if that is not inside the middle of what it shows (a margin of
-        :data:`STEADY_MARGIN` of its side)."""
-        loupes, support = self.app.loupes, self.app.loupe_support
-        pick = next((p for p in self.app.state.picks if p.id == pick_id), None)
-        if pick is None or (clicked == "camera" and loupes.shows_render):
-            return  # the laser loupe shows the camera loupe's crop of the render: both stay
-        if clicked == "ba":
-            uv = pick.pixel if pick.pixel is not None else (
-                None if pick.laser_rc is None else support.predict_pixel(*pick.laser_rc))
-            if uv is not None and not self._well_inside("camera", (uv[0], uv[1])):
-                loupes.frame_camera(*uv)
-            return
-        cell = pick.laser_rc if pick.laser_rc is not None else (
-            None if pick.pixel is None else support.predict_cell(*pick.pixel))
-        if cell is not None and not self._well_inside("ba", (cell[1], cell[0])):
-            loupes.frame_ba(loupes.ba_crop.key, *cell)
-
-    def _well_inside(self, kind: str, target: tuple[float, float]) -> bool:
-        """Does loupe ``kind`` show ``target`` (``(col, row)`` of a cell or an original pixel) away from its edges?"""
-        shown = self.app.loupes.display_of(kind, target)
-        if shown is None:
-            return False
-        slot = self.app.loupes.slot(kind)
-        mx, my = STEADY_MARGIN * slot.width_px, STEADY_MARGIN * slot.height_px
-        return (mx - 0.5 <= shown[0] <= slot.width_px - 0.5 - mx
-                and my - 0.5 <= shown[1] <= slot.height_px - 0.5 - my)
-
-    def _frame_loupes(self, target: tuple, pick_id: int, recentre: bool,
-                      render_uv: tuple[float, float] | None = None) -> None:
-        """After a click: the clicked loupe on the click, the other loupe on the pair's other end or its prediction
-        (a click on the render: the camera loupe on the clicked pixel, the laser loupe showing the same crop)."""
-        pick = next((p for p in self.app.state.picks if p.id == pick_id), None)
-        if target[0] == "ba":
-            if recentre:
-                self.app.loupes.frame_ba(*target[1:])
-            else:  # a click inside the loupe: it keeps its view, its title names the new cell
-                self.app.loupes.show_click("ba", target[2:])
-            if pick is not None and pick.pixel is not None:
-                self.app.loupes.frame_camera(*pick.pixel)
-            elif render_uv is not None:
-                self.app.loupes.frame_camera(*render_uv)
-            else:
-                predicted = self.app.loupe_support.predict_pixel(target[2], target[3])
-                if predicted is not None:
-                    self.app.loupes.frame_camera(*predicted)
-        else:
-            if recentre:
-                self.app.loupes.frame_camera(target[1], target[2])
-            else:
-                self.app.loupes.show_click("camera", target[1:])
-            if pick is not None and pick.laser_rc is not None:
-                self.app.loupes.frame_ba(self.app.loupes.ba_crop.key, *pick.laser_rc)
-            else:
-                cell = self.app.loupe_support.predict_cell(target[1], target[2])
-                if cell is not None:
-                    self.app.loupes.frame_ba(self.app.loupes.ba_crop.key, *cell)
 
     def _original_from_display(self, uv: tuple[float, float]) -> tuple[float, float]:
         """Original camera pixel of a click on the visible camera view."""
-        raw, valid = self.app.view.camera_view.pixels_from_display(np.array([uv], dtype=np.float64))
+        raw, valid = self.app.camera_view.pixels_from_display(np.array([uv], dtype=np.float64))
         if not valid[0]:
             raise CalibError("the camera does not see that part of the panorama; click inside the picture")
         return float(raw[0, 0]), float(raw[0, 1])
 
     def _nearest_pick(self, key: str, uv: tuple[float, float]) -> int | None:
-        ids, ends = self.app.overlays.pick_ends(key)
-        if not ids:
-            return None
-        slot = self.app.view.slot_of(key)
-        delta = ends - np.asarray(uv, dtype=np.float64)
-        d = np.hypot(delta[:, 0] * slot.units_per_px, delta[:, 1] * slot.units_per_px_y)  # world units
-        k = int(np.argmin(d))
-        return ids[k] if d[k] <= PICK_RADII * self.app.overlays.ring_radius(slot) else None
+        return self.app.overlays.nearest_pick(key, uv, self.app.slot_of(key))
 
     def make_select_handler(self, key: str) -> Callable:
         """The Shift+click callback of image slot ``key``: selects the pair whose marker is nearest."""
         def on_shift_click(event: Any) -> None:
-            uv = self.app.view.slot_of(key).pixel_from_ray(event.ray_origin, event.ray_direction)
+            uv = self.app.slot_of(key).pixel_from_ray(event.ray_origin, event.ray_direction)
             pick_id = None if uv is None else self._nearest_pick(key, uv)
             self.app.state.select(pick_id)
 
@@ -365,7 +293,7 @@ class PairsPanel:
         def on_drag(event: Any) -> None:
             if event.phase != "end" or self.app.align.drag_enabled:  # aligning: the Align panel has this drag
                 return
-            slot = self.app.view.slots[key]
+            slot = self.app.slots[key]
             start = slot.pixel_from_world(np.asarray(event.start_position)[None])[0]
             end = slot.pixel_from_world(np.asarray(event.end_position)[None])[0]
             pick_id = self._nearest_pick(key, tuple(start))
@@ -386,11 +314,15 @@ class PairsPanel:
         value = str(event.value)
         self.app.state.select(None if value == "none" else int(value.split()[0].lstrip("#")))
 
+    def set_next_pair_handler(self, handler: Callable) -> None:
+        """The viser callback of the "Next pair" button in the pair actions (guided picking's own button)."""
+        self._next_pair = handler
+
     async def _on_pair_action_event(self, event: Any) -> None:
         """A press in the pair actions at the top: "Next pair" is guided picking's own button, the others queue
         :meth:`on_pair_action` (both on the ordered action worker)."""
         if str(getattr(event.target, "value", "")) == "Next pair":
-            await self.app.guide.callback("Next pair")(event)
+            await self._next_pair(event)
         else:
             await self._guarded_pair_action(event)
 
@@ -415,9 +347,8 @@ class PairsPanel:
             state.select(None)
             return
         state.delete(pending.id)
-        loupes = getattr(self.app, "loupes", None)
-        if loupes is not None and loupes.camera_crop.cov_px2 is not None:  # a guided proposal's ellipse goes too
-            loupes.frame_camera(*loupes.camera_crop.center)
+        for listener in list(self._cancel_listeners):  # e.g. a guided proposal's ellipse in the camera loupe goes
+            listener()
 
     def on_edit(self, event: Any) -> None:
         action = event.value
@@ -444,7 +375,7 @@ class PairsPanel:
 
     def add_upload_button(self, client: Any) -> None:
         """This tab's own "Import pairs YAML" button, in the shared Pairs folder above "Download pairs YAML"."""
-        with self.app.page.folder_lock:  # a folder is one GUI context at a time
+        with self.app.folder_lock:  # a folder is one GUI context at a time
             with self.folder:
                 button = client.gui.add_upload_button("Import pairs YAML", icon=viser.Icon.UPLOAD, mime_type="*/*",
                                                       order=self._btn_pairs.order - 0.5)

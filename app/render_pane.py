@@ -4,7 +4,7 @@ The render has the camera image's size and framing (:func:`calib_core.render.ren
 as the camera image is (raw, or unwrapped into the same panorama), so a corner sits at nearly the same place in
 the photo and in the render once the pose is roughly right.  The pose is the solve
 if there is one, else the rough pose (Align folder, imported or saved), else the "+x" preset
-(:meth:`app.loupe_support.LoupeSupport.view_pose`).  A click on the render picks the laser cell drawn there: an
+(:meth:`app.pose_source.PoseSource.view_pose`).  A click on the render picks the laser cell drawn there: an
 ordinary laser end, through the pairs panel like a BA click.  The same render can be drawn over the photo
 ("Render over photo"), and the laser loupe shows a crop of it after a click on it (:class:`app.loupes.Loupes`).
 
@@ -18,7 +18,7 @@ import dataclasses
 import math
 import time
 import traceback
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -72,7 +72,7 @@ class RenderPane:
 
     It owns its scene nodes (the pane, its title, the copy drawn over the photo, the markers on it), the render
     worker, and the widgets it adds to the Align folder (:meth:`add_controls`).  Public: :attr:`current` (the
-    render the page shows), :meth:`request`, :meth:`target_at`, :meth:`pixel_of_cells` and the loupe helpers.
+    render the page shows), :meth:`request`, :meth:`target_at`, :meth:`pixel_of_cells`, :meth:`subscribe`.
     """
 
     def __init__(self, app: Any) -> None:
@@ -88,6 +88,7 @@ class RenderPane:
         self._marks_of: tuple | None = None
         self._stopped = False
         self._placed: tuple | None = None  # (render slot, camera slot, camera view) the nodes were placed for
+        self._listeners: list[Callable[[str], None]] = []
         scene = app.server.scene
         self._handle = scene.add_image(NODE, np.full((2, 2, 3), NO_RETURN_RGB, np.uint8), 1.0, 1.0, format="png")
         self._title = scene.add_label("/annot/titles/render", "Camera-view laser: rendering ...",
@@ -103,9 +104,23 @@ class RenderPane:
         # The copy over the photo answers as the camera view under it does (same place, same pixels).
         self._overlay.on_click(self._as_camera_view(app.make_click_handler))
         self._overlay.on_click(modifier="shift")(self._as_camera_view(app.make_select_handler))
-        self.overlay_drag_callback = self._as_camera_view(app.pairs_panel.make_drag_handler)
+        self.overlay_drag_callback = self._as_camera_view(app.make_drag_handler)
         self._overlay.on_drag(self.overlay_drag_callback)
         self._worker = LiveSolver(self._render_job, self._on_rendered, name="ba-calib-render")
+
+    def subscribe(self, listener: Callable[[str, ShownRender | None], None], replay: bool = False) -> None:
+        """Call ``listener(what, shown)`` with the render shown (:attr:`current`): ``what`` is ``"pose"`` when the
+        render is asked for a pose from another source (solve, rough pose, preset, drag), on the requesting thread,
+        ``"render"`` when a new render is shown, under the UI lock and in its message batch.  ``replay``: call it
+        now with the render shown, if any."""
+        with self.app.ui_lock:
+            self._listeners.append(listener)
+            if replay and self.current is not None:
+                listener("render", self.current)
+
+    def _publish(self, what: str) -> None:
+        for listener in list(self._listeners):
+            listener(what, self.current)
 
     # ------------------------------------------------------------------ nodes the Align panel drags on
     @property
@@ -116,7 +131,7 @@ class RenderPane:
     def _as_camera_view(self, make_handler: Any) -> Any:
         """A viser callback that hands the event to ``make_handler(key)`` of the camera view shown at that moment."""
         async def handler(event: Any) -> None:
-            await make_handler(self.app.view.camera_view.key)(event)
+            await make_handler(self.app.camera_view.key)(event)
 
         return handler
 
@@ -124,7 +139,7 @@ class RenderPane:
         """Put the pane where the layout says, in the camera view's framing, and the copy over the camera view."""
         app = self.app
         slot, cam = app.slots[RENDER_KEY], app.camera_slot()
-        placed = (slot, cam, app.view.camera_view.key)
+        placed = (slot, cam, app.camera_view.key)
         if placed == self._placed:
             return
         self._placed = placed
@@ -184,6 +199,18 @@ class RenderPane:
             self._blink_back = blend
         self.set_blend(0.0 if blend > 0.0 else self._blink_back)
 
+    def show_drag_pose(self, T_camera_lidar: np.ndarray | None, render: bool) -> None:
+        """Render ``T_camera_lidar`` while an alignment drag turns the view (None: the drag ended), if ``render``
+        (:meth:`app.align_panel.AlignPanel.subscribe_drag`)."""
+        self.drag_pose = T_camera_lidar
+        if render:
+            self.request()
+
+    def on_align_drag_mode(self, on: bool) -> None:
+        """"Align by drag" ticked: show the render over the photo (half opaque) if it was hidden."""
+        if on and self.app.state.view.render_blend == 0.0:
+            self.set_blend(0.5)
+
     def set_blend(self, blend: float) -> None:
         """Draw the render over the photo with opacity ``blend`` (0 hides it), and save it."""
         view = self.app.state.set_view(render_blend=float(blend))  # clipped to RENDER_BLEND_RANGE
@@ -195,9 +222,9 @@ class RenderPane:
     # ------------------------------------------------------------------ rendering
     def view_pose(self) -> tuple[np.ndarray, str]:
         """The pose the render shows and where it comes from (a key of :data:`POSE_NAMES`)."""
-        if self.drag_pose is not None and self.app.live.bundle is None:
+        if self.drag_pose is not None and self.app.solve_bundle is None:
             return self.drag_pose, "drag"
-        return self.app.loupe_support.view_pose()
+        return self.app.pose_source.view_pose()
 
     def on_state_change(self, state: Any) -> None:
         """After any change of the state: a new render if the pose or the shading changed, the markers redrawn."""
@@ -213,9 +240,8 @@ class RenderPane:
         key = (np.asarray(T, np.float64).tobytes(), mode, source)
         if key == self._requested:
             return
-        align = getattr(self.app, "align", None)
-        if align is not None and (self._requested is None or self._requested[2] != source):
-            align.show()  # its pose line says which pose is used (solve, rough pose, preset)
+        if self._requested is None or self._requested[2] != source:
+            self._publish("pose")  # e.g. the Align panel's pose line says which pose is used (solve, rough, preset)
         self._requested = key
         self._wanted = (np.array(T, np.float64), mode, source)
         self._job += 1
@@ -259,26 +285,14 @@ class RenderPane:
             self._title.text = self.title()
             self._show_overlay()
             self.draw_marks()
-            loupes = getattr(app, "loupes", None)
-            if loupes is not None and loupes.shows_render:
-                loupes.refresh_ba()
-            align = getattr(app, "align", None)
-            if align is not None:  # its pose line says which pose the render shows
-                align.show()
+            self._publish("render")  # e.g. the laser loupe showing its crop, the Align panel's pose line
 
     def _shown_texture(self, shown: ShownRender) -> np.ndarray:
         """The pane's texture: the render in the camera view's framing, over :data:`NO_RETURN_RGB`."""
-        view = self.app.view.camera_view
+        view = self.app.camera_view
         if view.key == "raw":
-            return self.pane_texture(shown.rgba)
-        return self.pane_texture(view.shown(shown.rgba))  # alpha 0 where the panorama sees past the camera
-
-    @staticmethod
-    def pane_texture(rgba: np.ndarray) -> np.ndarray:
-        """The pane's RGB texture: the shading over :data:`NO_RETURN_RGB` where there is no return."""
-        a = rgba[..., 3:4].astype(np.uint16)
-        bg = np.asarray(NO_RETURN_RGB, np.uint16)
-        return ((rgba[..., :3].astype(np.uint16) * a + bg * (255 - a) + 127) // 255).astype(np.uint8)
+            return pane_texture(shown.rgba)
+        return pane_texture(view.shown(shown.rgba))  # alpha 0 where the panorama sees past the camera
 
     def _show_overlay(self) -> None:
         """The render over the photo at the saved opacity (hidden at 0 and without a render)."""
@@ -286,7 +300,7 @@ class RenderPane:
         shown = self.current
         visible = blend > 0.0 and shown is not None
         if visible:
-            rgba = self.app.view.camera_view.shown(shown.rgba).copy()
+            rgba = self.app.camera_view.shown(shown.rgba).copy()
             rgba[..., 3] = np.round(rgba[..., 3] * blend).astype(np.uint8)
             self._overlay.image = rgba
         if self._overlay.visible != visible:
@@ -311,26 +325,8 @@ class RenderPane:
 
     # ------------------------------------------------------------------ clicks
     def cell_at_pixel(self, u: float, v: float, radius_px: float = NEAREST_PX) -> tuple[int, int] | None:
-        """Scan cell ``(row, col)`` the render draws at original-size pixel ``(u, v)``, or at the nearest rendered
-        pixel within ``radius_px`` render pixels; None if none."""
-        shown = self.current
-        if shown is None:
-            return None
-        cells = shown.render.cell_rc
-        h, w = cells.shape[:2]
-        iu, iv = int(math.floor(u + 0.5)), int(math.floor(v + 0.5))
-        r = int(math.ceil(radius_px))
-        u0, u1, v0, v1 = max(iu - r, 0), min(iu + r + 1, w), max(iv - r, 0), min(iv + r + 1, h)
-        if u0 >= u1 or v0 >= v1:
-            return None
-        window = cells[v0:v1, u0:u1]
-        vv, uu = np.mgrid[v0:v1, u0:u1]
-        d2 = np.where(window[..., 0] >= 0, (uu - u) ** 2 + (vv - v) ** 2, np.inf)
-        k = int(np.argmin(d2))
-        if not np.isfinite(d2.flat[k]) or d2.flat[k] > radius_px * radius_px:
-            return None
-        row, col = window.reshape(-1, 2)[k]
-        return int(row), int(col)
+        """Scan cell ``(row, col)`` the render draws at original-size pixel ``(u, v)`` (:func:`cell_at_pixel`)."""
+        return cell_at_pixel(self.current, u, v, radius_px)
 
     def target_at(self, uv: tuple[float, float], display: bool = True, screen_units: float | None = None) -> tuple:
         """``("ba", key, row, col)``: the laser cell under pixel ``uv`` of the pane (``display``: in the camera
@@ -344,10 +340,10 @@ class RenderPane:
             raise CalibError("the camera-view render is not ready yet; try again in a moment")
         radius = float(NEAREST_PX)
         if display and screen_units is not None:
-            per_px = self.app.view.slot_of(RENDER_KEY).units_per_px  # world units per pane pixel
+            per_px = self.app.slots[RENDER_KEY].units_per_px  # world units per pane pixel
             radius = float(min(max(radius, SNAP_SCREEN_PX * screen_units / per_px), NEAREST_MAX_PX))
         if display:
-            raw, ok = self.app.view.camera_view.pixels_from_display(np.array([uv], np.float64))
+            raw, ok = self.app.camera_view.pixels_from_display(np.array([uv], np.float64))
             if not ok[0]:
                 raise CalibError("the camera does not see that part of the panorama; click inside the picture")
             uv = (float(raw[0, 0]), float(raw[0, 1]))
@@ -358,20 +354,12 @@ class RenderPane:
         return ("ba", self.app.loupes.ba_crop.key, *cell)
 
     def pixel_of_cells(self, rows_cols: np.ndarray) -> np.ndarray:
-        """Original camera pixels ``(N, 2)`` of scan cells ``(N, 2)`` under the shown render's pose (NaN: not in
-        view)."""
-        rc = np.asarray(rows_cols, np.int64).reshape(-1, 2)
-        out = np.full((len(rc), 2), np.nan)
-        shown = self.current
-        if shown is None or not len(rc):
-            return out
-        uv, ok = project_lidar_points(shown.T_camera_lidar, self.app.camera, self.app.depth.cell_points(rc))
-        out[ok] = uv[ok]
-        return out
+        """Original camera pixels of scan cells under the shown render's pose (:func:`pixel_of_cells`)."""
+        return pixel_of_cells(self.current, self.app.camera, self.app.depth, rows_cols)
 
     def _on_shift_click(self, event: Any) -> None:
         """Shift+click on the render: select the pair whose laser end is drawn nearest (as on the BA images)."""
-        slot = self.app.view.slot_of(RENDER_KEY)
+        slot = self.app.slots[RENDER_KEY]
         uv = slot.pixel_from_ray(event.ray_origin, event.ray_direction)
         picks = [p for p in self.app.state.picks if p.laser_rc is not None]
         if uv is None or not picks:
@@ -392,7 +380,7 @@ class RenderPane:
         if event.phase != "end":
             return
         moved = np.hypot(*(np.asarray(event.end_screen_pos) - np.asarray(event.start_screen_pos)))
-        slot = self.app.view.slot_of(RENDER_KEY)
+        slot = self.app.slots[RENDER_KEY]
         start = slot.pixel_from_world(np.asarray(event.start_position)[None])[0]
         if moved < 0.01 and slot.contains(start):  # display pixels, as a click gives them
             self.app.pairs_panel.click_at(RENDER_KEY, (float(start[0]), float(start[1])), event.client)
@@ -427,23 +415,66 @@ class RenderPane:
         sel_segs = marker_segments(world[sel] + [0.0, 0.0, 0.003], 1.5 * self._ring_radius(slot))
         app.nodes.lines("/annot/selected/render", sel_segs, np.full(sel_segs.shape, 255, np.uint8), thickness=4.0)
 
-    # ------------------------------------------------------------------ the laser loupe's render crop
-    def loupe_texture(self, u0: int, v0: int, n: int) -> np.ndarray:
-        """The render's pixels ``[u0, u0 + n) x [v0, v0 + n)`` (the camera loupe's crop), enlarged by nearest
-        neighbour as the camera loupe is; :data:`PAD_RGB` outside the image."""
-        shown = self.current
-        h, w = self.app.camera.height, self.app.camera.width
-        pane = (np.full((h, w, 3), NO_RETURN_RGB, np.uint8) if shown is None else self.pane_texture(shown.rgba))
-        us, vs = u0 + np.arange(n), v0 + np.arange(n)
-        ok = ((vs >= 0) & (vs < h))[:, None] & ((us >= 0) & (us < w))[None, :]
-        crop = pane[np.clip(vs, 0, h - 1)][:, np.clip(us, 0, w - 1)]
-        crop = np.where(ok[..., None], crop, np.asarray(PAD_RGB, np.uint8)).astype(np.uint8)
-        k = max(1, TEXTURE_TEXELS // n)
-        return np.repeat(np.repeat(crop, k, axis=0), k, axis=1)
 
-    def loupe_title(self, center: tuple[float, float], n: int) -> str:
-        """The laser loupe's title while it shows the render: the cell at the crop's centre and its range."""
-        from .loupe_marks import render_title
+# ---------------------------------------------------------------------- a shown render's pixels and cells
+def pane_texture(rgba: np.ndarray) -> np.ndarray:
+    """The pane's RGB texture: the shading over :data:`NO_RETURN_RGB` where there is no return."""
+    a = rgba[..., 3:4].astype(np.uint16)
+    bg = np.asarray(NO_RETURN_RGB, np.uint16)
+    return ((rgba[..., :3].astype(np.uint16) * a + bg * (255 - a) + 127) // 255).astype(np.uint8)
 
-        cell = self.cell_at_pixel(*center)
-        return render_title(cell, None if cell is None else float(self.app.depth.range_m[cell]))
+
+def cell_at_pixel(shown: ShownRender | None, u: float, v: float,
+                  radius_px: float = NEAREST_PX) -> tuple[int, int] | None:
+    """Scan cell ``(row, col)`` render ``shown`` draws at original-size pixel ``(u, v)``, or at the nearest rendered
+    pixel within ``radius_px`` render pixels; None if none (or no render)."""
+    if shown is None:
+        return None
+    cells = shown.render.cell_rc
+    h, w = cells.shape[:2]
+    iu, iv = int(math.floor(u + 0.5)), int(math.floor(v + 0.5))
+    r = int(math.ceil(radius_px))
+    u0, u1, v0, v1 = max(iu - r, 0), min(iu + r + 1, w), max(iv - r, 0), min(iv + r + 1, h)
+    if u0 >= u1 or v0 >= v1:
+        return None
+    window = cells[v0:v1, u0:u1]
+    vv, uu = np.mgrid[v0:v1, u0:u1]
+    d2 = np.where(window[..., 0] >= 0, (uu - u) ** 2 + (vv - v) ** 2, np.inf)
+    k = int(np.argmin(d2))
+    if not np.isfinite(d2.flat[k]) or d2.flat[k] > radius_px * radius_px:
+        return None
+    row, col = window.reshape(-1, 2)[k]
+    return int(row), int(col)
+
+
+def pixel_of_cells(shown: ShownRender | None, camera: Any, depth: Any, rows_cols: np.ndarray) -> np.ndarray:
+    """Original camera pixels ``(N, 2)`` of scan cells ``(N, 2)`` under render ``shown``'s pose (NaN: not in view,
+    or no render)."""
+    rc = np.asarray(rows_cols, np.int64).reshape(-1, 2)
+    out = np.full((len(rc), 2), np.nan)
+    if shown is None or not len(rc):
+        return out
+    uv, ok = project_lidar_points(shown.T_camera_lidar, camera, depth.cell_points(rc))
+    out[ok] = uv[ok]
+    return out
+
+
+def loupe_texture(shown: ShownRender | None, camera: Any, u0: int, v0: int, n: int) -> np.ndarray:
+    """Render ``shown``'s pixels ``[u0, u0 + n) x [v0, v0 + n)`` (the camera loupe's crop), enlarged by nearest
+    neighbour as the camera loupe is; :data:`PAD_RGB` outside the image."""
+    h, w = camera.height, camera.width
+    pane = (np.full((h, w, 3), NO_RETURN_RGB, np.uint8) if shown is None else pane_texture(shown.rgba))
+    us, vs = u0 + np.arange(n), v0 + np.arange(n)
+    ok = ((vs >= 0) & (vs < h))[:, None] & ((us >= 0) & (us < w))[None, :]
+    crop = pane[np.clip(vs, 0, h - 1)][:, np.clip(us, 0, w - 1)]
+    crop = np.where(ok[..., None], crop, np.asarray(PAD_RGB, np.uint8)).astype(np.uint8)
+    k = max(1, TEXTURE_TEXELS // n)
+    return np.repeat(np.repeat(crop, k, axis=0), k, axis=1)
+
+
+def loupe_title(shown: ShownRender | None, depth: Any, center: tuple[float, float]) -> str:
+    """The laser loupe's title while it shows render ``shown``: the cell at the crop's centre and its range."""
+    from .loupe_marks import render_title
+
+    cell = cell_at_pixel(shown, *center)
+    return render_title(cell, None if cell is None else float(depth.range_m[cell]))

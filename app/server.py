@@ -9,6 +9,7 @@ loupes.  A BA click and a camera click, in either order, make a pair; from 4 pai
 from __future__ import annotations
 
 import os
+import threading
 import traceback
 from pathlib import Path
 from typing import Any, Callable
@@ -25,8 +26,8 @@ from .cloud_pane import CloudPane
 from .display_panel import DisplayPanel
 from .export_panel import ExportPanel, FormatExportPanel
 from .guide_panel import attach_guide_panel
+from .laser_images import LaserImages
 from .live_coordinator import LiveSolveCoordinator
-from .loupe_support import LoupeSupport, read_extrinsics
 from .loupes import Loupes
 from .overlay_drawing import OverlayDrawing
 from .page_builder import PageBuilder
@@ -40,11 +41,12 @@ from .ui_common import page_url
 from .verify_panel import VerifyPanel
 from .view_panel import ViewPanel
 from .picks import ShotFiles
+from .pose_source import PoseSource, read_extrinsics
 from .warm_up import WarmUp
 
 
 # The composition root: one object per concern, owning its state and widgets, as a public attribute: actions, display,
-# live, loupe_support, overlays, cloud, page, pairs_panel, calibration_panel, view, export_panel, loupes, format_export,
+# live, overlays, cloud, page, pairs_panel, calibration_panel, view, export_panel, loupes, format_export,
 # guide, verify_panel.  Panels use only the public services below (app/app_services.py).
 class CalibrationApp:
     """The annotation app on one scene; the viser server runs from construction.
@@ -134,10 +136,13 @@ class CalibrationApp:
         self.session_path = self.state.session_path or self.session_path
         self.active_shot = self.state.active_shot  # the shot these panes show
         self.ui_lock = UiLock()  # public: held while the scene and the panels are redrawn
-        self.display = DisplayPanel(self)  # the laser panes' grey levels, with the saved contrast
+        self.folder_lock = threading.Lock()  # held while one tab's own widgets go into a shared folder
+        self.laser_images = LaserImages(self)  # the laser panes' grey levels, with the saved contrast
+        self.display = DisplayPanel(self)  # their widgets (loupe source, last pane, contrast, hide marks, edges)
         self.live = LiveSolveCoordinator(self)  # the solve shown; its threads start with the page
-        self.loupe_support = LoupeSupport(self, initial_T)  # the pose predictions use (solved, else rough)
-        self.live.ensure_facing()  # from the rough pose, else the "+x" preset
+        self.pose_source = PoseSource(self, initial_T)  # the pose predictions use (solved, else rough)
+        self.pose_source.subscribe(self._on_rough_pose)
+        self.pose_source.ensure_facing()  # from the rough pose, else the "+x" preset
 
         # -- server -------------------------------------------------------------------
         # Every request must name this server (Host, Origin) and, off loopback, carry the token.
@@ -157,20 +162,33 @@ class CalibrationApp:
             self.cloud = CloudPane(self.server.scene, self.cloud_points_lidar)  # the 3-D pane
             # The control panel's folders in page order; each panel builds its own widgets.
             self.page = PageBuilder(self)  # theme, intro text, backdrop
-            self.pairs_panel = PairsPanel(self)  # "Pairs" folder and the clicks on the images
+            self.pairs_panel = PairsPanel(self, top=self.page.intro.order)  # "Pairs" folder, clicks on the images
             self.pairs_folder = self.pairs_panel.folder  # guided picking goes below it
             self.subscribe_solve(lambda shown: self.pairs_panel.refresh())  # after the overlays' (OverlayDrawing)
             self.calibration_panel = CalibrationPanel(self.server.gui)
             self.subscribe_solve(self.calibration_panel.on_solve_shown)
             self.view = ViewPanel(self)  # "View" folder, the BA column window, the page layout, each tab's camera
+            self.view.subscribe_window(self.page.show_ba_window)  # the BA images follow the window and layout
+            self.view.subscribe_layout(lambda moved: self.overlays.refresh())  # the marks follow the images
+            self.view.subscribe_camera_view(self.page.show_camera_view)
+            self.view.subscribe_3d(self._on_3d_view)
             self.export_panel = ExportPanel(self)
             self.page.add_images({k: self.view.ba_texture(k) for k in self.ba_keys},
                                  {k: self.view.ba_title(k) for k in self.ba_keys})
             self.view.update_camera_title()
             self.render_pane = RenderPane(self)  # the scan seen from the camera, below the camera image
+            self.view.subscribe_window(lambda shown: self.render_pane.place())
             self.align = AlignPanel(self, order=self.pairs_folder.order - 0.5)  # rough pose; first folder
+            self.render_pane.subscribe(lambda what, shown: self.align.show())  # its pose line names the render's pose
+            self.align.subscribe_drag(self.render_pane.show_drag_pose)  # the render follows an alignment drag
+            self.align.subscribe_drag_mode(self.render_pane.on_align_drag_mode)
             self.loupes = Loupes(self)  # the magnified BA and camera panes (public: frame_ba, frame_camera)
             self.overlays.subscribe(self.loupes.draw_marks)  # the loupes show the marks magnified
+            self.pairs_panel.subscribe_clicks(self.loupes.on_pair_click)  # the loupes follow each click
+            self.pairs_panel.subscribe_cancel(self.loupes.on_pair_cancelled)
+            self.pairs_panel.subscribe_clicks(self.view.on_pair_click)  # "Zoom on last click"
+            self.view.subscribe_layout(self.loupes.relayout)  # after the marks' redraw
+            self.render_pane.subscribe(self.loupes.on_render, replay=True)  # the laser loupe can show its crop
             self.format_export = FormatExportPanel(self)  # verify: its own widgets (formats, reference import)
             self.display.subscribe(self._on_display_change)
             self.server.on_client_connect(self._on_connect)
@@ -180,6 +198,7 @@ class CalibrationApp:
             self.live.subscribe_facing(lambda: self.post(self.view.apply_ba_window))
             self.live.start()
             self.guide = attach_guide_panel(self)  # guided picking (app/guide_panel.py)
+            self.pairs_panel.set_next_pair_handler(self.guide.callback("Next pair"))  # its button in the pair actions
             self.state.subscribe(self.live.on_state_change)
             self.live.on_state_change(self.state)
             self.state.subscribe(self.align.on_pairs_change)  # 2-3 pairs turn the rough pose to fit them
@@ -202,7 +221,7 @@ class CalibrationApp:
     def _on_connect(self, client: Any) -> None:
         try:  # this tab's own upload buttons, then its view of the page
             self.pairs_panel.add_upload_button(client)
-            self.loupe_support.add_upload_button(client)
+            self.align.add_upload_button(client)
             self.view.set_view(client, "all")
         except Exception:
             traceback.print_exc()
@@ -221,8 +240,27 @@ class CalibrationApp:
                 self.page.set_ba(key, texture=self.view.ba_texture(key), **title)
         self.loupes.refresh()
 
+    def _on_3d_view(self, shown: bool) -> None:
+        """Some tab shows the 3-D view (or none does): the cloud shows, with the current solve's colours."""
+        self.cloud.visible = shown
+        self.live.request_cloud()  # a tab that switches to 3-D gets the current solve's colours
+
+    def _on_rough_pose(self) -> None:
+        """A new rough pose (:meth:`PoseSource.subscribe`): redraw predictions, the facing window and the render."""
+        if self.state.view.ba_window_mode == "camera" and self.live.bundle is None:
+            self.pose_source.ensure_facing()
+            self.view.apply_ba_window()
+        if getattr(self, "render_pane", None) is not None:
+            self.render_pane.request()
+            self.align.show()
+        self.overlays.invalidate()
+        self.overlays.refresh()
+        self.live.show_panels()
+        guide = getattr(self, "guide", None)
+        if guide is not None:  # proposals can start from the imported pose
+            guide.update()
+
     def _on_disconnect(self, client: Any) -> None:
-        self.pairs_panel.forget_tab(client.client_id)
         self.view.forget_tab(client.client_id)
 
     def _on_save_error(self, message: str) -> None:
@@ -249,6 +287,12 @@ class CalibrationApp:
     camera_view = property(lambda self: self.view.camera_view,
                            doc="The visible camera view (:class:`app.camera_view.CameraView`: raw or panorama).")
 
+    def slot_of(self, key: str) -> Any:
+        """The image slot of click key ``key``: a BA key, ``raw``, ``panorama``, ``loupe_ba`` or ``loupe_camera``."""
+        if key.startswith("loupe_"):
+            return self.loupes.slot(key[len("loupe_"):])
+        return self.view.slots[key]
+
     def camera_slot(self) -> Any:
         """The page slot of the visible camera view."""
         return self.view.camera_slot()
@@ -260,6 +304,10 @@ class CalibrationApp:
     def make_click_handler(self, key: str) -> Callable:
         """The on-click callback of image slot ``key`` (:meth:`PairsPanel.make_click_handler`)."""
         return self.pairs_panel.make_click_handler(key)
+
+    def make_drag_handler(self, key: str) -> Callable:
+        """The on-drag callback of image slot ``key`` (:meth:`PairsPanel.make_drag_handler`: moves a pair end)."""
+        return self.pairs_panel.make_drag_handler(key)
 
     def make_select_handler(self, key: str) -> Callable:
         """The Shift+click callback of image slot ``key`` (:meth:`PairsPanel.make_select_handler`)."""
@@ -283,15 +331,19 @@ class CalibrationApp:
         (:meth:`LiveSolveCoordinator.subscribe_solved`)."""
         self.live.subscribe_solved(listener)
 
+    def solve_shown(self) -> Any:
+        """What the live solve shows now (:class:`app.ui_common.SolveShown`)."""
+        return self.live.shown()
+
     solve_bundle = property(lambda self: self.live.bundle, doc="The last good solve (:class:`SolveBundle`), or None.")
     result = property(lambda self: getattr(self.live.bundle, "result", None),
                       doc="The last good :class:`calib_core.solve.CalibrationResult`, or None.")
 
     def pose(self) -> np.ndarray | None:
         """``T_camera_lidar`` predictions use: the last good solve, else the imported initial extrinsic, else None."""
-        return self.loupe_support.pose()
+        return self.pose_source.pose()
 
-    initial_T_camera_lidar = property(lambda self: self.loupe_support.initial_T_camera_lidar,
+    initial_T_camera_lidar = property(lambda self: self.pose_source.initial_T_camera_lidar,
                                       doc="The imported rough ``T_camera_lidar`` (None: none imported).")
 
     last_update_time = property(lambda self: self.live.last_update_time,

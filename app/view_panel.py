@@ -1,6 +1,6 @@
 """The view panel and the per-tab cameras: camera image raw or unwrapped, overlays on/off, the BA column window and
-the page layout that follows from it, the 2-D / 3-D views and zoom.  The View folder also holds the display
-panel's widgets and the loupe zoom buttons."""
+the page layout that follows from it, the 2-D / 3-D views and zoom.  The View folder also holds two of the display
+panel's widgets."""
 
 from __future__ import annotations
 
@@ -22,16 +22,17 @@ from .settled_updates import settled
 from .ui_common import (
     MIN_PAIRS, CLOUD_ORIGIN, PANEL_PX, ZOOM_PX_PER_CELL, ZOOM_PX_PER_IMAGE_PX, ZOOM_STEP,
 )
+from .view_events import BaWindowShown, ViewEvents
 from .view_settings import BA_WINDOW_MODES, UP_AXES
 
 
-class ViewPanel:
+class ViewPanel(ViewEvents):
     """The "View" folder of one :class:`app.server.CalibrationApp` and the per-tab cameras (``app.view``).
 
     It owns the BA column window and the page layout that follows from it
     (:attr:`ba_window`, :attr:`slots`), which camera view is shown
     (:attr:`camera_view`), what each tab looks at, and the View folder (the
-    display panel's and the loupe zoom widgets are placed in it).  Built where
+    display panel's last-pane and edge widgets are placed in it).  Built where
     the folder goes on the page.
     """
 
@@ -42,6 +43,7 @@ class ViewPanel:
         self._framed: dict[int, bool] = {}  # client id -> its view is the app's framing (not zoomed since)
         self._canvas_size: dict[int, tuple[int, int] | None] = {}  # client id -> canvas size last reported
         self._loupe_rects: dict[int, dict] = {}  # client id -> where the loupes lie on its canvas, as last sent
+        ViewEvents.__init__(self)
         install_page_script(app.server, LOUPE_WHEEL_JS)  # the wheel over a loupe zooms the loupe
         self._ba_window = self._wanted_ba_window()
         self.slots: dict[str, ImageSlot] = self._layout()
@@ -50,12 +52,6 @@ class ViewPanel:
 
     def _build_folder(self, gui: Any) -> None:
         app, guard, view = self.app, self.app.guard, self.app.state.view
-        # The loupe controls are used while picking: right below the Pairs folder, found without scrolling.
-        self.loupes_folder = gui.add_folder("Loupes", order=app.pairs_folder.order + 0.25)
-        with self.loupes_folder:
-            loupe_zoom = gui.add_button_group("Loupe zoom", ("BA +", "BA -", "Camera +", "Camera -"))
-            loupe_zoom.on_click(guard(app.loupe_support.on_loupe_zoom))
-            app.display.add_loupe_controls(gui)
         self.folder = gui.add_folder("View")
         with self.folder:
             app.display.add_last_pane_control(gui)
@@ -99,20 +95,15 @@ class ViewPanel:
         return layout_with_render(app.camera_sizes, self.camera_view.key, (self._ba_window.width, app.depth.shape[0]),
                                   app.ba_keys, app.ba_cell_aspect)
 
-    def slot_of(self, key: str) -> ImageSlot:
-        """The image slot of click key ``key``: a BA key, ``raw``, ``panorama``, ``loupe_ba`` or ``loupe_camera``."""
-        if key.startswith("loupe_"):
-            return self.app.loupes.slot(key[len("loupe_"):])
-        return self.slots[key]
-
     def _wanted_ba_window(self) -> ColumnWindow:
         """The column window the current mode asks for (custom until a solve says what the camera sees)."""
         mode = self.app.state.view.ba_window_mode
         if mode == "all":
             return ColumnWindow.full(self.app.depth.shape[1], self.app.wrap_cols)
-        if mode == "camera" and self.app.live.facing is not None:
+        facing = self.app.pose_source.facing
+        if mode == "camera" and facing is not None:
             shown = getattr(self, "_ba_window", None)  # None while the panel is being built
-            return self.app.live.facing if shown is None else steady_window(shown, self.app.live.facing)
+            return facing if shown is None else steady_window(shown, facing)
         return self._ba_custom
 
     @property
@@ -124,12 +115,12 @@ class ViewPanel:
     def ba_texture(self, key: str) -> np.ndarray:
         """The texture of BA image ``key``: its shown grey image, cut to the column window and enlarged."""
         window = self._ba_window
-        return ba_texture(self.app.display.ba_display(key), window, texture_factor(window.width, self.app.depth.shape[0]))
+        return ba_texture(self.app.laser_images.ba_display(key), window, texture_factor(window.width, self.app.depth.shape[0]))
 
     def ba_title(self, key: str) -> str:
         """The title of BA image ``key`` (with the shown columns when they are not all)."""
         w = self._ba_window
-        title = self.app.display.ba_title(key)
+        title = self.app.laser_images.ba_title(key)
         side_by_side = len({round(self.slots[k].center[1], 6) for k in self.app.ba_keys}) == 1
         if w.is_full or side_by_side:  # four narrow panes in a row: a longer title would run into the next one
             return title
@@ -147,17 +138,16 @@ class ViewPanel:
             self._ba_window = window
             old_slots, self.slots = self.slots, self._layout()
             with self.app.server.atomic():
-                for key in self.app.ba_keys:
-                    self.app.page.set_ba(key, texture=self.ba_texture(key), slot=self.slots[key],
-                                         title=self.ba_title(key))
-                if getattr(self.app, "render_pane", None) is not None:
-                    self.app.render_pane.place()
+                keys = self.app.ba_keys
+                shown = BaWindowShown({k: self.ba_texture(k) for k in keys}, {k: self.ba_title(k) for k in keys},
+                                      {k: self.slots[k] for k in keys})
+                for listener in list(self._window_listeners):
+                    listener(shown)
             self.sync_window_widgets(typed)
-        self.app.overlays.refresh()
-        if self.slots == old_slots:
+        moved = self.slots != old_slots
+        self._publish_layout(moved)
+        if not moved:
             return  # same size (only the first column moved): keep every tab's zoom and pan
-        if getattr(self.app, "loupes", None) is not None:
-            self.app.loupes.relayout()  # beside the new images, not where the old ones ended
         clients = self.app.server.get_clients()
         for cid, mode in list(self._client_mode.items()):
             if mode != "3d" and cid in clients:
@@ -192,7 +182,8 @@ class ViewPanel:
 
     def update_camera_title(self) -> None:
         """Show the visible camera view and its title on the page."""
-        self.app.page.show_camera_view(self.camera_view.key, self.camera_slot(), self.camera_view.title())
+        for listener in list(self._camera_view_listeners):
+            listener(self.camera_view.key, self.camera_slot(), self.camera_view.title())
 
     def on_view_checkbox(self, event: Any) -> None:
         with self.app.ui_lock:  # a drawing on another thread sees the old or the new camera view, never a mix
@@ -203,7 +194,7 @@ class ViewPanel:
         if was != self.camera_view.key:
             # The camera view changed size: the render follows its framing, the page is laid out and re-framed.
             self.apply_ba_window(relayout=True)
-        self.app.overlays.refresh()
+        self._publish_layout(False)  # the overlays shown changed
 
     def on_up_axis(self, event: Any) -> None:
         self.app.state.set_view(up_axis=str(event.value))
@@ -238,7 +229,7 @@ class ViewPanel:
             return
         mode = {label: m for m, label in BA_WINDOW_MODES.items()}.get(str(event.value), "all")
         self._set_ba_mode(mode)
-        if mode == "camera" and self.app.live.facing is None:
+        if mode == "camera" and self.app.pose_source.facing is None:
             self.app.notify(event.client, "No calibration yet",
                             f"Showing the columns set by the sliders; once {MIN_PAIRS} pairs are solved the BA images "
                             "show the columns the camera sees.", color="yellow")
@@ -258,13 +249,14 @@ class ViewPanel:
         w = self._ba_custom if custom is None else custom
         self.app.state.set_view(ba_window_mode=mode, ba_window_start=int(w.start), ba_window_width=int(w.width))
         if mode == "camera":
-            self.app.live.ensure_facing()
+            self.app.pose_source.ensure_facing()
         self.apply_ba_window(typed)
         self.sync_window_widgets(typed)
 
     def forget_tab(self, client_id: int) -> None:
         """Forget a closed tab (the 3-D pane hides when no tab shows it)."""
         self._client_mode.pop(client_id, None)
+        self._last_click.pop(client_id, None)
         self._view_target.pop(client_id, None)
         self._framed.pop(client_id, None)
         self._canvas_size.pop(client_id, None)
@@ -276,8 +268,9 @@ class ViewPanel:
         return any(m == "3d" for m in list(self._client_mode.values()))
 
     def _update_cloud_visibility(self) -> None:
-        self.app.cloud.visible = self.any_tab_in_3d()
-        self.app.live.request_cloud()  # a tab that switches to 3-D gets the current solve's colours
+        shown = self.any_tab_in_3d()
+        for listener in list(self._3d_listeners):
+            listener(shown)
 
     def set_view(self, client: Any, mode: str) -> None:
         """Point one client's camera at the annotation images (``all``, ``camera``, ``ba``) or the 3-D cloud."""
@@ -288,7 +281,7 @@ class ViewPanel:
             self._client_mode[client.client_id] = "3d"
             self._update_cloud_visibility()
             up = self._up_vector()
-            bundle = self.app.live.bundle
+            bundle = self.app.solve_bundle
             # Stand a little behind and above the solved camera, look where it looks (paper Fig. 9).
             eye, look = viewpoint_behind_camera(None if bundle is None else bundle.result.T_camera_lidar, up)
             pos, look = CLOUD_ORIGIN + eye, CLOUD_ORIGIN + look
@@ -303,7 +296,7 @@ class ViewPanel:
         else:
             slots = [self.camera_slot(), self.slots[RENDER_KEY]] + [self.slots[k] for k in self.app.ba_keys]
             if getattr(self.app, "loupes", None) is not None:  # the loupes are part of the page
-                slots += [self.slot_of("loupe_ba"), self.slot_of("loupe_camera")]
+                slots += [self.app.slot_of("loupe_ba"), self.app.slot_of("loupe_camera")]
         x0, y0, x1, y1 = bounds_of(slots)
         y0 -= 0.3  # room for the titles
         w_px, h_px = self._canvas_px(client)
@@ -359,7 +352,7 @@ class ViewPanel:
     def _zoom_on_last(self, client: Any) -> None:
         """Centre the last click and magnify one step (``ZOOM_STEP``), up to ``ZOOM_PX_PER_CELL`` per BA cell
         or ``ZOOM_PX_PER_IMAGE_PX`` per camera pixel: each press keeps the surroundings in view."""
-        last = self.app.pairs_panel.last_click(client.client_id)
+        last = self.last_click(client.client_id)
         if last is None:
             raise CalibError("nothing clicked yet in this tab: click a BA or camera image first")
         with self.app.ui_lock:
@@ -411,7 +404,7 @@ class ViewPanel:
         rects: dict = {}
         if self._client_mode.get(client.client_id) not in (None, "3d"):
             try:
-                bounds = {k: self.slot_of(f"loupe_{k}").bounds() for k in ("ba", "camera")}
+                bounds = {k: self.app.slot_of(f"loupe_{k}").bounds() for k in ("ba", "camera")}
             except (AttributeError, KeyError):  # no loupes (yet)
                 bounds = {}
             rects = canvas_rects(camera, bounds) or {}
@@ -456,7 +449,7 @@ class ViewPanel:
     def _up_vector(self) -> np.ndarray:
         axis = UP_AXES.get(self.app.state.view.up_axis)
         if axis is None:
-            bundle = self.app.live.bundle
+            bundle = self.app.solve_bundle
             if bundle is None:
                 return np.array([0.0, 0.0, 1.0])
             R_lidar_camera = bundle.result.T_camera_lidar[:3, :3].T

@@ -150,7 +150,7 @@ def test_loupe_shows_range_and_contrast_and_the_edge_overlay_stays_in_the_fishey
                          port=0)
     try:
         d = AppDriver(app)
-        assert "Range" in app.display.loupe_sources()
+        assert "Range" in app.laser_images.loupe_sources()
         app.loupes.frame_ba("horizontal", 90, 300)
         k = app.loupes.texture("ba").shape[1] // app.loupes.ba_crop.n_cols  # texels per cell
         ba_centre = d.loupe_texture("ba")[::k, ::k]
@@ -164,9 +164,9 @@ def test_loupe_shows_range_and_contrast_and_the_edge_overlay_stays_in_the_fishey
         assert np.all(np.diff(rng[valid][order].astype(int)) >= 0) and not np.array_equal(rng, ba_centre)
         assert "Range loupe" in app.loupes.title("ba")
         # Contrast 2 spreads the grey levels of the BA panes about their median.
-        before = app.display.ba_display("horizontal").astype(float)
+        before = app.laser_images.ba_display("horizontal").astype(float)
         assert d.set_slider("Laser contrast", 2.0) == []
-        after = app.display.ba_display("horizontal").astype(float)
+        after = app.laser_images.ba_display("horizontal").astype(float)
         ok = before > 0
         assert after[ok].std() > 1.3 * before[ok].std() and np.all(after[~ok] == 0)
 
@@ -216,7 +216,7 @@ def test_last_laser_pane_shows_range_picks_the_same_cells_and_is_saved(tmp_path)
     try:
         d = AppDriver(app)
         last, first = app.ba_keys[-1], app.ba_keys[0]
-        assert app.display.last_pane_sources()[0] == app.display.ba_title(last) and "Range" in app.display.last_pane_sources()
+        assert app.laser_images.last_pane_sources()[0] == app.laser_images.ba_title(last) and "Range" in app.laser_images.last_pane_sources()
         ba_tex, other_tex = d.ba_texture(last).copy(), d.ba_texture(first).copy()
         assert d.choose_last_pane_source("Range") == []
         tex = d.ba_texture(last)
@@ -227,7 +227,7 @@ def test_last_laser_pane_shows_range_picks_the_same_cells_and_is_saved(tmp_path)
         order = np.argsort(app.depth.range_m[valid])
         assert np.all(np.diff(grey[valid][order].astype(int)) >= 0)
         assert not np.array_equal(tex, ba_tex) and np.array_equal(d.ba_texture(first), other_tex)
-        assert app.display.ba_title(last) == "Range"
+        assert app.laser_images.ba_title(last) == "Range"
         # A click on the range pane picks the cell under it, as on a BA pane.
         assert d.click(last, (301.3, 80.4)) == []  # cell centres at whole display pixels
         assert app.state.picks[-1].laser_rc == (80, 301)
@@ -238,8 +238,8 @@ def test_last_laser_pane_shows_range_picks_the_same_cells_and_is_saved(tmp_path)
                          port=0)
     try:
         d = AppDriver(app)
-        assert app.display.last_pane_source == "Range" and np.array_equal(d.ba_texture(last), tex)
-        assert d.choose_last_pane_source(app.display.last_pane_sources()[0]) == []
+        assert app.laser_images.last_pane_source == "Range" and np.array_equal(d.ba_texture(last), tex)
+        assert d.choose_last_pane_source(app.laser_images.last_pane_sources()[0]) == []
         assert np.array_equal(d.ba_texture(last), ba_tex) and app.state.view.last_pane_shows == ""
     finally:
         app.stop()

@@ -207,7 +207,7 @@ def test_dragging_turns_the_view_so_the_grabbed_point_follows_the_mouse(tmp_path
         row = int(np.flatnonzero(app.depth.valid[:, col])[len(np.flatnonzero(app.depth.valid[:, col])) // 2])
         assert d.click_cell("horizontal", row, col) == []
         uv_cell, _ = project(T3, app.depth.points[row, col][None])
-        assert app.loupe_support.predict_pixel(row, col) == pytest.approx(tuple(uv_cell[0]), abs=1e-6)
+        assert app.pose_source.predict_pixel(row, col) == pytest.approx(tuple(uv_cell[0]), abs=1e-6)
         assert "from '+x'" in d.align_text
     finally:
         app.stop()

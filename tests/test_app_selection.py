@@ -81,7 +81,7 @@ def test_snap_refines_ba_clicks_on_the_full_image_and_in_the_loupe_alike(driver)
     app.state.set_view(snap=True)
     assert driver.press_edit("Deselect") == []
     for row, col in [(45, 262), (83, 256), (105, 480)]:
-        corner = refine_click_to_corner(app.display.ba_display(key), (float(col), float(row)), 3.0)
+        corner = refine_click_to_corner(app.laser_images.ba_display(key), (float(col), float(row)), 3.0)
         want = (int(round(corner[1])), int(round(corner[0])) % app.depth.shape[1])
         n = len(app.state.picks)
         assert driver.click_cell(key, row, col) == []

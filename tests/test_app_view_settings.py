@@ -128,9 +128,9 @@ def test_the_app_shows_the_saved_settings_and_ignores_bad_ones(tmp_path):
         assert app.state.view.contrast == 2.0 and app.display.edge_opacity == 0.8
         # A bad saved up axis takes the scene's default: +y for the sample's rotating 2-D scanner.
         assert app.depth.meta.get("model") == "rotating_2d" and app.state.view.up_axis == "+y"
-        assert app.display.loupe_source == AS_CLICKED  # a saved choice this scene lacks shows the clicked BA image
+        assert app.laser_images.loupe_source == AS_CLICKED  # a saved choice this scene lacks shows the clicked BA image
         assert driver.choose_loupe_source("Range") == []
-        assert app.state.view.loupe_shows == "Range" and app.display.loupe_source == "Range"
+        assert app.state.view.loupe_shows == "Range" and app.laser_images.loupe_source == "Range"
         assert driver.set_ba_columns(100, 80) == []
         assert (app.state.view.ba_window_start, app.state.view.ba_window_width) == (100, 80)
         assert (app.ba_window.start, app.ba_window.width) == (100, 80)

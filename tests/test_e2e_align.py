@@ -75,7 +75,7 @@ def test_a_rough_alignment_by_drag_on_kitti(tmp_path):
             wait_for(lambda: tab.shows_image_at(((RENDER_KEY, (640.0, 300.0)),)), "the render on the page", interval=0.2)
 
             def rough() -> np.ndarray:
-                return app.loupe_support.initial_T_camera_lidar
+                return app.pose_source.initial_T_camera_lidar
 
             def press(name: str) -> None:
                 before = app.state.view.rough_T_camera_lidar

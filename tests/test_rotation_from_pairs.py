@@ -159,7 +159,7 @@ def test_the_app_turns_the_rough_pose_after_the_2nd_and_3rd_pair_and_undo_takes_
 
         def prediction_error():
             r, c, _, true_uv = chosen[3]
-            got = app.loupe_support.predict_pixel(r, c)
+            got = app.pose_source.predict_pixel(r, c)
             return np.inf if got is None else float(np.hypot(*(np.asarray(got) - true_uv)))
 
         # A rough start as after a hasty alignment: the '+x' preset turned 2 deg right and 1 deg up.

@@ -130,11 +130,11 @@ def test_the_rough_pose_is_kept_when_switching_shots_before_any_solve(tmp_path, 
         assert app.wait_idle(60)
         app = server.load(1)
         assert app.wait_idle(60) and app.live.bundle is None
-        T, source = app.loupe_support.view_pose()
+        T, source = app.pose_source.view_pose()
         assert source == "rough"
         np.testing.assert_array_equal(T, rough)
         app = server.load(0)
         assert app.wait_idle(60)
-        np.testing.assert_array_equal(app.loupe_support.view_pose()[0], rough)
+        np.testing.assert_array_equal(app.pose_source.view_pose()[0], rough)
     finally:
         server.stop()

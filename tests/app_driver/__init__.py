@@ -55,7 +55,7 @@ class AppDriver(RenderDriver):
         return self.tab.notifications[before:]
 
     def _ray(self, key: str, uv: tuple[float, float], **extra: Any) -> Any:
-        world = self.app.view.slot_of(key).world_from_pixel(np.asarray(uv, dtype=np.float64).reshape(1, 2))[0]
+        world = self.app.slot_of(key).world_from_pixel(np.asarray(uv, dtype=np.float64).reshape(1, 2))[0]
         return SimpleNamespace(ray_origin=tuple(world - [0.0, 0.0, 1.0]), ray_direction=(0.0, 0.0, 1.0),
                                client=self.tab, target=None, **extra)
 
@@ -101,22 +101,22 @@ class AppDriver(RenderDriver):
 
     def press_loupe_zoom(self, label: str) -> list[tuple[str, str]]:
         """Press a "Loupe zoom" button: ``"BA +"``, ``"BA -"``, ``"Camera +"`` or ``"Camera -"``."""
-        return self._fire(self.app.guard(self.app.loupe_support.on_loupe_zoom), SimpleNamespace(
+        return self._fire(self.app.guard(self.app.loupes.on_zoom), SimpleNamespace(
             client=self.tab, target=SimpleNamespace(value=label)))
 
     def upload_initial_extrinsics(self, name: str, content: bytes) -> list[tuple[str, str]]:
         """Upload an extrinsics file through this tab's "Import initial extrinsics" button."""
-        support = self.app.loupe_support
+        support = self.app.align
         handler = self.app.guard(lambda action: support.receive_initial_extrinsics(action.client, name, content))
         return self._fire(handler, SimpleNamespace(client=self.tab, target=None))
 
     def choose_loupe_source(self, name: str) -> list[tuple[str, str]]:
-        """Choose what the BA loupe shows in its dropdown (see ``app.display.loupe_sources()``)."""
+        """Choose what the BA loupe shows in its dropdown (see ``app.laser_images.loupe_sources()``)."""
         return self._fire(self.app.guard(self.app.display.on_loupe_source), SimpleNamespace(
             client=self.tab, target=SimpleNamespace(value=name)))
 
     def choose_last_pane_source(self, name: str) -> list[tuple[str, str]]:
-        """Choose what the last laser pane shows in its dropdown (see ``app.display.last_pane_sources()``)."""
+        """Choose what the last laser pane shows in its dropdown (see ``app.laser_images.last_pane_sources()``)."""
         return self._fire(self.app.guard(self.app.display.on_last_pane_source), SimpleNamespace(
             client=self.tab, target=SimpleNamespace(value=name)))
 
@@ -153,12 +153,12 @@ class AppDriver(RenderDriver):
     def drawn_display_pixels(self, name: str, key: str) -> np.ndarray:
         """Display pixels ``(N, 2)`` on image ``key`` of the points scene node ``name`` draws (as sent to viser)."""
         world, _ = self.drawn_points(name)
-        return self.app.view.slot_of(key).pixel_from_world(world)
+        return self.app.slot_of(key).pixel_from_world(world)
 
     def drawn_segment_pixels(self, name: str, key: str) -> np.ndarray:
         """Display pixels ``(N, 2, 2)`` on image ``key`` of the line segments node ``name`` draws (padding dropped)."""
         segs = self.app.nodes.segments(name)
-        return self.app.view.slot_of(key).pixel_from_world(segs.reshape(-1, 3)).reshape(-1, 2, 2)
+        return self.app.slot_of(key).pixel_from_world(segs.reshape(-1, 3)).reshape(-1, 2, 2)
 
     def drawn_marker_pixels(self, key: str) -> np.ndarray:
         """Display pixels ``(N, 2)`` on image ``key`` of the pick markers drawn there: the centres of the rings as sent."""
@@ -167,7 +167,7 @@ class AppDriver(RenderDriver):
         segs = self.app.nodes.segments(f"/annot/markers/{key}/ring")
         per = len(marker_segments(np.zeros((1, 3)), 1.0, cell_half_size=(1.0, 1.0) if key in self.app.ba_keys else None))
         rings = segs.reshape(-1, per, 2, 3)[:, :RING_SEGMENTS, 0, :].astype(np.float64)
-        return self.app.view.slot_of(key).pixel_from_world(rings.mean(axis=1))
+        return self.app.slot_of(key).pixel_from_world(rings.mean(axis=1))
 
     def loupe_view(self, kind: str) -> dict:
         """What loupe ``kind`` shows: ``{"center", "size"}`` (+ ``"key"`` for BA): its centre cell ``(row, col)``

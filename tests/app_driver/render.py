@@ -51,7 +51,7 @@ class RenderDriver:
     @property
     def rough_pose(self) -> np.ndarray | None:
         """The rough ``T_camera_lidar`` predictions use before a solve (None: none)."""
-        return self.app.loupe_support.initial_T_camera_lidar
+        return self.app.pose_source.initial_T_camera_lidar
 
     @property
     def align_text(self) -> str:
@@ -117,7 +117,7 @@ class RenderDriver:
         from original camera pixel ``start_uv`` to ``end_uv`` in ``steps`` moves: the start, update and end
         events viser sends, to every handler the node has for that button and modifier."""
         app = self.app
-        slot = app.view.slot_of(RENDER_KEY) if key == RENDER_KEY else app.camera_slot()
+        slot = app.slot_of(RENDER_KEY) if key == RENDER_KEY else app.camera_slot()
         node = app.align.drag_nodes()[key]
 
         def world(uv: Any) -> np.ndarray:

@@ -1,25 +1,26 @@
-"""What the loupes need from the app: the pose to predict with (solved, else imported), predictions both ways,
-the initial-extrinsics import (constructor path or upload button), and the loupe zoom buttons.
+"""The pose the app predicts and renders with: the last good solve, else the rough pose (imported or aligned), else
+the "+x" mounting preset; predictions both ways under it, the scan projected under it (cached per pose) and the scan
+columns the camera sees under it (the BA panes' "camera" window).
 
-The maths is :mod:`calib_core.predict`; this only picks the pose and caches per pose.
+A service of the app (``app.pose_source``: state and queries, no widgets).  A new rough pose is published to its
+subscribers (:meth:`PoseSource.subscribe`); the composition root redraws what depends on it.  The maths is
+:mod:`calib_core.predict`; this only picks the pose and caches per pose.
 """
 
 from __future__ import annotations
 
-import tempfile
 import threading
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
-import viser
 
 from calib_core.alignment import preset_T
 from calib_core.errors import CalibError
+from calib_core.overlays import columns_seen_by_camera, project_lidar_points
 from calib_core.predict import ProjectedScan, predict_pixel
 
-from .loupes import ZOOM_FACTOR
-from .security import upload_display_name
+from .ba_view import ColumnWindow, covering_window
 
 #: The pose the render and the BA columns assume before any pose exists.
 DEFAULT_PRESET = "+x"
@@ -37,17 +38,18 @@ def read_extrinsics(path: Path, shown: str | None = None) -> np.ndarray:
         raise CalibError(str(exc).replace(str(path), shown)) from None
 
 
-class LoupeSupport:
-    """The pose the loupes predict with, of one :class:`app.server.CalibrationApp` (``app.loupe_support``).
+class PoseSource:
+    """The pose predictions use, of one :class:`app.server.CalibrationApp` (``app.pose_source``).
 
-    It owns the imported initial extrinsic (:attr:`initial_T_camera_lidar`)
-    and the scan projected under the current pose (cached per pose).  The
-    solve shown comes from ``app.live``.
+    It owns the rough pose (:attr:`initial_T_camera_lidar`), the extrinsic
+    given at start (:attr:`imported_T_camera_lidar`) and the scan projected
+    under the current pose (cached per pose).  The solve comes from the app's
+    ``solve_bundle`` service.
 
     Parameters
     ----------
     app : CalibrationApp
-        The app (its ``live``, ``camera``, ``depth``, ``all_points_lidar``, ``scene_data`` ...).
+        The app (its ``solve_bundle``, ``state``, ``camera``, ``depth``, ``all_points_lidar``, ``scene_data``).
     initial_T_camera_lidar : ndarray, shape (4, 4), optional
         A rough pose to predict with until a solve exists.
     """
@@ -57,6 +59,9 @@ class LoupeSupport:
         self.initial_T_camera_lidar: np.ndarray | None = None
         self._projected: tuple[bytes, ProjectedScan] | None = None
         self._projected_lock = threading.Lock()
+        self._listeners: list[Callable[[], None]] = []
+        self._facing: ColumnWindow | None = None  # from the last good solve it was computed for (else the view pose)
+        self._facing_of: Any = None  # the solve ``_facing`` was computed for
         # The extrinsic given at start (file, bag's /tf_static); a rough pose saved in the session wins over it.
         self.imported_T_camera_lidar: np.ndarray | None = None
         if initial_T_camera_lidar is not None:
@@ -66,10 +71,14 @@ class LoupeSupport:
         if saved:
             self.set_initial_extrinsics(np.array(saved, np.float64).reshape(4, 4))
 
+    def subscribe(self, listener: Callable[[], None]) -> None:
+        """Call ``listener()`` after each new rough pose (:meth:`adopt_rough_pose`), on the adopting thread."""
+        self._listeners.append(listener)
+
     # ------------------------------------------------------------------ pose and predictions
     def pose(self) -> np.ndarray | None:
         """``T_camera_lidar`` predictions use: the last good solve, else the imported initial extrinsic, else None."""
-        bundle = self.app.live.bundle
+        bundle = self.app.solve_bundle
         if bundle is not None:
             return bundle.result.T_camera_lidar
         return self.initial_T_camera_lidar
@@ -77,7 +86,7 @@ class LoupeSupport:
     def view_pose(self) -> tuple[np.ndarray, str]:
         """The pose the camera-view render and the BA columns use, and where it comes from: the last good solve
         (``"solve"``), else the rough pose (``"rough"``), else the "+x" mounting preset (``"default"``)."""
-        bundle = self.app.live.bundle
+        bundle = self.app.solve_bundle
         if bundle is not None:
             return bundle.result.T_camera_lidar, "solve"
         if self.initial_T_camera_lidar is not None:
@@ -98,6 +107,17 @@ class LoupeSupport:
             return None
         return self.projection(T).cell_at(float(u), float(v))
 
+    def predicted_pixels(self, picks: dict) -> tuple[list[int], np.ndarray]:
+        """Original camera pixels ``(M, 2)`` where :meth:`pose` expects the picks (by id) that have only a laser
+        cell, and their ids (those in view only); none without a pose."""
+        T = self.pose()  # the last good solve, else the imported initial extrinsic
+        pending = [p for p in picks.values() if p.laser_rc is not None and p.pixel is None]
+        if T is None or not pending:
+            return [], np.empty((0, 2))
+        points = self.app.depth.cell_points(np.array([p.laser_rc for p in pending]))
+        uv, ok = project_lidar_points(T, self.app.camera, points)
+        return [p.id for p, good in zip(pending, ok) if good], uv[ok]
+
     def projection(self, T: np.ndarray) -> ProjectedScan:
         """Every scan point projected under ``T`` (cached per pose; built off the click path after a solve)."""
         key = np.asarray(T, np.float64).tobytes()
@@ -115,8 +135,46 @@ class LoupeSupport:
         if T is not None:
             self.projection(T)
 
-    # ------------------------------------------------------------------ initial extrinsics
+    # ------------------------------------------------------------------ the columns the camera sees
+    @property
+    def facing(self) -> ColumnWindow | None:
+        """The scan columns whose points the current pose projects into the camera image (None: not known); computed
+        by :meth:`ensure_facing` or, after a solve, by the live solve's follow-up work (:meth:`set_facing`)."""
+        return self._facing
 
+    def facing_due(self, bundle: Any) -> bool:
+        """Is the facing window of solve ``bundle`` still to be computed?"""
+        return self._facing_of is not bundle
+
+    def facing_window(self, T_camera_lidar: np.ndarray) -> ColumnWindow | None:
+        """The scan columns whose points project into the camera image under ``T_camera_lidar``, or None."""
+        seen = columns_seen_by_camera(self.app.depth, self.app.camera, T_camera_lidar)
+        n_cols = len(seen)
+        # A margin and coarse ends, so that the next solve usually keeps the same window.
+        step = max(1, round(n_cols / 225))
+        return covering_window(seen, self.app.wrap_cols, margin=step, quantum=step)
+
+    def set_facing(self, bundle: Any, facing: ColumnWindow | None) -> None:
+        """The facing window ``facing`` computed for solve ``bundle`` (ignored once a newer solve is shown)."""
+        with self.app.ui_lock:
+            if bundle is not self.app.solve_bundle:
+                return  # a newer solve is shown; its own window comes with it
+            self._facing_of = bundle
+            if facing is not None:  # the camera sees no column: keep the last window
+                self._facing = facing
+
+    def ensure_facing(self) -> None:
+        """Compute the camera-facing window of the current pose now, if not done yet (switch to camera mode)."""
+        bundle = self.app.solve_bundle
+        if bundle is not None and self._facing_of is not bundle:
+            self.set_facing(bundle, self.facing_window(bundle.result.T_camera_lidar))
+        elif bundle is None:
+            # Before any solve: the rough pose, else the "+x" preset.
+            facing = self.facing_window(self.view_pose()[0])
+            if facing is not None:
+                self._facing = facing
+
+    # ------------------------------------------------------------------ the rough pose
     def set_initial_extrinsics(self, T_camera_lidar: np.ndarray | None) -> None:
         """Use ``T_camera_lidar`` (4x4) for predictions and "facing the camera" until a solve exists (None: forget it)."""
         if T_camera_lidar is not None:
@@ -128,58 +186,9 @@ class LoupeSupport:
         threading.Thread(target=self._warm_projection, name="ba-calib-projection", daemon=True).start()
 
     def adopt_rough_pose(self, T_camera_lidar: np.ndarray | None) -> None:
-        """Make ``T_camera_lidar`` the rough pose (None: none), save it in the session and redraw what uses it."""
+        """Make ``T_camera_lidar`` the rough pose (None: none), save it in the session and tell the subscribers."""
         self.set_initial_extrinsics(T_camera_lidar)
         saved = () if self.initial_T_camera_lidar is None else tuple(self.initial_T_camera_lidar.reshape(-1))
         self.app.state.set_view(rough_T_camera_lidar=saved)
-        self._after_initial_extrinsics()
-
-    def _after_initial_extrinsics(self) -> None:
-        """Redraw predictions and the facing window once an initial extrinsic is imported."""
-        app = self.app
-        if app.state.view.ba_window_mode == "camera" and app.live.bundle is None:
-            app.live.ensure_facing()
-            app.view.apply_ba_window()
-        if getattr(app, "render_pane", None) is not None:
-            app.render_pane.request()
-            app.align.show()
-        app.overlays.invalidate()
-        app.overlays.refresh()
-        app.live.show_panels()
-        guide = getattr(app, "guide", None)
-        if guide is not None:  # proposals can start from the imported pose
-            guide.update()
-
-    def add_upload_button(self, client: Any) -> None:
-        """This tab's "Import initial extrinsics" button, in the Align folder (each tab gets its own)."""
-        app = self.app
-        with app.page.folder_lock:
-            with app.align.folder:
-                button = client.gui.add_upload_button(
-                    "Import initial extrinsics", icon=viser.Icon.UPLOAD, mime_type="*/*",
-                    hint="A rough pose (any extrinsics format ba-calib reads): predictions and 'Facing the camera' "
-                         "work before 4 pairs")
-        button.on_upload(app.guard(lambda event: self.receive_initial_extrinsics(
-            event.client, getattr(event.value, "name", ""), getattr(event.value, "content", b""))))
-
-    def receive_initial_extrinsics(self, client: Any, name: str, content: bytes) -> None:
-        """Import an uploaded extrinsics file as the initial pose (the upload button's handler)."""
-        shown = upload_display_name(name)
-        if not content:
-            raise CalibError(f"{shown}: the file is empty")
-        suffix = Path(str(name)).suffix.lower()
-        suffix = suffix if suffix in (".yaml", ".yml", ".json", ".txt", ".urdf", ".xml", ".launch", ".py") else ".txt"
-        with tempfile.TemporaryDirectory() as tmp:
-            path = Path(tmp) / f"upload{suffix}"
-            path.write_bytes(content)
-            T = read_extrinsics(path, shown)
-        self.app.align.adopt(T)
-        app = self.app
-        app.notify(client, "Initial extrinsics imported",
-                     f"{shown}: predictions use it until {4} pairs are solved", color="green")
-
-    def on_loupe_zoom(self, event: Any) -> None:
-        """The "Loupe zoom" buttons: magnify or widen one loupe around the same centre."""
-        kind, step = {"BA +": ("ba", ZOOM_FACTOR), "BA -": ("ba", 1 / ZOOM_FACTOR),
-                      "Camera +": ("camera", ZOOM_FACTOR), "Camera -": ("camera", 1 / ZOOM_FACTOR)}[str(event.value)]
-        self.app.loupes.zoom(kind, step)
+        for listener in list(self._listeners):
+            listener()
