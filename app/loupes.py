@@ -25,7 +25,7 @@ from .layout import ImageSlot, LoupeArea, bounds_of, loupe_areas
 from .loupe_crops import BaCrop, CameraCrop, default_camera_crop_px, node_name, slot_key
 from .loupe_framing import PairClick, follow_click
 from .loupe_marks import LEGEND, ba_title, camera_title, draw_camera_marks, tick_segments
-from .render_pane import cell_at_pixel, loupe_texture, loupe_title, pixel_of_cells
+from .shown_render import cell_at_pixel, loupe_texture, loupe_title, pixel_of_cells
 from .ui_common import marker_segments
 
 #: Columns the BA loupe shows at zoom 1 (the camera loupe's crop side: :data:`app.loupe_crops.CAMERA_LOUPE_PX`).
@@ -68,7 +68,7 @@ class Loupes:
         self._framing_of: dict[str, tuple] = {}  # kind -> inputs its outline (and centre marker) were drawn from
         self._clicked: dict[str, tuple] = {}  # kind -> the cell / pixel a click inside it chose: its title names it
         self.shows_render = False  # the laser loupe shows the camera-view render's crop (after a click on it)
-        self._render: Any = None  # the render the render pane shows (app.render_pane.ShownRender; on_render)
+        self._render: Any = None  # the render the render pane shows (app.shown_render.ShownRender; on_render)
         scene = app.server.scene
         self._handles: dict[str, Any] = {}
         self._titles: dict[str, Any] = {}

@@ -14,8 +14,6 @@ clicks never wait for it.  Display plumbing only: the render and its shading com
 
 from __future__ import annotations
 
-import dataclasses
-import math
 import time
 import traceback
 from typing import Any, Callable
@@ -24,47 +22,28 @@ import numpy as np
 
 from calib_core.display_images import find_intensity
 from calib_core.errors import CalibError
-from calib_core.overlays import project_lidar_points
 from calib_core.render import render_from_camera, shade_render
 
 from .layout import RENDER_KEY, ImageSlot
 from .live_solver import LiveSolver
+from .shown_render import NEAREST_PX, NO_RETURN_RGB, ShownRender, cell_at_pixel, pane_texture, pixel_of_cells
 from .ui_common import marker_segments
 from .view_settings import RENDER_MODES
 
 #: The render's scene nodes (its page slot and click key: :data:`app.layout.RENDER_KEY`).
 NODE = "/annot/render"
 OVERLAY_NODE = "/annot/render_over"
-#: What the pane shows where the scan has no return (dark, so range colours and white depth edges stand out).
-NO_RETURN_RGB = (30, 30, 34)
-#: Outside the render in a loupe crop.
-PAD_RGB = (60, 60, 60)
-#: A click on a pixel without a return takes the nearest rendered pixel this close (render pixels) ...
-NEAREST_PX = 4
+#: A click on a pixel without a return takes the nearest rendered pixel (:data:`app.shown_render.NEAREST_PX`) ...
 #: ... or this close in screen pixels when the pane is shown small (a click aimed at a thin outline lands a pixel
 #: or two beside it), at most :data:`NEAREST_MAX_PX` render pixels.
 SNAP_SCREEN_PX = 2.0
 NEAREST_MAX_PX = 24
-TEXTURE_TEXELS = 320  # as app.loupes: texels along a loupe texture's side
 #: A new solve is rendered at most this often (seconds): a burst of clicks solves many times, each render costs a
 #: core for 0.1-0.3 s.  Drags and the Align buttons render at once.
 SOLVE_RENDER_INTERVAL_S = 0.5
 #: Where the pose the render uses comes from, as its title says it.
 POSE_NAMES = {"solve": "solved pose", "rough": "rough pose", "default": "'+x' preset (no pose yet)",
               "drag": "rough pose (dragging)"}
-
-
-@dataclasses.dataclass(frozen=True, eq=False)
-class ShownRender:
-    """A finished render: the pose and shading it was made with, the :class:`calib_core.render.CameraRender`,
-    its RGBA shading (alpha 0 where no return) and how long it took (seconds)."""
-
-    T_camera_lidar: np.ndarray
-    mode: str
-    source: str
-    render: Any
-    rgba: np.ndarray
-    seconds: float
 
 
 class RenderPane:
@@ -414,67 +393,3 @@ class RenderPane:
         sel = [k for k, (pid, _, _) in enumerate(p for p, good in zip(picks, ok) if good) if pid == app.state.selected]
         sel_segs = marker_segments(world[sel] + [0.0, 0.0, 0.003], 1.5 * self._ring_radius(slot))
         app.nodes.lines("/annot/selected/render", sel_segs, np.full(sel_segs.shape, 255, np.uint8), thickness=4.0)
-
-
-# ---------------------------------------------------------------------- a shown render's pixels and cells
-def pane_texture(rgba: np.ndarray) -> np.ndarray:
-    """The pane's RGB texture: the shading over :data:`NO_RETURN_RGB` where there is no return."""
-    a = rgba[..., 3:4].astype(np.uint16)
-    bg = np.asarray(NO_RETURN_RGB, np.uint16)
-    return ((rgba[..., :3].astype(np.uint16) * a + bg * (255 - a) + 127) // 255).astype(np.uint8)
-
-
-def cell_at_pixel(shown: ShownRender | None, u: float, v: float,
-                  radius_px: float = NEAREST_PX) -> tuple[int, int] | None:
-    """Scan cell ``(row, col)`` render ``shown`` draws at original-size pixel ``(u, v)``, or at the nearest rendered
-    pixel within ``radius_px`` render pixels; None if none (or no render)."""
-    if shown is None:
-        return None
-    cells = shown.render.cell_rc
-    h, w = cells.shape[:2]
-    iu, iv = int(math.floor(u + 0.5)), int(math.floor(v + 0.5))
-    r = int(math.ceil(radius_px))
-    u0, u1, v0, v1 = max(iu - r, 0), min(iu + r + 1, w), max(iv - r, 0), min(iv + r + 1, h)
-    if u0 >= u1 or v0 >= v1:
-        return None
-    window = cells[v0:v1, u0:u1]
-    vv, uu = np.mgrid[v0:v1, u0:u1]
-    d2 = np.where(window[..., 0] >= 0, (uu - u) ** 2 + (vv - v) ** 2, np.inf)
-    k = int(np.argmin(d2))
-    if not np.isfinite(d2.flat[k]) or d2.flat[k] > radius_px * radius_px:
-        return None
-    row, col = window.reshape(-1, 2)[k]
-    return int(row), int(col)
-
-
-def pixel_of_cells(shown: ShownRender | None, camera: Any, depth: Any, rows_cols: np.ndarray) -> np.ndarray:
-    """Original camera pixels ``(N, 2)`` of scan cells ``(N, 2)`` under render ``shown``'s pose (NaN: not in view,
-    or no render)."""
-    rc = np.asarray(rows_cols, np.int64).reshape(-1, 2)
-    out = np.full((len(rc), 2), np.nan)
-    if shown is None or not len(rc):
-        return out
-    uv, ok = project_lidar_points(shown.T_camera_lidar, camera, depth.cell_points(rc))
-    out[ok] = uv[ok]
-    return out
-
-
-def loupe_texture(shown: ShownRender | None, camera: Any, u0: int, v0: int, n: int) -> np.ndarray:
-    """Render ``shown``'s pixels ``[u0, u0 + n) x [v0, v0 + n)`` (the camera loupe's crop), enlarged by nearest
-    neighbour as the camera loupe is; :data:`PAD_RGB` outside the image."""
-    h, w = camera.height, camera.width
-    pane = (np.full((h, w, 3), NO_RETURN_RGB, np.uint8) if shown is None else pane_texture(shown.rgba))
-    us, vs = u0 + np.arange(n), v0 + np.arange(n)
-    ok = ((vs >= 0) & (vs < h))[:, None] & ((us >= 0) & (us < w))[None, :]
-    crop = pane[np.clip(vs, 0, h - 1)][:, np.clip(us, 0, w - 1)]
-    crop = np.where(ok[..., None], crop, np.asarray(PAD_RGB, np.uint8)).astype(np.uint8)
-    k = max(1, TEXTURE_TEXELS // n)
-    return np.repeat(np.repeat(crop, k, axis=0), k, axis=1)
-
-
-def loupe_title(shown: ShownRender | None, depth: Any, center: tuple[float, float]) -> str:
-    """The laser loupe's title while it shows render ``shown``: the cell at the crop's centre and its range."""
-    from .loupe_marks import render_title
-
-    cell = cell_at_pixel(shown, *center)
-    return render_title(cell, None if cell is None else float(depth.range_m[cell]))

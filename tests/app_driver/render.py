@@ -41,7 +41,7 @@ class RenderDriver:
 
     @property
     def render_shown(self) -> Any:
-        """The render the page shows (:class:`app.render_pane.ShownRender`) or None."""
+        """The render the page shows (:class:`app.shown_render.ShownRender`) or None."""
         return self.app.render_pane.current
 
     def render_texture(self) -> np.ndarray:
