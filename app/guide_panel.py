@@ -12,8 +12,8 @@ a proposal to re-click a rough pair selects that pair instead, so the click
 moves its pixel (0.3 px; it keeps its source, e.g. ``clicked``).
 One click on the camera (loupe or image) completes the pair through the
 ordinary pick logic; when the new proposals arrive the next one is started
-and framed by itself, so a guided pair costs one click; a re-click proposal is never started by itself (its pair is
-not selected behind the person's back: "Next pair" selects it).  "Skip" moves the half pick to the next proposal
+and framed by itself, so a guided pair costs one click; after a re-click a next re-click is not started by itself (its
+pair is not selected behind the person's back: "Next pair" selects it).  "Skip" moves the half pick to the next proposal
 (it comes back last; a re-click never), "Not a corner" drops the cell for good, "Stop" removes the half pick (and
 a re-click shown, for good).  "Next pair" while a proposal is started skips it, and ending a re-click's selection
 (Cancel pair) declines it for good.  One undo takes back a guided click with the precision the panel gives it.
@@ -130,7 +130,7 @@ class GuidePanel(GuideShotsMixin):
         self._refine: int | None = None  # a guided pick clicked on the full image, not yet refined in the loupe
         self._reclick: int | None = None  # the rough pair selected for a re-click
         self._reclick_from: tuple | None = None  # its pixel when selected (unchanged when the selection ends: declined)
-        self._hands_off = False  # the next start is automatic: a re-click then waits for Next pair
+        self._hands_off = False  # the next start follows an accepted re-click: a re-click then waits for Next pair
         self._moved_on: str | None = None  # what the last Next pair or Cancel pair skipped, shown once
         self._reclick_of: dict[tuple[int, int], int] = {}  # cell -> pick id of the re-click proposals
         self.auto_gate = auto_gate if auto_gate is not None else AutoGate()
@@ -265,13 +265,13 @@ class GuidePanel(GuideShotsMixin):
             # source (a hand pair stays "clicked"); the precision joins the click's undo step (run 5).
             if pick.precision_px != precision:
                 self.state.move_pixel(pick_id, *pick.pixel, precision_px=precision, same_step=True)
+            self._hands_off, self._moved_on = pick_id == self._reclick, None  # run 5: after a re-click
             if pick_id == self._reclick:
                 self._end_reclick()
             self._refine = pick_id if full else None
             if not full:  # done: an undo of this click must not look like a new click
                 self._watch = None
             self._want_next = self._guiding and not full  # the new proposals then frame the next pair
-            self._hands_off, self._moved_on = True, None
             self._refresh()
         finally:
             with self._lock:

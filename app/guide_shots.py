@@ -115,7 +115,7 @@ class GuideShotsMixin:
 
     def resume(self) -> None:
         """Go on with a guided session started on another shot's page: frame this shot's best proposal."""
-        self._guiding = self._want_next = self._resumed = self._hands_off = True
+        self._guiding = self._want_next = self._resumed = True
         self.update()
 
     def shot_lines(self, p: Any) -> list[str]:

@@ -67,7 +67,7 @@ def shown_target(app, d: AppDriver) -> int:
     at the proposed cell, or for a re-click the rough pair (selected) at that cell."""
     proposal = d.guide_proposal
     assert proposal is not None
-    if proposal.replaces is not None and app.state.selected is None:  # never selected by itself (run 5)
+    if proposal.replaces is not None and app.state.selected is None:  # run 5: Next pair selects it
         assert d.press_guide("Next pair") == [] and d.wait_guide() and d.guide_proposal == proposal
     if proposal.replaces is not None:
         rid = app.state.selected
@@ -112,7 +112,7 @@ def test_guided_pairs_beat_the_start_and_keep_their_tags(app, scene, truth, tmp_
     for k in range(N_GUIDED):
         proposal = d.guide_proposal
         assert proposal is not None
-        if proposal.replaces is not None and app.state.selected is None:  # never selected by itself (run 5)
+        if proposal.replaces is not None and app.state.selected is None:  # run 5: Next pair selects it
             assert d.press_guide("Next pair") == [] and d.wait_guide() and d.guide_proposal == proposal
         cells.append(tuple(proposal.laser_rc))
         # The loupes are framed on the cell and on the predicted pixel; the camera loupe shows the whole

@@ -137,3 +137,23 @@ def test_reclicks_by_guidance_are_counted(app, scene):
     assert "Pairs: 4 clicked (1 re-clicked by guidance), 0 guided, 0 auto" in d.guide_panel
     assert d.press_pair_action("Undo") == [] and d.wait_guide()
     assert "Pairs: 4 clicked, 0 guided, 0 auto" in d.guide_panel
+
+
+def test_same_step_joins_only_a_change_of_the_same_pick():
+    """The state's side of one-step undo: a tag change ``same_step`` joins the newest step when that step moved the
+    same pick, and makes its own step after a change of another pick."""
+    from app.state import AnnotationState
+
+    state = AnnotationState(np.ones((10, 20), dtype=bool), (100, 80))
+    a = state.add_laser(1, 2)
+    state.add_pixel(10.0, 20.0)
+    b = state.add_laser(3, 4)
+    state.add_pixel(30.0, 40.0)
+    state.move_pixel(a, 11.0, 21.0)  # the click
+    state.move_pixel(a, 11.0, 21.0, precision_px=0.3, same_step=True)  # the guide's tag on it
+    assert state.get(a).precision_px == 0.3
+    assert state.undo() and state.get(a).pixel == (10.0, 20.0) and state.get(a).precision_px is None
+    assert state.redo() and state.get(a).pixel == (11.0, 21.0) and state.get(a).precision_px == 0.3
+    state.move_pixel(b, 31.0, 41.0)  # another pick changed since: the tag is a step of its own
+    state.move_pixel(a, 11.0, 21.0, precision_px=0.5, same_step=True)
+    assert state.undo() and state.get(a).precision_px == 0.3 and state.get(b).pixel == (31.0, 41.0)
