@@ -12,9 +12,11 @@ a proposal to re-click a rough pair selects that pair instead, so the click
 moves its pixel (0.3 px; it keeps its source, e.g. ``clicked``).
 One click on the camera (loupe or image) completes the pair through the
 ordinary pick logic; when the new proposals arrive the next one is started
-and framed by itself, so a guided pair costs one click.  "Skip" moves the half
-pick to the next proposal (it comes back last; a re-click never), "Not a corner" drops the cell for good,
-"Stop" removes the half pick (and a re-click shown, for good).  Undo works on these picks as on any other.
+and framed by itself, so a guided pair costs one click; after a re-click a next re-click is not started by itself (its
+pair is not selected behind the person's back: "Next pair" selects it).  "Skip" moves the half pick to the next proposal
+(it comes back last; a re-click never), "Not a corner" drops the cell for good, "Stop" removes the half pick (and
+a re-click shown, for good).  "Next pair" while a proposal is started skips it, and ending a re-click's selection
+(Cancel pair) declines it for good.  One undo takes back a guided click with the precision the panel gives it.
 
 Proposals pass the clear-evidence screen of :mod:`calib_core.guide.evidence`
 with a 3-sigma radius of at most half the camera loupe's side zoomed out one
@@ -53,7 +55,7 @@ from calib_core.guide.session import GuidedSession
 from calib_core.pairs import Pair
 
 from .guide_shots import GuideShotsMixin
-from .guide_support import ELLIPSE_MARGIN_PX, live_quality, max_ellipse_px_for, rank_proposals
+from .guide_support import ELLIPSE_MARGIN_PX, live_quality, max_ellipse_px_for, pair_counts_line, rank_proposals
 from .live_solver import LiveSolver
 from .state import AnnotationState
 from .ui_common import MIN_PAIRS, md_escape
@@ -127,6 +129,9 @@ class GuidePanel(GuideShotsMixin):
         self._watch: list | None = None  # [id, pixel seen] of the guided pick started last
         self._refine: int | None = None  # a guided pick clicked on the full image, not yet refined in the loupe
         self._reclick: int | None = None  # the rough pair selected for a re-click
+        self._reclick_from: tuple | None = None  # its pixel when selected (unchanged when the selection ends: declined)
+        self._hands_off = False  # the next start follows an accepted re-click: a re-click then waits for Next pair
+        self._moved_on: str | None = None  # what the last Next pair or Cancel pair skipped, shown once
         self._reclick_of: dict[tuple[int, int], int] = {}  # cell -> pick id of the re-click proposals
         self.auto_gate = auto_gate if auto_gate is not None else AutoGate()
         self._auto_tried: set[tuple[int, int]] = set()  # cells auto-accepted once: never again (an undo sticks)
@@ -225,6 +230,7 @@ class GuidePanel(GuideShotsMixin):
         T0 = self._initial_T()
         key = (tuple(pairs), None if T0 is None else np.asarray(T0, dtype=np.float64).tobytes(), self._auto)
         with self._lock:
+            self._declined_by_deselect(state)
             watch = self._watch
             pick = next((p for p in state.picks if watch is not None and p.id == watch[0]), None)
             if watch is not None and pick is None:
@@ -255,13 +261,16 @@ class GuidePanel(GuideShotsMixin):
                 return
             full = self._click_source(pick_id) == "full" and self._loupes() is not None
             precision = None if full or self._click_source(pick_id) is None else GUIDED_CLICK_SIGMA_PX
-            # A re-click refines a pair and keeps its source (a hand pair stays "clicked" in the counts).
-            source = pick.source if pick_id == self._reclick else "guided"
-            if pick.precision_px != precision or pick.source != source:
-                self.state.move_pixel(pick_id, *pick.pixel, precision_px=precision, source=source)
+            # The watched pick is a guided half (tagged "guided" at its start) or a re-clicked pair, which keeps its
+            # source (a hand pair stays "clicked"); the precision joins the click's undo step (run 5).
+            if pick.precision_px != precision:
+                self.state.move_pixel(pick_id, *pick.pixel, precision_px=precision, same_step=True)
+            self._hands_off, self._moved_on = pick_id == self._reclick, None  # run 5: after a re-click
             if pick_id == self._reclick:
                 self._end_reclick()
             self._refine = pick_id if full else None
+            if not full:  # done: an undo of this click must not look like a new click
+                self._watch = None
             self._want_next = self._guiding and not full  # the new proposals then frame the next pair
             self._refresh()
         finally:
@@ -330,11 +339,6 @@ class GuidePanel(GuideShotsMixin):
             with self._lock:
                 self._pending_posts -= 1
 
-    def _reclick_id(self, p: Proposal | None) -> int | None:
-        if p is None or p.replaces is None or self.shot_of(p) != self.active_shot:
-            return None
-        return self._reclick_of.get(tuple(p.laser_rc))
-
     def _start_current(self, quiet: bool = False) -> None:
         """Make (or move) the guided half pick at the shown proposal -- or, for a re-click, select the rough
         pair so the next camera click moves its pixel -- and frame the loupes on it."""
@@ -347,6 +351,9 @@ class GuidePanel(GuideShotsMixin):
             return
         half = self._guided_half()
         rid = self._reclick_id(p)
+        if rid is not None and self._hands_off:  # run 5: a pair selected by itself got moved by a plain click
+            self._refresh()
+            return
         if rid is not None:
             if half is not None:
                 self.state.delete(half.id)  # the half pick of the proposal shown before
@@ -357,7 +364,7 @@ class GuidePanel(GuideShotsMixin):
                 raise CalibError(f"pair {self.state.pending().id} is not finished; complete or undo it first")
             self.state.select(rid)
             self._reclick, half = rid, self.state.get(rid)
-            self._watch, self._refine = [rid, half.pixel], None
+            self._watch, self._refine, self._reclick_from = [rid, half.pixel], None, half.pixel
         elif half is not None:
             if half.laser_rc != tuple(p.laser_rc):
                 self.state.move_laser(half.id, *p.laser_rc)
@@ -382,15 +389,6 @@ class GuidePanel(GuideShotsMixin):
                                 min_side_px=self._guided_side)
         self._refresh()
 
-    def _unreliable(self) -> str | None:
-        """The first reason why the calibration of the current pairs is unreliable (the live solve's verdict,
-        else the guide's own solve of the same pairs), or None (reliable, or not known yet)."""
-        pairs = self._quality_pairs()
-        for known in (self._solve_quality(), self._job_quality):
-            if known is not None and tuple(known[0]) == pairs:
-                return (str(known[2][0]) if known[2] else "the solve's verdict") if known[1] == "unreliable" else None
-        return None
-
     def _on_button(self, label: str) -> None:
         if label == "Stop":
             if self._guiding and self.current is not None and self.current.replaces is not None:
@@ -406,13 +404,16 @@ class GuidePanel(GuideShotsMixin):
             self._guiding = self._want_next = False
             self._drop_unfinished()
             raise CalibError(f"guided picking waits for a reliable calibration: {reason}")
-        self._guiding = True  # from now on the proposals follow every change
+        self._guiding, self._hands_off, self._moved_on = True, False, None  # proposals follow every change from now
         self.update()  # an initial extrinsic imported since the last change is used from now on
         with self._lock:
             ready = not self._busy and self._shown_key == self._submitted
             p = self.current if ready else None
-            if label in ("Skip", "Not a corner") and p is not None:
-                if label == "Skip" and p.replaces is None:  # a skipped re-click goes for good (no cycling back)
+            moving_on = label == "Next pair" and p is not None and self._started(p)  # run 5: skip it, go on
+            if moving_on:
+                self._moved_on = self._what(p)
+            if (label in ("Skip", "Not a corner") or moving_on) and p is not None:
+                if label != "Not a corner" and p.replaces is None:  # a skipped re-click goes for good (no cycling back)
                     self._skipped.append(tuple(p.laser_rc))
                     self._index = (self._index + 1) % len(self._proposals)
                 else:
@@ -424,13 +425,10 @@ class GuidePanel(GuideShotsMixin):
         if self.current is None:
             self._drop_unfinished()
             return
-        self._start_unless_reclick_after(label, p)
-
-    def _drop_current(self, p: Proposal) -> None:
-        with self._lock:  # the shown proposal ``p``, for good
-            self._dropped.append(tuple(p.laser_rc))
-            self._delete_proposal(self._index)
-            self._index = 0 if self._index >= len(self._proposals) else self._index
+        if moving_on:
+            self._start_current()
+        else:
+            self._start_unless_reclick_after(label, p)
 
     def _on_auto(self, on: bool) -> None:
         self._refuse_auto_across_shots(on)
@@ -464,26 +462,28 @@ class GuidePanel(GuideShotsMixin):
         else:
             p = props[index]
             major = 3.0 * float(p.ellipse_sigma_px()[0])
-            what = p.kind if p.replaces is None else f"re-click of pair {self._reclick_id(p)}"
+            what = self._what(p)
+            lines += [f"Skipped the {md_escape(self._moved_on)}."] if self._moved_on else []
             lines.append(f"Proposal {index + 1} of {len(props)}: cell (row {p.laser_rc[0]}, col {p.laser_rc[1]}), "
                          f"{what}, gain {p.gain:.3f}")
             lines.append(f"Predicted pixel ({p.pixel[0]:.1f}, {p.pixel[1]:.1f}), 3σ ±{major:.1f} px")
             lines += self.shot_lines(p) + ([f"{md_escape(props.note)}."] if getattr(props, "note", None) else [])
             half = self.state.pending()
             if self._reclick is not None and self._reclick_id(p) == self._reclick == self.state.selected:
-                lines.append(f"Pair {self._reclick} (selected): re-click its corner in the camera loupe.")
+                lines.append(f"Pair {self._reclick} (selected): re-click its corner in the camera loupe "
+                             "(**Next pair** or **Cancel pair** skips this re-click).")
             elif half is not None and half.source == "guided" and half.laser_rc == tuple(p.laser_rc):
                 lines.append(f"Pair {half.id}: click the corner in the camera loupe.")
             elif self._refine is not None:
                 lines.append(f"Pair {self._refine}: refine its pixel in the camera loupe (a click on the full "
                              f"image is coarse), or press **Next pair**.")
+            elif self._guiding and self._reclick_id(p) is not None:
+                lines.append(f"Press **Next pair** to re-click pair {self._reclick_id(p)} (nothing is selected "
+                             "until then), or **Skip**.")
             elif self._guiding:
                 lines.append("Press **Next pair** to continue.")
         self._on_status(self._guiding, lines[1:])
-        counts = {s: 0 for s in ("clicked", "guided", "auto")}
-        for pick in self.state.complete_picks():
-            counts[pick.source] = counts.get(pick.source, 0) + 1
-        lines.append("Pairs: " + ", ".join(f"{v} {k}" for k, v in counts.items()))
+        lines.append(pair_counts_line(self.state.complete_picks()))
         self._md.content = "  \n".join(lines)
 
 

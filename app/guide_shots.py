@@ -162,3 +162,55 @@ class GuideShotsMixin:
         if loupes is not None and loupes.camera_crop.cov_px2 is not None:
             loupes.frame_camera(*loupes.camera_crop.center)
         self._refresh()
+
+    def _reclick_id(self, p: Any) -> int | None:
+        """The pick id of the pair proposal ``p`` re-clicks (None: a new cell, or in another shot)."""
+        if p is None or p.replaces is None or self.shot_of(p) != self.active_shot:
+            return None
+        return self._reclick_of.get(tuple(p.laser_rc))
+
+    def _what(self, p: Any) -> str:
+        """What proposal ``p`` is, in words (its kind, or "re-click of pair N")."""
+        return p.kind if p.replaces is None else f"re-click of pair {self._reclick_id(p)}"
+
+    def _started(self, p: Any) -> bool:
+        """Is proposal ``p`` started: its pair selected for the re-click, or a guided half pick at its cell?"""
+        rid = self._reclick_id(p)
+        if rid is not None:
+            return self._reclick == rid and self.state.selected == rid
+        half = self._guided_half()
+        return half is not None and half.laser_rc == tuple(p.laser_rc)
+
+    def _declined_by_deselect(self, state: Any) -> None:
+        """A re-click's selection ended without a click that moved its pixel (Cancel pair, Deselect, another pair
+        selected, the pair undone): that re-click is declined for good, like Skip (run 5: Cancel pair then Next
+        pair offered the same re-click again).  Called under the panel's lock after every change."""
+        rid = self._reclick
+        if rid is None or state.selected == rid:
+            return
+        pick = next((q for q in state.picks if q.id == rid), None)
+        if pick is not None and pick.pixel != self._reclick_from:
+            return  # the re-click's own click: :meth:`_after_click` follows
+        self._reclick = None
+        index = next((i for i, q in enumerate(self._proposals) if self._reclick_id(q) == rid), None)
+        if index is not None:
+            self._dropped.append(tuple(self._proposals[index].laser_rc))
+            self._delete_proposal(index)
+            self._index = self._index - 1 if index < self._index else self._index
+            self._index = 0 if self._index >= len(self._proposals) else self._index
+        self._moved_on = f"re-click of pair {rid}"
+
+    def _drop_current(self, p: Any) -> None:
+        with self._lock:  # the shown proposal ``p``, for good
+            self._dropped.append(tuple(p.laser_rc))
+            self._delete_proposal(self._index)
+            self._index = 0 if self._index >= len(self._proposals) else self._index
+
+    def _unreliable(self) -> str | None:
+        """The first reason why the calibration of the current pairs is unreliable (the live solve's verdict,
+        else the guide's own solve of the same pairs), or None (reliable, or not known yet)."""
+        pairs = self._quality_pairs()
+        for known in (self._solve_quality(), self._job_quality):
+            if known is not None and tuple(known[0]) == pairs:
+                return (str(known[2][0]) if known[2] else "the solve's verdict") if known[1] == "unreliable" else None
+        return None

@@ -297,3 +297,17 @@ def joins_newest_step(undo: Sequence[Snapshot], current: Snapshot, new: Snapshot
     before = undo[-1].picks
     return not any(p.complete for p in before if p.id == pick_id) and (
         [p for p in before if p.id != pick_id] == [p for p in current.picks if p.id != pick_id])
+
+
+def amends_newest_step(undo: Sequence[Snapshot], current: Snapshot, new: Snapshot, pick_id: int) -> bool:
+    """Does the change ``current`` -> ``new`` of pick ``pick_id`` finish the newest undo step instead of making its own?
+
+    Yes when neither that step nor this change touched any other pick: the guide setting a guided click's
+    precision right after the click moved the pixel (run 5: one Ctrl+Z took back only the precision, a second
+    the pixel).  One undo then takes back the click and its tags together.
+    """
+    if not undo or not current.shots == new.shots == undo[-1].shots:
+        return False
+    def others(snap: Snapshot) -> list[Pick]:
+        return [p for p in snap.picks if p.id != pick_id]
+    return others(undo[-1]) == others(current) == others(new)

@@ -33,8 +33,8 @@ import numpy as np
 from calib_core.errors import CalibError
 from calib_core.pairs import PAIR_SOURCES, Pair, load_pairs_yaml, save_pairs_yaml
 
-from .picks import (Pick, ShotFiles, Snapshot, checked_picks, joins_newest_step, new_ends, next_number,
-                    session_data)
+from .picks import (Pick, ShotFiles, Snapshot, amends_newest_step, checked_picks, joins_newest_step, new_ends,
+                    next_number, session_data)
 from .session_store import SessionStore, compact_at_exit, forget_at_exit
 from .state_shots import StateShots
 from .view_settings import ViewSettings
@@ -243,11 +243,15 @@ class AnnotationState(StateShots):
         self._notify()
         return out
 
-    def move_pixel(self, pick_id: int, u: float, v: float, **tags: Any) -> int:
-        """Set the camera end of pick ``pick_id`` to an original-image pixel (and ``precision_px``, ``source`` if given)."""
+    def move_pixel(self, pick_id: int, u: float, v: float, *, same_step: bool = False, **tags: Any) -> int:
+        """Set the camera end of pick ``pick_id`` to an original-image pixel (and ``precision_px``, ``source`` if given).
+
+        With ``same_step`` the change joins the newest undo step when that step changed only this pick (the
+        guide tagging the click it just saw: one undo takes back both)."""
         uv = self.check_pixel(u, v)
         with self._lock:
-            out = self._move_locked(pick_id, pixel=uv, **{k: tags[k] for k in ("precision_px", "source") if k in tags})
+            out = self._move_locked(pick_id, pixel=uv, amend=same_step,
+                                    **{k: tags[k] for k in ("precision_px", "source") if k in tags})
         self._notify()
         return out
 
@@ -433,7 +437,7 @@ class AnnotationState(StateShots):
             return new.id
         return self._move_locked(target.id, laser_rc=laser_rc, pixel=pixel)
 
-    def _move_locked(self, pick_id: int, laser_rc=None, pixel=None, **tags: Any) -> int:
+    def _move_locked(self, pick_id: int, laser_rc=None, pixel=None, amend: bool = False, **tags: Any) -> int:
         old = self.get(pick_id)
         if old.shot != self._active:  # its ends were checked against the active shot's scan
             raise CalibError(f"pair {pick_id} is in shot {old.shot}; show that shot to move it")
@@ -442,16 +446,19 @@ class AnnotationState(StateShots):
             new = replace(new, laser_rc=laser_rc, laser_xyz=None)
         if pixel is not None:
             new = replace(new, pixel=pixel)
-        self._commit_locked(self._with(tuple(new if p.id == pick_id else p for p in self._snap.picks)))
+        self._commit_locked(self._with(tuple(new if p.id == pick_id else p for p in self._snap.picks)),
+                            amend=pick_id if amend else None)
         return pick_id
 
-    def _commit_locked(self, snap: Snapshot) -> None:
+    def _commit_locked(self, snap: Snapshot, amend: int | None = None) -> None:
         # Numbers follow the picks that exist: one dropped or undone (a declined proposal) frees its number.
         snap = Snapshot(snap.picks, next_number(snap.picks), snap.shots)
         if snap == self._snap:
             return
         before = self._checkpoint_locked()
-        self._undo += [] if joins_newest_step(self._undo, self._snap, snap) else [self._snap]
+        joins = joins_newest_step(self._undo, self._snap, snap) or (
+            amend is not None and amends_newest_step(self._undo, self._snap, snap, amend))
+        self._undo += [] if joins else [self._snap]
         del self._undo[:-MAX_HISTORY]
         self._redo = []
         self._snap = snap

@@ -67,6 +67,8 @@ def shown_target(app, d: AppDriver) -> int:
     at the proposed cell, or for a re-click the rough pair (selected) at that cell."""
     proposal = d.guide_proposal
     assert proposal is not None
+    if proposal.replaces is not None and app.state.selected is None:  # run 5: Next pair selects it
+        assert d.press_guide("Next pair") == [] and d.wait_guide() and d.guide_proposal == proposal
     if proposal.replaces is not None:
         rid = app.state.selected
         assert rid is not None and app.state.pending() is None
@@ -110,6 +112,8 @@ def test_guided_pairs_beat_the_start_and_keep_their_tags(app, scene, truth, tmp_
     for k in range(N_GUIDED):
         proposal = d.guide_proposal
         assert proposal is not None
+        if proposal.replaces is not None and app.state.selected is None:  # run 5: Next pair selects it
+            assert d.press_guide("Next pair") == [] and d.wait_guide() and d.guide_proposal == proposal
         cells.append(tuple(proposal.laser_rc))
         # The loupes are framed on the cell and on the predicted pixel; the camera loupe shows the whole
         # 3-sigma ellipse (zoomed out when it is larger), which the screen keeps within the app's limit.
@@ -131,8 +135,8 @@ def test_guided_pairs_beat_the_start_and_keep_their_tags(app, scene, truth, tmp_
             assert d.click_loupe_camera(*click) == [] and d.wait_guide()
             target = app.state.get(rid)
             reclicked.add(rid)
-            # Deselected, unless the next proposal framed by itself is another re-click.
-            assert app.state.selected is None or d.guide_proposal.replaces is not None
+            # Deselected, also when the next proposal is another re-click (Next pair selects it).
+            assert app.state.selected is None
         else:
             # "Next pair" (then each finished pair) started a guided half pick at the shown proposal's cell.
             half = app.state.pending()
@@ -164,7 +168,8 @@ def test_guided_pairs_beat_the_start_and_keep_their_tags(app, scene, truth, tmp_
     print(f"{N_GUIDED} guided clicks: {n_new} new pairs, {len(reclicked)} re-clicks of the 4 clicked pairs")
     assert len(complete) == 4 + n_new >= N_GUIDED
     assert [p.source for p in complete] == ["clicked"] * 4 + ["guided"] * n_new
-    assert f"Pairs: 4 clicked, {n_new} guided" in d.guide_panel
+    again = f" ({len(reclicked)} re-clicked by guidance)" if reclicked else ""
+    assert f"Pairs: 4 clicked{again}, {n_new} guided" in d.guide_panel
     assert all(p.precision_px == pytest.approx(CLICK_SIGMA_PX) for p in complete
                if p.source == "guided" or p.id in reclicked)
     assert [(p.source, p.precision_px) for p in app.state.pairs()] == [(p.source, p.precision_px) for p in complete]

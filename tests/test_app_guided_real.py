@@ -77,6 +77,9 @@ def test_guided_pairs_on_the_real_scan_from_a_rough_extrinsic(tmp_path):
             if proposal is None:  # the screen proposes only clear corners: they may run out
                 break
             made += 1
+            if proposal.replaces is not None and app.state.selected is None:  # run 5: Next pair selects it
+                assert d.press_guide("Next pair") == [] and d.wait_guide() and d.guide_proposal == proposal
+                actions += 1
             if proposal.replaces is not None:  # a re-click: the pair is selected, the click moves its pixel
                 half = app.state.get(app.state.selected)
             assert half is not None and half.laser_rc == tuple(proposal.laser_rc)
