@@ -21,13 +21,16 @@ def pytest_sessionstart(session):
     """Compile every numba kernel once, before the first test.
 
     On a fresh checkout numba's disk cache is empty and compiling all kernels
-    takes about half a minute of CPU (longer on a loaded machine).  The app compiles them
+    takes about half a minute of CPU (longer on a loaded machine).  Under
+    pytest-xdist each worker does this (``.ci/run`` fills the cache first).  The app compiles them
     in a background thread, so without this the first app test's wait for its
     live solve would also wait for the compiler, and could time out.  With a
     warm cache this loads the kernels in about a second.
     """
     import sys
 
+    if getattr(session.config.option, "numprocesses", None) and not hasattr(session.config, "workerinput"):
+        return  # the pytest-xdist controller runs no test: each worker warms up (loads the cache) itself
     from app.warm_up import WarmUp  # what the app runs at start-up, here run to the end first
 
     warm = WarmUp()
