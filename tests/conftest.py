@@ -4,6 +4,8 @@ import os
 import sys
 from pathlib import Path
 
+import pytest  # does not load numpy: the BLAS variables below still come first
+
 # The test driver (tests/app_driver) and helpers (browser_helpers, bag_helpers, ...) are imported by name from
 # tests/; bench-only code that tests check (bench.guide_snap, bench.guide_junction) from the repository root.
 # pytest's default import mode and ``python -m pytest`` put them on sys.path; this says so whatever the mode.
@@ -15,6 +17,57 @@ for _path in (TESTS_DIR.parent, TESTS_DIR):
 # Before numpy loads: see calib_core/__init__.py (single-threaded BLAS).
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
+
+
+#: The test files that take longest (tens of seconds each in CI), slowest first, CPU-bound ones alternating with
+#: those that drive Chromium.  Under pytest-xdist (``.ci/run``: ``--dist loadfile --no-loadscope-reorder``) they
+#: are handed out first, so that none of them starts last and runs alone while the other workers idle, and two
+#: browsers seldom run at once.  Only the order changes: a file not listed keeps its place after these.
+SLOW_FILES_FIRST = (
+    "test_fuzz_corpus.py",
+    "test_e2e_align.py",
+    "test_shots_app.py",
+    "test_e2e_loupes.py",
+    "test_app_durability.py",
+    "test_e2e_defects.py",
+    "test_install.py",
+    "test_e2e_guided.py",
+    "test_shots_app_guided.py",
+    "test_e2e_verify.py",
+    "test_app_concurrency.py",
+    "test_e2e_shots.py",
+    "test_kernels_interpreted.py",
+    "test_app_real_scene.py",
+    "test_app_guided.py",
+    "test_e2e_browser.py",
+    "test_cli_serve_bag.py",
+    "test_e2e_frictions.py",
+    "test_shots.py",
+    "test_shots_guided.py",
+    "test_cli_shots.py",
+    "test_shots_live.py",
+    "test_guide.py",
+    "test_bag_frames.py",
+)
+
+
+def pytest_collection_modifyitems(config, items):
+    """Under a pytest-xdist worker, put :data:`SLOW_FILES_FIRST` first (a stable sort: the rest keep their order)."""
+    if not hasattr(config, "workerinput"):
+        return
+    rank = {name: k for k, name in enumerate(SLOW_FILES_FIRST)}
+    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))
+
+
+@pytest.fixture(scope="session")
+def second_shot(tmp_path_factory):
+    """``shots_helpers.write_second_shot``, once per test process (about 10 s of ray casting).
+
+    The several-shot test files share these scenes and files and only read them.
+    """
+    from shots_helpers import write_second_shot
+
+    return write_second_shot(tmp_path_factory.mktemp("second_shot"))
 
 
 def pytest_sessionstart(session):
