@@ -19,30 +19,31 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 
-#: The test files that take longest (tens of seconds each in CI), slowest first, CPU-bound ones alternating with
-#: those that drive Chromium.  Under pytest-xdist (``.ci/run``: ``--dist loadfile --no-loadscope-reorder``) they
-#: are handed out first, so that none of them starts last and runs alone while the other workers idle, and two
-#: browsers seldom run at once.  Only the order changes: a file not listed keeps its place after these.
+#: The test files that take longest (tens of seconds each in CI), slowest first.  Under pytest-xdist (``.ci/run``:
+#: ``--dist loadfile --no-loadscope-reorder``) they are handed out first, so that none of them starts last and runs
+#: alone while the other workers idle.  The fuzz corpus (its cases have a 10 s limit) is followed by files that
+#: drive no browser, so that it first shares the machine with one Python process, not with Chromium; then
+#: browser files alternate with the others.  Only the order changes: a file not listed keeps its place after these.
 SLOW_FILES_FIRST = (
     "test_fuzz_corpus.py",
-    "test_e2e_align.py",
     "test_shots_app.py",
+    "test_e2e_align.py",
+    "test_shots_app_guided.py",
     "test_e2e_loupes.py",
     "test_app_durability.py",
     "test_e2e_defects.py",
     "test_install.py",
     "test_e2e_guided.py",
-    "test_shots_app_guided.py",
-    "test_e2e_verify.py",
     "test_app_concurrency.py",
-    "test_e2e_shots.py",
+    "test_e2e_verify.py",
     "test_kernels_interpreted.py",
-    "test_app_real_scene.py",
+    "test_e2e_shots.py",
     "test_app_guided.py",
-    "test_e2e_browser.py",
+    "test_app_real_scene.py",
     "test_cli_serve_bag.py",
-    "test_e2e_frictions.py",
+    "test_e2e_browser.py",
     "test_shots.py",
+    "test_e2e_frictions.py",
     "test_shots_guided.py",
     "test_cli_shots.py",
     "test_shots_live.py",
