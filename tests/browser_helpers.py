@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import io
+import itertools
 import math
+import os
 import socket
 import time
 from pathlib import Path
@@ -27,7 +29,26 @@ CHROMIUM_ARGS = [
 TIMEOUT_S = 30.0
 
 
+#: Under pytest-xdist each worker takes its ports from its own block below Linux's ephemeral range (32768 and
+#: up), so that a port found free here cannot be handed to another worker (as ``bind(0)`` could) before the
+#: server binds it; viser would then silently serve on the next port.
+_WORKER_PORT_BASE, _WORKER_PORT_BLOCK, _WORKER_PORT_BLOCKS = 20000, 400, 30
+_worker_ports = itertools.count()
+
+
 def free_port() -> int:
+    """A TCP port on 127.0.0.1 that nothing listens on now (one of this pytest-xdist worker's own, if any)."""
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "")  # "gw0", "gw1", ...
+    if worker[:2] == "gw" and worker[2:].isdigit() and int(worker[2:]) < _WORKER_PORT_BLOCKS:
+        first = _WORKER_PORT_BASE + int(worker[2:]) * _WORKER_PORT_BLOCK
+        for _ in range(_WORKER_PORT_BLOCK):
+            port = first + next(_worker_ports) % _WORKER_PORT_BLOCK
+            with socket.socket() as s:
+                try:
+                    s.bind(("127.0.0.1", port))
+                except OSError:  # in use (or still closing): the next one
+                    continue
+                return port
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]

@@ -4,6 +4,8 @@ import os
 import sys
 from pathlib import Path
 
+import pytest  # does not load numpy: the BLAS variables below still come first
+
 # The test driver (tests/app_driver) and helpers (browser_helpers, bag_helpers, ...) are imported by name from
 # tests/; bench-only code that tests check (bench.guide_snap, bench.guide_junction) from the repository root.
 # pytest's default import mode and ``python -m pytest`` put them on sys.path; this says so whatever the mode.
@@ -17,17 +19,72 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 
+#: The test files that take longest (tens of seconds each in CI), slowest first.  Under pytest-xdist (``.ci/run``:
+#: ``--dist loadfile --no-loadscope-reorder``) they are handed out first, so that none of them starts last and runs
+#: alone while the other workers idle.  The fuzz corpus (its cases have a 10 s limit) is followed by files that
+#: drive no browser, so that it first shares the machine with one Python process, not with Chromium; then
+#: browser files alternate with the others.  Only the order changes: a file not listed keeps its place after these.
+SLOW_FILES_FIRST = (
+    "test_fuzz_corpus.py",
+    "test_shots_app.py",
+    "test_e2e_align.py",
+    "test_shots_app_guided.py",
+    "test_e2e_loupes.py",
+    "test_app_durability.py",
+    "test_e2e_defects.py",
+    "test_install.py",
+    "test_e2e_guided.py",
+    "test_app_concurrency.py",
+    "test_e2e_verify.py",
+    "test_kernels_interpreted.py",
+    "test_e2e_shots.py",
+    "test_app_guided.py",
+    "test_app_real_scene.py",
+    "test_cli_serve_bag.py",
+    "test_e2e_browser.py",
+    "test_shots.py",
+    "test_e2e_frictions.py",
+    "test_shots_guided.py",
+    "test_cli_shots.py",
+    "test_shots_live.py",
+    "test_guide.py",
+    "test_bag_frames.py",
+)
+
+
+def pytest_collection_modifyitems(config, items):
+    """Under a pytest-xdist worker, put :data:`SLOW_FILES_FIRST` first (a stable sort: the rest keep their order)."""
+    if not hasattr(config, "workerinput"):
+        return
+    rank = {name: k for k, name in enumerate(SLOW_FILES_FIRST)}
+    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))
+
+
+@pytest.fixture(scope="session")
+def second_shot(tmp_path_factory):
+    """``shots_helpers.write_second_shot``, once per test process (about 10 s of ray casting).
+
+    The several-shot test files share these scenes and files and only read them.
+    """
+    from shots_helpers import write_second_shot
+
+    return write_second_shot(tmp_path_factory.mktemp("second_shot"))
+
+
 def pytest_sessionstart(session):
     """Compile every numba kernel once, before the first test.
 
     On a fresh checkout numba's disk cache is empty and compiling all kernels
-    takes about half a minute of CPU (longer on a loaded machine).  The app compiles them
+    takes about half a minute of CPU (longer on a loaded machine).  Under
+    pytest-xdist each worker does this (``.ci/run`` fills the cache first).  The app compiles them
     in a background thread, so without this the first app test's wait for its
     live solve would also wait for the compiler, and could time out.  With a
     warm cache this loads the kernels in about a second.
     """
     import sys
 
+    if getattr(session.config.option, "numprocesses", None) and not hasattr(session.config, "workerinput"):
+        return  # the pytest-xdist controller runs no test: each worker warms up (loads the cache) itself
     from app.warm_up import WarmUp  # what the app runs at start-up, here run to the end first
 
     warm = WarmUp()

@@ -81,7 +81,9 @@ def test_guided_pairs_in_headless_chromium(tmp_path):
             heading = page.get_by_text("Guided picking", exact=True).first  # the folder title
 
             def offset() -> float:  # the button's place in its folder (the panel itself may scroll)
-                return not_a_corner.bounding_box()["y"] - heading.bounding_box()["y"]
+                # Both boxes in one JavaScript call: a scroll between two separate look-ups is not a move.
+                return not_a_corner.evaluate("(button, heading) => button.getBoundingClientRect().y"
+                                             " - heading.getBoundingClientRect().y", heading.element_handle())
 
             offset0 = offset()
             page.get_by_role("button", name="Next pair").first.click()  # the panel's top row (Guided has its own)

@@ -15,7 +15,6 @@ import time
 import numpy as np
 import pytest
 from browser_helpers import CHROMIUM, CHROMIUM_ARGS, TIMEOUT_S, free_port, page_text, wait_for
-from shots_helpers import write_second_shot
 
 from app_driver import AppDriver
 from calib_core.shots import Shot, solve_shots
@@ -36,11 +35,11 @@ def _close_webgl_notice(page) -> None:
 
 
 @pytest.mark.skipif(not CHROMIUM.exists(), reason="/usr/bin/chromium is missing (apt-get install chromium); CI installs it")
-def test_add_a_shot_in_the_page_pick_in_it_and_see_it_in_the_joint_solve(tmp_path):
+def test_add_a_shot_in_the_page_pick_in_it_and_see_it_in_the_joint_solve(tmp_path, second_shot):
     sync_api = pytest.importorskip("playwright.sync_api", reason="the playwright package is not installed")
     from app.serving import ShotServer
 
-    s0, s1, scan1, image1 = write_second_shot(tmp_path / "room1")
+    s0, s1, scan1, image1 = second_shot  # shots_helpers.write_second_shot (tests/conftest.py)
     rng = np.random.default_rng(7)
     pairs0 = simulate_pairs(s0, 4, rng)
     server = ShotServer([(SAMPLE / "scan.npz", SAMPLE / "image.png")], SAMPLE / "camera.yaml",

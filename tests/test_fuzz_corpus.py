@@ -2,9 +2,10 @@
 
 Each case runs as ``python -m app.cli ARGV`` in a process forked from a worker that has imported the
 package (tests/fuzz/runner.py), three workers at a time (two cores, plus one to fill the waits on
-fsync and on the polling of the others).  A case must end in exit 0 (or 3 from solve: a
-result marked unreliable), or exit 2 with exactly one ``error:`` line on stderr; never a traceback;
-within 10 s and 1 GiB peak RSS.  ``python -m tests.fuzz.generate OUT --run`` does the same by hand.
+fsync and on the polling of the others; one fewer per other pytest-xdist worker).  A case must end
+in exit 0 (or 3 from solve: a result marked unreliable), or exit 2 with exactly one ``error:`` line
+on stderr; never a traceback; within 10 s and 1 GiB peak RSS.  ``python -m tests.fuzz.generate OUT
+--run`` does the same by hand.
 """
 
 from __future__ import annotations
@@ -23,12 +24,20 @@ from tests.fuzz.generate import RSS_LIMIT_MB, TIME_LIMIT_S, build_corpus, case_m
 from tests.fuzz.runner import run_cases  # noqa: E402
 
 
+def _fuzz_workers() -> int:
+    """Three on two cores (one fills the waits); one fewer per other pytest-xdist worker, which keeps a core busy
+    too: the cases' 10 s limit then meets the same load as in a serial run."""
+    other_test_workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")) - 1
+    return max(1, min(3, (os.cpu_count() or 2) + 1 - other_test_workers))
+
+
 def test_every_fuzz_case_ends_cleanly(tmp_path):
     cases = build_corpus(tmp_path / "corpus")
     kinds = Counter("mutation" if "/mutation/" in f"/{c.name}" else "hostile" for c in cases)
     modules = [m.__name__.rsplit(".", 1)[1] for m in case_modules()]
     assert "cases_config" in modules
-    results = run_cases(cases, tmp_path / "runs", workers=3, timeout=TIME_LIMIT_S, rss_limit_mb=RSS_LIMIT_MB)
+    results = run_cases(cases, tmp_path / "runs", workers=_fuzz_workers(), timeout=TIME_LIMIT_S,
+                        rss_limit_mb=RSS_LIMIT_MB)
     failures = [f"{r.name}: {why}" for r in results if (why := check_result(r))]
     codes = Counter(r.returncode for r in results)
     slowest = max(results, key=lambda r: r.seconds)

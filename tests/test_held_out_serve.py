@@ -22,15 +22,10 @@ import yaml
 from app.security import AccessPolicy
 from app.state import AnnotationState
 from calib_core.io.scan_readers import load_scan
+from browser_helpers import free_port
 from repo_paths import SAMPLE
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def killed_session(tmp_path: Path) -> tuple[Path, list]:

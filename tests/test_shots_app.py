@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 import yaml
 from cli_helpers import one_error_line, run_cli
-from shots_helpers import sample_shot_server, write_second_shot
+from shots_helpers import sample_shot_server
 
 from app.picks import ShotFiles
 from app.state import AnnotationState
@@ -83,10 +83,9 @@ session_id: de0268ec729645eb8db85934420665b9
 
 
 @pytest.fixture(scope="module")
-def two_shots(tmp_path_factory):
-    """The sample (shot 0) and room 1 on the sample's rig (shot 1), as files."""
-    out = tmp_path_factory.mktemp("shots")
-    return write_second_shot(out)
+def two_shots(second_shot):
+    """The sample (shot 0) and room 1 on the sample's rig (shot 1), as files (tests/conftest.py: made once)."""
+    return second_shot
 
 
 def _masks():

@@ -16,7 +16,7 @@ import queue
 import numpy as np
 import pytest
 from app_driver import AppDriver
-from shots_helpers import sample_shot_server, write_second_shot
+from shots_helpers import sample_shot_server
 
 from calib_core.io.images import load_image_rgb
 from calib_core.shots import Shot, propose_shots
@@ -28,8 +28,8 @@ CLICK_SIGMA_PX = 0.3
 
 
 @pytest.fixture(scope="module")
-def two_shots(tmp_path_factory):
-    return write_second_shot(tmp_path_factory.mktemp("shots"))
+def two_shots(second_shot):
+    return second_shot  # shots_helpers.write_second_shot, made once per test process (tests/conftest.py)
 
 
 def _true_click(camera, truth, proposal, rng) -> np.ndarray:

@@ -12,7 +12,7 @@ import dataclasses
 
 import numpy as np
 import pytest
-from shots_helpers import sample_shot_server, write_second_shot
+from shots_helpers import sample_shot_server
 
 from calib_core.shots import UNCHECKED_REASON, Shot, solve_shots
 from calib_core.synthetic import simulate_pairs
@@ -20,8 +20,8 @@ from repo_paths import SAMPLE
 
 
 @pytest.fixture(scope="module")
-def two_shots(tmp_path_factory):
-    return write_second_shot(tmp_path_factory.mktemp("shots"))
+def two_shots(second_shot):
+    return second_shot  # shots_helpers.write_second_shot, made once per test process (tests/conftest.py)
 
 
 def _shots(two_shots, n=6, seed=0):
