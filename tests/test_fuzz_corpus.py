@@ -4,7 +4,7 @@ Each case runs as ``python -m app.cli ARGV`` in a process forked from a worker t
 package (tests/fuzz/runner.py), three workers at a time (two cores, plus one to fill the waits on
 fsync and on the polling of the others; one fewer per other pytest-xdist worker).  A case must end
 in exit 0 (or 3 from solve: a result marked unreliable), or exit 2 with exactly one ``error:`` line
-on stderr; never a traceback; within 10 s and 1 GiB peak RSS.  ``python -m tests.fuzz.generate OUT
+on stderr; never a traceback; within 10 s of CPU and 1 GiB peak RSS (killed as hung after 60 s wall).  ``python -m tests.fuzz.generate OUT
 --run`` does the same by hand.
 """
 
@@ -20,13 +20,13 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:  # tests/ is not a package: make ``tests.fuzz`` importable
     sys.path.insert(0, str(REPO))
 
-from tests.fuzz.generate import RSS_LIMIT_MB, TIME_LIMIT_S, build_corpus, case_modules, check_result  # noqa: E402
+from tests.fuzz.generate import HANG_LIMIT_S, RSS_LIMIT_MB, build_corpus, case_modules, check_result  # noqa: E402
 from tests.fuzz.runner import run_cases  # noqa: E402
 
 
 def _fuzz_workers() -> int:
     """Three on two cores (one fills the waits); one fewer per other pytest-xdist worker, which keeps a core busy
-    too: the cases' 10 s limit then meets the same load as in a serial run."""
+    too (the cases' limit is CPU time, so the load changes only how long the corpus takes)."""
     other_test_workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")) - 1
     return max(1, min(3, (os.cpu_count() or 2) + 1 - other_test_workers))
 
@@ -36,15 +36,15 @@ def test_every_fuzz_case_ends_cleanly(tmp_path):
     kinds = Counter("mutation" if "/mutation/" in f"/{c.name}" else "hostile" for c in cases)
     modules = [m.__name__.rsplit(".", 1)[1] for m in case_modules()]
     assert "cases_config" in modules
-    results = run_cases(cases, tmp_path / "runs", workers=_fuzz_workers(), timeout=TIME_LIMIT_S,
+    results = run_cases(cases, tmp_path / "runs", workers=_fuzz_workers(), timeout=HANG_LIMIT_S,
                         rss_limit_mb=RSS_LIMIT_MB)
     failures = [f"{r.name}: {why}" for r in results if (why := check_result(r))]
     codes = Counter(r.returncode for r in results)
-    slowest = max(results, key=lambda r: r.seconds)
+    slowest = max(results, key=lambda r: r.cpu_seconds)
     biggest = max(results, key=lambda r: r.peak_rss_mb)
     print(
         f"fuzz corpus from {', '.join(modules)}: {len(cases)} cases ({kinds['hostile']} hostile, {kinds['mutation']} mutations); "
-        f"exit codes {dict(sorted(codes.items()))}; slowest {slowest.seconds:.2f} s ({slowest.name}); "
+        f"exit codes {dict(sorted(codes.items()))}; slowest {slowest.cpu_seconds:.2f} s of CPU ({slowest.name}); "
         f"largest {biggest.peak_rss_mb:.0f} MiB ({biggest.name})"
     )
     assert not failures, f"{len(failures)} of {len(cases)} cases broke the rules:\n" + "\n".join(failures)
@@ -68,3 +68,17 @@ def test_forked_cases_end_as_real_processes_do(tmp_path):
                               env={**os.environ, "PYTHONPATH": str(REPO)})
         assert result.returncode == real.returncode, case.name
         assert result.stderr == real.stderr.decode("utf-8", "replace"), case.name
+
+
+def test_the_time_rule_counts_cpu_not_the_machines_load():
+    """A case that waited 30 s of wall time on a busy machine but used 2 s of CPU keeps the rules; 11 s of CPU
+    breaks them, and so does a case killed as hung."""
+    from tests.fuzz.runner import CaseResult
+
+    def result(wall, cpu, killed=None):
+        return CaseResult(name="x", returncode=2, stdout="", stderr="error: x.yaml: not a mapping\n", seconds=wall,
+                          peak_rss_mb=100.0, killed=killed, cpu_seconds=cpu)
+
+    assert check_result(result(30.0, 2.0)) is None
+    assert check_result(result(11.0, 11.0)) == "took 11.0 s of CPU (11.0 s wall)"
+    assert check_result(result(HANG_LIMIT_S, 0.1, killed="timeout")).startswith("killed (timeout)")

@@ -55,6 +55,9 @@ class CaseResult:
         The first :data:`KEEP_BYTES` bytes of each, decoded with replacement.
     seconds : float
         Wall time from fork to exit.
+    cpu_seconds : float
+        The child's CPU time (user + system, ``os.wait4``'s rusage): what a case costs, whatever else the
+        machine runs.
     peak_rss_mb : float
         Peak resident memory, MiB (``ru_maxrss``; the larger of it and the polled VmRSS).
     killed : str or None
@@ -68,6 +71,7 @@ class CaseResult:
     seconds: float
     peak_rss_mb: float
     killed: str | None
+    cpu_seconds: float = 0.0
 
 
 # ----------------------------------------------------------------------------- worker side
@@ -170,6 +174,7 @@ def run_in_fork(case: dict, timeout: float, rss_limit_mb: float, scratch: Path) 
         "seconds": seconds,
         "peak_rss_mb": max(usage.ru_maxrss, polled_kb) / 1024.0,
         "killed": killed,
+        "cpu_seconds": usage.ru_utime + usage.ru_stime,
     }
 
 
