@@ -656,25 +656,35 @@ def near_edge_turn(depth, rows_cols: np.ndarray, half: int = 3) -> np.ndarray:
     return np.where(hi - lo >= 0.005, _mask_turn(near), 0.0)
 
 
+def _log_intensity_windows(depth, rc: np.ndarray, half: int):
+    """The scan's log intensity (:func:`calib_core.guide.candidates.intensity_log_image`) in each cell's
+    ``(2 half + 1)^2`` window, (N, k, k) with NaN where a cell has none, and which cells have it; None
+    without intensity."""
+    from .candidates import intensity_log_image
+
+    found = intensity_log_image(depth)
+    if found is None:
+        return None
+    log_i, ok = found
+    H, W = depth.shape
+    off = np.arange(-half, half + 1)
+    rows = np.clip(rc[:, 0, None, None] + off[None, :, None], 0, H - 1)
+    cols = np.clip(rc[:, 1, None, None] + off[None, None, :], 0, W - 1)
+    inside = ok[rows, cols]
+    return np.where(inside, log_i[rows, cols], np.nan), inside
+
+
 def intensity_edge_turn(depth, rows_cols: np.ndarray, half: int = 3) -> np.ndarray:
     """:func:`near_edge_turn` of the bright side of the scan's log intensity
     (:func:`calib_core.guide.candidates.intensity_log_image`, split at the window's
     midpoint), (N,): clearly above 0 at a painted marking's corner, near 0 along a
     stripe's side; 0 without intensity or contrast (a 0.5 step of log intensity), or where the bright
     side is speckle (fewer than 70 % of its cells have two bright 4-neighbours, or fewer than 4 cells)."""
-    from .candidates import intensity_log_image
-
     rc = np.asarray(rows_cols, dtype=np.int64).reshape(-1, 2)
-    found = intensity_log_image(depth)
-    if found is None or len(rc) == 0:
+    found = _log_intensity_windows(depth, rc, half + 1) if len(rc) else None
+    if found is None:
         return np.zeros(len(rc))
-    log_i, ok = found
-    H, W = depth.shape
-    off = np.arange(-half - 1, half + 2)
-    rows = np.clip(rc[:, 0, None, None] + off[None, :, None], 0, H - 1)
-    cols = np.clip(rc[:, 1, None, None] + off[None, None, :], 0, W - 1)
-    inside = ok[rows, cols]
-    li = np.where(inside, log_i[rows, cols], np.nan)
+    li, _ = found
     with np.errstate(invalid="ignore"):
         lo, hi = np.nanmin(li, axis=(1, 2)), np.nanmax(li, axis=(1, 2))
         bright = (li > (0.5 * (lo + hi))[:, None, None]).astype(np.float64)
@@ -699,19 +709,11 @@ def bright_fraction(depth, rows_cols: np.ndarray, half: int = 3) -> tuple[np.nda
     marking's corner, 1/2 along a stripe's side, where the rings' different gains (a 64-beam scan's stripes
     are banded row by row) make corner-like peaks that are no corner of the paint.
     """
-    from .candidates import intensity_log_image
-
     rc = np.asarray(rows_cols, dtype=np.int64).reshape(-1, 2)
-    found = intensity_log_image(depth)
-    if found is None or len(rc) == 0:
+    found = _log_intensity_windows(depth, rc, half) if len(rc) else None
+    if found is None:
         return np.full(len(rc), np.nan), np.zeros(len(rc), dtype=bool)
-    log_i, ok = found
-    H, W = depth.shape
-    off = np.arange(-half, half + 1)
-    rows = np.clip(rc[:, 0, None, None] + off[None, :, None], 0, H - 1)
-    cols = np.clip(rc[:, 1, None, None] + off[None, None, :], 0, W - 1)
-    inside = ok[rows, cols]
-    li = np.where(inside, log_i[rows, cols], np.nan)
+    li, inside = found
     with np.errstate(invalid="ignore"):
         lo, hi = np.nanmin(li, axis=(1, 2)), np.nanmax(li, axis=(1, 2))
         # Within 0.5 (a 40 % intensity step) of the brightest: paint, not the rough asphalt's bright grains.
