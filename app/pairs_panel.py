@@ -338,13 +338,13 @@ class PairsPanel:
             self.cancel_pair()
 
     def cancel_pair(self) -> None:
-        """Drop the half-made pair in one undoable step (else end the selection); CalibError if neither."""
+        """Drop the half-made pair in one undoable step (else end the selection); nothing if neither (Escape with
+        nothing pending is no mistake: run 6 showed a red "Not accepted" for it)."""
         state = self.app.state
         pending = state.pending()
         if pending is None:
-            if state.selected is None:
-                raise CalibError("no half-made pair to cancel and no pair selected")
-            state.select(None)
+            if state.selected is not None:
+                state.select(None)
             return
         state.delete(pending.id)
         for listener in list(self._cancel_listeners):  # e.g. a guided proposal's ellipse in the camera loupe goes
