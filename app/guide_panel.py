@@ -144,12 +144,10 @@ class GuidePanel(GuideShotsMixin):
         self._submitted: tuple | None = None  # key of the newest job
         self._job_no = 0
         self._shown_key: tuple | None = None  # key the proposals were computed for
-        self._busy = False
-        self._error: str | None = None
+        self._busy, self._error = False, None  # a job running; why the last one failed
         self._guiding = False  # "Next pair" pressed, not stopped: frame the next proposal after each pair
         self._want_next = False
-        self._pending_posts = 0
-        self._auto = False
+        self._pending_posts, self._auto = 0, False
         self._auto_pairs: list[Pair] = []
         self._guided_side = 0.0  # the camera loupe's side (px) during this guided session: never shrinks
         self._callbacks: dict[str, Callable] = {}
@@ -178,8 +176,8 @@ class GuidePanel(GuideShotsMixin):
     @property
     def current(self) -> Proposal | None:
         """The proposal shown (the one "Next pair" starts), or None."""
-        with self._lock:
-            return self._proposals[self._index] if self._index < len(self._proposals) else None
+        with self._lock:  # none once every proposal left was skipped (run 6: a lone skipped one came back at once)
+            return self._proposals[self._index] if self._index < len(self._proposals) and not self._spent else None
 
     @property
     def proposals(self) -> list[Proposal]:
@@ -307,7 +305,7 @@ class GuidePanel(GuideShotsMixin):
                 (rc for rc, pid in self._reclick_of.items() if pid == self._reclick), None)
             cells = [tuple(p.laser_rc) for p in props]
             index = self._first_index(props, cells, waiting)
-            self._proposals, self._index, self._shown_key = props, index, key
+            self._proposals, self._index, self._shown_key, self._spent = props, index, key, False
             self._auto_pairs = auto_pairs
             self._pending_posts += 1
         self._post(self._advance)
@@ -405,6 +403,7 @@ class GuidePanel(GuideShotsMixin):
             self._drop_unfinished()
             raise CalibError(f"guided picking waits for a reliable calibration: {reason}")
         self._guiding, self._hands_off, self._moved_on = True, False, None  # proposals follow every change from now
+        self._spent = self._spent and label != "Next pair"  # Next pair shows a skipped proposal again
         self.update()  # an initial extrinsic imported since the last change is used from now on
         with self._lock:
             ready = not self._busy and self._shown_key == self._submitted
@@ -414,8 +413,7 @@ class GuidePanel(GuideShotsMixin):
                 self._moved_on = self._what(p)
             if (label in ("Skip", "Not a corner") or moving_on) and p is not None:
                 if label != "Not a corner" and p.replaces is None:  # a skipped re-click goes for good (no cycling back)
-                    self._skipped.append(tuple(p.laser_rc))
-                    self._index = (self._index + 1) % len(self._proposals)
+                    self._skip_new_cell(p)
                 else:
                     self._drop_current(p)
         if not ready:  # framed as soon as the proposals are in
@@ -459,6 +457,8 @@ class GuidePanel(GuideShotsMixin):
             lines.append(f"{shown}." if shown.startswith("No new") else f"No proposal: {shown}.")
         elif not self._guiding:
             lines.append(f"{len(props)} proposals for auto-accept.")
+        elif self._spent:
+            lines.append(self.SPENT_NOTE)
         else:
             p = props[index]
             major = 3.0 * float(p.ellipse_sigma_px()[0])

@@ -29,6 +29,11 @@ class GuideShotsMixin:
         self._prop_shots: list[int] | None = None  # the shot of each proposal (several shots)
         self._shot_guide: ShotGuide | None = None  # only touched on the worker thread
         self._resumed = False  # the page was switched to this shot by a guided session: frame its best
+        self._spent = False  # every proposal left was skipped: none shown until Next pair or new proposals
+
+    #: The Guided text once every proposal left was skipped (like the note when no new corner passes).
+    SPENT_NOTE = ("No other proposal is left: the skipped ones may come back after new pairs. Go on by hand, or "
+                  "press **Next pair** to see them again.")
 
     @property
     def active_shot(self) -> int:
@@ -130,6 +135,13 @@ class GuideShotsMixin:
         return [f"**Next proposal is in shot {k}**: show shot {k} (Shots folder) to pick it."]
 
     # ---------------------------------------------------------------- the guided flow's small steps
+    def _skip_new_cell(self, p: Any) -> None:
+        """Skip the shown new-cell proposal ``p`` (under the panel's lock): the next one is shown, unless it was
+        skipped too -- then nothing is (run 6: "Skipped the marking. Proposal 1 of 1" showed the same cell)."""
+        self._skipped.append(tuple(p.laser_rc))
+        self._index = (self._index + 1) % len(self._proposals)
+        self._spent = tuple(self._proposals[self._index].laser_rc) in set(map(tuple, self._skipped))
+
     def _guided_half(self):
         """The pending pick if it is a guided half (laser end only), else None."""
         p = self.state.pending()

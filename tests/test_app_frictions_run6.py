@@ -40,3 +40,29 @@ def test_cancel_pair_with_nothing_pending_gives_no_warning(app, scene):
     assert d.press_pair_action("Cancel pair") == [] and app.state.picks == done
     app.state.select(done[0].id)
     assert d.press_pair_action("Cancel pair") == [] and app.state.selected is None and app.state.picks == done
+
+
+def test_skipped_proposals_do_not_come_straight_back(app, scene):
+    d = AppDriver(app)
+    for pair in simulate_pairs(scene, 4, np.random.default_rng(3), pixel_noise_px=0.0):
+        assert d.click_cell(app.ba_keys[0], *pair.laser_rc) == [] and d.click_camera(*pair.pixel) == []
+    assert d.wait_idle()
+    assert d.press_guide("Next pair") == [] and d.wait_guide()
+    assert d.guide_proposal is not None
+    skipped: list[tuple[int, int]] = []
+    for _ in range(60):  # at most 20 proposals, each skipped once
+        p = d.guide_proposal
+        if p is None:
+            break
+        cell = tuple(int(v) for v in p.laser_rc)
+        # Run 6: "Skipped the marking. Proposal 1 of 1" showed the cell just skipped again.
+        assert cell not in skipped, f"skipped cell {cell} offered again before any new pair"
+        if p.replaces is None:
+            skipped.append(cell)
+        assert d.press_guide("Skip") == [] and d.wait_guide()
+    assert d.guide_proposal is None and skipped
+    assert app.state.pending() is None  # the guided half pick of the last skipped cell went with it
+    assert "No other proposal is left" in app.guide.text and "No other proposal is left" in app.pairs_panel.bar.guide_status
+    # Next pair shows a skipped one again, on request.
+    assert d.press_guide("Next pair") == [] and d.wait_guide()
+    assert d.guide_proposal is not None and tuple(int(v) for v in d.guide_proposal.laser_rc) in skipped
