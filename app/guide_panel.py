@@ -482,7 +482,7 @@ class GuidePanel(GuideShotsMixin):
                              "until then), or **Skip**.")
             elif self._guiding:
                 lines.append("Press **Next pair** to continue.")
-        self._on_status(self._guiding, lines[1:])
+        self._on_status(self._guiding, [self._bar_line(active, unreliable, busy, props, index)])
         lines.append(pair_counts_line(self.state.complete_picks()))
         self._md.content = "  \n".join(lines)
 

@@ -135,6 +135,33 @@ class GuideShotsMixin:
         return [f"**Next proposal is in shot {k}**: show shot {k} (Shots folder) to pick it."]
 
     # ---------------------------------------------------------------- the guided flow's small steps
+    def _bar_line(self, active: bool, unreliable: str | None, busy: bool, props: Any, index: int) -> str:
+        """Guided picking's status in one short line for the pair bar (markdown, fixed words and numbers only); the
+        full text stays in the Guided picking folder (run 6: the bar grew to about 300 px with it)."""
+        if not active or unreliable is not None or self._error is not None:
+            return ("not offered while the calibration is UNRELIABLE" if active and unreliable is not None
+                    else "see Guided picking")
+        if busy:
+            return "computing proposals…"
+        if not props:
+            return ("no new corner passes; go on by hand" if str(self._reason or "").startswith("No new")
+                    else "no proposal; see Guided picking")
+        if self._spent:
+            return "no other proposal left; go on by hand"
+        p, rid, half = props[index], self._reclick_id(props[index]), self.state.pending()
+        head = (f"Skipped the {self._moved_on}; " if self._moved_on else "") + f"proposal {index + 1} of {len(props)}"
+        if self.shot_of(p) != self.active_shot:
+            return f"{head} is in shot {self.shot_of(p)}"
+        if self._reclick is not None and rid == self._reclick == self.state.selected:
+            todo = f"re-click pair {rid} (selected)"
+        elif half is not None and half.source == "guided" and half.laser_rc == tuple(p.laser_rc):
+            todo = f"click pair {half.id}'s corner in the camera loupe"
+        elif self._refine is not None:
+            todo = f"refine pair {self._refine} in the camera loupe, or **Next pair**"
+        else:
+            todo = f"**Next pair** re-clicks pair {rid}" if rid is not None else "press **Next pair**"
+        return f"{head} — {todo}"
+
     def _skip_new_cell(self, p: Any) -> None:
         """Skip the shown new-cell proposal ``p`` (under the panel's lock): the next one is shown, unless it was
         skipped too -- then nothing is (run 6: "Skipped the marking. Proposal 1 of 1" showed the same cell)."""

@@ -176,7 +176,8 @@ class PairBar:
 
     def show_guide_status(self, guiding: bool, lines: list[str]) -> None:
         """Show guided picking's status ``lines`` (markdown, already escaped) while a guided session runs
-        (``guiding``); clear it otherwise.  Called by the Guide panel from any thread."""
+        (``guiding``); clear it otherwise.  The Guide panel sends one short line (its folder keeps the full text:
+        in run 6 the whole text here grew the bar to about 300 px).  Called by the Guide panel from any thread."""
         text = ("**Guided:** " + "  \n".join(lines)) if guiding and lines else ""
         with self._lock:
             if self._md_guide.content != text:

@@ -109,7 +109,7 @@ def test_an_accepted_reclick_selects_nothing(app, scene):
     p = d.guide_proposal
     assert p is not None and p.replaces is not None and tuple(p.laser_rc) != app.state.get(rid).laser_rc
     assert app.state.selected is None and "(selected)" not in app.pairs_panel.bar.guide_status
-    assert "Press **Next pair** to re-click pair" in app.pairs_panel.bar.guide_status
+    assert "**Next pair** re-clicks pair" in app.pairs_panel.bar.guide_status
     assert d.click_camera(330.0, 250.0) == [] and d.wait_guide()
     assert app.state.picks[:-1] == after and app.state.pending() is not None  # a new pair started, none moved
     assert d.press_pair_action("Cancel pair") == [] and d.wait_guide() and app.state.picks == after
