@@ -65,10 +65,14 @@ def test_the_pair_bar_stays_in_view_and_delete_and_ctrl_z_keys(tmp_path):
                 assert 0 <= shown[1] and shown[3] <= 900, (text, shown)
                 if before is not None:
                     assert abs(shown[1] - before[1]) < 2.0, (text, shown, before)
-            # A real click on the pinned "Cancel pair" reaches the app (nothing to cancel: one line, as the button).
+            # A real click on the pinned "Cancel pair" reaches the app: it ends a selection.
+            first = app.state.picks[0].id
+            app.state.select(first)  # as the dropdown does
+            wait_for(lambda: f"Pair {first} selected:" in page_text(page), "the selection in the pair status")
             cancel = page.evaluate(SHOWN_JS, ["Cancel pair", True])
             page.mouse.click((cancel[0] + cancel[2]) / 2, (cancel[1] + cancel[3]) / 2)
-            wait_for(lambda: "no half-made pair to cancel" in page_text(page), "Cancel pair's answer")
+            wait_for(lambda: app.state.selected is None and f"Pair {first} selected:" not in page_text(page),
+                     "Cancel pair to end the selection")
 
             # --- Delete with no pair selected: nothing happens.
             ids = [q.id for q in app.state.picks]
