@@ -92,3 +92,25 @@ def pytest_sessionstart(session):
     if warm.error is not None:
         raise warm.error
     print(f"numba kernels compiled or loaded from the cache in {sum(warm.seconds.values()):.1f} s", file=sys.stderr)
+
+
+# ---------------------------------------------------------------------- fixtures several app test modules share
+# (a module's own fixture of the same name takes precedence; imports stay inside: numpy must not load before the
+# BLAS variables above are set)
+@pytest.fixture(scope="module")
+def scene():
+    """The sample scene (scan, camera, ground truth)."""
+    from calib_core.synthetic import load_sample
+    from repo_paths import SAMPLE
+
+    return load_sample(SAMPLE)
+
+
+@pytest.fixture
+def app(tmp_path):
+    """A fresh app on the sample with its own session file, stopped after the test."""
+    from app_driver import sample_app
+
+    a = sample_app(tmp_path / "session.yaml")
+    yield a
+    a.stop()

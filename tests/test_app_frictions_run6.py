@@ -4,24 +4,10 @@ sample: Escape (Cancel pair) with nothing pending, a skipped lone marking propos
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
-from calib_core.synthetic import load_sample, simulate_pairs
+from calib_core.synthetic import simulate_pairs
 
-from app_driver import AppDriver, sample_app
-from repo_paths import SAMPLE
-
-
-@pytest.fixture(scope="module")
-def scene():
-    return load_sample(SAMPLE)
-
-
-@pytest.fixture
-def app(tmp_path):
-    a = sample_app(tmp_path / "session.yaml")
-    yield a
-    a.stop()
+from app_driver import AppDriver
 
 
 def test_cancel_pair_with_nothing_pending_gives_no_warning(app, scene):

@@ -11,26 +11,12 @@ from __future__ import annotations
 import re
 
 import numpy as np
-import pytest
 
 from calib_core.guide.evidence import ProposalScreen
-from calib_core.synthetic import load_sample, simulate_pairs
+from calib_core.synthetic import simulate_pairs
 from calib_core.transforms import transform_points
 
-from app_driver import AppDriver, sample_app
-from repo_paths import SAMPLE
-
-
-@pytest.fixture(scope="module")
-def scene():
-    return load_sample(SAMPLE)
-
-
-@pytest.fixture
-def app(tmp_path):
-    a = sample_app(tmp_path / "session.yaml")
-    yield a
-    a.stop()
+from app_driver import AppDriver
 
 
 def click_pairs(d: AppDriver, scene, n: int, noise_px: float = 1.0, first: int = 0) -> None:

@@ -15,23 +15,11 @@ import pytest
 
 from calib_core.guide.evidence import ProposalScreen
 from calib_core.io.extrinsics import load_extrinsics_yaml
-from calib_core.synthetic import load_sample, simulate_pairs
+from calib_core.synthetic import simulate_pairs
 from calib_core.transforms import transform_points
 
-from app_driver import AppDriver, sample_app
+from app_driver import AppDriver
 from repo_paths import SAMPLE
-
-
-@pytest.fixture(scope="module")
-def scene():
-    return load_sample(SAMPLE)
-
-
-@pytest.fixture
-def app(tmp_path):
-    a = sample_app(tmp_path / "session.yaml")
-    yield a
-    a.stop()
 
 
 def only_reclicks(d: AppDriver, scene) -> None:
