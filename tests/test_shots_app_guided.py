@@ -39,7 +39,6 @@ def _true_click(camera, truth, proposal, rng) -> np.ndarray:
 
 
 def test_guided_picking_ranks_across_shots_and_switches_shot_by_itself(tmp_path, two_shots):
-
     s0, s1, scan1, image1 = two_shots
     truth = s0.T_camera_lidar
     server = sample_shot_server(tmp_path / "session.yaml", (scan1, image1))
@@ -98,7 +97,6 @@ def test_guided_picking_ranks_across_shots_and_switches_shot_by_itself(tmp_path,
 
 
 def test_auto_accept_is_refused_across_shots_with_one_line(tmp_path, two_shots):
-
     _, _, scan1, image1 = two_shots
     server = sample_shot_server(tmp_path / "session.yaml", (scan1, image1))
     try:

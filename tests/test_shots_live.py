@@ -51,7 +51,6 @@ def test_the_joint_fit_without_checks_is_the_checked_fit_and_never_ok(two_shots)
 
 
 def test_the_app_shows_the_joint_fit_then_the_checked_one(tmp_path, two_shots):
-
     s0, s1, scan1, image1 = two_shots
     server = sample_shot_server(tmp_path / "session.yaml", (scan1, image1))
     rng = np.random.default_rng(3)
@@ -118,7 +117,6 @@ def test_the_3d_pane_labels_every_pair_with_its_shot(tmp_path, two_shots):
 
 
 def test_the_rough_pose_is_kept_when_switching_shots_before_any_solve(tmp_path, two_shots):
-
     s0, _, scan1, image1 = two_shots
     server = sample_shot_server(tmp_path / "session.yaml", (scan1, image1))
     try:
