@@ -7,9 +7,9 @@ without touching them.  :class:`AppServices` is a structural type: the app
 satisfies it, a test may pass anything else that does.
 
 ``tests/test_panel_reaches.py`` enforces it: an ``app/`` module (but the composition roots ``app/server.py`` and
-``app/serving.py``) that uses ``app.<name>`` must find ``name`` here, or among the sibling panels that test
-counts, each of whose remaining uses it lists (a list that only shrinks: panels talk through the state, the live
-solve's events and these services).
+``app/serving.py``) that uses ``app.<name>`` must find ``name`` here, and may not use a sibling panel (``app.loupes``,
+``app.render_pane``, ...) at all: panels talk through the state, the panels' events, callables the composition root
+passes them, and these services.
 """
 
 from __future__ import annotations

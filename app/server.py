@@ -161,6 +161,7 @@ class CalibrationApp:
             self.nodes.fill_label_pool()
             self.overlays = OverlayDrawing(self)  # markers, labels, selection, reprojection overlays
             self.cloud = CloudPane(self.server.scene, self.cloud_points_lidar)  # the 3-D pane
+            self.live.subscribe_cloud(self.cloud.show)  # it shows the live solve's camera, colours and pair points
             # The control panel's folders in page order; each panel builds its own widgets.
             self.page = PageBuilder(self)  # theme, intro text, backdrop
             self.pairs_panel = PairsPanel(  # "Pairs" folder, clicks on the images
@@ -263,7 +264,7 @@ class CalibrationApp:
     def _on_3d_view(self, shown: bool) -> None:
         """Some tab shows the 3-D view (or none does): the cloud shows, with the current solve's colours."""
         self.cloud.visible = shown
-        self.live.request_cloud()  # a tab that switches to 3-D gets the current solve's colours
+        self.live.show_3d(shown)  # a tab that switches to 3-D gets the current solve's colours
 
     def _on_rough_pose(self) -> None:
         """A new rough pose (:meth:`PoseSource.subscribe`): redraw predictions, the facing window and the render."""
