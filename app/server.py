@@ -17,9 +17,8 @@ from typing import Any, Callable
 import numpy as np
 
 from . import blas_threads
-from .action_queue import ActionQueue, notify_tabs
+from .action_queue import ActionQueue, UiLock, notify_tabs
 from .align_panel import AlignPanel
-from .app_services import UiLock
 from .calibration_panel import CalibrationPanel
 from .camera_view import camera_views
 from .cloud_pane import CloudPane
