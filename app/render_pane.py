@@ -51,7 +51,9 @@ class RenderPane:
 
     It owns its scene nodes (the pane, its title, the copy drawn over the photo, the markers on it), the render
     worker, and the widgets it adds to the Align folder (:meth:`add_controls`).  Public: :attr:`current` (the
-    render the page shows), :meth:`request`, :meth:`target_at`, :meth:`pixel_of_cells`, :meth:`subscribe`.
+    render the page shows), :meth:`request`, :meth:`target_at`, :meth:`pixel_of_cells`, :meth:`subscribe`,
+    :meth:`hand_plain_drags_to`.  The composition root passes what it uses of its siblings: ``laser_key()`` (the BA
+    image a laser end picked on it names: the laser loupe's) and ``click_at(key, uv, client)`` (the pairs panel's).
     """
 
     def __init__(self, app: Any, *, laser_key: Callable[[], str], click_at: Callable[[str, tuple, Any], Any]) -> None:
