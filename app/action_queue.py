@@ -1,5 +1,6 @@
 """The ordered action worker: viser callbacks only queue their work, one thread applies it in arrival order and
-turns a CalibError into a notification for the tab that caused it (the app keeps running)."""
+turns a CalibError into a notification for the tab that caused it (the app keeps running).  And the redraw lock
+(:class:`UiLock`) that the worker, the live solve's threads and the render worker hold while they redraw."""
 
 from __future__ import annotations
 
@@ -26,6 +27,45 @@ def notify_tabs(server: Any, client: Any, title: str, body: str, color: str = "r
             c.add_notification(title, body, color=color, auto_close_seconds=8.0, with_close_button=True)
         except Exception:
             pass
+
+
+class UiLock:
+    """A re-entrant lock that knows whether the calling thread holds it.
+
+    The redraw lock of the app: a thread that holds it must not wait for another thread's redraw
+    (:meth:`app.live_coordinator.LiveSolveCoordinator.on_change`), so it asks :meth:`held_here` first.
+    """
+
+    def __init__(self) -> None:
+        self._lock = threading.RLock()
+        self._owner: int | None = None  # written only by the holder, so a reader sees its own id or another
+        self._depth = 0
+
+    def acquire(self, blocking: bool = True, timeout: float = -1) -> bool:
+        got = self._lock.acquire(blocking, timeout)
+        if got:
+            self._owner = threading.get_ident()
+            self._depth += 1
+        return got
+
+    def release(self) -> None:
+        if self._owner != threading.get_ident():
+            raise RuntimeError("UiLock released by a thread that does not hold it")
+        self._depth -= 1
+        if self._depth == 0:
+            self._owner = None
+        self._lock.release()
+
+    def held_here(self) -> bool:
+        """Does the calling thread hold the lock?"""
+        return self._owner == threading.get_ident()
+
+    def __enter__(self) -> "UiLock":
+        self.acquire()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
 
 
 class ActionQueue:

@@ -56,11 +56,16 @@ class AlignPanel:
 
     It owns its widgets, the undo history of the rough pose and the drag in progress.  Public:
     :attr:`folder`, :attr:`drag_enabled`, :meth:`apply_preset`, :meth:`turn`, :meth:`move`, :meth:`on_drag`,
-    :meth:`undo`, :attr:`text`.
+    :meth:`undo`, :attr:`text`, :meth:`take_drag`.  The composition root passes what it uses of the render pane
+    and the page: ``add_render_controls(gui)`` (the render's widgets, in this folder), ``drag_nodes()`` (the scene
+    nodes a drag turns the view on, by slot key) and ``render_drag_callbacks`` (the render's own drag callbacks
+    on its nodes, by slot key).
     """
 
-    def __init__(self, app: Any, order: float | None = None) -> None:
+    def __init__(self, app: Any, order: float | None = None, *, add_render_controls: Callable[[Any], None],
+                 drag_nodes: Callable[[], dict[str, Any]], render_drag_callbacks: dict[str, Callable]) -> None:
         self.app = app
+        self._drag_nodes = drag_nodes
         self._history: list[np.ndarray | None] = []
         self._drag: dict | None = None  # the drag in progress: its start pose and pixel, and its slot
         self._fitted_to: tuple | None = None  # the pair ids the rough pose was last turned to fit (shown)
@@ -88,7 +93,7 @@ class AlignPanel:
             self._bg_move.on_click(guard(self.on_move))
             self._bt_undo = gui.add_button("Undo align step", disabled=True)
             self._bt_undo.on_click(guard(self.on_undo))
-            app.render_pane.add_controls(gui)
+            add_render_controls(gui)  # the render's shading, blend and blink (the render pane's widgets)
         # Every drag callback on the nodes a drag may turn the view on, by (slot key, modifier), as registered.
         self._callbacks: dict[tuple[str, str | None], list] = {}
         for key, node in self.drag_nodes().items():
@@ -96,13 +101,12 @@ class AlignPanel:
             node.on_drag(modifier="shift")(shift)
             self._callbacks[(key, "shift")] = [shift]
             if key == RENDER_KEY:  # the render's own drag handler hands plain drags over (a click stays a click)
-                self._callbacks[(key, None)] = [app.render_pane.plain_drag_callback]
+                self._callbacks[(key, None)] = [render_drag_callbacks[RENDER_KEY]]
                 continue
             plain = guard(lambda event, key=key: self.on_drag(key, event) if self.drag_enabled else None)
             node.on_drag(plain)
             # The pairs panel's marker drag (registered with the node) stands aside while aligning.
-            marker = (app.render_pane.overlay_drag_callback if key == "camera_overlay"
-                      else app.make_drag_handler(key))
+            marker = (render_drag_callbacks[key] if key == "camera_overlay" else app.make_drag_handler(key))
             self._callbacks[(key, None)] = [marker, plain]
         self.show()
 
@@ -312,9 +316,15 @@ class AlignPanel:
 
     def drag_nodes(self) -> dict[str, Any]:
         """The scene nodes a drag turns the view on: the camera views, the render and its copy over the photo."""
-        nodes = {key: self.app.page.image_handle(key) for key in self.app.camera_views}
-        nodes.update(self.app.render_pane.drag_nodes)
-        return nodes
+        return self._drag_nodes()
+
+    def take_drag(self, key: str, event: Any) -> bool:
+        """While "Align by drag" is on, turn the view with this drag phase on slot ``key`` (:meth:`on_drag`) and
+        return True; else False (e.g. the render pane's own drag handler then treats a shaky click as a click)."""
+        if not self.drag_enabled:
+            return False
+        self.on_drag(key, event)
+        return True
 
     def _on_shift_drag(self, event: Any) -> None:
         if not self.drag_enabled:

@@ -7,58 +7,21 @@ without touching them.  :class:`AppServices` is a structural type: the app
 satisfies it, a test may pass anything else that does.
 
 ``tests/test_panel_reaches.py`` enforces it: an ``app/`` module (but the composition roots ``app/server.py`` and
-``app/serving.py``) that uses ``app.<name>`` must find ``name`` here, or among the sibling panels that test
-counts, each of whose remaining uses it lists (a list that only shrinks: panels talk through the state, the live
-solve's events and these services).
+``app/serving.py``) that uses ``app.<name>`` must find ``name`` here, and may not use a sibling panel (``app.loupes``,
+``app.render_pane``, ...) at all: panels talk through the state, the panels' events, callables the composition root
+passes them, and these services.
 """
 
 from __future__ import annotations
 
-import threading
 from typing import Any, Callable, Protocol
 
 import numpy as np
 
+from .action_queue import UiLock
 from .state import AnnotationState
 
-
-class UiLock:
-    """A re-entrant lock that knows whether the calling thread holds it.
-
-    The redraw lock of the app: a thread that holds it must not wait for another thread's redraw
-    (:meth:`app.live_coordinator.LiveSolveCoordinator.on_change`), so it asks :meth:`held_here` first.
-    """
-
-    def __init__(self) -> None:
-        self._lock = threading.RLock()
-        self._owner: int | None = None  # written only by the holder, so a reader sees its own id or another
-        self._depth = 0
-
-    def acquire(self, blocking: bool = True, timeout: float = -1) -> bool:
-        got = self._lock.acquire(blocking, timeout)
-        if got:
-            self._owner = threading.get_ident()
-            self._depth += 1
-        return got
-
-    def release(self) -> None:
-        if self._owner != threading.get_ident():
-            raise RuntimeError("UiLock released by a thread that does not hold it")
-        self._depth -= 1
-        if self._depth == 0:
-            self._owner = None
-        self._lock.release()
-
-    def held_here(self) -> bool:
-        """Does the calling thread hold the lock?"""
-        return self._owner == threading.get_ident()
-
-    def __enter__(self) -> "UiLock":
-        self.acquire()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.release()
+__all__ = ["AppServices", "UiLock"]  # UiLock: the redraw lock, defined with the action worker (app/action_queue.py)
 
 
 class AppServices(Protocol):

@@ -61,6 +61,18 @@ class CloudPane:
     def visible(self, on: bool) -> None:
         self._root.visible = bool(on)
 
+    def show(self, what: str, value: Any) -> None:
+        """Show what the live solve publishes (:meth:`app.live_coordinator.LiveSolveCoordinator.subscribe_cloud`):
+        ``"camera"`` (:meth:`show_camera`), ``"pairs"`` (:meth:`show_pairs`) or ``"colors"`` (:meth:`show_colors`)."""
+        if what == "camera":
+            self.show_camera(value)
+        elif what == "pairs":
+            self.show_pairs(*value)
+        elif what == "colors":
+            self.show_colors(*value)
+        else:
+            raise ValueError(f"unknown 3-D pane update {what!r}")
+
     def show_colors(self, solve: Any, colors: np.ndarray) -> None:
         """Colour the cloud with ``colors`` ``(K, 3)`` uint8, computed from ``solve``."""
         self._points.colors = colors

@@ -487,14 +487,15 @@ class GuidePanel(GuideShotsMixin):
         self._md.content = "  \n".join(lines)
 
 
-def attach_guide_panel(app: Any) -> GuidePanel:
-    """The panel wired to a :class:`app.server.CalibrationApp` (the composition root's one line for it)."""
+def attach_guide_panel(app: Any, *, loupes: Callable[[], Any], on_status: Callable) -> GuidePanel:
+    """The panel wired to a :class:`app.server.CalibrationApp` (the composition root's one line for it); ``loupes``
+    and ``on_status`` are :class:`GuidePanel`'s (the root passes them: a panel never reaches into a sibling)."""
     return GuidePanel(app.server.gui, app.state, app.depth, app.camera, app.image, guard=app.guard,
                       post=app.post,
                       initial_T=lambda: getattr(app, "initial_T_camera_lidar", None),
-                      loupes=lambda: getattr(app, "loupes", None), ba_key=app.ba_keys[0],
+                      loupes=loupes, ba_key=app.ba_keys[0],
                       order=app.pairs_folder.order + 0.5,
                       click_source=app.camera_click_source, on_start=app.forget_last_picks,
-                      solve_quality=lambda: live_quality(app), on_status=app.pairs_panel.show_guide_status,
+                      solve_quality=lambda: live_quality(app), on_status=on_status,
                       shots=None if len(app.shot_scenes) < 2 else lambda: (
                           [sc.depth for sc in app.shot_scenes], [sc.image for sc in app.shot_scenes], app.active_shot))

@@ -2,8 +2,8 @@
 (:class:`app.live_solver.LiveSolver`) and shown when done, in one redraw that also draws the change itself.  The
 overlays and panels subscribe to what the solve shows (:meth:`LiveSolveCoordinator.subscribe`) and to each
 finished solve (:meth:`~LiveSolveCoordinator.subscribe_solved`), as they subscribe to the pairs with
-``state.subscribe``.  Then the 3-D pane's camera frame and cloud colours (:class:`app.cloud_pane.CloudPane`; at once
-only while a tab shows 3-D), the camera-facing column window and the scan projected for the loupes' predictions are
+``state.subscribe``.  Then the 3-D pane's camera frame and cloud colours (published, :meth:`subscribe_cloud`, to
+:class:`app.cloud_pane.CloudPane`; at once only while a tab shows 3-D), the camera-facing column window and the scan projected for the loupes' predictions are
 computed in their own thread.  The maths is :func:`calib_core.solve.calibrate` and :mod:`calib_core.overlays`."""
 
 from __future__ import annotations
@@ -48,7 +48,8 @@ class LiveSolveCoordinator:
     :attr:`solving`, :meth:`subscribe_facing` (the scan columns the camera sees,
     :attr:`app.pose_source.PoseSource.facing`, were recomputed),
     :meth:`on_state_change` (subscribed to the state), :meth:`subscribe` and
-    :meth:`subscribe_solved` (its events), :meth:`wait_idle`,
+    :meth:`subscribe_solved` and :meth:`subscribe_cloud` (its events), :meth:`show_3d` (whether a tab shows the
+    3-D pane), :meth:`wait_idle`,
     :meth:`last_click_to_update`.  :meth:`start` starts its two worker
     threads, :meth:`stop` ends them.
     """
@@ -75,6 +76,9 @@ class LiveSolveCoordinator:
         self._shown_listeners: list[Callable[[SolveShown], None]] = []
         self._solved_listeners: list[Callable[[SolveShown], None]] = []
         self._facing_listeners: list[Callable[[], None]] = []
+        self._cloud_listeners: list[Callable[[str, Any], None]] = []
+        self._cloud_shown = False  # some tab shows the 3-D pane (show_3d)
+        self._cloud_colored_by: SolveBundle | None = None  # the solve whose cloud colours were last published
 
     def subscribe(self, listener: Callable[[SolveShown], None]) -> None:
         """Call ``listener(shown)`` whenever what the solve shows is redrawn: a solve finished or failed, a solve
@@ -91,6 +95,26 @@ class LiveSolveCoordinator:
         """Call ``listener()`` when the camera-facing column window (``app.pose_source.facing``) was recomputed while the BA
         panes follow it (``ba_window_mode == "camera"``); on the cloud worker's thread: post UI work."""
         self._facing_listeners.append(listener)
+
+    def subscribe_cloud(self, listener: Callable[[str, Any], None]) -> None:
+        """Call ``listener(what, value)`` with what the 3-D pane shows, under the UI lock: ``("camera", T)``, the
+        solved ``T_camera_lidar`` (None: no solve, grey cloud), ``("pairs", (points_lidar, labels, shots))``,
+        ``("colors", (bundle, colors))``, the cloud's colours ``(K, 3)`` uint8 from solve ``bundle``
+        (:meth:`app.cloud_pane.CloudPane.show`)."""
+        self._cloud_listeners.append(listener)
+
+    def _publish_cloud(self, what: str, value: Any) -> None:
+        if what == "colors":
+            self._cloud_colored_by = value[0]
+        elif what == "camera" and value is None:
+            self._cloud_colored_by = None  # the pane greys its cloud
+        for listener in list(self._cloud_listeners):
+            listener(what, value)
+
+    def show_3d(self, shown: bool) -> None:
+        """Some tab shows the 3-D pane (``shown``) or none does; one that does gets the current solve's colours."""
+        self._cloud_shown = bool(shown)
+        self.request_cloud()
 
     def shown(self) -> SolveShown:
         """What the solve shows now."""
@@ -159,7 +183,7 @@ class LiveSolveCoordinator:
                     self._bundle = None
                     self.solve_error = None
                     self.solving = False
-                    app.cloud.show_camera(None)
+                    self._publish_cloud("camera", None)
         if (solve_job is None and not self.solving and self._cloud_worker is not None
                 and not self._stopped):  # the 3-D pane's pair marks (a solve's cloud job draws them too)
             self._cloud_worker.submit(0, self._bundle)
@@ -236,8 +260,8 @@ class LiveSolveCoordinator:
                     self.solve_error = None
                     if bundle.shots is not None and not bundle.shots.solved.checked and job == self._job:
                         self._solver.submit(job, _CheckShots(bundle))  # under the UI lock: no newer change lost
-                    if app.cloud.visible:  # a tab shows 3-D; else the hidden pane gets it with its colours (cloud job)
-                        app.cloud.show_camera(bundle.result.T_camera_lidar)
+                    if self._cloud_shown:  # a tab shows 3-D; else the hidden pane gets it with its colours (cloud job)
+                        self._publish_cloud("camera", bundle.result.T_camera_lidar)
                 self.redraw()
             change_job, change_time = self._change_time
             if job == change_job:  # after the batch was handed to viser
@@ -276,12 +300,12 @@ class LiveSolveCoordinator:
         app = self.app
         pairs = pairs_in_3d(app)
         with app.ui_lock:
-            app.cloud.show_pairs(*pairs)
+            self._publish_cloud("pairs", pairs)
         if bundle is None:  # only the pair marks (no solve shown)
             return None
         t0 = time.perf_counter()
         T = bundle.result.T_camera_lidar
-        colors = self._cloud_colors(T) if app.cloud.visible and app.cloud.shows is not bundle else None
+        colors = self._cloud_colors(T) if self._cloud_shown and self._cloud_colored_by is not bundle else None
         facing_done = app.state.view.ba_window_mode == "camera" and app.pose_source.facing_due(bundle)
         facing = app.pose_source.facing_window(T) if facing_done else None
         app.pose_source.projection(T)  # the loupes' camera-to-cell predictions, ready before the next click
@@ -298,9 +322,9 @@ class LiveSolveCoordinator:
             if self._stopped or update.bundle is not self._bundle:
                 return  # superseded: the newer solve queued its own
             with app.server.atomic():  # the 3-D pane in one batch: the solved camera's frame and the colours
-                app.cloud.show_camera(update.bundle.result.T_camera_lidar)
+                self._publish_cloud("camera", update.bundle.result.T_camera_lidar)
                 if update.colors is not None:
-                    app.cloud.show_colors(update.bundle, update.colors)
+                    self._publish_cloud("colors", (update.bundle, update.colors))
             if update.facing_done:
                 app.pose_source.set_facing(update.bundle, update.facing)
         if update.facing_done and app.state.view.ba_window_mode == "camera" and not self._stopped:

@@ -14,7 +14,7 @@ change how much they show around the same centre.  Display plumbing only (predic
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -52,7 +52,7 @@ class Loupes:
     :meth:`display_of` (the inverse).
     """
 
-    def __init__(self, app: Any) -> None:
+    def __init__(self, app: Any, add_controls: Callable[[Any], None] = lambda gui: None) -> None:
         self.app = app
         main = list(app.slots.values())  # camera views, the camera-view render, BA images
         self.areas: dict[str, LoupeArea] = loupe_areas(bounds_of(main))
@@ -89,15 +89,15 @@ class Loupes:
         for kind in KINDS:
             self._place(kind)  # sends the size and place once; later only when they change
         self.refresh()
-        self._build_folder(app.server.gui)
+        self._build_folder(app.server.gui, add_controls)  # the display panel's loupe widgets
 
-    def _build_folder(self, gui: Any) -> None:
+    def _build_folder(self, gui: Any, add_controls: Callable[[Any], None]) -> None:
         """The "Loupes" folder: used while picking, so right below the Pairs folder, found without scrolling."""
         self.folder = gui.add_folder("Loupes", order=self.app.pairs_folder.order + 0.25)
         with self.folder:
             zoom = gui.add_button_group("Loupe zoom", ("BA +", "BA -", "Camera +", "Camera -"))
             zoom.on_click(self.app.guard(self.on_zoom))
-            self.app.display.add_loupe_controls(gui)  # what the BA loupe shows, the contrast, "Hide marks"
+            add_controls(gui)  # what the BA loupe shows, the contrast, "Hide marks"
 
     def on_zoom(self, event: Any) -> None:
         """The "Loupe zoom" buttons: magnify or widen one loupe around the same centre."""

@@ -33,7 +33,13 @@ class OverlayDrawing:
         self._labels_drawn: dict[str, tuple[str, tuple]] | None = None  # number labels as last sent
         self._camera_view_drawn: str | None = None  # the camera view whose markers are drawn
         self._marks_listeners: list[Callable[[], None]] = []
+        self._loupe_display_of: Callable[[str, Any], Any] | None = None  # the loupes' projection (place_loupes_by)
         app.subscribe_solve(lambda shown: self.refresh())  # the reprojection overlays follow the solve shown
+
+    def place_loupes_by(self, display_of: Callable[[str, Any], Any]) -> None:
+        """Place the pick ends on slots ``loupe_*`` by ``display_of(kind, (x, y))`` -> loupe display pixel or None
+        (:meth:`app.loupes.Loupes.display_of`; the composition root wires it once the loupes are built)."""
+        self._loupe_display_of = display_of
 
     def subscribe(self, listener: Callable[[], None]) -> None:
         """Call ``listener()`` after each redraw of the marks (under the UI lock, in the redraw's message batch),
@@ -110,7 +116,7 @@ class OverlayDrawing:
         if key.startswith("loupe_"):
             kind = key[len("loupe_"):]
             sel = [p for p in picks if (p.laser_rc if kind == "ba" else p.pixel) is not None]
-            shown = [app.loupes.display_of(kind, (p.laser_rc[1], p.laser_rc[0]) if kind == "ba" else p.pixel)
+            shown = [self._loupe_display_of(kind, (p.laser_rc[1], p.laser_rc[0]) if kind == "ba" else p.pixel)
                      for p in sel]
             keep = [(p.id, xy) for p, xy in zip(sel, shown) if xy is not None]
             return [i for i, _ in keep], np.array([xy for _, xy in keep], np.float64).reshape(-1, 2)

@@ -30,11 +30,18 @@ class PairsPanel:
     It owns its widgets (built here, where the folder goes on the page) and
     where each tab's last camera click landed (:meth:`camera_click_source`).
     Every change goes through ``app.state``; the clicks are mapped through the
-    app's page layout, and published (:meth:`subscribe_clicks`: the loupes follow them).
+    app's page layout, and published (:meth:`subscribe_clicks`: the loupes follow them).  The composition root
+    passes what it uses of its siblings: ``loupe_marks_after()`` and ``nearest_pick(key, uv, slot)`` (the
+    overlays'), ``aligning()`` ("Align by drag" is on) and, once built, :meth:`resolve_clicks_with`.
     """
 
-    def __init__(self, app: Any, top: float) -> None:
+    def __init__(self, app: Any, top: float, *, loupe_marks_after: Callable[[], Any],
+                 nearest_pick: Callable[[str, tuple, Any], int | None], aligning: Callable[[], bool]) -> None:
         self.app = app
+        self._loupe_marks_after, self._nearest_pick_at, self._aligning = loupe_marks_after, nearest_pick, aligning
+        self._loupe_target: Callable[[str, tuple], tuple] | None = None  # resolve_clicks_with
+        self._render_target: Callable[[tuple, Any], tuple] | None = None
+        self._render_uv: tuple[float, float] | None = None  # the render pixel of the last render click resolved
         self._last_pick: dict[Any, tuple] = {}  # client id -> (kind, pick id, "full" | "loupe")
         self._loupes_pick: int | None = None  # the pair the loupes were last framed on (refining it keeps them still)
         self._undo_note: tuple[int, str] = (-1, "")  # (state version, what the last top Undo took back)
@@ -91,6 +98,12 @@ class PairsPanel:
     def dropdown_value(self) -> str:
         """What the "Selected pair" dropdown shows."""
         return str(self._dd_selected.value)
+
+    def resolve_clicks_with(self, loupe: Callable[[str, tuple], tuple],
+                            render: Callable[[tuple, Any], tuple[tuple, tuple[float, float] | None]]) -> None:
+        """How clicks on panes other panels draw become pair ends (the composition root wires it): ``loupe(kind,
+        uv)`` -> target, ``render(uv, client)`` -> (target, the render pixel clicked)."""
+        self._loupe_target, self._render_target = loupe, render
 
     # ------------------------------------------------------------------ events
     def subscribe_clicks(self, listener: Callable[[PairClick], None]) -> None:
@@ -190,7 +203,7 @@ class PairsPanel:
     def _target_of_click(self, key: str, uv: tuple[float, float], client: Any = None) -> tuple:
         """``("ba", key, row, col)`` or ``("camera", u, v)`` (original pixel) under display pixel ``uv`` of ``key``."""
         if key.startswith("loupe_"):
-            target = self.app.loupes.target_at(key[len("loupe_"):], uv)
+            target = self._loupe_target(key[len("loupe_"):], uv)
             if self.app.state.view.snap and target[0] == "ba":
                 col, row = refine_click_to_corner(self.app.laser_images.ba_display(target[1]), (target[3], target[2]), 3.0)
                 target = ("ba", target[1], int(np.clip(round(row), 0, self.app.depth.shape[0] - 1)),
@@ -200,7 +213,8 @@ class PairsPanel:
             return target
         if key == RENDER_KEY:  # the camera-view render: the laser cell drawn there, an ordinary laser end
             # A click on a thin outline may land a screen pixel beside it: snap within a few screen pixels.
-            return self.app.render_pane.target_at(uv, screen_units=self.app.view.units_per_screen_px(client))
+            target, self._render_uv = self._render_target(uv, client)
+            return target
         if key in self.app.ba_keys:
             if self.app.state.view.snap:
                 shown = self.app.laser_images.ba_display(key)[:, self.app.ba_window.columns]
@@ -221,7 +235,7 @@ class PairsPanel:
         """
         target = self._target_of_click(key, uv, client)
         # The loupes are re-framed right after the change: their marks are drawn once, for the new view.
-        with self.app.overlays.loupe_marks_after():
+        with self._loupe_marks_after():
             return self._apply_click(key, target, pick_id, client)
 
     def click_at(self, key: str, uv: tuple[float, float], client: Any = None) -> int:
@@ -267,7 +281,7 @@ class PairsPanel:
             return out
         self._loupes_pick = out
         self._publish_click(PairClick(key, target, out, render_uv=(
-            self.app.render_pane.last_pixel if key == RENDER_KEY else None), client_id=cid))
+            self._render_uv if key == RENDER_KEY else None), client_id=cid))
         return out
 
     def _original_from_display(self, uv: tuple[float, float]) -> tuple[float, float]:
@@ -278,7 +292,7 @@ class PairsPanel:
         return float(raw[0, 0]), float(raw[0, 1])
 
     def _nearest_pick(self, key: str, uv: tuple[float, float]) -> int | None:
-        return self.app.overlays.nearest_pick(key, uv, self.app.slot_of(key))
+        return self._nearest_pick_at(key, uv, self.app.slot_of(key))
 
     def make_select_handler(self, key: str) -> Callable:
         """The Shift+click callback of image slot ``key``: selects the pair whose marker is nearest."""
@@ -291,7 +305,7 @@ class PairsPanel:
 
     def make_drag_handler(self, key: str) -> Callable:
         def on_drag(event: Any) -> None:
-            if event.phase != "end" or self.app.align.drag_enabled:  # aligning: the Align panel has this drag
+            if event.phase != "end" or self._aligning():  # aligning: the Align panel has this drag
                 return
             slot = self.app.slots[key]
             start = slot.pixel_from_world(np.asarray(event.start_position)[None])[0]

@@ -51,11 +51,16 @@ class RenderPane:
 
     It owns its scene nodes (the pane, its title, the copy drawn over the photo, the markers on it), the render
     worker, and the widgets it adds to the Align folder (:meth:`add_controls`).  Public: :attr:`current` (the
-    render the page shows), :meth:`request`, :meth:`target_at`, :meth:`pixel_of_cells`, :meth:`subscribe`.
+    render the page shows), :meth:`request`, :meth:`target_at`, :meth:`pixel_of_cells`, :meth:`subscribe`,
+    :meth:`hand_plain_drags_to`.  The composition root passes what it uses of its siblings: ``laser_key()`` (the BA
+    image a laser end picked on it names: the laser loupe's) and ``click_at(key, uv, client)`` (the pairs panel's).
     """
 
-    def __init__(self, app: Any) -> None:
+    def __init__(self, app: Any, *, laser_key: Callable[[], str], click_at: Callable[[str, tuple, Any], Any]) -> None:
         self.app = app
+        self._laser_key = laser_key  # the BA image the laser loupe falls back to (the loupes')
+        self._click_at = click_at  # a click on a slot at a display pixel (the pairs panel's): a shaky drag is one
+        self._drag_taker: Callable[[Any], bool] = lambda event: False  # hand_plain_drags_to
         self.current: ShownRender | None = None
         self.last_pixel: tuple[float, float] | None = None  # the render pixel of the last pick on it
         self.drag_pose: np.ndarray | None = None  # while "Align by drag" turns the view: the pose being dragged
@@ -102,6 +107,11 @@ class RenderPane:
             listener(what, self.current)
 
     # ------------------------------------------------------------------ nodes the Align panel drags on
+    def hand_plain_drags_to(self, take: Callable[[Any], bool]) -> None:
+        """Offer each plain drag on the pane to ``take(event)`` first (the Align panel's: True when it turned the
+        view with it); a drag it leaves that is a shaky click is a click."""
+        self._drag_taker = take
+
     @property
     def drag_nodes(self) -> dict[str, Any]:
         """The render's scene nodes a drag may turn the view on: the pane and its copy over the camera view."""
@@ -330,7 +340,7 @@ class RenderPane:
         if cell is None:
             raise CalibError("no laser return here: click where the camera-view render shows the scan")
         self.last_pixel = (float(uv[0]), float(uv[1]))
-        return ("ba", self.app.loupes.ba_crop.key, *cell)
+        return ("ba", self._laser_key(), *cell)
 
     def pixel_of_cells(self, rows_cols: np.ndarray) -> np.ndarray:
         """Original camera pixels of scan cells under the shown render's pose (:func:`pixel_of_cells`)."""
@@ -352,9 +362,7 @@ class RenderPane:
 
     def _on_plain_drag(self, event: Any) -> None:
         """A left-drag on the render: turns the view while "Align by drag" is on; a shaky click is a click."""
-        align = getattr(self.app, "align", None)
-        if align is not None and align.drag_enabled:
-            align.on_drag(RENDER_KEY, event)
+        if self._drag_taker(event):  # "Align by drag" is on: the Align panel turned the view
             return
         if event.phase != "end":
             return
@@ -362,7 +370,7 @@ class RenderPane:
         slot = self.app.slots[RENDER_KEY]
         start = slot.pixel_from_world(np.asarray(event.start_position)[None])[0]
         if moved < 0.01 and slot.contains(start):  # display pixels, as a click gives them
-            self.app.pairs_panel.click_at(RENDER_KEY, (float(start[0]), float(start[1])), event.client)
+            self._click_at(RENDER_KEY, (float(start[0]), float(start[1])), event.client)
 
     # ------------------------------------------------------------------ markers
     @staticmethod

@@ -17,9 +17,8 @@ from typing import Any, Callable
 import numpy as np
 
 from . import blas_threads
-from .action_queue import ActionQueue, notify_tabs
+from .action_queue import ActionQueue, UiLock, notify_tabs
 from .align_panel import AlignPanel
-from .app_services import UiLock
 from .calibration_panel import CalibrationPanel
 from .camera_view import camera_views
 from .cloud_pane import CloudPane
@@ -27,6 +26,7 @@ from .display_panel import DisplayPanel
 from .export_panel import ExportPanel, FormatExportPanel
 from .guide_panel import attach_guide_panel
 from .laser_images import LaserImages
+from .layout import RENDER_KEY
 from .live_coordinator import LiveSolveCoordinator
 from .loupes import Loupes
 from .overlay_drawing import OverlayDrawing
@@ -160,14 +160,19 @@ class CalibrationApp:
             self.nodes.fill_label_pool()
             self.overlays = OverlayDrawing(self)  # markers, labels, selection, reprojection overlays
             self.cloud = CloudPane(self.server.scene, self.cloud_points_lidar)  # the 3-D pane
+            self.live.subscribe_cloud(self.cloud.show)  # it shows the live solve's camera, colours and pair points
             # The control panel's folders in page order; each panel builds its own widgets.
             self.page = PageBuilder(self)  # theme, intro text, backdrop
-            self.pairs_panel = PairsPanel(self, top=self.page.intro.order)  # "Pairs" folder, clicks on the images
+            self.pairs_panel = PairsPanel(  # "Pairs" folder, clicks on the images
+                self, top=self.page.intro.order, loupe_marks_after=self.overlays.loupe_marks_after,
+                nearest_pick=self.overlays.nearest_pick, aligning=lambda: self.align.drag_enabled)
             self.pairs_folder = self.pairs_panel.folder  # guided picking goes below it
             self.subscribe_solve(lambda shown: self.pairs_panel.refresh())  # after the overlays' (OverlayDrawing)
             self.calibration_panel = CalibrationPanel(self.server.gui)
             self.subscribe_solve(self.calibration_panel.on_solve_shown)
-            self.view = ViewPanel(self)  # "View" folder, the BA column window, the page layout, each tab's camera
+            # "View" folder, the BA column window, the page layout, each tab's camera; holds two display widgets.
+            self.view = ViewPanel(self, add_last_pane_control=self.display.add_last_pane_control,
+                                  add_edge_control=self.display.add_edge_control)
             self.view.subscribe_window(self.page.show_ba_window)  # the BA images follow the window and layout
             self.view.subscribe_layout(lambda moved: self.overlays.refresh())  # the marks follow the images
             self.view.subscribe_camera_view(self.page.show_camera_view)
@@ -176,18 +181,32 @@ class CalibrationApp:
             self.page.add_images({k: self.view.ba_texture(k) for k in self.ba_keys},
                                  {k: self.view.ba_title(k) for k in self.ba_keys})
             self.view.update_camera_title()
-            self.render_pane = RenderPane(self)  # the scan seen from the camera, below the camera image
+            # The scan seen from the camera, below the camera image; a click on it picks a laser cell.
+            self.render_pane = RenderPane(self, laser_key=lambda: self.loupes.ba_crop.key,
+                                          click_at=self.pairs_panel.click_at)
             self.view.subscribe_window(lambda shown: self.render_pane.place())
-            self.align = AlignPanel(self, order=self.pairs_folder.order - 0.5)  # rough pose; first folder
+            self.align = AlignPanel(  # rough pose; first folder; it holds the render's widgets, drags on its nodes
+                self, order=self.pairs_folder.order - 0.5, add_render_controls=self.render_pane.add_controls,
+                drag_nodes=lambda: {**{key: self.page.image_handle(key) for key in self.camera_views},
+                                    **self.render_pane.drag_nodes},
+                render_drag_callbacks={RENDER_KEY: self.render_pane.plain_drag_callback,
+                                       "camera_overlay": self.render_pane.overlay_drag_callback})
+            self.render_pane.hand_plain_drags_to(lambda event: self.align.take_drag(RENDER_KEY, event))
             self.render_pane.subscribe(lambda what, shown: self.align.show())  # its pose line names the render's pose
             self.align.subscribe_drag(self.render_pane.show_drag_pose)  # the render follows an alignment drag
             self.align.subscribe_drag_mode(self.render_pane.on_align_drag_mode)
-            self.loupes = Loupes(self)  # the magnified BA and camera panes (public: frame_ba, frame_camera)
+            # The magnified BA and camera panes; their folder holds the display panel's loupe widgets.
+            self.loupes = Loupes(self, add_controls=self.display.add_loupe_controls)
+            self.pairs_panel.resolve_clicks_with(  # a click in a loupe or on the render picks what it shows there
+                loupe=self.loupes.target_at, render=lambda uv, client: (self.render_pane.target_at(
+                    uv, screen_units=self.view.units_per_screen_px(client)), self.render_pane.last_pixel))
+            self.overlays.place_loupes_by(self.loupes.display_of)  # the marks in the loupes, Shift+click on them
             self.overlays.subscribe(self.loupes.draw_marks)  # the loupes show the marks magnified
             self.pairs_panel.subscribe_clicks(self.loupes.on_pair_click)  # the loupes follow each click
             self.pairs_panel.subscribe_cancel(self.loupes.on_pair_cancelled)
             self.pairs_panel.subscribe_clicks(self.view.on_pair_click)  # "Zoom on last click"
             self.view.subscribe_layout(self.loupes.relayout)  # after the marks' redraw
+            self.view.frame_also("loupe_ba", "loupe_camera")  # "All" frames the loupes too
             self.render_pane.subscribe(self.loupes.on_render, replay=True)  # the laser loupe can show its crop
             self.format_export = FormatExportPanel(self)  # verify: its own widgets (formats, reference import)
             self.display.subscribe(self._on_display_change)
@@ -197,7 +216,8 @@ class CalibrationApp:
             # In the action worker, so a click is never mapped through a window that changed under it.
             self.live.subscribe_facing(lambda: self.post(self.view.apply_ba_window))
             self.live.start()
-            self.guide = attach_guide_panel(self)  # guided picking (app/guide_panel.py)
+            self.guide = attach_guide_panel(  # guided picking (app/guide_panel.py); it frames the loupes
+                self, loupes=lambda: self.loupes, on_status=self.pairs_panel.show_guide_status)
             self.pairs_panel.set_next_pair_handler(self.guide.callback("Next pair"))  # its button in the pair actions
             self.state.subscribe(self.live.on_state_change)
             self.live.on_state_change(self.state)
@@ -243,7 +263,7 @@ class CalibrationApp:
     def _on_3d_view(self, shown: bool) -> None:
         """Some tab shows the 3-D view (or none does): the cloud shows, with the current solve's colours."""
         self.cloud.visible = shown
-        self.live.request_cloud()  # a tab that switches to 3-D gets the current solve's colours
+        self.live.show_3d(shown)  # a tab that switches to 3-D gets the current solve's colours
 
     def _on_rough_pose(self) -> None:
         """A new rough pose (:meth:`PoseSource.subscribe`): redraw predictions, the facing window and the render."""

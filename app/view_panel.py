@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -32,12 +32,14 @@ class ViewPanel(ViewEvents):
     It owns the BA column window and the page layout that follows from it
     (:attr:`ba_window`, :attr:`slots`), which camera view is shown
     (:attr:`camera_view`), what each tab looks at, and the View folder (the
-    display panel's last-pane and edge widgets are placed in it).  Built where
-    the folder goes on the page.
+    display panel's last-pane and edge widgets, ``add_last_pane_control(gui)`` and ``add_edge_control(gui)``,
+    are placed in it).  Built where the folder goes on the page.
     """
 
-    def __init__(self, app: Any) -> None:
+    def __init__(self, app: Any, add_last_pane_control: Callable[[Any], None] = lambda gui: None,
+                 add_edge_control: Callable[[Any], None] = lambda gui: None) -> None:
         self.app = app
+        self._framed_also: tuple[str, ...] = ()  # more slot keys "All" frames (frame_also: the loupes)
         self._client_mode: dict[int, str] = {}  # client id -> "all" | "camera" | "ba" | "3d"
         self._view_target: dict[int, tuple[np.ndarray, np.ndarray, float]] = {}
         self._framed: dict[int, bool] = {}  # client id -> its view is the app's framing (not zoomed since)
@@ -47,14 +49,18 @@ class ViewPanel(ViewEvents):
         install_page_script(app.server, LOUPE_WHEEL_JS)  # the wheel over a loupe zooms the loupe
         self._ba_window = self._wanted_ba_window()
         self.slots: dict[str, ImageSlot] = self._layout()
-        self._build_folder(app.server.gui)
+        self._build_folder(app.server.gui, add_last_pane_control, add_edge_control)
         self.sync_window_widgets()
 
-    def _build_folder(self, gui: Any) -> None:
+    def frame_also(self, *keys: str) -> None:
+        """Frame the slots of click keys ``keys`` too (e.g. the loupes, once built) when a tab shows "All"."""
+        self._framed_also = tuple(keys)
+
+    def _build_folder(self, gui: Any, add_last_pane_control: Callable, add_edge_control: Callable) -> None:
         app, guard, view = self.app, self.app.guard, self.app.state.view
         self.folder = gui.add_folder("View")
         with self.folder:
-            app.display.add_last_pane_control(gui)
+            add_last_pane_control(gui)
             gui.add_button_group("Show", ("2D annotation", "3D cloud")).on_click(guard(self.on_view_mode))
             gui.add_button_group("Frame", ("All", "Camera", "BA images")).on_click(guard(self.on_zoom))
             gui.add_button_group("Zoom", ("In", "Out", "On last click")).on_click(guard(self.on_magnify))
@@ -81,7 +87,7 @@ class ViewPanel(ViewEvents):
             self._cb_reproj.on_update(guard(self.on_view_checkbox))
             self._cb_edges = gui.add_checkbox("Reprojected BA-edge points", initial_value=view.show_edges)
             self._cb_edges.on_update(guard(self.on_view_checkbox))
-            app.display.add_edge_control(gui)
+            add_edge_control(gui)
             up = gui.add_dropdown("3D up axis (lidar)", tuple(UP_AXES), initial_value=view.up_axis)
             up.on_update(guard(self.on_up_axis))
 
@@ -295,8 +301,7 @@ class ViewPanel(ViewEvents):
             slots = [self.slots[k] for k in self.app.ba_keys]
         else:
             slots = [self.camera_slot(), self.slots[RENDER_KEY]] + [self.slots[k] for k in self.app.ba_keys]
-            if getattr(self.app, "loupes", None) is not None:  # the loupes are part of the page
-                slots += [self.app.slot_of("loupe_ba"), self.app.slot_of("loupe_camera")]
+            slots += [self.app.slot_of(key) for key in self._framed_also]  # the loupes are part of the page
         x0, y0, x1, y1 = bounds_of(slots)
         y0 -= 0.3  # room for the titles
         w_px, h_px = self._canvas_px(client)

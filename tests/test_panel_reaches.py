@@ -1,4 +1,4 @@
-"""No app module reaches into a sibling panel through the app object, beyond the reaches listed here (issue 22).
+"""No app module reaches into a sibling panel through the app object (issue 22): the count is 0.
 
 A *reach* is a use of ``app.<part>`` (``app`` a name, or ``self.app``) in one ``app/`` module, where ``<part>``
 is one of the app's panels or panes (:data:`PARTS`) that the module does not own: ``self.app.loupes.frame_ba(...)``
@@ -8,10 +8,14 @@ app) are not counted.  Panels talk through the app's services (:class:`app.app_s
 and its ``subscribe``, the live solve's events (``subscribe_solve``, ``subscribe_solved``), ``post``; and every
 other ``app.<name>`` a module uses must be one of those services (enforced here too).
 
+Where a panel needs what a sibling does (the pairs panel resolving a click on a loupe or the render, the Align panel
+dragging on the render's nodes, the display panel's widgets in the View and Loupes folders, the 3-D pane following
+the live solve), the composition root passes it a callable or subscribes it to an event at construction
+(``app/server.py``); the panel never holds the sibling.
+
 The count is read from the sources with :mod:`ast`.  :data:`ALLOWED` lists every reach left, as
-``module -> {part.attribute: count}``; the test fails on a new reach (or a higher count) and on a listed one that
-is gone (so the list only shrinks).  Run this file as a script to print the counts per module
-(``python tests/test_panel_reaches.py``; with ``--allowed``, the table to paste below).
+``module -> {part.attribute: count}``: it is empty, and the test fails on any reach.  Run this file as a script to
+print the counts per module (``python tests/test_panel_reaches.py``; with ``--allowed``, as a table).
 """
 
 from __future__ import annotations
@@ -111,25 +115,9 @@ def app_reaches(root: Path = REPO) -> dict[str, Counter]:
     return out
 
 
-#: Every reach left (issue 22 item 3: each should become a state or event subscription, or a service).  Left for
-#: a later round: the live solve's cloud worker drives the 3-D pane (its work depends on what the pane shows); the
-#: pairs panel resolves a click on a loupe or the render through the part that draws it; the display panel's
-#: widgets sit in the View and Loupes folders; the Align panel drags on the render's nodes, whose plain drag hands
-#: over to it; the Guide panel (app/guide_panel.py) is another helper's.
-ALLOWED: dict[str, dict[str, int]] = {
-    "app.align_panel": {"page.image_handle": 1, "render_pane.add_controls": 1, "render_pane.drag_nodes": 1,
-        "render_pane.overlay_drag_callback": 1, "render_pane.plain_drag_callback": 1},
-    "app.guide_panel": {"loupes": 1, "pairs_panel.show_guide_status": 1},
-    "app.live_coordinator": {"cloud.show_camera": 3, "cloud.show_colors": 1, "cloud.show_pairs": 1, "cloud.shows": 1,
-        "cloud.visible": 2},
-    "app.loupes": {"display.add_loupe_controls": 1},
-    "app.overlay_drawing": {"loupes.display_of": 1},
-    "app.pairs_panel": {"align.drag_enabled": 1, "loupes.target_at": 1, "overlays.loupe_marks_after": 1,
-        "overlays.nearest_pick": 1, "render_pane.last_pixel": 1, "render_pane.target_at": 1,
-        "view.units_per_screen_px": 1},
-    "app.render_pane": {"align": 1, "loupes.ba_crop": 1, "pairs_panel.click_at": 1},
-    "app.view_panel": {"display.add_edge_control": 1, "display.add_last_pane_control": 1, "loupes": 1},
-}
+#: Every reach left, ``module -> {part.attribute: count}``: none (issue 22 item 3, done).  Do not add one: publish
+#: an event or take a callable from the composition root instead.
+ALLOWED: dict[str, dict[str, int]] = {}
 
 
 def test_the_count_finds_each_kind_of_reach():
@@ -179,12 +167,14 @@ def test_the_services_check_sees_names_and_getattr():
                           "    other.hidden\n") == {"state", "secret", "g"}
 
 
-def test_no_new_reach_into_a_sibling_panel():
+def test_no_panel_reaches_into_a_sibling():
+    assert ALLOWED == {}, "no reach is allowed: a panel takes callables or events from the composition root"
     found = {m: dict(c) for m, c in app_reaches().items()}
     new = sorted(f"{m}: app.{r} x{n} (allowed {ALLOWED.get(m, {}).get(r, 0)})"
                  for m, c in found.items() for r, n in c.items() if n > ALLOWED.get(m, {}).get(r, 0))
-    assert new == [], ("app modules reaching into sibling panels (use the state, the live solve's events or a "
-                       "service of app/app_services.py instead):\n  " + "\n  ".join(new))
+    assert new == [], ("app modules reaching into sibling panels (use the state, a panel's events, a callable the "
+                       "composition root passes, or a service of app/app_services.py):\n  " + "\n  ".join(new))
+    assert sum(sum(c.values()) for c in found.values()) == 0
     gone = sorted(f"{m}: app.{r} allowed x{n}, found x{found.get(m, {}).get(r, 0)}"
                   for m, c in ALLOWED.items() for r, n in c.items() if found.get(m, {}).get(r, 0) < n)
     assert gone == [], "reaches removed: lower ALLOWED to match (the list only shrinks):\n  " + "\n  ".join(gone)
@@ -201,10 +191,8 @@ def mutual_reaches(graph: dict[str, set[str]]) -> list[tuple[str, str]]:
 
 
 #: Pairs of modules that still reach into each other (the hidden cycles of issue 22: view <-> pairs panel,
-#: view <-> live solve, live solve <-> loupe support, ...).  Only shrinks.
-MUTUAL = [
-    ("app.align_panel", "app.render_pane"), ("app.pairs_panel", "app.render_pane"),
-]
+#: view <-> live solve, align <-> render pane, ...): none left.
+MUTUAL: list[tuple[str, str]] = []
 
 
 def test_mutual_reaches_are_found_and_only_the_listed_ones_remain():
