@@ -217,10 +217,6 @@ class BagShots:
     def __getitem__(self, k: int) -> BagShot:
         return self.shots[k]
 
-    def as_tuples(self) -> list[tuple[Path, Path, float]]:
-        """``[(scan_path, image_path, stamp_s), ...]``."""
-        return [(s.scan, s.image, s.stamp_s) for s in self.shots]
-
 
 # --------------------------------------------------------------------------------------
 # the frame table

@@ -89,9 +89,6 @@ class BagInfo:
     duration_s: float
     topics: list[TopicInfo]
 
-    def topics_of(self, *msgtypes: str) -> list[str]:
-        return [t.name for t in self.topics if t.msgtype in msgtypes]
-
 
 @dataclass
 class BagScene:
@@ -422,7 +419,6 @@ def _pick_topic(bag: _Bag, given: str | None, msgtypes: tuple[str, ...], what: s
     if not names:
         raise CalibError(f"{bag.given}: no {what} topic ({' or '.join(msgtypes)})")
     raise CalibError(f"{bag.given}: several {what} topics ({', '.join(names)}); choose one with {option}")
-
 
 
 def _nearest(bag: _Bag, conns, target_s: float, topic: str) -> tuple[float, Any]:
