@@ -48,8 +48,6 @@ __all__ = [
     "image_to_rgb",
     "pointcloud2_to_cloud",
     "read_bag_scene",
-    "static_transform",
-    "topic_stamps",
     "write_bag_scene",
     "write_cloud_pcd",
     "POINTCLOUD2",
@@ -266,12 +264,6 @@ def bag_info(path: str | os.PathLike) -> BagInfo:
         return BagInfo(bag.path, bag.kind(), start, duration, topics)
 
 
-def topic_stamps(path: str | os.PathLike, topic: str) -> np.ndarray:
-    """``header.stamp`` of every message on ``topic``, seconds (for choosing a frame)."""
-    with _Bag(path) as bag:
-        return np.array([_stamp_s(m, t) for t, m in bag.messages(bag.connections(topic))])
-
-
 # --------------------------------------------------------------------------------------
 # message conversions
 # --------------------------------------------------------------------------------------
@@ -393,12 +385,6 @@ def _tf_edges(bag: _Bag) -> dict[tuple[str, str], np.ndarray]:
             except CalibError:
                 continue  # a broken transform elsewhere in the tree must not stop the rest
     return edges
-
-
-def static_transform(path: str | os.PathLike, target_frame: str, source_frame: str) -> np.ndarray | None:
-    """``T_target_source`` from the bag's ``/tf_static`` (maps source points into target), or None."""
-    with _Bag(path) as bag:
-        return compose_tree(_tf_edges(bag), target_frame.lstrip("/"), source_frame.lstrip("/"))
 
 
 # --------------------------------------------------------------------------------------
