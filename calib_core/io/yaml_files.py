@@ -150,7 +150,7 @@ def read_yaml_mapping(
 
 def parse_json_text(text: str, where: str) -> Any:
     """``json.loads`` with the same nesting limit as YAML; one-line errors naming ``where``."""
-    depth = max_depth = 0
+    depth = 0
     in_string = escaped = False
     # A bracket count outside strings bounds the depth before parsing (json recurses per level).
     for ch in text:
