@@ -31,7 +31,7 @@ import io
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any, Callable, Iterator
 
 import numpy as np
 
@@ -422,6 +422,33 @@ def _nearest(bag: _Bag, conns, target_s: float, topic: str) -> tuple[float, Any]
     return best[1], best[2]
 
 
+def _scene_of(where: str, topics: tuple[str, str, str | None], index: int, cloud_msg: Any, image_msg: Any,
+              info_msg: Any, cloud_time_s: float, image_time_s: float,
+              tf_edges: Callable[[], dict[tuple[str, str], np.ndarray]], notes: list[str]) -> BagScene:
+    """Cloud ``index`` of a bag and its image as a :class:`BagScene`.
+
+    ``topics``: the cloud, image and camera info topics; ``info_msg``: the CameraInfo (None: no camera);
+    ``tf_edges``: gives the ``/tf_static`` tree, asked only when the cloud's and the image's frames differ.
+    """
+    cloud_topic, image_topic, info_topic = topics
+    cloud = pointcloud2_to_cloud(cloud_msg, f"{where}: {cloud_topic} #{index}")
+    image = image_to_rgb(image_msg, f"{where}: {image_topic}")
+    camera = None
+    if info_msg is not None:
+        camera = camera_info_to_camera(info_msg, (image.shape[1], image.shape[0]), f"{where}: {info_topic}")
+    lidar_frame, camera_frame = _frame(cloud_msg), _frame(image_msg)
+    T_tf = None
+    if lidar_frame and camera_frame and lidar_frame != camera_frame:
+        T_tf = compose_tree(tf_edges(), camera_frame, lidar_frame)
+    return BagScene(
+        cloud=dataclasses.replace(cloud, meta={**cloud.meta, "source": f"{where}:{cloud_topic}#{index}"}),
+        image=image, camera=camera, cloud_index=index, cloud_time_s=float(cloud_time_s),
+        image_time_s=float(image_time_s), gap_s=float(image_time_s - cloud_time_s), lidar_frame=lidar_frame,
+        camera_frame=camera_frame, T_camera_lidar_tf=T_tf, cloud_topic=cloud_topic, image_topic=image_topic,
+        camera_info_topic=info_topic, notes=notes,
+    )  # fmt: skip
+
+
 def read_bag_scene(
     path: str | os.PathLike,
     cloud_topic: str | None = None,
@@ -478,44 +505,18 @@ def read_bag_scene(
             if n_clouds == 0:
                 raise CalibError(f"{bag.given}: topic {cloud_topic} holds no messages")
             raise CalibError(f"{bag.given}: index {chosen} but {cloud_topic} has {n_clouds} clouds (0..{n_clouds - 1})")
-        cloud = pointcloud2_to_cloud(cloud_msg, f"{bag.given}: {cloud_topic} #{chosen}")
-
         image_time, image_msg = _nearest(bag, bag.connections(image_topic), cloud_time, image_topic)
-        image = image_to_rgb(image_msg, f"{bag.given}: {image_topic}")
-
-        camera = None
-        if info_topic is not None:
-            _, info = _nearest(bag, bag.connections(info_topic), image_time, info_topic)
-            camera = camera_info_to_camera(info, (image.shape[1], image.shape[0]), f"{bag.given}: {info_topic}")
-
-        lidar_frame, camera_frame = _frame(cloud_msg), _frame(image_msg)
-        T_tf = None
-        if lidar_frame and camera_frame and lidar_frame != camera_frame:
-            T_tf = compose_tree(_tf_edges(bag), camera_frame, lidar_frame)
-            if T_tf is not None:
-                notes.append(f"/tf_static gives {camera_frame} <- {lidar_frame}: offered as the initial extrinsic")
-                if "optical" not in camera_frame:
-                    # ROS images live in an optical frame (z forward, x right, y down), as this package's camera frame.
-                    notes.append(
-                        f"warning: the image frame {camera_frame!r} is not named *optical*; if it is a body frame "
-                        "(x forward) the initial extrinsic misses the optical rotation"
-                    )
-        scene = BagScene(
-            cloud=dataclasses.replace(cloud, meta={**cloud.meta, "source": f"{bag.given}:{cloud_topic}#{chosen}"}),
-            image=image,
-            camera=camera,
-            cloud_index=chosen,
-            cloud_time_s=cloud_time,
-            image_time_s=float(image_time),
-            gap_s=float(image_time - cloud_time),
-            lidar_frame=lidar_frame,
-            camera_frame=camera_frame,
-            T_camera_lidar_tf=T_tf,
-            cloud_topic=cloud_topic,
-            image_topic=image_topic,
-            camera_info_topic=info_topic,
-            notes=notes,
-        )
+        info = None if info_topic is None else _nearest(bag, bag.connections(info_topic), image_time, info_topic)[1]
+        scene = _scene_of(str(bag.given), (cloud_topic, image_topic, info_topic), chosen, cloud_msg, image_msg, info,
+                          cloud_time, image_time, lambda: _tf_edges(bag), notes)
+        if scene.T_camera_lidar_tf is not None:
+            notes.append(f"/tf_static gives {scene.camera_frame} <- {scene.lidar_frame}: offered as the initial extrinsic")
+            if "optical" not in scene.camera_frame:
+                # ROS images live in an optical frame (z forward, x right, y down), as this package's camera frame.
+                notes.append(
+                    f"warning: the image frame {scene.camera_frame!r} is not named *optical*; if it is a body frame "
+                    "(x forward) the initial extrinsic misses the optical rotation"
+                )
     if abs(scene.gap_s) > 0.05:
         scene.notes.append(f"warning: the image is {1000 * scene.gap_s:+.1f} ms from the cloud; a moving rig blurs the calibration")
     return scene
