@@ -45,7 +45,7 @@ from typing import Any, Iterator, Sequence
 
 import numpy as np
 
-from ..errors import CalibError
+from ..errors import CalibError, one_line
 from .bags import (
     CAMERA_INFO,
     IMAGE_TYPES,
@@ -55,7 +55,6 @@ from .bags import (
     _Bag,
     _bag_path,
     _frame,
-    _one_line,
     _pick_topic,
     _scene_of,
     _stamp_s,
@@ -521,7 +520,7 @@ def _raw_at(bag: _Bag, conns, wanted: set[int]) -> dict[int, Any]:
             if i >= last:
                 break
     except Exception as exc:  # rosbags raises many types for bad data
-        raise CalibError(f"{bag.given}: unreadable message ({_one_line(exc)})") from None
+        raise CalibError(f"{bag.given}: unreadable message ({one_line(exc)})") from None
     return out
 
 

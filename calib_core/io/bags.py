@@ -35,7 +35,7 @@ from typing import Any, Callable, Iterator
 
 import numpy as np
 
-from ..errors import CalibError
+from ..errors import CalibError, one_line
 from .extrinsic_formats import compose_tree
 from .scan_readers import PointCloud
 
@@ -174,7 +174,7 @@ class _Bag:
         except CalibError:
             raise
         except Exception as exc:  # rosbags raises many types for bad files
-            raise CalibError(f"{self.given}: not a readable ROS bag ({_one_line(exc)})") from None
+            raise CalibError(f"{self.given}: not a readable ROS bag ({one_line(exc)})") from None
         return self
 
     def __exit__(self, *exc) -> bool:
@@ -207,18 +207,13 @@ class _Bag:
         except CalibError:
             raise
         except Exception as exc:
-            raise CalibError(f"{self.given}: unreadable message ({_one_line(exc)})") from None
+            raise CalibError(f"{self.given}: unreadable message ({one_line(exc)})") from None
 
     def raw_times(self, conns) -> np.ndarray:
         try:
             return np.array([t for _, t, _ in self.reader.messages(connections=conns)], dtype=np.int64)
         except Exception as exc:
-            raise CalibError(f"{self.given}: unreadable bag ({_one_line(exc)})") from None
-
-
-def _one_line(err: BaseException, limit: int = 160) -> str:
-    text = " ".join(str(err).split()) or type(err).__name__
-    return text if len(text) <= limit else text[: limit - 3] + "..."
+            raise CalibError(f"{self.given}: unreadable bag ({one_line(exc)})") from None
 
 
 def _stamp_s(msg: Any, receive_ns: int) -> float:
@@ -251,7 +246,7 @@ def bag_info(path: str | os.PathLike) -> BagInfo:
                 first[name] = min(first.get(name, t_ns), t_ns)
                 last[name] = max(last.get(name, t_ns), t_ns)
         except Exception as exc:
-            raise CalibError(f"{bag.given}: unreadable bag ({_one_line(exc)})") from None
+            raise CalibError(f"{bag.given}: unreadable bag ({one_line(exc)})") from None
         topics = []
         for name, info in sorted(r.topics.items()):
             n = count.get(name, 0)
@@ -322,7 +317,7 @@ def image_to_rgb(msg: Any, where: str = "image") -> np.ndarray:
     try:
         img = message_to_cvimage(msg, "rgb8")
     except Exception as exc:  # unsupported encodings, bad data
-        raise CalibError(f"{where}: cannot decode image ({_one_line(exc)})") from None
+        raise CalibError(f"{where}: cannot decode image ({one_line(exc)})") from None
     img = np.asarray(img)
     if img.ndim == 2:
         img = np.repeat(img[:, :, None], 3, axis=2)
