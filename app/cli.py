@@ -32,6 +32,7 @@ from .cli_guard import (  # noqa: F401  (with_default_command, load_camera_from_
 )
 from .cli_common import (  # noqa: F401  (format_summary: public here too)
     add_bag_topic_args,
+    add_organize_args,
     add_scan_args,
     format_summary,
     load_scan_from_args,
@@ -222,10 +223,7 @@ def build_parser() -> argparse.ArgumentParser:
         "(one 'error:' line), 3 solved but the quality status is unreliable (the file is still written).",
     )
     p.add_argument("--scan", type=Path, default=None, help="scan file (needed when pairs use laser_rc)")
-    p.add_argument("--organize", choices=["auto", "ring", "elevation", "firing", "spherical"], default="auto")
-    p.add_argument("--beams", type=int, default=None)
-    p.add_argument("--h-res-deg", type=float, default=None)
-    p.add_argument("--v-res-deg", type=float, default=None)
+    add_organize_args(p)
     add_camera_args(p, required=True)
     p.add_argument("--pairs", type=Path, default=None, help="pairs YAML (one shot; or give --shot)")
     add_shot_args(p)
