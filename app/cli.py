@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
-from calib_core import compile_events
+from calib_core import __version__, compile_events
 
 from .cli_guard import (  # noqa: F401  (with_default_command, load_camera_from_args: public, used elsewhere)
     EXIT_USAGE,
@@ -30,13 +30,12 @@ from .cli_guard import (  # noqa: F401  (with_default_command, load_camera_from_
     remove_stale_temp_files,
     with_default_command,
 )
-from .cli_common import (  # noqa: F401  (default_sample_dir, format_summary, scan_options: public here too)
+from .cli_common import (  # noqa: F401  (format_summary: public here too)
     add_bag_topic_args,
+    add_organize_args,
     add_scan_args,
-    default_sample_dir,
     format_summary,
     load_scan_from_args,
-    scan_options,
 )
 from .cli_serve import add_serve_parser
 from .cli_shots import add_bag_frames_parser, add_shot_args, check_shot_form, cmd_propose_shots, cmd_solve_shots
@@ -55,10 +54,6 @@ class Outcome:
 
     code: int
     stderr_line: str
-
-
-def _add_camera_arg(p: argparse.ArgumentParser) -> None:
-    add_camera_args(p, required=True)
 
 
 # --- commands ----------------------------------------------------------------
@@ -208,12 +203,6 @@ def cmd_sample(args: argparse.Namespace) -> int:
     return 0
 
 
-def _version() -> str:
-    from calib_core import __version__
-
-    return __version__
-
-
 def build_parser() -> argparse.ArgumentParser:
     parser = OneLineParser(
         prog="ba-calib",
@@ -222,7 +211,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--scan/--image/--camera are given; --host and --port work as for serve).",
     )
     parser.add_argument("--debug", action="store_true", help="show tracebacks of internal errors")
-    parser.add_argument("--version", action="version", version=f"ba-calib {_version()}")
+    parser.add_argument("--version", action="version", version=f"ba-calib {__version__}")
     sub = parser.add_subparsers(dest="command")
 
     add_serve_parser(sub)
@@ -234,11 +223,8 @@ def build_parser() -> argparse.ArgumentParser:
         "(one 'error:' line), 3 solved but the quality status is unreliable (the file is still written).",
     )
     p.add_argument("--scan", type=Path, default=None, help="scan file (needed when pairs use laser_rc)")
-    p.add_argument("--organize", choices=["auto", "ring", "elevation", "firing", "spherical"], default="auto")
-    p.add_argument("--beams", type=int, default=None)
-    p.add_argument("--h-res-deg", type=float, default=None)
-    p.add_argument("--v-res-deg", type=float, default=None)
-    _add_camera_arg(p)
+    add_organize_args(p)
+    add_camera_args(p, required=True)
     p.add_argument("--pairs", type=Path, default=None, help="pairs YAML (one shot; or give --shot)")
     add_shot_args(p)
     p.add_argument("--max-pairs", type=int, default=1_000, help="refuse pairs files with more pairs than this (default 1000)")
@@ -257,7 +243,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("propose", help="propose the next pairs to click (guided picking), best first")
     add_scan_args(p, required=False)
-    _add_camera_arg(p)
+    add_camera_args(p, required=True)
     p.add_argument("--pairs", type=Path, default=None, help="pairs so far (>= 4, or give --extrinsics; or give --shot)")
     add_shot_args(p, images=True)
     p.add_argument("--extrinsics", type=Path, default=None, help="initial extrinsics YAML (imported calibration)")
@@ -277,7 +263,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("colorize", help="colour the scan from the image and write a PLY")
     add_scan_args(p)
     p.add_argument("--image", required=True, type=Path)
-    _add_camera_arg(p)
+    add_camera_args(p, required=True)
     p.add_argument("--extrinsics", required=True, type=Path)
     p.add_argument("--no-occlusion", action="store_true", help="skip the depth test (colours occluded points too)")
     p.add_argument("-o", "--output", required=True, type=Path)
@@ -285,7 +271,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("render", help="render the scan from the camera's viewpoint (PNG picture or NPZ arrays)")
     add_scan_args(p)
-    _add_camera_arg(p)
+    add_camera_args(p, required=True)
     p.add_argument("--extrinsics", required=True, type=Path, help="T_camera_lidar: ba-calib YAML, KITTI calib txt or any 'export' format")
     p.add_argument("--mode", choices=["range", "intensity", "ba"], default="range", help="shading of the PNG (default range)")
     p.add_argument("--ba-direction", choices=["horizontal", "vertical", "diag_pos45", "diag_neg45"], default="horizontal",

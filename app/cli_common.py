@@ -36,6 +36,17 @@ def default_sample_dir() -> Path:
 
 def add_scan_args(p: argparse.ArgumentParser, required: bool = True) -> None:
     p.add_argument("--scan", required=required, type=Path, help="scan file: .npz (native), .pcd, .ply, .bin (KITTI), .las/.laz, .npy")
+    add_organize_args(p)
+    p.add_argument(
+        "--sensor-origin", type=float, nargs=3, metavar=("X", "Y", "Z"), default=None,
+        help="scanner position in the file's frame (metres), for scans stored in a world frame",
+    )
+    p.add_argument("--bin-columns", type=int, default=None, metavar="N", help="float32 values per point of a .bin scan (KITTI 4, nuScenes 5; default: detected)")
+    p.add_argument("--max-points", type=int, default=None, metavar="N", help="largest cloud (points or grid cells) a scan file may hold (default 5,000,000)")
+
+
+def add_organize_args(p: argparse.ArgumentParser) -> None:
+    """How an unorganized cloud becomes a depth matrix (``solve`` and ``serve`` take these without the other scan options)."""
     p.add_argument(
         "--organize",
         choices=["auto", "ring", "elevation", "firing", "spherical"],
@@ -47,12 +58,6 @@ def add_scan_args(p: argparse.ArgumentParser, required: bool = True) -> None:
     p.add_argument("--h-res-deg", type=float, default=None,
                    help="azimuth resolution in degrees: the spherical fallback's cells, the columns of the other layouts")
     p.add_argument("--v-res-deg", type=float, default=None, help="elevation resolution of the spherical fallback")
-    p.add_argument(
-        "--sensor-origin", type=float, nargs=3, metavar=("X", "Y", "Z"), default=None,
-        help="scanner position in the file's frame (metres), for scans stored in a world frame",
-    )
-    p.add_argument("--bin-columns", type=int, default=None, metavar="N", help="float32 values per point of a .bin scan (KITTI 4, nuScenes 5; default: detected)")
-    p.add_argument("--max-points", type=int, default=None, metavar="N", help="largest cloud (points or grid cells) a scan file may hold (default 5,000,000)")
 
 
 def add_bag_topic_args(p: argparse.ArgumentParser) -> None:

@@ -51,7 +51,7 @@ def check_args(args: argparse.Namespace) -> None:
             bad("--" + key.replace("_", "-"), v, "an angle in degrees from 0.0001 to 90")
     size = getattr(args, "image_size", None)
     if size is not None:
-        from calib_core.cameras.io import MAX_IMAGE_SIDE
+        from calib_core.cameras.params import MAX_IMAGE_SIDE
 
         if not all(1 <= v <= MAX_IMAGE_SIDE for v in size):
             bad("--image-size", list(size), f"a width and a height from 1 to {MAX_IMAGE_SIDE} pixels")

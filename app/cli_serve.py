@@ -136,6 +136,7 @@ def _serve_shots(args: argparse.Namespace) -> int:
 
 def add_serve_parser(sub) -> None:
     """The ``serve`` sub-command's options (``sub``: the parser's sub-parsers)."""
+    from .cli_common import add_organize_args
     from .cli_guard import add_camera_args
 
     p = sub.add_parser("serve", help="open the browser app on a scene",
@@ -148,13 +149,7 @@ def add_serve_parser(sub) -> None:
                    help="a scan and the photo taken with it; repeat for several shots of one rig (one camera, one "
                         "T_camera_lidar): every shot's pairs are solved together, the page switches shots")
     add_camera_args(p, required=False)
-    p.add_argument("--organize", choices=["auto", "ring", "elevation", "firing", "spherical"], default="auto",
-                   help="how an unorganized cloud becomes a depth matrix (default: ring field if present, else the "
-                        "scan order if points are stored laser after laser, else --beams, else spherical)")
-    p.add_argument("--beams", type=int, default=None, help="number of beams, for clouds without a ring field")
-    p.add_argument("--h-res-deg", type=float, default=None,
-                   help="azimuth resolution in degrees: the spherical fallback's cells, the columns of the other layouts")
-    p.add_argument("--v-res-deg", type=float, default=None, help="elevation resolution of the spherical fallback")
+    add_organize_args(p)
     p.add_argument("--session", type=Path, default=None, help="pairs session file, saved after every change and restored on start")
     p.add_argument("--output", type=Path, default=None, help="where Export also writes the extrinsics YAML")
     p.add_argument("--host", default="127.0.0.1", help="interface to bind (default 127.0.0.1: this machine only)")

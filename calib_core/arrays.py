@@ -51,9 +51,7 @@ def as_transform(value: Any, name: str = "T_camera_lidar") -> np.ndarray:
     a = np.asarray(value, dtype=np.float64)
     if a.shape != (4, 4):
         raise CalibError(f"{name} must be a 4x4 matrix, got shape {a.shape}")
-    if not np.all(np.isfinite(a)):
-        raise CalibError(f"{name} contains NaN or infinite values")
-    return a
+    return finite_array(a, (4, 4), name)
 
 
 def angle_between_rad(a: Any, b: Any) -> np.ndarray:

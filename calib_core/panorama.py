@@ -29,7 +29,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from .cameras.base import as_points
+from .arrays import as_rows
 from .errors import CalibError
 
 _DEFAULT_MAX_WIDTH = 4096
@@ -172,7 +172,7 @@ class Panorama:
     # ---------------------------------------------------------------- geometry
     def angles(self, pano_pixels: Any) -> tuple[np.ndarray, np.ndarray]:
         """Azimuth and elevation (radians) of panorama pixels ``(N, 2)``."""
-        uv = as_points(pano_pixels, "panorama pixels", 2)
+        uv = as_rows(pano_pixels, "panorama pixels", 2)
         (a0, a1), (e0, e1) = self.azimuth_range_rad, self.elevation_range_rad
         az = a0 + (uv[:, 0] + 0.5) / self.width * (a1 - a0)
         el = e1 - (uv[:, 1] + 0.5) / self.height * (e1 - e0)
@@ -191,7 +191,7 @@ class Panorama:
         (N, 3) ndarray
             NaN rows for pixels outside the panorama.
         """
-        uv = as_points(pano_pixels, "panorama pixels", 2)
+        uv = as_rows(pano_pixels, "panorama pixels", 2)
         az, el = self.angles(uv)
         ce = np.cos(el)
         b = (ce * np.cos(az))[:, None] * self.forward_camera + (ce * np.sin(az))[:, None] * self.right_camera
@@ -218,7 +218,7 @@ class Panorama:
         valid : (N,) bool ndarray
             The pixel lies inside the panorama.
         """
-        b = as_points(bearings_camera, "bearings", 3)
+        b = as_rows(bearings_camera, "bearings", 3)
         with np.errstate(invalid="ignore", divide="ignore"):
             b = b / np.linalg.norm(b, axis=1, keepdims=True)
             az = np.arctan2(b @ self.right_camera, b @ self.forward_camera)
@@ -244,7 +244,7 @@ class Panorama:
 
     def from_camera_pixels(self, pixels: Any) -> tuple[np.ndarray, np.ndarray]:
         """Panorama pixels of original-image pixels: ``self.project(camera.bearing(.))``."""
-        return self.project(self.camera.bearing(as_points(pixels, "pixels", 2)))
+        return self.project(self.camera.bearing(as_rows(pixels, "pixels", 2)))
 
     # --------------------------------------------------------------- resampling
     def render(self, image: np.ndarray, interpolation: int = cv2.INTER_LINEAR) -> np.ndarray:

@@ -338,15 +338,6 @@ def _cell_ranges(depth) -> np.ndarray:
 SHADE_MODES = ("range", "intensity", "ba")
 
 
-def _sample_cells(render: CameraRender, cell_image: np.ndarray) -> np.ndarray:
-    """Values of a per-cell (H_d, W_d) image at the render's cells; pixels without a return get 0."""
-    rc = render.cell_rc
-    shown = rc[..., 0] >= 0
-    out = np.zeros(rc.shape[:2], cell_image.dtype)
-    out[shown] = cell_image[rc[shown, 0], rc[shown, 1]]
-    return out
-
-
 def shade_render(render: CameraRender, depth, mode: str = "range", *, intensity=None, ba_image=None) -> np.ndarray:
     """The render as an RGBA picture for display beside the photo.
 

@@ -793,10 +793,7 @@ def shots_to_dict(shots_result: ShotsResult, shots: Sequence[Shot]) -> list[dict
     ``{index, px, deg}``, ``note``), and the disagreement ``test`` (``rotation_deg``,
     ``statistic``, ``dof``, ``p_value``, ``disagrees``).
     """
-
-    def num(x) -> float | None:
-        x = float(x)
-        return x if math.isfinite(x) else None
+    from .io.extrinsics import finite_or_none as num
 
     loso = {e.shot: e for e in shots_result.leave_one_shot_out}
     tests = {t.shot: t for t in shots_result.tests}

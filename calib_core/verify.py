@@ -28,6 +28,7 @@ import numpy as np
 
 from .arrays import angle_between_rad
 from .errors import CalibError
+from .io.extrinsics import finite_or_none
 from .solve import MIN_PAIRS, CalibrationResult, solve_extrinsics
 from .transforms import rotation_angle_deg, transform_points
 
@@ -483,11 +484,6 @@ def verify_pairs(pairs: Sequence, depth, camera, **kwargs) -> VerifyReport:
     return verify_calibration(points, bearings, pixels, camera, check=[p.check for p in pairs], ids=ids, **kwargs)
 
 
-def _num(x) -> float | None:
-    x = float(x)
-    return x if np.isfinite(x) else None
-
-
 def _mean(values: np.ndarray) -> float | None:
     finite = np.asarray(values, dtype=np.float64)
     finite = finite[np.isfinite(finite)]
@@ -517,27 +513,27 @@ def verification_to_dict(report: VerifyReport) -> dict[str, Any]:
         "n_fit_pairs": int(report.fit_index.size),
         "n_check_pairs": int(report.check_index.size),
         "check_pairs": [
-            {"id": ids[i], "px": _num(px), "deg": _num(deg)}
+            {"id": ids[i], "px": finite_or_none(px), "deg": finite_or_none(deg)}
             for i, px, deg in zip(report.check_index, report.check_px, report.check_deg)
         ],
         "check_mean_px": _mean(report.check_px),
         "check_mean_deg": _mean(report.check_deg),
         "leave_one_out": [
-            {"id": ids[i], "px": _num(px), "deg": _num(deg)}
+            {"id": ids[i], "px": finite_or_none(px), "deg": finite_or_none(deg)}
             for i, px, deg in zip(report.fit_index, report.loo_px, report.loo_deg)
         ],
         "leave_one_out_mean_px": _mean(report.loo_px),
         "leave_one_out_mean_deg": _mean(report.loo_deg),
         "sigma": {
-            "translation_m": [_num(v) for v in r.sigma_translation_m],
-            "rpy_deg": [_num(v) for v in r.sigma_rpy_deg],
+            "translation_m": [finite_or_none(v) for v in r.sigma_translation_m],
+            "rpy_deg": [finite_or_none(v) for v in r.sigma_rpy_deg],
         },
     }
     if report.reference is not None:
-        doc["reference"] = {k: (_num(v) if k != "n_points" else int(v)) for k, v in report.reference.items()}
+        doc["reference"] = {k: (finite_or_none(v) if k != "n_points" else int(v)) for k, v in report.reference.items()}
     if report.pairs_vs_count is not None:
         doc["error_vs_pair_count"] = {
-            k: ([int(v) for v in vals] if k == "n_pairs" else [_num(v) for v in vals]) for k, vals in report.pairs_vs_count.items()
+            k: ([int(v) for v in vals] if k == "n_pairs" else [finite_or_none(v) for v in vals]) for k, vals in report.pairs_vs_count.items()
         }
     doc["warnings"] = list(report.warnings)
     return doc

@@ -96,14 +96,8 @@ def in_image(pixels: np.ndarray, width: int, height: int) -> np.ndarray:
         return (u >= -0.5) & (u <= width - 0.5) & (v >= -0.5) & (v <= height - 0.5)
 
 
-def as_points(arr: Any, name: str, dim: int) -> np.ndarray:
-    """``arr`` as a float64 ``(N, dim)`` array (one ``(dim,)`` row allowed), or a :class:`CalibError`
-    (:func:`calib_core.arrays.as_rows`)."""
-    return as_rows(arr, name, dim)
-
-
 def as_points_keep_float32(points: Any) -> np.ndarray:
-    """``as_points(points, "points", 3)``, but float32 input stays float32.
+    """``as_rows(points, "points", 3)``, but float32 input stays float32.
 
     Bulk colouring passes float32 points and is projected in float32.  The
     result is C-contiguous, or a column-major float32 array as it came (the
@@ -111,17 +105,17 @@ def as_points_keep_float32(points: Any) -> np.ndarray:
     """
     P = np.asarray(points)
     if P.dtype != np.float32:
-        return np.ascontiguousarray(as_points(P, "points", 3))
+        return np.ascontiguousarray(as_rows(P, "points", 3))
     if P.ndim != 2 or P.shape[1] != 3:
-        return as_points(P, "points", 3).astype(np.float32)  # (3,) -> (1, 3), or the shape error
+        return as_rows(P, "points", 3).astype(np.float32)  # (3,) -> (1, 3), or the shape error
     if P.flags.c_contiguous or P.flags.f_contiguous:
         return P
     return np.ascontiguousarray(P)
 
 
 def as_pixels(pixels: Any) -> np.ndarray:
-    """``as_points(pixels, "pixels", 2)``, C-contiguous (for the compiled kernels)."""
-    return np.ascontiguousarray(as_points(pixels, "pixels", 2))
+    """``as_rows(pixels, "pixels", 2)``, C-contiguous (for the compiled kernels)."""
+    return np.ascontiguousarray(as_rows(pixels, "pixels", 2))
 
 
 def empty_projection(P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -40,15 +40,7 @@ from ..io.atomic import write_yaml_atomic
 from ..io.input_files import MAX_CAMERA_BYTES, check_input_file, read_input_text
 from ..io.yaml_files import parse_json_text, read_yaml_mapping
 from .base import CAMERA_MODELS, CameraModel
-from .params import (  # noqa: F401  (MAX_PARAM, MAX_IMAGE_SIDE: public here too)
-    MAX_IMAGE_SIDE,
-    MAX_PARAM,
-    numeric_array,
-    param_float,
-    param_image_size,
-    param_vector,
-    require_keys,
-)
+from .params import numeric_array, param_float, param_image_size, param_vector, require_keys
 
 #: ROS ``distortion_model`` names -> our model names.
 ROS_DISTORTION_MODELS = {

@@ -10,7 +10,7 @@ from typing import Any, Iterable
 
 import numpy as np
 
-from ..errors import CalibError
+from ..errors import CalibError, short_repr
 
 #: Largest magnitude of any camera parameter (pixels, coefficients); beyond it a value is absurd.
 MAX_PARAM = 1e8
@@ -18,24 +18,19 @@ MAX_PARAM = 1e8
 MAX_IMAGE_SIDE = 65_536
 
 
-def _short(value: Any) -> str:
-    text = repr(value)
-    return text if len(text) <= 80 else text[:77] + "..."
-
-
 def numeric_array(value: Any, name: str, max_abs: float = MAX_PARAM) -> np.ndarray:
     """``value`` as a finite float64 array of magnitudes at most ``max_abs``, or a :class:`CalibError` naming ``name``."""
     try:
         arr = np.asarray(value)
     except (ValueError, TypeError, OverflowError, RecursionError):
-        raise CalibError(f"{name}: expected numbers, got {_short(value)}") from None
+        raise CalibError(f"{name}: expected numbers, got {short_repr(value)}") from None
     if arr.dtype == object or arr.dtype.kind not in "iuf":
-        raise CalibError(f"{name}: expected numbers, got {_short(value)}")
+        raise CalibError(f"{name}: expected numbers, got {short_repr(value)}")
     arr = arr.astype(np.float64)
     if not np.all(np.isfinite(arr)):
-        raise CalibError(f"{name}: numbers must be finite, got {_short(arr.tolist())}")
+        raise CalibError(f"{name}: numbers must be finite, got {short_repr(arr.tolist())}")
     if np.any(np.abs(arr) > max_abs):
-        raise CalibError(f"{name}: numbers must be at most {max_abs:g} in size, got {_short(arr.tolist())}")
+        raise CalibError(f"{name}: numbers must be at most {max_abs:g} in size, got {short_repr(arr.tolist())}")
     return arr
 
 
@@ -76,10 +71,10 @@ def param_image_size(width: Any, height: Any) -> tuple[int, int]:
             raise CalibError(f"{name} must be a positive integer, got {value!r}")
         arr = numeric_array(value, name, max_abs=float("inf"))
         if arr.ndim != 0:
-            raise CalibError(f"{name} must be a positive integer, got {_short(value)}")
+            raise CalibError(f"{name} must be a positive integer, got {short_repr(value)}")
         v = float(arr)
         if v <= 0 or v != int(v):
-            raise CalibError(f"{name} must be a positive integer, got {_short(value)}")
+            raise CalibError(f"{name} must be a positive integer, got {short_repr(value)}")
         if v > MAX_IMAGE_SIDE:
             raise CalibError(f"{name} must be at most {MAX_IMAGE_SIDE} pixels, got {int(v)}")
         out.append(int(v))

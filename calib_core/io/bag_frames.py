@@ -38,7 +38,6 @@ Every problem raises a one-line :class:`~calib_core.errors.CalibError`.
 
 from __future__ import annotations
 
-import dataclasses
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -46,7 +45,7 @@ from typing import Any, Iterator, Sequence
 
 import numpy as np
 
-from ..errors import CalibError
+from ..errors import CalibError, one_line
 from .bags import (
     CAMERA_INFO,
     IMAGE_TYPES,
@@ -56,13 +55,10 @@ from .bags import (
     _Bag,
     _bag_path,
     _frame,
-    _one_line,
     _pick_topic,
+    _scene_of,
     _stamp_s,
     _tf_edges,
-    camera_info_to_camera,
-    image_to_rgb,
-    pointcloud2_to_cloud,
     write_bag_scene,
 )
 from .extrinsic_formats import compose_tree
@@ -216,10 +212,6 @@ class BagShots:
 
     def __getitem__(self, k: int) -> BagShot:
         return self.shots[k]
-
-    def as_tuples(self) -> list[tuple[Path, Path, float]]:
-        """``[(scan_path, image_path, stamp_s), ...]``."""
-        return [(s.scan, s.image, s.stamp_s) for s in self.shots]
 
 
 # --------------------------------------------------------------------------------------
@@ -528,7 +520,7 @@ def _raw_at(bag: _Bag, conns, wanted: set[int]) -> dict[int, Any]:
             if i >= last:
                 break
     except Exception as exc:  # rosbags raises many types for bad data
-        raise CalibError(f"{bag.given}: unreadable message ({_one_line(exc)})") from None
+        raise CalibError(f"{bag.given}: unreadable message ({one_line(exc)})") from None
     return out
 
 
@@ -577,27 +569,12 @@ def extract_frames(
     for i in indices:
         if i not in clouds or int(table.image_index[i]) not in images:
             raise CalibError(f"{table.where}: cloud #{i} or its image could not be read again (the bag changed?)")
-        cloud_msg = clouds[i][1]
-        image_msg = images[int(table.image_index[i])][1]
-        cloud = pointcloud2_to_cloud(cloud_msg, f"{table.where}: {table.cloud_topic} #{i}")
-        image = image_to_rgb(image_msg, f"{table.where}: {table.image_topic}")
-        camera = None
-        if i in info_for:
-            camera = camera_info_to_camera(infos[info_for[i]][1], (image.shape[1], image.shape[0]),
-                                           f"{table.where}: {table.camera_info_topic}")
-        lidar_frame, camera_frame = _frame(cloud_msg), _frame(image_msg)
-        T_tf = None
-        if lidar_frame and camera_frame and lidar_frame != camera_frame:
-            T_tf = compose_tree(static_edges, camera_frame, lidar_frame)
         gap = float(table.image_stamp_s[i] - table.cloud_stamp_s[i])
         frame_notes = [f"warning: the image is {1000 * gap:+.1f} ms from the cloud"] if abs(gap) > GAP_WARNING_S else []
-        scene = BagScene(
-            cloud=dataclasses.replace(cloud, meta={**cloud.meta, "source": f"{table.where}:{table.cloud_topic}#{i}"}),
-            image=image, camera=camera, cloud_index=i, cloud_time_s=float(table.cloud_stamp_s[i]),
-            image_time_s=float(table.image_stamp_s[i]), gap_s=gap, lidar_frame=lidar_frame, camera_frame=camera_frame,
-            T_camera_lidar_tf=T_tf, cloud_topic=table.cloud_topic, image_topic=table.image_topic,
-            camera_info_topic=table.camera_info_topic, notes=frame_notes,
-        )  # fmt: skip
+        scene = _scene_of(table.where, (table.cloud_topic, table.image_topic, table.camera_info_topic), i,
+                          clouds[i][1], images[int(table.image_index[i])][1],
+                          infos[info_for[i]][1] if i in info_for else None, table.cloud_stamp_s[i],
+                          table.image_stamp_s[i], lambda: static_edges, frame_notes)
         paths = write_bag_scene(scene, out / f"frame_{i:05d}")
         if "camera" in paths:
             camera_texts.add(paths["camera"].read_bytes())

@@ -31,11 +31,11 @@ import io
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any, Callable, Iterator
 
 import numpy as np
 
-from ..errors import CalibError
+from ..errors import CalibError, one_line
 from .extrinsic_formats import compose_tree
 from .scan_readers import PointCloud
 
@@ -48,8 +48,6 @@ __all__ = [
     "image_to_rgb",
     "pointcloud2_to_cloud",
     "read_bag_scene",
-    "static_transform",
-    "topic_stamps",
     "write_bag_scene",
     "write_cloud_pcd",
     "POINTCLOUD2",
@@ -88,9 +86,6 @@ class BagInfo:
     start_s: float
     duration_s: float
     topics: list[TopicInfo]
-
-    def topics_of(self, *msgtypes: str) -> list[str]:
-        return [t.name for t in self.topics if t.msgtype in msgtypes]
 
 
 @dataclass
@@ -179,7 +174,7 @@ class _Bag:
         except CalibError:
             raise
         except Exception as exc:  # rosbags raises many types for bad files
-            raise CalibError(f"{self.given}: not a readable ROS bag ({_one_line(exc)})") from None
+            raise CalibError(f"{self.given}: not a readable ROS bag ({one_line(exc)})") from None
         return self
 
     def __exit__(self, *exc) -> bool:
@@ -212,18 +207,13 @@ class _Bag:
         except CalibError:
             raise
         except Exception as exc:
-            raise CalibError(f"{self.given}: unreadable message ({_one_line(exc)})") from None
+            raise CalibError(f"{self.given}: unreadable message ({one_line(exc)})") from None
 
     def raw_times(self, conns) -> np.ndarray:
         try:
             return np.array([t for _, t, _ in self.reader.messages(connections=conns)], dtype=np.int64)
         except Exception as exc:
-            raise CalibError(f"{self.given}: unreadable bag ({_one_line(exc)})") from None
-
-
-def _one_line(err: BaseException, limit: int = 160) -> str:
-    text = " ".join(str(err).split()) or type(err).__name__
-    return text if len(text) <= limit else text[: limit - 3] + "..."
+            raise CalibError(f"{self.given}: unreadable bag ({one_line(exc)})") from None
 
 
 def _stamp_s(msg: Any, receive_ns: int) -> float:
@@ -256,7 +246,7 @@ def bag_info(path: str | os.PathLike) -> BagInfo:
                 first[name] = min(first.get(name, t_ns), t_ns)
                 last[name] = max(last.get(name, t_ns), t_ns)
         except Exception as exc:
-            raise CalibError(f"{bag.given}: unreadable bag ({_one_line(exc)})") from None
+            raise CalibError(f"{bag.given}: unreadable bag ({one_line(exc)})") from None
         topics = []
         for name, info in sorted(r.topics.items()):
             n = count.get(name, 0)
@@ -267,12 +257,6 @@ def bag_info(path: str | os.PathLike) -> BagInfo:
         start = r.start_time * 1e-9 if n_all else float("nan")
         duration = r.duration * 1e-9 if n_all else 0.0
         return BagInfo(bag.path, bag.kind(), start, duration, topics)
-
-
-def topic_stamps(path: str | os.PathLike, topic: str) -> np.ndarray:
-    """``header.stamp`` of every message on ``topic``, seconds (for choosing a frame)."""
-    with _Bag(path) as bag:
-        return np.array([_stamp_s(m, t) for t, m in bag.messages(bag.connections(topic))])
 
 
 # --------------------------------------------------------------------------------------
@@ -333,7 +317,7 @@ def image_to_rgb(msg: Any, where: str = "image") -> np.ndarray:
     try:
         img = message_to_cvimage(msg, "rgb8")
     except Exception as exc:  # unsupported encodings, bad data
-        raise CalibError(f"{where}: cannot decode image ({_one_line(exc)})") from None
+        raise CalibError(f"{where}: cannot decode image ({one_line(exc)})") from None
     img = np.asarray(img)
     if img.ndim == 2:
         img = np.repeat(img[:, :, None], 3, axis=2)
@@ -398,12 +382,6 @@ def _tf_edges(bag: _Bag) -> dict[tuple[str, str], np.ndarray]:
     return edges
 
 
-def static_transform(path: str | os.PathLike, target_frame: str, source_frame: str) -> np.ndarray | None:
-    """``T_target_source`` from the bag's ``/tf_static`` (maps source points into target), or None."""
-    with _Bag(path) as bag:
-        return compose_tree(_tf_edges(bag), target_frame.lstrip("/"), source_frame.lstrip("/"))
-
-
 # --------------------------------------------------------------------------------------
 # one scene
 # --------------------------------------------------------------------------------------
@@ -424,7 +402,6 @@ def _pick_topic(bag: _Bag, given: str | None, msgtypes: tuple[str, ...], what: s
     raise CalibError(f"{bag.given}: several {what} topics ({', '.join(names)}); choose one with {option}")
 
 
-
 def _nearest(bag: _Bag, conns, target_s: float, topic: str) -> tuple[float, Any]:
     """The message of ``conns`` whose stamp is nearest to ``target_s``, one message held at a time."""
     best: tuple[float, float, Any] | None = None
@@ -438,6 +415,33 @@ def _nearest(bag: _Bag, conns, target_s: float, topic: str) -> tuple[float, Any]
     if best is None:
         raise CalibError(f"{bag.given}: topic {topic} holds no messages")
     return best[1], best[2]
+
+
+def _scene_of(where: str, topics: tuple[str, str, str | None], index: int, cloud_msg: Any, image_msg: Any,
+              info_msg: Any, cloud_time_s: float, image_time_s: float,
+              tf_edges: Callable[[], dict[tuple[str, str], np.ndarray]], notes: list[str]) -> BagScene:
+    """Cloud ``index`` of a bag and its image as a :class:`BagScene`.
+
+    ``topics``: the cloud, image and camera info topics; ``info_msg``: the CameraInfo (None: no camera);
+    ``tf_edges``: gives the ``/tf_static`` tree, asked only when the cloud's and the image's frames differ.
+    """
+    cloud_topic, image_topic, info_topic = topics
+    cloud = pointcloud2_to_cloud(cloud_msg, f"{where}: {cloud_topic} #{index}")
+    image = image_to_rgb(image_msg, f"{where}: {image_topic}")
+    camera = None
+    if info_msg is not None:
+        camera = camera_info_to_camera(info_msg, (image.shape[1], image.shape[0]), f"{where}: {info_topic}")
+    lidar_frame, camera_frame = _frame(cloud_msg), _frame(image_msg)
+    T_tf = None
+    if lidar_frame and camera_frame and lidar_frame != camera_frame:
+        T_tf = compose_tree(tf_edges(), camera_frame, lidar_frame)
+    return BagScene(
+        cloud=dataclasses.replace(cloud, meta={**cloud.meta, "source": f"{where}:{cloud_topic}#{index}"}),
+        image=image, camera=camera, cloud_index=index, cloud_time_s=float(cloud_time_s),
+        image_time_s=float(image_time_s), gap_s=float(image_time_s - cloud_time_s), lidar_frame=lidar_frame,
+        camera_frame=camera_frame, T_camera_lidar_tf=T_tf, cloud_topic=cloud_topic, image_topic=image_topic,
+        camera_info_topic=info_topic, notes=notes,
+    )  # fmt: skip
 
 
 def read_bag_scene(
@@ -496,44 +500,18 @@ def read_bag_scene(
             if n_clouds == 0:
                 raise CalibError(f"{bag.given}: topic {cloud_topic} holds no messages")
             raise CalibError(f"{bag.given}: index {chosen} but {cloud_topic} has {n_clouds} clouds (0..{n_clouds - 1})")
-        cloud = pointcloud2_to_cloud(cloud_msg, f"{bag.given}: {cloud_topic} #{chosen}")
-
         image_time, image_msg = _nearest(bag, bag.connections(image_topic), cloud_time, image_topic)
-        image = image_to_rgb(image_msg, f"{bag.given}: {image_topic}")
-
-        camera = None
-        if info_topic is not None:
-            _, info = _nearest(bag, bag.connections(info_topic), image_time, info_topic)
-            camera = camera_info_to_camera(info, (image.shape[1], image.shape[0]), f"{bag.given}: {info_topic}")
-
-        lidar_frame, camera_frame = _frame(cloud_msg), _frame(image_msg)
-        T_tf = None
-        if lidar_frame and camera_frame and lidar_frame != camera_frame:
-            T_tf = compose_tree(_tf_edges(bag), camera_frame, lidar_frame)
-            if T_tf is not None:
-                notes.append(f"/tf_static gives {camera_frame} <- {lidar_frame}: offered as the initial extrinsic")
-                if "optical" not in camera_frame:
-                    # ROS images live in an optical frame (z forward, x right, y down), as this package's camera frame.
-                    notes.append(
-                        f"warning: the image frame {camera_frame!r} is not named *optical*; if it is a body frame "
-                        "(x forward) the initial extrinsic misses the optical rotation"
-                    )
-        scene = BagScene(
-            cloud=dataclasses.replace(cloud, meta={**cloud.meta, "source": f"{bag.given}:{cloud_topic}#{chosen}"}),
-            image=image,
-            camera=camera,
-            cloud_index=chosen,
-            cloud_time_s=cloud_time,
-            image_time_s=float(image_time),
-            gap_s=float(image_time - cloud_time),
-            lidar_frame=lidar_frame,
-            camera_frame=camera_frame,
-            T_camera_lidar_tf=T_tf,
-            cloud_topic=cloud_topic,
-            image_topic=image_topic,
-            camera_info_topic=info_topic,
-            notes=notes,
-        )
+        info = None if info_topic is None else _nearest(bag, bag.connections(info_topic), image_time, info_topic)[1]
+        scene = _scene_of(str(bag.given), (cloud_topic, image_topic, info_topic), chosen, cloud_msg, image_msg, info,
+                          cloud_time, image_time, lambda: _tf_edges(bag), notes)
+        if scene.T_camera_lidar_tf is not None:
+            notes.append(f"/tf_static gives {scene.camera_frame} <- {scene.lidar_frame}: offered as the initial extrinsic")
+            if "optical" not in scene.camera_frame:
+                # ROS images live in an optical frame (z forward, x right, y down), as this package's camera frame.
+                notes.append(
+                    f"warning: the image frame {scene.camera_frame!r} is not named *optical*; if it is a body frame "
+                    "(x forward) the initial extrinsic misses the optical rotation"
+                )
     if abs(scene.gap_s) > 0.05:
         scene.notes.append(f"warning: the image is {1000 * scene.gap_s:+.1f} ms from the cloud; a moving rig blurs the calibration")
     return scene

@@ -107,14 +107,14 @@ class FrameHint(NamedTuple):
 class ExtrinsicFormat:
     """One entry of :data:`FORMATS`.
 
-    ``write(T_camera_lidar, parent, child, lidar)`` returns the file text;
+    ``write(T_camera_lidar, parent, child, lidar, camera)`` returns the file text;
     ``read(text, hint)`` returns a :class:`ParsedExtrinsics` (``hint``: a :class:`FrameHint`).
     """
 
     name: str
     suffix: str
     description: str
-    write: Callable[[np.ndarray, str, str, str], str]
+    write: Callable[[np.ndarray, str, str, str, str], str]
     read: Callable[[str, "FrameHint"], ParsedExtrinsics]
 
 
@@ -153,12 +153,9 @@ def lidar_and_camera(a: str, b: str, lidar_frame: str | None = None) -> tuple[st
 
 
 def _T_parent_child(T_camera_lidar: np.ndarray, parent: str, lidar: str) -> np.ndarray:
-    """The TF transform from parent to child: maps child points into the parent frame."""
+    """The TF transform from parent to child (maps child points into the parent frame) of ``T_camera_lidar``,
+    and, the map being its own inverse, ``T_camera_lidar`` of a ``T_parent_child``."""
     return invert_T(T_camera_lidar) if parent == lidar else np.asarray(T_camera_lidar, dtype=np.float64)
-
-
-def _T_camera_lidar_from_parent_child(T_parent_child: np.ndarray, parent: str, lidar: str) -> np.ndarray:
-    return invert_T(T_parent_child) if parent == lidar else T_parent_child
 
 
 def _direction_line(parent: str, child: str) -> str:
@@ -244,7 +241,7 @@ def _from_edges(edges: list[tuple[str, str, np.ndarray]], hint: "FrameHint", tex
     if len(edges) == 1:
         parent, child, T = edges[0]
         lidar, camera = _frames_for_reading(text, parent, child, hint.lidar)
-        return ParsedExtrinsics(_T_camera_lidar_from_parent_child(T, parent, lidar), fmt, lidar, camera)
+        return ParsedExtrinsics(_T_parent_child(T, parent, lidar), fmt, lidar, camera)
     lidar, camera = hint.lidar, hint.camera
     marker = _find_marker(text)
     if (lidar is None or camera is None) and marker is not None:
@@ -270,16 +267,14 @@ def _tf_header(parent: str, child: str, lidar: str, camera: str, ros: str) -> st
     )
 
 
-def _write_ros1(T_camera_lidar, parent, child, lidar) -> str:
-    camera = child if parent == lidar else parent
+def _write_ros1(T_camera_lidar, parent, child, lidar, camera) -> str:
     T = _T_parent_child(T_camera_lidar, parent, lidar)
     q = quat_xyzw_from_R(T[:3, :3])
     args = " ".join(_r(v) for v in (*T[:3, 3], *q))
     return _tf_header(parent, child, lidar, camera, "1") + f"rosrun tf2_ros static_transform_publisher {args} {parent} {child}\n"
 
 
-def _write_ros2(T_camera_lidar, parent, child, lidar) -> str:
-    camera = child if parent == lidar else parent
+def _write_ros2(T_camera_lidar, parent, child, lidar, camera) -> str:
     T = _T_parent_child(T_camera_lidar, parent, lidar)
     q = quat_xyzw_from_R(T[:3, :3])
     opts = " ".join(f"--{k} {_r(v)}" for k, v in zip(("x", "y", "z", "qx", "qy", "qz", "qw"), (*T[:3, 3], *q)))
@@ -302,7 +297,6 @@ def _command_tokens(text: str) -> list[str]:
 
 
 def _read_ros1(text: str, hint: FrameHint) -> ParsedExtrinsics:
-    lidar_frame = hint.lidar
     tokens = _command_tokens(text)
     # x y z qx qy qz qw parent child [period_ms]  or  x y z yaw pitch roll parent child [period_ms]
     if len(tokens) in (9, 10) and not _is_number(tokens[7]):
@@ -319,8 +313,7 @@ def _read_ros1(text: str, hint: FrameHint) -> ParsedExtrinsics:
             "ros1-tf: expected 'x y z qx qy qz qw parent child' or 'x y z yaw pitch roll parent child', "
             f"got {len(tokens)} arguments"
         )
-    lidar, camera = _frames_for_reading(text, parent, child, lidar_frame)
-    return ParsedExtrinsics(_T_camera_lidar_from_parent_child(T, parent, lidar), "ros1-tf", lidar, camera)
+    return _from_edges([(parent, child, T)], hint, text, "ros1-tf")
 
 
 def _is_number(token: str) -> bool:
@@ -332,7 +325,6 @@ def _is_number(token: str) -> bool:
 
 
 def _read_ros2(text: str, hint: FrameHint) -> ParsedExtrinsics:
-    lidar_frame = hint.lidar
     tokens = _command_tokens(text)
     opts: dict[str, str] = {}
     i = 0
@@ -353,8 +345,7 @@ def _read_ros2(text: str, hint: FrameHint) -> ParsedExtrinsics:
         rpy = _numbers([opts.get(k, "0") for k in ("roll", "pitch", "yaw")], 3, "ros2-tf --roll --pitch --yaw")
         T = _rpy_rad_T(xyz, rpy)
     parent, child = opts["frame-id"], opts["child-frame-id"]
-    lidar, camera = _frames_for_reading(text, parent, child, lidar_frame)
-    return ParsedExtrinsics(_T_camera_lidar_from_parent_child(T, parent, lidar), "ros2-tf", lidar, camera)
+    return _from_edges([(parent, child, T)], hint, text, "ros2-tf")
 
 
 # --------------------------------------------------------------------------------------
@@ -362,8 +353,7 @@ def _read_ros2(text: str, hint: FrameHint) -> ParsedExtrinsics:
 # --------------------------------------------------------------------------------------
 
 
-def _write_urdf(T_camera_lidar, parent, child, lidar) -> str:
-    camera = child if parent == lidar else parent
+def _write_urdf(T_camera_lidar, parent, child, lidar, camera) -> str:
     T = _T_parent_child(T_camera_lidar, parent, lidar)
     rpy = np.radians(rpy_deg_from_R(T[:3, :3]))
     xyz = " ".join(_r(v) for v in T[:3, 3])
@@ -411,8 +401,7 @@ def _link(joint: ET.Element, which: str) -> str:
 # --------------------------------------------------------------------------------------
 
 
-def _write_autoware(T_camera_lidar, parent, child, lidar) -> str:
-    camera = child if parent == lidar else parent
+def _write_autoware(T_camera_lidar, parent, child, lidar, camera) -> str:
     T = _T_parent_child(T_camera_lidar, parent, lidar)
     rpy = np.radians(rpy_deg_from_R(T[:3, :3]))
     body = {parent: {child: {k: float(v) for k, v in zip(("x", "y", "z", "roll", "pitch", "yaw"), (*T[:3, 3], *rpy))}}}
@@ -462,8 +451,7 @@ def _safe_yaml(text: str, what: str):
 # --------------------------------------------------------------------------------------
 
 
-def _write_opencalib(T_camera_lidar, parent, child, lidar) -> str:
-    camera = child if parent == lidar else parent
+def _write_opencalib(T_camera_lidar, parent, child, lidar, camera) -> str:
     T = np.asarray(T_camera_lidar, dtype=np.float64)
     key = f"{lidar}-to-{camera}-extrinsic"
     doc = {
@@ -510,8 +498,7 @@ def _read_opencalib(text: str, hint: FrameHint) -> ParsedExtrinsics:
     return ParsedExtrinsics(T, "opencalib", lidar, camera)
 
 
-def _write_dvlc(T_camera_lidar, parent, child, lidar) -> str:
-    camera = child if parent == lidar else parent
+def _write_dvlc(T_camera_lidar, parent, child, lidar, camera) -> str:
     T = invert_T(T_camera_lidar)
     values = [float(v) for v in (*T[:3, 3], *quat_xyzw_from_R(T[:3, :3]))]
     doc = {
@@ -551,8 +538,7 @@ def _read_dvlc(text: str, hint: FrameHint) -> ParsedExtrinsics:
 # --------------------------------------------------------------------------------------
 
 
-def _write_kitti(T_camera_lidar, parent, child, lidar) -> str:
-    camera = child if parent == lidar else parent
+def _write_kitti(T_camera_lidar, parent, child, lidar, camera) -> str:
     T = np.asarray(T_camera_lidar, dtype=np.float64)
     # The comment holds a colon so that KITTI readers that split on ':' and
     # parse floats skip it.
@@ -578,8 +564,7 @@ def _read_kitti(text: str, hint: FrameHint) -> ParsedExtrinsics:
     return ParsedExtrinsics(_check_rigid(T, f"kitti camera {hint.kitti_camera}"), "kitti", *found)
 
 
-def _write_matrix(T_camera_lidar, parent, child, lidar) -> str:
-    camera = child if parent == lidar else parent
+def _write_matrix(T_camera_lidar, parent, child, lidar, camera) -> str:
     T = _T_parent_child(T_camera_lidar, parent, lidar)
     rows = "\n".join(" ".join(_r(v) for v in row) for row in T)
     return f"# 4x4 transform T_{parent}_{child}: {_direction_line(parent, child)}\n# {_marker(lidar, camera)}\n{rows}\n"
@@ -651,9 +636,9 @@ def export_extrinsics(
         raise CalibError(f"unknown extrinsics format {fmt!r} (one of {', '.join(FORMATS)})")
     parent = _check_frame(parent_frame, "parent frame")
     child = _check_frame(child_frame, "child frame")
-    lidar, _ = lidar_and_camera(parent, child, lidar_frame)
+    lidar, camera = lidar_and_camera(parent, child, lidar_frame)
     T = _check_rigid(np.array(T_camera_lidar, dtype=np.float64).reshape(4, 4), "T_camera_lidar")
-    return FORMATS[fmt].write(T, parent, child, lidar)
+    return FORMATS[fmt].write(T, parent, child, lidar, camera)
 
 
 def detect_format(text: str) -> str:

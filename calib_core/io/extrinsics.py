@@ -69,8 +69,10 @@ def _floats(a) -> list:
     return np.asarray(a, dtype=np.float64).tolist()
 
 
-def _nan_to_none(values) -> list:
-    return [None if not np.isfinite(v) else float(v) for v in np.asarray(values, dtype=np.float64)]
+def finite_or_none(x) -> float | None:
+    """``float(x)``, or None where it is NaN or infinite (how the YAML documents write "no value")."""
+    x = float(x)
+    return x if np.isfinite(x) else None
 
 
 def transform_to_dict(T_camera_lidar: np.ndarray) -> dict[str, Any]:
@@ -82,7 +84,7 @@ def transform_to_dict(T_camera_lidar: np.ndarray) -> dict[str, Any]:
         "translation_m": _floats(T[:3, 3]),
         "quaternion_xyzw": _floats(quat_xyzw_from_R(T[:3, :3])),
         "rpy_deg": _floats(rpy_deg_from_R(T[:3, :3])),
-        "viewing_deg": _nan_to_none([view.azimuth_deg, view.elevation_deg, view.roll_deg]),
+        "viewing_deg": [finite_or_none(v) for v in (view.azimuth_deg, view.elevation_deg, view.roll_deg)],
         "viewing_direction_lidar": _floats(view.direction_lidar),
         "convention": CONVENTION,
     }
@@ -139,10 +141,10 @@ def result_to_dict(result) -> dict[str, Any]:
             "n_inliers": int(result.n_pairs) - len(outliers),
             "error_estimated": error_estimate_reason(pairs_in_fit(result)) is None,
             "cost": str(result.cost_name),
-            "mean_px": _nan_to_none([result.mean_px])[0],
-            "std_px": _nan_to_none([result.std_px])[0],
-            "mean_deg": _nan_to_none([result.mean_deg])[0],
-            "std_deg": _nan_to_none([result.std_deg])[0],
+            "mean_px": finite_or_none(result.mean_px),
+            "std_px": finite_or_none(result.std_px),
+            "mean_deg": finite_or_none(result.mean_deg),
+            "std_deg": finite_or_none(result.std_deg),
             "per_pair": per_pair,
             "warnings": [str(w) for w in result.warnings],
         },

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from ..errors import CalibError
+from ..errors import CalibError, short_repr
 from .input_files import read_input_text, with_article
 
 #: Deepest nesting of lists/mappings accepted (real files nest fewer than 10 levels).
@@ -150,7 +150,7 @@ def read_yaml_mapping(
 
 def parse_json_text(text: str, where: str) -> Any:
     """``json.loads`` with the same nesting limit as YAML; one-line errors naming ``where``."""
-    depth = max_depth = 0
+    depth = 0
     in_string = escaped = False
     # A bracket count outside strings bounds the depth before parsing (json recurses per level).
     for ch in text:
@@ -183,22 +183,17 @@ def finite_vector(value: Any, length: int, where: str, max_abs: float = 1e9) -> 
     Booleans are refused (YAML's ``true`` is not the number 1).
     """
     if not isinstance(value, (list, tuple, np.ndarray)) or np.ndim(value) != 1:
-        raise CalibError(f"{where}: expected {length} numbers, got {_short(value)}")
+        raise CalibError(f"{where}: expected {length} numbers, got {short_repr(value)}")
     if len(value) != length:
         raise CalibError(f"{where}: expected {length} numbers, got {len(value)}")
     if any(isinstance(x, (bool, np.bool_)) or not isinstance(x, numbers.Real) for x in value):
-        raise CalibError(f"{where}: expected {length} numbers, got {_short(value)}")
+        raise CalibError(f"{where}: expected {length} numbers, got {short_repr(value)}")
     try:
         out = [float(x) for x in value]
     except OverflowError:
-        raise CalibError(f"{where}: number too large, got {_short(value)}") from None
+        raise CalibError(f"{where}: number too large, got {short_repr(value)}") from None
     if not all(x == x and abs(x) != float("inf") for x in out):
         raise CalibError(f"{where}: numbers must be finite, got {out}")
     if any(abs(x) > max_abs for x in out):
         raise CalibError(f"{where}: numbers must be at most {max_abs:g} in size, got {out}")
     return out
-
-
-def _short(value: Any) -> str:
-    text = repr(value)
-    return text if len(text) <= 80 else text[:77] + "..."

@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import CalibError
+from ..errors import CalibError, one_line
 from .depth_matrix import DepthMatrix
 from .organized import organized_cloud_depth
 from .rotating_scanner import rotating_scanner_depth
@@ -196,17 +196,12 @@ def npz_members(path, keys=None, max_bytes: int | None = None) -> dict[str, tupl
     return members
 
 
-def _one_line(err: BaseException) -> str:
-    text = " ".join(str(err).split()) or type(err).__name__
-    return text if len(text) <= 160 else text[:157] + "..."
-
-
 def _member(data, path: Path, key: str) -> np.ndarray:
     """Array ``key`` of an open ``.npz``; a damaged member is a one-line CalibError naming the file."""
     try:
         return data[key]
     except Exception as err:  # BadZipFile (CRC), zlib.error (a damaged deflate stream), ValueError, OSError, EOFError
-        raise CalibError(f"{path}: cannot read key '{key}' (damaged file?): {_one_line(err)}") from None
+        raise CalibError(f"{path}: cannot read key '{key}' (damaged file?): {one_line(err)}") from None
 
 
 def _read_key(data, path: Path, key: str, model: str) -> np.ndarray:
@@ -259,7 +254,7 @@ def load_depth_npz(path, max_cells: int = DEFAULT_MAX_CELLS) -> DepthMatrix:
     try:
         data = np.load(path, allow_pickle=False)
     except Exception as err:  # BadZipFile, zlib.error, ValueError, OSError, EOFError
-        raise CalibError(f"{path}: not a readable .npz scan file ({_one_line(err)})") from None
+        raise CalibError(f"{path}: not a readable .npz scan file ({one_line(err)})") from None
     if not isinstance(data, np.lib.npyio.NpzFile):
         raise CalibError(f"{path}: holds a single array, not an .npz scan with a 'model' key")
     with data:
