@@ -9,7 +9,7 @@ published (:class:`app.ui_common.SolveBundle`), the guided text is the Guide pan
 from __future__ import annotations
 
 import threading
-from typing import Any
+from typing import Any, Callable, Mapping
 
 from calib_core.solve.quality import LOO_NOISY_PX, NO_ERROR_ESTIMATE, error_estimate_reason, pairs_in_fit
 
@@ -44,9 +44,9 @@ if (!window.__baCalibPairBar) {
     if (!rows || !rows.length) return;
     const viewport = rows[0].closest(".mantine-ScrollArea-viewport");
     if (!viewport) return;
-    const shifted = parseFloat(rows[0].dataset.baShift || "0");
     const shift = Math.max(0, viewport.scrollTop);  // the rows head the scrolled content: they stay put
-    if (shift === shifted && rows[0].dataset.baPinned) return;
+    // A row shown since (the guided actions appear with a proposal) is pinned too.
+    if (rows.every((e) => e.dataset.baPinned && e.dataset.baShift === String(shift))) return;
     const paper = rows[0].closest(".mantine-Paper-root");
     const background = paper ? getComputedStyle(paper).backgroundColor : "white";
     rows.forEach((e, i) => {
@@ -142,20 +142,48 @@ def live_summary(live: Any) -> str:
     return f"**{n_fit} pairs · {errors} · Quality: {shown}**{solving}"
 
 
+#: Guided picking's actions the bar repeats while a proposal is shown (run 6: the person scrolled to the Guided
+#: folder for them).  "Next pair" is among the pair actions already.
+GUIDED_BAR_ACTIONS = ("Skip", "Not a corner", "Stop")
+
+
 class PairBar:
-    """The two markdown lines (live solve, guided status) placed at ``order`` in the panel ``gui``.
+    """The two markdown lines (live solve, guided status) placed at ``order`` in the panel ``gui``, and guided
+    picking's :data:`GUIDED_BAR_ACTIONS` under them while a proposal is shown.
+
+    The bar does not know the Guide panel: the actions' handlers come with the guided status
+    (:meth:`show_guide_status`), a slot the Guide panel fills with its own guarded callbacks.
 
     Parameters
     ----------
     gui : viser GUI API
     live_order, guide_order : float
-        Their positions in the control panel (just under the pair actions).
+        Their positions in the control panel (just under the pair actions); the guided actions go just under the
+        guided line.
     """
 
     def __init__(self, gui: Any, live_order: float, guide_order: float) -> None:
         self._md_live = gui.add_markdown("", order=live_order)
         self._md_guide = gui.add_markdown("", order=guide_order)
+        self._bg_guided = gui.add_button_group("Guided", GUIDED_BAR_ACTIONS, order=guide_order + 0.02, visible=False)
+        self._guided_actions: dict[str, Callable] = {}
+        self.guided_action_callback = self._on_guided_action
+        self._bg_guided.on_click(self.guided_action_callback)
         self._lock = threading.Lock()  # the Guide panel updates its line from its own threads
+
+    @property
+    def guided_actions_shown(self) -> bool:
+        """Whether the bar shows :data:`GUIDED_BAR_ACTIONS` (only while guided picking shows a proposal)."""
+        return bool(self._bg_guided.visible)
+
+    async def _on_guided_action(self, event: Any) -> None:
+        """A press of one of the bar's guided actions: the handler the Guide panel gave, as its own button would."""
+        with self._lock:
+            handler = self._guided_actions.get(str(event.target.value)) if self._bg_guided.visible else None
+        if handler is not None:
+            result = handler(event)
+            if hasattr(result, "__await__"):
+                await result
 
     @property
     def live_line(self) -> str:
@@ -174,11 +202,19 @@ class PairBar:
             if self._md_live.content != text:
                 self._md_live.content = text
 
-    def show_guide_status(self, guiding: bool, lines: list[str]) -> None:
+    def show_guide_status(self, guiding: bool, lines: list[str],
+                          actions: Mapping[str, Callable] | None = None) -> None:
         """Show guided picking's status ``lines`` (markdown, already escaped) while a guided session runs
         (``guiding``); clear it otherwise.  The Guide panel sends one short line (its folder keeps the full text:
-        in run 6 the whole text here grew the bar to about 300 px).  Called by the Guide panel from any thread."""
+        in run 6 the whole text here grew the bar to about 300 px).  ``actions``: label -> the Guide panel's
+        handler of its button (a viser click callback) for :data:`GUIDED_BAR_ACTIONS`, given while a proposal is
+        shown; the bar shows those buttons then and hides them otherwise.  Called by the Guide panel from any
+        thread."""
         text = ("**Guided:** " + "  \n".join(lines)) if guiding and lines else ""
+        shown = {k: v for k, v in (actions or {}).items() if k in GUIDED_BAR_ACTIONS} if guiding else {}
         with self._lock:
             if self._md_guide.content != text:
                 self._md_guide.content = text
+            self._guided_actions = shown
+            if bool(self._bg_guided.visible) != bool(shown):
+                self._bg_guided.visible = bool(shown)
