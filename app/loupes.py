@@ -1,11 +1,9 @@
 """The two loupes: magnified, clickable crops of one BA image and of the original camera image.
 
-They sit right of the camera and BA images (:func:`app.layout.loupe_areas`),
-so the whole page and both loupes are visible at once.  Each is a viser scene
-image whose texture is a crop enlarged by nearest neighbour (crisp cells and
-pixels).  A click in a loupe maps back exactly: sub-pixel for the camera
-(the loupe shows the *original* image, whatever the main view shows), a whole
-scan cell for the BA loupe.
+They sit right of the camera and BA images (:func:`app.layout.loupe_areas`), so the whole page and both loupes
+are visible at once.  Each is a viser scene image whose texture is a crop enlarged by nearest neighbour (crisp
+cells and pixels).  A click in a loupe maps back exactly: sub-pixel for the camera (the loupe shows the *original*
+image, whatever the main view shows), a whole scan cell for the BA loupe.
 
 They follow each click (:mod:`app.loupe_framing`: to the click and the other end's prediction); the zoom steps
 change how much they show around the same centre.  Display plumbing only (predictions: :mod:`calib_core.predict`).
@@ -241,6 +239,8 @@ class Loupes:
         x, y = float(uv[0]), float(uv[1])
         if kind == "ba" and self._render_on():
             c = self.camera_crop
+            if (stale := self.app.pose_source.stale_click_reason(self._render)) is not None:  # run 6: a refit
+                raise CalibError(stale)  # the click was planned on the render before it
             cell = cell_at_pixel(self._render, c.u0 + x, c.v0 + y)
             if cell is None:
                 raise CalibError("no laser return here: click where the camera-view render shows the scan")

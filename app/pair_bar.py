@@ -164,6 +164,7 @@ class PairBar:
 
     def __init__(self, gui: Any, live_order: float, guide_order: float) -> None:
         self._md_live = gui.add_markdown("", order=live_order)
+        self._md_pose = gui.add_markdown("", order=live_order + 0.05)  # a rough pose the person did not make
         self._md_guide = gui.add_markdown("", order=guide_order)
         self._bg_guided = gui.add_button_group("Guided", GUIDED_BAR_ACTIONS, order=guide_order + 0.02, visible=False)
         self._guided_actions: dict[str, Callable] = {}
@@ -191,6 +192,22 @@ class PairBar:
         return str(self._md_live.content)
 
     @property
+    def pose_note(self) -> str:
+        """The notice of a rough pose change the person did not make (markdown; empty if none shown)."""
+        return str(self._md_pose.content)
+
+    def show_pose_turn(self, turn: Any) -> None:
+        """Show the notice of rough pose change ``turn`` (:class:`app.pose_source.PoseTurn`, or None) under the live
+        line, where the person looks while picking (run 6: the render rolled 2.2-3 deg after the 2nd pair with no
+        word near it): e.g. "Pose refitted from 2 pairs: turned 2.6 deg".  A step by hand clears it, so does the
+        first solve (:meth:`show_live`)."""
+        note = "" if turn is None else turn.note()
+        text = f"⚠ **{note}**: the render moved; look again before the next click." if note else ""
+        with self._lock:
+            if self._md_pose.content != text:
+                self._md_pose.content = text
+
+    @property
     def guide_status(self) -> str:
         """Guided picking's status (markdown; empty while no guided session runs)."""
         return str(self._md_guide.content)
@@ -201,6 +218,8 @@ class PairBar:
         with self._lock:
             if self._md_live.content != text:
                 self._md_live.content = text
+            if getattr(live, "bundle", None) is not None and self._md_pose.content:
+                self._md_pose.content = ""  # the page shows the solve now, not the rough pose
 
     def show_guide_status(self, guiding: bool, lines: list[str],
                           actions: Mapping[str, Callable] | None = None) -> None:

@@ -51,6 +51,7 @@ class PairsPanel:
         # The live solve's figures right under the buttons, guided picking's status under the pair status.
         self.bar = PairBar(gui, live_order=top - 0.75, guide_order=top - 0.45)
         self.show_guide_status = self.bar.show_guide_status  # the Guide panel's hook
+        app.pose_source.subscribe(lambda: self.bar.show_pose_turn(app.pose_source.last_turn))  # e.g. a refit
         install_page_script(app.server, PAIR_BAR_JS)  # the bar stays in view; Delete and Ctrl+Z keys
         self._guarded_pair_action = guard(self.on_pair_action)
         self._next_pair: Callable | None = None  # guided picking's "Next pair" (set_next_pair_handler)

@@ -58,3 +58,54 @@ def test_guided_skip_not_a_corner_stop_are_in_the_pair_bar_while_a_proposal_is_s
     # Hidden buttons do nothing (a stale click after Stop must not restart guided picking).
     assert _press_bar_guided(d, "Skip") == [] and d.wait_guide()
     assert bar.guide_status == "" and not bar.guided_actions_shown
+
+
+def test_a_refit_of_the_rough_pose_is_noticed_in_the_bar_and_a_click_planned_before_it_is_not_placed(app, scene):
+    """Run 6: after the 2nd pair the rough pose turned by itself (2.2-3 deg, rolling the render) with no word near
+    the render, and a click planned on the old render missed."""
+    import time
+
+    from scipy.spatial.transform import Rotation
+
+    from app.pose_source import REFIT_CLICK_GRACE_S
+
+    d = AppDriver(app)
+    bar = app.pairs_panel.bar
+    assert d.press_turn("▶") == [] and d.press_turn("▲") == [] and d.wait_render()  # a rough pose by hand
+    assert bar.pose_note == ""  # the person's own step: no notice
+    T0, old_render = d.rough_pose.copy(), d.render_shown
+    first, second = simulate_pairs(scene, 2, np.random.default_rng(5), pixel_noise_px=0.0)
+    assert d.click_cell(app.ba_keys[0], *first.laser_rc) == [] and d.click_camera(*first.pixel) == []
+    assert d.wait_idle() and bar.pose_note == "" and np.array_equal(d.rough_pose, T0)  # one pair turns nothing
+    assert d.click_cell(app.ba_keys[0], *second.laser_rc) == [] and d.click_camera(*second.pixel) == []
+    assert d.wait_idle()
+    T1 = d.rough_pose.copy()
+    assert not np.allclose(T1, T0)
+    # The turn, computed here from the two poses (scipy's rotation of R0^T R1).
+    turned = np.degrees(Rotation.from_matrix(T0[:3, :3].T @ T1[:3, :3]).magnitude())
+    assert f"Pose refitted from 2 pairs: turned {turned:.1f} deg" in bar.pose_note, bar.pose_note
+    # A click on the old render (still shown while the new one renders) is not placed ...
+    reason = app.pose_source.stale_click_reason(old_render)
+    assert reason is not None and "refitted from 2 pairs" in reason
+    # ... nor one just after the new render came (planned on the old one): checked at the render's own time.
+    assert d.wait_render()
+    new_render = d.render_shown
+    assert app.pose_source.stale_click_reason(new_render, now=new_render.made_at + 0.1) is not None
+    assert app.pose_source.stale_click_reason(new_render, now=new_render.made_at + REFIT_CLICK_GRACE_S + 0.05) is None
+    # Through the page's click path: a click at once is refused with one line, the pairs unchanged; a later one
+    # is placed on the new render's cell.
+    cells = new_render.render.cell_rc
+    vs, us = np.nonzero(cells[..., 0] >= 0)
+    k = int(np.argmin(np.hypot(us - app.camera.width / 2, vs - app.camera.height / 2)))
+    u, v = float(us[k]), float(vs[k])
+    picks = app.state.picks
+    clicked_at = time.monotonic()
+    notes = d.click_render(u, v)
+    if clicked_at - new_render.made_at < REFIT_CLICK_GRACE_S - 0.05:  # the click came within the grace
+        assert [t for t, _ in notes] == ["Not accepted"] and "click again on the new render" in notes[0][1]
+        assert app.state.picks == picks
+    time.sleep(max(0.0, new_render.made_at + REFIT_CLICK_GRACE_S + 0.05 - time.monotonic()))
+    assert d.click_render(u, v) == []
+    assert app.state.picks[-1].laser_rc == tuple(int(x) for x in cells[int(v), int(u)])
+    # A step by hand clears the notice.
+    assert d.press_pair_action("Cancel pair") == [] and d.press_turn("▶") == [] and bar.pose_note == ""
