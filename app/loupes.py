@@ -471,8 +471,8 @@ class Loupes:
 
     def title(self, kind: str) -> str:
         """The loupe's title as the page shows it."""
-        if kind == "ba" and self._render_on():
-            return loupe_title(self._render, self.app.depth, self.camera_crop.center)
+        if kind == "ba" and self._render_on():  # the cell a click inside chose (run 6: it named the old one)
+            return loupe_title(self._render, self.app.depth, self.camera_crop.center, self._clicked.get("ba"))
         if kind == "ba":
             c = self.ba_crop
             row, col = self._clicked.get("ba", c.center)

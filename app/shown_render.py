@@ -97,9 +97,11 @@ def loupe_texture(shown: ShownRender | None, camera: Any, u0: int, v0: int, n: i
     return np.repeat(np.repeat(crop, k, axis=0), k, axis=1)
 
 
-def loupe_title(shown: ShownRender | None, depth: Any, center: tuple[float, float]) -> str:
-    """The laser loupe's title while it shows render ``shown``: the cell at the crop's centre and its range."""
+def loupe_title(shown: ShownRender | None, depth: Any, center: tuple[float, float],
+                clicked: tuple[int, int] | None = None) -> str:
+    """The laser loupe's title while it shows render ``shown``: the cell a click inside the loupe chose
+    (``clicked``, ``(row, col)``), else the cell at the crop's centre; and its range."""
     from .loupe_marks import render_title
 
-    cell = cell_at_pixel(shown, *center)
+    cell = (int(clicked[0]), int(clicked[1])) if clicked is not None else cell_at_pixel(shown, *center)
     return render_title(cell, None if cell is None else float(depth.range_m[cell]))

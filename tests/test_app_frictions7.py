@@ -109,3 +109,36 @@ def test_a_refit_of_the_rough_pose_is_noticed_in_the_bar_and_a_click_planned_bef
     assert app.state.picks[-1].laser_rc == tuple(int(x) for x in cells[int(v), int(u)])
     # A step by hand clears the notice.
     assert d.press_pair_action("Cancel pair") == [] and d.press_turn("▶") == [] and bar.pose_note == ""
+
+
+def test_a_refining_click_in_the_render_loupe_is_named_in_its_title(app):
+    """Run 6: the render loupe's title kept the old cell after a refining click, so a click aimed two cells from
+    the cell the title named landed on the cell already chosen ("No change: the same cell")."""
+    d = AppDriver(app)
+    assert d.wait_render()
+    cells = d.render_shown.render.cell_rc
+    vs, us = np.nonzero(cells[..., 0] >= 0)
+    k = int(np.argmin(np.hypot(us - app.camera.width / 2, vs - app.camera.height / 2)))
+    u, v = int(us[k]), int(vs[k])
+    assert d.click_render(float(u), float(v)) == []
+    first = tuple(int(x) for x in cells[v, u])
+    assert app.state.picks[-1].laser_rc == first and f"r{first[0]} c{first[1]}" in d.loupe_title("ba")
+    assert d.click_camera(u + 0.4, v - 0.3) == [] and app.state.picks[-1].complete  # a finished pair to refine
+    assert app.loupes.shows_render
+    crop = app.loupes.camera_crop
+    # A pixel of the loupe's crop whose cell is at least 2 rows or columns from the first.
+    far = next((uu, vv) for vv in range(crop.v0, crop.v0 + crop.n) for uu in range(crop.u0, crop.u0 + crop.n)
+               if cells[vv, uu, 0] >= 0 and np.abs(cells[vv, uu] - np.array(first)).max() >= 2)
+    second = tuple(int(x) for x in cells[far[1], far[0]])
+    assert d.click("loupe_ba", (float(far[0] - crop.u0), float(far[1] - crop.v0))) == []
+    assert app.state.picks[-1].laser_rc == second and len(app.state.picks) == 1 and app.state.pending() is None
+    title = d.loupe_title("ba")
+    assert f"r{second[0]} c{second[1]}" in title and f"{app.depth.range_m[second]:.2f} m" in title, title
+    # A click on a pixel showing the chosen cell: "No change", naming the cell the title names.
+    same = next(((uu, vv) for vv in range(crop.v0, crop.v0 + crop.n) for uu in range(crop.u0, crop.u0 + crop.n)
+                if tuple(cells[vv, uu]) == second and (uu, vv) != far), far)
+    notes = d.click("loupe_ba", (float(same[0] - crop.u0), float(same[1] - crop.v0)))
+    assert [t for t, _ in notes] == ["No change"] and f"(row {second[0]}, column {second[1]})" in notes[0][1]
+    assert f"r{second[0]} c{second[1]}" in d.loupe_title("ba")
+    # A fresh click on the render names its own cell again.
+    assert d.click_render(float(u), float(v)) == [] and f"r{first[0]} c{first[1]}" in d.loupe_title("ba")
