@@ -46,3 +46,12 @@ class CameraCrop:
     n: int
     center: tuple[float, float]
     cov_px2: tuple | None  # 2x2 covariance of the framed point (pixels^2), drawn as a 3-sigma ellipse
+
+
+def render_crop_of(camera_crop: CameraCrop, n: int | None) -> CameraCrop:
+    """The laser loupe's view while it shows the camera-view render: original-image pixels around
+    ``camera_crop``'s centre, ``n`` on a side (None: the camera loupe's side); no ellipse."""
+    if n is None or n == camera_crop.n:
+        return CameraCrop(camera_crop.u0, camera_crop.v0, camera_crop.n, camera_crop.center, None)
+    u, v = camera_crop.center
+    return CameraCrop(int(round(u)) - n // 2, int(round(v)) - n // 2, int(n), (float(u), float(v)), None)

@@ -20,9 +20,9 @@ from calib_core.errors import CalibError
 from calib_core.predict import ellipse_outline
 
 from .layout import ImageSlot, LoupeArea, bounds_of, loupe_areas
-from .loupe_crops import BaCrop, CameraCrop, default_camera_crop_px, node_name, slot_key
+from .loupe_crops import BaCrop, CameraCrop, default_camera_crop_px, node_name, render_crop_of, slot_key
 from .loupe_framing import PairClick, follow_click
-from .loupe_marks import LEGEND, ba_title, camera_title, draw_camera_marks, tick_segments
+from .loupe_marks import LEGEND, ba_title, camera_title, draw_camera_marks, draw_camera_outline, tick_segments
 from .shown_render import cell_at_pixel, loupe_texture, loupe_title, pixel_of_cells
 from .ui_common import marker_segments
 
@@ -67,6 +67,7 @@ class Loupes:
         self._clicked: dict[str, tuple] = {}  # kind -> the cell / pixel a click inside it chose: its title names it
         self.shows_render = False  # the laser loupe shows the camera-view render's crop (after a click on it)
         self._render: Any = None  # the render the render pane shows (app.shown_render.ShownRender; on_render)
+        self._render_n: int | None = None  # the render loupe's own side (px; None: the camera loupe's), zoomed alone
         scene = app.server.scene
         self._handles: dict[str, Any] = {}
         self._titles: dict[str, Any] = {}
@@ -165,12 +166,19 @@ class Loupes:
         """Does the laser loupe show the render now (asked for, and a render exists)?"""
         return self.shows_render and self._render is not None
 
+    @property
+    def render_crop(self) -> CameraCrop:
+        """The camera pixels the laser loupe shows while it shows the render: around the camera loupe's centre,
+        its own side (the two loupes zoom alone: run 6, the wheel over the render loupe zoomed the photo's too)."""
+        return render_crop_of(self.camera_crop, self._render_n)
+
     def zoom(self, kind: str, factor: float) -> None:
-        """Magnify loupe ``kind`` by ``factor`` (> 1 shows less, bigger) around the same centre."""
-        if kind == "ba" and self._render_on():
-            kind = "camera"  # the laser loupe shows the camera loupe's crop: zoom both
+        """Magnify loupe ``kind`` by ``factor`` (> 1 shows less, bigger) around the same centre; only that one."""
         with self.app.ui_lock:
-            if kind == "ba":
+            if kind == "ba" and self._render_on():
+                lo, hi = CAMERA_PX_LIMITS
+                self._render_n = int(min(max(round(self.render_crop.n / factor), lo), hi))
+            elif kind == "ba":
                 lo, hi = BA_COLUMN_LIMITS
                 self._ba_cols = int(min(max(round(self._ba_cols / factor), lo), hi, self.app.depth.shape[1]))
                 c = self.ba_crop
@@ -238,7 +246,7 @@ class Loupes:
         """
         x, y = float(uv[0]), float(uv[1])
         if kind == "ba" and self._render_on():
-            c = self.camera_crop
+            c = self.render_crop
             if (stale := self.app.pose_source.stale_click_reason(self._render)) is not None:  # run 6: a refit
                 raise CalibError(stale)  # the click was planned on the render before it
             cell = cell_at_pixel(self._render, c.u0 + x, c.v0 + y)
@@ -266,7 +274,7 @@ class Loupes:
         """Loupe pixel showing ``target``: ``(col, row)`` of a scan cell (fractions aim off its centre) or an
         original-image pixel ``(u, v)``; None when the loupe does not show it."""
         if kind == "ba" and self._render_on():  # where the render's pose draws the cell
-            c = self.camera_crop
+            c = self.render_crop
             uv = pixel_of_cells(self._render, self.app.camera, self.app.depth,
                                 np.array([[round(target[1]), round(target[0])]]))[0]
             x, y = float(uv[0]) - c.u0, float(uv[1]) - c.v0
@@ -303,7 +311,7 @@ class Loupes:
             pose = app.pose()
             inputs += (None if pose is None else np.asarray(pose, np.float64).tobytes(),)
         if kind == "ba" and self._render_on():
-            inputs += (self.camera_crop, id(self._render))
+            inputs += (self.render_crop, id(self._render))
         if self._marks_of.get(kind) == inputs:
             return
         self._marks_of[kind] = inputs
@@ -322,7 +330,7 @@ class Loupes:
             elif kind == "ba":
                 self._draw_ba_outline()
             else:
-                self._draw_camera_outline()
+                draw_camera_outline(app, self.camera_crop)
 
     def _draw_ba_marks(self, picks: list) -> None:
         nodes = self.app.nodes
@@ -337,8 +345,9 @@ class Loupes:
         hx, hy = 0.5 * s.units_per_px, 0.5 * s.units_per_px_y
         radius, cell = 1.6 * max(hx, hy), (hx, hy)
         if self._render_on():  # the render's crop: rings where the render's pose draws the cells
-            xy = pixel_of_cells(self._render, app.camera, app.depth, rc) - [self.camera_crop.u0, self.camera_crop.v0]
-            radius, cell = max(3.0, 0.06 * self.camera_crop.n) * s.units_per_px, None
+            rc_crop = self.render_crop
+            xy = pixel_of_cells(self._render, app.camera, app.depth, rc) - [rc_crop.u0, rc_crop.v0]
+            radius, cell = max(3.0, 0.06 * rc_crop.n) * s.units_per_px, None
         inside = np.array([s.contains(p) for p in xy], bool)
         segs = marker_segments(s.world_from_pixel(xy[inside], z_offset=-0.01), radius, cell_half_size=cell,
                                ticks=True)
@@ -385,25 +394,6 @@ class Loupes:
             segs = np.stack([w, np.roll(w, -1, axis=0)], axis=1)
         app.nodes.lines("/annot/loupe/ba_outline", segs, np.full(segs.shape, (255, 120, 0), np.uint8), thickness=2.0)
 
-    def _draw_camera_outline(self) -> None:
-        """Where the camera loupe looks, on the main camera view (curved on a panorama)."""
-        app = self.app
-        c = self.camera_crop
-        t = np.linspace(0.0, 1.0, 9)
-        a, b = c.u0 - 0.5, c.u0 + c.n - 0.5
-        top, bottom = c.v0 - 0.5, c.v0 + c.n - 0.5
-        ring = np.concatenate([np.stack([a + (b - a) * t, np.full_like(t, top)], 1),
-                               np.stack([np.full_like(t, b), top + (bottom - top) * t], 1),
-                               np.stack([b - (b - a) * t, np.full_like(t, bottom)], 1),
-                               np.stack([np.full_like(t, a), bottom - (bottom - top) * t], 1)])
-        disp, ok = app.display_from_pixels(ring)
-        segs = np.empty((0, 2, 3))
-        if ok.all():
-            w = app.camera_slot().world_from_pixel(disp, z_offset=-0.02)
-            segs = np.stack([w[:-1], w[1:]], axis=1)
-        app.nodes.lines("/annot/loupe/camera_outline", segs, np.full(segs.shape, (255, 120, 0), np.uint8),
-                        thickness=2.0)
-
     # ------------------------------------------------------------------ internals
     def _make_ba_crop(self, key: str, row: int, col: int) -> BaCrop:
         n_rows_scan, n_cols_scan = self.app.depth.shape
@@ -418,7 +408,7 @@ class Loupes:
 
     def _ba_texture(self) -> np.ndarray:
         if self._render_on():
-            cc = self.camera_crop
+            cc = self.render_crop
             return loupe_texture(self._render, self.app.camera, cc.u0, cc.v0, cc.n)
         c = self.ba_crop
         gray = self.app.laser_images.loupe_image(c.key)[0]
@@ -455,8 +445,8 @@ class Loupes:
             if unit_y * c.n_rows > area.height:
                 unit_y = area.height / c.n_rows
             w_px, h_px, rw, rh = c.n_cols, c.n_rows, area.width, unit_y * c.n_rows
-        else:  # the camera loupe, or the laser loupe showing the render's crop of the same pixels
-            n = self.camera_crop.n
+        else:  # the camera loupe, or the laser loupe showing the render's crop around the same centre
+            n = (self.render_crop if kind == "ba" else self.camera_crop).n
             w_px = h_px = n
             rw = rh = min(area.width, area.height)
         slot = ImageSlot(slot_key(kind), w_px, h_px, (area.x0 + rw / 2, area.y0 + rh / 2, 0.0), rw, rh)

@@ -142,3 +142,36 @@ def test_a_refining_click_in_the_render_loupe_is_named_in_its_title(app):
     assert f"r{second[0]} c{second[1]}" in d.loupe_title("ba")
     # A fresh click on the render names its own cell again.
     assert d.click_render(float(u), float(v)) == [] and f"r{first[0]} c{first[1]}" in d.loupe_title("ba")
+
+
+def test_each_loupe_zooms_alone_also_while_the_laser_loupe_shows_the_render(app):
+    """Run 6: the wheel over the render loupe (it presses "BA +" / "BA -") also changed the photo loupe's zoom."""
+    d = AppDriver(app)
+    assert d.wait_render()
+    cells = d.render_shown.render.cell_rc
+    vs, us = np.nonzero(cells[..., 0] >= 0)
+    k = int(np.argmin(np.hypot(us - app.camera.width / 2, vs - app.camera.height / 2)))
+    assert d.click_render(float(us[k]), float(vs[k])) == [] and app.loupes.shows_render
+    photo = dict(d.loupe_view("camera"))
+    side = app.loupes.render_crop.n
+    assert side == photo["size"]  # both start alike
+    assert d.press_loupe_zoom("BA +") == []  # the wheel up over the render loupe
+    assert d.loupe_view("camera") == photo  # the photo loupe is left alone
+    rc = app.loupes.render_crop
+    assert rc.n == round(side / 1.5) and rc.center == photo["center"]
+    # The render loupe shows the render's pixels (shading over the no-return colour) of its own, smaller crop.
+    from app.shown_render import pane_texture
+
+    tex, pane = d.loupe_texture("ba"), pane_texture(d.render_shown.rgba)
+    k_tex = tex.shape[0] // rc.n
+    assert tex.shape[0] == k_tex * rc.n
+    assert np.array_equal(tex[::k_tex, ::k_tex], pane[rc.v0:rc.v0 + rc.n, rc.u0:rc.u0 + rc.n])
+    # A click in it maps through its own crop: its centre pixel picks the cell the render draws there.
+    cu, cv = rc.u0 + rc.n // 2, rc.v0 + rc.n // 2
+    if cells[cv, cu, 0] >= 0:
+        notes = d.click("loupe_ba", (float(rc.n // 2), float(rc.n // 2)))
+        assert [t for t, _ in notes] in ([], ["No change"])  # "No change" when it is the cell the first click chose
+        assert app.state.picks[-1].laser_rc == tuple(int(x) for x in cells[cv, cu])
+    # And the photo loupe's zoom leaves the render loupe's side alone.
+    assert d.press_loupe_zoom("Camera -") == []
+    assert d.loupe_view("camera")["size"] == round(photo["size"] * 1.5) and app.loupes.render_crop.n == rc.n
