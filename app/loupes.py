@@ -21,7 +21,7 @@ from calib_core.predict import ellipse_outline
 
 from .layout import ImageSlot, LoupeArea, bounds_of, loupe_areas
 from .loupe_crops import BaCrop, CameraCrop, default_camera_crop_px, node_name, render_crop_of, slot_key
-from .loupe_framing import PairClick, follow_click
+from .loupe_framing import PairClick, follow_click, frame_pair
 from .loupe_marks import LEGEND, ba_title, camera_title, draw_camera_marks, draw_camera_outline, tick_segments
 from .shown_render import cell_at_pixel, loupe_texture, loupe_title, pixel_of_cells
 from .ui_common import marker_segments
@@ -89,6 +89,8 @@ class Loupes:
             self._place(kind)  # sends the size and place once; later only when they change
         self.refresh()
         self._build_folder(app.server.gui)
+        self._selected_seen: int | None = None
+        app.state.subscribe(self._on_state_change)  # a pair selected: both loupes go to it
 
     def _build_folder(self, gui: Any) -> None:
         """The "Loupes" folder: used while picking, so right below the Pairs folder, found without scrolling."""
@@ -193,6 +195,13 @@ class Loupes:
     def on_pair_click(self, click: PairClick) -> None:
         """Follow a click on the images (:meth:`app.pairs_panel.PairsPanel.subscribe_clicks`)."""
         follow_click(self, self.app, click)
+
+    def _on_state_change(self, state: Any) -> None:
+        selected = state.selected
+        if selected != self._selected_seen:
+            self._selected_seen = selected
+            if selected is not None:
+                frame_pair(self, self.app, selected)
 
     def on_pair_cancelled(self) -> None:
         """A half-made pair was cancelled: a guided proposal's ellipse in the camera loupe goes too."""

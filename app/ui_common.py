@@ -32,6 +32,12 @@ RING_MIN_RADIUS = 0.03
 RING_SEGMENTS = 20
 #: Shift+click / drag this many ring radii from a marker selects it.
 PICK_RADII = 2.5
+
+
+def pick_tolerance_px(units_per_px: float, units_per_px_y: float) -> float:
+    """How far (display pixels along x) from a pick marker a Shift+click or a drag still takes it, on a slot of
+    ``units_per_px`` x ``units_per_px_y`` world units per display pixel: :data:`PICK_RADII` ring radii."""
+    return PICK_RADII * max(RING_CELLS * max(units_per_px, units_per_px_y), RING_MIN_RADIUS) / units_per_px
 #: "Zoom: on last click" magnifies by ZOOM_STEP per press, up to this many
 #: screen pixels per BA cell (narrow side) or per camera-image pixel.
 ZOOM_PX_PER_CELL = 14.0

@@ -7,6 +7,7 @@ import asyncio
 from types import SimpleNamespace
 
 import numpy as np
+import pytest
 
 from calib_core.synthetic import simulate_pairs
 
@@ -175,3 +176,41 @@ def test_each_loupe_zooms_alone_also_while_the_laser_loupe_shows_the_render(app)
     # And the photo loupe's zoom leaves the render loupe's side alone.
     assert d.press_loupe_zoom("Camera -") == []
     assert d.loupe_view("camera")["size"] == round(photo["size"] * 1.5) and app.loupes.render_crop.n == rc.n
+
+
+def test_selecting_a_pair_frames_the_loupes_on_it_and_a_shift_click_on_nothing_says_so(app, scene):
+    """Run 6: selecting a pair (Shift+click) left the loupes where they were; a Shift+click beside a marker did
+    nothing, silently."""
+    d = AppDriver(app)
+    _pairs(d, app, scene, 3, seed=11)
+    picks = app.state.picks
+    target = picks[0]  # not the pair the loupes show after the last click
+    assert d.loupe_view("camera")["center"] != pytest.approx(target.pixel)
+    key = d.camera_key
+    mu, mv = d.marker_display_pixel(key, target.id)
+    assert d.shift_click(key, (mu + 1.0, mv - 1.0)) == [] and app.state.selected == target.id
+    assert d.loupe_view("ba")["center"] == target.laser_rc
+    assert d.loupe_view("camera")["center"] == pytest.approx(target.pixel)
+    # The dropdown's selection frames them too.
+    assert d.select_in_dropdown(picks[1].id) == [] and d.loupe_view("ba")["center"] == picks[1].laser_rc
+    # A Shift+click on no pair: the status line says how far it looked, and that distance is the true one.
+    import re
+
+    others = np.array([d.marker_display_pixel(key, p.id) for p in picks if p.id != target.id])
+    away = None
+    for direction in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+        trial = np.array([mu, mv]) + 40.0 * np.array(direction)
+        if np.hypot(*(others - trial).T).min() > 60.0:
+            away = np.array(direction, float)
+            break
+    assert away is not None
+    assert d.shift_click(key, (mu + 200.0 * away[0], mv + 200.0 * away[1])) == []
+    assert app.state.selected is None
+    m = re.search(r"No pair within (\d+) px of that Shift\+click", d.pair_status)
+    assert m, d.pair_status
+    n = int(m.group(1))
+    assert d.shift_click(key, (mu + (n + 1.5) * away[0], mv + (n + 1.5) * away[1])) == []
+    assert app.state.selected is None and f"No pair within {n} px" in d.pair_status
+    assert d.shift_click(key, (mu + (n - 1.0) * away[0], mv + (n - 1.0) * away[1])) == []
+    assert app.state.selected == target.id and "No pair within" not in d.pair_status
+
