@@ -20,7 +20,8 @@ from calib_core.errors import CalibError
 from calib_core.predict import ellipse_outline
 
 from .layout import ImageSlot, LoupeArea, bounds_of, loupe_areas
-from .loupe_crops import BaCrop, CameraCrop, default_camera_crop_px, node_name, render_crop_of, slot_key
+from .loupe_crops import (BaCrop, CameraCrop, ba_crop_texture, camera_crop_texture, default_camera_crop_px, node_name,
+                          render_crop_of, slot_key)
 from .loupe_framing import PairClick, follow_click, frame_pair
 from .loupe_marks import LEGEND, ba_title, camera_title, draw_camera_marks, draw_camera_outline, tick_segments
 from .shown_render import cell_at_pixel, loupe_texture, loupe_title, pixel_of_cells
@@ -67,6 +68,7 @@ class Loupes:
         self._clicked: dict[str, tuple] = {}  # kind -> the cell / pixel a click inside it chose: its title names it
         self.shows_render = False  # the laser loupe shows the camera-view render's crop (after a click on it)
         self._render: Any = None  # the render the render pane shows (app.shown_render.ShownRender; on_render)
+        self.photo_gamma = 1.0  # the photo loupe's brightness (display only: "Photo loupe brightness")
         self._render_n: int | None = None  # the render loupe's own side (px; None: the camera loupe's), zoomed alone
         scene = app.server.scene
         self._handles: dict[str, Any] = {}
@@ -98,7 +100,18 @@ class Loupes:
         with self.folder:
             zoom = gui.add_button_group("Loupe zoom", ("BA +", "BA -", "Camera +", "Camera -"))
             zoom.on_click(self.app.guard(self.on_zoom))
+            # Run 6: shadowed bins were black in the photo loupe.  Display only: the pairs never change with it.
+            self._sl_gamma = gui.add_slider("Photo loupe brightness", 1.0, 3.0, 0.1, initial_value=self.photo_gamma,
+                                            hint="Lifts the photo loupe's shadows (gamma); display only")
+            self.photo_gamma_callback = self.app.guard(lambda event: self.set_photo_gamma(float(event.target.value)))
+            self._sl_gamma.on_update(self.photo_gamma_callback)
             self.app.display.add_loupe_controls(gui)  # what the BA loupe shows, the contrast, "Hide marks"
+
+    def set_photo_gamma(self, gamma: float) -> None:
+        """Show the photo loupe with its shadows lifted by ``gamma`` (>= 1; 1: the photo as it is)."""
+        with self.app.ui_lock:
+            self.photo_gamma = float(min(max(gamma, 1.0), 3.0))
+            self._show("camera")
 
     def on_zoom(self, event: Any) -> None:
         """The "Loupe zoom" buttons: magnify or widen one loupe around the same centre."""
@@ -419,30 +432,11 @@ class Loupes:
         if self._render_on():
             cc = self.render_crop
             return loupe_texture(self._render, self.app.camera, cc.u0, cc.v0, cc.n)
-        c = self.ba_crop
-        gray = self.app.laser_images.loupe_image(c.key)[0]
-        n_rows, n_cols = gray.shape
-        rows = c.row0 + np.arange(c.n_rows)
-        cols = c.col0 + np.arange(c.n_cols)
-        if self.app.wrap_cols:
-            cols %= n_cols
-        ok_r = (rows >= 0) & (rows < n_rows)
-        ok_c = (cols >= 0) & (cols < n_cols)
-        crop = gray[np.clip(rows, 0, n_rows - 1)][:, np.clip(cols, 0, n_cols - 1)]
-        crop = np.where(ok_r[:, None] & ok_c[None, :], crop, np.uint8(PAD_GRAY)).astype(np.uint8)
-        k = max(1, TEXTURE_TEXELS // max(c.n_rows, c.n_cols))
-        return np.repeat(np.repeat(crop, k, axis=0), k, axis=1)
+        gray = self.app.laser_images.loupe_image(self.ba_crop.key)[0]
+        return ba_crop_texture(gray, self.ba_crop, self.app.wrap_cols, TEXTURE_TEXELS, PAD_GRAY)
 
     def _camera_texture(self) -> np.ndarray:
-        c = self.camera_crop
-        img = self.app.image
-        h, w = img.shape[:2]
-        us, vs = c.u0 + np.arange(c.n), c.v0 + np.arange(c.n)
-        ok = ((vs >= 0) & (vs < h))[:, None] & ((us >= 0) & (us < w))[None, :]
-        crop = img[np.clip(vs, 0, h - 1)][:, np.clip(us, 0, w - 1)]
-        crop = np.where(ok[..., None], crop, np.uint8(PAD_GRAY)).astype(np.uint8)
-        k = max(1, TEXTURE_TEXELS // c.n)
-        return np.repeat(np.repeat(crop, k, axis=0), k, axis=1)
+        return camera_crop_texture(self.app.image, self.camera_crop, self.photo_gamma, TEXTURE_TEXELS, PAD_GRAY)
 
     def _place(self, kind: str) -> None:
         """Fit the crop into the loupe's area (cells keep their drawn aspect), top-left aligned."""

@@ -214,3 +214,37 @@ def test_selecting_a_pair_frames_the_loupes_on_it_and_a_shift_click_on_nothing_s
     assert d.shift_click(key, (mu + (n - 1.0) * away[0], mv + (n - 1.0) * away[1])) == []
     assert app.state.selected == target.id and "No pair within" not in d.pair_status
 
+
+def test_the_photo_loupe_brightness_lifts_its_shadows_and_changes_no_pair(app, scene):
+    """Run 6: the photo loupe had no brightness control and shadowed bins were black."""
+    d = AppDriver(app)
+    _pairs(d, app, scene, 2, seed=2)
+    pairs_before, ba_before = app.state.picks, d.loupe_texture("ba")
+    c = app.loupes.camera_crop
+    image = app.image.astype(np.float64)
+
+    def expected(gamma: float) -> np.ndarray:  # the crop, lifted, written out here
+        h, w = image.shape[:2]
+        out = np.full((c.n, c.n, 3), 60.0)
+        for j in range(c.n):
+            v = c.v0 + j
+            if not 0 <= v < h:
+                continue
+            us = c.u0 + np.arange(c.n)
+            ok = (us >= 0) & (us < w)
+            out[j, ok] = np.round(255.0 * (image[v, us[ok]] / 255.0) ** (1.0 / gamma))
+        return out.astype(np.uint8)
+
+    tex = d.loupe_texture("camera")
+    k = tex.shape[0] // c.n
+    assert np.array_equal(tex[::k, ::k], expected(1.0))
+    before = len(d.tab.notifications)
+    asyncio.run(app.loupes.photo_gamma_callback(SimpleNamespace(client=d.tab, target=SimpleNamespace(value=2.0))))
+    app.actions.join()
+    assert d.tab.notifications[before:] == []
+    tex = d.loupe_texture("camera")
+    assert np.array_equal(tex[::k, ::k], expected(2.0))
+    assert tex.astype(float).mean() > expected(1.0).astype(float).mean()  # brighter
+    # Display only: the pairs, the photo itself and the laser loupe are untouched.
+    assert app.state.picks == pairs_before and np.array_equal(d.loupe_texture("ba"), ba_before)
+    assert np.array_equal(app.image.astype(np.float64), image)
