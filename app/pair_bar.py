@@ -13,7 +13,7 @@ from typing import Any, Callable, Mapping
 
 from calib_core.solve.quality import LOO_NOISY_PX, NO_ERROR_ESTIMATE, error_estimate_reason, pairs_in_fit
 
-from .ui_common import _fmt
+from .ui_common import HeldQuality, _fmt
 
 #: Keeps the pair bar (the pair actions, the live line, the pair status, the guided line: the panel's rows above the
 #: intro) in view while the control panel scrolls: each scroll shifts those rows down by what scrolled away, over the
@@ -117,13 +117,16 @@ def undo_note(before: list, after: list) -> str:
     return f"Undone: a change of pair {b.id}."
 
 
-def live_summary(live: Any) -> str:
+def live_summary(live: Any, held: HeldQuality | None = None) -> str:
     """``"N pairs · mean X px · left out Y px (warning above L) · Quality: ok"`` (markdown) of the solve
-    ``live.bundle`` shows (``live``: a :class:`app.ui_common.SolveShown`), or "" before the first solve.  N is the pairs in the fit; with too few for an error
-    figure the mean says so."""
+    ``live.bundle`` shows (``live``: a :class:`app.ui_common.SolveShown`), or "" before the first solve.  N is the
+    pairs in the fit; with too few for an error figure the mean says so.  With ``held`` the status has hysteresis
+    on the left-out limit (:class:`app.ui_common.HeldQuality`; "(held, near the limit)" says so)."""
     bundle = getattr(live, "bundle", None)
     r = getattr(bundle, "result", None)
     if r is None:
+        if held is not None:
+            held.status(None)  # a new start: the next verdict is shown plain
         return ""
     n_fit = pairs_in_fit(r)
     quality = getattr(r, "quality", None)
@@ -137,7 +140,10 @@ def live_summary(live: Any) -> str:
                   f"(warning above {LOO_NOISY_PX:g})")
     else:
         errors = f"mean: {NO_ERROR_ESTIMATE}"
-    shown = "UNRELIABLE" if status == "unreliable" else status
+    note = ""
+    if held is not None:  # hysteresis on the left-out limit (the bar's own memory of what it showed)
+        status, note = held.status(quality)
+    shown = ("UNRELIABLE" if status == "unreliable" else status) + (" (held, near the limit)" if note else "")
     solving = " · solving…" if getattr(live, "solving", False) else ""
     return f"**{n_fit} pairs · {errors} · Quality: {shown}**{solving}"
 
@@ -171,6 +177,7 @@ class PairBar:
         self.guided_action_callback = self._on_guided_action
         self._bg_guided.on_click(self.guided_action_callback)
         self._lock = threading.Lock()  # the Guide panel updates its line from its own threads
+        self._held = HeldQuality()  # the live line's Quality, with hysteresis on the left-out limit
 
     @property
     def guided_actions_shown(self) -> bool:
@@ -214,8 +221,8 @@ class PairBar:
 
     def show_live(self, live: Any) -> None:
         """Show :func:`live_summary` of what the live solve shows (``live``: :class:`app.ui_common.SolveShown`)."""
-        text = live_summary(live)
         with self._lock:
+            text = live_summary(live, self._held)
             if self._md_live.content != text:
                 self._md_live.content = text
             if getattr(live, "bundle", None) is not None and self._md_pose.content:

@@ -248,3 +248,53 @@ def test_the_photo_loupe_brightness_lifts_its_shadows_and_changes_no_pair(app, s
     # Display only: the pairs, the photo itself and the laser loupe are untouched.
     assert app.state.picks == pairs_before and np.array_equal(d.loupe_texture("ba"), ba_before)
     assert np.array_equal(app.image.astype(np.float64), image)
+
+
+def test_the_shown_quality_holds_near_the_left_out_limit_and_the_verdict_stays_plain(app, scene):
+    """Run 4: Quality flipped ok / warning on a 1-2 px re-click (left out 5.71 vs 6.06 px at the 6 px limit).  The
+    app's panels hold the shown status within 10 % of the limit; calib_core's verdict (what exports carry) is plain."""
+    import copy
+
+    from calib_core.solve.quality import LOO_NOISY_PX, LeaveOneOut, Quality, leave_one_out_reasons
+
+    from app.ui_common import SolveShown
+
+    d = AppDriver(app)
+    _pairs(d, app, scene, 6, seed=4)
+    bundle = app.solve_bundle
+    assert bundle is not None
+
+    def verdict(mean_px: float) -> Quality:  # calib_core's own verdict for these left-out errors
+        loo = LeaveOneOut(np.full(6, mean_px), np.full(6, 1.0), np.zeros(6), list(range(1, 7)), float("nan"))
+        reasons = leave_one_out_reasons(loo)
+        return Quality("warning" if reasons else "ok", reasons, leave_one_out=loo)
+
+    def show(mean_px: float) -> tuple[str, str, str]:
+        b = copy.copy(bundle)
+        b.result = copy.copy(bundle.result)
+        q = verdict(mean_px)
+        b.result.quality = q
+        app.calibration_panel.show(b, None, False, 6)
+        app.pairs_panel.bar.show_live(SolveShown(b, None, False, 6))
+        assert b.result.quality is q and q.status == ("warning" if mean_px > LOO_NOISY_PX else "ok")  # untouched
+        return q.status, app.calibration_panel.result_text.replace("\\", ""), app.pairs_panel.bar.live_line
+
+    # The first: outside the band, so whatever the live solve showed before, the plain verdict.
+    expected_shown = [(5.0, "ok"), (5.71, "ok"), (6.06, "ok"), (5.71, "ok"), (6.7, "warning"), (6.06, "warning"),
+                      (5.71, "warning"), (5.3, "ok"), (6.5, "ok")]
+    for mean_px, shown in expected_shown:
+        plain, panel, bar = show(mean_px)
+        assert f"Quality: {shown}</span>" in panel, (mean_px, panel)
+        assert f"Quality: {shown}" in bar, (mean_px, bar)
+        held = plain != shown
+        assert (f"held: left out {mean_px:.2f} px is within 10 % of the 6 px limit (the export says {plain})"
+                in panel) == held
+        assert ("(held, near the limit)" in bar) == held
+    # Another reason than the left-out limit is never held: the plain verdict shows.
+    b = copy.copy(bundle)
+    b.result = copy.copy(bundle.result)
+    q = verdict(6.06)
+    b.result.quality = Quality("warning", ["only 6 pairs in the fit: too few"] + q.reasons, leave_one_out=q.leave_one_out)
+    show(5.71)
+    app.calibration_panel.show(b, None, False, 6)
+    assert "Quality: warning</span>" in app.calibration_panel.result_text
