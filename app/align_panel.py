@@ -189,7 +189,8 @@ class AlignPanel:
         old = self.app.initial_T_camera_lidar
         self._history.append(None if old is None else np.array(old))
         del self._history[:-MAX_HISTORY]
-        self.app.pose_source.adopt_rough_pose(T_camera_lidar)
+        self.app.pose_source.adopt_rough_pose(T_camera_lidar, why=f"refitted from {len(fitted_to)} pairs"
+                                              if fitted_to else "")  # shown near the render (run 6)
         self.show()
 
     def fit_to_pairs(self, pairs: list) -> bool:

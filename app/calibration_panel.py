@@ -12,7 +12,7 @@ import numpy as np
 from calib_core.solve.quality import NO_ERROR_ESTIMATE, error_estimate_reason, pairs_in_fit
 from calib_core.transforms import rpy_deg_from_R, viewing_direction
 
-from .ui_common import MIN_PAIRS, QUALITY_BADGES, SolveBundle, SolveShown, md_escape, _fmt
+from .ui_common import MIN_PAIRS, QUALITY_BADGES, HeldQuality, SolveBundle, SolveShown, md_escape, _fmt
 
 #: The characters the panel may show besides printable ASCII: ones every sans-serif font of the page's
 #: stack has (Arial / Liberation Sans, Roboto, Helvetica, DejaVu Sans).
@@ -32,6 +32,7 @@ class CalibrationPanel:
         with gui.add_folder("Calibration"):
             self.md_result = gui.add_markdown("")
             self.md_table = gui.add_markdown("")
+        self._held = HeldQuality()  # the verdict shown, with hysteresis on the left-out limit (display only)
 
     @property
     def result_text(self) -> str:
@@ -57,6 +58,7 @@ class CalibrationPanel:
             keep = " Showing the last good result." if bundle is not None else ""
             out.append(f"**Solve failed:** {md_escape(error)}.{keep}")
         if bundle is None:
+            self._held.status(None)  # a new start: the next verdict is shown plain
             if n_complete < MIN_PAIRS:
                 out.append(f"No calibration yet (needs {MIN_PAIRS} pairs).")
             self.md_result.content = "  \n".join(out)
@@ -67,10 +69,13 @@ class CalibrationPanel:
         t, rpy = T[:3, 3], rpy_deg_from_R(T[:3, :3])
         st, sr = np.asarray(r.sigma_translation_m), np.asarray(r.sigma_rpy_deg)
         quality = getattr(r, "quality", None)
-        status = getattr(quality, "status", "ok")
+        status, held = self._held.status(quality)
         reasons = list(getattr(quality, "reasons", []))
         # The verdict first and in colour: never a confident wrong answer.
         out.append(f"{QUALITY_BADGES.get(status, QUALITY_BADGES['unreliable'])}")
+        if held:  # run 4: a 1-2 px re-click flipped it at the limit
+            out.append(f"*Shown as {md_escape(held)}; the shown Quality changes once the left-out error passes the "
+                       "limit by that margin.*")
         for reason in reasons:
             out.append(f"• {md_escape(reason)}")
         excluded = [int(i) for i in getattr(r, "outlier_ids", [])]

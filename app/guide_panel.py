@@ -119,7 +119,7 @@ class GuidePanel(GuideShotsMixin):
                  shots: Callable[[], Any] | None = None, on_status: Callable | None = None) -> None:
         self._init_shots(shots)
         self.state, self.depth, self.camera, self.image = state, depth, camera, image
-        self._solve_quality, self._on_status = solve_quality, on_status or (lambda guiding, lines: None)  # pair bar
+        self._solve_quality, self._on_status = solve_quality, on_status or (lambda *status, **actions: None)  # pair bar
         self._job_quality: tuple | None = None  # (pairs, status, reasons) of the guide's own solve, last job
         self._reason: str | None = None  # why the last proposals are empty
         #: The screen of the proposals; its 3-sigma limit follows the camera loupe (:func:`max_ellipse_px_for`).
@@ -435,12 +435,11 @@ class GuidePanel(GuideShotsMixin):
 
     # ---------------------------------------------------------------- drawing
     def _refresh(self) -> None:
-        n = self._n_complete()
-        active = self._active(n)
+        active = self._active(self._n_complete())
         with self._lock:
             busy, error, props, index, reason = self._busy, self._error, self._proposals, self._index, self._reason
         unreliable = self._unreliable() if active else None
-        lines = ["**Guided picking**"]
+        lines, shown = ["**Guided picking**"], False  # shown: a proposal is, so the pair bar repeats its actions
         if not active:
             lines.append(f"Starts after {MIN_PAIRS} pairs or an imported initial extrinsic.")
         elif unreliable is not None:
@@ -460,7 +459,7 @@ class GuidePanel(GuideShotsMixin):
         elif self._spent:
             lines.append(self.SPENT_NOTE)
         else:
-            p = props[index]
+            p, shown = props[index], True
             major = 3.0 * float(p.ellipse_sigma_px()[0])
             what = self._what(p)
             lines += [f"Skipped the {md_escape(self._moved_on)}."] if self._moved_on else []
@@ -482,7 +481,8 @@ class GuidePanel(GuideShotsMixin):
                              "until then), or **Skip**.")
             elif self._guiding:
                 lines.append("Press **Next pair** to continue.")
-        self._on_status(self._guiding, [self._bar_line(active, unreliable, busy, props, index)])
+        self._on_status(self._guiding, [self._bar_line(active, unreliable, busy, props, index)],  # Skip...Stop too:
+                        actions={k: self._callbacks[k] for k in BUTTONS[1:]} if shown else None)
         lines.append(pair_counts_line(self.state.complete_picks()))
         self._md.content = "  \n".join(lines)
 

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
 #: The camera loupe's crop side for a 640 px wide image (original-image px, zoom 1).
 CAMERA_LOUPE_PX = 36
 
@@ -46,3 +48,43 @@ class CameraCrop:
     n: int
     center: tuple[float, float]
     cov_px2: tuple | None  # 2x2 covariance of the framed point (pixels^2), drawn as a 3-sigma ellipse
+
+
+def render_crop_of(camera_crop: CameraCrop, n: int | None) -> CameraCrop:
+    """The laser loupe's view while it shows the camera-view render: original-image pixels around
+    ``camera_crop``'s centre, ``n`` on a side (None: the camera loupe's side); no ellipse."""
+    if n is None or n == camera_crop.n:
+        return CameraCrop(camera_crop.u0, camera_crop.v0, camera_crop.n, camera_crop.center, None)
+    u, v = camera_crop.center
+    return CameraCrop(int(round(u)) - n // 2, int(round(v)) - n // 2, int(n), (float(u), float(v)), None)
+
+
+def camera_crop_texture(image: np.ndarray, c: CameraCrop, gamma: float, texels: int, pad: int) -> np.ndarray:
+    """The camera loupe's texture: ``image``'s pixels of crop ``c`` (gray ``pad`` outside the image), their
+    shadows lifted by ``gamma`` (``255 * (x / 255) ** (1 / gamma)``; 1: as they are), enlarged by nearest neighbour
+    to about ``texels`` texels a side."""
+    h, w = image.shape[:2]
+    us, vs = c.u0 + np.arange(c.n), c.v0 + np.arange(c.n)
+    ok = ((vs >= 0) & (vs < h))[:, None] & ((us >= 0) & (us < w))[None, :]
+    crop = image[np.clip(vs, 0, h - 1)][:, np.clip(us, 0, w - 1)]
+    if gamma != 1.0:
+        crop = np.round(255.0 * (np.arange(256) / 255.0) ** (1.0 / gamma)).astype(np.uint8)[crop]
+    crop = np.where(ok[..., None], crop, np.uint8(pad)).astype(np.uint8)
+    k = max(1, texels // c.n)
+    return np.repeat(np.repeat(crop, k, axis=0), k, axis=1)
+
+
+def ba_crop_texture(gray: np.ndarray, c: BaCrop, wrap_cols: bool, texels: int, pad: int) -> np.ndarray:
+    """The BA loupe's texture: the cells of crop ``c`` of laser image ``gray`` (rows x columns; columns wrap
+    around a 360-degree scan with ``wrap_cols``; gray ``pad`` outside), enlarged by nearest neighbour."""
+    n_rows, n_cols = gray.shape
+    rows = c.row0 + np.arange(c.n_rows)
+    cols = c.col0 + np.arange(c.n_cols)
+    if wrap_cols:
+        cols %= n_cols
+    ok_r = (rows >= 0) & (rows < n_rows)
+    ok_c = (cols >= 0) & (cols < n_cols)
+    crop = gray[np.clip(rows, 0, n_rows - 1)][:, np.clip(cols, 0, n_cols - 1)]
+    crop = np.where(ok_r[:, None] & ok_c[None, :], crop, np.uint8(pad)).astype(np.uint8)
+    k = max(1, texels // max(c.n_rows, c.n_cols))
+    return np.repeat(np.repeat(crop, k, axis=0), k, axis=1)

@@ -131,3 +131,19 @@ def _frame(loupes: Any, app: Any, target: tuple, pick_id: int, recentre: bool,
             cell = app.pose_source.predict_cell(target[1], target[2])
             if cell is not None:
                 loupes.frame_ba(loupes.ba_crop.key, *cell)
+
+
+def frame_pair(loupes: Any, app: Any, pick_id: int) -> None:
+    """Frame both ``loupes`` on pair ``pick_id``'s two ends (an end not clicked yet: its prediction under the
+    app's pose), e.g. when it is selected (run 6: selecting a pair left the loupes where they were)."""
+    pick = next((p for p in app.state.picks if p.id == pick_id), None)
+    if pick is None:
+        return
+    cell = pick.laser_rc if pick.laser_rc is not None else (
+        None if pick.pixel is None else app.pose_source.predict_cell(*pick.pixel))
+    uv = pick.pixel if pick.pixel is not None else (
+        None if pick.laser_rc is None else app.pose_source.predict_pixel(*pick.laser_rc))
+    if cell is not None:
+        loupes.frame_ba(loupes.ba_crop.key, *cell)
+    if uv is not None:
+        loupes.frame_camera(float(uv[0]), float(uv[1]))

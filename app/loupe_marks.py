@@ -86,3 +86,22 @@ def draw_camera_marks(app: Any, slot: Any, crop: Any, picks: list, pose: np.ndar
         seg_cols = _colours(np.array([p.color for p in cells], np.uint8).reshape(-1, 3)[keep], len(segs),
                             int(keep.sum()))
     nodes.lines("/annot/loupe/camera_laser", segs, seg_cols, thickness=2.0)
+
+
+def draw_camera_outline(app: Any, c: Any) -> None:
+    """Where the camera loupe looks (its crop ``c``, :class:`app.loupe_crops.CameraCrop`), on the main camera
+    view of ``app`` (curved on a panorama)."""
+    t = np.linspace(0.0, 1.0, 9)
+    a, b = c.u0 - 0.5, c.u0 + c.n - 0.5
+    top, bottom = c.v0 - 0.5, c.v0 + c.n - 0.5
+    ring = np.concatenate([np.stack([a + (b - a) * t, np.full_like(t, top)], 1),
+                           np.stack([np.full_like(t, b), top + (bottom - top) * t], 1),
+                           np.stack([b - (b - a) * t, np.full_like(t, bottom)], 1),
+                           np.stack([np.full_like(t, a), bottom - (bottom - top) * t], 1)])
+    disp, ok = app.display_from_pixels(ring)
+    segs = np.empty((0, 2, 3))
+    if ok.all():
+        w = app.camera_slot().world_from_pixel(disp, z_offset=-0.02)
+        segs = np.stack([w[:-1], w[1:]], axis=1)
+    app.nodes.lines("/annot/loupe/camera_outline", segs, np.full(segs.shape, (255, 120, 0), np.uint8),
+                    thickness=2.0)

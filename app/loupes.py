@@ -1,11 +1,9 @@
 """The two loupes: magnified, clickable crops of one BA image and of the original camera image.
 
-They sit right of the camera and BA images (:func:`app.layout.loupe_areas`),
-so the whole page and both loupes are visible at once.  Each is a viser scene
-image whose texture is a crop enlarged by nearest neighbour (crisp cells and
-pixels).  A click in a loupe maps back exactly: sub-pixel for the camera
-(the loupe shows the *original* image, whatever the main view shows), a whole
-scan cell for the BA loupe.
+They sit right of the camera and BA images (:func:`app.layout.loupe_areas`), so the whole page and both loupes
+are visible at once.  Each is a viser scene image whose texture is a crop enlarged by nearest neighbour (crisp
+cells and pixels).  A click in a loupe maps back exactly: sub-pixel for the camera (the loupe shows the *original*
+image, whatever the main view shows), a whole scan cell for the BA loupe.
 
 They follow each click (:mod:`app.loupe_framing`: to the click and the other end's prediction); the zoom steps
 change how much they show around the same centre.  Display plumbing only (predictions: :mod:`calib_core.predict`).
@@ -22,9 +20,10 @@ from calib_core.errors import CalibError
 from calib_core.predict import ellipse_outline
 
 from .layout import ImageSlot, LoupeArea, bounds_of, loupe_areas
-from .loupe_crops import BaCrop, CameraCrop, default_camera_crop_px, node_name, slot_key
-from .loupe_framing import PairClick, follow_click
-from .loupe_marks import LEGEND, ba_title, camera_title, draw_camera_marks, tick_segments
+from .loupe_crops import (BaCrop, CameraCrop, ba_crop_texture, camera_crop_texture, default_camera_crop_px, node_name,
+                          render_crop_of, slot_key)
+from .loupe_framing import PairClick, follow_click, frame_pair
+from .loupe_marks import LEGEND, ba_title, camera_title, draw_camera_marks, draw_camera_outline, tick_segments
 from .shown_render import cell_at_pixel, loupe_texture, loupe_title, pixel_of_cells
 from .ui_common import marker_segments
 
@@ -69,6 +68,8 @@ class Loupes:
         self._clicked: dict[str, tuple] = {}  # kind -> the cell / pixel a click inside it chose: its title names it
         self.shows_render = False  # the laser loupe shows the camera-view render's crop (after a click on it)
         self._render: Any = None  # the render the render pane shows (app.shown_render.ShownRender; on_render)
+        self.photo_gamma = 1.0  # the photo loupe's brightness (display only: "Photo loupe brightness")
+        self._render_n: int | None = None  # the render loupe's own side (px; None: the camera loupe's), zoomed alone
         scene = app.server.scene
         self._handles: dict[str, Any] = {}
         self._titles: dict[str, Any] = {}
@@ -90,6 +91,8 @@ class Loupes:
             self._place(kind)  # sends the size and place once; later only when they change
         self.refresh()
         self._build_folder(app.server.gui, add_controls)  # the display panel's loupe widgets
+        self._selected_seen: int | None = None
+        app.state.subscribe(self._on_state_change)  # a pair selected: both loupes go to it
 
     def _build_folder(self, gui: Any, add_controls: Callable[[Any], None]) -> None:
         """The "Loupes" folder: used while picking, so right below the Pairs folder, found without scrolling."""
@@ -97,7 +100,18 @@ class Loupes:
         with self.folder:
             zoom = gui.add_button_group("Loupe zoom", ("BA +", "BA -", "Camera +", "Camera -"))
             zoom.on_click(self.app.guard(self.on_zoom))
+            # Run 6: shadowed bins were black in the photo loupe.  Display only: the pairs never change with it.
+            self._sl_gamma = gui.add_slider("Photo loupe brightness", 1.0, 3.0, 0.1, initial_value=self.photo_gamma,
+                                            hint="Lifts the photo loupe's shadows (gamma); display only")
+            self.photo_gamma_callback = self.app.guard(lambda event: self.set_photo_gamma(float(event.target.value)))
+            self._sl_gamma.on_update(self.photo_gamma_callback)
             add_controls(gui)  # what the BA loupe shows, the contrast, "Hide marks"
+
+    def set_photo_gamma(self, gamma: float) -> None:
+        """Show the photo loupe with its shadows lifted by ``gamma`` (>= 1; 1: the photo as it is)."""
+        with self.app.ui_lock:
+            self.photo_gamma = float(min(max(gamma, 1.0), 3.0))
+            self._show("camera")
 
     def on_zoom(self, event: Any) -> None:
         """The "Loupe zoom" buttons: magnify or widen one loupe around the same centre."""
@@ -167,12 +181,19 @@ class Loupes:
         """Does the laser loupe show the render now (asked for, and a render exists)?"""
         return self.shows_render and self._render is not None
 
+    @property
+    def render_crop(self) -> CameraCrop:
+        """The camera pixels the laser loupe shows while it shows the render: around the camera loupe's centre,
+        its own side (the two loupes zoom alone: run 6, the wheel over the render loupe zoomed the photo's too)."""
+        return render_crop_of(self.camera_crop, self._render_n)
+
     def zoom(self, kind: str, factor: float) -> None:
-        """Magnify loupe ``kind`` by ``factor`` (> 1 shows less, bigger) around the same centre."""
-        if kind == "ba" and self._render_on():
-            kind = "camera"  # the laser loupe shows the camera loupe's crop: zoom both
+        """Magnify loupe ``kind`` by ``factor`` (> 1 shows less, bigger) around the same centre; only that one."""
         with self.app.ui_lock:
-            if kind == "ba":
+            if kind == "ba" and self._render_on():
+                lo, hi = CAMERA_PX_LIMITS
+                self._render_n = int(min(max(round(self.render_crop.n / factor), lo), hi))
+            elif kind == "ba":
                 lo, hi = BA_COLUMN_LIMITS
                 self._ba_cols = int(min(max(round(self._ba_cols / factor), lo), hi, self.app.depth.shape[1]))
                 c = self.ba_crop
@@ -187,6 +208,13 @@ class Loupes:
     def on_pair_click(self, click: PairClick) -> None:
         """Follow a click on the images (:meth:`app.pairs_panel.PairsPanel.subscribe_clicks`)."""
         follow_click(self, self.app, click)
+
+    def _on_state_change(self, state: Any) -> None:
+        selected = state.selected
+        if selected != self._selected_seen:
+            self._selected_seen = selected
+            if selected is not None:
+                frame_pair(self, self.app, selected)
 
     def on_pair_cancelled(self) -> None:
         """A half-made pair was cancelled: a guided proposal's ellipse in the camera loupe goes too."""
@@ -240,7 +268,9 @@ class Loupes:
         """
         x, y = float(uv[0]), float(uv[1])
         if kind == "ba" and self._render_on():
-            c = self.camera_crop
+            c = self.render_crop
+            if (stale := self.app.pose_source.stale_click_reason(self._render)) is not None:  # run 6: a refit
+                raise CalibError(stale)  # the click was planned on the render before it
             cell = cell_at_pixel(self._render, c.u0 + x, c.v0 + y)
             if cell is None:
                 raise CalibError("no laser return here: click where the camera-view render shows the scan")
@@ -266,7 +296,7 @@ class Loupes:
         """Loupe pixel showing ``target``: ``(col, row)`` of a scan cell (fractions aim off its centre) or an
         original-image pixel ``(u, v)``; None when the loupe does not show it."""
         if kind == "ba" and self._render_on():  # where the render's pose draws the cell
-            c = self.camera_crop
+            c = self.render_crop
             uv = pixel_of_cells(self._render, self.app.camera, self.app.depth,
                                 np.array([[round(target[1]), round(target[0])]]))[0]
             x, y = float(uv[0]) - c.u0, float(uv[1]) - c.v0
@@ -303,7 +333,7 @@ class Loupes:
             pose = app.pose()
             inputs += (None if pose is None else np.asarray(pose, np.float64).tobytes(),)
         if kind == "ba" and self._render_on():
-            inputs += (self.camera_crop, id(self._render))
+            inputs += (self.render_crop, id(self._render))
         if self._marks_of.get(kind) == inputs:
             return
         self._marks_of[kind] = inputs
@@ -322,7 +352,7 @@ class Loupes:
             elif kind == "ba":
                 self._draw_ba_outline()
             else:
-                self._draw_camera_outline()
+                draw_camera_outline(app, self.camera_crop)
 
     def _draw_ba_marks(self, picks: list) -> None:
         nodes = self.app.nodes
@@ -337,8 +367,9 @@ class Loupes:
         hx, hy = 0.5 * s.units_per_px, 0.5 * s.units_per_px_y
         radius, cell = 1.6 * max(hx, hy), (hx, hy)
         if self._render_on():  # the render's crop: rings where the render's pose draws the cells
-            xy = pixel_of_cells(self._render, app.camera, app.depth, rc) - [self.camera_crop.u0, self.camera_crop.v0]
-            radius, cell = max(3.0, 0.06 * self.camera_crop.n) * s.units_per_px, None
+            rc_crop = self.render_crop
+            xy = pixel_of_cells(self._render, app.camera, app.depth, rc) - [rc_crop.u0, rc_crop.v0]
+            radius, cell = max(3.0, 0.06 * rc_crop.n) * s.units_per_px, None
         inside = np.array([s.contains(p) for p in xy], bool)
         segs = marker_segments(s.world_from_pixel(xy[inside], z_offset=-0.01), radius, cell_half_size=cell,
                                ticks=True)
@@ -385,25 +416,6 @@ class Loupes:
             segs = np.stack([w, np.roll(w, -1, axis=0)], axis=1)
         app.nodes.lines("/annot/loupe/ba_outline", segs, np.full(segs.shape, (255, 120, 0), np.uint8), thickness=2.0)
 
-    def _draw_camera_outline(self) -> None:
-        """Where the camera loupe looks, on the main camera view (curved on a panorama)."""
-        app = self.app
-        c = self.camera_crop
-        t = np.linspace(0.0, 1.0, 9)
-        a, b = c.u0 - 0.5, c.u0 + c.n - 0.5
-        top, bottom = c.v0 - 0.5, c.v0 + c.n - 0.5
-        ring = np.concatenate([np.stack([a + (b - a) * t, np.full_like(t, top)], 1),
-                               np.stack([np.full_like(t, b), top + (bottom - top) * t], 1),
-                               np.stack([b - (b - a) * t, np.full_like(t, bottom)], 1),
-                               np.stack([np.full_like(t, a), bottom - (bottom - top) * t], 1)])
-        disp, ok = app.display_from_pixels(ring)
-        segs = np.empty((0, 2, 3))
-        if ok.all():
-            w = app.camera_slot().world_from_pixel(disp, z_offset=-0.02)
-            segs = np.stack([w[:-1], w[1:]], axis=1)
-        app.nodes.lines("/annot/loupe/camera_outline", segs, np.full(segs.shape, (255, 120, 0), np.uint8),
-                        thickness=2.0)
-
     # ------------------------------------------------------------------ internals
     def _make_ba_crop(self, key: str, row: int, col: int) -> BaCrop:
         n_rows_scan, n_cols_scan = self.app.depth.shape
@@ -418,32 +430,13 @@ class Loupes:
 
     def _ba_texture(self) -> np.ndarray:
         if self._render_on():
-            cc = self.camera_crop
+            cc = self.render_crop
             return loupe_texture(self._render, self.app.camera, cc.u0, cc.v0, cc.n)
-        c = self.ba_crop
-        gray = self.app.laser_images.loupe_image(c.key)[0]
-        n_rows, n_cols = gray.shape
-        rows = c.row0 + np.arange(c.n_rows)
-        cols = c.col0 + np.arange(c.n_cols)
-        if self.app.wrap_cols:
-            cols %= n_cols
-        ok_r = (rows >= 0) & (rows < n_rows)
-        ok_c = (cols >= 0) & (cols < n_cols)
-        crop = gray[np.clip(rows, 0, n_rows - 1)][:, np.clip(cols, 0, n_cols - 1)]
-        crop = np.where(ok_r[:, None] & ok_c[None, :], crop, np.uint8(PAD_GRAY)).astype(np.uint8)
-        k = max(1, TEXTURE_TEXELS // max(c.n_rows, c.n_cols))
-        return np.repeat(np.repeat(crop, k, axis=0), k, axis=1)
+        gray = self.app.laser_images.loupe_image(self.ba_crop.key)[0]
+        return ba_crop_texture(gray, self.ba_crop, self.app.wrap_cols, TEXTURE_TEXELS, PAD_GRAY)
 
     def _camera_texture(self) -> np.ndarray:
-        c = self.camera_crop
-        img = self.app.image
-        h, w = img.shape[:2]
-        us, vs = c.u0 + np.arange(c.n), c.v0 + np.arange(c.n)
-        ok = ((vs >= 0) & (vs < h))[:, None] & ((us >= 0) & (us < w))[None, :]
-        crop = img[np.clip(vs, 0, h - 1)][:, np.clip(us, 0, w - 1)]
-        crop = np.where(ok[..., None], crop, np.uint8(PAD_GRAY)).astype(np.uint8)
-        k = max(1, TEXTURE_TEXELS // c.n)
-        return np.repeat(np.repeat(crop, k, axis=0), k, axis=1)
+        return camera_crop_texture(self.app.image, self.camera_crop, self.photo_gamma, TEXTURE_TEXELS, PAD_GRAY)
 
     def _place(self, kind: str) -> None:
         """Fit the crop into the loupe's area (cells keep their drawn aspect), top-left aligned."""
@@ -455,8 +448,8 @@ class Loupes:
             if unit_y * c.n_rows > area.height:
                 unit_y = area.height / c.n_rows
             w_px, h_px, rw, rh = c.n_cols, c.n_rows, area.width, unit_y * c.n_rows
-        else:  # the camera loupe, or the laser loupe showing the render's crop of the same pixels
-            n = self.camera_crop.n
+        else:  # the camera loupe, or the laser loupe showing the render's crop around the same centre
+            n = (self.render_crop if kind == "ba" else self.camera_crop).n
             w_px = h_px = n
             rw = rh = min(area.width, area.height)
         slot = ImageSlot(slot_key(kind), w_px, h_px, (area.x0 + rw / 2, area.y0 + rh / 2, 0.0), rw, rh)
@@ -471,8 +464,8 @@ class Loupes:
 
     def title(self, kind: str) -> str:
         """The loupe's title as the page shows it."""
-        if kind == "ba" and self._render_on():
-            return loupe_title(self._render, self.app.depth, self.camera_crop.center)
+        if kind == "ba" and self._render_on():  # the cell a click inside chose (run 6: it named the old one)
+            return loupe_title(self._render, self.app.depth, self.camera_crop.center, self._clicked.get("ba"))
         if kind == "ba":
             c = self.ba_crop
             row, col = self._clicked.get("ba", c.center)

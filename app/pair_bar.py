@@ -9,11 +9,11 @@ published (:class:`app.ui_common.SolveBundle`), the guided text is the Guide pan
 from __future__ import annotations
 
 import threading
-from typing import Any
+from typing import Any, Callable, Mapping
 
 from calib_core.solve.quality import LOO_NOISY_PX, NO_ERROR_ESTIMATE, error_estimate_reason, pairs_in_fit
 
-from .ui_common import _fmt
+from .ui_common import HeldQuality, _fmt
 
 #: Keeps the pair bar (the pair actions, the live line, the pair status, the guided line: the panel's rows above the
 #: intro) in view while the control panel scrolls: each scroll shifts those rows down by what scrolled away, over the
@@ -44,9 +44,9 @@ if (!window.__baCalibPairBar) {
     if (!rows || !rows.length) return;
     const viewport = rows[0].closest(".mantine-ScrollArea-viewport");
     if (!viewport) return;
-    const shifted = parseFloat(rows[0].dataset.baShift || "0");
     const shift = Math.max(0, viewport.scrollTop);  // the rows head the scrolled content: they stay put
-    if (shift === shifted && rows[0].dataset.baPinned) return;
+    // A row shown since (the guided actions appear with a proposal) is pinned too.
+    if (rows.every((e) => e.dataset.baPinned && e.dataset.baShift === String(shift))) return;
     const paper = rows[0].closest(".mantine-Paper-root");
     const background = paper ? getComputedStyle(paper).backgroundColor : "white";
     rows.forEach((e, i) => {
@@ -117,13 +117,16 @@ def undo_note(before: list, after: list) -> str:
     return f"Undone: a change of pair {b.id}."
 
 
-def live_summary(live: Any) -> str:
+def live_summary(live: Any, held: HeldQuality | None = None) -> str:
     """``"N pairs · mean X px · left out Y px (warning above L) · Quality: ok"`` (markdown) of the solve
-    ``live.bundle`` shows (``live``: a :class:`app.ui_common.SolveShown`), or "" before the first solve.  N is the pairs in the fit; with too few for an error
-    figure the mean says so."""
+    ``live.bundle`` shows (``live``: a :class:`app.ui_common.SolveShown`), or "" before the first solve.  N is the
+    pairs in the fit; with too few for an error figure the mean says so.  With ``held`` the status has hysteresis
+    on the left-out limit (:class:`app.ui_common.HeldQuality`; "(held, near the limit)" says so)."""
     bundle = getattr(live, "bundle", None)
     r = getattr(bundle, "result", None)
     if r is None:
+        if held is not None:
+            held.status(None)  # a new start: the next verdict is shown plain
         return ""
     n_fit = pairs_in_fit(r)
     quality = getattr(r, "quality", None)
@@ -137,30 +140,79 @@ def live_summary(live: Any) -> str:
                   f"(warning above {LOO_NOISY_PX:g})")
     else:
         errors = f"mean: {NO_ERROR_ESTIMATE}"
-    shown = "UNRELIABLE" if status == "unreliable" else status
+    note = ""
+    if held is not None:  # hysteresis on the left-out limit (the bar's own memory of what it showed)
+        status, note = held.status(quality)
+    shown = ("UNRELIABLE" if status == "unreliable" else status) + (" (held, near the limit)" if note else "")
     solving = " · solving…" if getattr(live, "solving", False) else ""
     return f"**{n_fit} pairs · {errors} · Quality: {shown}**{solving}"
 
 
+#: Guided picking's actions the bar repeats while a proposal is shown (run 6: the person scrolled to the Guided
+#: folder for them).  "Next pair" is among the pair actions already.
+GUIDED_BAR_ACTIONS = ("Skip", "Not a corner", "Stop")
+
+
 class PairBar:
-    """The two markdown lines (live solve, guided status) placed at ``order`` in the panel ``gui``.
+    """The two markdown lines (live solve, guided status) placed at ``order`` in the panel ``gui``, and guided
+    picking's :data:`GUIDED_BAR_ACTIONS` under them while a proposal is shown.
+
+    The bar does not know the Guide panel: the actions' handlers come with the guided status
+    (:meth:`show_guide_status`), a slot the Guide panel fills with its own guarded callbacks.
 
     Parameters
     ----------
     gui : viser GUI API
     live_order, guide_order : float
-        Their positions in the control panel (just under the pair actions).
+        Their positions in the control panel (just under the pair actions); the guided actions go just under the
+        guided line.
     """
 
     def __init__(self, gui: Any, live_order: float, guide_order: float) -> None:
         self._md_live = gui.add_markdown("", order=live_order)
+        self._md_pose = gui.add_markdown("", order=live_order + 0.05)  # a rough pose the person did not make
         self._md_guide = gui.add_markdown("", order=guide_order)
+        self._bg_guided = gui.add_button_group("Guided", GUIDED_BAR_ACTIONS, order=guide_order + 0.02, visible=False)
+        self._guided_actions: dict[str, Callable] = {}
+        self.guided_action_callback = self._on_guided_action
+        self._bg_guided.on_click(self.guided_action_callback)
         self._lock = threading.Lock()  # the Guide panel updates its line from its own threads
+        self._held = HeldQuality()  # the live line's Quality, with hysteresis on the left-out limit
+
+    @property
+    def guided_actions_shown(self) -> bool:
+        """Whether the bar shows :data:`GUIDED_BAR_ACTIONS` (only while guided picking shows a proposal)."""
+        return bool(self._bg_guided.visible)
+
+    async def _on_guided_action(self, event: Any) -> None:
+        """A press of one of the bar's guided actions: the handler the Guide panel gave, as its own button would."""
+        with self._lock:
+            handler = self._guided_actions.get(str(event.target.value)) if self._bg_guided.visible else None
+        if handler is not None:
+            result = handler(event)
+            if hasattr(result, "__await__"):
+                await result
 
     @property
     def live_line(self) -> str:
         """The live solve's one-line summary (markdown; empty before the first solve)."""
         return str(self._md_live.content)
+
+    @property
+    def pose_note(self) -> str:
+        """The notice of a rough pose change the person did not make (markdown; empty if none shown)."""
+        return str(self._md_pose.content)
+
+    def show_pose_turn(self, turn: Any) -> None:
+        """Show the notice of rough pose change ``turn`` (:class:`app.pose_source.PoseTurn`, or None) under the live
+        line, where the person looks while picking (run 6: the render rolled 2.2-3 deg after the 2nd pair with no
+        word near it): e.g. "Pose refitted from 2 pairs: turned 2.6 deg".  A step by hand clears it, so does the
+        first solve (:meth:`show_live`)."""
+        note = "" if turn is None else turn.note()
+        text = f"⚠ **{note}**: the render moved; look again before the next click." if note else ""
+        with self._lock:
+            if self._md_pose.content != text:
+                self._md_pose.content = text
 
     @property
     def guide_status(self) -> str:
@@ -169,16 +221,26 @@ class PairBar:
 
     def show_live(self, live: Any) -> None:
         """Show :func:`live_summary` of what the live solve shows (``live``: :class:`app.ui_common.SolveShown`)."""
-        text = live_summary(live)
         with self._lock:
+            text = live_summary(live, self._held)
             if self._md_live.content != text:
                 self._md_live.content = text
+            if getattr(live, "bundle", None) is not None and self._md_pose.content:
+                self._md_pose.content = ""  # the page shows the solve now, not the rough pose
 
-    def show_guide_status(self, guiding: bool, lines: list[str]) -> None:
+    def show_guide_status(self, guiding: bool, lines: list[str],
+                          actions: Mapping[str, Callable] | None = None) -> None:
         """Show guided picking's status ``lines`` (markdown, already escaped) while a guided session runs
         (``guiding``); clear it otherwise.  The Guide panel sends one short line (its folder keeps the full text:
-        in run 6 the whole text here grew the bar to about 300 px).  Called by the Guide panel from any thread."""
+        in run 6 the whole text here grew the bar to about 300 px).  ``actions``: label -> the Guide panel's
+        handler of its button (a viser click callback) for :data:`GUIDED_BAR_ACTIONS`, given while a proposal is
+        shown; the bar shows those buttons then and hides them otherwise.  Called by the Guide panel from any
+        thread."""
         text = ("**Guided:** " + "  \n".join(lines)) if guiding and lines else ""
+        shown = {k: v for k, v in (actions or {}).items() if k in GUIDED_BAR_ACTIONS} if guiding else {}
         with self._lock:
             if self._md_guide.content != text:
                 self._md_guide.content = text
+            self._guided_actions = shown
+            if bool(self._bg_guided.visible) != bool(shown):
+                self._bg_guided.visible = bool(shown)

@@ -18,7 +18,7 @@ from .loupe_framing import PairClick
 from .page_builder import install_page_script
 from .pair_bar import PAIR_BAR_JS, PairBar, undo_note
 from .pairs_import import import_upload
-from .ui_common import MIN_PAIRS, SNAP_RADIUS_PX
+from .ui_common import MIN_PAIRS, SNAP_RADIUS_PX, pick_tolerance_px
 
 #: The buttons at the top of the control panel ("Next pair" is guided picking's own).
 PAIR_ACTIONS = ("Undo", "Cancel pair", "Next pair")
@@ -58,6 +58,7 @@ class PairsPanel:
         # The live solve's figures right under the buttons, guided picking's status under the pair status.
         self.bar = PairBar(gui, live_order=top - 0.75, guide_order=top - 0.45)
         self.show_guide_status = self.bar.show_guide_status  # the Guide panel's hook
+        app.pose_source.subscribe(lambda: self.bar.show_pose_turn(app.pose_source.last_turn))  # e.g. a refit
         install_page_script(app.server, PAIR_BAR_JS)  # the bar stays in view; Delete and Ctrl+Z keys
         self._guarded_pair_action = guard(self.on_pair_action)
         self._next_pair: Callable | None = None  # guided picking's "Next pair" (set_next_pair_handler)
@@ -297,9 +298,14 @@ class PairsPanel:
     def make_select_handler(self, key: str) -> Callable:
         """The Shift+click callback of image slot ``key``: selects the pair whose marker is nearest."""
         def on_shift_click(event: Any) -> None:
-            uv = self.app.slot_of(key).pixel_from_ray(event.ray_origin, event.ray_direction)
+            slot = self.app.slot_of(key)
+            uv = slot.pixel_from_ray(event.ray_origin, event.ray_direction)
             pick_id = None if uv is None else self._nearest_pick(key, uv)
             self.app.state.select(pick_id)
+            if pick_id is None and uv is not None:  # run 6: a Shift+click beside a marker did nothing, silently
+                tolerance = pick_tolerance_px(slot.units_per_px, slot.units_per_px_y)
+                self._undo_note = (self.app.state.version, f"No pair within {tolerance:.0f} px of that Shift+click.")
+                self.refresh()
 
         return self.app.guard(on_shift_click)
 

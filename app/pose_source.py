@@ -9,7 +9,9 @@ subscribers (:meth:`PoseSource.subscribe`); the composition root redraws what de
 
 from __future__ import annotations
 
+import dataclasses
 import threading
+import time
 from pathlib import Path
 from typing import Any, Callable
 
@@ -19,11 +21,32 @@ from calib_core.alignment import preset_T
 from calib_core.errors import CalibError
 from calib_core.overlays import columns_seen_by_camera, project_lidar_points
 from calib_core.predict import ProjectedScan, predict_pixel
+from calib_core.transforms import rotation_angle_deg
 
 from .ba_view import ColumnWindow, covering_window
 
 #: The pose the render and the BA columns assume before any pose exists.
 DEFAULT_PRESET = "+x"
+#: After a rough pose the person did not make (the fit to 2-3 pairs), a click on the render is not placed for this
+#: long (seconds) once the new render is shown: it was planned on the old one (run 6: the render rolled 2.2-3 deg
+#: after the 2nd pair, and a click then missed).
+REFIT_CLICK_GRACE_S = 0.5
+
+
+@dataclasses.dataclass(frozen=True)
+class PoseTurn:
+    """One change of the rough pose: ``why`` it changed (e.g. "refitted from 2 pairs"; "" for a step by hand), how
+    far it turned (degrees, the angle of the relative rotation), the new ``T_camera_lidar`` (4x4) and when
+    (``time.monotonic()`` seconds)."""
+
+    why: str
+    degrees: float
+    T_camera_lidar: np.ndarray
+    at: float
+
+    def note(self) -> str:
+        """The notice for the person, e.g. "Pose refitted from 2 pairs: turned 2.6 deg" ("" for a step by hand)."""
+        return f"Pose {self.why}: turned {self.degrees:.1f} deg" if self.why else ""
 
 
 def read_extrinsics(path: Path, shown: str | None = None) -> np.ndarray:
@@ -60,6 +83,7 @@ class PoseSource:
         self._projected: tuple[bytes, ProjectedScan] | None = None
         self._projected_lock = threading.Lock()
         self._listeners: list[Callable[[], None]] = []
+        self.last_turn: PoseTurn | None = None  # the last change of the rough pose (adopt_rough_pose)
         self._facing: ColumnWindow | None = None  # from the last good solve it was computed for (else the view pose)
         self._facing_of: Any = None  # the solve ``_facing`` was computed for
         # The extrinsic given at start (file, bag's /tf_static); a rough pose saved in the session wins over it.
@@ -185,10 +209,32 @@ class PoseSource:
         self.initial_T_camera_lidar = T_camera_lidar
         threading.Thread(target=self._warm_projection, name="ba-calib-projection", daemon=True).start()
 
-    def adopt_rough_pose(self, T_camera_lidar: np.ndarray | None) -> None:
-        """Make ``T_camera_lidar`` the rough pose (None: none), save it in the session and tell the subscribers."""
+    def adopt_rough_pose(self, T_camera_lidar: np.ndarray | None, why: str = "") -> None:
+        """Make ``T_camera_lidar`` the rough pose (None: none), save it in the session and tell the subscribers.
+
+        ``why``: the reason when the person did not make the change (e.g. "refitted from 2 pairs"), shown near
+        the render as :meth:`PoseTurn.note` (:attr:`last_turn`); "" for a step by hand."""
+        old = self.view_pose()[0]
         self.set_initial_extrinsics(T_camera_lidar)
+        new = self.view_pose()[0]
+        self.last_turn = PoseTurn(str(why), rotation_angle_deg(old[:3, :3], new[:3, :3]), np.array(new),
+                                  time.monotonic())
         saved = () if self.initial_T_camera_lidar is None else tuple(self.initial_T_camera_lidar.reshape(-1))
         self.app.state.set_view(rough_T_camera_lidar=saved)
         for listener in list(self._listeners):
             listener()
+
+    def stale_click_reason(self, shown: Any, now: float | None = None) -> str | None:
+        """Why a click on render ``shown`` (:class:`app.shown_render.ShownRender`) must not be placed, or None.
+
+        After a rough pose the person did not make (:attr:`last_turn` with a reason) and before any solve: while
+        the render shown is still the old pose's (the new one is on its way, and will move under the click), and
+        for :data:`REFIT_CLICK_GRACE_S` after the new one was made (the click was planned on the old render)."""
+        turn = self.last_turn
+        if turn is None or not turn.why or shown is None or self.app.solve_bundle is not None:
+            return None
+        now = time.monotonic() if now is None else now
+        old = not np.array_equal(np.asarray(shown.T_camera_lidar), turn.T_camera_lidar)
+        if old or now - float(getattr(shown, "made_at", turn.at)) < REFIT_CLICK_GRACE_S:
+            return f"not placed: {turn.note()} just now and the render moved; click again on the new render"
+        return None

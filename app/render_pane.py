@@ -327,6 +327,9 @@ class RenderPane:
         there is none."""
         if self.current is None:
             raise CalibError("the camera-view render is not ready yet; try again in a moment")
+        stale = self.app.pose_source.stale_click_reason(self.current)  # planned on the render before a refit
+        if stale is not None:
+            raise CalibError(stale)
         radius = float(NEAREST_PX)
         if display and screen_units is not None:
             per_px = self.app.slots[RENDER_KEY].units_per_px  # world units per pane pixel

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import time
 from typing import Any
 
 import numpy as np
@@ -27,7 +28,9 @@ TEXTURE_TEXELS = 320  # as app.loupes: texels along a loupe texture's side
 @dataclasses.dataclass(frozen=True, eq=False)
 class ShownRender:
     """A finished render: the pose and shading it was made with, the :class:`calib_core.render.CameraRender`,
-    its RGBA shading (alpha 0 where no return) and how long it took (seconds)."""
+    its RGBA shading (alpha 0 where no return), how long it took (seconds) and when it was finished
+    (``time.monotonic()`` seconds: a click just after a pose change is checked against it,
+    :meth:`app.pose_source.PoseSource.stale_click_reason`)."""
 
     T_camera_lidar: np.ndarray
     mode: str
@@ -35,6 +38,7 @@ class ShownRender:
     render: Any
     rgba: np.ndarray
     seconds: float
+    made_at: float = dataclasses.field(default_factory=time.monotonic)
 
 
 # ---------------------------------------------------------------------- a shown render's pixels and cells
@@ -93,9 +97,11 @@ def loupe_texture(shown: ShownRender | None, camera: Any, u0: int, v0: int, n: i
     return np.repeat(np.repeat(crop, k, axis=0), k, axis=1)
 
 
-def loupe_title(shown: ShownRender | None, depth: Any, center: tuple[float, float]) -> str:
-    """The laser loupe's title while it shows render ``shown``: the cell at the crop's centre and its range."""
+def loupe_title(shown: ShownRender | None, depth: Any, center: tuple[float, float],
+                clicked: tuple[int, int] | None = None) -> str:
+    """The laser loupe's title while it shows render ``shown``: the cell a click inside the loupe chose
+    (``clicked``, ``(row, col)``), else the cell at the crop's centre; and its range."""
     from .loupe_marks import render_title
 
-    cell = cell_at_pixel(shown, *center)
+    cell = (int(clicked[0]), int(clicked[1])) if clicked is not None else cell_at_pixel(shown, *center)
     return render_title(cell, None if cell is None else float(depth.range_m[cell]))

@@ -38,6 +38,7 @@ __all__ = [
     "LOO_FLOOR_PX",
     "LOO_NOISY_PX",
     "HIGH_LEVERAGE",
+    "off_plane_advice",
 ]
 
 STATUSES = ("ok", "warning", "unreliable")
@@ -436,6 +437,66 @@ def leave_one_out_reasons(loo: LeaveOneOut | None, fit_mean_px: float | None = N
     return reasons
 
 
+#: How a near-coplanar reason starts (:func:`geometry_reasons`); :func:`with_leave_one_out` says where to add pairs.
+PLANE_REASON_END = "lie near one plane: few coplanar pairs can fit a wrong pose; add pairs off that plane"
+
+
+def off_plane_advice(T_camera_lidar: np.ndarray | None, points_lidar: np.ndarray, pixels: np.ndarray, width: int,
+                     height: int) -> str:
+    """Where pairs off the plane of ``points_lidar`` (``(n, 3)``, lidar frame, metres) would go, in words, from
+    their ``pixels`` (``(n, 2)``, original image, ``width`` x ``height``) and ranges (from the lidar, metres).
+
+    With a pose ``T_camera_lidar`` to trust (None: none), the plane is named by its normal in the camera frame
+    (x right, y down, z forward): level (like the ground), across the view (like a wall ahead) or along it (like a
+    wall beside the road), else tilted.  Then the pairs' range band, the image's thirds that hold no pair, and
+    where off-plane pairs would lie: above the pairs' rows for a level plane, nearer or farther for a plane across
+    the view, on the image's other side for a plane along it, else in the empty thirds (by-eye run 6: "add pairs
+    off that plane" did not say where).
+    """
+    P = np.asarray(points_lidar, np.float64).reshape(-1, 3)
+    uv = np.asarray(pixels, np.float64).reshape(-1, 2)
+    rng = np.linalg.norm(P, axis=1)
+    lo, hi = float(rng.min()), float(rng.max())
+    normal = np.zeros(3)
+    if T_camera_lidar is not None:
+        normal = np.linalg.svd(P - P.mean(axis=0))[2][2] @ np.asarray(T_camera_lidar, np.float64)[:3, :3].T
+    axis = int(np.argmax(np.abs(normal)))
+    upright = abs(normal[axis]) >= 0.8
+    if T_camera_lidar is None:
+        kind, where = "", "in the image's empty thirds, at other ranges"
+    elif upright and axis == 1:
+        kind, where = "level (like the ground)", (f"above image row {uv[:, 1].min():.0f}, where the scan reaches "
+                                                  "(poles, signs, walls' upper edges)")
+    elif upright and axis == 2:
+        kind, where = "across the view (like a wall ahead)", f"nearer than {lo:.1f} m or farther than {hi:.1f} m"
+    elif upright:
+        left = float(np.mean(uv[:, 0])) < width / 2.0
+        kind = "along the view (like a wall beside the road)"
+        where = (f"right of image column {uv[:, 0].max():.0f}" if left else
+                 f"left of image column {uv[:, 0].min():.0f}") + " (the other side of the view)"
+    else:
+        kind, where = "tilted", "in the empty parts of the image"
+    empty = [f"{name} third" for name, lo_v in (("top", 0.0), ("middle", height / 3.0), ("bottom", 2 * height / 3.0))
+             if not ((uv[:, 1] >= lo_v - 0.5) & (uv[:, 1] < lo_v + height / 3.0 - 0.5)).any()]
+    empty += [f"{name} third" for name, lo_u in (("left", 0.0), ("centre", width / 3.0), ("right", 2 * width / 3.0))
+              if not ((uv[:, 0] >= lo_u - 0.5) & (uv[:, 0] < lo_u + width / 3.0 - 0.5)).any()]
+    none_in = f"; no pair in the image's {', '.join(empty)}" if empty else ""
+    named = f"the plane is {kind}, " if kind else ""
+    return f"{named}the pairs {lo:.1f}-{hi:.1f} m from the lidar{none_in}: add pairs {where}"
+
+
+def _with_plane_advice(reasons: list, result, points_lidar, pixels, camera) -> list:
+    """``reasons`` with the near-coplanar one saying where to add pairs (:func:`off_plane_advice`)."""
+    out = []
+    for r in reasons:
+        if str(r).endswith(PLANE_REASON_END) and len(points_lidar) >= 3:
+            trusted = result.quality.status != "unreliable"  # an unreliable pose could name the plane wrong
+            r = str(r)[:-len("add pairs off that plane")] + off_plane_advice(
+                result.T_camera_lidar if trusted else None, points_lidar, pixels, camera.width, camera.height)
+        out.append(r)
+    return out
+
+
 def with_leave_one_out(result, points_lidar, pixels, camera, pixel_sigma=None, pair_ids=None):
     """Add the leave-one-out check to a solve's result in place: ``result.quality`` (with its
     :attr:`Quality.leave_one_out`) and ``result.warnings`` get :func:`leave_one_out_reasons`.
@@ -468,7 +529,8 @@ def with_leave_one_out(result, points_lidar, pixels, camera, pixel_sigma=None, p
     old = result.quality
     new_reasons = [r for r in leave_one_out_reasons(loo, getattr(result, "mean_px", None)) if r not in old.reasons]
     status = old.status if (old.status == "unreliable" or not new_reasons) else "warning"
-    reasons = list(old.reasons) + new_reasons
+    reasons = _with_plane_advice(list(old.reasons), result, np.asarray(points_lidar)[keep], np.asarray(pixels)[keep],
+                                 camera) + new_reasons
     result.quality = Quality(status, reasons, leave_one_out=loo)
     notes = [w for w in result.warnings if w not in old.reasons]
     result.warnings = reasons + notes
