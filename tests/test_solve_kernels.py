@@ -179,3 +179,48 @@ def test_laser_term_of_the_whitening_against_a_sampled_bearing_error():
         C = sig[i] ** 2 * Ainv @ Ainv.T + L[i]
         np.testing.assert_allclose(W[i].T @ W[i], np.linalg.inv(C), rtol=1e-9)
         assert W[i, 0, 1] == 0.0  # lower triangular: the inverse of C's Cholesky factor
+
+
+def _whitened_optimum(T0, points, F, W):
+    """Independent of the kernels: scipy's LM on ``W_i`` times :func:`_geodesic_residuals`, from ``T0``."""
+    from scipy.optimize import least_squares
+
+    R0 = T0[:3, :3]
+
+    def fun(x):
+        r = _geodesic_residuals(Rotation.from_rotvec(x[:3]).as_matrix() @ R0, x[3:], points, F)
+        return np.einsum("nij,nj->ni", W, r).ravel()
+
+    sol = least_squares(fun, np.concatenate([np.zeros(3), T0[:3, 3]]), method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = Rotation.from_rotvec(sol.x[:3]).as_matrix() @ R0, sol.x[3:]
+    return T
+
+
+def test_laser_term_refit_in_one_lm_is_the_two_solve_estimate():
+    """The solve with ``laser_cov_m2`` re-whitens inside one compiled LM (fit_pose_laser); its estimate is
+    that of its definition, computed here with scipy and numpy alone: the optimum with the click
+    whitening, the laser term added at that pose, the optimum again."""
+    from calib_core.solve.whiten import laser_tangent_covariance
+
+    for seed, n in ((11, 8), (12, 40)):
+        cam, T, points, pixels = pinhole_scene(seed, n)
+        rng = np.random.default_rng(seed)
+        clicked = pixels + rng.normal(0.0, 1.0, pixels.shape)
+        bearings = cam.bearing(clicked)
+        G = rng.normal(size=(n, 3, 3)) * 0.03
+        S = G @ np.swapaxes(G, 1, 2)  # laser covariances, m^2 (a few cm, anisotropic)
+        sig = rng.uniform(0.5, 2.0, n)
+        F = kernels.bearing_frames(bearings)
+        A, _ = whitening(n, camera=cam, frames=F)
+        T1 = _whitened_optimum(T, points, F, A / sig[:, None, None])
+        Ainv = np.linalg.inv(A)
+        C = sig[:, None, None] ** 2 * Ainv @ np.swapaxes(Ainv, 1, 2) + laser_tangent_covariance(T1, points, F, S)
+        W1 = np.linalg.inv(np.linalg.cholesky(C))
+        T2 = _whitened_optimum(T1, points, F, W1)
+        res = solve_extrinsics(points, bearings, camera=cam, pixels=clicked, pixel_sigma=sig, laser_cov_m2=S)
+        assert res.quality.status != "unreliable"
+        rot, trans = pose_error(res.T_camera_lidar, T2)
+        moved_rot, moved_trans = pose_error(T1, T2)  # what the laser term changes: the test can fail
+        assert moved_rot > 1e-3 and moved_trans > 1e-4
+        assert rot < 1e-6 and trans < 1e-7

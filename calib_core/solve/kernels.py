@@ -259,13 +259,26 @@ def _lm(R0, t0, P, F, W, max_iter):
     """
     R = R0.copy()
     t = t0.copy()
-    lam = 1e-4
     Z = np.empty((P.shape[0], 2))
-    Z_new = np.empty((P.shape[0], 2))
     H, g, cost = _normal_equations_into(R, t, P, F, W, Z)
     if not np.isfinite(cost):
         return R, t, 1, -2, H, Z
-    it = 1
+    R, t, it, status, H, Z = _lm_loop(R, t, P, F, W, H, g, cost, Z, 1, max_iter, -1.0)
+    return R, t, it, status, H, Z
+
+
+@kernel
+def _lm_loop(R, t, P, F, W, H, g, cost, Z, it, max_iter, switch_gd):
+    """The iterations of :func:`_lm` from a pose whose normal equations ``H, g, cost`` and residuals ``Z``
+    are known (``it`` evaluations so far).
+
+    ``switch_gd > 0``: stop early for a new whitening (:func:`fit_pose_laser`): once a step's predicted
+    decrease is below ``switch_gd * cost`` (the pose then moves by far less than its sigma), its end
+    is only checked to lower the cost (one residual pass, no Jacobian) and returned with status 2; the
+    caller re-whitens there.  Other statuses as :func:`_lm`; a converged pose returns with status 1.
+    """
+    lam = 1e-4
+    Z_new = np.empty((P.shape[0], 2))
     A = np.empty((6, 6))
     L = np.empty((6, 6))
     dx = np.empty(6)
@@ -293,6 +306,13 @@ def _lm(R0, t0, P, F, W, max_iter):
             return R, t, it, 1, H, Z
         R_new = so3_exp(dx[:3]) @ R
         t_new = t + dx[3:]
+        if gd <= switch_gd * cost:
+            cost_new = _cost(R_new, t_new, P, F, W)
+            it += 1
+            if np.isfinite(cost_new) and cost_new <= cost:
+                return R_new, t_new, it, 2, H, Z
+            lam *= 10.0
+            continue
         # One pass gives the new cost and, if the step is taken, the next normal equations.
         H_new, g_new, cost_new = _normal_equations_into(R_new, t_new, P, F, W, Z_new)
         it += 1
@@ -318,6 +338,64 @@ def _lm(R0, t0, P, F, W, max_iter):
             if lam > 1e16:
                 return R, t, it, 1, H, Z  # no descent direction left: a minimum to rounding
     return R, t, it, 0, H, Z
+
+
+@kernel
+def _cost(R, t, P, F, W):
+    """``sum |z_i|^2`` at ``(R, t)``: a residual pass without the Jacobian."""
+    z = np.empty(2)
+    Jd = np.empty((2, 6))
+    cost = 0.0
+    for i in range(P.shape[0]):
+        _pair(R, t, P, F, W, i, z, Jd, False)
+        cost += z[0] * z[0] + z[1] * z[1]
+    return cost
+
+
+#: :func:`fit_pose_laser` re-whitens once a step's predicted decrease is below this share of the cost:
+#: the pose is then within about ``sqrt(SWITCH_GD * cost)`` whitened units (a thousandth of its
+#: sigma) of the optimum with the click whitening, where the two-pass solve re-whitened.
+SWITCH_GD = 1e-6
+
+
+@kernel
+def fit_pose_laser(P, B, F, W0, C0, S, R0, t0, use_dlt, max_iter):
+    """:func:`fit_pose` with the laser term of the whitening, in one call.
+
+    LM with the click whitening ``W0`` from the start until the pose is within a small fraction
+    of its sigma of that optimum (:data:`SWITCH_GD`), then the whitening with the laser term at
+    that pose (:func:`laser_whitening_at`: click covariance ``C0`` (N, 3), laser covariance ``S``
+    (N, 3, 3) m^2) and LM with it to convergence.  The same estimate as two full solves (click
+    whitening, then re-whitened at its optimum), without the first one's last iterations.
+
+    Returns
+    -------
+    As :func:`fit_pose`, then ``W (N, 2, 2)``: the whitening of the second LM (W0 itself when the
+    first failed; status as :func:`fit_pose`).
+    """
+    n = P.shape[0]
+    if use_dlt:
+        R_start, t_start, ok = dlt_pose(P, B)
+        if not ok:
+            return R_start, t_start, R_start, t_start, 0, -3, np.zeros((6, 6)), np.zeros((n, 2)), W0
+    else:
+        R_start, t_start = R0.copy(), t0.copy()
+    Z = np.empty((n, 2))
+    H, g, cost = _normal_equations_into(R_start, t_start, P, F, W0, Z)
+    if not np.isfinite(cost):
+        return R_start, t_start, R_start, t_start, 1, -2, H, Z, W0
+    R, t, it, status, H, Z = _lm_loop(R_start.copy(), t_start.copy(), P, F, W0, H, g, cost, Z, 1, max_iter, SWITCH_GD)
+    if status < 0 or not np.isfinite(R.sum() + t.sum()):
+        return R, t, R_start, t_start, it, -2 if status >= 0 else status, H, Z, W0
+    W = laser_whitening_at(R, t, P, F, C0, S)
+    H, g, cost = _normal_equations_into(R, t, P, F, W, Z)
+    it += 1
+    if not np.isfinite(cost):
+        return R, t, R_start, t_start, it, -2, H, Z, W
+    R, t, more, status, H, Z = _lm_loop(R, t, P, F, W, H, g, cost, Z, 0, max_iter, -1.0)
+    if not np.isfinite(R.sum() + t.sum()):
+        status = -2
+    return R, t, R_start, t_start, it + more, status, H, Z, W
 
 
 @kernel
@@ -1227,23 +1305,63 @@ def laser_bearing_cov(R, t, P, F, S):
     see :func:`calib_core.solve.whiten.laser_tangent_covariance`."""
     n = P.shape[0]
     out = np.empty((n, 2, 2))
-    A = np.empty((2, 3))
-    AS = np.empty((2, 3))
     for i in range(n):
-        d2 = 0.0
-        for r in range(3):
-            c = R[r, 0] * P[i, 0] + R[r, 1] * P[i, 1] + R[r, 2] * P[i, 2] + t[r]
-            d2 += c * c
-        for a in range(2):
-            for k in range(3):
-                A[a, k] = F[i, a, 0] * R[0, k] + F[i, a, 1] * R[1, k] + F[i, a, 2] * R[2, k]
-        for a in range(2):
-            for k in range(3):
-                AS[a, k] = A[a, 0] * S[i, 0, k] + A[a, 1] * S[i, 1, k] + A[a, 2] * S[i, 2, k]
-        for a in range(2):
-            for b in range(2):
-                out[i, a, b] = (AS[a, 0] * A[b, 0] + AS[a, 1] * A[b, 1] + AS[a, 2] * A[b, 2]) / d2
+        out[i, 0, 0], out[i, 0, 1], out[i, 1, 0], out[i, 1, 1] = _laser_bearing_cov_pair(R, t, P, F, S, i)
     return out
+
+
+@kernel
+def _laser_bearing_cov_pair(R, t, P, F, S, i):
+    """:func:`laser_bearing_cov` of pair ``i``: ``(Sigma_00, Sigma_01, Sigma_10, Sigma_11)``, in scalars."""
+    d2 = 0.0
+    for r in range(3):
+        c = R[r, 0] * P[i, 0] + R[r, 1] * P[i, 1] + R[r, 2] * P[i, 2] + t[r]
+        d2 += c * c
+    # A = E_i R (2x3), then A S_i (2x3).
+    a00 = F[i, 0, 0] * R[0, 0] + F[i, 0, 1] * R[1, 0] + F[i, 0, 2] * R[2, 0]
+    a01 = F[i, 0, 0] * R[0, 1] + F[i, 0, 1] * R[1, 1] + F[i, 0, 2] * R[2, 1]
+    a02 = F[i, 0, 0] * R[0, 2] + F[i, 0, 1] * R[1, 2] + F[i, 0, 2] * R[2, 2]
+    a10 = F[i, 1, 0] * R[0, 0] + F[i, 1, 1] * R[1, 0] + F[i, 1, 2] * R[2, 0]
+    a11 = F[i, 1, 0] * R[0, 1] + F[i, 1, 1] * R[1, 1] + F[i, 1, 2] * R[2, 1]
+    a12 = F[i, 1, 0] * R[0, 2] + F[i, 1, 1] * R[1, 2] + F[i, 1, 2] * R[2, 2]
+    b00 = a00 * S[i, 0, 0] + a01 * S[i, 1, 0] + a02 * S[i, 2, 0]
+    b01 = a00 * S[i, 0, 1] + a01 * S[i, 1, 1] + a02 * S[i, 2, 1]
+    b02 = a00 * S[i, 0, 2] + a01 * S[i, 1, 2] + a02 * S[i, 2, 2]
+    b10 = a10 * S[i, 0, 0] + a11 * S[i, 1, 0] + a12 * S[i, 2, 0]
+    b11 = a10 * S[i, 0, 1] + a11 * S[i, 1, 1] + a12 * S[i, 2, 1]
+    b12 = a10 * S[i, 0, 2] + a11 * S[i, 1, 2] + a12 * S[i, 2, 2]
+    return ((b00 * a00 + b01 * a01 + b02 * a02) / d2, (b00 * a10 + b01 * a11 + b02 * a12) / d2,
+            (b10 * a00 + b11 * a01 + b12 * a02) / d2, (b10 * a10 + b11 * a11 + b12 * a12) / d2)
+
+
+@kernel
+def click_covariance(A, s):
+    """``s_i^2 A_i^-1 A_i^-T`` as ``(c00, c10, c11)`` (N, 3), rad^2: a click's covariance in the tangent
+    plane (``A_i`` px/rad, ``s_i`` px)."""
+    n = A.shape[0]
+    C = np.empty((n, 3))
+    for i in range(n):
+        a00, a01, a10, a11 = A[i, 0, 0], A[i, 0, 1], A[i, 1, 0], A[i, 1, 1]
+        det = a00 * a11 - a01 * a10
+        # J = s A^-1
+        j00, j01 = a11 / det * s[i], -a01 / det * s[i]
+        j10, j11 = -a10 / det * s[i], a00 / det * s[i]
+        C[i, 0] = j00 * j00 + j01 * j01
+        C[i, 1] = j10 * j00 + j11 * j01
+        C[i, 2] = j10 * j10 + j11 * j11
+    return C
+
+
+@kernel
+def _whiten_2x2(c00, c10, c11, W, i):
+    """``W[i] = chol(C)^-1`` of the 2x2 covariance ``C`` (lower triangular; ``W^T W = C^-1``)."""
+    l00 = math.sqrt(c00)
+    l10 = c10 / l00
+    l11 = math.sqrt(max(c11 - l10 * l10, 1e-300))
+    W[i, 0, 0] = 1.0 / l00
+    W[i, 0, 1] = 0.0
+    W[i, 1, 1] = 1.0 / l11
+    W[i, 1, 0] = -l10 / (l00 * l11)
 
 
 @kernel
@@ -1252,22 +1370,23 @@ def laser_whitening(A, s, L):
     the tangent plane (``A_i`` px/rad, ``s_i`` px) plus the laser term ``L_i`` (rad^2); ``W^T W = C^-1``
     (:func:`calib_core.solve.whiten.whitening`)."""
     n = A.shape[0]
-    W = np.zeros((n, 2, 2))
+    C = click_covariance(A, s)
+    W = np.empty((n, 2, 2))
     for i in range(n):
-        a00, a01, a10, a11 = A[i, 0, 0], A[i, 0, 1], A[i, 1, 0], A[i, 1, 1]
-        det = a00 * a11 - a01 * a10
-        # J = s A^-1
-        j00, j01 = a11 / det * s[i], -a01 / det * s[i]
-        j10, j11 = -a10 / det * s[i], a00 / det * s[i]
-        c00 = j00 * j00 + j01 * j01 + L[i, 0, 0]
-        c10 = j10 * j00 + j11 * j01 + L[i, 1, 0]
-        c11 = j10 * j10 + j11 * j11 + L[i, 1, 1]
-        l00 = math.sqrt(c00)
-        l10 = c10 / l00
-        l11 = math.sqrt(max(c11 - l10 * l10, 1e-300))
-        W[i, 0, 0] = 1.0 / l00
-        W[i, 1, 1] = 1.0 / l11
-        W[i, 1, 0] = -l10 / (l00 * l11)
+        _whiten_2x2(C[i, 0] + L[i, 0, 0], C[i, 1] + L[i, 1, 0], C[i, 2] + L[i, 1, 1], W, i)
+    return W
+
+
+@kernel
+def laser_whitening_at(R, t, P, F, C, S):
+    """:func:`laser_whitening` at the pose ``(R, t)``, from the click covariances ``C`` (N, 3) of
+    :func:`click_covariance` and the laser covariances ``S`` (N, 3, 3), m^2: the laser term of
+    :func:`laser_bearing_cov` computed pair by pair, without its array."""
+    n = P.shape[0]
+    W = np.empty((n, 2, 2))
+    for i in range(n):
+        l00, _, l10, l11 = _laser_bearing_cov_pair(R, t, P, F, S, i)
+        _whiten_2x2(C[i, 0] + l00, C[i, 1] + l10, C[i, 2] + l11, W, i)
     return W
 
 
