@@ -247,7 +247,7 @@ def solve_extrinsics(
 
     # 2. Initial pose (the linear DLT on the bearings when it applies, n >= 6 and not coplanar, else
     # Quan & Lan / P3P) and LM on all pairs, in one compiled call (fit_pose, or fit_pose_laser with the
-    # laser term: LM with the click whitening, re-whitened near its optimum, LM again).
+    # laser term: the LM re-whitens at each pose it tries, until it is near the optimum).
     def fit(T_start: np.ndarray | None, W: np.ndarray, laser: bool
             ) -> tuple[np.ndarray, int, np.ndarray | None, np.ndarray, np.ndarray, str, np.ndarray | None]:
         """LM from ``T_start`` (None: from the DLT, or the closed-form start where it does not apply).
@@ -261,7 +261,7 @@ def solve_extrinsics(
         t_in = _ZERO3 if use_dlt else np.ascontiguousarray(T_start[:3, 3])
         W_new = None
         if laser:
-            R, t, R0, t0, it, status, H, z, W_new = fit_pose_laser(points, bearings, frames, W, click_cov, laser_cov,
+            R, t, R0, t0, it, status, H, z, W_new = fit_pose_laser(points, bearings, frames, click_cov, laser_cov,
                                                                    R_in, t_in, use_dlt, LM_MAX_ITER)
         else:
             R, t, R0, t0, it, status, H, z = fit_pose(points, bearings, frames, W, R_in, t_in, use_dlt, LM_MAX_ITER)
@@ -272,6 +272,8 @@ def solve_extrinsics(
                 return out[:5] + (method,) + out[6:]
             T_start, method = _pose_matrix(R0, t0), "dlt"
         failure = lm_failure(status, R, t) if status < 0 else None  # (fit_pose: -2 for a non-finite pose)
+        if failure and laser:
+            return fit(T_start, W, False)[:5] + (method, None)  # the laser term then as below, after this LM
         if failure:
             if not robust:
                 raise CalibError(failure)

@@ -263,22 +263,34 @@ def _lm(R0, t0, P, F, W, max_iter):
     H, g, cost = _normal_equations_into(R, t, P, F, W, Z)
     if not np.isfinite(cost):
         return R, t, 1, -2, H, Z
-    R, t, it, status, H, Z = _lm_loop(R, t, P, F, W, H, g, cost, Z, 1, max_iter, -1.0)
+    R, t, it, status, H, Z, _ = _lm_loop(R, t, P, F, W, H, g, cost, Z, 1, max_iter, _NO_C, _NO_S, False)
     return R, t, it, status, H, Z
 
 
-@kernel
-def _lm_loop(R, t, P, F, W, H, g, cost, Z, it, max_iter, switch_gd):
-    """The iterations of :func:`_lm` from a pose whose normal equations ``H, g, cost`` and residuals ``Z``
-    are known (``it`` evaluations so far).
+#: Placeholders of :func:`_lm_loop`'s laser arguments where it does not re-whiten.
+_NO_C = np.zeros((0, 3))
+_NO_S = np.zeros((0, 3, 3))
+#: With the laser term (:func:`fit_pose_laser`) the LM re-whitens at every pose it tries until a step's
+#: predicted decrease is below this share of the cost; the whitening is then kept (the pose is within about
+#: ``sqrt(REWHITEN_GD * cost)`` whitened units, a thousandth of its sigma, of the optimum; the whitening's
+#: change over that is far below rounding of the estimate) and the LM converges as without the laser term.
+REWHITEN_GD = 1e-6
 
-    ``switch_gd > 0``: stop early for a new whitening (:func:`fit_pose_laser`): once a step's predicted
-    decrease is below ``switch_gd * cost`` (the pose then moves by far less than its sigma), its end
-    is only checked to lower the cost (one residual pass, no Jacobian) and returned with status 2; the
-    caller re-whitens there.  Other statuses as :func:`_lm`; a converged pose returns with status 1.
+
+@kernel
+def _lm_loop(R, t, P, F, W, H, g, cost, Z, it, max_iter, C, S, rewhiten):
+    """The iterations of :func:`_lm` from a pose whose normal equations ``H, g, cost`` and residuals ``Z``
+    (with the whitening ``W``) are known (``it`` evaluations so far).
+
+    ``rewhiten``: every pose tried gets its own whitening with the laser term (:func:`laser_whitening_at`
+    from the click covariances ``C`` and laser covariances ``S``; a step is taken when the cost with the
+    new pose's whitening is below the current one's), until a step's predicted decrease is below
+    :data:`REWHITEN_GD` of the cost; from there on ``W`` is kept.  Returns ``(R, t, it, status, H, Z, W)``,
+    status as :func:`_lm`, ``W`` the whitening of ``H`` and ``Z``.
     """
     lam = 1e-4
     Z_new = np.empty((P.shape[0], 2))
+    W_new = W.copy() if rewhiten else W
     A = np.empty((6, 6))
     L = np.empty((6, 6))
     dx = np.empty(6)
@@ -294,7 +306,7 @@ def _lm_loop(R, t, P, F, W, H, g, cost, Z, it, max_iter, switch_gd):
             _chol_solve_inplace(L, dx)
         else:
             if lam > 1e12:
-                return R, t, it, -1, H, Z
+                return R, t, it, -1, H, Z, W
             lam *= 10.0
             continue
         # Predicted decrease -g.dx: at the noise floor of the cost nothing is left to gain
@@ -303,18 +315,17 @@ def _lm_loop(R, t, P, F, W, H, g, cost, Z, it, max_iter, switch_gd):
         for a in range(6):
             gd -= g[a] * dx[a]
         if gd <= 1e-13 * cost or cost <= 1e-300:
-            return R, t, it, 1, H, Z
+            return R, t, it, 1, H, Z, W
+        if rewhiten and gd <= REWHITEN_GD * cost:
+            rewhiten = False  # near the optimum: keep this whitening
         R_new = so3_exp(dx[:3]) @ R
         t_new = t + dx[3:]
-        if gd <= switch_gd * cost:
-            cost_new = _cost(R_new, t_new, P, F, W)
-            it += 1
-            if np.isfinite(cost_new) and cost_new <= cost:
-                return R_new, t_new, it, 2, H, Z
-            lam *= 10.0
-            continue
         # One pass gives the new cost and, if the step is taken, the next normal equations.
-        H_new, g_new, cost_new = _normal_equations_into(R_new, t_new, P, F, W, Z_new)
+        if rewhiten:
+            _laser_whitening_into(R_new, t_new, P, F, C, S, W_new)
+            H_new, g_new, cost_new = _normal_equations_into(R_new, t_new, P, F, W_new, Z_new)
+        else:
+            H_new, g_new, cost_new = _normal_equations_into(R_new, t_new, P, F, W, Z_new)
         it += 1
         step = 0.0
         scale = 0.0
@@ -328,74 +339,53 @@ def _lm_loop(R, t, P, F, W, H, g, cost, Z, it, max_iter, switch_gd):
             decrease = cost - cost_new
             R, t, H, g, cost = R_new, t_new, H_new, g_new, cost_new
             Z, Z_new = Z_new, Z
+            if rewhiten:
+                W, W_new = W_new, W
             lam = max(lam / 10.0, 1e-12)
             if small_step or decrease <= 1e-11 * cost or cost <= 1e-300:
-                return R, t, it, 1, H, Z
+                return R, t, it, 1, H, Z, W
         else:
             if small_step:
-                return R, t, it, 1, H, Z
+                return R, t, it, 1, H, Z, W
             lam *= 10.0
             if lam > 1e16:
-                return R, t, it, 1, H, Z  # no descent direction left: a minimum to rounding
-    return R, t, it, 0, H, Z
+                return R, t, it, 1, H, Z, W  # no descent direction left: a minimum to rounding
+    return R, t, it, 0, H, Z, W
 
 
 @kernel
-def _cost(R, t, P, F, W):
-    """``sum |z_i|^2`` at ``(R, t)``: a residual pass without the Jacobian."""
-    z = np.empty(2)
-    Jd = np.empty((2, 6))
-    cost = 0.0
-    for i in range(P.shape[0]):
-        _pair(R, t, P, F, W, i, z, Jd, False)
-        cost += z[0] * z[0] + z[1] * z[1]
-    return cost
-
-
-#: :func:`fit_pose_laser` re-whitens once a step's predicted decrease is below this share of the cost:
-#: the pose is then within about ``sqrt(SWITCH_GD * cost)`` whitened units (a thousandth of its
-#: sigma) of the optimum with the click whitening, where the two-pass solve re-whitened.
-SWITCH_GD = 1e-6
-
-
-@kernel
-def fit_pose_laser(P, B, F, W0, C0, S, R0, t0, use_dlt, max_iter):
+def fit_pose_laser(P, B, F, C, S, R0, t0, use_dlt, max_iter):
     """:func:`fit_pose` with the laser term of the whitening, in one call.
 
-    LM with the click whitening ``W0`` from the start until the pose is within a small fraction
-    of its sigma of that optimum (:data:`SWITCH_GD`), then the whitening with the laser term at
-    that pose (:func:`laser_whitening_at`: click covariance ``C0`` (N, 3), laser covariance ``S``
-    (N, 3, 3) m^2) and LM with it to convergence.  The same estimate as two full solves (click
-    whitening, then re-whitened at its optimum), without the first one's last iterations.
+    The laser term depends on the pose: the LM whitens each pose it tries with the click covariances
+    ``C`` (N, 3) of :func:`click_covariance` plus the laser covariances ``S`` (N, 3, 3), m^2, seen from
+    that pose (:func:`laser_whitening_at`), until it is near the optimum (:data:`REWHITEN_GD`), and
+    keeps that whitening to converge.  The estimate is the pose that is optimal with the whitening at
+    itself, the fixed point that the former two solves (click whitening, then re-whitened at that
+    optimum and solved again) approached to a small fraction of its sigma.
 
     Returns
     -------
-    As :func:`fit_pose`, then ``W (N, 2, 2)``: the whitening of the second LM (W0 itself when the
-    first failed; status as :func:`fit_pose`).
+    As :func:`fit_pose`, then ``W (N, 2, 2)``: the whitening at the end (status -2 also where the laser
+    term is not finite at the start: a point at the camera centre).
     """
     n = P.shape[0]
     if use_dlt:
         R_start, t_start, ok = dlt_pose(P, B)
         if not ok:
-            return R_start, t_start, R_start, t_start, 0, -3, np.zeros((6, 6)), np.zeros((n, 2)), W0
+            return R_start, t_start, R_start, t_start, 0, -3, np.zeros((6, 6)), np.zeros((n, 2)), np.zeros((n, 2, 2))
     else:
         R_start, t_start = R0.copy(), t0.copy()
+    W = laser_whitening_at(R_start, t_start, P, F, C, S)
     Z = np.empty((n, 2))
-    H, g, cost = _normal_equations_into(R_start, t_start, P, F, W0, Z)
+    H, g, cost = _normal_equations_into(R_start, t_start, P, F, W, Z)
     if not np.isfinite(cost):
-        return R_start, t_start, R_start, t_start, 1, -2, H, Z, W0
-    R, t, it, status, H, Z = _lm_loop(R_start.copy(), t_start.copy(), P, F, W0, H, g, cost, Z, 1, max_iter, SWITCH_GD)
-    if status < 0 or not np.isfinite(R.sum() + t.sum()):
-        return R, t, R_start, t_start, it, -2 if status >= 0 else status, H, Z, W0
-    W = laser_whitening_at(R, t, P, F, C0, S)
-    H, g, cost = _normal_equations_into(R, t, P, F, W, Z)
-    it += 1
-    if not np.isfinite(cost):
-        return R, t, R_start, t_start, it, -2, H, Z, W
-    R, t, more, status, H, Z = _lm_loop(R, t, P, F, W, H, g, cost, Z, 0, max_iter, -1.0)
+        return R_start, t_start, R_start, t_start, 1, -2, H, Z, W
+    R, t, it, status, H, Z, W = _lm_loop(R_start.copy(), t_start.copy(), P, F, W, H, g, cost, Z, 1, max_iter,
+                                         C, S, True)
     if not np.isfinite(R.sum() + t.sum()):
         status = -2
-    return R, t, R_start, t_start, it + more, status, H, Z, W
+    return R, t, R_start, t_start, it, status, H, Z, W
 
 
 @kernel
@@ -1382,12 +1372,17 @@ def laser_whitening_at(R, t, P, F, C, S):
     """:func:`laser_whitening` at the pose ``(R, t)``, from the click covariances ``C`` (N, 3) of
     :func:`click_covariance` and the laser covariances ``S`` (N, 3, 3), m^2: the laser term of
     :func:`laser_bearing_cov` computed pair by pair, without its array."""
-    n = P.shape[0]
-    W = np.empty((n, 2, 2))
-    for i in range(n):
+    W = np.empty((P.shape[0], 2, 2))
+    _laser_whitening_into(R, t, P, F, C, S, W)
+    return W
+
+
+@kernel
+def _laser_whitening_into(R, t, P, F, C, S, W):
+    """:func:`laser_whitening_at` into ``W``."""
+    for i in range(P.shape[0]):
         l00, _, l10, l11 = _laser_bearing_cov_pair(R, t, P, F, S, i)
         _whiten_2x2(C[i, 0] + l00, C[i, 1] + l10, C[i, 2] + l11, W, i)
-    return W
 
 
 @kernel
