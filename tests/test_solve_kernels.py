@@ -232,3 +232,26 @@ def test_laser_term_whitening_is_that_of_the_estimate_itself():
         rot, trans = pose_error(T_hat, T2)
         assert moved_rot > 1e-3 and moved_trans > 1e-4
         assert rot < 0.05 * moved_rot and trans < 0.05 * moved_trans
+
+
+def test_symmetric_eigen_solver_against_lapack():
+    """sym_eigh (Jacobi rotations, used for the covariance and the geometry figures) against numpy's LAPACK
+    eigh: random, ill-conditioned, rank-deficient and diagonal matrices of the sizes the solve uses."""
+    rng = np.random.default_rng(5)
+    cases = []
+    for n in (3, 6):
+        G = rng.normal(size=(n, n))
+        cases.append(G @ G.T)
+        Q, _ = np.linalg.qr(rng.normal(size=(n, n)))
+        cases.append(Q @ np.diag(np.logspace(-12, 3, n)) @ Q.T)  # condition 1e15
+        cases.append(Q @ np.diag([0.0] * (n - 2) + [1.0, 2.0]) @ Q.T)  # two or more zero eigenvalues
+        cases.append(np.diag(rng.uniform(-1, 1, n)))
+    pts = rng.normal(size=(40, 3)) * [5.0, 1e-4, 1e-4]  # nearly collinear points' scatter
+    cases.append(np.cov(pts.T))
+    for S in cases:
+        w, V = kernels.sym_eigh(S)
+        w_ref = np.linalg.eigvalsh(S)
+        scale = np.abs(w_ref).max()
+        np.testing.assert_allclose(w, w_ref, rtol=1e-12, atol=1e-14 * scale)
+        np.testing.assert_allclose(V.T @ V, np.eye(len(S)), atol=1e-13)
+        np.testing.assert_allclose(S @ V, V * w, atol=1e-12 * scale)
