@@ -31,7 +31,7 @@ from .refine import (
 )
 from .result import CalibrationResult
 from .robust import inlier_k, robust_fit, robust_scale
-from .whiten import check_pixel_sigma, click_covariances, laser_tangent_covariance, tangent_to_pixel, whitening
+from .whiten import check_pixel_sigma, click_whitening_inputs, laser_tangent_covariance, tangent_to_pixel, whitening
 
 __all__ = ["COSTS", "NOISY_FACTOR", "PRIOR_PX", "sigma_coverage", "solve_extrinsics", "student_t_factor", "warm_up"]
 
@@ -208,7 +208,7 @@ def solve_extrinsics(
     laser_cov = None
     if laser_cov_m2 is not None:
         laser_cov = np.ascontiguousarray(laser_cov_m2, dtype=np.float64)
-        if laser_cov.shape != (n, 3, 3) or not np.all(np.isfinite(laser_cov)):
+        if laser_cov.shape != (n, 3, 3) or not math.isfinite(float(laser_cov.sum())):  # (a NaN or inf spreads)
             raise CalibError(f"laser_cov_m2 must be {n} finite 3x3 covariances, got shape {laser_cov.shape}")
     if noise_rad is not None and not (np.isfinite(noise_rad) and noise_rad > 0):
         raise CalibError(f"noise_rad must be a positive number, got {noise_rad!r}")
@@ -240,10 +240,10 @@ def solve_extrinsics(
     floor = _MIN_SCALE[unit]
 
     laser_term = laser_cov is not None and whiten_camera is not None
-    # The clicks' covariances, from which the LM re-whitens with the laser term inside its one
+    # The clicks' whitening inputs, from which the LM re-whitens with the laser term inside its one
     # compiled call (fit_pose_laser); None where the laser term cannot enter (known noise_rad, no
     # projectable probe), as in whitening().
-    click_cov = click_covariances(tangent[0], sigmas) if laser_term and tangent and noise_rad is None else None
+    clicks = click_whitening_inputs(tangent[0], sigmas) if laser_term and tangent and noise_rad is None else None
 
     # 2. Initial pose (the linear DLT on the bearings when it applies, n >= 6 and not coplanar, else
     # Quan & Lan / P3P) and LM on all pairs, in one compiled call (fit_pose, or fit_pose_laser with the
@@ -261,8 +261,8 @@ def solve_extrinsics(
         t_in = _ZERO3 if use_dlt else np.ascontiguousarray(T_start[:3, 3])
         W_new = None
         if laser:
-            R, t, R0, t0, it, status, H, z, W_new = fit_pose_laser(points, bearings, frames, click_cov, laser_cov,
-                                                                   R_in, t_in, use_dlt, LM_MAX_ITER)
+            R, t, R0, t0, it, status, H, z, W_new = fit_pose_laser(points, bearings, frames, clicks[0], clicks[1],
+                                                                   laser_cov, R_in, t_in, use_dlt, LM_MAX_ITER)
         else:
             R, t, R0, t0, it, status, H, z = fit_pose(points, bearings, frames, W, R_in, t_in, use_dlt, LM_MAX_ITER)
         if use_dlt:
@@ -284,7 +284,7 @@ def solve_extrinsics(
 
     given = None if initial_T_camera_lidar is None else validate_initial_T(initial_T_camera_lidar)
     # H_at_T: the LM's normal matrix while T is the LM's optimum on all pairs with this W (else None).
-    T, iterations, H_at_T, z, T_init, method, W_laser = fit(given, W, click_cov is not None)
+    T, iterations, H_at_T, z, T_init, method, W_laser = fit(given, W, clicks is not None)
     if W_laser is not None:
         W = W_laser
     elif laser_term:

@@ -354,11 +354,12 @@ def _lm_loop(R, t, P, F, W, H, g, cost, Z, it, max_iter, C, S, rewhiten):
 
 
 @kernel
-def fit_pose_laser(P, B, F, C, S, R0, t0, use_dlt, max_iter):
+def fit_pose_laser(P, B, F, A, s, S, R0, t0, use_dlt, max_iter):
     """:func:`fit_pose` with the laser term of the whitening, in one call.
 
     The laser term depends on the pose: the LM whitens each pose it tries with the click covariances
-    ``C`` (N, 3) of :func:`click_covariance` plus the laser covariances ``S`` (N, 3, 3), m^2, seen from
+    (:func:`click_covariance` of the camera's ``A`` (N, 2, 2), px/rad, and the click sigmas ``s`` (N,),
+    px) plus the laser covariances ``S`` (N, 3, 3), m^2, seen from
     that pose (:func:`laser_whitening_at`), until it is near the optimum (:data:`REWHITEN_GD`), and
     keeps that whitening to converge.  The estimate is the pose that is optimal with the whitening at
     itself, the fixed point that the former two solves (click whitening, then re-whitened at that
@@ -376,6 +377,7 @@ def fit_pose_laser(P, B, F, C, S, R0, t0, use_dlt, max_iter):
             return R_start, t_start, R_start, t_start, 0, -3, np.zeros((6, 6)), np.zeros((n, 2)), np.zeros((n, 2, 2))
     else:
         R_start, t_start = R0.copy(), t0.copy()
+    C = click_covariance(A, s)
     W = laser_whitening_at(R_start, t_start, P, F, C, S)
     Z = np.empty((n, 2))
     H, g, cost = _normal_equations_into(R_start, t_start, P, F, W, Z)
@@ -1381,8 +1383,9 @@ def _laser_bearing_cov_pair(R, t, P, F, S, i):
     b10 = a10 * S[i, 0, 0] + a11 * S[i, 1, 0] + a12 * S[i, 2, 0]
     b11 = a10 * S[i, 0, 1] + a11 * S[i, 1, 1] + a12 * S[i, 2, 1]
     b12 = a10 * S[i, 0, 2] + a11 * S[i, 1, 2] + a12 * S[i, 2, 2]
-    return ((b00 * a00 + b01 * a01 + b02 * a02) / d2, (b00 * a10 + b01 * a11 + b02 * a12) / d2,
-            (b10 * a00 + b11 * a01 + b12 * a02) / d2, (b10 * a10 + b11 * a11 + b12 * a12) / d2)
+    inv_d2 = 1.0 / d2
+    return ((b00 * a00 + b01 * a01 + b02 * a02) * inv_d2, (b00 * a10 + b01 * a11 + b02 * a12) * inv_d2,
+            (b10 * a00 + b11 * a01 + b12 * a02) * inv_d2, (b10 * a10 + b11 * a11 + b12 * a12) * inv_d2)
 
 
 @kernel
@@ -1406,13 +1409,13 @@ def click_covariance(A, s):
 @kernel
 def _whiten_2x2(c00, c10, c11, W, i):
     """``W[i] = chol(C)^-1`` of the 2x2 covariance ``C`` (lower triangular; ``W^T W = C^-1``)."""
-    l00 = math.sqrt(c00)
-    l10 = c10 / l00
-    l11 = math.sqrt(max(c11 - l10 * l10, 1e-300))
-    W[i, 0, 0] = 1.0 / l00
+    w00 = 1.0 / math.sqrt(c00)  # 1 / l00
+    l10 = c10 * w00
+    w11 = 1.0 / math.sqrt(max(c11 - l10 * l10, 1e-300))  # 1 / l11
+    W[i, 0, 0] = w00
     W[i, 0, 1] = 0.0
-    W[i, 1, 1] = 1.0 / l11
-    W[i, 1, 0] = -l10 / (l00 * l11)
+    W[i, 1, 1] = w11
+    W[i, 1, 0] = -l10 * w00 * w11
 
 
 @kernel

@@ -27,9 +27,9 @@ from typing import Any
 import numpy as np
 
 from ..errors import CalibError
-from .kernels import click_covariance, laser_bearing_cov, laser_whitening, probe_jacobians, tangent_probes
+from .kernels import laser_bearing_cov, laser_whitening, probe_jacobians, tangent_probes
 
-__all__ = ["tangent_to_pixel", "whitening", "click_covariances", "check_pixel_sigma", "cell_pick_covariance",
+__all__ = ["tangent_to_pixel", "whitening", "click_whitening_inputs", "check_pixel_sigma", "cell_pick_covariance",
            "laser_tangent_covariance", "PICK_CELL_SIGMA", "PICK_RANGE_SIGMA_M"]
 
 #: Central-difference step on the sphere, radians (a fraction of a pixel for any real camera).
@@ -224,13 +224,14 @@ def _projectable_tangent(A: np.ndarray, ok: np.ndarray) -> np.ndarray:
     return A
 
 
-def click_covariances(tangent: tuple[np.ndarray, np.ndarray], pixel_sigma: np.ndarray | None) -> np.ndarray | None:
-    """The clicks' covariances in the tangent planes, ``(c00, c10, c11)`` per pair ``(N, 3)``, rad^2:
-    ``sigma_i^2 A_i^-1 A_i^-T`` of :func:`whitening` (None where it whitens without the camera: no
-    probe projectable).  With a laser-point covariance the solve re-whitens from these at a pose
-    (:func:`calib_core.solve.kernels.fit_pose_laser`)."""
+def click_whitening_inputs(tangent: tuple[np.ndarray, np.ndarray], pixel_sigma: np.ndarray | None
+                           ) -> tuple[np.ndarray, np.ndarray] | None:
+    """``(A (N, 2, 2) px/rad, sigma (N,) px)`` of the clicks as :func:`whitening` uses them (a probe the
+    camera cannot project replaced), contiguous for the kernels; None where it whitens without the
+    camera (no probe projectable).  With a laser-point covariance the solve re-whitens from these at
+    each pose (:func:`calib_core.solve.kernels.fit_pose_laser`)."""
     A, ok = tangent
     if not ok.any():
         return None
-    s = np.ones(len(A)) if pixel_sigma is None else pixel_sigma
-    return click_covariance(np.ascontiguousarray(_projectable_tangent(A, ok)), np.ascontiguousarray(s, dtype=np.float64))
+    s = np.ones(len(A)) if pixel_sigma is None else np.ascontiguousarray(pixel_sigma, dtype=np.float64)
+    return np.ascontiguousarray(_projectable_tangent(A, ok)), s
