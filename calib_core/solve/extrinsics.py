@@ -333,7 +333,8 @@ def solve_extrinsics(
     # 4. Covariance on the inliers: Student-t sigma from the residuals, or the known noise.
     R_hat, t_hat = T[:3, :3].copy(), T[:3, 3].copy()
     dof = 2 * n_in - 6
-    H_known, ssr_known = (H_at_T, -1.0) if H_at_T is not None and cost != "pixel" and n_in == n else (None, -1.0)
+    lm_at_T = H_at_T is not None and cost != "pixel" and n_in == n  # the LM's H and z are at T, with this W
+    H_known, ssr_known = (H_at_T, -1.0) if lm_at_T else (None, -1.0)
     if cost == "pixel":
         x_opt = np.concatenate([np.zeros(3), t_hat])
         inv_s = 1.0 if sigmas is None else np.repeat(1.0 / sigmas[idx], 2)[:, None]
@@ -347,6 +348,7 @@ def solve_extrinsics(
         R_hat, t_hat, points, frames, W, inliers, _NO_H if H_known is None else H_known, H_known is not None,
         ssr_known, noise_rad is not None and cost != "pixel", student_t_factor(dof) if dof > 0 else 1.0,
         float(prior) if prior is not None else math.inf,  # no redundancy: the expected noise
+        *((z,) if lm_at_T else ()),
     )
     noise_scale = float(noise_scale)
 

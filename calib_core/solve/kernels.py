@@ -682,11 +682,13 @@ def bearing_frames(B):
 
 
 @kernel
-def finish(R, t, P, F, W, inliers, want_H=True):
+def finish(R, t, P, F, W, inliers, want_H=True, Z_lm=None):
     """Everything the report needs at the final pose, in one pass.
 
     ``want_H=False`` skips the normal matrix (zeros): for a caller that has it
-    at this pose already (the LM's last one).
+    at this pose already (the LM's last one).  ``Z_lm``: the whitened residuals
+    at this pose with this ``W`` when the caller has them (the LM's): the angles
+    then come from them (``theta_i = |W_i^-1 z_i|``) without a pass through the pairs' geometry.
 
     Returns
     -------
@@ -713,8 +715,16 @@ def finish(R, t, P, F, W, inliers, want_H=True):
     zi = np.empty(2)
     k = 0
     for i in range(n):
+        if Z_lm is not None and not want_H:
+            # r = W^-1 z, and |r| = theta (the log map's norm).
+            z0, z1 = Z_lm[i, 0], Z_lm[i, 1]
+            det = W[i, 0, 0] * W[i, 1, 1] - W[i, 0, 1] * W[i, 1, 0]
+            r0 = (W[i, 1, 1] * z0 - W[i, 0, 1] * z1) / det
+            r1 = (W[i, 0, 0] * z1 - W[i, 1, 0] * z0) / det
+            theta[i] = math.sqrt(r0 * r0 + r1 * r1)
+            zi[0], zi[1] = z0, z1
         # Constant Jacobian flags: a flag known only at run time keeps _pair from being inlined (5x slower).
-        if inliers[i] and want_H:
+        elif inliers[i] and want_H:
             theta[i] = _pair(R, t, P, F, W, i, zi, Ji, True)
         else:
             theta[i] = _pair(R, t, P, F, W, i, zi, Ji, False)
@@ -791,7 +801,7 @@ def fit_pose(P, B, F, W, R0, t0, use_dlt, max_iter):
 
 
 @kernel
-def pose_report(R, t, P, F, W, inliers, H_given, have_H, ssr_given, known_noise, t_factor, prior_sigma):
+def pose_report(R, t, P, F, W, inliers, H_given, have_H, ssr_given, known_noise, t_factor, prior_sigma, Z_lm=None):
     """The figures of the final pose in one call: :func:`finish`, the residual scale, the covariance and sigmas.
 
     Parameters
@@ -806,6 +816,8 @@ def pose_report(R, t, P, F, W, inliers, H_given, have_H, ssr_given, known_noise,
         Student-t factor of ``2 m - 6`` degrees of freedom (m inliers), widening the estimated sigma.
     prior_sigma : float
         Sigma when there is no redundancy (``2 m <= 6``): the expected noise, or inf.
+    Z_lm : (N, 2), optional
+        The LM's whitened residuals at this pose (with ``have_H``): see :func:`finish`.
 
     Returns
     -------
@@ -814,7 +826,7 @@ def pose_report(R, t, P, F, W, inliers, H_given, have_H, ssr_given, known_noise,
     cov : (6, 6), condition : float, as :func:`covariance`
     sigma_t : (3,) m; sigma_rpy : (3,) deg; sigma_rotation : float, deg (:func:`rotation_sigma_deg`)
     """
-    z, theta, H, ssr, stats = finish(R, t, P, F, W, inliers, not have_H)
+    z, theta, H, ssr, stats = finish(R, t, P, F, W, inliers, not have_H, Z_lm)
     if have_H:
         H = H_given
     if ssr_given >= 0.0:
