@@ -255,3 +255,20 @@ def test_symmetric_eigen_solver_against_lapack():
         np.testing.assert_allclose(w, w_ref, rtol=1e-12, atol=1e-14 * scale)
         np.testing.assert_allclose(V.T @ V, np.eye(len(S)), atol=1e-13)
         np.testing.assert_allclose(S @ V, V * w, atol=1e-12 * scale)
+
+
+def test_reported_angles_are_the_geodesic_errors_at_the_estimate():
+    """``residual_deg`` (taken from the LM's whitened residuals when they are at the final pose) against the
+    angle between each bearing and its laser point's direction at the returned pose, computed here."""
+    cam, T, points, pixels = pinhole_scene(21, 30)
+    rng = np.random.default_rng(21)
+    clicked = pixels + rng.normal(0.0, 1.0, pixels.shape)
+    bearings = cam.bearing(clicked)
+    G = rng.normal(size=(30, 3, 3)) * 0.02
+    for laser in (None, G @ np.swapaxes(G, 1, 2)):
+        res = solve_extrinsics(points, bearings, camera=cam, pixels=clicked, laser_cov_m2=laser)
+        Th = res.T_camera_lidar
+        q = points @ Th[:3, :3].T + Th[:3, 3]
+        angle = np.degrees(np.arctan2(np.linalg.norm(np.cross(bearings, q), axis=1), np.sum(bearings * q, axis=1)))
+        assert angle.max() > 0.01  # noisy clicks: the test can fail
+        np.testing.assert_allclose(res.residual_deg, angle, rtol=1e-9, atol=1e-12)
