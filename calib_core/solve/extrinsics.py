@@ -218,7 +218,7 @@ def solve_extrinsics(
         if camera is None or pixels is None:
             raise CalibError("cost='pixel' needs a camera and the clicked pixels")
 
-    # 1. Whitening, computed once per solve (and once more at the pose for the laser term).
+    # 1. Whitening, computed once per solve (its laser term, which depends on the pose, inside the LM).
     frames = bearing_frames(bearings)
     whiten_camera = camera if cost != "geodesic" else None
 
