@@ -17,8 +17,9 @@ Sections
      (one ``camera.project``), DLT start, compiled LM, outlier check,
      covariance, quality verdict, pixel residuals (one more ``camera.project``);
    * the same with a laser-point covariance per pair (``laser_cov_m2``, 1 cm
-     per axis): what the app and ``calibrate()`` pass for whole-cell picks (a
-     second whitening at the first optimum and a second LM);
+     per axis): what the app and ``calibrate()`` pass for whole-cell picks (the
+     LM re-whitens at each pose it tries until near the optimum, in the same
+     compiled call: ``fit_pose_laser``);
    * OpenCV ``solvePnP(SOLVEPNP_SQPNP)`` + ``solvePnPRefineLM`` (pinhole only:
      OpenCV has no OCam model).
 
@@ -510,7 +511,8 @@ def speed_section(sp: list[dict]) -> list[str]:
              "checks, whitening, DLT start, LM, the outlier test (the robust LO-MSAC search runs only when a residual "
              "exceeds the threshold: never on these clean pairs), covariance, quality verdict, pixel residuals. "
              "*robust=False*: the same without the outlier test. *with `laser_cov_m2`*: the same with a laser-point "
-             "covariance per pair (1 cm per axis), as the app and `calibrate()` pass for whole-cell picks. *10 % outliers*: the whole solve on pairs with 10 % "
+             "covariance per pair (1 cm per axis), as the app and `calibrate()` pass for whole-cell picks (the LM "
+             "re-whitens at each pose it tries until near the optimum, in its one compiled call). *10 % outliers*: the whole solve on pairs with 10 % "
              "stray clicks (30-80 px off), where the robust search runs and finds them.\n")
     L.append("| camera | n | trials | `solve_extrinsics` (whole) | robust=False | with `laser_cov_m2` (as the app) | "
              "OpenCV SQPnP + RefineLM | whole / OpenCV | with laser / OpenCV | whole, 10 % outliers (robust search) |")

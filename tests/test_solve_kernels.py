@@ -179,3 +179,96 @@ def test_laser_term_of_the_whitening_against_a_sampled_bearing_error():
         C = sig[i] ** 2 * Ainv @ Ainv.T + L[i]
         np.testing.assert_allclose(W[i].T @ W[i], np.linalg.inv(C), rtol=1e-9)
         assert W[i, 0, 1] == 0.0  # lower triangular: the inverse of C's Cholesky factor
+
+
+def _whitened_optimum(T0, points, F, W):
+    """Independent of the kernels: scipy's LM on ``W_i`` times :func:`_geodesic_residuals`, from ``T0``."""
+    from scipy.optimize import least_squares
+
+    R0 = T0[:3, :3]
+
+    def fun(x):
+        r = _geodesic_residuals(Rotation.from_rotvec(x[:3]).as_matrix() @ R0, x[3:], points, F)
+        return np.einsum("nij,nj->ni", W, r).ravel()
+
+    sol = least_squares(fun, np.concatenate([np.zeros(3), T0[:3, 3]]), method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = Rotation.from_rotvec(sol.x[:3]).as_matrix() @ R0, sol.x[3:]
+    return T
+
+
+def test_laser_term_whitening_is_that_of_the_estimate_itself():
+    """With ``laser_cov_m2`` the solve re-whitens inside its one compiled LM (fit_pose_laser): its estimate
+    is optimal for the whitening with the laser term at itself.  Checked with scipy and numpy alone: the
+    whitening rebuilt at the returned pose, scipy's LM from there stays put; and the estimate is near
+    the two-solve one (click whitening, laser term added at that optimum, solved again), far nearer than
+    the laser term moves the pose."""
+    from calib_core.solve.whiten import laser_tangent_covariance
+
+    for seed, n in ((11, 8), (12, 40)):
+        cam, T, points, pixels = pinhole_scene(seed, n)
+        rng = np.random.default_rng(seed)
+        clicked = pixels + rng.normal(0.0, 1.0, pixels.shape)
+        bearings = cam.bearing(clicked)
+        G = rng.normal(size=(n, 3, 3)) * 0.03
+        S = G @ np.swapaxes(G, 1, 2)  # laser covariances, m^2 (a few cm, anisotropic)
+        sig = rng.uniform(0.5, 2.0, n)
+        F = kernels.bearing_frames(bearings)
+        A, _ = whitening(n, camera=cam, frames=F)
+        Ainv = np.linalg.inv(A)
+        click = sig[:, None, None] ** 2 * Ainv @ np.swapaxes(Ainv, 1, 2)
+
+        def laser_whitening_at(T_at):
+            return np.linalg.inv(np.linalg.cholesky(click + laser_tangent_covariance(T_at, points, F, S)))
+
+        res = solve_extrinsics(points, bearings, camera=cam, pixels=clicked, pixel_sigma=sig, laser_cov_m2=S)
+        assert res.quality.status != "unreliable"
+        T_hat = res.T_camera_lidar
+        rot, trans = pose_error(_whitened_optimum(T_hat, points, F, laser_whitening_at(T_hat)), T_hat)
+        assert rot < 1e-6 and trans < 1e-7
+        T1 = _whitened_optimum(T, points, F, A / sig[:, None, None])
+        T2 = _whitened_optimum(T1, points, F, laser_whitening_at(T1))
+        moved_rot, moved_trans = pose_error(T1, T2)  # what the laser term changes
+        rot, trans = pose_error(T_hat, T2)
+        assert moved_rot > 1e-3 and moved_trans > 1e-4
+        assert rot < 0.05 * moved_rot and trans < 0.05 * moved_trans
+
+
+def test_symmetric_eigen_solver_against_lapack():
+    """sym_eigh (Jacobi rotations, used for the covariance and the geometry figures) against numpy's LAPACK
+    eigh: random, ill-conditioned, rank-deficient and diagonal matrices of the sizes the solve uses."""
+    rng = np.random.default_rng(5)
+    cases = []
+    for n in (3, 6):
+        G = rng.normal(size=(n, n))
+        cases.append(G @ G.T)
+        Q, _ = np.linalg.qr(rng.normal(size=(n, n)))
+        cases.append(Q @ np.diag(np.logspace(-12, 3, n)) @ Q.T)  # condition 1e15
+        cases.append(Q @ np.diag([0.0] * (n - 2) + [1.0, 2.0]) @ Q.T)  # two or more zero eigenvalues
+        cases.append(np.diag(rng.uniform(-1, 1, n)))
+    pts = rng.normal(size=(40, 3)) * [5.0, 1e-4, 1e-4]  # nearly collinear points' scatter
+    cases.append(np.cov(pts.T))
+    for S in cases:
+        w, V = kernels.sym_eigh(S)
+        w_ref = np.linalg.eigvalsh(S)
+        scale = np.abs(w_ref).max()
+        np.testing.assert_allclose(w, w_ref, rtol=1e-12, atol=1e-14 * scale)
+        np.testing.assert_allclose(V.T @ V, np.eye(len(S)), atol=1e-13)
+        np.testing.assert_allclose(S @ V, V * w, atol=1e-12 * scale)
+
+
+def test_reported_angles_are_the_geodesic_errors_at_the_estimate():
+    """``residual_deg`` (taken from the LM's whitened residuals when they are at the final pose) against the
+    angle between each bearing and its laser point's direction at the returned pose, computed here."""
+    cam, T, points, pixels = pinhole_scene(21, 30)
+    rng = np.random.default_rng(21)
+    clicked = pixels + rng.normal(0.0, 1.0, pixels.shape)
+    bearings = cam.bearing(clicked)
+    G = rng.normal(size=(30, 3, 3)) * 0.02
+    for laser in (None, G @ np.swapaxes(G, 1, 2)):
+        res = solve_extrinsics(points, bearings, camera=cam, pixels=clicked, laser_cov_m2=laser)
+        Th = res.T_camera_lidar
+        q = points @ Th[:3, :3].T + Th[:3, 3]
+        angle = np.degrees(np.arctan2(np.linalg.norm(np.cross(bearings, q), axis=1), np.sum(bearings * q, axis=1)))
+        assert angle.max() > 0.01  # noisy clicks: the test can fail
+        np.testing.assert_allclose(res.residual_deg, angle, rtol=1e-9, atol=1e-12)

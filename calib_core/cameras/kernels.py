@@ -23,6 +23,8 @@ import math
 
 import numpy as np
 
+from numba.extending import register_jitable
+
 from .._jit import tiered_kernel as kernel
 
 # -- pinhole parameter vector --------------------------------------------------------
@@ -58,7 +60,7 @@ def _blank(pixels, valid, i):
 
 
 # ------------------------------------------------------------------ pinhole
-@kernel
+@register_jitable(inline="always")
 def _pinhole_distortion(x, y, k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4):
     """OpenCV's radial, tangential and thin-prism distortion of one normalised point (no tilt), and its
     Jacobian: ``xd, yd, d(xd)/dx, d(xd)/dy, d(yd)/dx, d(yd)/dy``.
@@ -99,7 +101,7 @@ def _store_chunk(pixels, valid, start, count, u_buf, v_buf, u_hi, v_hi):
     """Store a chunk's pixels and their in-image test (in float64: as strict as the test on a
     float32 pixel, the bounds being exact in float32)."""
     for k in range(count):
-        i = start + k
+        i = _U(start + k)
         u, v = u_buf[k], v_buf[k]
         pixels[i, 0] = u
         pixels[i, 1] = v
@@ -138,7 +140,7 @@ def pinhole_project(points, p, pixels, valid):
     for start in range(0, n_points, _CHUNK):
         count = min(_CHUNK, n_points - start)
         for k in range(count):
-            i = start + k
+            i = _U(start + k)  # unsigned: no wrap-around test, so the loop runs on SIMD lanes
             X, Y, Z = np.float64(points[i, 0]), np.float64(points[i, 1]), np.float64(points[i, 2])
             x = X / Z
             y = Y / Z

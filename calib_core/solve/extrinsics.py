@@ -18,7 +18,7 @@ from .checks import (
     validate_pairs,
     validate_pixels,
 )
-from .kernels import bearing_frames, fit_pose, pixel_errors, pose_report, whitened_residuals
+from .kernels import bearing_frames, fit_pose, fit_pose_laser, pixel_errors, pose_report, whitened_residuals
 from .quality import Quality, geometry_reasons, orientation_notes
 from .refine import (
     LM_MAX_ITER,
@@ -31,7 +31,7 @@ from .refine import (
 )
 from .result import CalibrationResult
 from .robust import inlier_k, robust_fit, robust_scale
-from .whiten import check_pixel_sigma, laser_tangent_covariance, tangent_to_pixel, whitening
+from .whiten import check_pixel_sigma, click_whitening_inputs, laser_tangent_covariance, tangent_to_pixel, whitening
 
 __all__ = ["COSTS", "NOISY_FACTOR", "PRIOR_PX", "sigma_coverage", "solve_extrinsics", "student_t_factor", "warm_up"]
 
@@ -207,8 +207,8 @@ def solve_extrinsics(
     sigmas = check_pixel_sigma(pixel_sigma, n)
     laser_cov = None
     if laser_cov_m2 is not None:
-        laser_cov = np.asarray(laser_cov_m2, dtype=np.float64)
-        if laser_cov.shape != (n, 3, 3) or not np.all(np.isfinite(laser_cov)):
+        laser_cov = np.ascontiguousarray(laser_cov_m2, dtype=np.float64)
+        if laser_cov.shape != (n, 3, 3) or not math.isfinite(float(laser_cov.sum())):  # (a NaN or inf spreads)
             raise CalibError(f"laser_cov_m2 must be {n} finite 3x3 covariances, got shape {laser_cov.shape}")
     if noise_rad is not None and not (np.isfinite(noise_rad) and noise_rad > 0):
         raise CalibError(f"noise_rad must be a positive number, got {noise_rad!r}")
@@ -218,7 +218,7 @@ def solve_extrinsics(
         if camera is None or pixels is None:
             raise CalibError("cost='pixel' needs a camera and the clicked pixels")
 
-    # 1. Whitening, computed once per solve (and once more at the pose for the laser term).
+    # 1. Whitening, computed once per solve (its laser term, which depends on the pose, inside the LM).
     frames = bearing_frames(bearings)
     whiten_camera = camera if cost != "geodesic" else None
 
@@ -239,40 +239,59 @@ def solve_extrinsics(
     prior = {"px": PRIOR_PX, "sigma": PRIOR_PX, "noise": 1.0}.get(unit)
     floor = _MIN_SCALE[unit]
 
+    laser_term = laser_cov is not None and whiten_camera is not None
+    # The clicks' whitening inputs, from which the LM re-whitens with the laser term inside its one
+    # compiled call (fit_pose_laser); None where the laser term cannot enter (known noise_rad, no
+    # projectable probe), as in whitening().
+    clicks = click_whitening_inputs(tangent[0], sigmas) if laser_term and tangent and noise_rad is None else None
+
     # 2. Initial pose (the linear DLT on the bearings when it applies, n >= 6 and not coplanar, else
-    # Quan & Lan / P3P) and LM on all pairs, in one compiled call (fit_pose).
-    def fit(T_start: np.ndarray | None) -> tuple[np.ndarray, int, np.ndarray | None, np.ndarray, np.ndarray, str]:
+    # Quan & Lan / P3P) and LM on all pairs, in one compiled call (fit_pose, or fit_pose_laser with the
+    # laser term: the LM re-whitens at each pose it tries, until it is near the optimum).
+    def fit(T_start: np.ndarray | None, W: np.ndarray, laser: bool
+            ) -> tuple[np.ndarray, int, np.ndarray | None, np.ndarray, np.ndarray, str, np.ndarray | None]:
         """LM from ``T_start`` (None: from the DLT, or the closed-form start where it does not apply).
 
-        ``(T, iterations, H, z, T_start, start method)``; a failed LM keeps ``T_start`` (H None), or
-        raises when ``robust`` is off.
+        ``(T, iterations, H, z, T_start, start method, W)``, ``W`` the laser term's whitening it ended
+        with (None: not re-whitened); a failed LM keeps ``T_start`` (H None), or raises when ``robust`` is off.
         """
         method = "given"
-        if T_start is None:
-            R, t, R0, t0, it, status, H, z = fit_pose(points, bearings, frames, W, _EYE3, _ZERO3, True, LM_MAX_ITER)
+        use_dlt = T_start is None
+        R_in = _EYE3 if use_dlt else np.ascontiguousarray(T_start[:3, :3])
+        t_in = _ZERO3 if use_dlt else np.ascontiguousarray(T_start[:3, 3])
+        W_new = None
+        if laser:
+            R, t, R0, t0, it, status, H, z, W_new = fit_pose_laser(points, bearings, frames, clicks[0], clicks[1],
+                                                                   laser_cov, R_in, t_in, use_dlt, LM_MAX_ITER)
+        else:
+            R, t, R0, t0, it, status, H, z = fit_pose(points, bearings, frames, W, R_in, t_in, use_dlt, LM_MAX_ITER)
+        if use_dlt:
             if status == -3:
                 T_closed, method = _closed_form_start(points, bearings)
-                return fit(T_closed)[:5] + (method,)
+                out = fit(T_closed, W, laser)
+                return out[:5] + (method,) + out[6:]
             T_start, method = _pose_matrix(R0, t0), "dlt"
-        else:
-            R, t, _, _, it, status, H, z = fit_pose(points, bearings, frames, W, np.ascontiguousarray(T_start[:3, :3]),
-                                                   np.ascontiguousarray(T_start[:3, 3]), False, LM_MAX_ITER)
         failure = lm_failure(status, R, t) if status < 0 else None  # (fit_pose: -2 for a non-finite pose)
+        if failure and laser:
+            return fit(T_start, W, False)[:5] + (method, None)  # the laser term then as below, after this LM
         if failure:
             if not robust:
                 raise CalibError(failure)
             z, _ = whitened_residuals(np.ascontiguousarray(T_start[:3, :3]), np.ascontiguousarray(T_start[:3, 3]),
                                       points, frames, W)
-            return T_start, 0, None, z, T_start, method
-        return _pose_matrix(R, t), int(it), H, z, T_start, method
+            return T_start, 0, None, z, T_start, method, None
+        return _pose_matrix(R, t), int(it), H, z, T_start, method, W_new
 
     given = None if initial_T_camera_lidar is None else validate_initial_T(initial_T_camera_lidar)
     # H_at_T: the LM's normal matrix while T is the LM's optimum on all pairs with this W (else None).
-    T, iterations, H_at_T, z, T_init, method = fit(given)
-    if laser_cov is not None and whiten_camera is not None:
-        # The laser term depends on the pose: whiten at the first optimum and refine once more.
+    T, iterations, H_at_T, z, T_init, method, W_laser = fit(given, W, clicks is not None)
+    if W_laser is not None:
+        W = W_laser
+    elif laser_term:
+        # The laser term depends on the pose: whiten at the first optimum and refine once more (where
+        # the fused LM did not run or failed).
         W, unit = whiten(T)
-        T, more, H_at_T, z, _, _ = fit(T)
+        T, more, H_at_T, z, _, _, _ = fit(T, W, False)
         iterations += more
     r2 = z[:, 0] ** 2 + z[:, 1] ** 2
 
@@ -314,7 +333,8 @@ def solve_extrinsics(
     # 4. Covariance on the inliers: Student-t sigma from the residuals, or the known noise.
     R_hat, t_hat = T[:3, :3].copy(), T[:3, 3].copy()
     dof = 2 * n_in - 6
-    H_known, ssr_known = (H_at_T, -1.0) if H_at_T is not None and cost != "pixel" and n_in == n else (None, -1.0)
+    lm_at_T = H_at_T is not None and cost != "pixel" and n_in == n  # the LM's H and z are at T, with this W
+    H_known, ssr_known = (H_at_T, -1.0) if lm_at_T else (None, -1.0)
     if cost == "pixel":
         x_opt = np.concatenate([np.zeros(3), t_hat])
         inv_s = 1.0 if sigmas is None else np.repeat(1.0 / sigmas[idx], 2)[:, None]
@@ -328,6 +348,7 @@ def solve_extrinsics(
         R_hat, t_hat, points, frames, W, inliers, _NO_H if H_known is None else H_known, H_known is not None,
         ssr_known, noise_rad is not None and cost != "pixel", student_t_factor(dof) if dof > 0 else 1.0,
         float(prior) if prior is not None else math.inf,  # no redundancy: the expected noise
+        *((z,) if lm_at_T else ()),
     )
     noise_scale = float(noise_scale)
 

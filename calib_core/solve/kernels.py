@@ -259,13 +259,38 @@ def _lm(R0, t0, P, F, W, max_iter):
     """
     R = R0.copy()
     t = t0.copy()
-    lam = 1e-4
     Z = np.empty((P.shape[0], 2))
-    Z_new = np.empty((P.shape[0], 2))
     H, g, cost = _normal_equations_into(R, t, P, F, W, Z)
     if not np.isfinite(cost):
         return R, t, 1, -2, H, Z
-    it = 1
+    R, t, it, status, H, Z, _ = _lm_loop(R, t, P, F, W, H, g, cost, Z, 1, max_iter, _NO_C, _NO_S, False)
+    return R, t, it, status, H, Z
+
+
+#: Placeholders of :func:`_lm_loop`'s laser arguments where it does not re-whiten.
+_NO_C = np.zeros((0, 3))
+_NO_S = np.zeros((0, 3, 3))
+#: With the laser term (:func:`fit_pose_laser`) the LM re-whitens at every pose it tries until a step's
+#: predicted decrease is below this share of the cost; the whitening is then kept (the pose is within about
+#: ``sqrt(REWHITEN_GD * cost)`` whitened units, a thousandth of its sigma, of the optimum; the whitening's
+#: change over that is far below rounding of the estimate) and the LM converges as without the laser term.
+REWHITEN_GD = 1e-6
+
+
+@kernel
+def _lm_loop(R, t, P, F, W, H, g, cost, Z, it, max_iter, C, S, rewhiten):
+    """The iterations of :func:`_lm` from a pose whose normal equations ``H, g, cost`` and residuals ``Z``
+    (with the whitening ``W``) are known (``it`` evaluations so far).
+
+    ``rewhiten``: every pose tried gets its own whitening with the laser term (:func:`laser_whitening_at`
+    from the click covariances ``C`` and laser covariances ``S``; a step is taken when the cost with the
+    new pose's whitening is below the current one's), until a step's predicted decrease is below
+    :data:`REWHITEN_GD` of the cost; from there on ``W`` is kept.  Returns ``(R, t, it, status, H, Z, W)``,
+    status as :func:`_lm`, ``W`` the whitening of ``H`` and ``Z``.
+    """
+    lam = 1e-4
+    Z_new = np.empty((P.shape[0], 2))
+    W_new = W.copy() if rewhiten else W
     A = np.empty((6, 6))
     L = np.empty((6, 6))
     dx = np.empty(6)
@@ -281,7 +306,7 @@ def _lm(R0, t0, P, F, W, max_iter):
             _chol_solve_inplace(L, dx)
         else:
             if lam > 1e12:
-                return R, t, it, -1, H, Z
+                return R, t, it, -1, H, Z, W
             lam *= 10.0
             continue
         # Predicted decrease -g.dx: at the noise floor of the cost nothing is left to gain
@@ -290,11 +315,17 @@ def _lm(R0, t0, P, F, W, max_iter):
         for a in range(6):
             gd -= g[a] * dx[a]
         if gd <= 1e-13 * cost or cost <= 1e-300:
-            return R, t, it, 1, H, Z
+            return R, t, it, 1, H, Z, W
+        if rewhiten and gd <= REWHITEN_GD * cost:
+            rewhiten = False  # near the optimum: keep this whitening
         R_new = so3_exp(dx[:3]) @ R
         t_new = t + dx[3:]
         # One pass gives the new cost and, if the step is taken, the next normal equations.
-        H_new, g_new, cost_new = _normal_equations_into(R_new, t_new, P, F, W, Z_new)
+        if rewhiten:
+            _laser_whitening_into(R_new, t_new, P, F, C, S, W_new)
+            H_new, g_new, cost_new = _normal_equations_into(R_new, t_new, P, F, W_new, Z_new)
+        else:
+            H_new, g_new, cost_new = _normal_equations_into(R_new, t_new, P, F, W, Z_new)
         it += 1
         step = 0.0
         scale = 0.0
@@ -308,16 +339,55 @@ def _lm(R0, t0, P, F, W, max_iter):
             decrease = cost - cost_new
             R, t, H, g, cost = R_new, t_new, H_new, g_new, cost_new
             Z, Z_new = Z_new, Z
+            if rewhiten:
+                W, W_new = W_new, W
             lam = max(lam / 10.0, 1e-12)
             if small_step or decrease <= 1e-11 * cost or cost <= 1e-300:
-                return R, t, it, 1, H, Z
+                return R, t, it, 1, H, Z, W
         else:
             if small_step:
-                return R, t, it, 1, H, Z
+                return R, t, it, 1, H, Z, W
             lam *= 10.0
             if lam > 1e16:
-                return R, t, it, 1, H, Z  # no descent direction left: a minimum to rounding
-    return R, t, it, 0, H, Z
+                return R, t, it, 1, H, Z, W  # no descent direction left: a minimum to rounding
+    return R, t, it, 0, H, Z, W
+
+
+@kernel
+def fit_pose_laser(P, B, F, A, s, S, R0, t0, use_dlt, max_iter):
+    """:func:`fit_pose` with the laser term of the whitening, in one call.
+
+    The laser term depends on the pose: the LM whitens each pose it tries with the click covariances
+    (:func:`click_covariance` of the camera's ``A`` (N, 2, 2), px/rad, and the click sigmas ``s`` (N,),
+    px) plus the laser covariances ``S`` (N, 3, 3), m^2, seen from
+    that pose (:func:`laser_whitening_at`), until it is near the optimum (:data:`REWHITEN_GD`), and
+    keeps that whitening to converge.  The estimate is the pose that is optimal with the whitening at
+    itself, the fixed point that the former two solves (click whitening, then re-whitened at that
+    optimum and solved again) approached to a small fraction of its sigma.
+
+    Returns
+    -------
+    As :func:`fit_pose`, then ``W (N, 2, 2)``: the whitening at the end (status -2 also where the laser
+    term is not finite at the start: a point at the camera centre).
+    """
+    n = P.shape[0]
+    if use_dlt:
+        R_start, t_start, ok = dlt_pose(P, B)
+        if not ok:
+            return R_start, t_start, R_start, t_start, 0, -3, np.zeros((6, 6)), np.zeros((n, 2)), np.zeros((n, 2, 2))
+    else:
+        R_start, t_start = R0.copy(), t0.copy()
+    C = click_covariance(A, s)
+    W = laser_whitening_at(R_start, t_start, P, F, C, S)
+    Z = np.empty((n, 2))
+    H, g, cost = _normal_equations_into(R_start, t_start, P, F, W, Z)
+    if not np.isfinite(cost):
+        return R_start, t_start, R_start, t_start, 1, -2, H, Z, W
+    R, t, it, status, H, Z, W = _lm_loop(R_start.copy(), t_start.copy(), P, F, W, H, g, cost, Z, 1, max_iter,
+                                         C, S, True)
+    if not np.isfinite(R.sum() + t.sum()):
+        status = -2
+    return R, t, R_start, t_start, it, status, H, Z, W
 
 
 @kernel
@@ -612,11 +682,13 @@ def bearing_frames(B):
 
 
 @kernel
-def finish(R, t, P, F, W, inliers, want_H=True):
+def finish(R, t, P, F, W, inliers, want_H=True, Z_lm=None):
     """Everything the report needs at the final pose, in one pass.
 
     ``want_H=False`` skips the normal matrix (zeros): for a caller that has it
-    at this pose already (the LM's last one).
+    at this pose already (the LM's last one).  ``Z_lm``: the whitened residuals
+    at this pose with this ``W`` when the caller has them (the LM's): the angles
+    then come from them (``theta_i = |W_i^-1 z_i|``) without a pass through the pairs' geometry.
 
     Returns
     -------
@@ -643,8 +715,16 @@ def finish(R, t, P, F, W, inliers, want_H=True):
     zi = np.empty(2)
     k = 0
     for i in range(n):
+        if Z_lm is not None and not want_H:
+            # r = W^-1 z, and |r| = theta (the log map's norm).
+            z0, z1 = Z_lm[i, 0], Z_lm[i, 1]
+            det = W[i, 0, 0] * W[i, 1, 1] - W[i, 0, 1] * W[i, 1, 0]
+            r0 = (W[i, 1, 1] * z0 - W[i, 0, 1] * z1) / det
+            r1 = (W[i, 0, 0] * z1 - W[i, 1, 0] * z0) / det
+            theta[i] = math.sqrt(r0 * r0 + r1 * r1)
+            zi[0], zi[1] = z0, z1
         # Constant Jacobian flags: a flag known only at run time keeps _pair from being inlined (5x slower).
-        if inliers[i] and want_H:
+        elif inliers[i] and want_H:
             theta[i] = _pair(R, t, P, F, W, i, zi, Ji, True)
         else:
             theta[i] = _pair(R, t, P, F, W, i, zi, Ji, False)
@@ -685,7 +765,7 @@ def finish(R, t, P, F, W, inliers, want_H=True):
     stats[0] = mean
     stats[1] = math.sqrt(var / m)
     stats[2] = np.median(ranges)
-    w = np.linalg.eigvalsh(C)
+    w, _ = sym_eigh(C)
     for a in range(3):
         stats[3 + a] = math.sqrt(max(w[2 - a], 0.0))
     return z, theta, H, ssr, stats
@@ -721,7 +801,7 @@ def fit_pose(P, B, F, W, R0, t0, use_dlt, max_iter):
 
 
 @kernel
-def pose_report(R, t, P, F, W, inliers, H_given, have_H, ssr_given, known_noise, t_factor, prior_sigma):
+def pose_report(R, t, P, F, W, inliers, H_given, have_H, ssr_given, known_noise, t_factor, prior_sigma, Z_lm=None):
     """The figures of the final pose in one call: :func:`finish`, the residual scale, the covariance and sigmas.
 
     Parameters
@@ -736,6 +816,8 @@ def pose_report(R, t, P, F, W, inliers, H_given, have_H, ssr_given, known_noise,
         Student-t factor of ``2 m - 6`` degrees of freedom (m inliers), widening the estimated sigma.
     prior_sigma : float
         Sigma when there is no redundancy (``2 m <= 6``): the expected noise, or inf.
+    Z_lm : (N, 2), optional
+        The LM's whitened residuals at this pose (with ``have_H``): see :func:`finish`.
 
     Returns
     -------
@@ -744,7 +826,7 @@ def pose_report(R, t, P, F, W, inliers, H_given, have_H, ssr_given, known_noise,
     cov : (6, 6), condition : float, as :func:`covariance`
     sigma_t : (3,) m; sigma_rpy : (3,) deg; sigma_rotation : float, deg (:func:`rotation_sigma_deg`)
     """
-    z, theta, H, ssr, stats = finish(R, t, P, F, W, inliers, not have_H)
+    z, theta, H, ssr, stats = finish(R, t, P, F, W, inliers, not have_H, Z_lm)
     if have_H:
         H = H_given
     if ssr_given >= 0.0:
@@ -763,6 +845,63 @@ def pose_report(R, t, P, F, W, inliers, H_given, have_H, ssr_given, known_noise,
 
 
 @kernel
+def sym_eigh(S):
+    """Eigenvalues (ascending) and unit eigenvectors (columns) of a small symmetric matrix.
+
+    Cyclic Jacobi rotations (Golub & Van Loan, sec. 8.5) until the off-diagonal part is at
+    rounding: accurate to rounding like LAPACK's ``eigh``, and for the 3x3 and 6x6 matrices of the
+    solve several times faster (no workspace, no copies, no call into LAPACK).
+    """
+    n = S.shape[0]
+    A = S.copy()
+    V = np.eye(n)
+    for _ in range(30):
+        off = 0.0
+        total = 0.0
+        for p in range(n):
+            total += A[p, p] * A[p, p]
+            for q in range(p + 1, n):
+                off += A[p, q] * A[p, q]
+        if not off > 1e-34 * (total + 2.0 * off):
+            break
+        for p in range(n - 1):
+            for q in range(p + 1, n):
+                apq = A[p, q]
+                if apq == 0.0:
+                    continue
+                theta = (A[q, q] - A[p, p]) / (2.0 * apq)
+                if abs(theta) > 1e150:
+                    tan = 0.5 / theta
+                else:
+                    tan = (1.0 if theta >= 0.0 else -1.0) / (abs(theta) + math.sqrt(theta * theta + 1.0))
+                c = 1.0 / math.sqrt(tan * tan + 1.0)
+                sn = tan * c
+                for k in range(n):  # A P, then P^T (A P), and V P, with P the rotation in the (p, q) plane
+                    akp, akq = A[k, p], A[k, q]
+                    A[k, p] = c * akp - sn * akq
+                    A[k, q] = sn * akp + c * akq
+                for k in range(n):
+                    apk, aqk = A[p, k], A[q, k]
+                    A[p, k] = c * apk - sn * aqk
+                    A[q, k] = sn * apk + c * aqk
+                for k in range(n):
+                    vkp, vkq = V[k, p], V[k, q]
+                    V[k, p] = c * vkp - sn * vkq
+                    V[k, q] = sn * vkp + c * vkq
+    w = np.empty(n)
+    for p in range(n):
+        w[p] = A[p, p]
+    order = np.argsort(w)
+    w_sorted = np.empty(n)
+    V_sorted = np.empty((n, n))
+    for j in range(n):
+        w_sorted[j] = w[order[j]]
+        for k in range(n):
+            V_sorted[k, j] = V[k, order[j]]
+    return w_sorted, V_sorted
+
+
+@kernel
 def rotation_sigma_deg(cov):
     """1-sigma of the rotation along its worst axis, degrees: ``sqrt(max eig(cov[:3, :3]))``.
 
@@ -775,7 +914,7 @@ def rotation_sigma_deg(cov):
             if not np.isfinite(cov[a, b]):
                 return np.inf
             C[a, b] = cov[a, b]
-    w = np.linalg.eigvalsh(C)
+    w, _ = sym_eigh(C)
     return math.degrees(math.sqrt(max(w[2], 0.0)))
 
 
@@ -798,8 +937,12 @@ def rpy_sigmas(R, cov):
             if not np.isfinite(cov[a, b]):
                 return st, sr
     cy, sy = R[0, 0] / cp, R[1, 0] / cp
-    M = np.array([[R[0, 0], -sy, 0.0], [R[1, 0], cy, 0.0], [R[2, 0], 0.0, 1.0]])
-    G = np.linalg.inv(M)
+    # G = M^-1 of M = [[R00, -sy, 0], [R10, cy, 0], [R20, 0, 1]], by cofactors (det M = R00 cy + R10 sy).
+    det = R[0, 0] * cy + R[1, 0] * sy
+    G = np.empty((3, 3))
+    G[0, 0], G[0, 1], G[0, 2] = cy / det, sy / det, 0.0
+    G[1, 0], G[1, 1], G[1, 2] = -R[1, 0] / det, R[0, 0] / det, 0.0
+    G[2, 0], G[2, 1], G[2, 2] = -R[2, 0] * cy / det, -R[2, 0] * sy / det, 1.0
     for a in range(3):  # diag(G C G^T), written out (tiny, and no layout warnings)
         acc = 0.0
         for b in range(3):
@@ -826,7 +969,7 @@ def covariance(H, sigma):
     for a in range(6):
         for b in range(6):
             S[a, b] = H[a, b] / (d[a] * d[b])
-    w, V = np.linalg.eigh(S)
+    w, V = sym_eigh(S)
     cond = w[5] / w[0] if w[0] > 0.0 else np.inf
     if not (w[0] > 1e-14 * w[5]) or not np.isfinite(sigma):
         return cov, cond
@@ -940,7 +1083,7 @@ def pair_checks(P, B, same_point_m, same_bearing_rad, unit_tolerance):
         c12 += d1 * d2
         c22 += d2 * d2
     C = np.array([[c00, c01, c02], [c01, c11, c12], [c02, c12, c22]])
-    w = np.linalg.eigvalsh(C)
+    w, _ = sym_eigh(C)
     for k in range(3):
         sv[k] = math.sqrt(max(w[2 - k], 0.0))
     sn = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
@@ -1227,23 +1370,64 @@ def laser_bearing_cov(R, t, P, F, S):
     see :func:`calib_core.solve.whiten.laser_tangent_covariance`."""
     n = P.shape[0]
     out = np.empty((n, 2, 2))
-    A = np.empty((2, 3))
-    AS = np.empty((2, 3))
     for i in range(n):
-        d2 = 0.0
-        for r in range(3):
-            c = R[r, 0] * P[i, 0] + R[r, 1] * P[i, 1] + R[r, 2] * P[i, 2] + t[r]
-            d2 += c * c
-        for a in range(2):
-            for k in range(3):
-                A[a, k] = F[i, a, 0] * R[0, k] + F[i, a, 1] * R[1, k] + F[i, a, 2] * R[2, k]
-        for a in range(2):
-            for k in range(3):
-                AS[a, k] = A[a, 0] * S[i, 0, k] + A[a, 1] * S[i, 1, k] + A[a, 2] * S[i, 2, k]
-        for a in range(2):
-            for b in range(2):
-                out[i, a, b] = (AS[a, 0] * A[b, 0] + AS[a, 1] * A[b, 1] + AS[a, 2] * A[b, 2]) / d2
+        out[i, 0, 0], out[i, 0, 1], out[i, 1, 0], out[i, 1, 1] = _laser_bearing_cov_pair(R, t, P, F, S, i)
     return out
+
+
+@kernel
+def _laser_bearing_cov_pair(R, t, P, F, S, i):
+    """:func:`laser_bearing_cov` of pair ``i``: ``(Sigma_00, Sigma_01, Sigma_10, Sigma_11)``, in scalars."""
+    d2 = 0.0
+    for r in range(3):
+        c = R[r, 0] * P[i, 0] + R[r, 1] * P[i, 1] + R[r, 2] * P[i, 2] + t[r]
+        d2 += c * c
+    # A = E_i R (2x3), then A S_i (2x3).
+    a00 = F[i, 0, 0] * R[0, 0] + F[i, 0, 1] * R[1, 0] + F[i, 0, 2] * R[2, 0]
+    a01 = F[i, 0, 0] * R[0, 1] + F[i, 0, 1] * R[1, 1] + F[i, 0, 2] * R[2, 1]
+    a02 = F[i, 0, 0] * R[0, 2] + F[i, 0, 1] * R[1, 2] + F[i, 0, 2] * R[2, 2]
+    a10 = F[i, 1, 0] * R[0, 0] + F[i, 1, 1] * R[1, 0] + F[i, 1, 2] * R[2, 0]
+    a11 = F[i, 1, 0] * R[0, 1] + F[i, 1, 1] * R[1, 1] + F[i, 1, 2] * R[2, 1]
+    a12 = F[i, 1, 0] * R[0, 2] + F[i, 1, 1] * R[1, 2] + F[i, 1, 2] * R[2, 2]
+    b00 = a00 * S[i, 0, 0] + a01 * S[i, 1, 0] + a02 * S[i, 2, 0]
+    b01 = a00 * S[i, 0, 1] + a01 * S[i, 1, 1] + a02 * S[i, 2, 1]
+    b02 = a00 * S[i, 0, 2] + a01 * S[i, 1, 2] + a02 * S[i, 2, 2]
+    b10 = a10 * S[i, 0, 0] + a11 * S[i, 1, 0] + a12 * S[i, 2, 0]
+    b11 = a10 * S[i, 0, 1] + a11 * S[i, 1, 1] + a12 * S[i, 2, 1]
+    b12 = a10 * S[i, 0, 2] + a11 * S[i, 1, 2] + a12 * S[i, 2, 2]
+    inv_d2 = 1.0 / d2
+    return ((b00 * a00 + b01 * a01 + b02 * a02) * inv_d2, (b00 * a10 + b01 * a11 + b02 * a12) * inv_d2,
+            (b10 * a00 + b11 * a01 + b12 * a02) * inv_d2, (b10 * a10 + b11 * a11 + b12 * a12) * inv_d2)
+
+
+@kernel
+def click_covariance(A, s):
+    """``s_i^2 A_i^-1 A_i^-T`` as ``(c00, c10, c11)`` (N, 3), rad^2: a click's covariance in the tangent
+    plane (``A_i`` px/rad, ``s_i`` px)."""
+    n = A.shape[0]
+    C = np.empty((n, 3))
+    for i in range(n):
+        a00, a01, a10, a11 = A[i, 0, 0], A[i, 0, 1], A[i, 1, 0], A[i, 1, 1]
+        det = a00 * a11 - a01 * a10
+        # J = s A^-1
+        j00, j01 = a11 / det * s[i], -a01 / det * s[i]
+        j10, j11 = -a10 / det * s[i], a00 / det * s[i]
+        C[i, 0] = j00 * j00 + j01 * j01
+        C[i, 1] = j10 * j00 + j11 * j01
+        C[i, 2] = j10 * j10 + j11 * j11
+    return C
+
+
+@kernel
+def _whiten_2x2(c00, c10, c11, W, i):
+    """``W[i] = chol(C)^-1`` of the 2x2 covariance ``C`` (lower triangular; ``W^T W = C^-1``)."""
+    w00 = 1.0 / math.sqrt(c00)  # 1 / l00
+    l10 = c10 * w00
+    w11 = 1.0 / math.sqrt(max(c11 - l10 * l10, 1e-300))  # 1 / l11
+    W[i, 0, 0] = w00
+    W[i, 0, 1] = 0.0
+    W[i, 1, 1] = w11
+    W[i, 1, 0] = -l10 * w00 * w11
 
 
 @kernel
@@ -1252,23 +1436,29 @@ def laser_whitening(A, s, L):
     the tangent plane (``A_i`` px/rad, ``s_i`` px) plus the laser term ``L_i`` (rad^2); ``W^T W = C^-1``
     (:func:`calib_core.solve.whiten.whitening`)."""
     n = A.shape[0]
-    W = np.zeros((n, 2, 2))
+    C = click_covariance(A, s)
+    W = np.empty((n, 2, 2))
     for i in range(n):
-        a00, a01, a10, a11 = A[i, 0, 0], A[i, 0, 1], A[i, 1, 0], A[i, 1, 1]
-        det = a00 * a11 - a01 * a10
-        # J = s A^-1
-        j00, j01 = a11 / det * s[i], -a01 / det * s[i]
-        j10, j11 = -a10 / det * s[i], a00 / det * s[i]
-        c00 = j00 * j00 + j01 * j01 + L[i, 0, 0]
-        c10 = j10 * j00 + j11 * j01 + L[i, 1, 0]
-        c11 = j10 * j10 + j11 * j11 + L[i, 1, 1]
-        l00 = math.sqrt(c00)
-        l10 = c10 / l00
-        l11 = math.sqrt(max(c11 - l10 * l10, 1e-300))
-        W[i, 0, 0] = 1.0 / l00
-        W[i, 1, 1] = 1.0 / l11
-        W[i, 1, 0] = -l10 / (l00 * l11)
+        _whiten_2x2(C[i, 0] + L[i, 0, 0], C[i, 1] + L[i, 1, 0], C[i, 2] + L[i, 1, 1], W, i)
     return W
+
+
+@kernel
+def laser_whitening_at(R, t, P, F, C, S):
+    """:func:`laser_whitening` at the pose ``(R, t)``, from the click covariances ``C`` (N, 3) of
+    :func:`click_covariance` and the laser covariances ``S`` (N, 3, 3), m^2: the laser term of
+    :func:`laser_bearing_cov` computed pair by pair, without its array."""
+    W = np.empty((P.shape[0], 2, 2))
+    _laser_whitening_into(R, t, P, F, C, S, W)
+    return W
+
+
+@kernel
+def _laser_whitening_into(R, t, P, F, C, S, W):
+    """:func:`laser_whitening_at` into ``W``."""
+    for i in range(P.shape[0]):
+        l00, _, l10, l11 = _laser_bearing_cov_pair(R, t, P, F, S, i)
+        _whiten_2x2(C[i, 0] + l00, C[i, 1] + l10, C[i, 2] + l11, W, i)
 
 
 @kernel

@@ -29,7 +29,7 @@ import numpy as np
 from ..errors import CalibError
 from .kernels import laser_bearing_cov, laser_whitening, probe_jacobians, tangent_probes
 
-__all__ = ["tangent_to_pixel", "whitening", "check_pixel_sigma", "cell_pick_covariance",
+__all__ = ["tangent_to_pixel", "whitening", "click_whitening_inputs", "check_pixel_sigma", "cell_pick_covariance",
            "laser_tangent_covariance", "PICK_CELL_SIGMA", "PICK_RANGE_SIGMA_M"]
 
 #: Central-difference step on the sphere, radians (a fraction of a pixel for any real camera).
@@ -203,16 +203,35 @@ def whitening(
         return eye / s[:, None, None], "rad"
     if laser_tangent_cov is None and ok.all():
         return A / s[:, None, None], unit
-    det = A[:, 0, 0] * A[:, 1, 1] - A[:, 0, 1] * A[:, 1, 0]
     if not ok.any():
         return eye / s[:, None, None], "rad"
-    if not ok.all():
-        # A probe the camera cannot project: the median isotropic px-per-radian of the other pairs.
-        A = A.copy()  # (the caller's ``tangent`` stays as it was)
-        A[~ok] = np.eye(2) * float(np.median(np.sqrt(np.abs(det[ok]))))
-        det = np.where(ok, det, A[:, 0, 0] * A[:, 1, 1])
+    A = _projectable_tangent(A, ok)
     if laser_tangent_cov is None:
         return A / s[:, None, None], unit
     # C = s^2 A^-1 A^-T + Sigma_L (rad^2) = L L^T (2x2 Cholesky, closed form); W = L^-1, W^T W = C^-1.
     return laser_whitening(np.ascontiguousarray(A), np.ascontiguousarray(s, dtype=np.float64),
                            np.ascontiguousarray(laser_tangent_cov, dtype=np.float64)), unit
+
+
+def _projectable_tangent(A: np.ndarray, ok: np.ndarray) -> np.ndarray:
+    """``A`` where a probe the camera cannot project is replaced by the median isotropic px-per-radian
+    of the other pairs (a copy then: the caller's ``tangent`` stays as it was)."""
+    if ok.all():
+        return A
+    det = A[:, 0, 0] * A[:, 1, 1] - A[:, 0, 1] * A[:, 1, 0]
+    A = A.copy()
+    A[~ok] = np.eye(2) * float(np.median(np.sqrt(np.abs(det[ok]))))
+    return A
+
+
+def click_whitening_inputs(tangent: tuple[np.ndarray, np.ndarray], pixel_sigma: np.ndarray | None
+                           ) -> tuple[np.ndarray, np.ndarray] | None:
+    """``(A (N, 2, 2) px/rad, sigma (N,) px)`` of the clicks as :func:`whitening` uses them (a probe the
+    camera cannot project replaced), contiguous for the kernels; None where it whitens without the
+    camera (no probe projectable).  With a laser-point covariance the solve re-whitens from these at
+    each pose (:func:`calib_core.solve.kernels.fit_pose_laser`)."""
+    A, ok = tangent
+    if not ok.any():
+        return None
+    s = np.ones(len(A)) if pixel_sigma is None else np.ascontiguousarray(pixel_sigma, dtype=np.float64)
+    return np.ascontiguousarray(_projectable_tangent(A, ok)), s
