@@ -60,7 +60,7 @@ def _largest_angle_deg(bearings: np.ndarray, cos_min_to_mean: float) -> float:
     so some ``b_j`` is over 90 deg away.  Only a narrow cone, the case the
     checks are about, needs all pairs.
     """
-    if np.isfinite(cos_min_to_mean):
+    if math.isfinite(cos_min_to_mean):
         alpha_deg = math.degrees(math.acos(min(max(cos_min_to_mean, -1.0), 1.0)))
         if alpha_deg >= CONE_WARNING_DEG:
             return alpha_deg
@@ -102,7 +102,7 @@ def validate_pairs(points_lidar: object, bearings_camera: object) -> tuple[np.nd
     if n < MIN_PAIRS:
         raise CalibError(f"need at least {MIN_PAIRS} pairs to solve the pose, got {n}")
     # One compiled pass computes every figure; the messages are chosen here, in order.
-    bad_p, bad_b, zero_b, off_b, norms, bearings, same_p, same_b, sv, cos_min = pair_checks(
+    bad_p, bad_b, zero_b, off_b, off_norm, bearings, sp0, sp1, sb0, sb1, sv0, sv1, cos_min = pair_checks(
         points, bearings, SAME_POINT_M, SAME_BEARING_RAD, UNIT_TOLERANCE)
     if bad_p >= 0:
         raise CalibError(f"pair {bad_p}: laser point is not finite (NaN or inf)")
@@ -111,12 +111,12 @@ def validate_pairs(points_lidar: object, bearings_camera: object) -> tuple[np.nd
     if zero_b >= 0:
         raise CalibError(f"pair {zero_b}: bearing has zero length")
     if off_b >= 0:
-        raise CalibError(f"pair {off_b}: bearing is not a unit vector (norm {norms[off_b]:.6g})")
-    if same_p[0] >= 0:
-        raise CalibError(f"pairs {same_p[0]} and {same_p[1]} use the same laser point")
-    if same_b[0] >= 0:
-        raise CalibError(f"pairs {same_b[0]} and {same_b[1]} use the same bearing (the same pixel clicked twice)")
-    if sv[1] < COLLINEAR_RATIO * sv[0]:
+        raise CalibError(f"pair {off_b}: bearing is not a unit vector (norm {off_norm:.6g})")
+    if sp0 >= 0:
+        raise CalibError(f"pairs {sp0} and {sp1} use the same laser point")
+    if sb0 >= 0:
+        raise CalibError(f"pairs {sb0} and {sb1} use the same bearing (the same pixel clicked twice)")
+    if sv1 < COLLINEAR_RATIO * sv0:
         raise CalibError(
             "the laser points are (nearly) collinear, so the rotation about their line is undetermined; "
             "pick points off that line"

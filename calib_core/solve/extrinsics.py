@@ -18,7 +18,17 @@ from .checks import (
     validate_pairs,
     validate_pixels,
 )
-from .kernels import bearing_frames, fit_pose, fit_pose_laser, pixel_errors, pose_report, whitened_residuals
+from .kernels import (
+    bearing_frames,
+    fit_pose,
+    fit_pose_laser,
+    frames_and_probes,
+    pixel_errors,
+    pose_report,
+    pose_report_points,
+    probe_jacobians_all,
+    whitened_residuals,
+)
 from .quality import Quality, geometry_reasons, orientation_notes
 from .refine import (
     LM_MAX_ITER,
@@ -31,7 +41,7 @@ from .refine import (
 )
 from .result import CalibrationResult
 from .robust import inlier_k, robust_fit, robust_scale
-from .whiten import check_pixel_sigma, click_whitening_inputs, laser_tangent_covariance, tangent_to_pixel, whitening
+from .whiten import STEP_RAD, check_pixel_sigma, click_whitening_inputs, laser_tangent_covariance, whitening
 
 __all__ = ["COSTS", "NOISY_FACTOR", "PRIOR_PX", "sigma_coverage", "solve_extrinsics", "student_t_factor", "warm_up"]
 
@@ -47,11 +57,11 @@ PRIOR_PX = 1.5
 NOISY_FACTOR = 3.0
 
 
-def _pixel_errors(camera: Any, T: np.ndarray, points_lidar: np.ndarray, pixels: np.ndarray,
+def _pixel_errors(camera: Any, points_camera: np.ndarray, pixels: np.ndarray,
                   inliers: np.ndarray) -> tuple[np.ndarray, float, float, int]:
-    """Pixel errors (NaN where not projectable), their mean and std over the inliers, and how many
-    inliers have none (:func:`.kernels.pixel_errors`)."""
-    projected, valid = camera.project(points_lidar @ T[:3, :3].T + T[:3, 3])
+    """Pixel errors (NaN where not projectable) of the laser points in the camera frame (metres), their mean
+    and std over the inliers, and how many inliers have none (:func:`.kernels.pixel_errors`)."""
+    projected, valid = camera.project(points_camera)
     return pixel_errors(np.ascontiguousarray(projected, dtype=np.float64), np.ascontiguousarray(valid, dtype=bool),
                         np.ascontiguousarray(pixels, dtype=np.float64), inliers)
 
@@ -99,11 +109,11 @@ def _ids_text(ids: list[int]) -> str:
     return shown + (f" and {len(ids) - 8} more" if len(ids) > 8 else "")
 
 
-_EYE3, _ZERO3, _NO_H = np.eye(3), np.zeros(3), np.zeros((6, 6))
+_EYE3, _ZERO3, _NO_H, _EYE4 = np.eye(3), np.zeros(3), np.zeros((6, 6)), np.eye(4)
 
 
 def _pose_matrix(R: np.ndarray, t: np.ndarray) -> np.ndarray:
-    T = np.eye(4)
+    T = _EYE4.copy()  # (a copy of a template: np.eye costs more than the rest of this)
     T[:3, :3], T[:3, 3] = R, t
     return T
 
@@ -219,21 +229,28 @@ def solve_extrinsics(
             raise CalibError("cost='pixel' needs a camera and the clicked pixels")
 
     # 1. Whitening, computed once per solve (its laser term, which depends on the pose, inside the LM).
-    frames = bearing_frames(bearings)
     whiten_camera = camera if cost != "geodesic" else None
-
     tangent = []  # tangent_to_pixel of the camera at the bearings: pose-free, computed once
+    all_ok = False
+    if whiten_camera is not None and noise_rad is None:
+        # The bearings' frames and the probes of the camera's tangent Jacobian in one call, then the
+        # Jacobian (whiten.tangent_to_pixel) and whether every pair has one in another.
+        frames, probes = frames_and_probes(bearings, STEP_RAD)
+        uv = np.ascontiguousarray(whiten_camera.project(probes)[0], dtype=np.float64)
+        A, ok, all_ok = probe_jacobians_all(uv, STEP_RAD)
+        tangent.append((A, ok))
+    else:
+        frames = bearing_frames(bearings)
 
     def whiten(T_at: np.ndarray | None) -> tuple[np.ndarray, str]:
         lt = None
         if laser_cov is not None and T_at is not None and whiten_camera is not None:
             lt = laser_tangent_covariance(T_at, points, frames, laser_cov)
-        if whiten_camera is not None and noise_rad is None and not tangent:
-            tangent.append(tangent_to_pixel(whiten_camera, frames))
         return whitening(n, camera=whiten_camera, frames=frames, pixel_sigma=sigmas, noise_rad=noise_rad,
                          laser_tangent_cov=lt, tangent=tangent[0] if tangent else None)
 
-    W, unit = whiten(None)
+    # whitening()'s common case (W = A, px) without its call.
+    W, unit = (tangent[0][0], "px") if all_ok and sigmas is None else whiten(None)
     # Expected scale of the whitened residuals, for the outlier test: the known noise, or the
     # click noise plus the laser pick (whole-cell picks add about 1 px; measured 0.76 px on the sample).
     prior = {"px": PRIOR_PX, "sigma": PRIOR_PX, "noise": 1.0}.get(unit)
@@ -243,7 +260,10 @@ def solve_extrinsics(
     # The clicks' whitening inputs, from which the LM re-whitens with the laser term inside its one
     # compiled call (fit_pose_laser); None where the laser term cannot enter (known noise_rad, no
     # projectable probe), as in whitening().
-    clicks = click_whitening_inputs(tangent[0], sigmas) if laser_term and tangent and noise_rad is None else None
+    clicks = None
+    if laser_term and tangent and noise_rad is None:
+        clicks = ((tangent[0][0], np.ones(n) if sigmas is None else np.ascontiguousarray(sigmas)) if all_ok
+                  else click_whitening_inputs(tangent[0], sigmas))
 
     # 2. Initial pose (the linear DLT on the bearings when it applies, n >= 6 and not coplanar, else
     # Quan & Lan / P3P) and LM on all pairs, in one compiled call (fit_pose, or fit_pose_laser with the
@@ -344,7 +364,8 @@ def solve_extrinsics(
         H_known, ssr_known = J.T @ J, float(np.nansum(rp**2))
         if noise_rad is not None:
             warnings.append("noise_rad is ignored with cost='pixel'; sigma comes from the pixel residuals")
-    theta, H, stats, noise_scale, cov, condition, sigma_t, sigma_rpy, sigma_rotation = pose_report(
+    report = pose_report_points if camera is not None else pose_report  # (+ the points in the camera frame)
+    theta, H, stats, noise_scale, cov, condition, sigma_t, sigma_rpy, sigma_rotation, *points_camera = report(
         R_hat, t_hat, points, frames, W, inliers, _NO_H if H_known is None else H_known, H_known is not None,
         ssr_known, noise_rad is not None and cost != "pixel", student_t_factor(dof) if dof > 0 else 1.0,
         float(prior) if prior is not None else math.inf,  # no redundancy: the expected noise
@@ -358,7 +379,7 @@ def solve_extrinsics(
         if pixels is None:
             projected, valid = camera.project(bearings)
             pixels = np.where(np.asarray(valid, dtype=bool)[:, None], np.asarray(projected, dtype=np.float64), np.nan)
-        residual_px, mean_px, std_px, n_off = _pixel_errors(camera, T, points, pixels, inliers)
+        residual_px, mean_px, std_px, n_off = _pixel_errors(camera, points_camera[0], pixels, inliers)
         if n_off:
             off = np.flatnonzero(~np.isfinite(residual_px[idx]))
             warnings.append(

@@ -845,6 +845,20 @@ def pose_report(R, t, P, F, W, inliers, H_given, have_H, ssr_given, known_noise,
 
 
 @kernel
+def pose_report_points(R, t, P, F, W, inliers, H_given, have_H, ssr_given, known_noise, t_factor, prior_sigma,
+                       Z_lm=None):
+    """:func:`pose_report`, then the laser points in the camera frame ``R P + t`` (N, 3), metres (for
+    the pixel residuals), in one call."""
+    out = pose_report(R, t, P, F, W, inliers, H_given, have_H, ssr_given, known_noise, t_factor, prior_sigma, Z_lm)
+    n = P.shape[0]
+    X = np.empty((n, 3))
+    for i in range(n):
+        for r in range(3):
+            X[i, r] = R[r, 0] * P[i, 0] + R[r, 1] * P[i, 1] + R[r, 2] * P[i, 2] + t[r]
+    return out + (X,)
+
+
+@kernel
 def sym_eigh(S):
     """Eigenvalues (ascending) and unit eigenvectors (columns) of a small symmetric matrix.
 
@@ -1013,6 +1027,59 @@ def _first_close(X, radius, angular):
 
 
 @kernel
+def _any_close(X, radius, angular):
+    """Whether two rows of ``X`` lie within ``radius`` (the distance of :func:`_first_close`), in O(n) for
+    spread-out data, without a sort.
+
+    The rows go into buckets along x at least ``radius`` wide (a counting sort); two rows within
+    ``radius`` differ by at most that in x (the angle between unit vectors is never below their chord),
+    so they lie in the same bucket or in adjacent ones: each row is compared with the later rows of its
+    bucket and with the rows of the next bucket.  Rows with the same x all share a bucket (O(n^2), as the
+    sweep of :func:`_first_close`).
+    """
+    n = X.shape[0]
+    lo = hi = X[0, 0]
+    for i in range(n):
+        lo = min(lo, X[i, 0])
+        hi = max(hi, X[i, 0])
+    # The 1e-4 margin keeps rows within radius in adjacent buckets whatever the division rounds.
+    width = max((hi - lo) / n, radius) * 1.0001
+    if not width > 0.0:
+        width = 1.0  # all rows at one x and a zero radius: one bucket
+    nb = int((hi - lo) / width) + 2  # the last bucket stays empty: every bucket has a next one
+    start = np.zeros(nb + 1, np.int64)
+    bucket = np.empty(n, np.int64)
+    for i in range(n):
+        b = int((X[i, 0] - lo) / width)
+        bucket[i] = b
+        start[b + 1] += 1
+    for b in range(nb):
+        start[b + 1] += start[b]
+    fill = start[:nb].copy()
+    order = np.empty(n, np.int64)
+    for i in range(n):
+        order[fill[bucket[i]]] = i
+        fill[bucket[i]] += 1
+    for b in range(nb - 1):
+        end_next = start[b + 2]
+        for a in range(start[b], start[b + 1]):
+            i = order[a]
+            for c in range(a + 1, end_next):
+                j = order[c]
+                if angular:
+                    c0 = X[i, 1] * X[j, 2] - X[i, 2] * X[j, 1]
+                    c1 = X[i, 2] * X[j, 0] - X[i, 0] * X[j, 2]
+                    c2 = X[i, 0] * X[j, 1] - X[i, 1] * X[j, 0]
+                    dot = X[i, 0] * X[j, 0] + X[i, 1] * X[j, 1] + X[i, 2] * X[j, 2]
+                    dist = math.atan2(math.sqrt(c0 * c0 + c1 * c1 + c2 * c2), dot)
+                else:
+                    dist = math.sqrt((X[i, 0] - X[j, 0]) ** 2 + (X[i, 1] - X[j, 1]) ** 2 + (X[i, 2] - X[j, 2]) ** 2)
+                if dist <= radius:
+                    return True
+    return False
+
+
+@kernel
 def pair_checks(P, B, same_point_m, same_bearing_rad, unit_tolerance):
     """The degeneracy figures of :func:`calib_core.solve.checks.validate_pairs` in one pass.
 
@@ -1022,25 +1089,28 @@ def pair_checks(P, B, same_point_m, same_bearing_rad, unit_tolerance):
         First pair with a non-finite laser point / bearing, or -1.
     zero_bearing, off_unit : int
         First pair whose bearing norm is below 1e-12 / more than ``unit_tolerance`` off 1, or -1.
-    norms : (N,) bearing norms
+    off_norm : float
+        The bearing norm of pair ``off_unit`` (NaN if none).
     U : (N, 3) the bearings divided by their norms
-    same_point, same_bearing : (2,) int
-        A pair of pairs with the same laser point / bearing, or (-1, -1).
-    singular : (3,) singular values of the centred laser points, descending
+    same_point_0, same_point_1, same_bearing_0, same_bearing_1 : int
+        A pair of pairs with the same laser point / bearing, or -1, -1.
+    sv0, sv1 : float
+        The largest two singular values of the centred laser points (0 when a check above failed).
     cos_min_to_mean : float
         Smallest cosine between a unit bearing and the normalised bearing sum
         (NaN if the sum vanishes).
+
+    Scalars rather than small arrays: each array returned to Python costs more than these checks at 10 pairs.
     """
     n = P.shape[0]
     bad_point = -1
     bad_bearing = -1
     zero_bearing = -1
     off_unit = -1
-    norms = np.empty(n)
+    off_norm = np.nan
     U = np.empty((n, 3))
-    same_p = np.full(2, -1)
-    same_b = np.full(2, -1)
-    sv = np.zeros(3)
+    sp0 = sp1 = sb0 = sb1 = -1
+    sv0 = sv1 = 0.0
     cos_min = np.nan
     # Scalars, not row views (``mu += P[i]``): numba's views cost more than the sums here.
     m0 = m1 = m2 = s0 = s1 = s2 = 0.0
@@ -1052,11 +1122,11 @@ def pair_checks(P, B, same_point_m, same_bearing_rad, unit_tolerance):
         if bad_bearing < 0 and not (np.isfinite(b0) and np.isfinite(b1) and np.isfinite(b2)):
             bad_bearing = i
         norm = math.sqrt(b0 * b0 + b1 * b1 + b2 * b2)
-        norms[i] = norm
         if zero_bearing < 0 and norm < 1e-12:
             zero_bearing = i
         if off_unit < 0 and abs(norm - 1.0) > unit_tolerance:
             off_unit = i
+            off_norm = norm
         if norm > 0.0:  # a division, not a reciprocal's product: the bearings numpy's ``B / norms`` gives
             u0, u1, u2 = b0 / norm, b1 / norm, b2 / norm
         else:
@@ -1069,9 +1139,13 @@ def pair_checks(P, B, same_point_m, same_bearing_rad, unit_tolerance):
         s1 += u1
         s2 += u2
     if bad_point >= 0 or bad_bearing >= 0 or zero_bearing >= 0 or off_unit >= 0:
-        return bad_point, bad_bearing, zero_bearing, off_unit, norms, U, same_p, same_b, sv, cos_min
-    same_p[0], same_p[1] = _first_close(P, same_point_m, False)
-    same_b[0], same_b[1] = _first_close(U, same_bearing_rad, True)
+        return bad_point, bad_bearing, zero_bearing, off_unit, off_norm, U, sp0, sp1, sb0, sb1, sv0, sv1, cos_min
+    # The bucket test finds whether any pair is too close; only then does the sorted sweep name the
+    # first such pair (its two argsorts cost more than all the other checks at 1000 pairs).
+    if _any_close(P, same_point_m, False):
+        sp0, sp1 = _first_close(P, same_point_m, False)
+    if _any_close(U, same_bearing_rad, True):
+        sb0, sb1 = _first_close(U, same_bearing_rad, True)
     m0, m1, m2 = m0 / n, m1 / n, m2 / n
     c00 = c01 = c02 = c11 = c12 = c22 = 0.0
     for i in range(n):
@@ -1084,8 +1158,7 @@ def pair_checks(P, B, same_point_m, same_bearing_rad, unit_tolerance):
         c22 += d2 * d2
     C = np.array([[c00, c01, c02], [c01, c11, c12], [c02, c12, c22]])
     w, _ = sym_eigh(C)
-    for k in range(3):
-        sv[k] = math.sqrt(max(w[2 - k], 0.0))
+    sv0, sv1 = math.sqrt(max(w[2], 0.0)), math.sqrt(max(w[1], 0.0))
     sn = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
     if sn > 0.0:
         cos_min = 1.0
@@ -1093,7 +1166,7 @@ def pair_checks(P, B, same_point_m, same_bearing_rad, unit_tolerance):
             c = (U[i, 0] * s0 + U[i, 1] * s1 + U[i, 2] * s2) / sn
             if c < cos_min:
                 cos_min = c
-    return bad_point, bad_bearing, zero_bearing, off_unit, norms, U, same_p, same_b, sv, cos_min
+    return bad_point, bad_bearing, zero_bearing, off_unit, off_norm, U, sp0, sp1, sb0, sb1, sv0, sv1, cos_min
 
 
 @kernel
@@ -1345,6 +1418,25 @@ def tangent_probes(F, h):
             out[2 * n + i, k] = F[i, 2, k] + h * F[i, 1, k]
             out[3 * n + i, k] = F[i, 2, k] - h * F[i, 1, k]
     return out
+
+
+@kernel
+def frames_and_probes(B, h):
+    """:func:`bearing_frames` of the unit bearings ``B`` and their :func:`tangent_probes` at step ``h``
+    (radians), in one call."""
+    F = bearing_frames(B)
+    return F, tangent_probes(F, h)
+
+
+@kernel
+def probe_jacobians_all(uv, h):
+    """:func:`probe_jacobians`, then whether every pair's is ``ok``."""
+    A, ok = probe_jacobians(uv, h)
+    all_ok = True
+    for i in range(ok.shape[0]):
+        if not ok[i]:
+            all_ok = False
+    return A, ok, all_ok
 
 
 @kernel
