@@ -20,6 +20,7 @@ from .checks import (
 )
 from .kernels import (
     bearing_frames,
+    fit_and_report,
     fit_pose,
     fit_pose_laser,
     frames_and_probes,
@@ -110,6 +111,7 @@ def _ids_text(ids: list[int]) -> str:
 
 
 _EYE3, _ZERO3, _NO_H, _EYE4 = np.eye(3), np.zeros(3), np.zeros((6, 6)), np.eye(4)
+_NO_A, _NO_S, _NO_L = np.zeros((0, 2, 2)), np.zeros(0), np.zeros((0, 3, 3))  # fit_and_report without the laser term
 
 
 def _pose_matrix(R: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -303,8 +305,29 @@ def solve_extrinsics(
         return _pose_matrix(R, t), int(it), H, z, T_start, method, W_new
 
     given = None if initial_T_camera_lidar is None else validate_initial_T(initial_T_camera_lidar)
+    # The common case in one compiled call (fit_and_report): the LM from the DLT or the given start and,
+    # where no residual calls for the outlier search, the report at its optimum (steps 3-4 below skipped).
+    # Elsewhere (no prior noise scale, the pixel cost, a failed LM or DLT: the closed-form start) fit()
+    # does it step by step.
+    fused_report = None
+    fitted = None
+    if cost != "pixel" and prior is not None and (clicks is not None or not laser_term):
+        use_dlt = given is None
+        laser = clicks is not None
+        dof = 2 * n - 6
+        T_f, T_start_f, it_f, status_f, H_f, z_f, W_f, done, *fused_report = fit_and_report(
+            points, bearings, frames, W, clicks[0] if laser else _NO_A, clicks[1] if laser else _NO_S,
+            laser_cov if laser else _NO_L, laser, _EYE3 if use_dlt else np.ascontiguousarray(given[:3, :3]),
+            _ZERO3 if use_dlt else np.ascontiguousarray(given[:3, 3]), use_dlt, LM_MAX_ITER, robust,
+            (inlier_k(n) * max(prior, floor)) ** 2, noise_rad is not None, student_t_factor(dof) if dof > 0 else 1.0,
+            float(prior))
+        if status_f >= 0:
+            fitted = (T_f, int(it_f), H_f, z_f, T_start_f if use_dlt else given, "dlt" if use_dlt else "given",
+                      W_f if laser else None)
+        if not done:
+            fused_report = None
     # H_at_T: the LM's normal matrix while T is the LM's optimum on all pairs with this W (else None).
-    T, iterations, H_at_T, z, T_init, method, W_laser = fit(given, W, clicks is not None)
+    T, iterations, H_at_T, z, T_init, method, W_laser = fit(given, W, clicks is not None) if fitted is None else fitted
     if W_laser is not None:
         W = W_laser
     elif laser_term:
@@ -313,64 +336,68 @@ def solve_extrinsics(
         W, unit = whiten(T)
         T, more, H_at_T, z, _, _, _ = fit(T, W, False)
         iterations += more
-    r2 = z[:, 0] ** 2 + z[:, 1] ** 2
+    if fused_report is not None:  # (fit_and_report did steps 3 and 4: no outlier search, all pairs in)
+        inliers, hypotheses, searched, idx, n_in = np.ones(n, dtype=bool), 0, False, np.arange(n), n
+        theta, H, stats, noise_scale, cov, condition, sigma_t, sigma_rpy, sigma_rotation, *points_camera = fused_report
+    else:
+        r2 = z[:, 0] ** 2 + z[:, 1] ** 2
 
-    # 3. Outliers: only searched for when some residual is far above the noise scale.
-    # With a prior (expected click noise), any pair beyond it is suspect; without one, the
-    # median residual sets the scale.  A noisier-than-expected set just takes the robust path.
-    inliers = np.ones(n, dtype=bool)
-    hypotheses = 0
-    searched = False
-    scale_ref = max(prior, floor) if prior is not None else max(robust_scale(r2), floor)
-    if robust and r2.max() >= (inlier_k(n) * scale_ref) ** 2:
-        fit = robust_fit(points, bearings, frames, W, prior, T[:3, :3], T[:3, 3], min_scale=floor)
-        hypotheses, searched = fit.hypotheses, True
-        iterations += fit.iterations
-        H_at_T = None
-        if fit.inliers.sum() >= 3:
-            inliers = fit.inliers
-            T = np.eye(4)
-            T[:3, :3], T[:3, 3] = fit.R, fit.t
-        if laser_cov is not None and whiten_camera is not None:
-            # The laser term depends on the pose: whiten at the robust pose and refine once more.
-            W, unit = whiten(T)
-            keep = np.flatnonzero(inliers)
-            if keep.size >= 3:
-                T, more = refine_angular(T, points[keep], frames[keep], W[keep])
-                iterations += more
-    idx = np.flatnonzero(inliers) if searched else np.arange(n)  # (no search ran: all pairs are in)
-    n_in = idx.size
-    if cost == "pixel" and n_in >= 3:
-        bad = np.nonzero(~np.all(np.isfinite(pixels[idx]), axis=1))[0]
-        if bad.size:
-            raise CalibError(f"cost='pixel': pairs {bad.tolist()} have no finite pixel")
-        T, more = refine_pose(
-            T, points[idx], bearings[idx], cost="pixel", camera=camera, pixels=pixels[idx],
-            pixel_sigma=None if sigmas is None else sigmas[idx],
+        # 3. Outliers: only searched for when some residual is far above the noise scale.
+        # With a prior (expected click noise), any pair beyond it is suspect; without one, the
+        # median residual sets the scale.  A noisier-than-expected set just takes the robust path.
+        inliers = np.ones(n, dtype=bool)
+        hypotheses = 0
+        searched = False
+        scale_ref = max(prior, floor) if prior is not None else max(robust_scale(r2), floor)
+        if robust and r2.max() >= (inlier_k(n) * scale_ref) ** 2:
+            fit = robust_fit(points, bearings, frames, W, prior, T[:3, :3], T[:3, 3], min_scale=floor)
+            hypotheses, searched = fit.hypotheses, True
+            iterations += fit.iterations
+            H_at_T = None
+            if fit.inliers.sum() >= 3:
+                inliers = fit.inliers
+                T = np.eye(4)
+                T[:3, :3], T[:3, 3] = fit.R, fit.t
+            if laser_cov is not None and whiten_camera is not None:
+                # The laser term depends on the pose: whiten at the robust pose and refine once more.
+                W, unit = whiten(T)
+                keep = np.flatnonzero(inliers)
+                if keep.size >= 3:
+                    T, more = refine_angular(T, points[keep], frames[keep], W[keep])
+                    iterations += more
+        idx = np.flatnonzero(inliers) if searched else np.arange(n)  # (no search ran: all pairs are in)
+        n_in = idx.size
+        if cost == "pixel" and n_in >= 3:
+            bad = np.nonzero(~np.all(np.isfinite(pixels[idx]), axis=1))[0]
+            if bad.size:
+                raise CalibError(f"cost='pixel': pairs {bad.tolist()} have no finite pixel")
+            T, more = refine_pose(
+                T, points[idx], bearings[idx], cost="pixel", camera=camera, pixels=pixels[idx],
+                pixel_sigma=None if sigmas is None else sigmas[idx],
+            )
+            iterations += more
+
+        # 4. Covariance on the inliers: Student-t sigma from the residuals, or the known noise.
+        R_hat, t_hat = T[:3, :3].copy(), T[:3, 3].copy()
+        dof = 2 * n_in - 6
+        lm_at_T = H_at_T is not None and cost != "pixel" and n_in == n  # the LM's H and z are at T, with this W
+        H_known, ssr_known = (H_at_T, -1.0) if lm_at_T else (None, -1.0)
+        if cost == "pixel":
+            x_opt = np.concatenate([np.zeros(3), t_hat])
+            inv_s = 1.0 if sigmas is None else np.repeat(1.0 / sigmas[idx], 2)[:, None]
+            J = pixel_jacobian(x_opt, R_hat, points[idx], pixels[idx], camera) * inv_s
+            rp = pixel_residuals(x_opt, R_hat, points[idx], pixels[idx], camera).ravel() * np.ravel(inv_s)
+            J = np.where(np.isfinite(J), J, 0.0)
+            H_known, ssr_known = J.T @ J, float(np.nansum(rp**2))
+            if noise_rad is not None:
+                warnings.append("noise_rad is ignored with cost='pixel'; sigma comes from the pixel residuals")
+        report = pose_report_points if camera is not None else pose_report  # (+ the points in the camera frame)
+        theta, H, stats, noise_scale, cov, condition, sigma_t, sigma_rpy, sigma_rotation, *points_camera = report(
+            R_hat, t_hat, points, frames, W, inliers, _NO_H if H_known is None else H_known, H_known is not None,
+            ssr_known, noise_rad is not None and cost != "pixel", student_t_factor(dof) if dof > 0 else 1.0,
+            float(prior) if prior is not None else math.inf,  # no redundancy: the expected noise
+            *((z,) if lm_at_T else ()),
         )
-        iterations += more
-
-    # 4. Covariance on the inliers: Student-t sigma from the residuals, or the known noise.
-    R_hat, t_hat = T[:3, :3].copy(), T[:3, 3].copy()
-    dof = 2 * n_in - 6
-    lm_at_T = H_at_T is not None and cost != "pixel" and n_in == n  # the LM's H and z are at T, with this W
-    H_known, ssr_known = (H_at_T, -1.0) if lm_at_T else (None, -1.0)
-    if cost == "pixel":
-        x_opt = np.concatenate([np.zeros(3), t_hat])
-        inv_s = 1.0 if sigmas is None else np.repeat(1.0 / sigmas[idx], 2)[:, None]
-        J = pixel_jacobian(x_opt, R_hat, points[idx], pixels[idx], camera) * inv_s
-        rp = pixel_residuals(x_opt, R_hat, points[idx], pixels[idx], camera).ravel() * np.ravel(inv_s)
-        J = np.where(np.isfinite(J), J, 0.0)
-        H_known, ssr_known = J.T @ J, float(np.nansum(rp**2))
-        if noise_rad is not None:
-            warnings.append("noise_rad is ignored with cost='pixel'; sigma comes from the pixel residuals")
-    report = pose_report_points if camera is not None else pose_report  # (+ the points in the camera frame)
-    theta, H, stats, noise_scale, cov, condition, sigma_t, sigma_rpy, sigma_rotation, *points_camera = report(
-        R_hat, t_hat, points, frames, W, inliers, _NO_H if H_known is None else H_known, H_known is not None,
-        ssr_known, noise_rad is not None and cost != "pixel", student_t_factor(dof) if dof > 0 else 1.0,
-        float(prior) if prior is not None else math.inf,  # no redundancy: the expected noise
-        *((z,) if lm_at_T else ()),
-    )
     noise_scale = float(noise_scale)
 
     # 5. Report.

@@ -391,6 +391,64 @@ def fit_pose_laser(P, B, F, A, s, S, R0, t0, use_dlt, max_iter):
 
 
 @kernel
+def _pose_4x4(R, t):
+    T = np.eye(4)
+    for r in range(3):
+        for c in range(3):
+            T[r, c] = R[r, c]
+        T[r, 3] = t[r]
+    return T
+
+
+@kernel
+def fit_and_report(P, B, F, W, A, s, S, laser, R0, t0, use_dlt, max_iter, robust, threshold_sq, known_noise,
+                   t_factor, prior_sigma):
+    """The fit of :func:`calib_core.solve.solve_extrinsics` and, where nothing else is left to do, its report,
+    in one call: :func:`fit_pose_laser` (``laser``; the click inputs ``A``, ``s`` and laser covariances ``S``)
+    or :func:`fit_pose` (the whitening ``W``), then, when the LM succeeded and no whitened residual
+    reaches the outlier threshold (``|z_i|^2 >= threshold_sq``, only looked at when ``robust``),
+    :func:`pose_report_points` of all pairs at the optimum with the LM's normal matrix and residuals.
+
+    Returns
+    -------
+    T, T_start : (4, 4) the optimum and the start (as 4x4 ``T_camera_lidar``)
+    iterations, status, H, z : as :func:`fit_pose`
+    W_end : (N, 2, 2) the whitening of ``H`` and ``z`` (``W`` itself without the laser term)
+    done : bool
+        The report below was computed (else it is empty and the caller goes on: a failed LM, or an
+        outlier search to run).
+    theta, H, stats, noise_scale, cov, condition, sigma_t, sigma_rpy, sigma_rotation, points_camera :
+        as :func:`pose_report_points`.
+    """
+    n = P.shape[0]
+    if laser:
+        R, t, R_s, t_s, it, status, H, Z, W_end = fit_pose_laser(P, B, F, A, s, S, R0, t0, use_dlt, max_iter)
+    else:
+        R, t, R_s, t_s, it, status, H, Z = fit_pose(P, B, F, W, R0, t0, use_dlt, max_iter)
+        W_end = W
+    done = status >= 0
+    if done and robust:
+        # The caller's test, ``max |z_i|^2 >= threshold_sq`` with numpy's max: a NaN makes it false.
+        above = False
+        for i in range(n):
+            r2 = Z[i, 0] ** 2 + Z[i, 1] ** 2
+            if r2 != r2:
+                above = False
+                break
+            if r2 >= threshold_sq:
+                above = True
+        done = not above
+    T, T_start = _pose_4x4(R, t), _pose_4x4(R_s, t_s)
+    if not done:
+        return (T, T_start, it, status, H, Z, W_end, False, np.empty(0), np.zeros((6, 6)), np.zeros(7), np.nan,
+                np.zeros((6, 6)), np.nan, np.zeros(3), np.zeros(3), np.nan, np.empty((0, 3)))
+    theta, H_r, stats, noise_scale, cov, condition, sigma_t, sigma_rpy, sigma_rot, X = pose_report_points(
+        R, t, P, F, W_end, np.ones(n, dtype=np.bool_), H, True, -1.0, known_noise, t_factor, prior_sigma, Z)
+    return (T, T_start, it, status, H, Z, W_end, True, theta, H_r, stats, noise_scale, cov, condition, sigma_t,
+            sigma_rpy, sigma_rot, X)
+
+
+@kernel
 def score_poses(Rs, ts, P, F, W):
     """Squared whitened residual norms ``(K, N)`` of K candidate poses ``Rs (K, 3, 3)``, ``ts (K, 3)``."""
     K = Rs.shape[0]
