@@ -15,15 +15,13 @@ from .checks import (
     MIN_PAIRS,
     conditioning_warning,
     validate_initial_T,
-    validate_pairs,
+    validate_pairs_frames,
     validate_pixels,
 )
 from .kernels import (
-    bearing_frames,
     fit_and_report,
     fit_pose,
     fit_pose_laser,
-    frames_and_probes,
     pixel_errors,
     pose_report,
     pose_report_points,
@@ -213,7 +211,11 @@ def solve_extrinsics(
     """
     if cost not in COSTS:
         raise CalibError(f"unknown cost {cost!r}; use one of {', '.join(COSTS)}")
-    points, bearings, warnings = validate_pairs(points_lidar, bearings_camera)
+    whiten_camera = camera if cost != "geodesic" else None
+    by_camera = whiten_camera is not None and noise_rad is None  # whitening by the camera's tangent Jacobian
+    # The checks, the bearings' frames and (by_camera) the probes of the camera's tangent Jacobian in one call.
+    points, bearings, warnings, frames, probes = validate_pairs_frames(points_lidar, bearings_camera,
+                                                                       STEP_RAD if by_camera else 0.0)
     n = len(points)
     ids = _check_pair_ids(pair_ids, n)
     sigmas = check_pixel_sigma(pixel_sigma, n)
@@ -231,18 +233,13 @@ def solve_extrinsics(
             raise CalibError("cost='pixel' needs a camera and the clicked pixels")
 
     # 1. Whitening, computed once per solve (its laser term, which depends on the pose, inside the LM).
-    whiten_camera = camera if cost != "geodesic" else None
     tangent = []  # tangent_to_pixel of the camera at the bearings: pose-free, computed once
     all_ok = False
-    if whiten_camera is not None and noise_rad is None:
-        # The bearings' frames and the probes of the camera's tangent Jacobian in one call, then the
-        # Jacobian (whiten.tangent_to_pixel) and whether every pair has one in another.
-        frames, probes = frames_and_probes(bearings, STEP_RAD)
+    if by_camera:
+        # The Jacobian (whiten.tangent_to_pixel) and whether every pair has one, in one call.
         uv = np.ascontiguousarray(whiten_camera.project(probes)[0], dtype=np.float64)
         A, ok, all_ok = probe_jacobians_all(uv, STEP_RAD)
         tangent.append((A, ok))
-    else:
-        frames = bearing_frames(bearings)
 
     def whiten(T_at: np.ndarray | None) -> tuple[np.ndarray, str]:
         lt = None

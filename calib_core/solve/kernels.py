@@ -1228,6 +1228,21 @@ def pair_checks(P, B, same_point_m, same_bearing_rad, unit_tolerance):
 
 
 @kernel
+def pair_checks_frames(P, B, same_point_m, same_bearing_rad, unit_tolerance, h):
+    """:func:`pair_checks`, then, when its first four checks passed, :func:`bearing_frames` of the unit
+    bearings and (``h > 0``) their :func:`tangent_probes` at step ``h`` radians, in one call (empty arrays
+    where not computed)."""
+    out = pair_checks(P, B, same_point_m, same_bearing_rad, unit_tolerance)
+    if out[0] < 0 and out[1] < 0 and out[2] < 0 and out[3] < 0:
+        F = bearing_frames(out[5])
+        probes = tangent_probes(F, h) if h > 0.0 else np.empty((0, 3))
+    else:
+        F = np.empty((0, 3, 3))
+        probes = np.empty((0, 3))
+    return out + (F, probes)
+
+
+@kernel
 def _rigid_fit_one(src, dst, out):
     """Least-squares rigid ``T_dst_src`` of (N, 3) point sets into ``out`` (4, 4): Arun's SVD with
     Umeyama's reflection fix (see :mod:`calib_core.solve.rigid`)."""
@@ -1476,14 +1491,6 @@ def tangent_probes(F, h):
             out[2 * n + i, k] = F[i, 2, k] + h * F[i, 1, k]
             out[3 * n + i, k] = F[i, 2, k] - h * F[i, 1, k]
     return out
-
-
-@kernel
-def frames_and_probes(B, h):
-    """:func:`bearing_frames` of the unit bearings ``B`` and their :func:`tangent_probes` at step ``h``
-    (radians), in one call."""
-    F = bearing_frames(B)
-    return F, tangent_probes(F, h)
 
 
 @kernel
