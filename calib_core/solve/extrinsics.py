@@ -261,7 +261,8 @@ def solve_extrinsics(
     # projectable probe), as in whitening().
     clicks = None
     if laser_term and tangent and noise_rad is None:
-        clicks = ((tangent[0][0], np.ones(n) if sigmas is None else np.ascontiguousarray(sigmas)) if all_ok
+        # (sigmas None: 1 px each, the ones made where they are used)
+        clicks = ((tangent[0][0], None if sigmas is None else np.ascontiguousarray(sigmas)) if all_ok
                   else click_whitening_inputs(tangent[0], sigmas))
 
     # 2. Initial pose (the linear DLT on the bearings when it applies, n >= 6 and not coplanar, else
@@ -280,8 +281,9 @@ def solve_extrinsics(
         t_in = _ZERO3 if use_dlt else np.ascontiguousarray(T_start[:3, 3])
         W_new = None
         if laser:
-            R, t, R0, t0, it, status, H, z, W_new = fit_pose_laser(points, bearings, frames, clicks[0], clicks[1],
-                                                                   laser_cov, R_in, t_in, use_dlt, LM_MAX_ITER)
+            R, t, R0, t0, it, status, H, z, W_new = fit_pose_laser(
+                points, bearings, frames, clicks[0], np.ones(n) if clicks[1] is None else clicks[1], laser_cov, R_in,
+                t_in, use_dlt, LM_MAX_ITER)
         else:
             R, t, R0, t0, it, status, H, z = fit_pose(points, bearings, frames, W, R_in, t_in, use_dlt, LM_MAX_ITER)
         if use_dlt:
@@ -313,7 +315,8 @@ def solve_extrinsics(
         laser = clicks is not None
         dof = 2 * n - 6
         T_f, T_start_f, it_f, status_f, H_f, z_f, W_f, done, *fused_report = fit_and_report(
-            points, bearings, frames, W, clicks[0] if laser else _NO_A, clicks[1] if laser else _NO_S,
+            points, bearings, frames, W, clicks[0] if laser else _NO_A,
+            clicks[1] if laser and clicks[1] is not None else _NO_S,
             laser_cov if laser else _NO_L, laser, _EYE3 if use_dlt else np.ascontiguousarray(given[:3, :3]),
             _ZERO3 if use_dlt else np.ascontiguousarray(given[:3, 3]), use_dlt, LM_MAX_ITER, robust,
             (inlier_k(n) * max(prior, floor)) ** 2, noise_rad is not None, student_t_factor(dof) if dof > 0 else 1.0,
@@ -327,7 +330,7 @@ def solve_extrinsics(
     T, iterations, H_at_T, z, T_init, method, W_laser = fit(given, W, clicks is not None) if fitted is None else fitted
     if W_laser is not None:
         W = W_laser
-    elif laser_term:
+    elif laser_term and fused_report is None:  # (fit_and_report's report: W has no further use)
         # The laser term depends on the pose: whiten at the first optimum and refine once more (where
         # the fused LM did not run or failed).
         W, unit = whiten(T)

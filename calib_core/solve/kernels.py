@@ -404,7 +404,8 @@ def _pose_4x4(R, t):
 def fit_and_report(P, B, F, W, A, s, S, laser, R0, t0, use_dlt, max_iter, robust, threshold_sq, known_noise,
                    t_factor, prior_sigma):
     """The fit of :func:`calib_core.solve.solve_extrinsics` and, where nothing else is left to do, its report,
-    in one call: :func:`fit_pose_laser` (``laser``; the click inputs ``A``, ``s`` and laser covariances ``S``)
+    in one call: :func:`fit_pose_laser` (``laser``; the click inputs ``A``, ``s`` (empty: 1 px each) and laser
+    covariances ``S``)
     or :func:`fit_pose` (the whitening ``W``), then, when the LM succeeded and no whitened residual
     reaches the outlier threshold (``|z_i|^2 >= threshold_sq``, only looked at when ``robust``),
     :func:`pose_report_points` of all pairs at the optimum with the LM's normal matrix and residuals.
@@ -415,13 +416,17 @@ def fit_and_report(P, B, F, W, A, s, S, laser, R0, t0, use_dlt, max_iter, robust
     iterations, status, H, z : as :func:`fit_pose`
     W_end : (N, 2, 2) the whitening of ``H`` and ``z`` (``W`` itself without the laser term)
     done : bool
-        The report below was computed (else it is empty and the caller goes on: a failed LM, or an
-        outlier search to run).
+        The report below was computed (else it is None and the caller goes on: a failed LM, or an
+        outlier search to run).  With ``done``, ``H``, ``z`` and ``W_end`` are None (the caller has no
+        further use for them, and each array returned to Python costs about as much as a pass
+        through 100 pairs).
     theta, H, stats, noise_scale, cov, condition, sigma_t, sigma_rpy, sigma_rotation, points_camera :
         as :func:`pose_report_points`.
     """
     n = P.shape[0]
     if laser:
+        if s.shape[0] != n:
+            s = np.ones(n)
         R, t, R_s, t_s, it, status, H, Z, W_end = fit_pose_laser(P, B, F, A, s, S, R0, t0, use_dlt, max_iter)
     else:
         R, t, R_s, t_s, it, status, H, Z = fit_pose(P, B, F, W, R0, t0, use_dlt, max_iter)
@@ -440,11 +445,11 @@ def fit_and_report(P, B, F, W, A, s, S, laser, R0, t0, use_dlt, max_iter, robust
         done = not above
     T, T_start = _pose_4x4(R, t), _pose_4x4(R_s, t_s)
     if not done:
-        return (T, T_start, it, status, H, Z, W_end, False, np.empty(0), np.zeros((6, 6)), np.zeros(7), np.nan,
-                np.zeros((6, 6)), np.nan, np.zeros(3), np.zeros(3), np.nan, np.empty((0, 3)))
+        return (T, T_start, it, status, H, Z, W_end, False, None, None, None, None, None, None, None, None, None,
+                None)
     theta, H_r, stats, noise_scale, cov, condition, sigma_t, sigma_rpy, sigma_rot, X = pose_report_points(
         R, t, P, F, W_end, np.ones(n, dtype=np.bool_), H, True, -1.0, known_noise, t_factor, prior_sigma, Z)
-    return (T, T_start, it, status, H, Z, W_end, True, theta, H_r, stats, noise_scale, cov, condition, sigma_t,
+    return (T, T_start, it, status, None, None, None, True, theta, H_r, stats, noise_scale, cov, condition, sigma_t,
             sigma_rpy, sigma_rot, X)
 
 
