@@ -20,6 +20,7 @@ from .checks import (
 )
 from .kernels import (
     fit_and_report,
+    fit_and_report_probes,
     fit_pose,
     fit_pose_laser,
     pixel_errors,
@@ -235,10 +236,27 @@ def solve_extrinsics(
     # 1. Whitening, computed once per solve (its laser term, which depends on the pose, inside the LM).
     tangent = []  # tangent_to_pixel of the camera at the bearings: pose-free, computed once
     all_ok = False
+    given = None if initial_T_camera_lidar is None else validate_initial_T(initial_T_camera_lidar)
+    use_dlt = given is None
+    R_in = _EYE3 if use_dlt else np.ascontiguousarray(given[:3, :3])
+    t_in = _ZERO3 if use_dlt else np.ascontiguousarray(given[:3, 3])
+    fused = None  # fit_and_report's outputs when the call below made them
     if by_camera:
-        # The Jacobian (whiten.tangent_to_pixel) and whether every pair has one, in one call.
         uv = np.ascontiguousarray(whiten_camera.project(probes)[0], dtype=np.float64)
-        A, ok, all_ok = probe_jacobians_all(uv, STEP_RAD)
+        if cost != "pixel":
+            # The camera's tangent Jacobian (whiten.tangent_to_pixel), and where every pair has one, step 2 and
+            # (fit_and_report) steps 3-4 below, in one compiled call; the expected noise as for all_ok below.
+            laser = laser_cov is not None
+            dof = 2 * n - 6
+            A, ok, all_ok, *fused = fit_and_report_probes(
+                points, bearings, frames, uv, STEP_RAD, _NO_S if sigmas is None else np.ascontiguousarray(sigmas),
+                laser_cov if laser else _NO_L, laser, R_in, t_in, use_dlt, LM_MAX_ITER, robust,
+                (inlier_k(n) * max(PRIOR_PX, _MIN_SCALE["px"])) ** 2, student_t_factor(dof) if dof > 0 else 1.0,
+                float(PRIOR_PX))
+            if not all_ok:
+                fused = None
+        else:
+            A, ok, all_ok = probe_jacobians_all(uv, STEP_RAD)
         tangent.append((A, ok))
 
     def whiten(T_at: np.ndarray | None) -> tuple[np.ndarray, str]:
@@ -248,8 +266,11 @@ def solve_extrinsics(
         return whitening(n, camera=whiten_camera, frames=frames, pixel_sigma=sigmas, noise_rad=noise_rad,
                          laser_tangent_cov=lt, tangent=tangent[0] if tangent else None)
 
-    # whitening()'s common case (W = A, px) without its call.
-    W, unit = (tangent[0][0], "px") if all_ok and sigmas is None else whiten(None)
+    # whitening()'s common case (W = A, px) without its call, and none where fit_and_report_probes had it.
+    if fused is not None and fused[7]:  # (its report is done: no further use for W)
+        W, unit = None, "px" if sigmas is None else "sigma"
+    else:
+        W, unit = (tangent[0][0], "px") if all_ok and sigmas is None else whiten(None)
     # Expected scale of the whitened residuals, for the outlier test: the known noise, or the
     # click noise plus the laser pick (whole-cell picks add about 1 px; measured 0.76 px on the sample).
     prior = {"px": PRIOR_PX, "sigma": PRIOR_PX, "noise": 1.0}.get(unit)
@@ -303,27 +324,25 @@ def solve_extrinsics(
             return T_start, 0, None, z, T_start, method, None
         return _pose_matrix(R, t), int(it), H, z, T_start, method, W_new
 
-    given = None if initial_T_camera_lidar is None else validate_initial_T(initial_T_camera_lidar)
     # The common case in one compiled call (fit_and_report): the LM from the DLT or the given start and,
     # where no residual calls for the outlier search, the report at its optimum (steps 3-4 below skipped).
     # Elsewhere (no prior noise scale, the pixel cost, a failed LM or DLT: the closed-form start) fit()
     # does it step by step.
     fused_report = None
     fitted = None
-    if cost != "pixel" and prior is not None and (clicks is not None or not laser_term):
-        use_dlt = given is None
+    if fused is None and cost != "pixel" and prior is not None and (clicks is not None or not laser_term):
         laser = clicks is not None
         dof = 2 * n - 6
-        T_f, T_start_f, it_f, status_f, H_f, z_f, W_f, done, *fused_report = fit_and_report(
+        fused = fit_and_report(
             points, bearings, frames, W, clicks[0] if laser else _NO_A,
-            clicks[1] if laser and clicks[1] is not None else _NO_S,
-            laser_cov if laser else _NO_L, laser, _EYE3 if use_dlt else np.ascontiguousarray(given[:3, :3]),
-            _ZERO3 if use_dlt else np.ascontiguousarray(given[:3, 3]), use_dlt, LM_MAX_ITER, robust,
-            (inlier_k(n) * max(prior, floor)) ** 2, noise_rad is not None, student_t_factor(dof) if dof > 0 else 1.0,
-            float(prior))
+            clicks[1] if laser and clicks[1] is not None else _NO_S, laser_cov if laser else _NO_L, laser, R_in, t_in,
+            use_dlt, LM_MAX_ITER, robust, (inlier_k(n) * max(prior, floor)) ** 2, noise_rad is not None,
+            student_t_factor(dof) if dof > 0 else 1.0, float(prior))
+    if fused is not None:
+        T_f, T_start_f, it_f, status_f, H_f, z_f, W_f, done, *fused_report = fused
         if status_f >= 0:
             fitted = (T_f, int(it_f), H_f, z_f, T_start_f if use_dlt else given, "dlt" if use_dlt else "given",
-                      W_f if laser else None)
+                      W_f if clicks is not None else None)
         if not done:
             fused_report = None
     # H_at_T: the LM's normal matrix while T is the LM's optimum on all pairs with this W (else None).

@@ -454,6 +454,36 @@ def fit_and_report(P, B, F, W, A, s, S, laser, R0, t0, use_dlt, max_iter, robust
 
 
 @kernel
+def fit_and_report_probes(P, B, F, uv, h, s, S, laser, R0, t0, use_dlt, max_iter, robust, threshold_sq, t_factor,
+                          prior_sigma):
+    """:func:`probe_jacobians_all` of the probes' pixels ``uv`` (step ``h`` radians), then, when every pair
+    has its Jacobian ``A``, :func:`fit_and_report` whitened by the camera: ``W_i = A_i / s_i`` (``s`` the click
+    sigmas, px; empty: 1 px each), with the laser term when ``laser``.
+
+    Returns
+    -------
+    A, ok, all_ok : as :func:`probe_jacobians_all`
+    then :func:`fit_and_report`'s outputs (all None, status -4, when not ``all_ok``: the caller whitens
+    the pairs without a Jacobian its own way).
+    """
+    A, ok, all_ok = probe_jacobians_all(uv, h)
+    if not all_ok:
+        return (A, ok, False, None, None, 0, -4, None, None, None, False, None, None, None, None, None, None, None,
+                None, None, None)
+    n = P.shape[0]
+    if s.shape[0] == n:
+        W = np.empty((n, 2, 2))
+        for i in range(n):
+            for a in range(2):
+                for b in range(2):
+                    W[i, a, b] = A[i, a, b] / s[i]
+    else:
+        W = A
+    return (A, ok, True) + fit_and_report(P, B, F, W, A, s, S, laser, R0, t0, use_dlt, max_iter, robust, threshold_sq,
+                                          False, t_factor, prior_sigma)
+
+
+@kernel
 def score_poses(Rs, ts, P, F, W):
     """Squared whitened residual norms ``(K, N)`` of K candidate poses ``Rs (K, 3, 3)``, ``ts (K, 3)``."""
     K = Rs.shape[0]
