@@ -272,3 +272,64 @@ def test_reported_angles_are_the_geodesic_errors_at_the_estimate():
         angle = np.degrees(np.arctan2(np.linalg.norm(np.cross(bearings, q), axis=1), np.sum(bearings * q, axis=1)))
         assert angle.max() > 0.01  # noisy clicks: the test can fail
         np.testing.assert_allclose(res.residual_deg, angle, rtol=1e-9, atol=1e-12)
+
+
+def _any_close_brute(X, radius, angular):
+    """Every pair's distance in numpy (the angle between unit rows, or the Euclidean distance)."""
+    if angular:
+        d = np.arccos(np.clip(X @ X.T, -1.0, 1.0))
+    else:
+        d = np.linalg.norm(X[:, None, :] - X[None, :, :], axis=2)
+    iu = np.triu_indices(len(X), 1)
+    return bool((d[iu] <= radius).any())
+
+
+def test_bucketed_duplicate_check_finds_exactly_the_pairs_within_the_radius():
+    """``_any_close`` (buckets along x, no sort) says what every pair's distance says, also where the
+    buckets are crowded (all rows at one x) and for pairs just inside and just outside the radius."""
+    rng = np.random.default_rng(5)
+    r = 1e-6
+    for n in (4, 10, 300):
+        P = rng.uniform(-10, 10, (n, 3))
+        U = rng.normal(size=(n, 3))
+        U /= np.linalg.norm(U, axis=1, keepdims=True)
+        cases = [(P, False), (U, True)]
+        for X, angular in list(cases):
+            i, j = rng.choice(n, 2, replace=False)
+            for offset in (0.5 * r, 0.99 * r, 1.5 * r, 3 * r):  # just inside / outside the radius
+                Y = X.copy()
+                step = np.array([0.0, 0.6, 0.8]) if not angular else np.cross(Y[i], [0.0, 0.0, 1.0])
+                step = step / np.linalg.norm(step) * offset
+                Y[j] = Y[i] + step
+                if angular:
+                    Y[j] /= np.linalg.norm(Y[j])
+                cases.append((Y, angular))
+            same_x = X.copy()
+            same_x[:, 0] = 0.25 if not angular else 0.0  # one bucket for all: the quadratic fallback
+            if angular:
+                same_x /= np.linalg.norm(same_x, axis=1, keepdims=True)
+            cases.append((same_x, angular))
+        # Buckets about one radius wide (all x within n r / 2) and pairs 0.9 r apart in x: most such pairs
+        # straddle two buckets, which the adjacent-bucket comparison must see.
+        for trial in range(10):
+            Q = np.column_stack([rng.uniform(0, n * r / 2, n), rng.uniform(-10, 10, (n, 2))])
+            i, j = rng.choice(n, 2, replace=False)
+            Q[j] = Q[i] + [0.9 * r, 0.0, 0.0]
+            cases.append((Q, False))
+        for X, angular in cases:
+            X = np.ascontiguousarray(X)
+            assert kernels._any_close(X, r, angular) == _any_close_brute(X, r, angular)
+            # The sorted sweep, which names the pair in the messages, agrees on whether there is one.
+            assert (kernels._first_close(X, r, angular)[0] >= 0) == _any_close_brute(X, r, angular)
+
+
+def test_pair_checks_frames_gives_the_frames_and_probes_of_the_separate_kernels():
+    _, points, bearings = random_scene(7, 12)
+    out = kernels.pair_checks_frames(points, bearings * 1.0000001, 1e-6, 1e-6, 1e-3, 1e-4)
+    U, F, probes = out[5], out[13], out[14]
+    np.testing.assert_allclose(U, bearings, atol=1e-12)
+    np.testing.assert_array_equal(F, kernels.bearing_frames(U))
+    h = 1e-4
+    expected = np.concatenate([F[:, 2] + h * F[:, 0], F[:, 2] - h * F[:, 0], F[:, 2] + h * F[:, 1],
+                               F[:, 2] - h * F[:, 1]])
+    np.testing.assert_allclose(probes, expected, atol=1e-15)

@@ -13,7 +13,7 @@ import numpy as np
 
 from ..arrays import angle_between_rad, as_rows, as_transform
 from ..errors import CalibError
-from .kernels import pair_checks
+from .kernels import pair_checks, pair_checks_frames
 from .refine import PARAMETER_NAMES
 
 __all__ = [
@@ -60,7 +60,7 @@ def _largest_angle_deg(bearings: np.ndarray, cos_min_to_mean: float) -> float:
     so some ``b_j`` is over 90 deg away.  Only a narrow cone, the case the
     checks are about, needs all pairs.
     """
-    if np.isfinite(cos_min_to_mean):
+    if math.isfinite(cos_min_to_mean):
         alpha_deg = math.degrees(math.acos(min(max(cos_min_to_mean, -1.0), 1.0)))
         if alpha_deg >= CONE_WARNING_DEG:
             return alpha_deg
@@ -94,6 +94,14 @@ def validate_pairs(points_lidar: object, bearings_camera: object) -> tuple[np.nd
         pairs (names them); coincident or (nearly) collinear laser points; all
         bearings within 2 deg of each other.
     """
+    return validate_pairs_frames(points_lidar, bearings_camera, None)[:3]
+
+
+def validate_pairs_frames(points_lidar: object, bearings_camera: object, probe_step_rad: float | None
+                          ) -> tuple[np.ndarray, np.ndarray, list[str], np.ndarray | None, np.ndarray | None]:
+    """:func:`validate_pairs`, then the frames of the unit bearings (rows ``e1, e2, b``,
+    :func:`.kernels.bearing_frames`) and, with a ``probe_step_rad``, their tangent probes
+    (:func:`.kernels.tangent_probes`), from the same compiled call (None, None without a step: the plain checks)."""
     points = np.ascontiguousarray(as_rows(points_lidar, "points_lidar", 3, single_row=False))
     bearings = np.ascontiguousarray(as_rows(bearings_camera, "bearings_camera", 3, single_row=False))
     if len(points) != len(bearings):
@@ -102,8 +110,14 @@ def validate_pairs(points_lidar: object, bearings_camera: object) -> tuple[np.nd
     if n < MIN_PAIRS:
         raise CalibError(f"need at least {MIN_PAIRS} pairs to solve the pose, got {n}")
     # One compiled pass computes every figure; the messages are chosen here, in order.
-    bad_p, bad_b, zero_b, off_b, norms, bearings, same_p, same_b, sv, cos_min = pair_checks(
-        points, bearings, SAME_POINT_M, SAME_BEARING_RAD, UNIT_TOLERANCE)
+    frames = probes = None
+    if probe_step_rad is None:
+        bad_p, bad_b, zero_b, off_b, off_norm, bearings, sp0, sp1, sb0, sb1, sv0, sv1, cos_min = pair_checks(
+            points, bearings, SAME_POINT_M, SAME_BEARING_RAD, UNIT_TOLERANCE)
+    else:
+        (bad_p, bad_b, zero_b, off_b, off_norm, bearings, sp0, sp1, sb0, sb1, sv0, sv1, cos_min, frames,
+         probes) = pair_checks_frames(points, bearings, SAME_POINT_M, SAME_BEARING_RAD, UNIT_TOLERANCE,
+                                      float(probe_step_rad))
     if bad_p >= 0:
         raise CalibError(f"pair {bad_p}: laser point is not finite (NaN or inf)")
     if bad_b >= 0:
@@ -111,12 +125,12 @@ def validate_pairs(points_lidar: object, bearings_camera: object) -> tuple[np.nd
     if zero_b >= 0:
         raise CalibError(f"pair {zero_b}: bearing has zero length")
     if off_b >= 0:
-        raise CalibError(f"pair {off_b}: bearing is not a unit vector (norm {norms[off_b]:.6g})")
-    if same_p[0] >= 0:
-        raise CalibError(f"pairs {same_p[0]} and {same_p[1]} use the same laser point")
-    if same_b[0] >= 0:
-        raise CalibError(f"pairs {same_b[0]} and {same_b[1]} use the same bearing (the same pixel clicked twice)")
-    if sv[1] < COLLINEAR_RATIO * sv[0]:
+        raise CalibError(f"pair {off_b}: bearing is not a unit vector (norm {off_norm:.6g})")
+    if sp0 >= 0:
+        raise CalibError(f"pairs {sp0} and {sp1} use the same laser point")
+    if sb0 >= 0:
+        raise CalibError(f"pairs {sb0} and {sb1} use the same bearing (the same pixel clicked twice)")
+    if sv1 < COLLINEAR_RATIO * sv0:
         raise CalibError(
             "the laser points are (nearly) collinear, so the rotation about their line is undetermined; "
             "pick points off that line"
@@ -133,7 +147,7 @@ def validate_pairs(points_lidar: object, bearings_camera: object) -> tuple[np.nd
         warnings.append(
             f"all pairs lie in a small part of the view (within {max_angle_deg:.1f} deg); spread them out"
         )
-    return points, bearings, warnings
+    return points, bearings, warnings, frames, probes
 
 
 def validate_pixels(pixels: object, n: int) -> np.ndarray:

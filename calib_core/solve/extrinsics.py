@@ -15,10 +15,20 @@ from .checks import (
     MIN_PAIRS,
     conditioning_warning,
     validate_initial_T,
-    validate_pairs,
+    validate_pairs_frames,
     validate_pixels,
 )
-from .kernels import bearing_frames, fit_pose, fit_pose_laser, pixel_errors, pose_report, whitened_residuals
+from .kernels import (
+    fit_and_report,
+    fit_and_report_probes,
+    fit_pose,
+    fit_pose_laser,
+    pixel_errors,
+    pose_report,
+    pose_report_points,
+    probe_jacobians_all,
+    whitened_residuals,
+)
 from .quality import Quality, geometry_reasons, orientation_notes
 from .refine import (
     LM_MAX_ITER,
@@ -31,7 +41,7 @@ from .refine import (
 )
 from .result import CalibrationResult
 from .robust import inlier_k, robust_fit, robust_scale
-from .whiten import check_pixel_sigma, click_whitening_inputs, laser_tangent_covariance, tangent_to_pixel, whitening
+from .whiten import STEP_RAD, check_pixel_sigma, click_whitening_inputs, laser_tangent_covariance, whitening
 
 __all__ = ["COSTS", "NOISY_FACTOR", "PRIOR_PX", "sigma_coverage", "solve_extrinsics", "student_t_factor", "warm_up"]
 
@@ -47,11 +57,11 @@ PRIOR_PX = 1.5
 NOISY_FACTOR = 3.0
 
 
-def _pixel_errors(camera: Any, T: np.ndarray, points_lidar: np.ndarray, pixels: np.ndarray,
+def _pixel_errors(camera: Any, points_camera: np.ndarray, pixels: np.ndarray,
                   inliers: np.ndarray) -> tuple[np.ndarray, float, float, int]:
-    """Pixel errors (NaN where not projectable), their mean and std over the inliers, and how many
-    inliers have none (:func:`.kernels.pixel_errors`)."""
-    projected, valid = camera.project(points_lidar @ T[:3, :3].T + T[:3, 3])
+    """Pixel errors (NaN where not projectable) of the laser points in the camera frame (metres), their mean
+    and std over the inliers, and how many inliers have none (:func:`.kernels.pixel_errors`)."""
+    projected, valid = camera.project(points_camera)
     return pixel_errors(np.ascontiguousarray(projected, dtype=np.float64), np.ascontiguousarray(valid, dtype=bool),
                         np.ascontiguousarray(pixels, dtype=np.float64), inliers)
 
@@ -99,11 +109,12 @@ def _ids_text(ids: list[int]) -> str:
     return shown + (f" and {len(ids) - 8} more" if len(ids) > 8 else "")
 
 
-_EYE3, _ZERO3, _NO_H = np.eye(3), np.zeros(3), np.zeros((6, 6))
+_EYE3, _ZERO3, _NO_H, _EYE4 = np.eye(3), np.zeros(3), np.zeros((6, 6)), np.eye(4)
+_NO_A, _NO_S, _NO_L = np.zeros((0, 2, 2)), np.zeros(0), np.zeros((0, 3, 3))  # fit_and_report without the laser term
 
 
 def _pose_matrix(R: np.ndarray, t: np.ndarray) -> np.ndarray:
-    T = np.eye(4)
+    T = _EYE4.copy()  # (a copy of a template: np.eye costs more than the rest of this)
     T[:3, :3], T[:3, 3] = R, t
     return T
 
@@ -201,7 +212,11 @@ def solve_extrinsics(
     """
     if cost not in COSTS:
         raise CalibError(f"unknown cost {cost!r}; use one of {', '.join(COSTS)}")
-    points, bearings, warnings = validate_pairs(points_lidar, bearings_camera)
+    whiten_camera = camera if cost != "geodesic" else None
+    by_camera = whiten_camera is not None and noise_rad is None  # whitening by the camera's tangent Jacobian
+    # The checks, the bearings' frames and (by_camera) the probes of the camera's tangent Jacobian in one call.
+    points, bearings, warnings, frames, probes = validate_pairs_frames(points_lidar, bearings_camera,
+                                                                       STEP_RAD if by_camera else 0.0)
     n = len(points)
     ids = _check_pair_ids(pair_ids, n)
     sigmas = check_pixel_sigma(pixel_sigma, n)
@@ -219,21 +234,43 @@ def solve_extrinsics(
             raise CalibError("cost='pixel' needs a camera and the clicked pixels")
 
     # 1. Whitening, computed once per solve (its laser term, which depends on the pose, inside the LM).
-    frames = bearing_frames(bearings)
-    whiten_camera = camera if cost != "geodesic" else None
-
     tangent = []  # tangent_to_pixel of the camera at the bearings: pose-free, computed once
+    all_ok = False
+    given = None if initial_T_camera_lidar is None else validate_initial_T(initial_T_camera_lidar)
+    use_dlt = given is None
+    R_in = _EYE3 if use_dlt else np.ascontiguousarray(given[:3, :3])
+    t_in = _ZERO3 if use_dlt else np.ascontiguousarray(given[:3, 3])
+    fused = None  # fit_and_report's outputs when the call below made them
+    if by_camera:
+        uv = np.ascontiguousarray(whiten_camera.project(probes)[0], dtype=np.float64)
+        if cost != "pixel":
+            # The camera's tangent Jacobian (whiten.tangent_to_pixel), and where every pair has one, step 2 and
+            # (fit_and_report) steps 3-4 below, in one compiled call; the expected noise as for all_ok below.
+            laser = laser_cov is not None
+            dof = 2 * n - 6
+            A, ok, all_ok, *fused = fit_and_report_probes(
+                points, bearings, frames, uv, STEP_RAD, _NO_S if sigmas is None else np.ascontiguousarray(sigmas),
+                laser_cov if laser else _NO_L, laser, R_in, t_in, use_dlt, LM_MAX_ITER, robust,
+                (inlier_k(n) * max(PRIOR_PX, _MIN_SCALE["px"])) ** 2, student_t_factor(dof) if dof > 0 else 1.0,
+                float(PRIOR_PX))
+            if not all_ok:
+                fused = None
+        else:
+            A, ok, all_ok = probe_jacobians_all(uv, STEP_RAD)
+        tangent.append((A, ok))
 
     def whiten(T_at: np.ndarray | None) -> tuple[np.ndarray, str]:
         lt = None
         if laser_cov is not None and T_at is not None and whiten_camera is not None:
             lt = laser_tangent_covariance(T_at, points, frames, laser_cov)
-        if whiten_camera is not None and noise_rad is None and not tangent:
-            tangent.append(tangent_to_pixel(whiten_camera, frames))
         return whitening(n, camera=whiten_camera, frames=frames, pixel_sigma=sigmas, noise_rad=noise_rad,
                          laser_tangent_cov=lt, tangent=tangent[0] if tangent else None)
 
-    W, unit = whiten(None)
+    # whitening()'s common case (W = A, px) without its call, and none where fit_and_report_probes had it.
+    if fused is not None and fused[7]:  # (its report is done: no further use for W)
+        W, unit = None, "px" if sigmas is None else "sigma"
+    else:
+        W, unit = (tangent[0][0], "px") if all_ok and sigmas is None else whiten(None)
     # Expected scale of the whitened residuals, for the outlier test: the known noise, or the
     # click noise plus the laser pick (whole-cell picks add about 1 px; measured 0.76 px on the sample).
     prior = {"px": PRIOR_PX, "sigma": PRIOR_PX, "noise": 1.0}.get(unit)
@@ -243,7 +280,11 @@ def solve_extrinsics(
     # The clicks' whitening inputs, from which the LM re-whitens with the laser term inside its one
     # compiled call (fit_pose_laser); None where the laser term cannot enter (known noise_rad, no
     # projectable probe), as in whitening().
-    clicks = click_whitening_inputs(tangent[0], sigmas) if laser_term and tangent and noise_rad is None else None
+    clicks = None
+    if laser_term and tangent and noise_rad is None:
+        # (sigmas None: 1 px each, the ones made where they are used)
+        clicks = ((tangent[0][0], None if sigmas is None else np.ascontiguousarray(sigmas)) if all_ok
+                  else click_whitening_inputs(tangent[0], sigmas))
 
     # 2. Initial pose (the linear DLT on the bearings when it applies, n >= 6 and not coplanar, else
     # Quan & Lan / P3P) and LM on all pairs, in one compiled call (fit_pose, or fit_pose_laser with the
@@ -261,8 +302,9 @@ def solve_extrinsics(
         t_in = _ZERO3 if use_dlt else np.ascontiguousarray(T_start[:3, 3])
         W_new = None
         if laser:
-            R, t, R0, t0, it, status, H, z, W_new = fit_pose_laser(points, bearings, frames, clicks[0], clicks[1],
-                                                                   laser_cov, R_in, t_in, use_dlt, LM_MAX_ITER)
+            R, t, R0, t0, it, status, H, z, W_new = fit_pose_laser(
+                points, bearings, frames, clicks[0], np.ones(n) if clicks[1] is None else clicks[1], laser_cov, R_in,
+                t_in, use_dlt, LM_MAX_ITER)
         else:
             R, t, R0, t0, it, status, H, z = fit_pose(points, bearings, frames, W, R_in, t_in, use_dlt, LM_MAX_ITER)
         if use_dlt:
@@ -282,74 +324,99 @@ def solve_extrinsics(
             return T_start, 0, None, z, T_start, method, None
         return _pose_matrix(R, t), int(it), H, z, T_start, method, W_new
 
-    given = None if initial_T_camera_lidar is None else validate_initial_T(initial_T_camera_lidar)
+    # The common case in one compiled call (fit_and_report): the LM from the DLT or the given start and,
+    # where no residual calls for the outlier search, the report at its optimum (steps 3-4 below skipped).
+    # Elsewhere (no prior noise scale, the pixel cost, a failed LM or DLT: the closed-form start) fit()
+    # does it step by step.
+    fused_report = None
+    fitted = None
+    if fused is None and cost != "pixel" and prior is not None and (clicks is not None or not laser_term):
+        laser = clicks is not None
+        dof = 2 * n - 6
+        fused = fit_and_report(
+            points, bearings, frames, W, clicks[0] if laser else _NO_A,
+            clicks[1] if laser and clicks[1] is not None else _NO_S, laser_cov if laser else _NO_L, laser, R_in, t_in,
+            use_dlt, LM_MAX_ITER, robust, (inlier_k(n) * max(prior, floor)) ** 2, noise_rad is not None,
+            student_t_factor(dof) if dof > 0 else 1.0, float(prior))
+    if fused is not None:
+        T_f, T_start_f, it_f, status_f, H_f, z_f, W_f, done, *fused_report = fused
+        if status_f >= 0:
+            fitted = (T_f, int(it_f), H_f, z_f, T_start_f if use_dlt else given, "dlt" if use_dlt else "given",
+                      W_f if clicks is not None else None)
+        if not done:
+            fused_report = None
     # H_at_T: the LM's normal matrix while T is the LM's optimum on all pairs with this W (else None).
-    T, iterations, H_at_T, z, T_init, method, W_laser = fit(given, W, clicks is not None)
+    T, iterations, H_at_T, z, T_init, method, W_laser = fit(given, W, clicks is not None) if fitted is None else fitted
     if W_laser is not None:
         W = W_laser
-    elif laser_term:
+    elif laser_term and fused_report is None:  # (fit_and_report's report: W has no further use)
         # The laser term depends on the pose: whiten at the first optimum and refine once more (where
         # the fused LM did not run or failed).
         W, unit = whiten(T)
         T, more, H_at_T, z, _, _, _ = fit(T, W, False)
         iterations += more
-    r2 = z[:, 0] ** 2 + z[:, 1] ** 2
+    if fused_report is not None:  # (fit_and_report did steps 3 and 4: no outlier search, all pairs in)
+        inliers, hypotheses, searched, idx, n_in = np.ones(n, dtype=bool), 0, False, np.arange(n), n
+        theta, H, stats, noise_scale, cov, condition, sigma_t, sigma_rpy, sigma_rotation, *points_camera = fused_report
+    else:
+        r2 = z[:, 0] ** 2 + z[:, 1] ** 2
 
-    # 3. Outliers: only searched for when some residual is far above the noise scale.
-    # With a prior (expected click noise), any pair beyond it is suspect; without one, the
-    # median residual sets the scale.  A noisier-than-expected set just takes the robust path.
-    inliers = np.ones(n, dtype=bool)
-    hypotheses = 0
-    searched = False
-    scale_ref = max(prior, floor) if prior is not None else max(robust_scale(r2), floor)
-    if robust and r2.max() >= (inlier_k(n) * scale_ref) ** 2:
-        fit = robust_fit(points, bearings, frames, W, prior, T[:3, :3], T[:3, 3], min_scale=floor)
-        hypotheses, searched = fit.hypotheses, True
-        iterations += fit.iterations
-        H_at_T = None
-        if fit.inliers.sum() >= 3:
-            inliers = fit.inliers
-            T = np.eye(4)
-            T[:3, :3], T[:3, 3] = fit.R, fit.t
-        if laser_cov is not None and whiten_camera is not None:
-            # The laser term depends on the pose: whiten at the robust pose and refine once more.
-            W, unit = whiten(T)
-            keep = np.flatnonzero(inliers)
-            if keep.size >= 3:
-                T, more = refine_angular(T, points[keep], frames[keep], W[keep])
-                iterations += more
-    idx = np.flatnonzero(inliers) if searched else np.arange(n)  # (no search ran: all pairs are in)
-    n_in = idx.size
-    if cost == "pixel" and n_in >= 3:
-        bad = np.nonzero(~np.all(np.isfinite(pixels[idx]), axis=1))[0]
-        if bad.size:
-            raise CalibError(f"cost='pixel': pairs {bad.tolist()} have no finite pixel")
-        T, more = refine_pose(
-            T, points[idx], bearings[idx], cost="pixel", camera=camera, pixels=pixels[idx],
-            pixel_sigma=None if sigmas is None else sigmas[idx],
+        # 3. Outliers: only searched for when some residual is far above the noise scale.
+        # With a prior (expected click noise), any pair beyond it is suspect; without one, the
+        # median residual sets the scale.  A noisier-than-expected set just takes the robust path.
+        inliers = np.ones(n, dtype=bool)
+        hypotheses = 0
+        searched = False
+        scale_ref = max(prior, floor) if prior is not None else max(robust_scale(r2), floor)
+        if robust and r2.max() >= (inlier_k(n) * scale_ref) ** 2:
+            fit = robust_fit(points, bearings, frames, W, prior, T[:3, :3], T[:3, 3], min_scale=floor)
+            hypotheses, searched = fit.hypotheses, True
+            iterations += fit.iterations
+            H_at_T = None
+            if fit.inliers.sum() >= 3:
+                inliers = fit.inliers
+                T = np.eye(4)
+                T[:3, :3], T[:3, 3] = fit.R, fit.t
+            if laser_cov is not None and whiten_camera is not None:
+                # The laser term depends on the pose: whiten at the robust pose and refine once more.
+                W, unit = whiten(T)
+                keep = np.flatnonzero(inliers)
+                if keep.size >= 3:
+                    T, more = refine_angular(T, points[keep], frames[keep], W[keep])
+                    iterations += more
+        idx = np.flatnonzero(inliers) if searched else np.arange(n)  # (no search ran: all pairs are in)
+        n_in = idx.size
+        if cost == "pixel" and n_in >= 3:
+            bad = np.nonzero(~np.all(np.isfinite(pixels[idx]), axis=1))[0]
+            if bad.size:
+                raise CalibError(f"cost='pixel': pairs {bad.tolist()} have no finite pixel")
+            T, more = refine_pose(
+                T, points[idx], bearings[idx], cost="pixel", camera=camera, pixels=pixels[idx],
+                pixel_sigma=None if sigmas is None else sigmas[idx],
+            )
+            iterations += more
+
+        # 4. Covariance on the inliers: Student-t sigma from the residuals, or the known noise.
+        R_hat, t_hat = T[:3, :3].copy(), T[:3, 3].copy()
+        dof = 2 * n_in - 6
+        lm_at_T = H_at_T is not None and cost != "pixel" and n_in == n  # the LM's H and z are at T, with this W
+        H_known, ssr_known = (H_at_T, -1.0) if lm_at_T else (None, -1.0)
+        if cost == "pixel":
+            x_opt = np.concatenate([np.zeros(3), t_hat])
+            inv_s = 1.0 if sigmas is None else np.repeat(1.0 / sigmas[idx], 2)[:, None]
+            J = pixel_jacobian(x_opt, R_hat, points[idx], pixels[idx], camera) * inv_s
+            rp = pixel_residuals(x_opt, R_hat, points[idx], pixels[idx], camera).ravel() * np.ravel(inv_s)
+            J = np.where(np.isfinite(J), J, 0.0)
+            H_known, ssr_known = J.T @ J, float(np.nansum(rp**2))
+            if noise_rad is not None:
+                warnings.append("noise_rad is ignored with cost='pixel'; sigma comes from the pixel residuals")
+        report = pose_report_points if camera is not None else pose_report  # (+ the points in the camera frame)
+        theta, H, stats, noise_scale, cov, condition, sigma_t, sigma_rpy, sigma_rotation, *points_camera = report(
+            R_hat, t_hat, points, frames, W, inliers, _NO_H if H_known is None else H_known, H_known is not None,
+            ssr_known, noise_rad is not None and cost != "pixel", student_t_factor(dof) if dof > 0 else 1.0,
+            float(prior) if prior is not None else math.inf,  # no redundancy: the expected noise
+            *((z,) if lm_at_T else ()),
         )
-        iterations += more
-
-    # 4. Covariance on the inliers: Student-t sigma from the residuals, or the known noise.
-    R_hat, t_hat = T[:3, :3].copy(), T[:3, 3].copy()
-    dof = 2 * n_in - 6
-    lm_at_T = H_at_T is not None and cost != "pixel" and n_in == n  # the LM's H and z are at T, with this W
-    H_known, ssr_known = (H_at_T, -1.0) if lm_at_T else (None, -1.0)
-    if cost == "pixel":
-        x_opt = np.concatenate([np.zeros(3), t_hat])
-        inv_s = 1.0 if sigmas is None else np.repeat(1.0 / sigmas[idx], 2)[:, None]
-        J = pixel_jacobian(x_opt, R_hat, points[idx], pixels[idx], camera) * inv_s
-        rp = pixel_residuals(x_opt, R_hat, points[idx], pixels[idx], camera).ravel() * np.ravel(inv_s)
-        J = np.where(np.isfinite(J), J, 0.0)
-        H_known, ssr_known = J.T @ J, float(np.nansum(rp**2))
-        if noise_rad is not None:
-            warnings.append("noise_rad is ignored with cost='pixel'; sigma comes from the pixel residuals")
-    theta, H, stats, noise_scale, cov, condition, sigma_t, sigma_rpy, sigma_rotation = pose_report(
-        R_hat, t_hat, points, frames, W, inliers, _NO_H if H_known is None else H_known, H_known is not None,
-        ssr_known, noise_rad is not None and cost != "pixel", student_t_factor(dof) if dof > 0 else 1.0,
-        float(prior) if prior is not None else math.inf,  # no redundancy: the expected noise
-        *((z,) if lm_at_T else ()),
-    )
     noise_scale = float(noise_scale)
 
     # 5. Report.
@@ -358,7 +425,7 @@ def solve_extrinsics(
         if pixels is None:
             projected, valid = camera.project(bearings)
             pixels = np.where(np.asarray(valid, dtype=bool)[:, None], np.asarray(projected, dtype=np.float64), np.nan)
-        residual_px, mean_px, std_px, n_off = _pixel_errors(camera, T, points, pixels, inliers)
+        residual_px, mean_px, std_px, n_off = _pixel_errors(camera, points_camera[0], pixels, inliers)
         if n_off:
             off = np.flatnonzero(~np.isfinite(residual_px[idx]))
             warnings.append(

@@ -391,6 +391,99 @@ def fit_pose_laser(P, B, F, A, s, S, R0, t0, use_dlt, max_iter):
 
 
 @kernel
+def _pose_4x4(R, t):
+    T = np.eye(4)
+    for r in range(3):
+        for c in range(3):
+            T[r, c] = R[r, c]
+        T[r, 3] = t[r]
+    return T
+
+
+@kernel
+def fit_and_report(P, B, F, W, A, s, S, laser, R0, t0, use_dlt, max_iter, robust, threshold_sq, known_noise,
+                   t_factor, prior_sigma):
+    """The fit of :func:`calib_core.solve.solve_extrinsics` and, where nothing else is left to do, its report,
+    in one call: :func:`fit_pose_laser` (``laser``; the click inputs ``A``, ``s`` (empty: 1 px each) and laser
+    covariances ``S``)
+    or :func:`fit_pose` (the whitening ``W``), then, when the LM succeeded and no whitened residual
+    reaches the outlier threshold (``|z_i|^2 >= threshold_sq``, only looked at when ``robust``),
+    :func:`pose_report_points` of all pairs at the optimum with the LM's normal matrix and residuals.
+
+    Returns
+    -------
+    T, T_start : (4, 4) the optimum and the start (as 4x4 ``T_camera_lidar``)
+    iterations, status, H, z : as :func:`fit_pose`
+    W_end : (N, 2, 2) the whitening of ``H`` and ``z`` (``W`` itself without the laser term)
+    done : bool
+        The report below was computed (else it is None and the caller goes on: a failed LM, or an
+        outlier search to run).  With ``done``, ``H``, ``z`` and ``W_end`` are None (the caller has no
+        further use for them, and each array returned to Python costs about as much as a pass
+        through 100 pairs).
+    theta, H, stats, noise_scale, cov, condition, sigma_t, sigma_rpy, sigma_rotation, points_camera :
+        as :func:`pose_report_points`.
+    """
+    n = P.shape[0]
+    if laser:
+        if s.shape[0] != n:
+            s = np.ones(n)
+        R, t, R_s, t_s, it, status, H, Z, W_end = fit_pose_laser(P, B, F, A, s, S, R0, t0, use_dlt, max_iter)
+    else:
+        R, t, R_s, t_s, it, status, H, Z = fit_pose(P, B, F, W, R0, t0, use_dlt, max_iter)
+        W_end = W
+    done = status >= 0
+    if done and robust:
+        # The caller's test, ``max |z_i|^2 >= threshold_sq`` with numpy's max: a NaN makes it false.
+        above = False
+        for i in range(n):
+            r2 = Z[i, 0] ** 2 + Z[i, 1] ** 2
+            if r2 != r2:
+                above = False
+                break
+            if r2 >= threshold_sq:
+                above = True
+        done = not above
+    T, T_start = _pose_4x4(R, t), _pose_4x4(R_s, t_s)
+    if not done:
+        return (T, T_start, it, status, H, Z, W_end, False, None, None, None, None, None, None, None, None, None,
+                None)
+    theta, H_r, stats, noise_scale, cov, condition, sigma_t, sigma_rpy, sigma_rot, X = pose_report_points(
+        R, t, P, F, W_end, np.ones(n, dtype=np.bool_), H, True, -1.0, known_noise, t_factor, prior_sigma, Z)
+    return (T, T_start, it, status, None, None, None, True, theta, H_r, stats, noise_scale, cov, condition, sigma_t,
+            sigma_rpy, sigma_rot, X)
+
+
+@kernel
+def fit_and_report_probes(P, B, F, uv, h, s, S, laser, R0, t0, use_dlt, max_iter, robust, threshold_sq, t_factor,
+                          prior_sigma):
+    """:func:`probe_jacobians_all` of the probes' pixels ``uv`` (step ``h`` radians), then, when every pair
+    has its Jacobian ``A``, :func:`fit_and_report` whitened by the camera: ``W_i = A_i / s_i`` (``s`` the click
+    sigmas, px; empty: 1 px each), with the laser term when ``laser``.
+
+    Returns
+    -------
+    A, ok, all_ok : as :func:`probe_jacobians_all`
+    then :func:`fit_and_report`'s outputs (all None, status -4, when not ``all_ok``: the caller whitens
+    the pairs without a Jacobian its own way).
+    """
+    A, ok, all_ok = probe_jacobians_all(uv, h)
+    if not all_ok:
+        return (A, ok, False, None, None, 0, -4, None, None, None, False, None, None, None, None, None, None, None,
+                None, None, None)
+    n = P.shape[0]
+    if s.shape[0] == n:
+        W = np.empty((n, 2, 2))
+        for i in range(n):
+            for a in range(2):
+                for b in range(2):
+                    W[i, a, b] = A[i, a, b] / s[i]
+    else:
+        W = A
+    return (A, ok, True) + fit_and_report(P, B, F, W, A, s, S, laser, R0, t0, use_dlt, max_iter, robust, threshold_sq,
+                                          False, t_factor, prior_sigma)
+
+
+@kernel
 def score_poses(Rs, ts, P, F, W):
     """Squared whitened residual norms ``(K, N)`` of K candidate poses ``Rs (K, 3, 3)``, ``ts (K, 3)``."""
     K = Rs.shape[0]
@@ -845,6 +938,20 @@ def pose_report(R, t, P, F, W, inliers, H_given, have_H, ssr_given, known_noise,
 
 
 @kernel
+def pose_report_points(R, t, P, F, W, inliers, H_given, have_H, ssr_given, known_noise, t_factor, prior_sigma,
+                       Z_lm=None):
+    """:func:`pose_report`, then the laser points in the camera frame ``R P + t`` (N, 3), metres (for
+    the pixel residuals), in one call."""
+    out = pose_report(R, t, P, F, W, inliers, H_given, have_H, ssr_given, known_noise, t_factor, prior_sigma, Z_lm)
+    n = P.shape[0]
+    X = np.empty((n, 3))
+    for i in range(n):
+        for r in range(3):
+            X[i, r] = R[r, 0] * P[i, 0] + R[r, 1] * P[i, 1] + R[r, 2] * P[i, 2] + t[r]
+    return out + (X,)
+
+
+@kernel
 def sym_eigh(S):
     """Eigenvalues (ascending) and unit eigenvectors (columns) of a small symmetric matrix.
 
@@ -1013,6 +1120,59 @@ def _first_close(X, radius, angular):
 
 
 @kernel
+def _any_close(X, radius, angular):
+    """Whether two rows of ``X`` lie within ``radius`` (the distance of :func:`_first_close`), in O(n) for
+    spread-out data, without a sort.
+
+    The rows go into buckets along x at least ``radius`` wide (a counting sort); two rows within
+    ``radius`` differ by at most that in x (the angle between unit vectors is never below their chord),
+    so they lie in the same bucket or in adjacent ones: each row is compared with the later rows of its
+    bucket and with the rows of the next bucket.  Rows with the same x all share a bucket (O(n^2), as the
+    sweep of :func:`_first_close`).
+    """
+    n = X.shape[0]
+    lo = hi = X[0, 0]
+    for i in range(n):
+        lo = min(lo, X[i, 0])
+        hi = max(hi, X[i, 0])
+    # The 1e-4 margin keeps rows within radius in adjacent buckets whatever the division rounds.
+    width = max((hi - lo) / n, radius) * 1.0001
+    if not width > 0.0:
+        width = 1.0  # all rows at one x and a zero radius: one bucket
+    nb = int((hi - lo) / width) + 2  # the last bucket stays empty: every bucket has a next one
+    start = np.zeros(nb + 1, np.int64)
+    bucket = np.empty(n, np.int64)
+    for i in range(n):
+        b = int((X[i, 0] - lo) / width)
+        bucket[i] = b
+        start[b + 1] += 1
+    for b in range(nb):
+        start[b + 1] += start[b]
+    fill = start[:nb].copy()
+    order = np.empty(n, np.int64)
+    for i in range(n):
+        order[fill[bucket[i]]] = i
+        fill[bucket[i]] += 1
+    for b in range(nb - 1):
+        end_next = start[b + 2]
+        for a in range(start[b], start[b + 1]):
+            i = order[a]
+            for c in range(a + 1, end_next):
+                j = order[c]
+                if angular:
+                    c0 = X[i, 1] * X[j, 2] - X[i, 2] * X[j, 1]
+                    c1 = X[i, 2] * X[j, 0] - X[i, 0] * X[j, 2]
+                    c2 = X[i, 0] * X[j, 1] - X[i, 1] * X[j, 0]
+                    dot = X[i, 0] * X[j, 0] + X[i, 1] * X[j, 1] + X[i, 2] * X[j, 2]
+                    dist = math.atan2(math.sqrt(c0 * c0 + c1 * c1 + c2 * c2), dot)
+                else:
+                    dist = math.sqrt((X[i, 0] - X[j, 0]) ** 2 + (X[i, 1] - X[j, 1]) ** 2 + (X[i, 2] - X[j, 2]) ** 2)
+                if dist <= radius:
+                    return True
+    return False
+
+
+@kernel
 def pair_checks(P, B, same_point_m, same_bearing_rad, unit_tolerance):
     """The degeneracy figures of :func:`calib_core.solve.checks.validate_pairs` in one pass.
 
@@ -1022,25 +1182,28 @@ def pair_checks(P, B, same_point_m, same_bearing_rad, unit_tolerance):
         First pair with a non-finite laser point / bearing, or -1.
     zero_bearing, off_unit : int
         First pair whose bearing norm is below 1e-12 / more than ``unit_tolerance`` off 1, or -1.
-    norms : (N,) bearing norms
+    off_norm : float
+        The bearing norm of pair ``off_unit`` (NaN if none).
     U : (N, 3) the bearings divided by their norms
-    same_point, same_bearing : (2,) int
-        A pair of pairs with the same laser point / bearing, or (-1, -1).
-    singular : (3,) singular values of the centred laser points, descending
+    same_point_0, same_point_1, same_bearing_0, same_bearing_1 : int
+        A pair of pairs with the same laser point / bearing, or -1, -1.
+    sv0, sv1 : float
+        The largest two singular values of the centred laser points (0 when a check above failed).
     cos_min_to_mean : float
         Smallest cosine between a unit bearing and the normalised bearing sum
         (NaN if the sum vanishes).
+
+    Scalars rather than small arrays: each array returned to Python costs more than these checks at 10 pairs.
     """
     n = P.shape[0]
     bad_point = -1
     bad_bearing = -1
     zero_bearing = -1
     off_unit = -1
-    norms = np.empty(n)
+    off_norm = np.nan
     U = np.empty((n, 3))
-    same_p = np.full(2, -1)
-    same_b = np.full(2, -1)
-    sv = np.zeros(3)
+    sp0 = sp1 = sb0 = sb1 = -1
+    sv0 = sv1 = 0.0
     cos_min = np.nan
     # Scalars, not row views (``mu += P[i]``): numba's views cost more than the sums here.
     m0 = m1 = m2 = s0 = s1 = s2 = 0.0
@@ -1052,11 +1215,11 @@ def pair_checks(P, B, same_point_m, same_bearing_rad, unit_tolerance):
         if bad_bearing < 0 and not (np.isfinite(b0) and np.isfinite(b1) and np.isfinite(b2)):
             bad_bearing = i
         norm = math.sqrt(b0 * b0 + b1 * b1 + b2 * b2)
-        norms[i] = norm
         if zero_bearing < 0 and norm < 1e-12:
             zero_bearing = i
         if off_unit < 0 and abs(norm - 1.0) > unit_tolerance:
             off_unit = i
+            off_norm = norm
         if norm > 0.0:  # a division, not a reciprocal's product: the bearings numpy's ``B / norms`` gives
             u0, u1, u2 = b0 / norm, b1 / norm, b2 / norm
         else:
@@ -1069,9 +1232,13 @@ def pair_checks(P, B, same_point_m, same_bearing_rad, unit_tolerance):
         s1 += u1
         s2 += u2
     if bad_point >= 0 or bad_bearing >= 0 or zero_bearing >= 0 or off_unit >= 0:
-        return bad_point, bad_bearing, zero_bearing, off_unit, norms, U, same_p, same_b, sv, cos_min
-    same_p[0], same_p[1] = _first_close(P, same_point_m, False)
-    same_b[0], same_b[1] = _first_close(U, same_bearing_rad, True)
+        return bad_point, bad_bearing, zero_bearing, off_unit, off_norm, U, sp0, sp1, sb0, sb1, sv0, sv1, cos_min
+    # The bucket test finds whether any pair is too close; only then does the sorted sweep name the
+    # first such pair (its two argsorts cost more than all the other checks at 1000 pairs).
+    if _any_close(P, same_point_m, False):
+        sp0, sp1 = _first_close(P, same_point_m, False)
+    if _any_close(U, same_bearing_rad, True):
+        sb0, sb1 = _first_close(U, same_bearing_rad, True)
     m0, m1, m2 = m0 / n, m1 / n, m2 / n
     c00 = c01 = c02 = c11 = c12 = c22 = 0.0
     for i in range(n):
@@ -1084,8 +1251,7 @@ def pair_checks(P, B, same_point_m, same_bearing_rad, unit_tolerance):
         c22 += d2 * d2
     C = np.array([[c00, c01, c02], [c01, c11, c12], [c02, c12, c22]])
     w, _ = sym_eigh(C)
-    for k in range(3):
-        sv[k] = math.sqrt(max(w[2 - k], 0.0))
+    sv0, sv1 = math.sqrt(max(w[2], 0.0)), math.sqrt(max(w[1], 0.0))
     sn = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
     if sn > 0.0:
         cos_min = 1.0
@@ -1093,7 +1259,22 @@ def pair_checks(P, B, same_point_m, same_bearing_rad, unit_tolerance):
             c = (U[i, 0] * s0 + U[i, 1] * s1 + U[i, 2] * s2) / sn
             if c < cos_min:
                 cos_min = c
-    return bad_point, bad_bearing, zero_bearing, off_unit, norms, U, same_p, same_b, sv, cos_min
+    return bad_point, bad_bearing, zero_bearing, off_unit, off_norm, U, sp0, sp1, sb0, sb1, sv0, sv1, cos_min
+
+
+@kernel
+def pair_checks_frames(P, B, same_point_m, same_bearing_rad, unit_tolerance, h):
+    """:func:`pair_checks`, then, when its first four checks passed, :func:`bearing_frames` of the unit
+    bearings and (``h > 0``) their :func:`tangent_probes` at step ``h`` radians, in one call (empty arrays
+    where not computed)."""
+    out = pair_checks(P, B, same_point_m, same_bearing_rad, unit_tolerance)
+    if out[0] < 0 and out[1] < 0 and out[2] < 0 and out[3] < 0:
+        F = bearing_frames(out[5])
+        probes = tangent_probes(F, h) if h > 0.0 else np.empty((0, 3))
+    else:
+        F = np.empty((0, 3, 3))
+        probes = np.empty((0, 3))
+    return out + (F, probes)
 
 
 @kernel
@@ -1345,6 +1526,17 @@ def tangent_probes(F, h):
             out[2 * n + i, k] = F[i, 2, k] + h * F[i, 1, k]
             out[3 * n + i, k] = F[i, 2, k] - h * F[i, 1, k]
     return out
+
+
+@kernel
+def probe_jacobians_all(uv, h):
+    """:func:`probe_jacobians`, then whether every pair's is ``ok``."""
+    A, ok = probe_jacobians(uv, h)
+    all_ok = True
+    for i in range(ok.shape[0]):
+        if not ok[i]:
+            all_ok = False
+    return A, ok, all_ok
 
 
 @kernel

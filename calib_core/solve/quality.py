@@ -152,7 +152,7 @@ def geometry_reasons(
     m = int(n_inliers)
     s_rot = float(rotation_sigma_deg)
     # Plain floats: this runs once per solve, where numpy's per-call overhead would dominate.
-    s_ts = [float(v) for v in sigma_translation_m]
+    s_ts = np.asarray(sigma_translation_m, dtype=np.float64).tolist()
     s_t = max(s_ts) if all(math.isfinite(v) for v in s_ts) else math.inf
     if not (math.isfinite(s_rot) and math.isfinite(s_t)):
         bad.append("the uncertainty of the pose is undefined (the pairs in the fit do not determine it)")
@@ -169,7 +169,7 @@ def geometry_reasons(
             )
         elif frac > WARNING_TRANSLATION_FRACTION:
             weak.append(f"the translation is uncertain by {100 * s_t:.1f} cm (1 sigma); add pairs at other depths")
-    sv0, sv2 = float(singular_values[0]), float(singular_values[2])
+    sv0, _, sv2 = np.asarray(singular_values, dtype=np.float64).tolist()[:3]
     if m >= 4 and sv2 < COPLANAR_RATIO * sv0 and m < 2 * FEW_INLIERS:
         weak.append(
             f"the {m} laser points in the fit lie near one plane: few coplanar pairs can fit a wrong pose; "
@@ -202,10 +202,11 @@ def orientation_notes(R_camera_lidar: np.ndarray) -> list[str]:
     given when the pose is within :data:`NEAR_SINGULAR_DEG` of either; at most one of the two
     applies, so the other chart is always readable.
     """
-    R = np.asarray(R_camera_lidar, dtype=np.float64)
+    # Python floats (one list, then plain indexing): numpy's per-element indexing would cost more than the maths.
+    R = np.asarray(R_camera_lidar, dtype=np.float64).tolist()
     notes: list[str] = []
-    cos_pitch = math.hypot(R[0, 0], R[1, 0])
-    pitch = math.degrees(math.atan2(-R[2, 0], cos_pitch))
+    cos_pitch = math.hypot(R[0][0], R[1][0])
+    pitch = math.degrees(math.atan2(-R[2][0], cos_pitch))
     if 90.0 - abs(pitch) < NEAR_SINGULAR_DEG:
         notes.append(
             f"pitch is {pitch:.1f} deg, within {NEAR_SINGULAR_DEG:g} deg of +-90 (near gimbal lock): roll, yaw and "
@@ -213,8 +214,8 @@ def orientation_notes(R_camera_lidar: np.ndarray) -> list[str]:
             "viewing direction (azimuth, elevation, roll about the optical axis), the matrix or the quaternion"
         )
     # The optical axis in lidar coordinates is R's last row (as in viewing_direction); plain floats, once per solve.
-    cos_el = math.hypot(R[2, 0], R[2, 1])
-    elevation = math.degrees(math.atan2(R[2, 2], cos_el))
+    cos_el = math.hypot(R[2][0], R[2][1])
+    elevation = math.degrees(math.atan2(R[2][2], cos_el))
     if 90.0 - abs(elevation) < NEAR_SINGULAR_DEG:
         notes.append(
             f"the camera looks {90.0 - abs(elevation):.1f} deg from lidar {'+' if elevation > 0 else '-'}z:"
