@@ -43,7 +43,7 @@ NEAREST_MAX_PX = 24
 SOLVE_RENDER_INTERVAL_S = 0.5
 #: Where the pose the render uses comes from, as its title says it.
 POSE_NAMES = {"solve": "solved pose", "rough": "rough pose", "default": "'+x' preset (no pose yet)",
-              "drag": "rough pose (dragging)"}
+              "drag": "rough pose (dragging)", "unreliable": "rough pose: the solve is unreliable"}
 
 
 class RenderPane:
@@ -211,7 +211,7 @@ class RenderPane:
     # ------------------------------------------------------------------ rendering
     def view_pose(self) -> tuple[np.ndarray, str]:
         """The pose the render shows and where it comes from (a key of :data:`POSE_NAMES`)."""
-        if self.drag_pose is not None and self.app.solve_bundle is None:
+        if self.drag_pose is not None and self.app.pose_source.trusted_bundle() is None:
             return self.drag_pose, "drag"
         return self.app.pose_source.view_pose()
 
@@ -301,7 +301,7 @@ class RenderPane:
         if shown is None:
             return "Camera-view laser: rendering ..."
         mode = RENDER_MODES[shown.mode]
-        return (f"Camera-view laser ({mode}) under the {POSE_NAMES[shown.source]}: click a point to pick its "
+        return (f"Camera-view laser ({mode}) under the {POSE_NAMES[shown.source]}; click a point to pick its "
                 f"laser cell")
 
     def wait_idle(self, timeout: float = 30.0) -> bool:

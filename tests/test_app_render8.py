@@ -1,0 +1,81 @@
+"""By-eye frictions of run 7 (docs/by_eye.md) in the camera-view render and its loupe, driven through
+:class:`app_driver.AppDriver` on the committed sample (one test per friction)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from calib_core.synthetic.picks import MAX_LASER_PICK_ERROR_M, laser_picks
+from calib_core.transforms import transform_points
+
+from app_driver import AppDriver
+
+
+def _clustered_corners(scene, n: int, around: int = 11) -> list[tuple[tuple[int, int], tuple[float, float]]]:
+    """``n`` corners close together in the photo (distinct laser cells): ``((row, col), (u, v))`` from the ground
+    truth.  Four such pairs fix the pose poorly: their solve is "unreliable"."""
+    corners = np.asarray(scene.corners_lidar, np.float64).reshape(-1, 3)
+    rc, err = laser_picks(scene.depth, corners)
+    pts = transform_points(scene.T_camera_lidar, corners)
+    uv, seen = scene.camera.project(pts)
+    usable = np.flatnonzero((err <= MAX_LASER_PICK_ERROR_M) & seen & (pts[:, 2] > 0))
+    start = usable[around]
+    out, cells = [], set()
+    for k in usable[np.argsort(np.hypot(*(uv[usable] - uv[start]).T))]:
+        cell = (int(rc[k, 0]), int(rc[k, 1]))
+        if cell not in cells:
+            cells.add(cell)
+            out.append((cell, (float(uv[k, 0]), float(uv[k, 1]))))
+        if len(out) == n:
+            break
+    return out
+
+
+def _spread_to(pose: np.ndarray, scene) -> float:
+    """Median pixel distance, over every corner the camera sees, between ``pose``'s projection and the truth's."""
+    corners = np.asarray(scene.corners_lidar, np.float64).reshape(-1, 3)
+    truth, ok_t = scene.camera.project(transform_points(scene.T_camera_lidar, corners))
+    mine, ok_m = scene.camera.project(transform_points(pose, corners))
+    ok = ok_t & ok_m
+    return float(np.median(np.hypot(*(truth[ok] - mine[ok]).T))) if ok.any() else float("inf")
+
+
+def test_an_unreliable_solve_is_not_rendered_the_rough_pose_refitted_to_the_pairs_is(app, scene):
+    """Run 7: the 4th pair's solve was unreliable (t 0.6 m off) and the render switched to it ("changed completely,
+    hard to compare with the photo until pair 5")."""
+    from calib_core.synthetic import simulate_pairs
+
+    d = AppDriver(app)
+    for cell, pixel in _clustered_corners(scene, 4):
+        assert d.click_cell(app.ba_keys[0], *cell) == [] and d.click_camera(*pixel) == []
+    assert d.wait_idle() and d.wait_render()
+    bundle = app.solve_bundle
+    assert bundle is not None and bundle.result.quality.status == "unreliable"  # the situation of run 7
+    shown = d.render_shown
+    # The render and the predictions use the rough pose, and the title says why.
+    assert not np.array_equal(shown.T_camera_lidar, bundle.result.T_camera_lidar)
+    assert np.array_equal(shown.T_camera_lidar, d.rough_pose) and np.array_equal(app.pose(), d.rough_pose)
+    assert "under the rough pose: the solve is unreliable" in app.render_pane.title()
+    assert "solve is unreliable" in d.align_text
+    # The rough pose is turned to fit the four pairs: it is the rough pose the 3-pair fit left, refitted ("4 pairs")
+    # and it shows the scene as the truth does far better than the unreliable solve (every corner, not just the 4).
+    assert "refitted from 4 pairs" in app.pose_source.last_turn.note()
+    assert _spread_to(d.rough_pose, scene) < 0.25 * _spread_to(bundle.result.T_camera_lidar, scene)
+    # The Align buttons still turn the rough pose (it is what the page shows).
+    before = d.rough_pose.copy()
+    assert d.press_turn("▶") == [] and d.wait_render() and not np.array_equal(d.rough_pose, before)
+    assert np.array_equal(d.render_shown.T_camera_lidar, d.rough_pose)
+    # Spread pairs until the solve is no longer unreliable: the render then uses the solve.
+    for pair in simulate_pairs(scene, 12, np.random.default_rng(1), pixel_noise_px=0.0):
+        if app.solve_bundle.result.quality.status != "unreliable":
+            break
+        if tuple(pair.laser_rc) in {tuple(p.laser_rc) for p in app.state.picks}:
+            continue
+        assert d.click_cell(app.ba_keys[0], *pair.laser_rc) == [] and d.click_camera(*pair.pixel) == []
+        assert d.wait_idle()
+    bundle = app.solve_bundle
+    assert bundle.result.quality.status in ("ok", "warning")
+    assert d.wait_render()
+    assert np.array_equal(d.render_shown.T_camera_lidar, bundle.result.T_camera_lidar)
+    assert np.array_equal(app.pose(), bundle.result.T_camera_lidar)
+    assert "under the solved pose" in app.render_pane.title()
