@@ -79,3 +79,56 @@ def test_an_unreliable_solve_is_not_rendered_the_rough_pose_refitted_to_the_pair
     assert np.array_equal(d.render_shown.T_camera_lidar, bundle.result.T_camera_lidar)
     assert np.array_equal(app.pose(), bundle.result.T_camera_lidar)
     assert "under the solved pose" in app.render_pane.title()
+
+
+def test_the_render_loupe_stays_on_the_pairs_laser_end_while_its_photo_end_is_refined(app, scene):
+    """Run 7: a refining click in the photo loupe refitted the rough pose (2 pairs) and the render loupe moved under
+    the person: its title went r5 c982 -> r4 c981 -> r5 c986, a click planned on it landed elsewhere, and once it
+    said "no return here" on the pair's cell."""
+    from calib_core.synthetic import simulate_pairs
+
+    import time
+
+    from calib_core.alignment import rotate_about_camera
+
+    from app.pose_source import REFIT_CLICK_GRACE_S
+
+    d = AppDriver(app)
+    app.pose_source.adopt_rough_pose(rotate_about_camera(scene.T_camera_lidar, 0.02, -0.015, 0.01))  # 1.5 deg off
+    first, second = simulate_pairs(scene, 2, np.random.default_rng(5), pixel_noise_px=0.0)
+    assert d.click_cell(app.ba_keys[0], *first.laser_rc) == [] and d.click_camera(*first.pixel) == []
+    assert d.wait_idle() and d.wait_render()
+    # The second pair: its laser end picked on the render (the loupe shows the render's crop), its photo end clicked.
+    assert d.click_render(*second.pixel) == [] and app.loupes.shows_render
+    assert d.click_camera(*second.pixel) == [] and d.wait_idle() and d.wait_render()
+    pick = app.state.picks[-1]
+    assert pick.complete and app.pose_source.last_turn.why == "refitted from 2 pairs"
+    cell = pick.laser_rc
+    # Refine the photo end in the photo loupe, twice, a few pixels each: each refits the rough pose.
+    for du, dv in ((3.0, -2.0), (-5.0, 3.0)):
+        turned = app.pose_source.last_turn
+        where = d.loupe_display_pixel("ba", (cell[1], cell[0]))  # the laser end in the render loupe
+        crop = app.loupes.render_crop
+        assert where is not None
+        u, v = app.state.picks[-1].pixel
+        assert d.click_loupe_camera(u + du, v + dv) == [] and d.wait_idle() and d.wait_render()
+        assert app.pose_source.last_turn is not turned  # the pose was refitted, the render is the new one
+        assert d.render_shown.T_camera_lidar is not None and app.state.picks[-1].laser_rc == cell
+        # The render loupe shows the laser end where it was (within a pixel of the rounding of its crop), redrawn
+        # under the new pose: the crop moved with the end's pixel in the new render.
+        now = d.loupe_display_pixel("ba", (cell[1], cell[0]))
+        assert now is not None and np.hypot(now[0] - where[0], now[1] - where[1]) <= 1.0, (where, now)
+        new_uv = app.render_pane.pixel_of_cells(np.array([cell]))[0]
+        rc = app.loupes.render_crop
+        assert np.hypot(new_uv[0] - rc.u0 - now[0], new_uv[1] - rc.v0 - now[1]) < 1e-9
+        assert rc.n == crop.n
+        # Its title names the pair's cell, not the crop centre's.
+        assert f"r{cell[0]} c{cell[1]}" in d.loupe_title("ba"), d.loupe_title("ba")
+        # A click on the pair's cell in the loupe takes that cell (no "no return here"), once the refit's grace for
+        # clicks planned on the old render is over.
+        time.sleep(max(0.0, d.render_shown.made_at + REFIT_CLICK_GRACE_S + 0.05 - time.monotonic()))
+        x, y = np.floor(np.asarray(now) + 0.5)
+        notes = d.click("loupe_ba", (float(x), float(y)))
+        assert [t for t, _ in notes] in ([], ["No change"]), notes
+        assert app.state.picks[-1].laser_rc == cell, (app.state.picks[-1].laser_rc, cell)
+        assert d.wait_idle() and d.wait_render()
