@@ -132,3 +132,27 @@ def test_the_render_loupe_stays_on_the_pairs_laser_end_while_its_photo_end_is_re
         assert [t for t, _ in notes] in ([], ["No change"]), notes
         assert app.state.picks[-1].laser_rc == cell, (app.state.picks[-1].laser_rc, cell)
         assert d.wait_idle() and d.wait_render()
+
+
+def test_the_render_controls_carry_no_tooltip_their_help_is_in_the_folder_text(app):
+    """Run 7: the tooltips of "Render over photo" and "Render shading" stayed over the Turn / Move buttons after a
+    click on them (viser's hints cannot be dismissed from the server): the page gets no hint for them, and what
+    they said is in the Align folder's text.  Read from the messages a tab receives over the websocket."""
+    import asyncio
+
+    from viser_wire import WireClient
+
+    async def run() -> dict:
+        async with WireClient(app.port) as tab:
+            found = {}
+            for kind, label in (("GuiSliderMessage", "Render over photo"), ("GuiDropdownMessage", "Render shading")):
+                m = await tab.wait_for(lambda m: m.get("type") == kind and m.get("props", {}).get("label") == label)
+                found[label] = m["props"]
+            texts = [m["props"].get("_markdown", "") for m in tab.messages if m.get("type") == "GuiMarkdownMessage"]
+            return {"props": found, "texts": texts}
+
+    got = asyncio.run(run())
+    for label, props in got["props"].items():
+        assert not props.get("hint"), (label, props.get("hint"))
+    help_text = " ".join(t for t in got["texts"] if "Render over photo" in t)
+    assert "Render shading" in help_text and "bearing angle" in help_text and "0: photo only" in help_text, help_text
