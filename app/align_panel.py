@@ -8,9 +8,11 @@ move the camera by 5 cm.  The render (and its copy over the photo) follows every
 (predictions, BA columns, proposals, the session file) takes the new pose when the drag ends.
 
 The result is an ordinary initial extrinsic (``app.pose_source``): predictions, loupes and proposals use it until
-4 pairs are solved.  After the 2nd and the 3rd complete pair (:meth:`AlignPanel.fit_to_pairs`) the rough pose is turned
-about the camera centre so that those pairs line up (:func:`calib_core.alignment.fit_rotation_about_centre`): one
-ordinary align step, which "Undo align step" takes back and a drag or a turn button changes further.  The maths is :mod:`calib_core.alignment`; this panel only maps widgets and drags to it.
+4 pairs are solved, and while the solve's quality is "unreliable".  After the 2nd and the 3rd complete pair, and after
+each unreliable solve (:meth:`AlignPanel.fit_to_pairs`), the rough pose is turned about the camera centre so that the
+pairs line up (:func:`calib_core.alignment.fit_rotation_about_centre`): one ordinary align step, which "Undo align
+step" takes back and a drag or a turn button changes further.  The maths is :mod:`calib_core.alignment`; this panel
+only maps widgets and drags to it.
 """
 
 from __future__ import annotations
@@ -108,6 +110,7 @@ class AlignPanel:
             # The pairs panel's marker drag (registered with the node) stands aside while aligning.
             marker = (render_drag_callbacks[key] if key == "camera_overlay" else app.make_drag_handler(key))
             self._callbacks[(key, None)] = [marker, plain]
+        app.subscribe_solved(self.on_solved)  # an unreliable solve: the rough pose is refitted to its pairs
         self.show()
 
     # ------------------------------------------------------------------ events
@@ -141,7 +144,11 @@ class AlignPanel:
         app = self.app
         T, source = app.pose_source.view_pose()
         if source == "solve":
-            line = (f"A calibration from {MIN_PAIRS}+ pairs is shown; the rough pose is used only with fewer pairs.")
+            line = (f"A calibration from {MIN_PAIRS}+ pairs is shown; the rough pose is used only with fewer pairs "
+                    "or while the solve is unreliable.")
+        elif source == "unreliable":
+            line = ("**The solve is unreliable**: the render and the predictions use the rough pose (turned to fit "
+                    "the pairs) until the solve's quality is warning or ok.")
         elif source == "default":
             line = "No pose yet: the render and the BA panes assume the camera looks along lidar +x."
         else:
@@ -173,8 +180,15 @@ class AlignPanel:
         if MIN_ROTATION_PAIRS <= len(picks) < MIN_PAIRS:  # 2-3 pairs fix the rotation: line the render up (issue 20)
             self.app.post(lambda pairs=[p.to_pair() for p in picks]: self.fit_to_pairs(pairs))
 
+    def on_solved(self, shown: Any) -> None:
+        """After each finished solve (:meth:`app.server.CalibrationApp.subscribe_solved`): when it is unreliable,
+        queue :meth:`fit_to_pairs` with every complete pair on the action worker (the rough pose is used then)."""
+        if self.app.pose_source.solve_unreliable:
+            pairs = [p.to_pair() for p in self.app.state.all_picks if p.complete]
+            self.app.post(lambda: self.fit_to_pairs(pairs))
+
     def _check_unsolved(self) -> None:
-        if self.app.solve_bundle is not None:
+        if self.app.pose_source.trusted_bundle() is not None:
             raise CalibError(f"{MIN_PAIRS}+ pairs are solved: the page shows that calibration, not the rough pose "
                              f"(the rough pose is for starting; delete pairs to go back to it)")
 
@@ -194,19 +208,22 @@ class AlignPanel:
         self.show()
 
     def fit_to_pairs(self, pairs: list) -> bool:
-        """Before the first solve, turn the rough pose so that 2 or 3 complete ``pairs`` line up (the camera centre
-        kept; :func:`calib_core.alignment.fit_rotation_about_centre`), as one align step.
+        """Before the first solve, or while the solve is unreliable, turn the rough pose so that the complete
+        ``pairs`` line up (the camera centre kept; :func:`calib_core.alignment.fit_rotation_about_centre`), as one
+        align step.
 
-        Called on the action worker after the complete pairs changed (:meth:`on_pairs_change`).  Does nothing
-        (returns False) with fewer than 2 or with 4+ pairs, once a solve is shown, when the pairs changed again
+        Called on the action worker after the complete pairs changed (:meth:`on_pairs_change`: 2 or 3 pairs) or
+        an unreliable solve was shown (:meth:`on_solved`: 4+).  Does nothing (returns False) with fewer than 2
+        pairs, with 4+ pairs unless the solve shown is unreliable, when the pairs changed again
         meanwhile, when a pair is guided (guided picking proposes from the rough pose it was started on: turning
         it would reshuffle the proposals under the person), or when their directions are parallel (no rotation
         fixed).  Clicks weigh ``1 / precision_px^2``.
         """
         app = self.app
         current = [p.to_pair() for p in app.state.picks if p.complete]
-        if (app.solve_bundle is not None or current != list(pairs)
-                or not MIN_ROTATION_PAIRS <= len(pairs) < MIN_PAIRS
+        if (app.pose_source.trusted_bundle() is not None or current != list(pairs)
+                or len(pairs) < MIN_ROTATION_PAIRS
+                or (len(pairs) >= MIN_PAIRS and not app.pose_source.solve_unreliable)  # 4+: only while unreliable
                 or any(getattr(p, "source", None) == "guided" for p in pairs)):
             return False
         points, bearings, _ = resolve_pairs(pairs, app.depth, app.camera)

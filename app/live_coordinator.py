@@ -307,8 +307,9 @@ class LiveSolveCoordinator:
         T = bundle.result.T_camera_lidar
         colors = self._cloud_colors(T) if self._cloud_shown and self._cloud_colored_by is not bundle else None
         facing_done = app.state.view.ba_window_mode == "camera" and app.pose_source.facing_due(bundle)
-        facing = app.pose_source.facing_window(T) if facing_done else None
-        app.pose_source.projection(T)  # the loupes' camera-to-cell predictions, ready before the next click
+        view_T = app.pose_source.view_pose()[0]  # the rough pose while the solve is unreliable
+        facing = app.pose_source.facing_window(view_T) if facing_done else None
+        app.pose_source.projection(view_T)  # the loupes' camera-to-cell predictions, ready before the next click
         return CloudUpdate(bundle, colors, facing_done, facing, time.perf_counter() - t0)
 
     def _on_cloud_done(self, job: int, update: CloudUpdate | None, error: BaseException | None) -> None:

@@ -1,11 +1,17 @@
-"""The loupes' views: which cells (BA loupe) or original-image pixels (camera loupe) each shows, and the names of
-their scene nodes and click keys (:mod:`app.loupes` draws them)."""
+"""The loupes' views: which cells (BA loupe) or original-image pixels (camera loupe) each shows, the names of
+their scene nodes and click keys (:mod:`app.loupes` draws them), and the marks that follow a view (the camera
+loupe's framed centre and ellipse, the BA loupe's outline on its BA image)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+
+from calib_core.predict import ellipse_outline
+
+from .loupe_marks import tick_segments
 
 #: The camera loupe's crop side for a 640 px wide image (original-image px, zoom 1).
 CAMERA_LOUPE_PX = 36
@@ -59,6 +65,12 @@ def render_crop_of(camera_crop: CameraCrop, n: int | None) -> CameraCrop:
     return CameraCrop(int(round(u)) - n // 2, int(round(v)) - n // 2, int(n), (float(u), float(v)), None)
 
 
+def render_crop_around(u: float, v: float, n: int) -> CameraCrop:
+    """The laser loupe's view while it is held on a pair's laser end (:meth:`app.loupes.Loupes.anchor_render`):
+    original-image pixels ``n`` on a side around ``(u, v)``; no ellipse."""
+    return CameraCrop(int(round(u)) - n // 2, int(round(v)) - n // 2, int(n), (float(u), float(v)), None)
+
+
 def camera_crop_texture(image: np.ndarray, c: CameraCrop, gamma: float, texels: int, pad: int) -> np.ndarray:
     """The camera loupe's texture: ``image``'s pixels of crop ``c`` (gray ``pad`` outside the image), their
     shadows lifted by ``gamma`` (``255 * (x / 255) ** (1 / gamma)``; 1: as they are), enlarged by nearest neighbour
@@ -88,3 +100,38 @@ def ba_crop_texture(gray: np.ndarray, c: BaCrop, wrap_cols: bool, texels: int, p
     crop = np.where(ok_r[:, None] & ok_c[None, :], crop, np.uint8(pad)).astype(np.uint8)
     k = max(1, texels // max(c.n_rows, c.n_cols))
     return np.repeat(np.repeat(crop, k, axis=0), k, axis=1)
+
+
+def draw_camera_centre(app: Any, s: Any, c: CameraCrop) -> None:
+    """The camera loupe's framed centre (four black-white ticks: neither a click's cross nor a laser point's ring)
+    and its 3-sigma ellipse, for crop ``c`` shown in loupe slot ``s``: they follow the crop."""
+    nodes = app.nodes
+    centre = s.world_from_pixel(np.array([c.center]) - [c.u0, c.v0], z_offset=-0.012)
+    rr = max(2.0, 0.05 * c.n) * s.units_per_px
+    hollow = tick_segments(centre, rr)
+    nodes.lines("/annot/loupe/camera_centre_halo", hollow + [0, 0, 0.001], np.full(hollow.shape, 0, np.uint8),
+                thickness=4.0)
+    nodes.lines("/annot/loupe/camera_centre", hollow, np.full(hollow.shape, 255, np.uint8), thickness=1.5)
+    ell = np.empty((0, 2, 3))
+    if c.cov_px2 is not None:
+        pts = ellipse_outline(c.center, np.array(c.cov_px2)) - [c.u0, c.v0]
+        inside = np.array([s.contains(p) for p in pts], bool)
+        w = s.world_from_pixel(pts, z_offset=-0.011)
+        ell = np.stack([w[:-1], w[1:]], axis=1)[inside[:-1] & inside[1:]]  # only inside the loupe
+    nodes.lines("/annot/loupe/ellipse", ell, np.full(ell.shape, (255, 200, 0), np.uint8), thickness=1.0)
+
+
+def draw_ba_outline(app: Any, c: BaCrop) -> None:
+    """Where the BA loupe looks (crop ``c``), as a thin rectangle on its main BA image (context)."""
+    segs = np.empty((0, 2, 3))
+    u, shown = app.ba_window.display_cols(np.array([c.col0 + c.n_cols // 2]) % app.depth.shape[1])
+    if shown[0]:
+        slot = app.slots[c.key]
+        x0 = u[0] - c.n_cols // 2 - 0.5
+        corners = np.array([[x0, c.row0 - 0.5], [x0 + c.n_cols, c.row0 - 0.5],
+                            [x0 + c.n_cols, c.row0 + c.n_rows - 0.5], [x0, c.row0 + c.n_rows - 0.5]])
+        corners[:, 0] = np.clip(corners[:, 0], -0.5, slot.width_px - 0.5)
+        corners[:, 1] = np.clip(corners[:, 1], -0.5, slot.height_px - 0.5)
+        w = slot.world_from_pixel(corners, z_offset=-0.02)
+        segs = np.stack([w, np.roll(w, -1, axis=0)], axis=1)
+    app.nodes.lines("/annot/loupe/ba_outline", segs, np.full(segs.shape, (255, 120, 0), np.uint8), thickness=2.0)

@@ -69,6 +69,15 @@ def follow_click(loupes: Any, app: Any, click: PairClick) -> None:
         _keep_other_end_shown(loupes, app, kind, click.pick_id)
     else:
         _frame(loupes, app, click.target, click.pick_id, click.on_full_image, click.render_uv)
+    _hold_render_loupe(loupes, app, click.pick_id)
+
+
+def _hold_render_loupe(loupes: Any, app: Any, pick_id: int | None) -> None:
+    """While the laser loupe shows the render, hold it on pair ``pick_id``'s laser end as it shows it now (a refit
+    of the rough pose then leaves that end where it is in the loupe: run 7)."""
+    pick = next((p for p in app.state.picks if p.id == pick_id), None)
+    if loupes.shows_render:
+        loupes.anchor_render(None if pick is None else pick.laser_rc)
 
 
 def _keep_other_end_shown(loupes: Any, app: Any, clicked: str, pick_id: int) -> None:
@@ -147,3 +156,4 @@ def frame_pair(loupes: Any, app: Any, pick_id: int) -> None:
         loupes.frame_ba(loupes.ba_crop.key, *cell)
     if uv is not None:
         loupes.frame_camera(float(uv[0]), float(uv[1]))
+    _hold_render_loupe(loupes, app, pick_id)

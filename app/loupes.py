@@ -17,13 +17,12 @@ from typing import Any, Callable
 import numpy as np
 
 from calib_core.errors import CalibError
-from calib_core.predict import ellipse_outline
 
-from .layout import ImageSlot, LoupeArea, bounds_of, loupe_areas
-from .loupe_crops import (BaCrop, CameraCrop, ba_crop_texture, camera_crop_texture, default_camera_crop_px, node_name,
-                          render_crop_of, slot_key)
+from .layout import ImageSlot, LoupeArea, bounds_of, loupe_areas, loupe_areas_in_view
+from .loupe_crops import (BaCrop, CameraCrop, ba_crop_texture, camera_crop_texture, default_camera_crop_px,
+                          draw_ba_outline, draw_camera_centre, node_name, render_crop_around, render_crop_of, slot_key)
 from .loupe_framing import PairClick, follow_click, frame_pair
-from .loupe_marks import LEGEND, ba_title, camera_title, draw_camera_marks, draw_camera_outline, tick_segments
+from .loupe_marks import LEGEND, ba_title, camera_title, draw_camera_marks, draw_camera_outline
 from .shown_render import cell_at_pixel, loupe_texture, loupe_title, pixel_of_cells
 from .ui_common import marker_segments
 
@@ -55,6 +54,7 @@ class Loupes:
         self.app = app
         main = list(app.slots.values())  # camera views, the camera-view render, BA images
         self.areas: dict[str, LoupeArea] = loupe_areas(bounds_of(main))
+        self._visible: tuple | None = None  # the page area a tab shows (keep_in_view); None: the whole page
         n_rows, n_cols = app.depth.shape
         self._ba_cols = min(BA_LOUPE_COLUMNS, n_cols)
         cam_w, cam_h = app.camera.width, app.camera.height
@@ -70,6 +70,10 @@ class Loupes:
         self._render: Any = None  # the render the render pane shows (app.shown_render.ShownRender; on_render)
         self.photo_gamma = 1.0  # the photo loupe's brightness (display only: "Photo loupe brightness")
         self._render_n: int | None = None  # the render loupe's own side (px; None: the camera loupe's), zoomed alone
+        # ((row, col), (du, dv)): the laser end the render loupe is held on, and its crop centre's offset from where
+        # the render draws it; a new render (a refit) keeps that end still in the loupe (run 7).  None: it follows
+        # the camera loupe.
+        self._render_anchor: tuple | None = None
         scene = app.server.scene
         self._handles: dict[str, Any] = {}
         self._titles: dict[str, Any] = {}
@@ -150,6 +154,7 @@ class Loupes:
             cov = tuple(map(tuple, c))
         with self.app.ui_lock:
             self._clicked.pop("camera", None)
+            self._render_anchor = None  # the render loupe follows the camera loupe again (until anchor_render)
             side = self._cam_n_chosen if min_side_px is None else max(self._cam_n_chosen, math.ceil(min_side_px))
             self._cam_n = int(min(side, CAMERA_PX_LIMITS[1]))
             crop = self._make_camera_crop(float(u), float(v), cov)
@@ -183,9 +188,29 @@ class Loupes:
 
     @property
     def render_crop(self) -> CameraCrop:
-        """The camera pixels the laser loupe shows while it shows the render: around the camera loupe's centre,
-        its own side (the two loupes zoom alone: run 6, the wheel over the render loupe zoomed the photo's too)."""
+        """The camera pixels the laser loupe shows while it shows the render: around the camera loupe's centre, or
+        held on a pair's laser end (:meth:`anchor_render`), its own side (the two loupes zoom alone: run 6)."""
+        anchor = self._render_anchor
+        if anchor is not None and self._render is not None:
+            uv = pixel_of_cells(self._render, self.app.camera, self.app.depth, np.array([anchor[0]]))[0]
+            if np.isfinite(uv).all():
+                n = self.camera_crop.n if self._render_n is None else self._render_n
+                return render_crop_around(uv[0] + anchor[1][0], uv[1] + anchor[1][1], n)
         return render_crop_of(self.camera_crop, self._render_n)
+
+    def anchor_render(self, cell: tuple[int, int] | None) -> None:
+        """Hold the render loupe on laser cell ``cell`` (``(row, col)``, a pair's laser end) as it shows it now: a
+        new render (a refit of the rough pose) moves its crop with the cell, so the cell stays where it is in the
+        loupe and its title names it (run 7: the loupe re-framed after a photo-loupe click).  None: let go."""
+        with self.app.ui_lock:
+            centre = self.render_crop.center  # as it shows now (held or not)
+            self._render_anchor = None
+            if cell is None or not self._render_on():
+                return
+            uv = pixel_of_cells(self._render, self.app.camera, self.app.depth, np.array([cell]))[0]
+            if np.isfinite(uv).all():
+                self._render_anchor = ((int(cell[0]), int(cell[1])), (centre[0] - uv[0], centre[1] - uv[1]))
+            self._titles["ba"].text = self.title("ba")
 
     def zoom(self, kind: str, factor: float) -> None:
         """Magnify loupe ``kind`` by ``factor`` (> 1 shows less, bigger) around the same centre; only that one."""
@@ -231,12 +256,21 @@ class Loupes:
     def relayout(self, moved: bool = True) -> None:
         """Place both loupes beside the images again if they ``moved`` (the page layout changed, e.g. another BA
         column window: :meth:`app.view_panel.ViewPanel.subscribe_layout`), not where the old ones ended."""
-        if not moved:
-            return
+        if moved:
+            self.keep_in_view(self._visible, always=True)
+
+    def keep_in_view(self, visible: tuple | None, always: bool = False) -> None:
+        """Keep both loupes inside page area ``visible`` (``(x0, y0, x1, y1)``, world units, that a tab shows left
+        of the control panel: :meth:`app.view_panel.ViewPanel.subscribe_visible`): beside the images when they fit
+        there, else at its right edge (run 7); None: beside the images."""
         app = self.app
         with app.ui_lock, app.server.atomic():
+            self._visible = visible
             main = list(app.slots.values())  # camera views, the camera-view render, BA images
-            self.areas = loupe_areas(bounds_of(main))
+            areas = loupe_areas_in_view(loupe_areas(bounds_of(main)), visible)
+            if areas == self.areas and not always:
+                return
+            self.areas = areas
             for kind in KINDS:
                 area = self.areas[kind]
                 self._titles[kind].position = (area.x0, area.y0 - 0.03, -0.01)
@@ -346,11 +380,11 @@ class Loupes:
         if self._framing_of.get(kind) != framing:
             self._framing_of[kind] = framing
             if kind == "camera":
-                self._draw_camera_centre()
+                draw_camera_centre(app, self._slots["camera"], self.camera_crop)
             if hidden:
                 app.nodes.lines(FRAMING_NODES[kind][-1], np.empty((0, 2, 3)), (0, 0, 0))  # the outline
             elif kind == "ba":
-                self._draw_ba_outline()
+                draw_ba_outline(app, self.ba_crop)
             else:
                 draw_camera_outline(app, self.camera_crop)
 
@@ -379,42 +413,6 @@ class Loupes:
     def _draw_camera_marks(self, picks: list) -> None:
         # Camera loupe: clicks as crosses, the pairs' laser points projected as rings (app.loupe_marks).
         draw_camera_marks(self.app, self._slots["camera"], self.camera_crop, picks, self.app.pose())
-
-    def _draw_camera_centre(self) -> None:
-        """The camera loupe's framed centre (four black-white ticks: neither a click's cross nor a laser point's ring)
-        and its 3-sigma ellipse: they follow the crop."""
-        nodes = self.app.nodes
-        s, c = self._slots["camera"], self.camera_crop
-        centre = s.world_from_pixel(np.array([c.center]) - [c.u0, c.v0], z_offset=-0.012)
-        rr = max(2.0, 0.05 * c.n) * s.units_per_px
-        hollow = tick_segments(centre, rr)
-        nodes.lines("/annot/loupe/camera_centre_halo", hollow + [0, 0, 0.001], np.full(hollow.shape, 0, np.uint8),
-                    thickness=4.0)
-        nodes.lines("/annot/loupe/camera_centre", hollow, np.full(hollow.shape, 255, np.uint8), thickness=1.5)
-        ell = np.empty((0, 2, 3))
-        if c.cov_px2 is not None:
-            pts = ellipse_outline(c.center, np.array(c.cov_px2)) - [c.u0, c.v0]
-            inside = np.array([s.contains(p) for p in pts], bool)
-            w = s.world_from_pixel(pts, z_offset=-0.011)
-            ell = np.stack([w[:-1], w[1:]], axis=1)[inside[:-1] & inside[1:]]  # only inside the loupe
-        nodes.lines("/annot/loupe/ellipse", ell, np.full(ell.shape, (255, 200, 0), np.uint8), thickness=1.0)
-
-    def _draw_ba_outline(self) -> None:
-        """Where the BA loupe looks, as a thin rectangle on its main BA image (context)."""
-        app = self.app
-        c = self.ba_crop
-        segs = np.empty((0, 2, 3))
-        u, shown = app.ba_window.display_cols(np.array([c.col0 + c.n_cols // 2]) % app.depth.shape[1])
-        if shown[0]:
-            slot = app.slots[c.key]
-            x0 = u[0] - c.n_cols // 2 - 0.5
-            corners = np.array([[x0, c.row0 - 0.5], [x0 + c.n_cols, c.row0 - 0.5], [x0 + c.n_cols, c.row0 + c.n_rows - 0.5],
-                                [x0, c.row0 + c.n_rows - 0.5]])
-            corners[:, 0] = np.clip(corners[:, 0], -0.5, slot.width_px - 0.5)
-            corners[:, 1] = np.clip(corners[:, 1], -0.5, slot.height_px - 0.5)
-            w = slot.world_from_pixel(corners, z_offset=-0.02)
-            segs = np.stack([w, np.roll(w, -1, axis=0)], axis=1)
-        app.nodes.lines("/annot/loupe/ba_outline", segs, np.full(segs.shape, (255, 120, 0), np.uint8), thickness=2.0)
 
     # ------------------------------------------------------------------ internals
     def _make_ba_crop(self, key: str, row: int, col: int) -> BaCrop:
@@ -464,8 +462,9 @@ class Loupes:
 
     def title(self, kind: str) -> str:
         """The loupe's title as the page shows it."""
-        if kind == "ba" and self._render_on():  # the cell a click inside chose (run 6: it named the old one)
-            return loupe_title(self._render, self.app.depth, self.camera_crop.center, self._clicked.get("ba"))
+        if kind == "ba" and self._render_on():  # the pair's cell it is held on, else the cell a click inside chose
+            held = None if self._render_anchor is None else self._render_anchor[0]
+            return loupe_title(self._render, self.app.depth, self.render_crop.center, held or self._clicked.get("ba"))
         if kind == "ba":
             c = self.ba_crop
             row, col = self._clicked.get("ba", c.center)

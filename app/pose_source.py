@@ -1,6 +1,7 @@
-"""The pose the app predicts and renders with: the last good solve, else the rough pose (imported or aligned), else
-the "+x" mounting preset; predictions both ways under it, the scan projected under it (cached per pose) and the scan
-columns the camera sees under it (the BA panes' "camera" window).
+"""The pose the app predicts and renders with: the last good solve unless its quality is "unreliable", else the rough
+pose (imported, aligned, or refitted to the pairs), else the "+x" mounting preset; predictions both ways under it,
+the scan projected under it (cached per pose) and the scan columns the camera sees under it (the BA panes' "camera"
+window).
 
 A service of the app (``app.pose_source``: state and queries, no widgets).  A new rough pose is published to its
 subscribers (:meth:`PoseSource.subscribe`); the composition root redraws what depends on it.  The maths is
@@ -100,19 +101,39 @@ class PoseSource:
         self._listeners.append(listener)
 
     # ------------------------------------------------------------------ pose and predictions
-    def pose(self) -> np.ndarray | None:
-        """``T_camera_lidar`` predictions use: the last good solve, else the imported initial extrinsic, else None."""
+    def trusted_bundle(self) -> Any:
+        """The last good solve if its quality is not "unreliable", else None.  An unreliable solve (e.g. 4 pairs
+        close together: translation sigma 229 cm, 0.6 m off in run 7) is not rendered nor predicted from: the
+        render would jump away from the photo (run 7)."""
         bundle = self.app.solve_bundle
+        quality = getattr(getattr(bundle, "result", None), "quality", None)
+        if bundle is None or getattr(quality, "status", None) == "unreliable":
+            return None
+        return bundle
+
+    @property
+    def solve_unreliable(self) -> bool:
+        """True while a solve is shown whose quality is "unreliable" (the rough pose is used instead)."""
+        return self.app.solve_bundle is not None and self.trusted_bundle() is None
+
+    def pose(self) -> np.ndarray | None:
+        """``T_camera_lidar`` predictions use: the last good solve unless unreliable, else the rough pose, else
+        None."""
+        bundle = self.trusted_bundle()
         if bundle is not None:
             return bundle.result.T_camera_lidar
         return self.initial_T_camera_lidar
 
     def view_pose(self) -> tuple[np.ndarray, str]:
         """The pose the camera-view render and the BA columns use, and where it comes from: the last good solve
-        (``"solve"``), else the rough pose (``"rough"``), else the "+x" mounting preset (``"default"``)."""
-        bundle = self.app.solve_bundle
+        (``"solve"``), else the rough pose (``"rough"``; ``"unreliable"`` while the solve shown is unreliable), else
+        the "+x" mounting preset (``"default"``)."""
+        bundle = self.trusted_bundle()
         if bundle is not None:
             return bundle.result.T_camera_lidar, "solve"
+        if self.solve_unreliable:
+            rough = self.initial_T_camera_lidar
+            return (preset_T(DEFAULT_PRESET) if rough is None else rough), "unreliable"
         if self.initial_T_camera_lidar is not None:
             return self.initial_T_camera_lidar, "rough"
         return preset_T(DEFAULT_PRESET), "default"
@@ -191,7 +212,7 @@ class PoseSource:
         """Compute the camera-facing window of the current pose now, if not done yet (switch to camera mode)."""
         bundle = self.app.solve_bundle
         if bundle is not None and self._facing_of is not bundle:
-            self.set_facing(bundle, self.facing_window(bundle.result.T_camera_lidar))
+            self.set_facing(bundle, self.facing_window(self.view_pose()[0]))
         elif bundle is None:
             # Before any solve: the rough pose, else the "+x" preset.
             facing = self.facing_window(self.view_pose()[0])
@@ -227,11 +248,11 @@ class PoseSource:
     def stale_click_reason(self, shown: Any, now: float | None = None) -> str | None:
         """Why a click on render ``shown`` (:class:`app.shown_render.ShownRender`) must not be placed, or None.
 
-        After a rough pose the person did not make (:attr:`last_turn` with a reason) and before any solve: while
+        After a rough pose the person did not make (:attr:`last_turn` with a reason), with no solve to trust: while
         the render shown is still the old pose's (the new one is on its way, and will move under the click), and
         for :data:`REFIT_CLICK_GRACE_S` after the new one was made (the click was planned on the old render)."""
         turn = self.last_turn
-        if turn is None or not turn.why or shown is None or self.app.solve_bundle is not None:
+        if turn is None or not turn.why or shown is None or self.trusted_bundle() is not None:
             return None
         now = time.monotonic() if now is None else now
         old = not np.array_equal(np.asarray(shown.T_camera_lidar), turn.T_camera_lidar)

@@ -41,9 +41,13 @@ NEAREST_MAX_PX = 24
 #: A new solve is rendered at most this often (seconds): a burst of clicks solves many times, each render costs a
 #: core for 0.1-0.3 s.  Drags and the Align buttons render at once.
 SOLVE_RENDER_INTERVAL_S = 0.5
+#: The render controls' help, in the Align folder's text (no tooltips: run 7).
+RENDER_HELP = ("**Render shading**: how the scan seen from the camera is coloured (range, the laser's intensity or "
+               "the bearing angle; depth edges white).  **Render over photo**: the render drawn over the camera "
+               "image (0: photo only, 1: render wherever the scan has a return).")
 #: Where the pose the render uses comes from, as its title says it.
 POSE_NAMES = {"solve": "solved pose", "rough": "rough pose", "default": "'+x' preset (no pose yet)",
-              "drag": "rough pose (dragging)"}
+              "drag": "rough pose (dragging)", "unreliable": "rough pose: the solve is unreliable"}
 
 
 class RenderPane:
@@ -149,14 +153,13 @@ class RenderPane:
     def add_controls(self, gui: Any) -> None:
         """The render's shading, its opacity over the photo and a blink button, where ``gui`` adds now."""
         app, view = self.app, self.app.state.view
+        # Run 7: viser's hint tooltips stayed over the Turn / Move buttons after a click on these two (the server
+        # cannot dismiss them), so what they would say is text in the folder.
+        gui.add_markdown(RENDER_HELP)
         self._dd_mode = gui.add_dropdown("Render shading", tuple(RENDER_MODES.values()),
-                                         initial_value=RENDER_MODES[view.render_mode],
-                                         hint="How the scan seen from the camera is coloured: range, the laser's "
-                                              "intensity, or the bearing angle; depth edges are white")
+                                         initial_value=RENDER_MODES[view.render_mode])
         self._dd_mode.on_update(app.guard(self.on_mode))
-        self._sl_blend = gui.add_slider("Render over photo", 0.0, 1.0, 0.05, initial_value=view.render_blend,
-                                        hint="Draw the render over the camera image (0: photo only, 1: render "
-                                             "wherever the scan has a return)")
+        self._sl_blend = gui.add_slider("Render over photo", 0.0, 1.0, 0.05, initial_value=view.render_blend)
         self._sl_blend.on_update(app.guard(self.on_blend))
         self._bt_blink = gui.add_button("Blink render / photo",
                                         hint="Swap between the photo alone and the render over it")
@@ -211,7 +214,7 @@ class RenderPane:
     # ------------------------------------------------------------------ rendering
     def view_pose(self) -> tuple[np.ndarray, str]:
         """The pose the render shows and where it comes from (a key of :data:`POSE_NAMES`)."""
-        if self.drag_pose is not None and self.app.solve_bundle is None:
+        if self.drag_pose is not None and self.app.pose_source.trusted_bundle() is None:
             return self.drag_pose, "drag"
         return self.app.pose_source.view_pose()
 
@@ -301,7 +304,7 @@ class RenderPane:
         if shown is None:
             return "Camera-view laser: rendering ..."
         mode = RENDER_MODES[shown.mode]
-        return (f"Camera-view laser ({mode}) under the {POSE_NAMES[shown.source]}: click a point to pick its "
+        return (f"Camera-view laser ({mode}) under the {POSE_NAMES[shown.source]}; click a point to pick its "
                 f"laser cell")
 
     def wait_idle(self, timeout: float = 30.0) -> bool:

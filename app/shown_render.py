@@ -73,14 +73,35 @@ def cell_at_pixel(shown: ShownRender | None, u: float, v: float,
 
 
 def pixel_of_cells(shown: ShownRender | None, camera: Any, depth: Any, rows_cols: np.ndarray) -> np.ndarray:
-    """Original camera pixels ``(N, 2)`` of scan cells ``(N, 2)`` under render ``shown``'s pose (NaN: not in view,
-    or no render)."""
+    """Original camera pixels ``(N, 2)`` where render ``shown`` draws scan cells ``(N, 2)``: the cell's point
+    projected under the render's pose, moved to the nearest pixel the render draws that cell on within
+    :data:`NEAREST_PX` (a footprint is not centred on its point: run 7, a click on a pair's ring took the cell
+    beside it); NaN: not in view, or no render."""
     rc = np.asarray(rows_cols, np.int64).reshape(-1, 2)
     out = np.full((len(rc), 2), np.nan)
     if shown is None or not len(rc):
         return out
     uv, ok = project_lidar_points(shown.T_camera_lidar, camera, depth.cell_points(rc))
     out[ok] = uv[ok]
+    cells = getattr(shown.render, "cell_rc", None)
+    if cells is None or not ok.any():
+        return out
+    h, w = cells.shape[:2]
+    r = NEAREST_PX
+    k = np.flatnonzero(ok)
+    offsets = np.arange(-r, r + 1)
+    us = np.floor(uv[k, 0] + 0.5).astype(np.int64)[:, None, None] + offsets[None, None, :]  # (K, 1, W)
+    vs = np.floor(uv[k, 1] + 0.5).astype(np.int64)[:, None, None] + offsets[None, :, None]  # (K, W, 1)
+    us, vs = np.broadcast_arrays(us, vs)
+    inside = (us >= 0) & (us < w) & (vs >= 0) & (vs < h)
+    drawn = cells[np.clip(vs, 0, h - 1), np.clip(us, 0, w - 1)]  # (K, W, W, 2)
+    mine = inside & (drawn == rc[k][:, None, None, :]).all(axis=-1)
+    d2 = np.where(mine, (us - uv[k, 0, None, None]) ** 2 + (vs - uv[k, 1, None, None]) ** 2, np.inf)
+    flat = d2.reshape(len(k), -1)
+    best = flat.argmin(axis=1)
+    found = flat[np.arange(len(k)), best] <= r * r  # inf: the render draws the cell nowhere near its point
+    out[k[found], 0] = us.reshape(len(k), -1)[found, best[found]]
+    out[k[found], 1] = vs.reshape(len(k), -1)[found, best[found]]
     return out
 
 
