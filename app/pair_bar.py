@@ -8,6 +8,8 @@ published (:class:`app.ui_common.SolveBundle`), the guided text is the Guide pan
 
 from __future__ import annotations
 
+import html
+import re
 import threading
 from typing import Any, Callable, Mapping
 
@@ -148,6 +150,41 @@ def live_summary(live: Any, held: HeldQuality | None = None) -> str:
     return f"**{n_fit} pairs · {errors} · Quality: {shown}**{solving}"
 
 
+#: One line of constant height: a block that never wraps, ellipsised when longer than the panel is wide (the
+#: whole text in its hover title).  Fixed markup; the text inside is the app's own (no user strings).
+_ONE_LINE = ('<span style="display:block;white-space:nowrap;overflow:hidden;text-overflow:ellipsis" '
+             'title="{title}">{text}</span>')
+
+
+def one_line_markdown(text: str) -> str:
+    """``text`` (one line of markdown, app text only) as a line of constant height: blank when ``text`` is empty,
+    so that the line keeps its place (run 7: the panel's controls jumped about 18 px as a status line came and
+    went, and clicks aimed at them landed on nothing)."""
+    plain = re.sub(r"\\(.)", r"\1", text.replace("**", ""))
+    return _ONE_LINE.format(title=html.escape(plain, quote=True), text=text if text else "&nbsp;")
+
+
+class FixedLine:
+    """A markdown line of the pair bar that keeps its height whether it shows something or not
+    (:func:`one_line_markdown`).  Not locked: the owner updates it under its own lock."""
+
+    def __init__(self, gui: Any, order: float) -> None:
+        self._text = ""
+        self._md = gui.add_markdown(one_line_markdown(""), order=order)
+
+    @property
+    def text(self) -> str:
+        """The markdown shown ("" when blank)."""
+        return self._text
+
+    def show(self, text: str) -> None:
+        """Show ``text`` (one line of markdown: no line breaks), or a blank line for ""."""
+        text = " ".join(text.split("  \n"))
+        if text != self._text:
+            self._text = text
+            self._md.content = one_line_markdown(text)
+
+
 #: Guided picking's actions the bar repeats while a proposal is shown (run 6: the person scrolled to the Guided
 #: folder for them).  "Next pair" is among the pair actions already.
 GUIDED_BAR_ACTIONS = ("Skip", "Not a corner", "Stop")
@@ -170,7 +207,8 @@ class PairBar:
 
     def __init__(self, gui: Any, live_order: float, guide_order: float) -> None:
         self._md_live = gui.add_markdown("", order=live_order)
-        self._md_pose = gui.add_markdown("", order=live_order + 0.05)  # a rough pose the person did not make
+        # What the app did by itself (e.g. a rough pose the person did not make): one line, kept when blank.
+        self._notice = FixedLine(gui, order=live_order + 0.05)
         self._md_guide = gui.add_markdown("", order=guide_order)
         self._bg_guided = gui.add_button_group("Guided", GUIDED_BAR_ACTIONS, order=guide_order + 0.02, visible=False)
         self._guided_actions: dict[str, Callable] = {}
@@ -201,7 +239,7 @@ class PairBar:
     @property
     def pose_note(self) -> str:
         """The notice of a rough pose change the person did not make (markdown; empty if none shown)."""
-        return str(self._md_pose.content)
+        return self._notice.text
 
     def show_pose_turn(self, turn: Any) -> None:
         """Show the notice of rough pose change ``turn`` (:class:`app.pose_source.PoseTurn`, or None) under the live
@@ -211,8 +249,7 @@ class PairBar:
         note = "" if turn is None else turn.note()
         text = f"⚠ **{note}**: the render moved; look again before the next click." if note else ""
         with self._lock:
-            if self._md_pose.content != text:
-                self._md_pose.content = text
+            self._notice.show(text)
 
     @property
     def guide_status(self) -> str:
@@ -225,8 +262,8 @@ class PairBar:
             text = live_summary(live, self._held)
             if self._md_live.content != text:
                 self._md_live.content = text
-            if getattr(live, "bundle", None) is not None and self._md_pose.content:
-                self._md_pose.content = ""  # the page shows the solve now, not the rough pose
+            if getattr(live, "bundle", None) is not None and self._notice.text:
+                self._notice.show("")  # the page shows the solve now, not the rough pose
 
     def show_guide_status(self, guiding: bool, lines: list[str],
                           actions: Mapping[str, Callable] | None = None) -> None:

@@ -16,7 +16,7 @@ from calib_core.panorama import refine_click_to_corner
 from .layout import RENDER_KEY
 from .loupe_framing import PairClick
 from .page_builder import install_page_script
-from .pair_bar import PAIR_BAR_JS, PairBar, undo_note
+from .pair_bar import PAIR_BAR_JS, FixedLine, PairBar, one_line_markdown, undo_note
 from .pairs_import import import_upload
 from .ui_common import MIN_PAIRS, SNAP_RADIUS_PX, pick_tolerance_px
 
@@ -54,7 +54,8 @@ class PairsPanel:
         self.pair_action_callback = self._on_pair_action_event
         self._bg_actions = gui.add_button_group("Pair", PAIR_ACTIONS, order=top - 1.0)
         self._bg_actions.on_click(self.pair_action_callback)
-        self._md_status = gui.add_markdown("", order=top - 0.5)
+        # One line kept when blank: in run 7 the controls below jumped ~18 px as it came and went.
+        self._status_line = FixedLine(gui, order=top - 0.5)
         # The live solve's figures right under the buttons, guided picking's status under the pair status.
         self.bar = PairBar(gui, live_order=top - 0.75, guide_order=top - 0.45)
         self.show_guide_status = self.bar.show_guide_status  # the Guide panel's hook
@@ -65,6 +66,7 @@ class PairsPanel:
         self.folder = gui.add_folder("Pairs")
         with self.folder:
             self._md_pairs = gui.add_markdown("")
+            self._summary = ""  # the summary's text as shown (its lines without the fixed-line markup)
             self._dd_selected = gui.add_dropdown("Selected pair", ("none",), initial_value="none")
             self._dd_selected.on_update(guard(self.on_select_dropdown))
             self._bg_edit = gui.add_button_group("Edit", ("Undo", "Redo", "Deselect", "Delete"))
@@ -88,12 +90,12 @@ class PairsPanel:
     @property
     def text(self) -> str:
         """The panel's summary as shown (markdown)."""
-        return str(self._md_pairs.content)
+        return self._summary
 
     @property
     def status(self) -> str:
         """The status line under the pair actions at the top of the panel (markdown; empty when nothing waits)."""
-        return str(self._md_status.content)
+        return self._status_line.text
 
     @property
     def dropdown_value(self) -> str:
@@ -146,30 +148,32 @@ class PairsPanel:
             pending = state.pending()
             selected = state.selected
             total = sum(1 for p in state.all_picks if p.complete)  # every shot's pairs go into the solve
-            lines = [f"**Pairs:** {len(complete)} complete" + (
-                f" in shot {state.active_shot} (shown); {total} in all {state.n_shots} shots" if state.n_shots > 1 else "")]
+            # Fixed slots, each one line kept when blank: the controls under the summary never move (run 7).
+            count = f"**Pairs:** {len(complete)} complete" + (
+                f" in shot {state.active_shot} (shown); {total} in all {state.n_shots} shots" if state.n_shots > 1 else "")
+            doing = ""
             if pending is not None:
                 need = "camera" if pending.pixel is None else "BA"
-                lines.append(f"Pair {pending.id} waits for a {need} click.")
+                doing = f"Pair {pending.id} waits for a {need} click."
                 ids, uv = app.pose_source.predicted_pixels({pending.id: pending})
                 if ids:
-                    lines.append(f"Predicted camera pixel: ({uv[0, 0]:.1f}, {uv[0, 1]:.1f}) (cross in the image).")
+                    doing += f" Predicted camera pixel: ({uv[0, 0]:.1f}, {uv[0, 1]:.1f}) (cross in the image)."
             status = [self._undo_note[1]] if self._undo_note[0] == state.version else []
             if pending is not None:
                 status.append(f"Pair {pending.id} waits for a {need} click (**Cancel pair** or Esc drops it).")
             if selected is not None:
-                lines.append(f"**Pair {selected} selected:** clicks now move its ends (Deselect to add pairs).")
+                doing = f"**Pair {selected} selected:** clicks now move its ends (Deselect to add pairs)."
                 status.append(f"Pair {selected} selected: the next click moves it (**Cancel pair** deselects).")
-            if self._md_status.content != "  \n".join(status):
-                self._md_status.content = "  \n".join(status)
+            self._status_line.show(" · ".join(status))
             self.bar.show_live(app.solve_shown())
             left_out = [f"#{p.id}" for p in complete if p.check]
-            if left_out:
-                lines.append(f"Left out of the fit (check pairs): {', '.join(left_out)}.")
-            if total < MIN_PAIRS:
-                lines.append(f"Pick {MIN_PAIRS - total} more to calibrate.")
-            lines.append(f"Undo: {'yes' if state.can_undo else 'no'}, redo: {'yes' if state.can_redo else 'no'}")
-            self._md_pairs.content = "  \n".join(lines)
+            lines = [count, doing, f"Left out of the fit (check pairs): {', '.join(left_out)}." if left_out else "",
+                     f"Pick {MIN_PAIRS - total} more to calibrate." if total < MIN_PAIRS else "",
+                     f"Undo: {'yes' if state.can_undo else 'no'}, redo: {'yes' if state.can_redo else 'no'}"]
+            self._summary = "  \n".join(line for line in lines if line)
+            shown = "\n".join(one_line_markdown(line) for line in lines)
+            if self._md_pairs.content != shown:
+                self._md_pairs.content = shown
             options = ("none",) + tuple(f"#{p.id}" for p in picks)
             if tuple(self._dd_selected.options) != options:
                 self._dd_selected.options = options

@@ -1,0 +1,71 @@
+"""By-eye run 7 friction in the page (docs/by_eye.md): the panel's controls jumped by about 18 px when the pair
+bar's status line came or went (a pair started, then Esc; "Leave selected pair out"; a Shift+click), so clicks
+aimed at a control landed on nothing.
+
+Truth comes from the browser: the page rectangle of the Pairs folder's controls before and after each change.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from browser_helpers import CHROMIUM, AnnotationTab, page_text, start_sample_app, wait_for
+from calib_core.pairs import load_pairs_yaml
+from repo_paths import SAMPLE
+
+pytestmark = [pytest.mark.browser, pytest.mark.skipif(
+    not CHROMIUM.exists(), reason="/usr/bin/chromium is missing (apt-get install chromium)")]
+
+#: The page rectangle ``[left, top, right, bottom]`` of the innermost shown element whose text contains ``text``.
+RECT_JS = """(text) => {
+  const all = Array.from(document.querySelectorAll('body *')).filter(e => e.textContent.includes(text)
+    && !Array.from(e.children).some(c => c.textContent.includes(text)) && e.getBoundingClientRect().width > 0);
+  if (!all.length) return null;
+  const r = all[0].getBoundingClientRect();
+  return [r.left, r.top, r.right, r.bottom]; }"""
+
+#: Controls under the pair bar whose place a person aims at.
+BELOW = ("Click a point in any", "Leave selected pair out", "Clear all pairs")
+
+
+def test_controls_under_the_pair_bar_do_not_move_when_its_status_line_comes_and_goes(tmp_path):
+    sync_api = pytest.importorskip("playwright.sync_api", reason="the playwright package is not installed")
+    app, driver = start_sample_app(tmp_path, load_pairs_yaml(SAMPLE / "pairs.yaml")[:6])
+    try:
+        with sync_api.sync_playwright() as p:
+            tab = AnnotationTab(p, app, {"width": 1400, "height": 1000})
+            page = tab.page
+            wait_for(lambda: page.evaluate(RECT_JS, "6 pairs · mean"), "the live line")
+            wait_for(lambda: all(page.evaluate(RECT_JS, t) for t in BELOW), "the Pairs folder's controls")
+            page.wait_for_timeout(800)
+
+            def places() -> list:
+                return [page.evaluate(RECT_JS, t) for t in BELOW]
+
+            def settled(what: str) -> list:
+                page.wait_for_timeout(600)  # the page re-lays out after the text changed
+                return places()
+
+            start = places()
+            # A half pair: "Pair 7 waits for a BA click" shows in the bar; the controls stay put.
+            page.mouse.click(*tab.screen("camera", (300.0, 250.0)))
+            wait_for(lambda: "waits for a" in page_text(page), "the pending pair's status line")
+            assert settled("pending") == start
+            # Esc drops it: the line goes; the controls still stay put.
+            page.keyboard.press("Escape")
+            wait_for(lambda: app.state.pending() is None and "waits for a" not in page_text(page), "Esc to drop it")
+            assert settled("cancelled") == start
+            # A selection (as a Shift+click makes it) and "Leave selected pair out": the controls stay put.
+            first = app.state.picks[0].id
+            app.state.select(first)
+            wait_for(lambda: f"Pair {first} selected" in page_text(page), "the selection in the status line")
+            assert settled("selected") == start
+            leave = page.evaluate(RECT_JS, "Leave selected pair out")
+            page.mouse.click((leave[0] + leave[2]) / 2, (leave[1] + leave[3]) / 2)
+            wait_for(lambda: app.state.get(first).check and not app.actions.busy, "the pair to be left out")
+            assert settled("left out") == start
+            page.keyboard.press("Control+z")
+            wait_for(lambda: not app.state.get(first).check and not app.actions.busy, "Ctrl+Z to put it back")
+            assert settled("undone") == start
+    finally:
+        app.stop()
