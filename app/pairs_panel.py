@@ -395,7 +395,14 @@ class PairsPanel:
         sel = self.app.state.selected
         if sel is None:
             raise CalibError("select a pair first (shift+click its marker or use the dropdown)")
-        self.app.state.set_check(sel, not self.app.state.get(sel).check)
+        out = not self.app.state.get(sel).check
+        self.app.state.set_check(sel, out)
+        # Then the selection ends, as after a move (run 7: a left-out pair stayed selected and the next click
+        # silently moved its laser end; being left out, no figure changed).
+        self.app.state.select(None)
+        self._undo_note = (self.app.state.version, f"Pair {sel} {'left out of the fit' if out else 'put back in the fit'}"
+                                                   "; selection ended: the next click starts a new pair.")
+        self.refresh()
 
     def add_upload_button(self, client: Any) -> None:
         """This tab's own "Import pairs YAML" button, in the shared Pairs folder above "Download pairs YAML"."""
