@@ -304,7 +304,7 @@ class PairsPanel:
         def on_shift_click(event: Any) -> None:
             slot = self.app.slot_of(key)
             uv = slot.pixel_from_ray(event.ray_origin, event.ray_direction)
-            pick_id = None if uv is None else self._nearest_pick(key, uv)
+            pick_id = None if uv is None else self._nearest_pick_at(key, uv, slot, client=event.client)
             self.app.state.select(pick_id)
             if pick_id is None and uv is not None:  # run 6: a Shift+click beside a marker did nothing, silently
                 tolerance = pick_tolerance_px(slot.units_per_px, slot.units_per_px_y)

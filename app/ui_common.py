@@ -32,6 +32,9 @@ RING_MIN_RADIUS = 0.03
 RING_SEGMENTS = 20
 #: Shift+click / drag this many ring radii from a marker selects it.
 PICK_RADII = 2.5
+#: The pick-number labels' em on screen (CSS px): viser draws a screen-sized label at 12 px per em times its
+#: ``font_screen_scale`` (0.8 in :mod:`app.scene_nodes`).
+LABEL_EM_SCREEN_PX = 12.0 * 0.8
 
 
 def pick_tolerance_px(units_per_px: float, units_per_px_y: float) -> float:

@@ -48,3 +48,43 @@ def test_leaving_a_pair_out_ends_the_selection_so_the_next_click_does_not_move_i
     assert _press_leave_out(d) == [] and d.wait_idle()
     assert not app.state.get(second.id).check and app.state.selected is None
     assert f"Pair {second.id} put back in the fit; selection ended" in d.pair_status, d.pair_status
+
+
+def test_a_shift_click_on_a_markers_number_label_selects_that_pair(app, scene):
+    """Run 7: a Shift+click on the "2" label beside marker 2 said "No pair within 18 px"."""
+    d = AppDriver(app)
+    _pairs(d, app, scene, 3)
+    cam = d.tab.camera
+    # The tab zoomed out (as a person sees the whole scan): a label's few screen pixels span many image pixels.
+    cam.position = (cam.position[0], cam.position[1], cam.look_at[2] - 40.0)
+    dist = cam.look_at[2] - cam.position[2]
+    f = (cam.image_height / 2) / np.tan(cam.fov / 2)  # canvas px per world unit at the plane, times dist
+
+    def world_of_screen(x: float, y: float) -> np.ndarray:  # the inverse of FakeCamera.screen_of on the plane
+        return np.array([cam.position[0] + (x - cam.image_width / 2) * dist / f,
+                         cam.position[1] + (y - cam.image_height / 2) * dist / f, 0.0])
+
+    for key in (app.ba_keys[0], d.camera_key):
+        slot = app.slot_of(key)
+        for pick in app.state.picks:
+            name = f"/annot/labels/{key}/{pick.id}"
+            text, pos = app.nodes.drawn[name][1][1:]
+            assert text == str(pick.id)
+            # The middle of the digit: viser draws a label anchored bottom-left at its position, 9.6 CSS px per em
+            # (12 px x font_screen_scale 0.8), padded by 0.2 line heights: about 5 px right of and 8 px above it.
+            ax, ay = cam.screen_of(pos)
+            uv = tuple(slot.pixel_from_world(world_of_screen(ax + 5.0, ay - 8.0)[None])[0])
+            marker = np.array(d.marker_display_pixel(key, pick.id))
+            ring_px = np.hypot(*(np.array(uv) - marker))
+            m_reach = 2.5 * max(1.5 * max(slot.units_per_px, slot.units_per_px_y), 0.03) / slot.units_per_px
+            assert ring_px > m_reach, (key, ring_px, m_reach)  # beyond the marker's own reach
+            assert d.shift_click(key, uv) == [] and app.state.selected == pick.id, (key, pick.id, d.pair_status)
+            assert "No pair within" not in d.pair_status
+            assert d.press_pair_action("Cancel pair") == [] and app.state.selected is None
+    # Well beside every label and marker: still no pair.
+    key = app.ba_keys[0]
+    marker = np.array(d.marker_display_pixel(key, app.state.picks[0].id))
+    far = [marker + np.array(s) for s in ((-60.0, 60.0), (60.0, 60.0), (-60.0, -60.0), (60.0, -60.0))]
+    others = np.array([d.marker_display_pixel(key, p.id) for p in app.state.picks])
+    spot = max(far, key=lambda q: np.hypot(*(others - q).T).min())
+    assert d.shift_click(key, tuple(spot)) == [] and app.state.selected is None and "No pair within" in d.pair_status
