@@ -209,6 +209,7 @@ class PairBar:
         self._md_live = gui.add_markdown("", order=live_order)
         # What the app did by itself (e.g. a rough pose the person did not make): one line, kept when blank.
         self._notice = FixedLine(gui, order=live_order + 0.05)
+        self._notice_pairs: Any = None  # the pairs when the shown notice was made
         self._md_guide = gui.add_markdown("", order=guide_order)
         self._bg_guided = gui.add_button_group("Guided", GUIDED_BAR_ACTIONS, order=guide_order + 0.02, visible=False)
         self._guided_actions: dict[str, Callable] = {}
@@ -241,15 +242,24 @@ class PairBar:
         """The notice of a rough pose change the person did not make (markdown; empty if none shown)."""
         return self._notice.text
 
-    def show_pose_turn(self, turn: Any) -> None:
+    def show_pose_turn(self, turn: Any, pairs: Any = None) -> None:
         """Show the notice of rough pose change ``turn`` (:class:`app.pose_source.PoseTurn`, or None) under the live
         line, where the person looks while picking (run 6: the render rolled 2.2-3 deg after the 2nd pair with no
         word near it): e.g. "Pose refitted from 2 pairs: turned 2.6 deg".  A step by hand clears it, so does the
-        first solve (:meth:`show_live`)."""
+        first solve (:meth:`show_live`).  ``pairs``: the pairs when the pose turned (e.g. ``state.all_picks``);
+        the notice goes once they change (:meth:`pairs_changed`: run 7, it stayed after later pairs)."""
         note = "" if turn is None else turn.note()
         text = f"⚠ **{note}**: the render moved; look again before the next click." if note else ""
         with self._lock:
             self._notice.show(text)
+            self._notice_pairs = pairs
+
+    def pairs_changed(self, pairs: Any) -> None:
+        """The pairs are ``pairs`` now: a rough-pose notice made for other pairs goes (the next pair was started or
+        made, or one removed); a refit that follows the change shows its own."""
+        with self._lock:
+            if self._notice.text and self._notice_pairs is not None and pairs != self._notice_pairs:
+                self._notice.show("")
 
     @property
     def guide_status(self) -> str:

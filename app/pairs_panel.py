@@ -59,7 +59,8 @@ class PairsPanel:
         # The live solve's figures right under the buttons, guided picking's status under the pair status.
         self.bar = PairBar(gui, live_order=top - 0.75, guide_order=top - 0.45)
         self.show_guide_status = self.bar.show_guide_status  # the Guide panel's hook
-        app.pose_source.subscribe(lambda: self.bar.show_pose_turn(app.pose_source.last_turn))  # e.g. a refit
+        app.pose_source.subscribe(lambda: self.bar.show_pose_turn(  # e.g. a refit
+            app.pose_source.last_turn, app.state.all_picks))
         install_page_script(app.server, PAIR_BAR_JS)  # the bar stays in view; Delete and Ctrl+Z keys
         self._guarded_pair_action = guard(self.on_pair_action)
         self._next_pair: Callable | None = None  # guided picking's "Next pair" (set_next_pair_handler)
@@ -165,6 +166,7 @@ class PairsPanel:
                 doing = f"**Pair {selected} selected:** clicks now move its ends (Deselect to add pairs)."
                 status.append(f"Pair {selected} selected: the next click moves it (**Cancel pair** deselects).")
             self._status_line.show(" · ".join(status))
+            self.bar.pairs_changed(state.all_picks)
             self.bar.show_live(app.solve_shown())
             left_out = [f"#{p.id}" for p in complete if p.check]
             lines = [count, doing, f"Left out of the fit (check pairs): {', '.join(left_out)}." if left_out else "",

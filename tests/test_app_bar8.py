@@ -88,3 +88,39 @@ def test_a_shift_click_on_a_markers_number_label_selects_that_pair(app, scene):
     others = np.array([d.marker_display_pixel(key, p.id) for p in app.state.picks])
     spot = max(far, key=lambda q: np.hypot(*(others - q).T).min())
     assert d.shift_click(key, tuple(spot)) == [] and app.state.selected is None and "No pair within" in d.pair_status
+
+
+def test_the_refit_notice_shows_the_latest_refit_and_goes_with_the_next_pair(app, scene):
+    """Run 7: after a later refit the bar still read "Pose refitted from 2 pairs: turned 0.8 deg"."""
+    from scipy.spatial.transform import Rotation
+
+    d = AppDriver(app)
+    bar = app.pairs_panel.bar
+    made = simulate_pairs(scene, 4, np.random.default_rng(5), pixel_noise_px=0.0)
+    key = app.ba_keys[0]
+    for pair in made[:2]:
+        assert d.click_cell(key, *pair.laser_rc) == [] and d.click_camera(*pair.pixel) == []
+    assert d.wait_idle() and "Pose refitted from 2 pairs" in bar.pose_note, bar.pose_note
+    # The next pair started (its laser end clicked): the notice of the old refit goes.
+    assert d.click_cell(key, *made[2].laser_rc) == [] and d.wait_idle()
+    assert bar.pose_note == "", bar.pose_note
+    # The pair made: the bar names this refit (its turn computed here from the two poses), or nothing.
+    def latest_refit_shown(before: np.ndarray, n: int) -> None:
+        after = d.rough_pose.copy()
+        if np.allclose(before, after):
+            assert bar.pose_note == "", bar.pose_note
+        else:
+            turned = np.degrees(Rotation.from_matrix(before[:3, :3].T @ after[:3, :3]).magnitude())
+            assert f"Pose refitted from {n} pairs: turned {turned:.1f} deg" in bar.pose_note, bar.pose_note
+
+    T = d.rough_pose.copy()
+    assert d.click_camera(*made[2].pixel) == [] and d.wait_idle()
+    latest_refit_shown(T, 3)
+    # Undo takes the 3rd pair's camera end back: 2 pairs again, refitted to them (or not): the bar says which.
+    T = d.rough_pose.copy()
+    assert d.press_pair_action("Undo") == [] and d.wait_idle()
+    latest_refit_shown(T, 2)
+    # The 4th pair: the solve replaces the rough pose, and no notice stays.
+    assert d.click_camera(*made[2].pixel) == [] and d.wait_idle()
+    assert d.click_cell(key, *made[3].laser_rc) == [] and d.click_camera(*made[3].pixel) == [] and d.wait_idle()
+    assert app.result is not None and bar.pose_note == ""
