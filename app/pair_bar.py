@@ -15,7 +15,7 @@ from typing import Any, Callable, Mapping
 
 from calib_core.solve.quality import LOO_NOISY_PX, NO_ERROR_ESTIMATE, error_estimate_reason, pairs_in_fit
 
-from .ui_common import HeldQuality, _fmt
+from .ui_common import MIN_PAIRS, HeldQuality, _fmt
 
 #: Keeps the pair bar (the pair actions, the live line, the pair status, the guided line: the panel's rows above the
 #: intro) in view while the control panel scrolls: each scroll shifts those rows down by what scrolled away, over the
@@ -119,17 +119,31 @@ def undo_note(before: list, after: list) -> str:
     return f"Undone: a change of pair {b.id}."
 
 
-def live_summary(live: Any, held: HeldQuality | None = None) -> str:
+def live_summary(live: Any, held: HeldQuality | None = None, fitted: bool = False) -> str:
     """``"N pairs · mean X px · left out Y px (warning above L) · Quality: ok"`` (markdown) of the solve
-    ``live.bundle`` shows (``live``: a :class:`app.ui_common.SolveShown`), or "" before the first solve.  N is the
-    pairs in the fit; with too few for an error figure the mean says so.  With ``held`` the status has hysteresis
-    on the left-out limit (:class:`app.ui_common.HeldQuality`; "(held, near the limit)" says so)."""
+    ``live.bundle`` shows (``live``: a :class:`app.ui_common.SolveShown`).  N is the pairs in the fit; with too few
+    for an error figure the mean says so.  With ``held`` the status has hysteresis on the left-out limit
+    (:class:`app.ui_common.HeldQuality`; "(held, near the limit)" says so).
+
+    Before the first solve, the pairs so far and how many more the solve needs, e.g. "2 pairs · rough pose turned
+    to fit them · 2 more to solve" (``fitted``: the rough pose was turned to fit these pairs; run 7: with 1-3 pairs
+    the line showed nothing)."""
     bundle = getattr(live, "bundle", None)
     r = getattr(bundle, "result", None)
     if r is None:
         if held is not None:
             held.status(None)  # a new start: the next verdict is shown plain
-        return ""
+        n = int(getattr(live, "n_complete", 0) or 0)
+        parts = [f"{n} pair{'' if n == 1 else 's'}"]
+        if fitted and n:
+            parts.append("rough pose turned to fit them")
+        if n < MIN_PAIRS:
+            parts.append(f"{MIN_PAIRS - n} more to solve")
+        elif getattr(live, "solving", False):
+            parts.append("solving…")
+        else:
+            parts.append("no solve (see Calibration)")
+        return f"**{parts[0]}** · " + " · ".join(parts[1:])
     n_fit = pairs_in_fit(r)
     quality = getattr(r, "quality", None)
     status = str(getattr(quality, "status", "ok"))
@@ -266,10 +280,11 @@ class PairBar:
         """Guided picking's status (markdown; empty while no guided session runs)."""
         return str(self._md_guide.content)
 
-    def show_live(self, live: Any) -> None:
-        """Show :func:`live_summary` of what the live solve shows (``live``: :class:`app.ui_common.SolveShown`)."""
+    def show_live(self, live: Any, fitted: bool = False) -> None:
+        """Show :func:`live_summary` of what the live solve shows (``live``: :class:`app.ui_common.SolveShown`;
+        ``fitted``: the rough pose was turned to fit the pairs so far)."""
         with self._lock:
-            text = live_summary(live, self._held)
+            text = live_summary(live, self._held, fitted)
             if self._md_live.content != text:
                 self._md_live.content = text
             if getattr(live, "bundle", None) is not None and self._notice.text:

@@ -167,7 +167,8 @@ class PairsPanel:
                 status.append(f"Pair {selected} selected: the next click moves it (**Cancel pair** deselects).")
             self._status_line.show(" · ".join(status))
             self.bar.pairs_changed(state.all_picks)
-            self.bar.show_live(app.solve_shown())
+            turn = app.pose_source.last_turn  # its reason names the pairs a refit fitted (app.align_panel)
+            self.bar.show_live(app.solve_shown(), fitted=getattr(turn, "why", "") == f"refitted from {total} pairs")
             left_out = [f"#{p.id}" for p in complete if p.check]
             lines = [count, doing, f"Left out of the fit (check pairs): {', '.join(left_out)}." if left_out else "",
                      f"Pick {MIN_PAIRS - total} more to calibrate." if total < MIN_PAIRS else "",

@@ -124,3 +124,23 @@ def test_the_refit_notice_shows_the_latest_refit_and_goes_with_the_next_pair(app
     assert d.click_camera(*made[2].pixel) == [] and d.wait_idle()
     assert d.click_cell(key, *made[3].laser_rc) == [] and d.click_camera(*made[3].pixel) == [] and d.wait_idle()
     assert app.result is not None and bar.pose_note == ""
+
+
+def test_the_live_line_counts_the_pairs_before_the_first_solve(app, scene):
+    """Run 7: with 1-3 pairs the live line showed nothing."""
+    d = AppDriver(app)
+    bar = app.pairs_panel.bar
+    assert d.wait_idle() and bar.live_line.replace("*", "") == "0 pairs · 4 more to solve", bar.live_line
+    made = simulate_pairs(scene, 4, np.random.default_rng(5), pixel_noise_px=0.0)
+    key = app.ba_keys[0]
+    for n, pair in enumerate(made[:3], start=1):
+        before = d.rough_pose
+        assert d.click_cell(key, *pair.laser_rc) == [] and d.click_camera(*pair.pixel) == [] and d.wait_idle()
+        after = d.rough_pose  # refitted to these pairs when it changed
+        turned = after is not None and (before is None or not np.allclose(before, after))
+        want = [f"{n} pair{'s' if n > 1 else ''}"] + (["rough pose turned to fit them"] if turned else []) + [
+            f"{4 - n} more to solve"]
+        assert bar.live_line.replace("*", "") == " · ".join(want), (n, bar.live_line)
+    assert n == 3 and "rough pose turned to fit them" in bar.live_line  # 2-3 pairs turn it (issue 20)
+    assert d.click_cell(key, *made[3].laser_rc) == [] and d.click_camera(*made[3].pixel) == [] and d.wait_idle()
+    assert app.result is not None and "4 pairs · mean" in bar.live_line and "more to solve" not in bar.live_line
