@@ -225,6 +225,7 @@ class PairBar:
         self._notice = FixedLine(gui, order=live_order + 0.05)
         self._notice_pairs: Any = None  # the pairs when the shown notice was made
         self._md_guide = gui.add_markdown("", order=guide_order)
+        self._guide_text = ""  # the guided line's markdown as shown (without the one-line markup)
         self._bg_guided = gui.add_button_group("Guided", GUIDED_BAR_ACTIONS, order=guide_order + 0.02, visible=False)
         self._guided_actions: dict[str, Callable] = {}
         self.guided_action_callback = self._on_guided_action
@@ -278,7 +279,7 @@ class PairBar:
     @property
     def guide_status(self) -> str:
         """Guided picking's status (markdown; empty while no guided session runs)."""
-        return str(self._md_guide.content)
+        return self._guide_text
 
     def show_live(self, live: Any, fitted: bool = False) -> None:
         """Show :func:`live_summary` of what the live solve shows (``live``: :class:`app.ui_common.SolveShown`;
@@ -298,11 +299,12 @@ class PairBar:
         handler of its button (a viser click callback) for :data:`GUIDED_BAR_ACTIONS`, given while a proposal is
         shown; the bar shows those buttons then and hides them otherwise.  Called by the Guide panel from any
         thread."""
-        text = ("**Guided:** " + "  \n".join(lines)) if guiding and lines else ""
+        text = ("**Guided:** " + " ".join(lines)) if guiding and lines else ""
         shown = {k: v for k, v in (actions or {}).items() if k in GUIDED_BAR_ACTIONS} if guiding else {}
         with self._lock:
-            if self._md_guide.content != text:
-                self._md_guide.content = text
+            if self._guide_text != text:  # one line, ellipsised when long (the whole of it in its hover title)
+                self._guide_text = text
+                self._md_guide.content = one_line_markdown(text) if text else ""
             self._guided_actions = shown
             if bool(self._bg_guided.visible) != bool(shown):
                 self._bg_guided.visible = bool(shown)

@@ -144,3 +144,29 @@ def test_the_live_line_counts_the_pairs_before_the_first_solve(app, scene):
     assert n == 3 and "rough pose turned to fit them" in bar.live_line  # 2-3 pairs turn it (issue 20)
     assert d.click_cell(key, *made[3].laser_rc) == [] and d.click_camera(*made[3].pixel) == [] and d.wait_idle()
     assert app.result is not None and "4 pairs · mean" in bar.live_line and "more to solve" not in bar.live_line
+
+
+def test_the_bar_gives_guided_pickings_reason_when_it_has_no_proposal(app, scene):
+    """Run 7: the bar said only "Guided: no proposal; see Guided picking"; the reason was a long scroll away."""
+    import re
+
+    from calib_core.guide.evidence import ProposalScreen
+
+    d = AppDriver(app)
+    _pairs(d, app, scene, 4)
+    app.guide.screen = ProposalScreen(max_range_m=0.5, max_ellipse_px=app.guide.screen.max_ellipse_px)  # none passes
+    assert d.press_pair_action("Next pair") == [] and d.wait_guide()
+    for _ in range(12):  # the re-clicks of the 4 pairs, each skipped for good
+        if d.guide_proposal is None:
+            break
+        assert d.press_guide("Skip") == [] and d.wait_guide()
+    assert d.guide_proposal is None
+    # The Guided folder's reason, with its count of candidates left out (the folder's own full text) ...
+    m = re.search(r"No new corner passes the checks here \((\d+) candidates? left out: most for (\w+)\); go on by hand",
+                  d.guide_panel.replace("\\", ""))
+    assert m and int(m.group(1)) > 0, d.guide_panel
+    # ... is in the pair bar's one line.
+    bar = app.pairs_panel.bar.guide_status
+    assert "\n" not in bar and bar.replace("\\", "") == (
+        f"**Guided:** no new corner passes the checks here ({m.group(1)} candidate{'s' if int(m.group(1)) != 1 else ''}"
+        f" left out: most for {m.group(2)}); go on by hand"), bar
