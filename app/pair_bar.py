@@ -15,7 +15,7 @@ from typing import Any, Callable, Mapping
 
 from calib_core.solve.quality import LOO_NOISY_PX, NO_ERROR_ESTIMATE, error_estimate_reason, pairs_in_fit
 
-from .ui_common import MIN_PAIRS, HeldQuality, _fmt
+from .ui_common import MIN_PAIRS, HeldQuality, _fmt, outlier_change_note
 
 #: Keeps the pair bar (the pair actions, the live line, the pair status, the guided line: the panel's rows above the
 #: intro) in view while the control panel scrolls: each scroll shifts those rows down by what scrolled away, over the
@@ -224,6 +224,10 @@ class PairBar:
         # What the app did by itself (e.g. a rough pose the person did not make): one line, kept when blank.
         self._notice = FixedLine(gui, order=live_order + 0.05)
         self._notice_pairs: Any = None  # the pairs when the shown notice was made
+        self._notice_kind = ""  # what the notice line shows: "pose", "outliers" or "" (blank)
+        self._pairs_now: Any = None  # the pairs as last told (pairs_changed)
+        self._bundle_seen: Any = None  # the last solve shown, and the pairs it left out as outliers
+        self._outliers_seen: list[int] = []
         self._md_guide = gui.add_markdown("", order=guide_order)
         self._guide_text = ""  # the guided line's markdown as shown (without the one-line markup)
         self._bg_guided = gui.add_button_group("Guided", GUIDED_BAR_ACTIONS, order=guide_order + 0.02, visible=False)
@@ -255,7 +259,17 @@ class PairBar:
     @property
     def pose_note(self) -> str:
         """The notice of a rough pose change the person did not make (markdown; empty if none shown)."""
-        return self._notice.text
+        return self._notice.text if self._notice_kind == "pose" else ""
+
+    @property
+    def outlier_note(self) -> str:
+        """The notice that the last solve changed which pairs it left out as outliers (markdown; empty if none)."""
+        return self._notice.text if self._notice_kind == "outliers" else ""
+
+    def _show_notice(self, kind: str, text: str, pairs: Any) -> None:
+        """The notice line (under the lock): ``text`` of ``kind`` ("pose", "outliers"), made for ``pairs``."""
+        self._notice.show(text)
+        self._notice_kind, self._notice_pairs = (kind if text else ""), pairs
 
     def show_pose_turn(self, turn: Any, pairs: Any = None) -> None:
         """Show the notice of rough pose change ``turn`` (:class:`app.pose_source.PoseTurn`, or None) under the live
@@ -266,15 +280,15 @@ class PairBar:
         note = "" if turn is None else turn.note()
         text = f"⚠ **{note}**: the render moved; look again before the next click." if note else ""
         with self._lock:
-            self._notice.show(text)
-            self._notice_pairs = pairs
+            self._show_notice("pose", text, pairs)
 
     def pairs_changed(self, pairs: Any) -> None:
         """The pairs are ``pairs`` now: a rough-pose notice made for other pairs goes (the next pair was started or
         made, or one removed); a refit that follows the change shows its own."""
         with self._lock:
+            self._pairs_now = pairs
             if self._notice.text and self._notice_pairs is not None and pairs != self._notice_pairs:
-                self._notice.show("")
+                self._show_notice("", "", None)
 
     @property
     def guide_status(self) -> str:
@@ -288,8 +302,18 @@ class PairBar:
             text = live_summary(live, self._held, fitted)
             if self._md_live.content != text:
                 self._md_live.content = text
-            if getattr(live, "bundle", None) is not None and self._notice.text:
-                self._notice.show("")  # the page shows the solve now, not the rough pose
+            bundle = getattr(live, "bundle", None)
+            if bundle is not None and self._notice_kind == "pose":
+                self._show_notice("", "", None)  # the page shows the solve now, not the rough pose
+            if bundle is not None and bundle is not self._bundle_seen:
+                # Run 7: outlier exclusion "flipped between pairs" (pair 2 left out at 6 pairs, back in at 7 with
+                # pair 3 out) with no word: say so when the set changes.
+                self._bundle_seen = bundle
+                now = [int(i) for i in getattr(bundle.result, "outlier_ids", [])]
+                note = outlier_change_note(self._outliers_seen, now, [int(i) for i in bundle.pick_ids])
+                self._outliers_seen = now
+                if note:
+                    self._show_notice("outliers", f"⚠ {note}", self._pairs_now)
 
     def show_guide_status(self, guiding: bool, lines: list[str],
                           actions: Mapping[str, Callable] | None = None) -> None:

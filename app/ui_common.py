@@ -210,3 +210,21 @@ class _Action:
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self.event, name)
+
+
+def outlier_change_note(before: list[int], after: list[int], in_solve: list[int]) -> str:
+    """What changed in the pairs a solve left out as outliers, from the ids ``before`` to ``after`` (``in_solve``:
+    the ids of the pairs the new solve had; a pair deleted meanwhile is not "back in"), e.g. "Pair 3 now left out
+    as an outlier; pair 2 back in the fit."; "" when nothing changed."""
+    out = sorted(set(after) - set(before))
+    back = sorted((set(before) - set(after)) & set(in_solve))
+
+    def ids(values: list[int]) -> str:
+        return f"pair{'s' if len(values) > 1 else ''} {', '.join(map(str, values))}"
+
+    parts = ([f"{ids(out)} now left out as {'outliers' if len(out) > 1 else 'an outlier'}"] if out else []) + (
+        [f"{ids(back)} back in the fit"] if back else [])
+    if not parts:
+        return ""
+    text = "; ".join(parts)
+    return text[0].upper() + text[1:] + "."

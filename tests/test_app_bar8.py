@@ -170,3 +170,54 @@ def test_the_bar_gives_guided_pickings_reason_when_it_has_no_proposal(app, scene
     assert "\n" not in bar and bar.replace("\\", "") == (
         f"**Guided:** no new corner passes the checks here ({m.group(1)} candidate{'s' if int(m.group(1)) != 1 else ''}"
         f" left out: most for {m.group(2)}); go on by hand"), bar
+
+
+def test_the_bar_says_when_the_pairs_left_out_as_outliers_change(app, scene):
+    """Run 7: at 6 pairs pair 2 was left out as an outlier; adding pair 7 put it back and left out pair 3, unsaid."""
+    d = AppDriver(app)
+    bar = app.pairs_panel.bar
+    key = app.ba_keys[0]
+    made = simulate_pairs(scene, 9, np.random.default_rng(11), pixel_noise_px=0.3)
+    for pair in made[:6]:
+        assert d.click_cell(key, *pair.laser_rc) == [] and d.click_camera(*pair.pixel) == []
+    assert d.wait_idle() and list(app.result.outlier_ids) == [] and bar.outlier_note == ""
+
+    def add(pair, off_px: float) -> int:
+        assert d.click_cell(key, *pair.laser_rc) == [] and d.click_camera(pair.pixel[0] + off_px, pair.pixel[1]) == []
+        assert d.wait_idle()
+        return app.state.picks[-1].id
+
+    bad = add(made[6], 60.0)  # a click 60 px off: a gross outlier
+    assert list(app.result.outlier_ids) == [bad], app.result.outlier_ids
+    assert f"Pair {bad} now left out as an outlier." in bar.outlier_note, bar.outlier_note
+    # It goes with the next pair started.
+    assert d.click_cell(key, *made[7].laser_rc) == [] and d.wait_idle() and bar.outlier_note == ""
+    assert d.press_pair_action("Cancel pair") == [] and d.wait_idle()
+    # Pair `bad` re-clicked where it belongs (selected, then its camera end moved): back in the fit.
+    app.state.select(bad)
+    assert d.click_camera(*made[6].pixel) == [] and d.wait_idle()
+    assert list(app.result.outlier_ids) == [] and f"Pair {bad} back in the fit." in bar.outlier_note, bar.outlier_note
+    assert f"Changed with this solve: Pair {bad} back in the fit." in app.calibration_panel.result_text
+    # Two more pairs, one of them 60 px off: only it is named.
+    add(made[7], 0.0)
+    assert list(app.result.outlier_ids) == [] and bar.outlier_note == ""  # nothing changed: nothing said
+    second = add(made[8], -60.0)
+    assert list(app.result.outlier_ids) == [second], app.result.outlier_ids
+    assert bar.outlier_note.endswith(f"Pair {second} now left out as an outlier."), bar.outlier_note
+    assert f"Left out of the fit: pair {second}  \nChanged with this solve: Pair {second} now left out as an outlier." \
+        in app.calibration_panel.result_text
+    # Deleting the outlier: it is not "back in".
+    app.state.select(second)
+    assert d.press_edit("Delete") == [] and d.wait_idle()
+    assert list(app.result.outlier_ids) == [] and "back in" not in bar.outlier_note
+
+
+def test_the_outlier_change_note_names_who_went_out_and_who_came_back():
+    """The run-7 case in words: pair 2 was out; with pair 7 pair 3 went out and pair 2 came back."""
+    from app.ui_common import outlier_change_note
+
+    assert outlier_change_note([2], [3], [1, 2, 3, 4, 5, 6, 7]) == "Pair 3 now left out as an outlier; pair 2 back in the fit."
+    assert outlier_change_note([], [3, 5], [3, 5, 6]) == "Pairs 3, 5 now left out as outliers."
+    assert outlier_change_note([2, 4], [], [2, 4]) == "Pairs 2, 4 back in the fit."
+    assert outlier_change_note([2], [], [1, 3]) == ""  # pair 2 deleted: not back in
+    assert outlier_change_note([2], [2], [1, 2]) == ""
