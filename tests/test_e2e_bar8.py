@@ -69,3 +69,62 @@ def test_controls_under_the_pair_bar_do_not_move_when_its_status_line_comes_and_
             assert settled("undone") == start
     finally:
         app.stop()
+
+
+def test_a_real_shift_click_on_a_markers_number_label_selects_its_pair(tmp_path):
+    """Run 7: a Shift+click on the "2" label beside marker 2 said "No pair within 18 px".  The label's place is
+    found in the page's pixels (they change where it is drawn when "Hide marks" hides it), not from the app."""
+    import io
+
+    import numpy as np
+    from PIL import Image
+
+    from app.ui_common import pick_tolerance_px
+    from browser_helpers import screen_rect
+
+    sync_api = pytest.importorskip("playwright.sync_api", reason="the playwright package is not installed")
+    app, driver = start_sample_app(tmp_path, load_pairs_yaml(SAMPLE / "pairs.yaml")[:6])
+    try:
+        with sync_api.sync_playwright() as p:
+            tab = AnnotationTab(p, app, {"width": 1400, "height": 1000})
+            page = tab.page
+            client = app.server.get_clients()[tab.cid]
+            key = driver.camera_key
+            pick = app.state.picks[1]
+            name = f"/annot/labels/{key}/{pick.id}"
+            wait_for(lambda: name in driver.drawn_labels(), "the pair's number label")
+            pos = app.nodes.drawn[name][1][2]
+            ax, ay = screen_rect(client.camera, tab.box, (pos[0], pos[1], pos[0], pos[1]))[:2]  # the label's anchor
+            clip = {"x": ax - 4, "y": ay - 24, "width": 30, "height": 28}  # around it, up and right
+
+            def grab() -> np.ndarray:
+                return np.asarray(Image.open(io.BytesIO(page.screenshot(clip=clip))).convert("L"), dtype=float)
+
+            page.wait_for_timeout(800)
+            shown = grab()
+            app.state.set_view(hide_marks=True)  # as the "Hide marks" box does
+            wait_for(lambda: name not in driver.drawn_labels(), "the marks to be hidden")
+            page.wait_for_timeout(800)
+            hidden = grab()
+            app.state.set_view(hide_marks=False)
+            wait_for(lambda: name in driver.drawn_labels(), "the marks to be back")
+            # Where the label is drawn: the pixels that differ with the marks hidden, right of the anchor (the
+            # marker's ring passes the anchor's lower left; the label lies up and right of it).
+            differs = np.abs(shown - hidden) > 40
+            ys, xs = np.nonzero(differs[:, 6:])
+            assert len(xs) > 10, "no label drawn up and right of its anchor"
+            gx, gy = clip["x"] + 6 + float(np.median(xs)), clip["y"] + float(np.median(ys))
+            # That spot is beyond the marker's own reach (the ring test alone finds no pair there).
+            marker = np.array(tab.screen("camera", pick.pixel))
+            x0, y0, x1, _ = screen_rect(client.camera, tab.box, (0.0, 0.0, 1.0, 0.0))
+            slot = app.slot_of(key)
+            display_px = np.hypot(gx - marker[0], gy - marker[1]) / (x1 - x0) / slot.units_per_px
+            assert display_px > pick_tolerance_px(slot.units_per_px, slot.units_per_px_y), display_px
+            page.wait_for_timeout(800)
+            page.keyboard.down("Shift")
+            page.mouse.click(gx, gy)
+            page.keyboard.up("Shift")
+            wait_for(lambda: app.state.selected == pick.id, f"the Shift+click on label {pick.id} to select its pair")
+            assert "No pair within" not in page_text(page)
+    finally:
+        app.stop()
