@@ -12,7 +12,7 @@ import numpy as np
 from calib_core.solve.quality import NO_ERROR_ESTIMATE, error_estimate_reason, pairs_in_fit
 from calib_core.transforms import rpy_deg_from_R, viewing_direction
 
-from .ui_common import MIN_PAIRS, QUALITY_BADGES, HeldQuality, SolveBundle, SolveShown, md_escape, _fmt
+from .ui_common import MIN_PAIRS, QUALITY_BADGES, HeldQuality, SolveBundle, SolveShown, md_escape, _fmt, outlier_change_note
 
 #: The characters the panel may show besides printable ASCII: ones every sans-serif font of the page's
 #: stack has (Arial / Liberation Sans, Roboto, Helvetica, DejaVu Sans).
@@ -33,6 +33,8 @@ class CalibrationPanel:
             self.md_result = gui.add_markdown("")
             self.md_table = gui.add_markdown("")
         self._held = HeldQuality()  # the verdict shown, with hysteresis on the left-out limit (display only)
+        # The last solve shown, the outliers it left out, and what changed in them with it (run 7: "flips").
+        self._outliers_of: tuple[Any, list[int], str] = (None, [], "")
 
     @property
     def result_text(self) -> str:
@@ -79,8 +81,13 @@ class CalibrationPanel:
         for reason in reasons:
             out.append(f"• {md_escape(reason)}")
         excluded = [int(i) for i in getattr(r, "outlier_ids", [])]
+        if bundle is not self._outliers_of[0]:
+            self._outliers_of = (bundle, excluded, outlier_change_note(self._outliers_of[1], excluded,
+                                                                       [int(i) for i in bundle.pick_ids]))
         if excluded:
             out.append("Left out of the fit: pair " + ", ".join(str(i) for i in excluded))
+        if self._outliers_of[2]:
+            out.append(f"Changed with this solve: {self._outliers_of[2]}")
         checks = [int(i) for i in getattr(r, "check_ids", [])]
         if checks:
             out.append("Check pairs (not in the fit, see Verify): " + ", ".join(str(i) for i in checks))

@@ -16,6 +16,7 @@ from typing import Any, Callable
 from calib_core.errors import CalibError
 
 from .guide_support import ShotGuide
+from .ui_common import md_escape
 
 
 class GuideShotsMixin:
@@ -140,12 +141,12 @@ class GuideShotsMixin:
         full text stays in the Guided picking folder (run 6: the bar grew to about 300 px with it)."""
         if not active or unreliable is not None or self._error is not None:
             return ("not offered while the calibration is UNRELIABLE" if active and unreliable is not None
-                    else "see Guided picking")
+                    else f"proposals failed: {md_escape(self._error)}" if active else "see Guided picking")
         if busy:
             return "computing proposals…"
-        if not props:
-            return ("no new corner passes; go on by hand" if str(self._reason or "").startswith("No new")
-                    else "no proposal; see Guided picking")
+        if not props:  # the reason itself (run 7: "no proposal; see Guided picking" sent the person scrolling)
+            reason = md_escape(self._reason or "none left")
+            return reason[0].lower() + reason[1:] if reason.startswith("No new") else f"no proposal: {reason}"
         if self._spent:
             return "no other proposal left; go on by hand"
         p, rid, half = props[index], self._reclick_id(props[index]), self.state.pending()

@@ -5,6 +5,7 @@
 from __future__ import annotations
 
 import contextlib
+import math
 from typing import Any, Callable, Iterator
 
 import numpy as np
@@ -12,7 +13,7 @@ import numpy as np
 
 from .layout import ImageSlot
 from .state import Pick
-from .ui_common import MARKER_SIZE, PICK_RADII, RING_CELLS, RING_MIN_RADIUS, EDGE_MIN_SIZE, marker_segments
+from .ui_common import LABEL_EM_SCREEN_PX, MARKER_SIZE, PICK_RADII, RING_CELLS, RING_MIN_RADIUS, EDGE_MIN_SIZE, marker_segments
 
 
 class OverlayDrawing:
@@ -165,16 +166,45 @@ class OverlayDrawing:
         self._marker_cache[key] = (inputs, labels)
         return labels
 
-    def nearest_pick(self, key: str, uv: tuple[float, float], slot: ImageSlot) -> int | None:
+    def nearest_pick(self, key: str, uv: tuple[float, float], slot: ImageSlot, client: Any = None) -> int | None:
         """The pair whose end marker on slot ``key`` (placed at ``slot``) is nearest display pixel ``uv``, if within
-        :data:`app.ui_common.PICK_RADII` ring radii; else None."""
+        :data:`app.ui_common.PICK_RADII` ring radii; else the pair whose number label, as tab ``client`` draws it
+        (its camera gives the label's size), holds ``uv`` (run 7: a Shift+click on the "2" label found no pair);
+        else None."""
         ids, ends = self.pick_ends(key)
         if not ids:
             return None
         delta = ends - np.asarray(uv, dtype=np.float64)
         d = np.hypot(delta[:, 0] * slot.units_per_px, delta[:, 1] * slot.units_per_px_y)  # world units
         k = int(np.argmin(d))
-        return ids[k] if d[k] <= PICK_RADII * self.ring_radius(slot) else None
+        if d[k] <= PICK_RADII * self.ring_radius(slot):
+            return ids[k]
+        return self._label_under(key, uv, slot, client)
+
+    def _label_under(self, key: str, uv: tuple[float, float], slot: ImageSlot, client: Any) -> int | None:
+        """The pair whose number label drawn on slot ``key`` covers display pixel ``uv`` in tab ``client``.
+
+        The labels keep a constant size on screen (:data:`app.ui_common.LABEL_EM_SCREEN_PX` per em); their box
+        starts at the label's anchor and goes right and up the screen (world -y: the annotation camera's up)."""
+        units = _units_per_screen_px(getattr(client, "camera", None))
+        cached = self._marker_cache.get(key)
+        if units is None or cached is None or not cached[1]:
+            return None
+        names = list(cached[1])
+        text_len = np.array([len(cached[1][n][0]) for n in names], np.float64)
+        anchors = np.array([cached[1][n][1][:2] for n in names], np.float64)
+        em = LABEL_EM_SCREEN_PX * units  # world units
+        margin = 2.0 * units  # a click on the label's edge counts
+        width = (0.65 * text_len + 0.4) * em
+        height = 1.6 * em
+        x, y = slot.world_from_pixel(np.asarray(uv, np.float64).reshape(1, 2))[0, :2]
+        inside = ((x >= anchors[:, 0] - margin) & (x <= anchors[:, 0] + width + margin)
+                  & (y <= anchors[:, 1] + margin) & (y >= anchors[:, 1] - height - margin))
+        if not inside.any():
+            return None
+        hit = np.flatnonzero(inside)
+        best = hit[int(np.argmin(np.hypot(*(anchors[hit] - [x, y]).T)))]
+        return int(names[best].rsplit("/", 1)[1])
 
     @staticmethod
     def ring_radius(slot: ImageSlot) -> float:
@@ -263,3 +293,14 @@ def edge_dot_size(units_per_px: float) -> float:
     :data:`EDGE_MIN_SIZE` world units (one pixel of a 1920 px photo is too small to see in the full view) but at
     most :data:`EDGE_MAX_PX` pixels."""
     return max(units_per_px * 1.6, min(EDGE_MIN_SIZE, units_per_px * EDGE_MAX_PX))
+
+
+def _units_per_screen_px(camera: Any) -> float | None:
+    """World units per canvas pixel on the annotation plane for a tab's ``camera`` (looking along +z at it), or
+    None when it has not reported one."""
+    try:
+        dist = abs(float(camera.look_at[2]) - float(camera.position[2]))
+        units = 2.0 * dist * math.tan(float(camera.fov) / 2.0) / max(int(camera.image_height), 1)
+    except (AssertionError, AttributeError, TypeError, ValueError):
+        return None
+    return units if math.isfinite(units) and units > 0.0 else None

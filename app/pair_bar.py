@@ -8,12 +8,14 @@ published (:class:`app.ui_common.SolveBundle`), the guided text is the Guide pan
 
 from __future__ import annotations
 
+import html
+import re
 import threading
 from typing import Any, Callable, Mapping
 
 from calib_core.solve.quality import LOO_NOISY_PX, NO_ERROR_ESTIMATE, error_estimate_reason, pairs_in_fit
 
-from .ui_common import HeldQuality, _fmt
+from .ui_common import MIN_PAIRS, HeldQuality, _fmt, outlier_change_note
 
 #: Keeps the pair bar (the pair actions, the live line, the pair status, the guided line: the panel's rows above the
 #: intro) in view while the control panel scrolls: each scroll shifts those rows down by what scrolled away, over the
@@ -117,17 +119,31 @@ def undo_note(before: list, after: list) -> str:
     return f"Undone: a change of pair {b.id}."
 
 
-def live_summary(live: Any, held: HeldQuality | None = None) -> str:
+def live_summary(live: Any, held: HeldQuality | None = None, fitted: bool = False) -> str:
     """``"N pairs · mean X px · left out Y px (warning above L) · Quality: ok"`` (markdown) of the solve
-    ``live.bundle`` shows (``live``: a :class:`app.ui_common.SolveShown`), or "" before the first solve.  N is the
-    pairs in the fit; with too few for an error figure the mean says so.  With ``held`` the status has hysteresis
-    on the left-out limit (:class:`app.ui_common.HeldQuality`; "(held, near the limit)" says so)."""
+    ``live.bundle`` shows (``live``: a :class:`app.ui_common.SolveShown`).  N is the pairs in the fit; with too few
+    for an error figure the mean says so.  With ``held`` the status has hysteresis on the left-out limit
+    (:class:`app.ui_common.HeldQuality`; "(held, near the limit)" says so).
+
+    Before the first solve, the pairs so far and how many more the solve needs, e.g. "2 pairs · rough pose turned
+    to fit them · 2 more to solve" (``fitted``: the rough pose was turned to fit these pairs; run 7: with 1-3 pairs
+    the line showed nothing)."""
     bundle = getattr(live, "bundle", None)
     r = getattr(bundle, "result", None)
     if r is None:
         if held is not None:
             held.status(None)  # a new start: the next verdict is shown plain
-        return ""
+        n = int(getattr(live, "n_complete", 0) or 0)
+        parts = [f"{n} pair{'' if n == 1 else 's'}"]
+        if fitted and n:
+            parts.append("rough pose turned to fit them")
+        if n < MIN_PAIRS:
+            parts.append(f"{MIN_PAIRS - n} more to solve")
+        elif getattr(live, "solving", False):
+            parts.append("solving…")
+        else:
+            parts.append("no solve (see Calibration)")
+        return f"**{parts[0]}** · " + " · ".join(parts[1:])
     n_fit = pairs_in_fit(r)
     quality = getattr(r, "quality", None)
     status = str(getattr(quality, "status", "ok"))
@@ -146,6 +162,41 @@ def live_summary(live: Any, held: HeldQuality | None = None) -> str:
     shown = ("UNRELIABLE" if status == "unreliable" else status) + (" (held, near the limit)" if note else "")
     solving = " · solving…" if getattr(live, "solving", False) else ""
     return f"**{n_fit} pairs · {errors} · Quality: {shown}**{solving}"
+
+
+#: One line of constant height: a block that never wraps, ellipsised when longer than the panel is wide (the
+#: whole text in its hover title).  Fixed markup; the text inside is the app's own (no user strings).
+_ONE_LINE = ('<span style="display:block;white-space:nowrap;overflow:hidden;text-overflow:ellipsis" '
+             'title="{title}">{text}</span>')
+
+
+def one_line_markdown(text: str) -> str:
+    """``text`` (one line of markdown, app text only) as a line of constant height: blank when ``text`` is empty,
+    so that the line keeps its place (run 7: the panel's controls jumped about 18 px as a status line came and
+    went, and clicks aimed at them landed on nothing)."""
+    plain = re.sub(r"\\(.)", r"\1", text.replace("**", ""))
+    return _ONE_LINE.format(title=html.escape(plain, quote=True), text=text if text else "&nbsp;")
+
+
+class FixedLine:
+    """A markdown line of the pair bar that keeps its height whether it shows something or not
+    (:func:`one_line_markdown`).  Not locked: the owner updates it under its own lock."""
+
+    def __init__(self, gui: Any, order: float) -> None:
+        self._text = ""
+        self._md = gui.add_markdown(one_line_markdown(""), order=order)
+
+    @property
+    def text(self) -> str:
+        """The markdown shown ("" when blank)."""
+        return self._text
+
+    def show(self, text: str) -> None:
+        """Show ``text`` (one line of markdown: no line breaks), or a blank line for ""."""
+        text = " ".join(text.split("  \n"))
+        if text != self._text:
+            self._text = text
+            self._md.content = one_line_markdown(text)
 
 
 #: Guided picking's actions the bar repeats while a proposal is shown (run 6: the person scrolled to the Guided
@@ -170,8 +221,15 @@ class PairBar:
 
     def __init__(self, gui: Any, live_order: float, guide_order: float) -> None:
         self._md_live = gui.add_markdown("", order=live_order)
-        self._md_pose = gui.add_markdown("", order=live_order + 0.05)  # a rough pose the person did not make
+        # What the app did by itself (e.g. a rough pose the person did not make): one line, kept when blank.
+        self._notice = FixedLine(gui, order=live_order + 0.05)
+        self._notice_pairs: Any = None  # the pairs when the shown notice was made
+        self._notice_kind = ""  # what the notice line shows: "pose", "outliers" or "" (blank)
+        self._pairs_now: Any = None  # the pairs as last told (pairs_changed)
+        self._bundle_seen: Any = None  # the last solve shown, and the pairs it left out as outliers
+        self._outliers_seen: list[int] = []
         self._md_guide = gui.add_markdown("", order=guide_order)
+        self._guide_text = ""  # the guided line's markdown as shown (without the one-line markup)
         self._bg_guided = gui.add_button_group("Guided", GUIDED_BAR_ACTIONS, order=guide_order + 0.02, visible=False)
         self._guided_actions: dict[str, Callable] = {}
         self.guided_action_callback = self._on_guided_action
@@ -201,32 +259,61 @@ class PairBar:
     @property
     def pose_note(self) -> str:
         """The notice of a rough pose change the person did not make (markdown; empty if none shown)."""
-        return str(self._md_pose.content)
+        return self._notice.text if self._notice_kind == "pose" else ""
 
-    def show_pose_turn(self, turn: Any) -> None:
+    @property
+    def outlier_note(self) -> str:
+        """The notice that the last solve changed which pairs it left out as outliers (markdown; empty if none)."""
+        return self._notice.text if self._notice_kind == "outliers" else ""
+
+    def _show_notice(self, kind: str, text: str, pairs: Any) -> None:
+        """The notice line (under the lock): ``text`` of ``kind`` ("pose", "outliers"), made for ``pairs``."""
+        self._notice.show(text)
+        self._notice_kind, self._notice_pairs = (kind if text else ""), pairs
+
+    def show_pose_turn(self, turn: Any, pairs: Any = None) -> None:
         """Show the notice of rough pose change ``turn`` (:class:`app.pose_source.PoseTurn`, or None) under the live
         line, where the person looks while picking (run 6: the render rolled 2.2-3 deg after the 2nd pair with no
         word near it): e.g. "Pose refitted from 2 pairs: turned 2.6 deg".  A step by hand clears it, so does the
-        first solve (:meth:`show_live`)."""
+        first solve (:meth:`show_live`).  ``pairs``: the pairs when the pose turned (e.g. ``state.all_picks``);
+        the notice goes once they change (:meth:`pairs_changed`: run 7, it stayed after later pairs)."""
         note = "" if turn is None else turn.note()
         text = f"⚠ **{note}**: the render moved; look again before the next click." if note else ""
         with self._lock:
-            if self._md_pose.content != text:
-                self._md_pose.content = text
+            self._show_notice("pose", text, pairs)
+
+    def pairs_changed(self, pairs: Any) -> None:
+        """The pairs are ``pairs`` now: a rough-pose notice made for other pairs goes (the next pair was started or
+        made, or one removed); a refit that follows the change shows its own."""
+        with self._lock:
+            self._pairs_now = pairs
+            if self._notice.text and self._notice_pairs is not None and pairs != self._notice_pairs:
+                self._show_notice("", "", None)
 
     @property
     def guide_status(self) -> str:
         """Guided picking's status (markdown; empty while no guided session runs)."""
-        return str(self._md_guide.content)
+        return self._guide_text
 
-    def show_live(self, live: Any) -> None:
-        """Show :func:`live_summary` of what the live solve shows (``live``: :class:`app.ui_common.SolveShown`)."""
+    def show_live(self, live: Any, fitted: bool = False) -> None:
+        """Show :func:`live_summary` of what the live solve shows (``live``: :class:`app.ui_common.SolveShown`;
+        ``fitted``: the rough pose was turned to fit the pairs so far)."""
         with self._lock:
-            text = live_summary(live, self._held)
+            text = live_summary(live, self._held, fitted)
             if self._md_live.content != text:
                 self._md_live.content = text
-            if getattr(live, "bundle", None) is not None and self._md_pose.content:
-                self._md_pose.content = ""  # the page shows the solve now, not the rough pose
+            bundle = getattr(live, "bundle", None)
+            if bundle is not None and self._notice_kind == "pose":
+                self._show_notice("", "", None)  # the page shows the solve now, not the rough pose
+            if bundle is not None and bundle is not self._bundle_seen:
+                # Run 7: outlier exclusion "flipped between pairs" (pair 2 left out at 6 pairs, back in at 7 with
+                # pair 3 out) with no word: say so when the set changes.
+                self._bundle_seen = bundle
+                now = [int(i) for i in getattr(bundle.result, "outlier_ids", [])]
+                note = outlier_change_note(self._outliers_seen, now, [int(i) for i in bundle.pick_ids])
+                self._outliers_seen = now
+                if note:
+                    self._show_notice("outliers", f"⚠ {note}", self._pairs_now)
 
     def show_guide_status(self, guiding: bool, lines: list[str],
                           actions: Mapping[str, Callable] | None = None) -> None:
@@ -236,11 +323,12 @@ class PairBar:
         handler of its button (a viser click callback) for :data:`GUIDED_BAR_ACTIONS`, given while a proposal is
         shown; the bar shows those buttons then and hides them otherwise.  Called by the Guide panel from any
         thread."""
-        text = ("**Guided:** " + "  \n".join(lines)) if guiding and lines else ""
+        text = ("**Guided:** " + " ".join(lines)) if guiding and lines else ""
         shown = {k: v for k, v in (actions or {}).items() if k in GUIDED_BAR_ACTIONS} if guiding else {}
         with self._lock:
-            if self._md_guide.content != text:
-                self._md_guide.content = text
+            if self._guide_text != text:  # one line, ellipsised when long (the whole of it in its hover title)
+                self._guide_text = text
+                self._md_guide.content = one_line_markdown(text) if text else ""
             self._guided_actions = shown
             if bool(self._bg_guided.visible) != bool(shown):
                 self._bg_guided.visible = bool(shown)

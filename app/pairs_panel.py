@@ -16,7 +16,7 @@ from calib_core.panorama import refine_click_to_corner
 from .layout import RENDER_KEY
 from .loupe_framing import PairClick
 from .page_builder import install_page_script
-from .pair_bar import PAIR_BAR_JS, PairBar, undo_note
+from .pair_bar import PAIR_BAR_JS, FixedLine, PairBar, one_line_markdown, undo_note
 from .pairs_import import import_upload
 from .ui_common import MIN_PAIRS, SNAP_RADIUS_PX, pick_tolerance_px
 
@@ -54,17 +54,20 @@ class PairsPanel:
         self.pair_action_callback = self._on_pair_action_event
         self._bg_actions = gui.add_button_group("Pair", PAIR_ACTIONS, order=top - 1.0)
         self._bg_actions.on_click(self.pair_action_callback)
-        self._md_status = gui.add_markdown("", order=top - 0.5)
+        # One line kept when blank: in run 7 the controls below jumped ~18 px as it came and went.
+        self._status_line = FixedLine(gui, order=top - 0.5)
         # The live solve's figures right under the buttons, guided picking's status under the pair status.
         self.bar = PairBar(gui, live_order=top - 0.75, guide_order=top - 0.45)
         self.show_guide_status = self.bar.show_guide_status  # the Guide panel's hook
-        app.pose_source.subscribe(lambda: self.bar.show_pose_turn(app.pose_source.last_turn))  # e.g. a refit
+        app.pose_source.subscribe(lambda: self.bar.show_pose_turn(  # e.g. a refit
+            app.pose_source.last_turn, app.state.all_picks))
         install_page_script(app.server, PAIR_BAR_JS)  # the bar stays in view; Delete and Ctrl+Z keys
         self._guarded_pair_action = guard(self.on_pair_action)
         self._next_pair: Callable | None = None  # guided picking's "Next pair" (set_next_pair_handler)
         self.folder = gui.add_folder("Pairs")
         with self.folder:
             self._md_pairs = gui.add_markdown("")
+            self._summary = ""  # the summary's text as shown (its lines without the fixed-line markup)
             self._dd_selected = gui.add_dropdown("Selected pair", ("none",), initial_value="none")
             self._dd_selected.on_update(guard(self.on_select_dropdown))
             self._bg_edit = gui.add_button_group("Edit", ("Undo", "Redo", "Deselect", "Delete"))
@@ -88,12 +91,12 @@ class PairsPanel:
     @property
     def text(self) -> str:
         """The panel's summary as shown (markdown)."""
-        return str(self._md_pairs.content)
+        return self._summary
 
     @property
     def status(self) -> str:
         """The status line under the pair actions at the top of the panel (markdown; empty when nothing waits)."""
-        return str(self._md_status.content)
+        return self._status_line.text
 
     @property
     def dropdown_value(self) -> str:
@@ -146,30 +149,34 @@ class PairsPanel:
             pending = state.pending()
             selected = state.selected
             total = sum(1 for p in state.all_picks if p.complete)  # every shot's pairs go into the solve
-            lines = [f"**Pairs:** {len(complete)} complete" + (
-                f" in shot {state.active_shot} (shown); {total} in all {state.n_shots} shots" if state.n_shots > 1 else "")]
+            # Fixed slots, each one line kept when blank: the controls under the summary never move (run 7).
+            count = f"**Pairs:** {len(complete)} complete" + (
+                f" in shot {state.active_shot} (shown); {total} in all {state.n_shots} shots" if state.n_shots > 1 else "")
+            doing = ""
             if pending is not None:
                 need = "camera" if pending.pixel is None else "BA"
-                lines.append(f"Pair {pending.id} waits for a {need} click.")
+                doing = f"Pair {pending.id} waits for a {need} click."
                 ids, uv = app.pose_source.predicted_pixels({pending.id: pending})
                 if ids:
-                    lines.append(f"Predicted camera pixel: ({uv[0, 0]:.1f}, {uv[0, 1]:.1f}) (cross in the image).")
+                    doing += f" Predicted camera pixel: ({uv[0, 0]:.1f}, {uv[0, 1]:.1f}) (cross in the image)."
             status = [self._undo_note[1]] if self._undo_note[0] == state.version else []
             if pending is not None:
                 status.append(f"Pair {pending.id} waits for a {need} click (**Cancel pair** or Esc drops it).")
             if selected is not None:
-                lines.append(f"**Pair {selected} selected:** clicks now move its ends (Deselect to add pairs).")
+                doing = f"**Pair {selected} selected:** clicks now move its ends (Deselect to add pairs)."
                 status.append(f"Pair {selected} selected: the next click moves it (**Cancel pair** deselects).")
-            if self._md_status.content != "  \n".join(status):
-                self._md_status.content = "  \n".join(status)
-            self.bar.show_live(app.solve_shown())
+            self._status_line.show(" · ".join(status))
+            self.bar.pairs_changed(state.all_picks)
+            turn = app.pose_source.last_turn  # its reason names the pairs a refit fitted (app.align_panel)
+            self.bar.show_live(app.solve_shown(), fitted=getattr(turn, "why", "") == f"refitted from {total} pairs")
             left_out = [f"#{p.id}" for p in complete if p.check]
-            if left_out:
-                lines.append(f"Left out of the fit (check pairs): {', '.join(left_out)}.")
-            if total < MIN_PAIRS:
-                lines.append(f"Pick {MIN_PAIRS - total} more to calibrate.")
-            lines.append(f"Undo: {'yes' if state.can_undo else 'no'}, redo: {'yes' if state.can_redo else 'no'}")
-            self._md_pairs.content = "  \n".join(lines)
+            lines = [count, doing, f"Left out of the fit (check pairs): {', '.join(left_out)}." if left_out else "",
+                     f"Pick {MIN_PAIRS - total} more to calibrate." if total < MIN_PAIRS else "",
+                     f"Undo: {'yes' if state.can_undo else 'no'}, redo: {'yes' if state.can_redo else 'no'}"]
+            self._summary = "  \n".join(line for line in lines if line)
+            shown = "\n".join(one_line_markdown(line) for line in lines)
+            if self._md_pairs.content != shown:
+                self._md_pairs.content = shown
             options = ("none",) + tuple(f"#{p.id}" for p in picks)
             if tuple(self._dd_selected.options) != options:
                 self._dd_selected.options = options
@@ -300,7 +307,7 @@ class PairsPanel:
         def on_shift_click(event: Any) -> None:
             slot = self.app.slot_of(key)
             uv = slot.pixel_from_ray(event.ray_origin, event.ray_direction)
-            pick_id = None if uv is None else self._nearest_pick(key, uv)
+            pick_id = None if uv is None else self._nearest_pick_at(key, uv, slot, client=event.client)
             self.app.state.select(pick_id)
             if pick_id is None and uv is not None:  # run 6: a Shift+click beside a marker did nothing, silently
                 tolerance = pick_tolerance_px(slot.units_per_px, slot.units_per_px_y)
@@ -391,7 +398,14 @@ class PairsPanel:
         sel = self.app.state.selected
         if sel is None:
             raise CalibError("select a pair first (shift+click its marker or use the dropdown)")
-        self.app.state.set_check(sel, not self.app.state.get(sel).check)
+        out = not self.app.state.get(sel).check
+        self.app.state.set_check(sel, out)
+        # Then the selection ends, as after a move (run 7: a left-out pair stayed selected and the next click
+        # silently moved its laser end; being left out, no figure changed).
+        self.app.state.select(None)
+        self._undo_note = (self.app.state.version, f"Pair {sel} {'left out of the fit' if out else 'put back in the fit'}"
+                                                   "; selection ended: the next click starts a new pair.")
+        self.refresh()
 
     def add_upload_button(self, client: Any) -> None:
         """This tab's own "Import pairs YAML" button, in the shared Pairs folder above "Download pairs YAML"."""

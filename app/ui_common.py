@@ -32,6 +32,9 @@ RING_MIN_RADIUS = 0.03
 RING_SEGMENTS = 20
 #: Shift+click / drag this many ring radii from a marker selects it.
 PICK_RADII = 2.5
+#: The pick-number labels' em on screen (CSS px): viser draws a screen-sized label at 12 px per em times its
+#: ``font_screen_scale`` (0.8 in :mod:`app.scene_nodes`).
+LABEL_EM_SCREEN_PX = 12.0 * 0.8
 
 
 def pick_tolerance_px(units_per_px: float, units_per_px_y: float) -> float:
@@ -207,3 +210,21 @@ class _Action:
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self.event, name)
+
+
+def outlier_change_note(before: list[int], after: list[int], in_solve: list[int]) -> str:
+    """What changed in the pairs a solve left out as outliers, from the ids ``before`` to ``after`` (``in_solve``:
+    the ids of the pairs the new solve had; a pair deleted meanwhile is not "back in"), e.g. "Pair 3 now left out
+    as an outlier; pair 2 back in the fit."; "" when nothing changed."""
+    out = sorted(set(after) - set(before))
+    back = sorted((set(before) - set(after)) & set(in_solve))
+
+    def ids(values: list[int]) -> str:
+        return f"pair{'s' if len(values) > 1 else ''} {', '.join(map(str, values))}"
+
+    parts = ([f"{ids(out)} now left out as {'outliers' if len(out) > 1 else 'an outlier'}"] if out else []) + (
+        [f"{ids(back)} back in the fit"] if back else [])
+    if not parts:
+        return ""
+    text = "; ".join(parts)
+    return text[0].upper() + text[1:] + "."
