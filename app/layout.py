@@ -242,26 +242,6 @@ def loupe_areas(main_bounds: tuple[float, float, float, float]) -> dict[str, Lou
             "ba": LoupeArea(left, y0 + side + GAP + 2 * LABEL_HEIGHT, side, side)}
 
 
-def loupe_areas_in_view(beside: dict[str, LoupeArea], visible: tuple[float, float, float, float] | None
-                        ) -> dict[str, LoupeArea]:
-    """Where the loupes go while a tab shows page area ``visible`` (``(x0, y0, x1, y1)``, world units): beside the
-    images (``beside``, :func:`loupe_areas`) when they lie inside it with their titles, else a column
-    at its right edge, at most as big as beside the images (run 7: a wheel zoom slid them under the control panel)."""
-    if visible is None:
-        return beside
-    vx0, vy0, vx1, vy1 = visible
-    tol = 1e-6 * max(vx1 - vx0, vy1 - vy0)
-    inside = all(vx0 - tol <= a.x0 and a.x0 + a.width <= vx1 + tol and vy0 - tol <= a.y0 - LABEL_HEIGHT
-                 and a.y0 + a.height <= vy1 + tol for a in beside.values())
-    if inside:
-        return beside
-    side = min(beside["camera"].width, 0.45 * (vy1 - vy0 - GAP - 4 * LABEL_HEIGHT), 0.35 * (vx1 - vx0))
-    side = max(side, 1e-3)
-    left, top = vx1 - side - GAP, vy0 + LABEL_HEIGHT + GAP
-    return {"camera": LoupeArea(left, top, side, side),
-            "ba": LoupeArea(left, top + side + GAP + 2 * LABEL_HEIGHT, side, side)}
-
-
 def loupe_side(height: float) -> float:
     """The side of each of the two square loupes beside a main block ``height`` world units tall (titles and the
     camera loupe's legend line included)."""

@@ -81,23 +81,3 @@ def send_loupe_rects(client: Any, rects: dict[str, list[float]]) -> bool:
     except (ImportError, AttributeError, TypeError):
         return False
     return True
-
-
-def visible_page_rect(camera: Any, canvas_px: tuple[int, int], panel_px: int) -> tuple[float, float, float, float] | None:
-    """The part of the flat page (world plane ``z = 0``) tab camera ``camera`` shows left of the control panel
-    (``panel_px`` wide on the right of a ``canvas_px`` = (width, height) canvas, as the app's framing assumes):
-    ``(x0, y0, x1, y1)`` in world units; None when the camera does not face the page (e.g. orbited in 3-D)."""
-    try:
-        position, look = np.asarray(camera.position, np.float64), np.asarray(camera.look_at, np.float64)
-        fov = float(camera.fov)
-    except (AssertionError, AttributeError, TypeError, ValueError):
-        return None
-    axis = look - position
-    norm = float(np.linalg.norm(axis))
-    if not (norm > 0 and axis[2] / norm > 0.999 and np.isfinite(position).all()):
-        return None
-    w_px, h_px = max(int(canvas_px[0]), 1), max(int(canvas_px[1]), 1)
-    units = 2.0 * abs(float(position[2])) * math.tan(fov / 2.0) / h_px  # world units per canvas pixel at z = 0
-    usable = w_px - panel_px if w_px > 2 * panel_px else w_px
-    x0, y0 = float(position[0]) - w_px / 2.0 * units, float(position[1]) - h_px / 2.0 * units
-    return (x0, y0, x0 + usable * units, y0 + h_px * units)

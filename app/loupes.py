@@ -18,7 +18,7 @@ import numpy as np
 
 from calib_core.errors import CalibError
 
-from .layout import ImageSlot, LoupeArea, bounds_of, loupe_areas, loupe_areas_in_view
+from .layout import ImageSlot, LoupeArea, bounds_of, loupe_areas
 from .loupe_crops import (BaCrop, CameraCrop, ba_crop_texture, camera_crop_texture, default_camera_crop_px,
                           draw_ba_outline, draw_camera_centre, node_name, render_crop_around, render_crop_of, slot_key)
 from .loupe_framing import PairClick, follow_click, frame_pair
@@ -54,7 +54,6 @@ class Loupes:
         self.app = app
         main = list(app.slots.values())  # camera views, the camera-view render, BA images
         self.areas: dict[str, LoupeArea] = loupe_areas(bounds_of(main))
-        self._visible: tuple | None = None  # the page area a tab shows (keep_in_view); None: the whole page
         n_rows, n_cols = app.depth.shape
         self._ba_cols = min(BA_LOUPE_COLUMNS, n_cols)
         cam_w, cam_h = app.camera.width, app.camera.height
@@ -256,21 +255,12 @@ class Loupes:
     def relayout(self, moved: bool = True) -> None:
         """Place both loupes beside the images again if they ``moved`` (the page layout changed, e.g. another BA
         column window: :meth:`app.view_panel.ViewPanel.subscribe_layout`), not where the old ones ended."""
-        if moved:
-            self.keep_in_view(self._visible, always=True)
-
-    def keep_in_view(self, visible: tuple | None, always: bool = False) -> None:
-        """Keep both loupes inside page area ``visible`` (``(x0, y0, x1, y1)``, world units, that a tab shows left
-        of the control panel: :meth:`app.view_panel.ViewPanel.subscribe_visible`): beside the images when they fit
-        there, else at its right edge (run 7); None: beside the images."""
+        if not moved:
+            return
         app = self.app
         with app.ui_lock, app.server.atomic():
-            self._visible = visible
             main = list(app.slots.values())  # camera views, the camera-view render, BA images
-            areas = loupe_areas_in_view(loupe_areas(bounds_of(main)), visible)
-            if areas == self.areas and not always:
-                return
-            self.areas = areas
+            self.areas = loupe_areas(bounds_of(main))
             for kind in KINDS:
                 area = self.areas[kind]
                 self._titles[kind].position = (area.x0, area.y0 - 0.03, -0.01)

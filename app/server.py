@@ -206,7 +206,6 @@ class CalibrationApp:
             self.pairs_panel.subscribe_cancel(self.loupes.on_pair_cancelled)
             self.pairs_panel.subscribe_clicks(self.view.on_pair_click)  # "Zoom on last click"
             self.view.subscribe_layout(self.loupes.relayout)  # after the marks' redraw
-            self.view.subscribe_visible(self.loupes.keep_in_view)  # a tab's wheel zoom: the loupes stay in view
             self.view.frame_also("loupe_ba", "loupe_camera")  # "All" frames the loupes too
             self.render_pane.subscribe(self.loupes.on_render, replay=True)  # the laser loupe can show its crop
             self.format_export = FormatExportPanel(self)  # verify: its own widgets (formats, reference import)

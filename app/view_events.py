@@ -33,7 +33,6 @@ class ViewEvents:
         self._layout_listeners: list[Callable[[bool], None]] = []
         self._camera_view_listeners: list[Callable[[str, Any, str], None]] = []
         self._3d_listeners: list[Callable[[bool], None]] = []
-        self._visible_listeners: list[Callable[[tuple | None], None]] = []
 
     def subscribe_window(self, listener: Callable[[BaWindowShown], None]) -> None:
         """Call ``listener(shown)`` when the BA column window or the page layout changed, under the UI lock and in
@@ -49,16 +48,6 @@ class ViewEvents:
     def _publish_layout(self, moved: bool) -> None:
         for listener in list(self._layout_listeners):
             listener(moved)
-
-    def subscribe_visible(self, listener: Callable[[tuple | None], None]) -> None:
-        """Call ``listener(rect)`` on the action worker when a tab's view of the flat page moved (a wheel, a pan):
-        ``rect``, the page area ``(x0, y0, x1, y1)`` (world units) the tab shows left of the control panel; None
-        before the app frames the whole page ("All"), e.g. the loupes go back beside the images (run 7)."""
-        self._visible_listeners.append(listener)
-
-    def _publish_visible(self, rect: tuple | None) -> None:
-        for listener in list(self._visible_listeners):
-            listener(rect)
 
     def subscribe_camera_view(self, listener: Callable[[str, Any, str], None]) -> None:
         """Call ``listener(key, slot, title)`` to show camera view ``key`` (hiding the other) at ``slot``."""

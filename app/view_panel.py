@@ -16,7 +16,7 @@ from calib_core.viewpoint import viewpoint_behind_camera
 from .ba_view import ColumnWindow, ba_texture, steady_window, texture_factor
 from .camera_view import CameraView
 from .layout import RENDER_KEY, ImageSlot, bounds_of, layout_with_render
-from .loupe_wheel import LOUPE_WHEEL_JS, canvas_rects, send_loupe_rects, visible_page_rect
+from .loupe_wheel import LOUPE_WHEEL_JS, canvas_rects, send_loupe_rects
 from .page_builder import install_page_script
 from .settled_updates import settled
 from .ui_common import (
@@ -300,7 +300,6 @@ class ViewPanel(ViewEvents):
         elif mode == "ba":
             slots = [self.slots[k] for k in self.app.ba_keys]
         else:
-            self._publish_visible(None)  # the loupes back beside the images, then framed with them
             slots = [self.camera_slot(), self.slots[RENDER_KEY]] + [self.slots[k] for k in self.app.ba_keys]
             slots += [self.app.slot_of(key) for key in self._framed_also]  # the loupes are part of the page
         x0, y0, x1, y1 = bounds_of(slots)
@@ -393,9 +392,6 @@ class ViewPanel(ViewEvents):
         async def on_camera(camera: Any) -> None:  # every camera message, on viser's event loop: cheap
             cid = camera.client.client_id
             self._publish_loupes(camera.client, camera)
-            rect = visible_page_rect(camera, self._canvas_px(camera.client), PANEL_PX)  # run 7: the loupes stay
-            if rect is not None and self._client_mode.get(cid) not in (None, "3d"):  # in view (after a wheel zoom)
-                self.app.post(lambda: self._publish_visible(rect), camera.client)
             size = (int(camera.image_width), int(camera.image_height))
             old = self._canvas_size.get(cid)
             if old is not None and min(old + size) > 0 and not _resized(old, size):

@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from calib_core.synthetic.picks import MAX_LASER_PICK_ERROR_M, laser_picks
 from calib_core.transforms import transform_points
@@ -157,50 +156,3 @@ def test_the_render_controls_carry_no_tooltip_their_help_is_in_the_folder_text(a
         assert not props.get("hint"), (label, props.get("hint"))
     help_text = " ".join(t for t in got["texts"] if "Render over photo" in t)
     assert "Render shading" in help_text and "bearing angle" in help_text and "0: photo only" in help_text, help_text
-
-
-def test_after_a_wheel_zoom_the_loupes_stay_in_view_left_of_the_control_panel(app):
-    """Run 7: the wheel over the render zoomed the whole page about the view centre and the loupes (beside the
-    images, on the right) slid under the control panel.  The tab's camera is moved as viser's wheel moves it and
-    reported as a tab reports it; where the loupes land is read with the tab camera's own projection."""
-    import asyncio
-
-    from app.ui_common import PANEL_PX
-
-    d = AppDriver(app)
-    tab, cam = d.tab, d.tab.camera
-    cam.client = tab  # what viser's camera handle carries
-    assert d.show("2D annotation") == [] and cam.update_callbacks  # framed "All"; its camera is watched
-
-    def report() -> None:  # the tab tells the server where its camera is now
-        for callback in cam.update_callbacks:
-            asyncio.run(callback(cam))
-        app.actions.join()
-
-    def loupe_screen(kind: str) -> np.ndarray:
-        x0, y0, x1, y1 = app.loupes.slot(kind).bounds()
-        return np.array([cam.screen_of((x0, y0)), cam.screen_of((x1, y1))])
-
-    def panes_right() -> float:
-        return max(app.slot_of(k).bounds()[2] for k in (*app.ba_keys, "render", d.camera_key))
-
-    report()
-    beside = {k: app.loupes.slot(k).bounds() for k in ("ba", "camera")}
-    assert all(b[0] > panes_right() for b in beside.values())  # beside the images, on the right
-    free_px = cam.image_width - PANEL_PX
-    for kind in ("ba", "camera"):
-        assert loupe_screen(kind)[1, 0] <= free_px + 1e-6  # "All" shows them left of the panel
-    # A wheel zoom (x3) about the view centre, as viser's camera controls do it: the camera moves along its axis.
-    look, pos = np.array(cam.look_at, float), np.array(cam.position, float)
-    cam.position = tuple(look + (pos - look) / 3.0)
-    report()
-    for kind in ("ba", "camera"):
-        (sx0, sy0), (sx1, sy1) = loupe_screen(kind)
-        assert 0.0 <= sx0 < sx1 <= free_px + 1e-6 and 0.0 <= sy0 < sy1 <= cam.image_height + 1e-6, (kind, sx0, sx1)
-    # The loupes still work where they are: a click in the camera loupe at its centre adds that photo end.
-    centre = app.loupes.camera_crop.center
-    assert d.click_loupe_camera(*centre) == [] and app.state.picks[-1].pixel == pytest.approx(centre, abs=0.51)
-    # "All" puts them back beside the images.
-    assert d.show("2D annotation") == []
-    report()
-    assert {k: app.loupes.slot(k).bounds() for k in ("ba", "camera")} == beside
