@@ -23,6 +23,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba.extending import register_jitable
 from .._jit import tiered_kernel as kernel
 
 __all__ = [
@@ -1090,6 +1091,19 @@ def covariance(H, sigma):
     return cov, cond
 
 
+@register_jitable(inline="always")
+def _row_distance(X, i, j, angular):
+    """Distance between rows ``i`` and ``j`` of ``X`` (N, 3): the angle between them (radians) when ``angular``
+    (unit vectors, atan2 of the cross and dot products: exact at small angles), else the Euclidean distance."""
+    if angular:
+        c0 = X[i, 1] * X[j, 2] - X[i, 2] * X[j, 1]
+        c1 = X[i, 2] * X[j, 0] - X[i, 0] * X[j, 2]
+        c2 = X[i, 0] * X[j, 1] - X[i, 1] * X[j, 0]
+        dot = X[i, 0] * X[j, 0] + X[i, 1] * X[j, 1] + X[i, 2] * X[j, 2]
+        return math.atan2(math.sqrt(c0 * c0 + c1 * c1 + c2 * c2), dot)
+    return math.sqrt((X[i, 0] - X[j, 0]) ** 2 + (X[i, 1] - X[j, 1]) ** 2 + (X[i, 2] - X[j, 2]) ** 2)
+
+
 @kernel
 def _first_close(X, radius, angular):
     """First pair ``(i, j)`` (i < j in sorted-by-x scan order) closer than ``radius``; (-1, -1) if none.
@@ -1106,15 +1120,7 @@ def _first_close(X, radius, angular):
             j = order[c]
             if X[j, 0] - X[i, 0] > radius:
                 break
-            if angular:
-                c0 = X[i, 1] * X[j, 2] - X[i, 2] * X[j, 1]
-                c1 = X[i, 2] * X[j, 0] - X[i, 0] * X[j, 2]
-                c2 = X[i, 0] * X[j, 1] - X[i, 1] * X[j, 0]
-                dot = X[i, 0] * X[j, 0] + X[i, 1] * X[j, 1] + X[i, 2] * X[j, 2]
-                dist = math.atan2(math.sqrt(c0 * c0 + c1 * c1 + c2 * c2), dot)
-            else:
-                dist = math.sqrt((X[i, 0] - X[j, 0]) ** 2 + (X[i, 1] - X[j, 1]) ** 2 + (X[i, 2] - X[j, 2]) ** 2)
-            if dist <= radius:
+            if _row_distance(X, i, j, angular) <= radius:
                 return min(i, j), max(i, j)
     return -1, -1
 
@@ -1159,15 +1165,7 @@ def _any_close(X, radius, angular):
             i = order[a]
             for c in range(a + 1, end_next):
                 j = order[c]
-                if angular:
-                    c0 = X[i, 1] * X[j, 2] - X[i, 2] * X[j, 1]
-                    c1 = X[i, 2] * X[j, 0] - X[i, 0] * X[j, 2]
-                    c2 = X[i, 0] * X[j, 1] - X[i, 1] * X[j, 0]
-                    dot = X[i, 0] * X[j, 0] + X[i, 1] * X[j, 1] + X[i, 2] * X[j, 2]
-                    dist = math.atan2(math.sqrt(c0 * c0 + c1 * c1 + c2 * c2), dot)
-                else:
-                    dist = math.sqrt((X[i, 0] - X[j, 0]) ** 2 + (X[i, 1] - X[j, 1]) ** 2 + (X[i, 2] - X[j, 2]) ** 2)
-                if dist <= radius:
+                if _row_distance(X, i, j, angular) <= radius:
                     return True
     return False
 
