@@ -175,7 +175,9 @@ def one_line_markdown(text: str) -> str:
     so that the line keeps its place (run 7: the panel's controls jumped about 18 px as a status line came and
     went, and clicks aimed at them landed on nothing)."""
     plain = re.sub(r"\\(.)", r"\1", text.replace("**", ""))
-    return _ONE_LINE.format(title=html.escape(plain, quote=True), text=text if text else "&nbsp;")
+    # Escaped too: a message may quote a file name, and no user string goes into raw HTML.
+    shown = html.escape(text, quote=False) if text else "&nbsp;"
+    return _ONE_LINE.format(title=html.escape(plain, quote=True), text=shown)
 
 
 class FixedLine:

@@ -94,7 +94,9 @@ def test_solve_two_shots_writes_per_shot_residuals_and_leave_one_shot_out(shot_f
 
         points, _, pixels = resolve_pairs(load_pairs_yaml(p0 if k == 0 else p1), load_scan(SCAN), camera)
         uv, _ = camera.project(points @ T_other[:3, :3].T + T_other[:3, 3])
-        assert loso["mean_px"] == pytest.approx(np.linalg.norm(uv - pixels, axis=1).mean(), abs=1e-6)
+        # Two solves of the same pairs from different starts agree to the LM's stopping rule (the laser
+        # term's whitening is a fixed point reached to 1e-6 of the cost), not to rounding: 1e-4 px.
+        assert loso["mean_px"] == pytest.approx(np.linalg.norm(uv - pixels, axis=1).mean(), abs=1e-4)
         assert shots[k]["residuals"]["mean_px"] > 0 and "test" in shots[k]
     assert doc["verification"]["n_fit_pairs"] == 24
 

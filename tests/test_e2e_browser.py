@@ -92,7 +92,7 @@ def test_annotate_sample_in_headless_chromium(tmp_path):
                 n = k + 1
                 wait_for(lambda: f"Pairs: {n} complete" in page_text(page), f"the page to show {n} pairs")
                 if n < 4:
-                    assert f"Pick {4 - n} more to calibrate" in page_text(page)
+                    assert f"pick {4 - n} more to calibrate" in page_text(page)
                     continue
                 def solved_text(n=n):
                     text = page_text(page)
