@@ -72,6 +72,7 @@ class RenderPane:
         self._wanted: tuple | None = None  # (T, mode, source) the page should show; the worker renders the newest
         self._last_done = 0.0  # time.monotonic() when the last render finished
         self._blink_back = 1.0  # the opacity "Blink" goes back to
+        self._shown_for_drag = False  # ticking "Align by drag" raised the opacity from 0 (unticking lowers it back)
         self._job = 0
         self._marks_of: tuple | None = None
         self._stopped = False
@@ -199,9 +200,15 @@ class RenderPane:
             self.request()
 
     def on_align_drag_mode(self, on: bool) -> None:
-        """"Align by drag" ticked: show the render over the photo (half opaque) if it was hidden."""
+        """"Align by drag" ticked: show the render over the photo (half opaque) if it was hidden; unticked: hide it
+        again if the tick showed it and nobody changed it since (run 8: it stayed over the photo)."""
         if on and self.app.state.view.render_blend == 0.0:
             self.set_blend(0.5)
+            self._shown_for_drag = True
+        elif not on and self._shown_for_drag:
+            self._shown_for_drag = False
+            if self.app.state.view.render_blend == 0.5:
+                self.set_blend(0.0)
 
     def set_blend(self, blend: float) -> None:
         """Draw the render over the photo with opacity ``blend`` (0 hides it), and save it."""
