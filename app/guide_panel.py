@@ -490,8 +490,7 @@ class GuidePanel(GuideShotsMixin):
 def attach_guide_panel(app: Any, *, loupes: Callable[[], Any], on_status: Callable) -> GuidePanel:
     """The panel wired to a :class:`app.server.CalibrationApp` (the composition root's one line for it); ``loupes``
     and ``on_status`` are :class:`GuidePanel`'s (the root passes them: a panel never reaches into a sibling)."""
-    return GuidePanel(app.server.gui, app.state, app.depth, app.camera, app.image, guard=app.guard,
-                      post=app.post,
+    return GuidePanel(app.server.gui, app.state, app.depth, app.camera, app.image, guard=app.guard, post=app.post,
                       initial_T=lambda: getattr(app, "initial_T_camera_lidar", None),
                       loupes=loupes, ba_key=app.ba_keys[0],
                       order=app.pairs_folder.order + 0.5,
