@@ -129,7 +129,7 @@ class GuidePanel(GuideShotsMixin):
         self._watch: list | None = None  # [id, pixel seen] of the guided pick started last
         self._refine: int | None = None  # a guided pick clicked on the full image, not yet refined in the loupe
         self._reclick: int | None = None  # the rough pair selected for a re-click
-        self._reclick_from: tuple | None = None  # its pixel when selected (unchanged when the selection ends: declined)
+        self._reclick_from: tuple | None = None  # (pixel, laser cell) at selection; both unchanged: declined
         self._hands_off = False  # the next start follows an accepted re-click: a re-click then waits for Next pair
         self._moved_on: str | None = None  # what the last Next pair or Cancel pair skipped, shown once
         self._reclick_of: dict[tuple[int, int], int] = {}  # cell -> pick id of the re-click proposals
@@ -362,7 +362,7 @@ class GuidePanel(GuideShotsMixin):
                 raise CalibError(f"pair {self.state.pending().id} is not finished; complete or undo it first")
             self.state.select(rid)
             self._reclick, half = rid, self.state.get(rid)
-            self._watch, self._refine, self._reclick_from = [rid, half.pixel], None, half.pixel
+            self._watch, self._refine, self._reclick_from = [rid, half.pixel], None, (half.pixel, half.laser_rc)
         elif half is not None:
             if half.laser_rc != tuple(p.laser_rc):
                 self.state.move_laser(half.id, *p.laser_rc)

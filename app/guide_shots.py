@@ -222,14 +222,14 @@ class GuideShotsMixin:
         return half is not None and half.laser_rc == tuple(p.laser_rc)
 
     def _declined_by_deselect(self, state: Any) -> None:
-        """A re-click's selection ended without a click that moved its pixel (Cancel pair, Deselect, another pair
+        """A re-click's selection ended without a click that moved either end (Cancel pair, Deselect, another pair
         selected, the pair undone): that re-click is declined for good, like Skip (run 5: Cancel pair then Next
         pair offered the same re-click again).  Called under the panel's lock after every change."""
         rid = self._reclick
         if rid is None or state.selected == rid:
             return
         pick = next((q for q in state.picks if q.id == rid), None)
-        if pick is not None and pick.pixel != self._reclick_from:
+        if pick is not None and pick.pixel != self._reclick_from[0]:
             return  # the re-click's own click: :meth:`_after_click` follows
         self._reclick = None
         index = next((i for i, q in enumerate(self._proposals) if self._reclick_id(q) == rid), None)
@@ -238,6 +238,12 @@ class GuideShotsMixin:
             self._delete_proposal(index)
             self._index = self._index - 1 if index < self._index else self._index
             self._index = 0 if self._index >= len(self._proposals) else self._index
+        if pick is not None and pick.laser_rc != self._reclick_from[1]:
+            # Run 8: a click in the render loupe moved the laser end: the re-click was made there, not skipped
+            # (and, like a made re-click, not offered again at its new cell).
+            self._dropped.append(tuple(pick.laser_rc))
+            self._hands_off, self._moved_on, self._submitted = True, None, None  # resubmit: the move was ranked first
+            return
         self._moved_on = f"re-click of pair {rid}"
 
     def _drop_current(self, p: Any) -> None:
