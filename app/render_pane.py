@@ -41,6 +41,8 @@ NEAREST_MAX_PX = 24
 #: A new solve is rendered at most this often (seconds): a burst of clicks solves many times, each render costs a
 #: core for 0.1-0.3 s.  Drags and the Align buttons render at once.
 SOLVE_RENDER_INTERVAL_S = 0.5
+#: The render's opacity over the photo that ticking "Align by drag" sets when it was hidden (unticking undoes it).
+ALIGN_BLEND = 0.5
 #: The render controls' help, in the Align folder's text (no tooltips: run 7).
 RENDER_HELP = ("**Render shading**: how the scan seen from the camera is coloured (range, the laser's intensity or "
                "the bearing angle; depth edges white).  **Render over photo**: the render drawn over the camera "
@@ -203,11 +205,11 @@ class RenderPane:
         """"Align by drag" ticked: show the render over the photo (half opaque) if it was hidden; unticked: hide it
         again if the tick showed it and nobody changed it since (run 8: it stayed over the photo)."""
         if on and self.app.state.view.render_blend == 0.0:
-            self.set_blend(0.5)
+            self.set_blend(ALIGN_BLEND)
             self._shown_for_drag = True
         elif not on and self._shown_for_drag:
             self._shown_for_drag = False
-            if self.app.state.view.render_blend == 0.5:
+            if self.app.state.view.render_blend == ALIGN_BLEND:
                 self.set_blend(0.0)
 
     def set_blend(self, blend: float) -> None:
