@@ -54,7 +54,7 @@ def test_reclicks_skipped_or_stopped_do_not_come_back_and_the_bar_says_why(app, 
         # The pair bar, at the top, says which proposal and what to click (not only the Guided folder).
         bar = app.pairs_panel.bar.guide_status
         assert f"re-click pair {rid} (selected)" in bar and "\n" not in bar  # one short line (run 6)
-        assert f"Pair {rid} (selected)" in d.guide_panel and "No new corner passes the checks here" in d.guide_panel
+        assert f"Pair {rid} (selected)" in d.guide_panel and "No new corner to propose here" in d.guide_panel
         if len(shown) == 1:  # Cancel pair ends the selection and skips this re-click (run 5: Next pair re-offered it)
             assert d.press_pair_action("Cancel pair") == [] and d.wait_guide() and app.state.selected is None
             bar = app.pairs_panel.bar.guide_status
@@ -71,7 +71,8 @@ def test_reclicks_skipped_or_stopped_do_not_come_back_and_the_bar_says_why(app, 
     assert len(shown) == len(set(shown)) and 1 <= len(shown) <= 4, shown
     assert d.guide_proposal is None
     panel = d.guide_panel.replace("\\", "")  # markdown escapes
-    m = re.search(r"No new corner passes the checks here \((\d+) candidates? left out: most for far\); go on by hand",
+    m = re.search(r"No new corner to propose here: of (\d+) corners? in the scan, most \(\d+\) are too far away to place; "
+                  r"pick the next pairs by hand",
                   panel)
     assert m and int(m.group(1)) > 0, panel
     # The bar gives the reason itself in its one line (run 7).

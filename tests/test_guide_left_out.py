@@ -87,8 +87,10 @@ def test_from_a_real_by_eye_start_the_guide_offers_painted_corners_a_person_can_
     T_ref = np.array(doc["top_center_lidar-to-center_camera-extrinsic"]["param"]["sensor_calib"]["data"], float)
     pairs = load_pairs_yaml(ROOT / "tests" / "by_eye_sessions" / "pjlab_manual_run1.yaml")
     limit = max_ellipse_px_for(camera.width, camera.height)
+    # The smear rule (max_marking_edge_cells, guide9) now leaves these stripe corners out by default: none lies
+    # within 3 px of a clean photo corner (tests/test_guide9.py); the rest of the marking screen is checked here.
     session = GuidedSession(depth, camera, pairs, image=image,
-                            screen=replace(ProposalScreen(), max_ellipse_px=limit))
+                            screen=replace(ProposalScreen(), max_ellipse_px=limit, max_marking_edge_cells=1e9))
     new = [p for p in session.proposals(20) if p.replaces is None]
     assert len(new) >= 3
     within_one = 0
@@ -137,7 +139,9 @@ def test_no_proposal_says_rough_alignment_only_when_no_ellipse_fitted():
     camera = load_camera(PJLAB / "center_camera-intrinsic.json", image_size=(1920, 1200))
     image = load_image_rgb(PJLAB / "0.png")
     pairs = load_pairs_yaml(ROOT / "tests" / "by_eye_sessions" / "pjlab_manual_run2.yaml")
-    screen = replace(ProposalScreen(), max_ellipse_px=max_ellipse_px_for(camera.width, camera.height),
+    # The loupe zoomed out one step (the app's limit before guide9): some ellipses fit, the image tests leave
+    # those cells out.
+    screen = replace(ProposalScreen(), max_ellipse_px=1.5 * max_ellipse_px_for(camera.width, camera.height),
                      min_marking_strength=1e9)
     session = GuidedSession(depth, camera, pairs, image=image, reclicks=False, screen=screen)
     props = session.proposals(20)
@@ -148,4 +152,4 @@ def test_no_proposal_says_rough_alignment_only_when_no_ellipse_fitted():
     assert len(props) == 0 and after_ellipse.any()
     rough = REASON_ROUGH_ALIGNMENT.split("(")[0]
     assert not props.note.startswith(rough)
-    assert props.note.startswith("No new corner passes the checks here")
+    assert props.note.startswith("No new corner to propose here")

@@ -74,9 +74,9 @@ def test_no_new_corner_says_so_with_the_main_reason(scene):
     props = session.proposals(20)
     assert all(p.replaces is not None for p in props)
     note = props.note
-    assert note is not None and note.startswith("No new corner passes the checks here (")
-    assert "most for far" in note and note.endswith("go on by hand")
-    n = int(note.split("(")[1].split()[0])
+    assert note is not None and note.startswith("No new corner to propose here: of ")
+    assert "are too far away to place" in note and note.endswith("pick the next pairs by hand")
+    n = int(note.split("of ")[1].split()[0])
     assert n == props.screened["far"] + sum(v for k, v in props.screened.items()
                                             if k not in ("far", "reclick ellipse or border"))
     for p in props:  # every re-click skipped: the list empties and the note is its reason

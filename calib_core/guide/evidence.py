@@ -85,6 +85,7 @@ __all__ = [
     "REASON_ROUGH_ALIGNMENT",
     "REASON_NO_EVIDENCE",
     "no_new_corner_note",
+    "PLAIN_REASONS",
     "local_plane_residual_m",
     "planar_share",
     "cell_footprint_px",
@@ -123,10 +124,38 @@ REASON_NO_EVIDENCE = (
 RECLICK_SCREEN_KEYS = ("reclick ellipse or border",)
 
 
+#: Each test of the screen in a user's words: what the corners it leaves out are ("most (N) ...").
+PLAIN_REASONS = {
+    "scan edge": "lie on the scan's top or bottom row, where an object may go on past the beam",
+    "far": "are too far away to place",
+    "footprint": "fall where the laser's points are too far apart to place a corner",
+    "not planar": "are on leaves or clutter, not on a flat surface",
+    "junction of fewer than three planes": "are folds between surfaces that the laser's rows are too coarse to place",
+    "junction on a coarse scan": "are folds between surfaces that the laser's rows are too coarse to place",
+    "depth step too small": "lie along an object's edge, not at its corner",
+    "straight depth edge": "lie along an object's edge, not at its corner",
+    "depth edge does not turn": "lie along an object's edge, not at its corner",
+    "on the ground": "are on the road or at an object's foot, where the photo shows shadow",
+    "at the foot of an object": "are on the road or at an object's foot, where the photo shows shadow",
+    "intensity corner off the ground": "are patterns in the laser's brightness off the road (signs, frames, shading) "
+                                       "with no matching corner in the photo",
+    "weak intensity corner": "are painted markings the laser blurs, whose corners it cannot place",
+    "marking edge does not turn": "are painted markings the laser blurs, whose corners it cannot place",
+    "straight marking edge": "are painted markings the laser blurs, whose corners it cannot place",
+    "marking corner off the paint": "are painted markings the laser blurs, whose corners it cannot place",
+    "marking edge smeared": "are painted markings the laser blurs, whose corners it cannot place",
+    "ellipse larger than the loupe": "need a better rough pose before the loupe can show where to look",
+    "border": "are too close to the photo's border",
+    "no dominant image corner": "have no clear corner in the photo where the laser puts them",
+    "repeated image texture": "are among many look-alike corners in the photo (fence, railing, leaves)",
+}
+
+
 def no_new_corner_note(screened: dict) -> str:
-    """What the app says when no new cell passes the screen: how many candidates it left out and the test that
-    left out most, e.g. "No new corner passes the checks here (412 candidates left out: most for not planar);
-    go on by hand".
+    """What the app says when no new cell passes the screen, in a user's words: how many corners the scan
+    offered and what most of them are (:data:`PLAIN_REASONS`, tests with the same wording counted together),
+    e.g. "No new corner to propose here: of 412 corners in the scan, most (230) are too far away to place; pick
+    the next pairs by hand".
 
     Parameters
     ----------
@@ -135,11 +164,15 @@ def no_new_corner_note(screened: dict) -> str:
     """
     counts = {k: int(v) for k, v in screened.items() if k not in RECLICK_SCREEN_KEYS and int(v) > 0}
     if not counts:
-        return "No new corner passes the checks here (no candidate in view); go on by hand"
+        return "No new corner to propose here: the scan has no corner in view; pick the next pairs by hand"
     n = sum(counts.values())
-    most = max(counts, key=lambda k: counts[k])
-    return (f"No new corner passes the checks here ({n} candidate{'s' if n != 1 else ''} left out: most for "
-            f"{most}); go on by hand")
+    plain: dict[str, int] = {}
+    for test, k in counts.items():
+        words = PLAIN_REASONS.get(test, f"fail the check '{test}'")
+        plain[words] = plain.get(words, 0) + k
+    words = max(plain, key=lambda w: plain[w])
+    return (f"No new corner to propose here: of {n} corner{'s' if n != 1 else ''} in the scan, most "
+            f"({plain[words]}) {words}; pick the next pairs by hand")
 
 
 @dataclass(frozen=True)
@@ -232,6 +265,13 @@ class ProposalScreen:
         its strength are its rivals (:func:`corner_rivals`)...
     max_rivals : int
         ...and a corner with more rivals is a repeated texture (fence, railing, foliage), not proposed.
+    max_marking_edge_cells : float
+        A ``marking`` cell's intensity edges may be smeared over at most this many cells along the rings
+        (:func:`calib_core.guide.marking_corner.edge_width_cells`; about one for a sharp edge under a beam one
+        cell wide).  A wider smear puts the corner-looking cell a cell or two outside the paint's corner:
+        measured (``python -m bench.guide_by_eye --summary --trials 8``), none of the 21 stripe corners
+        proposed on PJLab manual_calib from 8 rough starts, nor of the 9 offered continuing its by-eye
+        sessions, lay within 3 px of a clean photo corner under the published pose; all are smeared wider.
     """
 
     max_ellipse_px: float = DEFAULT_MAX_ELLIPSE_PX
@@ -265,6 +305,7 @@ class ProposalScreen:
     rival_radius_px: float = 12.0
     rival_fraction: float = 0.3
     max_rivals: int = 1
+    max_marking_edge_cells: float = 1.0
 
     def __post_init__(self) -> None:
         for name, value in vars(self).items():

@@ -46,6 +46,7 @@ from .evidence import (REASON_NO_EVIDENCE, REASON_ROUGH_ALIGNMENT, ProposalScree
                        intensity_edge_turn, local_plane_residual_m, near_edge_turn, normal_span, planar_share,
                        window_share)
 from .image_corners import CornerImage, content_mask, strongest_near
+from .marking_corner import edge_width_cells
 from .information import d_optimal_gain, pair_noise, pixel_jacobians, pose_pixel_covariance
 from .laser_noise import DEFAULT_CELL_SIGMA, DEFAULT_RANGE_SIGMA_M, PICK_CELL_SIGMA, cell_covariance
 from .pose_state import PoseState
@@ -528,6 +529,11 @@ def _screen(depth, camera, cand: Candidates, pixels, pixel_cov, J_point, ok, scr
         cut("straight marking edge", ~marking | (bright <= screen.max_convex_share)
             | (bright >= screen.min_concave_share))
         cut("marking corner off the paint", ~marking | touches)
+        m = np.flatnonzero(ok & marking)
+        if m.size:
+            width = np.zeros(len(ok))
+            width[m] = np.nan_to_num(edge_width_cells(depth, cand.rows_cols[m]), nan=np.inf)
+            cut("marking edge smeared", ~marking | (width <= screen.max_marking_edge_cells))
     radius = 3.0 * np.sqrt(np.maximum(np.linalg.eigvalsh(np.where(ok[:, None, None], pixel_cov, 0.0))[:, -1], 0.0))
     fits = radius <= screen.max_ellipse_px
     too_big = ok & ~fits
