@@ -137,8 +137,8 @@ PLAIN_REASONS = {
     "depth edge does not turn": "lie along an object's edge, not at its corner",
     "on the ground": "are on the road or at an object's foot, where the photo shows shadow",
     "at the foot of an object": "are on the road or at an object's foot, where the photo shows shadow",
-    "intensity corner off the ground": "are patterns in the laser's brightness off the road (signs, frames, shading) "
-                                       "with no matching corner in the photo",
+    "intensity corner off the ground": "are patterns in the laser's brightness off the road (signs, frames, shading), "
+                                       "which rarely match a corner in the photo",
     "weak intensity corner": "are painted markings the laser blurs, whose corners it cannot place",
     "marking edge does not turn": "are painted markings the laser blurs, whose corners it cannot place",
     "straight marking edge": "are painted markings the laser blurs, whose corners it cannot place",
@@ -154,8 +154,8 @@ PLAIN_REASONS = {
 def no_new_corner_note(screened: dict) -> str:
     """What the app says when no new cell passes the screen, in a user's words: how many corners the scan
     offered and what most of them are (:data:`PLAIN_REASONS`, tests with the same wording counted together),
-    e.g. "No new corner to propose here: of 412 corners in the scan, most (230) are too far away to place; pick
-    the next pairs by hand".
+    e.g. "No new corner to propose here: of 412 corner-like spots in the scan, most (230) are too far away to
+    place; pick the next pairs by hand".
 
     Parameters
     ----------
@@ -171,7 +171,7 @@ def no_new_corner_note(screened: dict) -> str:
         words = PLAIN_REASONS.get(test, f"fail the check '{test}'")
         plain[words] = plain.get(words, 0) + k
     words = max(plain, key=lambda w: plain[w])
-    return (f"No new corner to propose here: of {n} corner{'s' if n != 1 else ''} in the scan, most "
+    return (f"No new corner to propose here: of {n} corner-like spot{'s' if n != 1 else ''} in the scan, most "
             f"({plain[words]}) {words}; pick the next pairs by hand")
 
 
