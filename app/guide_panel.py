@@ -137,10 +137,8 @@ class GuidePanel(GuideShotsMixin):
         self._auto_tried: set[tuple[int, int]] = set()  # cells auto-accepted once: never again (an undo sticks)
         self._lock = threading.RLock()
         self._session: GuidedSession | None = None  # only touched on the worker thread
-        self._proposals: list[Proposal] = []
-        self._index = 0
-        self._skipped: list[tuple[int, int]] = []
-        self._dropped: list[tuple[int, int]] = []
+        self._proposals, self._index = [], 0  # list of Proposal, the one shown
+        self._skipped, self._dropped = [], []  # cells (row, col): new cells skipped; re-clicks and cells declined
         self._submitted: tuple | None = None  # key of the newest job
         self._job_no = 0
         self._shown_key: tuple | None = None  # key the proposals were computed for
@@ -407,7 +405,7 @@ class GuidePanel(GuideShotsMixin):
         self.update()  # an initial extrinsic imported since the last change is used from now on
         with self._lock:
             ready = not self._busy and self._shown_key == self._submitted
-            p = self.current if ready else None
+            p = self.current if ready else self._decline_while_busy(label)
             moving_on = label == "Next pair" and p is not None and self._started(p)  # run 5: skip it, go on
             if moving_on:
                 self._moved_on = self._what(p)
@@ -418,6 +416,7 @@ class GuidePanel(GuideShotsMixin):
                     self._drop_current(p)
         if not ready:  # framed as soon as the proposals are in
             self._want_next = True
+            self.update()  # a decline while busy ranks again
             self._refresh()
             return
         if self.current is None:

@@ -170,6 +170,19 @@ class GuideShotsMixin:
         self._index = (self._index + 1) % len(self._proposals)
         self._spent = tuple(self._proposals[self._index].laser_rc) in set(map(tuple, self._skipped))
 
+    def _decline_while_busy(self, label: str) -> None:
+        """Skip or Not a corner pressed while new proposals are computed (under the panel's lock): the shown
+        proposal is declined all the same, and the ranking in flight, which does not know it, is redone (run 8,
+        PJLab: such a Skip was lost and the re-click came back: pairs 2, 1, 3, 1, each a Skip).  Returns None
+        (no proposal to move on from)."""
+        shown = self.current
+        if shown is None or label not in ("Skip", "Not a corner"):
+            return None
+        declined = self._skipped if label == "Skip" and shown.replaces is None else self._dropped
+        declined.append(tuple(shown.laser_rc))
+        self._submitted = None
+        return None
+
     def _guided_half(self):
         """The pending pick if it is a guided half (laser end only), else None."""
         p = self.state.pending()
