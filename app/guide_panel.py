@@ -19,8 +19,8 @@ a re-click shown, for good).  "Next pair" while a proposal is started skips it, 
 (Cancel pair) declines it for good.  One undo takes back a guided click with the precision the panel gives it.
 
 Proposals pass the clear-evidence screen of :mod:`calib_core.guide.evidence`
-with a 3-sigma radius of at most half the camera loupe's side zoomed out one
-step (:func:`max_ellipse_px_for`); the camera loupe zooms out (never in) to
+with a 3-sigma radius of at most half the camera loupe's side at zoom 1
+(:func:`max_ellipse_px_for`); the camera loupe zooms out (never in) to
 show a proposal's ellipse whole and keeps that zoom until "Stop" (steady from
 one proposal to the next), and the ellipse is drawn inside the loupe only.  When no cell qualifies the panel says why (e.g. "do a better rough
 alignment first").  Guided picking is not offered while the calibration is

@@ -32,7 +32,7 @@ pose, by this module's own measures (none of them is the proposal code):
   :data:`FAR_M`; also reported: a Harris corner within 3 px, within one cell
   footprint (measured by projecting the neighbouring beams);
 * **3-sigma radius**, **fits the loupe** at zoom 1 (half the camera loupe's
-  side) and within the app's limit (the loupe zoomed out one step);
+  side) and within the app's limit (:func:`app.guide_support.max_ellipse_px_for`);
 * **off vegetation**, **off far background** (range > :data:`FAR_M`), **off
   the ground**.
 
@@ -469,7 +469,7 @@ def markdown(results: dict, trials: int, seconds: float, load: tuple) -> str:
         "Each trial: 5 rough pairs made by eye (cells of the committed real_data pairs, pixels 5-15 px off their "
         "projection under the published calibration, no precision given), then the first 20 proposals with the "
         "camera image: without a screen (`screen=None`) and with the app's screen (`ProposalScreen`, "
-        "`max_ellipse_px` = half the camera loupe zoomed out one step). The verdict is the benchmark's own, from each proposal's laser point projected with the "
+        "`max_ellipse_px` = the app's limit, `app.guide_support.max_ellipse_px_for`). The verdict is the benchmark's own, from each proposal's laser point projected with the "
         "*published* calibration: *corner* = an OpenCV Harris corner (`goodFeaturesToTrack`, quality "
         f"{HARRIS_QUALITY}, block {HARRIS_BLOCK}) within {ON_CORNER_PX:.0f} px with at most {MAX_RIVALS} other "
         f"Harris corners within {ISOLATION_PX:.0f} px of it, and the laser window explained by at most two RANSAC "
@@ -719,8 +719,8 @@ def ring_crossing_rows(name: str, scene: RealScene) -> list[str]:
     for label, d in (("the marking cell", d_cell), ("the rebuilt corner", d_rebuilt),
                      ("the cell nearest the rebuilt corner", d_nearest)):
         dd = d[sel]
-        rows.append(f"| {name} | {label} | {len(dd)} | {np.median(dd):.1f} px | {100 * np.mean(dd <= ON_CORNER_PX):.0f} % |"
-                    if len(dd) else f"| {name} | {label} | 0 | - | - |")
+        rows.append(f"| {name} | {label} | {len(dd)} | {np.median(dd):.1f} px | "
+                    f"{100 * np.mean(dd <= ON_CORNER_PX):.0f} % |" if len(dd) else f"| {name} | {label} | 0 | - | - |")
     rows.append(f"| {name} | (of the {int(m.sum())} markings, {int(np.isfinite(corner).all(axis=1).sum())} rebuilt; "
                 f"edge smeared over more than one cell: {int((width > 1.0).sum())}, at most one: "
                 f"{int((width <= 1.0).sum())}) | | | |")

@@ -89,6 +89,15 @@ def test_on_the_sample_every_ellipse_fits_the_loupe_and_holds_the_true_pixel():
         d = uv[0] - p.pixel
         inside.append(bool(ok[0]) and float(d @ np.linalg.solve(p.pixel_cov, d)) <= 9.0)
     assert np.mean(inside) >= 0.9, inside
+    # Planar and resolved, by the benchmark's own measures under the ground truth (RANSAC planes, neighbouring beams).
+    import bench.guide_by_eye as b
+
+    truth = SimpleNamespace(depth=sample.depth, camera=sample.camera, T_published=sample.T_camera_lidar)
+    noise, rng, screen = b.range_noise_m(sample.depth), np.random.default_rng(0), app_screen(sample.camera)
+    for p in props:
+        assert b.explained_by_two_planes(sample.depth, p.laser_rc, b.PLANE_TOL_NOISE * noise, rng) >= b.MIN_EXPLAINED
+        assert b.footprint_px(truth, p.laser_rc) <= 1.1 * screen.max_footprint_px
+        assert np.linalg.norm(p.laser_xyz) <= screen.max_range_m
 
 
 # ------------------------------------------------------------------ the real frames (published poses)
@@ -96,14 +105,15 @@ def real_scenes():
     from bench.guide_by_eye import load_manual, manual_available
     from bench.guide_real import kitti_available, load_kitti
 
-    return [pytest.param(load_kitti, marks=pytest.mark.skipif(not kitti_available(), reason="KITTI frame missing"),
+    # KITTI offers new cells from these starts; PJLab's were all smeared stripe corners, now left out.
+    return [pytest.param(load_kitti, 1, marks=pytest.mark.skipif(not kitti_available(), reason="KITTI frame missing"),
                          id="kitti"),
-            pytest.param(load_manual, marks=pytest.mark.skipif(not manual_available(), reason="PJLab frame missing"),
+            pytest.param(load_manual, 0, marks=pytest.mark.skipif(not manual_available(), reason="PJLab frame missing"),
                          id="pjlab")]
 
 
-@pytest.mark.parametrize("loader", real_scenes())
-def test_real_proposals_are_planar_resolved_and_fit_the_loupe(loader):
+@pytest.mark.parametrize("loader, min_new", real_scenes())
+def test_real_proposals_are_planar_resolved_and_fit_the_loupe(loader, min_new):
     import bench.guide_by_eye as b
 
     scene = loader()
@@ -120,6 +130,7 @@ def test_real_proposals_are_planar_resolved_and_fit_the_loupe(loader):
         new += [p for p in session.proposals(20) if p.replaces is None]
         for p in session.proposals(20):  # re-clicks too: the loupe must show where to click
             assert p.radius_3sigma_px <= loupe_half_px(scene.camera)
+    assert len(new) >= min_new
     rng = np.random.default_rng(0)
     for p in new:
         # Planar: the near side of its window is at most two planes (the bench's RANSAC, not the screen's fits).
