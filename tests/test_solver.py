@@ -454,7 +454,7 @@ def test_angular_lm_failure_becomes_calib_error():
     T = np.eye(4)
     T[:3, 3] = -p[0]
     with pytest.raises(CalibError, match="Levenberg-Marquardt"):
-        refine_module.refine_angular(T, p, refine_module.bearing_frames(b) * np.nan)
+        refine_module.refine_angular(T, p, kernels.bearing_frames(b) * np.nan)
 
 
 def test_pixel_cost_with_the_package_pinhole_model():

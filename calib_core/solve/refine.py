@@ -30,8 +30,8 @@ from typing import Any, Callable, NamedTuple
 import numpy as np
 
 from ..errors import CalibError
-from .kernels import bearing_frames as compiled_bearing_frames
 from .kernels import (
+    bearing_frames,
     covariance,
     lm_refine,
     normal_equations,
@@ -48,7 +48,6 @@ __all__ = [
     "refine_angular",
     "refine_angular_normal",
     "lm_failure",
-    "bearing_frames",
     "pose_covariance",
     "covariance_from_normal",
     "uncertainty_from_covariance",
@@ -72,23 +71,6 @@ PARAMETER_NAMES = (
 # Residual used where the camera cannot project a point during the pixel LM
 # (pixels); large enough that LM rejects the step.
 _UNPROJECTABLE_PX = 1e4
-
-
-def bearing_frames(bearings_camera: np.ndarray) -> np.ndarray:
-    """Per-bearing orthonormal frames, rows ``e1, e2, b`` (:func:`calib_core.solve.kernels.bearing_frames`).
-
-    Parameters
-    ----------
-    bearings_camera : (N, 3) ndarray
-        Unit bearings, camera frame.
-
-    Returns
-    -------
-    (N, 3, 3) ndarray
-        One product ``frames @ P`` gives a point's two tangent components and
-        its component along the bearing (metres, like ``P``).
-    """
-    return compiled_bearing_frames(np.ascontiguousarray(bearings_camera, dtype=np.float64))
 
 
 def _identity_W(n: int) -> np.ndarray:
@@ -191,7 +173,8 @@ def refine_pose(
         point cannot be projected at the start.
     """
     if cost == "angular":
-        return refine_angular(T_initial, points_lidar, bearing_frames(bearings_camera))
+        frames = bearing_frames(np.ascontiguousarray(bearings_camera, dtype=np.float64))
+        return refine_angular(T_initial, points_lidar, frames)
     R0 = T_initial[:3, :3]
     x0 = np.concatenate([np.zeros(3), T_initial[:3, 3]])
     if cost == "pixel":
@@ -241,7 +224,7 @@ def refine_angular(
     points_lidar : (N, 3) ndarray
         Laser points, lidar frame, metres.
     frames : (N, 3, 3) ndarray
-        Rows ``e1, e2, b`` per bearing (:func:`bearing_frames`), so a caller
+        Rows ``e1, e2, b`` per bearing (:func:`.kernels.bearing_frames`), so a caller
         that refines several times computes them once.
     W : (N, 2, 2) ndarray, optional
         Whitening matrices; identity (paper eq. 7 as printed) when omitted.
