@@ -60,7 +60,6 @@ __all__ = [
     "ShotTest",
     "ShotsResult",
     "solve_shots",
-    "leave_one_shot_out",
     "shot_tests",
     "shots_to_dict",
     "ShotProposal",
@@ -752,35 +751,6 @@ def _with_checks(result: CalibrationResult, shots: Sequence[Shot], kept: list[in
         result.check_positions = [p for _, p in checks]
         result.check_ids = [ids[p] for _, p in checks]
     return result
-
-
-def leave_one_shot_out(shots: Sequence[Shot], camera, *, cost: str = "angular",
-                       **options: Any) -> list[LeaveOneShotOut]:
-    """Each shot's errors under the pose fitted to the other shots alone (two shots or more).
-
-    Pairs the fit of the other shots would call outliers are not special-cased here: every fit
-    pair of the held-out shot is reported (use :func:`solve_shots` for the full report).
-    """
-    shots = list(shots)
-    if len(shots) < 2:
-        raise CalibError("leave-one-shot-out needs at least two shots")
-    ids = _global_ids(shots)
-    out = []
-    for k, s in enumerate(shots):
-        rows = _rows(shots, [j for j in range(len(shots)) if j != k], ids)
-        T, note = None, ""
-        if len(rows.points) < MIN_PAIRS:
-            note = f"the other shots have {len(rows.points)} fit pairs; a pose needs at least {MIN_PAIRS}"
-        else:
-            try:
-                fit = _solve_rows(rows, camera, cost, options)
-                T = fit.T_camera_lidar
-                if fit.quality.status == "unreliable":
-                    note = "the other shots alone give an unreliable pose: " + fit.quality.reasons[0]
-            except CalibError as exc:
-                note = str(exc)
-        out.append(_loso_entry(k, s, T, camera, set(), note))
-    return out
 
 
 def shots_to_dict(shots_result: ShotsResult, shots: Sequence[Shot]) -> list[dict]:
