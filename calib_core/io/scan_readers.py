@@ -46,7 +46,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import CalibError
+from ..errors import CalibError, one_line
 from ..lidar.depth_matrix import DepthMatrix
 from ..lidar.npz_format import (
     DEFAULT_MAX_CELLS,
@@ -58,7 +58,7 @@ from ..lidar.npz_format import (
 from ..lidar.organize import RING_FIELD_NAMES
 from ..lidar.organize_cloud import ORGANIZE_METHODS, organize_cloud
 from ..lidar.report import organize_report
-from .point_clouds.cloud import PointCloud, one_line
+from .point_clouds.cloud import PointCloud
 from .point_clouds.float_bin import BIN_COLUMNS_DETECTED, detect_bin_columns, read_bin
 from .point_clouds.las import read_las
 from .point_clouds.numpy_files import read_npy, read_npz
