@@ -67,6 +67,7 @@ __all__ = [
     "propose_shots",
     "shot_proposals_to_dict",
     "shots_extrinsics_document",
+    "verify_shots",
     "format_shots",
     "DEFAULT_ALPHA",
     "UNCHECKED_REASON",
@@ -982,6 +983,21 @@ def shot_proposals_to_dict(proposals: Sequence[ShotProposal], state=None, shot_n
     return doc
 
 
+def verify_shots(shots_result: ShotsResult, shots: Sequence[Shot], camera, **verify_options: Any):
+    """:func:`calib_core.verify.verify_calibration` of every shot's pairs under the joint fit, a shot left out
+    of the fit counted as check pairs (``verify_options``: ``T_reference``, ``scene_points_lidar``, ...)."""
+    from .verify import verify_calibration
+
+    left_out = set(shots_result.disagreeing)
+    return verify_calibration(
+        np.concatenate([s.points_lidar for s in shots]).reshape(-1, 3),
+        np.concatenate([s.bearings for s in shots]).reshape(-1, 3),
+        np.concatenate([s.pixels for s in shots]).reshape(-1, 2), camera,
+        check=np.concatenate([s.check | (k in left_out) for k, s in enumerate(shots)]).astype(bool),
+        ids=[i for shot_ids in shots_result.pair_ids for i in shot_ids], result=shots_result.result,
+        **verify_options)
+
+
 def shots_extrinsics_document(shots_result: ShotsResult, shots: Sequence[Shot], camera, base_dir=None,
                               **verify_options: Any) -> tuple[dict, list[str]]:
     """The extrinsics YAML document of a :func:`solve_shots` result.
@@ -998,23 +1014,15 @@ def shots_extrinsics_document(shots_result: ShotsResult, shots: Sequence[Shot], 
         Why the document has no ``verification`` block, if it has none.
     """
     from .io.extrinsics import extrinsics_to_dict
-    from .verify import verification_to_dict, verify_calibration
+    from .verify import verification_to_dict
 
     shots = list(shots)
     result = shots_result.result
     pairs_block = [{**p.to_dict(), "shot": k} for k, s in enumerate(shots) for p in s.pairs]
     doc = extrinsics_to_dict(result.T_camera_lidar, result, camera, pairs_block, base_dir=base_dir)
     notes: list[str] = []
-    left_out = set(shots_result.disagreeing)
-    points = np.concatenate([s.points_lidar for s in shots]).reshape(-1, 3)
-    bearings = np.concatenate([s.bearings for s in shots]).reshape(-1, 3)
-    pixels = np.concatenate([s.pixels for s in shots]).reshape(-1, 2)
-    check = np.concatenate([s.check | (k in left_out) for k, s in enumerate(shots)]).astype(bool)
-    flat_ids = [i for shot_ids in shots_result.pair_ids for i in shot_ids]
     try:
-        report = verify_calibration(points, bearings, pixels, camera, check=check, ids=flat_ids, result=result,
-                                    **verify_options)
-        doc["verification"] = verification_to_dict(report)
+        doc["verification"] = verification_to_dict(verify_shots(shots_result, shots, camera, **verify_options))
     except CalibError as exc:
         notes.append(f"no verification block: {exc}")
     doc["shots"] = shots_to_dict(shots_result, shots)
