@@ -21,7 +21,7 @@ import numpy as np
 import viser
 
 from calib_core.errors import CalibError
-from calib_core.io.atomic import write_yaml_atomic
+from calib_core.io.atomic import write_yaml_atomic, yaml_bytes
 from calib_core.io.extrinsic_formats import FORMATS, export_extrinsics, lidar_and_camera, parse_extrinsics
 from calib_core.overlays import export_colored_scan
 from calib_core.verify import extrinsics_document
@@ -101,10 +101,7 @@ class ExportPanel:
                                          report=report)
             write_yaml_atomic(app.output_path, doc)
         doc, _ = extrinsics_document(r, bundle.pairs, app.depth, app.camera, base_dir=None, report=report)
-        with tempfile.TemporaryDirectory() as tmp:
-            path = Path(tmp) / "extrinsics.yaml"
-            write_yaml_atomic(path, doc)
-            return path.read_bytes(), app.output_path
+        return yaml_bytes(doc), app.output_path
 
 
 class FormatExportPanel:

@@ -108,11 +108,9 @@ class BagSource:
         """Extract frame ``index`` (None: the first frame, as given by ``index`` / ``time_s``)."""
         from calib_core.io.bags import read_bag_scene, write_bag_scene
 
-        if index is None:
-            scene = read_bag_scene(self.bag, self.cloud_topic, self.image_topic, self.camera_info_topic,
-                                   time_s=self.time_s, index=self.index)
-        else:
-            scene = read_bag_scene(self.bag, self.cloud_topic, self.image_topic, self.camera_info_topic, index=index)
+        time_s, index = (self.time_s, self.index) if index is None else (None, index)
+        scene = read_bag_scene(self.bag, self.cloud_topic, self.image_topic, self.camera_info_topic, time_s=time_s,
+                               index=index)
         # Later frames read the same topics, without asking again.
         self.cloud_topic, self.image_topic = scene.cloud_topic, scene.image_topic
         self.camera_info_topic = scene.camera_info_topic

@@ -42,7 +42,7 @@ from typing import Callable
 
 import yaml
 
-from calib_core.errors import CalibError
+from calib_core.errors import CalibError, one_line
 from calib_core.io.atomic import fsync_folder, write_bytes_atomic
 from calib_core.io.yaml_files import read_yaml_mapping
 
@@ -60,10 +60,6 @@ SEQ_KEY = "journal_seq"
 ID_KEY = "session_id"
 
 _fdatasync = getattr(os, "fdatasync", os.fsync)
-
-
-def _one_line(exc: BaseException) -> str:
-    return " ".join(str(exc).split()) or type(exc).__name__
 
 
 @dataclass(frozen=True)
@@ -216,7 +212,7 @@ class SessionStore:
         except FileNotFoundError:
             return b""
         except OSError as exc:
-            raise CalibError(f"{self.journal_path}: cannot read the session journal: {_one_line(exc)}") from None
+            raise CalibError(f"{self.journal_path}: cannot read the session journal: {one_line(exc)}") from None
         try:
             st = os.fstat(fd)
             if not stat.S_ISREG(st.st_mode):
@@ -256,7 +252,7 @@ class SessionStore:
                     view = view[os.write(fd, view):]
                 _fdatasync(fd)
             except (OSError, ValueError, TypeError) as exc:
-                raise CalibError(f"{self.journal_path}: cannot save the change: {_one_line(exc)}") from None
+                raise CalibError(f"{self.journal_path}: cannot save the change: {one_line(exc)}") from None
             self._seq, self._latest = seq, data
             self._records += 1
             self._new_bytes += len(line)
@@ -294,7 +290,7 @@ class SessionStore:
         try:
             write_bytes_atomic(self.path, text.encode("utf-8"))
         except (OSError, CalibError) as exc:
-            raise CalibError(f"{self.path}: cannot save the session: {_one_line(exc)}") from None
+            raise CalibError(f"{self.path}: cannot save the session: {one_line(exc)}") from None
         self._filed = True
         self.compactions += 1
 
@@ -309,7 +305,7 @@ class SessionStore:
         except FileNotFoundError:
             pass
         except OSError as exc:
-            print(f"ba-calib: cannot remove the session journal {self.journal_path}: {_one_line(exc)}",
+            print(f"ba-calib: cannot remove the session journal {self.journal_path}: {one_line(exc)}",
                   file=sys.stderr)
 
     def _open_locked(self) -> int:
@@ -318,7 +314,7 @@ class SessionStore:
             try:
                 fd = os.open(self.journal_path, flags, 0o666)
             except OSError as exc:
-                raise OSError(f"cannot open the session journal ({_one_line(exc)})") from None
+                raise OSError(f"cannot open the session journal ({one_line(exc)})") from None
             st = os.fstat(fd)
             if not stat.S_ISREG(st.st_mode):
                 os.close(fd)
@@ -355,7 +351,7 @@ class SessionStore:
                 os.ftruncate(self._fd, 0)
                 _fdatasync(self._fd)
             except OSError as exc:
-                raise CalibError(f"{self.journal_path}: cannot empty the session journal: {_one_line(exc)}") from None
+                raise CalibError(f"{self.journal_path}: cannot empty the session journal: {one_line(exc)}") from None
             self._bytes = 0
 
     def close(self) -> None:

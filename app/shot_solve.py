@@ -11,7 +11,6 @@ does).  No maths here: grouping, calls into :mod:`calib_core`, and the text the 
 from __future__ import annotations
 
 import math
-import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,11 +18,10 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from calib_core.io.atomic import write_yaml_atomic
+from calib_core.io.atomic import write_yaml_atomic, yaml_bytes
 from calib_core.pairs import Pair
 from calib_core.shots import Shot, ShotsResult, shots_extrinsics_document, solve_shots
 from calib_core.transforms import transform_points
-from calib_core.verify import VerifyReport, verify_calibration
 
 from .ui_common import SolveBundle, _fmt, md_escape
 
@@ -122,26 +120,6 @@ def _bundle(app: Any, ids: Sequence[int], pairs: Sequence[Pair], shot_of: np.nda
     )
 
 
-def verify_joint(joint: JointSolve, camera: Any, **options: Any) -> VerifyReport:
-    """Verify numbers of a joint solve: every shot's pairs, a shot left out of the fit counted as check pairs.
-
-    ``options``: ``T_reference``, ``scene_points_lidar`` (:func:`calib_core.verify.verify_calibration`)."""
-    shots, solved = joint.shots, joint.solved
-    left_out = set(solved.disagreeing)
-    return verify_calibration(
-        np.concatenate([s.points_lidar for s in shots]).reshape(-1, 3),
-        np.concatenate([s.bearings for s in shots]).reshape(-1, 3),
-        np.concatenate([s.pixels for s in shots]).reshape(-1, 2), camera,
-        check=np.concatenate([s.check | (k in left_out) for k, s in enumerate(shots)]).astype(bool),
-        ids=[i for shot_ids in solved.pair_ids for i in shot_ids], result=solved.result, **options)
-
-
-def joint_document(joint: JointSolve, camera: Any, base_dir: Any = None) -> dict:
-    """The extrinsics YAML document of a joint solve (per-shot block and leave-one-shot-out included)."""
-    doc, _ = shots_extrinsics_document(joint.solved, joint.shots, camera, base_dir=base_dir)
-    return doc
-
-
 def joint_export(app: Any, joint: JointSolve) -> tuple[bytes, Path | None]:
     """Export of a joint solve: the YAML to download (camera inline), also written to ``app.output_path``
     (camera named relative to it) when set; as :meth:`app.export_panel.ExportPanel.export_extrinsics`.
@@ -149,11 +127,10 @@ def joint_export(app: Any, joint: JointSolve) -> tuple[bytes, Path | None]:
     if not joint.solved.checked:
         joint = JointSolve(solve_shots(joint.shots, app.camera), joint.shots, joint.shot_of)
     if app.output_path is not None:
-        write_yaml_atomic(app.output_path, joint_document(joint, app.camera, base_dir=app.output_path.parent))
-    with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "extrinsics.yaml"
-        write_yaml_atomic(path, joint_document(joint, app.camera))
-        return path.read_bytes(), app.output_path
+        doc, _ = shots_extrinsics_document(joint.solved, joint.shots, app.camera, base_dir=app.output_path.parent)
+        write_yaml_atomic(app.output_path, doc)
+    doc, _ = shots_extrinsics_document(joint.solved, joint.shots, app.camera)
+    return yaml_bytes(doc), app.output_path
 
 
 def shots_markdown(joint: JointSolve, active: int) -> str:

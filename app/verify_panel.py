@@ -32,12 +32,12 @@ import viser.uplot as uplot
 
 from calib_core.errors import CalibError
 from calib_core.pairs import Pair
-from calib_core.shots import solve_shots
+from calib_core.shots import solve_shots, verify_shots
 from calib_core.solve import calibrate
 from calib_core.verify import VerifyReport, expected_error_map, verify_pairs
 
 from .live_solver import LiveSolver
-from .shot_solve import JointSolve, by_shot, make_shots, shot_name, shots_markdown, verify_joint
+from .shot_solve import JointSolve, by_shot, make_shots, shot_name, shots_markdown
 from .ui_common import MIN_PAIRS, _fmt, md_escape
 
 #: Seconds of quiet after a change before the verification runs (a click burst costs one run).
@@ -231,7 +231,7 @@ class VerifyPanel:
         names = [shot_name(f) for f in app.state.shots]
         shots = make_shots(pairs, rows_shot, [sc.depth for sc in app.shot_scenes], app.camera, names)
         joint = JointSolve(solve_shots(shots, app.camera), shots, rows_shot)
-        report = verify_joint(joint, app.camera, T_reference=None if ref is None else ref[0],
+        report = verify_shots(joint.solved, shots, app.camera, T_reference=None if ref is None else ref[0],
                               scene_points_lidar=self._scene_points)
         return joint.solved.result, report, shots_markdown(joint, app.active_shot), ids, tuple(rows_shot.tolist())
 

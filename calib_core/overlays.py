@@ -136,22 +136,6 @@ def project_lidar_points(T_camera_lidar: np.ndarray, camera, points_lidar: np.nd
     return camera.project(transform_points(T_camera_lidar, pts))
 
 
-def sample_bilinear(image: np.ndarray, pixels: np.ndarray) -> np.ndarray:
-    """Bilinear colours of an RGB(A) ``image`` (H, W, 3 or 4) uint8 at ``(u, v)`` pixels ``(N, 2)``: ``(N, 3)`` uint8.
-
-    Pixel centres are at integer ``(u, v)``; outside the image the border
-    pixels are repeated.  Rounded to the nearest integer.
-    """
-    uv = np.array(pixels, dtype=np.float32, order="C").reshape(-1, 2)  # a copy: clipped in place below
-    colors = np.zeros((uv.shape[0], 3), np.uint8)
-    packed = _packed_rgbx(image)
-    # Every pixel in one cell without a depth limit; NaN pixels get no colour.
-    np.clip(uv, -0.5, np.array([packed.shape[1] - 0.5, packed.shape[0] - 0.5], np.float32), out=uv)
-    _colour_visible(uv, np.isfinite(uv).all(axis=1), np.zeros(uv.shape[0], np.float32), 1 << 20, 1,
-                    np.zeros(1, np.float32), packed, colors, np.empty(uv.shape[0], np.bool_))
-    return colors
-
-
 def _packed_rgbx(image) -> np.ndarray:
     """``image`` (H, W, 3 or 4) uint8 as (H, W) int32, one pixel per item: one load per pixel in the sampler."""
     img = np.asarray(image)
@@ -489,7 +473,6 @@ def warm_up() -> None:
     for dtype in (np.float64, np.float32):  # the clouds come in both
         points = np.array([[0.0, 0.0, 1.0], [0.1, 0.0, 2.0], [np.nan, 0.0, 1.0]], dtype)
         colorize_points(points, image, camera, np.eye(4))
-    sample_bilinear(image, np.zeros((1, 2)))
 
 
 def export_colored_ply(

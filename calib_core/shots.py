@@ -60,7 +60,6 @@ __all__ = [
     "ShotTest",
     "ShotsResult",
     "solve_shots",
-    "leave_one_shot_out",
     "shot_tests",
     "shots_to_dict",
     "ShotProposal",
@@ -68,6 +67,7 @@ __all__ = [
     "propose_shots",
     "shot_proposals_to_dict",
     "shots_extrinsics_document",
+    "verify_shots",
     "format_shots",
     "DEFAULT_ALPHA",
     "UNCHECKED_REASON",
@@ -754,35 +754,6 @@ def _with_checks(result: CalibrationResult, shots: Sequence[Shot], kept: list[in
     return result
 
 
-def leave_one_shot_out(shots: Sequence[Shot], camera, *, cost: str = "angular",
-                       **options: Any) -> list[LeaveOneShotOut]:
-    """Each shot's errors under the pose fitted to the other shots alone (two shots or more).
-
-    Pairs the fit of the other shots would call outliers are not special-cased here: every fit
-    pair of the held-out shot is reported (use :func:`solve_shots` for the full report).
-    """
-    shots = list(shots)
-    if len(shots) < 2:
-        raise CalibError("leave-one-shot-out needs at least two shots")
-    ids = _global_ids(shots)
-    out = []
-    for k, s in enumerate(shots):
-        rows = _rows(shots, [j for j in range(len(shots)) if j != k], ids)
-        T, note = None, ""
-        if len(rows.points) < MIN_PAIRS:
-            note = f"the other shots have {len(rows.points)} fit pairs; a pose needs at least {MIN_PAIRS}"
-        else:
-            try:
-                fit = _solve_rows(rows, camera, cost, options)
-                T = fit.T_camera_lidar
-                if fit.quality.status == "unreliable":
-                    note = "the other shots alone give an unreliable pose: " + fit.quality.reasons[0]
-            except CalibError as exc:
-                note = str(exc)
-        out.append(_loso_entry(k, s, T, camera, set(), note))
-    return out
-
-
 def shots_to_dict(shots_result: ShotsResult, shots: Sequence[Shot]) -> list[dict]:
     """The ``shots:`` block of the extrinsics YAML (plain types; None for NaN).
 
@@ -1012,6 +983,21 @@ def shot_proposals_to_dict(proposals: Sequence[ShotProposal], state=None, shot_n
     return doc
 
 
+def verify_shots(shots_result: ShotsResult, shots: Sequence[Shot], camera, **verify_options: Any):
+    """:func:`calib_core.verify.verify_calibration` of every shot's pairs under the joint fit, a shot left out
+    of the fit counted as check pairs (``verify_options``: ``T_reference``, ``scene_points_lidar``, ...)."""
+    from .verify import verify_calibration
+
+    left_out = set(shots_result.disagreeing)
+    return verify_calibration(
+        np.concatenate([s.points_lidar for s in shots]).reshape(-1, 3),
+        np.concatenate([s.bearings for s in shots]).reshape(-1, 3),
+        np.concatenate([s.pixels for s in shots]).reshape(-1, 2), camera,
+        check=np.concatenate([s.check | (k in left_out) for k, s in enumerate(shots)]).astype(bool),
+        ids=[i for shot_ids in shots_result.pair_ids for i in shot_ids], result=shots_result.result,
+        **verify_options)
+
+
 def shots_extrinsics_document(shots_result: ShotsResult, shots: Sequence[Shot], camera, base_dir=None,
                               **verify_options: Any) -> tuple[dict, list[str]]:
     """The extrinsics YAML document of a :func:`solve_shots` result.
@@ -1028,23 +1014,15 @@ def shots_extrinsics_document(shots_result: ShotsResult, shots: Sequence[Shot], 
         Why the document has no ``verification`` block, if it has none.
     """
     from .io.extrinsics import extrinsics_to_dict
-    from .verify import verification_to_dict, verify_calibration
+    from .verify import verification_to_dict
 
     shots = list(shots)
     result = shots_result.result
     pairs_block = [{**p.to_dict(), "shot": k} for k, s in enumerate(shots) for p in s.pairs]
     doc = extrinsics_to_dict(result.T_camera_lidar, result, camera, pairs_block, base_dir=base_dir)
     notes: list[str] = []
-    left_out = set(shots_result.disagreeing)
-    points = np.concatenate([s.points_lidar for s in shots]).reshape(-1, 3)
-    bearings = np.concatenate([s.bearings for s in shots]).reshape(-1, 3)
-    pixels = np.concatenate([s.pixels for s in shots]).reshape(-1, 2)
-    check = np.concatenate([s.check | (k in left_out) for k, s in enumerate(shots)]).astype(bool)
-    flat_ids = [i for shot_ids in shots_result.pair_ids for i in shot_ids]
     try:
-        report = verify_calibration(points, bearings, pixels, camera, check=check, ids=flat_ids, result=result,
-                                    **verify_options)
-        doc["verification"] = verification_to_dict(report)
+        doc["verification"] = verification_to_dict(verify_shots(shots_result, shots, camera, **verify_options))
     except CalibError as exc:
         notes.append(f"no verification block: {exc}")
     doc["shots"] = shots_to_dict(shots_result, shots)

@@ -172,27 +172,13 @@ def leave_one_out(
 # --------------------------------------------------------------------------------------
 
 
-def _projection_jacobian(camera, points_camera: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``d pixel / d X_camera`` (N, 2, 3) by central differences, and the pixels (N, 2)."""
-    n = len(points_camera)
-    h = 1e-6 * np.maximum(np.linalg.norm(points_camera, axis=1), 1e-3)
-    steps = np.concatenate([np.eye(3), -np.eye(3)])  # (6, 3)
-    shifted = points_camera[None, :, :] + steps[:, None, :] * h[None, :, None]
-    proj, _ = camera.project(np.concatenate([points_camera, shifted.reshape(-1, 3)]))
-    proj = np.asarray(proj, dtype=np.float64)
-    center, moved = proj[:n], proj[n:].reshape(6, n, 2)
-    J = (moved[:3] - moved[3:]) / (2.0 * h[None, :, None])  # (3, N, 2)
-    return np.transpose(J, (1, 2, 0)), center
-
-
 def expected_error_px(
     T_camera_lidar: np.ndarray, covariance_6x6: np.ndarray, camera, points_lidar: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """RMS pixel error that the pose uncertainty causes at each scene point.
 
-    With ``X_c = exp(delta) R X + t``: ``d X_c / d delta = -[R X]_x`` and
-    ``d X_c / d t = I``; ``C = J Sigma J^T`` with ``J = (d pixel / d X_c)
-    [-[R X]_x, I]``.
+    ``C = J Sigma J^T`` with ``J = d pixel / d (delta, t)``
+    (:func:`calib_core.guide.information.pixel_jacobians`).
 
     Returns
     -------
@@ -204,20 +190,14 @@ def expected_error_px(
     pixel_cov : (N, 2, 2) array
         ``C`` per point.
     """
-    T = np.asarray(T_camera_lidar, dtype=np.float64)
-    cov = np.asarray(covariance_6x6, dtype=np.float64)
-    RX = np.asarray(points_lidar, dtype=np.float64) @ T[:3, :3].T
-    Xc = RX + T[:3, 3]
-    Jp, pixels = _projection_jacobian(camera, Xc)
-    skew = np.zeros((len(RX), 3, 3))
-    skew[:, 0, 1], skew[:, 0, 2], skew[:, 1, 2] = -RX[:, 2], RX[:, 1], -RX[:, 0]
-    skew[:, 1, 0], skew[:, 2, 0], skew[:, 2, 1] = RX[:, 2], -RX[:, 1], RX[:, 0]
-    dXc = np.concatenate([-skew, np.broadcast_to(np.eye(3), skew.shape)], axis=2)  # (N, 3, 6)
-    J = Jp @ dXc  # (N, 2, 6)
+    from .guide.information import pixel_jacobians
+
+    points = np.asarray(points_lidar, dtype=np.float64)
+    pixels, J, _ = pixel_jacobians(camera, T_camera_lidar, points)  # J: (N, 2, 6)
     with np.errstate(invalid="ignore", over="ignore"):
-        C = J @ cov @ np.transpose(J, (0, 2, 1))
+        C = J @ np.asarray(covariance_6x6, dtype=np.float64) @ np.transpose(J, (0, 2, 1))
         rms = np.sqrt(np.trace(C, axis1=1, axis2=2))
-    _, valid = camera.project(Xc)
+    _, valid = camera.project(transform_points(T_camera_lidar, points))
     rms = np.where(np.asarray(valid, bool), rms, np.nan)
     return rms, pixels, C
 

@@ -78,19 +78,6 @@ def test_colour_is_bilinear_between_pixel_centres(scene):
     np.testing.assert_array_equal(colors, [[130, 61, 7]])
 
 
-def test_sample_bilinear_by_hand():
-    from calib_core.overlays import sample_bilinear
-
-    image = np.zeros((2, 3, 3), np.uint8)
-    image[..., 0] = [[0, 100, 200], [50, 150, 250]]
-    # Midway between the four top-left pixels: (0 + 100 + 50 + 150) / 4 = 75.
-    # A quarter along u in the bottom row: 150 + 0.25 * 100 = 175.
-    # Outside the image the border repeats: (-3, 5) -> pixel (0, 1) = 50.
-    got = sample_bilinear(image, np.array([[0.5, 0.5], [1.25, 1.0], [-3.0, 5.0]]))
-    np.testing.assert_array_equal(got[:, 0], [75, 175, 50])
-    assert not got[:, 1:].any()
-
-
 def test_points_behind_outside_or_nan_get_no_colour(scene):
     image, _, _ = scene
     pts = np.array([[0, 0, -2.0], [50.0, 0, 1.0], [np.nan, 0, 1.0], [0, 0, 1.0]])

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from calib_core.errors import CalibError
-from calib_core.shots import Shot, leave_one_shot_out, propose_shots, solve_shots
+from calib_core.shots import Shot, propose_shots, solve_shots
 from calib_core.solve import calibrate, solve_extrinsics
 from calib_core.synthetic import load_sample, make_sample_scene, simulate_pairs
 from calib_core.synthetic.picks import CIRCLE_MARGIN_PX, MAX_LASER_PICK_ERROR_M, laser_picks
@@ -181,10 +181,6 @@ def test_leave_one_shot_out_fits_the_other_shots_and_reports(rooms):
         np.testing.assert_allclose(e.mean_px, np.linalg.norm(uv - s.pixels, axis=1).mean(), atol=1e-9)
         assert 0.3 < e.mean_px < 4.0 and 0.1 < e.mean_deg < 2.0
         assert _errors(e.T_camera_lidar, T_true)[0] < 1.0
-    plain = leave_one_shot_out(shots, cam)
-    np.testing.assert_allclose([e.mean_px for e in plain], [e.mean_px for e in joint.leave_one_shot_out], atol=1e-6)
-    with pytest.raises(CalibError, match="at least two shots"):
-        leave_one_shot_out(shots[:1], cam)
     with pytest.raises(CalibError, match="shot 0 pair 0 and shot 1 pair 0 use the same laser point"):
         solve_shots([shots[0], shots[0]], cam)
 

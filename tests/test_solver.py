@@ -18,17 +18,16 @@ from calib_core.errors import CalibError
 from calib_core.solve import pose_covariance, solve_extrinsics
 from calib_core.solve import refine as refine_module
 from calib_core.solve.bearing_pnp import p3p_grunert, quan_lan_pose, quan_lan_quartic
-from calib_core.solve.refine import (
-    _pose,
-    angular_jacobian,
-    log_map_residuals,
-    rpy_jacobian,
-    tangent_basis,
-)
+from calib_core.solve import kernels
 from calib_core.solve.rigid import rigid_fit
 
 
 # ---------------------------------------------------------------- helpers
+def tangent_basis(bearings: np.ndarray) -> np.ndarray:
+    """Rows ``e1, e2`` of each bearing's frame (``(e1, e2, b)`` right-handed orthonormal)."""
+    return kernels.bearing_frames(np.ascontiguousarray(bearings, dtype=np.float64))[:, :2, :]
+
+
 def random_scene(seed: int, n: int, near: float = 0.5, far: float = 20.0, max_t: float = 3.0):
     """Known pose, laser points and exact bearings, directions uniform on the sphere."""
     rng = np.random.default_rng(seed)
@@ -169,31 +168,36 @@ def test_rigid_fit_recovers_transform_and_never_reflects():
 
 
 # ------------------------------------------------ residual and Jacobians
+def _unit_whitening(n: int) -> np.ndarray:
+    return np.broadcast_to(np.eye(2), (n, 2, 2)).copy()
+
+
 def test_log_map_residual_norm_is_the_angle():
     bearings = np.array([[0.0, 0, 1], [0, 0, -1], [1, 0, 0]])
     points = np.array([[1.0, 0, 1], [0, 1, -1], [-1, 1e-9, 0]])  # 45, 45 and ~180 deg
-    r = log_map_residuals(points, bearings, tangent_basis(bearings))
+    r, _ = kernels.whitened_residuals(np.eye(3), np.zeros(3), points, kernels.bearing_frames(bearings),
+                                      _unit_whitening(3))
     np.testing.assert_allclose(np.linalg.norm(r, axis=1), np.radians([45, 45, 180]), atol=1e-8)
 
 
 def test_angular_jacobian_matches_finite_differences():
     rng = np.random.default_rng(5)
     T, points, bearings = random_scene(5, 8)
-    noisy = perturb(bearings, 0.2, rng)
-    E = tangent_basis(noisy)
-    R0 = T[:3, :3]
-    x = np.concatenate([rng.normal(size=3) * 0.3, T[:3, 3] + 0.1])
+    F = kernels.bearing_frames(perturb(bearings, 0.2, rng))
+    W = _unit_whitening(8)
+    R = Rotation.from_rotvec(rng.normal(size=3) * 0.3).as_matrix() @ T[:3, :3]
+    t = T[:3, 3] + 0.1
 
-    def f(x):
-        R, t = _pose(x, R0)
-        return log_map_residuals(points @ R.T + t, noisy, E).ravel()
+    def f(d):  # the kernel's parameters: a left rotation perturbation exp([d_rot]) R, then t + d_t
+        z, _ = kernels.whitened_residuals(Rotation.from_rotvec(d[:3]).as_matrix() @ R, t + d[3:], points, F, W)
+        return z.ravel()
 
     h = 1e-6
-    J_num = np.stack([(f(x + h * e) - f(x - h * e)) / (2 * h) for e in np.eye(6)], axis=1)
-    np.testing.assert_allclose(angular_jacobian(x, R0, points, noisy, E), J_num, atol=1e-7)
+    J_num = np.stack([(f(h * e) - f(-h * e)) / (2 * h) for e in np.eye(6)], axis=1)
+    np.testing.assert_allclose(kernels.jacobian(R, t, points, F, W), J_num, atol=1e-7)
 
 
-def test_rpy_jacobian_matches_finite_differences():
+def test_rpy_sigmas_match_finite_difference_propagation():
     R = Rotation.from_euler("xyz", [20, -35, 140], degrees=True).as_matrix()
     h = 1e-6
     cols = []
@@ -201,7 +205,12 @@ def test_rpy_jacobian_matches_finite_differences():
         plus = rpy_deg(Rotation.from_rotvec(h * e).as_matrix() @ R)
         minus = rpy_deg(Rotation.from_rotvec(-h * e).as_matrix() @ R)
         cols.append(np.radians(plus - minus) / (2 * h))
-    np.testing.assert_allclose(rpy_jacobian(R), np.stack(cols, axis=1), atol=1e-7)
+    G = np.stack(cols, axis=1)  # d(roll, pitch, yaw) / d delta, rad/rad
+    A = np.random.default_rng(3).normal(size=(6, 6)) * 1e-3
+    cov = A @ A.T
+    sigma_t, sigma_rpy = kernels.rpy_sigmas(R, cov)
+    np.testing.assert_allclose(sigma_t, np.sqrt(np.diag(cov)[3:]), rtol=1e-12)
+    np.testing.assert_allclose(sigma_rpy, np.degrees(np.sqrt(np.diag(G @ cov[:3, :3] @ G.T))), rtol=1e-6)
 
 
 # ------------------------------------------------------------ pixel cost
@@ -445,7 +454,7 @@ def test_angular_lm_failure_becomes_calib_error():
     T = np.eye(4)
     T[:3, 3] = -p[0]
     with pytest.raises(CalibError, match="Levenberg-Marquardt"):
-        refine_module.refine_angular(T, p, refine_module.bearing_frames(b) * np.nan)
+        refine_module.refine_angular(T, p, kernels.bearing_frames(b) * np.nan)
 
 
 def test_pixel_cost_with_the_package_pinhole_model():

@@ -123,10 +123,14 @@ def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> None:
         raise
 
 
+def yaml_bytes(data: Any) -> bytes:
+    """``data`` as the UTF-8 YAML :func:`write_yaml_atomic` writes (``yaml.safe_dump``, block style, key order kept)."""
+    return yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=100).encode("utf-8")
+
+
 def write_yaml_atomic(path: str | os.PathLike, data: Any) -> None:
-    """``yaml.safe_dump`` ``data`` to ``path`` atomically (block style, key order kept)."""
-    text = yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=100)
-    write_bytes_atomic(path, text.encode("utf-8"))
+    """:func:`yaml_bytes` of ``data`` written to ``path`` atomically."""
+    write_bytes_atomic(path, yaml_bytes(data))
 
 
 def fsync_folder(folder: Path) -> None:

@@ -49,6 +49,7 @@ import yaml
 
 from ..errors import CalibError
 from ..transforms import R_from_quat_xyzw, R_from_rpy_deg, invert_T, make_T, quat_xyzw_from_R, rpy_deg_from_R
+from .input_files import MAX_EXTRINSICS_BYTES, read_input_text
 from .kitti_calib import DEFAULT_KITTI_CAMERA, kitti_T_camera_lidar, parse_kitti_calib
 
 __all__ = [
@@ -711,14 +712,7 @@ def read_extrinsics_any(
 ) -> ParsedExtrinsics:
     """Read an extrinsics file of any supported format; errors name the file and the format."""
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise CalibError(f"{path}: extrinsics file not found") from None
-    except IsADirectoryError:
-        raise CalibError(f"{path}: is a folder, expected an extrinsics file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise CalibError(f"{path}: cannot read extrinsics file: {exc}") from None
+    text = read_input_text(path, "extrinsics file", MAX_EXTRINSICS_BYTES)  # a regular file, bounded
     try:
         return parse_extrinsics(text, fmt, lidar_frame, camera_frame, kitti_camera)
     except CalibError as exc:

@@ -46,7 +46,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import CalibError
+from ..errors import CalibError, one_line
 from ..lidar.depth_matrix import DepthMatrix
 from ..lidar.npz_format import (
     DEFAULT_MAX_CELLS,
@@ -58,7 +58,7 @@ from ..lidar.npz_format import (
 from ..lidar.organize import RING_FIELD_NAMES
 from ..lidar.organize_cloud import ORGANIZE_METHODS, organize_cloud
 from ..lidar.report import organize_report
-from .point_clouds.cloud import PointCloud, one_line
+from .point_clouds.cloud import PointCloud
 from .point_clouds.float_bin import BIN_COLUMNS_DETECTED, detect_bin_columns, read_bin
 from .point_clouds.las import read_las
 from .point_clouds.numpy_files import read_npy, read_npz
@@ -267,31 +267,14 @@ def load_scan(
         Any file :func:`read_point_cloud` reads; a native ``.npz`` (with a
         ``model`` key) is loaded with :func:`load_depth_npz` and the other
         options are ignored.
-    organize : str
-        How the cloud becomes a grid (see
-        :func:`calib_core.lidar.organize_cloud.organize_cloud`):
-
-        * ``"auto"`` -- an organized cloud keeps its grid; else the ring
-          field if present; else the scan order when the points are stored
-          laser after laser (KITTI); else elevation clustering when
-          ``beams`` is given; else a spherical projection.  The report says
-          which and why;
-        * ``"organized"`` -- the file's own grid (error if it has none);
-        * ``"ring"``, ``"elevation"``, ``"firing_order"`` (alias
-          ``"firing"``), ``"spherical"`` -- force that method (an organized
-          cloud is then treated as a flat list).
-    beams : int, optional
-        Number of beams, for ``"elevation"`` and ``"firing_order"``.
-    n_cols : int, optional
-        Azimuth columns for the beam-based methods (default: estimated).
-    v_res_deg, h_res_deg, v_range_deg : optional
-        Spherical projection grid (degrees); see :func:`organize_spherical`.
-    wrap_cols : bool, optional
-        For organized clouds: whether the columns close 360 degrees
-        (default: detected from the azimuths).
-    sensor_origin : (3,) float, optional
-        Scanner position in the file's frame (metres), for scans stored in a
-        world frame: the points are shifted so that it is the lidar origin.
+    organize, beams, n_cols, v_res_deg, h_res_deg, v_range_deg, wrap_cols, sensor_origin
+        How the cloud becomes a grid: see
+        :func:`calib_core.lidar.organize_cloud.organize_cloud` (``"auto"``: the
+        file's own grid, else the ring field, else the scan order, else
+        elevation clustering, else a spherical projection; the report says
+        which and why).  ``"organized"`` uses the file's grid (error if it has
+        none); ``"ring"``, ``"elevation"``, ``"firing_order"`` (alias
+        ``"firing"``), ``"spherical"`` force that method.
     bin_columns : int, optional
         Float32 values per point of a ``.bin`` file; see :func:`read_point_cloud`.
     max_points : int
@@ -330,8 +313,6 @@ def load_scan(
 
     cloud = read_point_cloud(path, bin_columns=bin_columns, max_points=max_points)
     _check_three_dimensional(path, cloud)
-    if beams is not None and (isinstance(beams, bool) or not isinstance(beams, (int, np.integer)) or beams < 1):
-        raise CalibError(f"beams must be a positive integer, got {beams!r}")
     ring = cloud.ring_field()
     ring_name = next((name for name in RING_FIELD_NAMES if cloud.fields.get(name) is ring), "ring")
     try:

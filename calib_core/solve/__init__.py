@@ -25,15 +25,7 @@ re-exports their public names.
 
 from .calibrate import calibrate
 from .checks import MIN_PAIRS
-from .extrinsics import (  # noqa: F401  (COSTS, NOISY_FACTOR, PRIOR_PX, student_t_factor: as before the split)
-    COSTS,
-    NOISY_FACTOR,
-    PRIOR_PX,
-    sigma_coverage,
-    solve_extrinsics,
-    student_t_factor,
-    warm_up,
-)
+from .extrinsics import sigma_coverage, solve_extrinsics, warm_up
 from .quality import Quality
 from .refine import PARAMETER_NAMES, PoseUncertainty, pose_covariance
 from .result import CalibrationResult

@@ -12,13 +12,9 @@ from typing import Any, Sequence
 
 import numpy as np
 
-__all__ = ["calibrate", "pair_ids_and_sigmas", "RANGE_SIGMA_M"]
-
 from .whiten import PICK_CELL_SIGMA, PICK_RANGE_SIGMA_M
 
-#: Error of a picked cell's point along its beam, metres (1-sigma): the pick model's
-#: (:data:`calib_core.solve.whiten.PICK_RANGE_SIGMA_M`).
-RANGE_SIGMA_M = PICK_RANGE_SIGMA_M
+__all__ = ["calibrate", "pair_ids_and_sigmas"]
 
 
 def pair_ids_and_sigmas(pairs: Sequence[Any]) -> tuple[list[int], np.ndarray | None]:

@@ -1030,8 +1030,9 @@ def rotation_sigma_deg(cov):
 def rpy_sigmas(R, cov):
     """1-sigma of ``t`` (m) and of roll, pitch, yaw (deg) from the covariance of ``(delta, t)`` at ``R``.
 
-    ``d(rpy)/d(delta)`` is the inverse of ``M = [R e_x-ish columns]`` (see
-    :func:`calib_core.solve.refine.rpy_jacobian`); inf at gimbal lock or for an infinite covariance.
+    ``d(rpy)/d(delta) = M^-1``: for a left perturbation ``exp([delta]) R`` of ``R = Rz Ry Rx``,
+    ``delta = M (roll, pitch, yaw)`` with columns ``Rz Ry e_x``, ``Rz e_y``, ``e_z``; inf at gimbal lock
+    or for an infinite covariance.
     """
     st = np.empty(3)
     sr = np.full(3, np.inf)

@@ -14,6 +14,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .kernels import so3_exp
+
 __all__ = [
     "Quality",
     "STATUSES",
@@ -289,16 +291,6 @@ class LeaveOneOut:
 GAUSS_NEWTON_STEPS = 3
 
 
-def _rotation_from_vector(phi: np.ndarray) -> np.ndarray:
-    """Rodrigues: the rotation by ``|phi|`` radians about ``phi``."""
-    angle = float(np.linalg.norm(phi))
-    if angle < 1e-12:
-        return np.eye(3)
-    k = phi / angle
-    K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-    return np.eye(3) + math.sin(angle) * K + (1.0 - math.cos(angle)) * (K @ K)
-
-
 def _pixel_jacobian(camera, points_camera: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``d pixel / d (delta, t)`` (n, 2, 6) for ``X_c = exp(delta) X_c + t`` by central differences of the
     projection, the pixels (n, 2) and whether each point projects (n,)."""
@@ -374,7 +366,7 @@ def leave_one_out_estimate(
             return None
         if _ == GAUSS_NEWTON_STEPS or np.linalg.norm(step[:3]) < 1e-9 and np.linalg.norm(step[3:]) < 1e-9:
             break
-        R_step = _rotation_from_vector(step[:3])
+        R_step = so3_exp(np.ascontiguousarray(step[:3]))
         T[:3, :3], T[:3, 3] = R_step @ T[:3, :3], R_step @ T[:3, 3] + step[3:]
     fit[ok] = np.hypot(e[ok, 0], e[ok, 1])
     H = Jw @ Ninv @ np.transpose(Jw, (0, 2, 1))  # (m, 2, 2) diagonal blocks of the hat matrix

@@ -30,31 +30,24 @@ from typing import Any, Callable, NamedTuple
 import numpy as np
 
 from ..errors import CalibError
-from .kernels import bearing_frames as compiled_bearing_frames
 from .kernels import (
+    bearing_frames,
     covariance,
-    jacobian,
     lm_refine,
     normal_equations,
     rpy_sigmas,
     so3_exp,
-    whitened_residuals,
 )
 
 __all__ = [
     "PARAMETER_NAMES",
     "PoseUncertainty",
-    "tangent_basis",
-    "log_map_residuals",
-    "angular_jacobian",
     "pixel_residuals",
     "pixel_jacobian",
     "refine_pose",
     "refine_angular",
     "refine_angular_normal",
     "lm_failure",
-    "bearing_frames",
-    "rpy_jacobian",
     "pose_covariance",
     "covariance_from_normal",
     "uncertainty_from_covariance",
@@ -80,106 +73,12 @@ PARAMETER_NAMES = (
 _UNPROJECTABLE_PX = 1e4
 
 
-def _so3_matrix(phi: np.ndarray, a: float, b: float, d: float) -> np.ndarray:
-    """``d I + a [phi]_x + b phi phi^T`` built from Python floats in one array call
-    (numpy's per-call overhead dominates for one 3x3 matrix).  (``exp([phi]_x)`` itself is
-    :func:`.kernels.so3_exp`.)"""
-    x, y, z = float(phi[0]), float(phi[1]), float(phi[2])
-    bx, by, bz = b * x, b * y, b * z
-    return np.array(
-        [
-            [d + bx * x, bx * y - a * z, bx * z + a * y],
-            [bx * y + a * z, d + by * y, by * z - a * x],
-            [bx * z - a * y, by * z + a * x, d + bz * z],
-        ]
-    )
-
-
-def _left_jacobian_so3(phi: np.ndarray) -> np.ndarray:
-    """``J_l(phi)`` with ``exp([phi + dphi]) = exp([J_l dphi]) exp([phi])`` to first order.
-
-    ``I + a K + b K^2`` with ``K = [phi]_x`` and ``K^2 = phi phi^T - theta^2 I``.
-    """
-    theta2 = float(phi[0]) ** 2 + float(phi[1]) ** 2 + float(phi[2]) ** 2
-    if theta2 < 1e-8:
-        a, b = 0.5 - theta2 / 24, 1.0 / 6 - theta2 / 120
-    else:
-        theta = math.sqrt(theta2)
-        a = (1 - math.cos(theta)) / theta2
-        b = (theta - math.sin(theta)) / (theta2 * theta)
-    return _so3_matrix(phi, a, b, 1.0 - b * theta2)
-
-
-def tangent_basis(bearings_camera: np.ndarray) -> np.ndarray:
-    """Orthonormal tangent-plane bases of unit bearings.
-
-    Parameters
-    ----------
-    bearings_camera : (N, 3) ndarray
-        Unit vectors.
-
-    Returns
-    -------
-    (N, 2, 3) ndarray
-        Rows ``e1, e2`` with ``(e1, e2, b)`` a right-handed orthonormal frame.
-    """
-    return bearing_frames(bearings_camera)[:, :2, :].copy()
-
-
-def bearing_frames(bearings_camera: np.ndarray, E: np.ndarray | None = None) -> np.ndarray:
-    """Per-bearing orthonormal frames, rows ``e1, e2, b`` (:func:`calib_core.solve.kernels.bearing_frames`).
-
-    Parameters
-    ----------
-    bearings_camera : (N, 3) ndarray
-        Unit bearings, camera frame.
-    E : (N, 2, 3) ndarray, optional
-        Their :func:`tangent_basis`, if already computed.
-
-    Returns
-    -------
-    (N, 3, 3) ndarray
-        One product ``frames @ P`` gives a point's two tangent components and
-        its component along the bearing (metres, like ``P``).
-    """
-    b = np.ascontiguousarray(bearings_camera, dtype=np.float64)
-    if E is None:
-        return compiled_bearing_frames(b)
-    return np.concatenate([E, b[:, None, :]], axis=1)
-
-
 def _identity_W(n: int) -> np.ndarray:
     return np.broadcast_to(np.eye(2), (n, 2, 2)).copy()
 
 
-def log_map_residuals(points_camera: np.ndarray, bearings_camera: np.ndarray, E: np.ndarray) -> np.ndarray:
-    """Log-map residuals ``(N, 2)`` of points (camera frame) against bearings.
-
-    Each row has norm equal to the geodesic angle (radians) between the
-    bearing and the direction of the point.  ``E`` comes from
-    :func:`tangent_basis` of the same bearings.
-    """
-    P = np.ascontiguousarray(points_camera, dtype=np.float64)
-    frames = bearing_frames(bearings_camera, E)
-    z, _ = whitened_residuals(np.eye(3), np.zeros(3), P, frames, _identity_W(len(P)))
-    return z
-
-
 def _pose(x: np.ndarray, R0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return so3_exp(np.ascontiguousarray(x[:3], dtype=np.float64)) @ R0, x[3:]
-
-
-def angular_jacobian(
-    x: np.ndarray, R0: np.ndarray, points_lidar: np.ndarray, bearings_camera: np.ndarray, E: np.ndarray
-) -> np.ndarray:
-    """Analytic Jacobian ``(2N, 6)`` of the log-map residuals w.r.t. ``x = (delta, t)``, ``R = exp(delta) R0``."""
-    x = np.asarray(x, dtype=np.float64)
-    R, t = _pose(x, R0)
-    P = np.ascontiguousarray(points_lidar, dtype=np.float64)
-    J = jacobian(R, np.ascontiguousarray(t), P, bearing_frames(bearings_camera, E), _identity_W(len(P)))
-    # The kernel differentiates a left perturbation at R; exp(delta + d) R0 = exp(J_l d) exp(delta) R0.
-    J[:, :3] = J[:, :3] @ _left_jacobian_so3(x[:3])
-    return J
 
 
 def pixel_residuals(
@@ -274,7 +173,8 @@ def refine_pose(
         point cannot be projected at the start.
     """
     if cost == "angular":
-        return refine_angular(T_initial, points_lidar, bearing_frames(bearings_camera))
+        frames = bearing_frames(np.ascontiguousarray(bearings_camera, dtype=np.float64))
+        return refine_angular(T_initial, points_lidar, frames)
     R0 = T_initial[:3, :3]
     x0 = np.concatenate([np.zeros(3), T_initial[:3, 3]])
     if cost == "pixel":
@@ -324,7 +224,7 @@ def refine_angular(
     points_lidar : (N, 3) ndarray
         Laser points, lidar frame, metres.
     frames : (N, 3, 3) ndarray
-        Rows ``e1, e2, b`` per bearing (:func:`bearing_frames`), so a caller
+        Rows ``e1, e2, b`` per bearing (:func:`.kernels.bearing_frames`), so a caller
         that refines several times computes them once.
     W : (N, 2, 2) ndarray, optional
         Whitening matrices; identity (paper eq. 7 as printed) when omitted.
@@ -366,24 +266,6 @@ def lm_failure(status: int, R: np.ndarray, t: np.ndarray) -> str | None:
     return None
 
 
-def rpy_jacobian(R: np.ndarray) -> np.ndarray:
-    """``d(roll, pitch, yaw) / d delta`` (3x3, rad/rad) at ``R = Rz Ry Rx``.
-
-    For a left perturbation ``exp([delta]) R`` the angular velocity is
-    ``delta_dot = yaw_dot e_z + pitch_dot Rz e_y + roll_dot Rz Ry e_x``, i.e.
-    ``delta = M (roll, pitch, yaw)`` with those three columns; the answer is
-    ``M^-1``, singular at pitch = +-90 deg (gimbal lock).
-    """
-    R = np.asarray(R, dtype=np.float64)
-    # R e_x = Rz Ry e_x = (cos yaw cos pitch, sin yaw cos pitch, -sin pitch).
-    cos_pitch = float(np.hypot(R[0, 0], R[1, 0]))
-    if cos_pitch < 1e-9:
-        return np.full((3, 3), np.inf)
-    cos_yaw, sin_yaw = R[0, 0] / cos_pitch, R[1, 0] / cos_pitch
-    M = np.array([[R[0, 0], -sin_yaw, 0.0], [R[1, 0], cos_yaw, 0.0], [R[2, 0], 0.0, 1.0]])
-    return np.linalg.inv(M)
-
-
 class PoseUncertainty(NamedTuple):
     """Covariance of a pose estimate and the derived 1-sigma values.
 
@@ -397,7 +279,7 @@ class PoseUncertainty(NamedTuple):
         Standard deviation of ``t`` (metres).
     sigma_rpy_deg : (3,) ndarray
         Standard deviation of roll, pitch, yaw (degrees), first-order
-        propagation through :func:`rpy_jacobian`.
+        propagation through ``d(roll, pitch, yaw) / d delta`` (:func:`.kernels.rpy_sigmas`).
     JtJ : (6, 6) ndarray
         ``J^T J`` at the estimate (unit noise).
     """

@@ -50,12 +50,6 @@ class PointCloud:
         return None
 
 
-def one_line(err: BaseException, limit: int = 160) -> str:
-    """An exception as a short single line."""
-    text = " ".join(str(err).split()) or type(err).__name__
-    return text if len(text) <= limit else text[: limit - 3] + "..."
-
-
 def too_many_points(path: Path, what: str, count: int, max_points: int) -> CalibError:
     return CalibError(
         f"{path}: {what} {count:,} points, above the limit of {max_points:,} (raise it with {MAX_CELLS_OPTION})"

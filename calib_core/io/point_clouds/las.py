@@ -6,8 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ...errors import CalibError
-from .cloud import PointCloud, one_line, too_many_points
+from ...errors import CalibError, one_line
+from .cloud import PointCloud, too_many_points
 
 
 def read_las(path: Path, max_points: int, **_) -> PointCloud:

@@ -8,9 +8,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ...errors import CalibError
+from ...errors import CalibError, one_line
 from ...lidar.npz_format import MAX_CELLS_OPTION, load_depth_npz, npz_members
-from .cloud import PointCloud, one_line, too_many_points, xyz_field_names
+from .cloud import PointCloud, too_many_points, xyz_field_names
 
 
 def _cloud_from_array(array: np.ndarray, path: Path, what: str) -> PointCloud:

@@ -14,8 +14,8 @@ from typing import Any
 
 import numpy as np
 
-from ...errors import CalibError
-from .cloud import PointCloud, normalise_text, one_line, too_many_points, values_per_line, xyz_field_names
+from ...errors import CalibError, one_line
+from .cloud import PointCloud, normalise_text, too_many_points, values_per_line, xyz_field_names
 
 
 _PCD_KEYS = ("VERSION", "FIELDS", "SIZE", "TYPE", "COUNT", "WIDTH", "HEIGHT", "VIEWPOINT", "POINTS", "DATA")

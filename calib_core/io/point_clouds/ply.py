@@ -10,8 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ...errors import CalibError
-from .cloud import PointCloud, normalise_text, one_line, too_many_points, values_per_line
+from ...errors import CalibError, one_line
+from .cloud import PointCloud, normalise_text, too_many_points, values_per_line
 
 
 _PLY_SCALAR_BYTES = {
