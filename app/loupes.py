@@ -181,6 +181,11 @@ class Loupes:
         with self.app.ui_lock:
             self._show("ba")
 
+    @property
+    def has_render(self) -> bool:
+        """Is there a render the laser loupe can show?"""
+        return self._render is not None
+
     def _render_on(self) -> bool:
         """Does the laser loupe show the render now (asked for, and a render exists)?"""
         return self.shows_render and self._render is not None
@@ -234,11 +239,25 @@ class Loupes:
         follow_click(self, self.app, click)
 
     def _on_state_change(self, state: Any) -> None:
+        self._forget_gone_ends(state.picks)
         selected = state.selected
         if selected != self._selected_seen:
             self._selected_seen = selected
             if selected is not None:
                 frame_pair(self, self.app, selected)
+
+    def _forget_gone_ends(self, picks: Any) -> None:
+        """A title naming a cell or pixel no pair has any more (an Undo took the click back: run 8) names the crop's
+        centre again, and the render loupe lets go of a laser end no pair has."""
+        cells, pixels = {p.laser_rc for p in picks}, {p.pixel for p in picks}
+        with self.app.ui_lock:
+            for kind, ends in (("ba", cells), ("camera", pixels)):
+                if kind in self._clicked and self._clicked[kind] not in ends:
+                    del self._clicked[kind]
+                    self._titles[kind].text = self.title(kind)
+            if self._render_anchor is not None and self._render_anchor[0] not in cells:
+                self._render_anchor = None
+                self._show("ba")
 
     def on_pair_cancelled(self) -> None:
         """A half-made pair was cancelled: a guided proposal's ellipse in the camera loupe goes too."""
