@@ -61,7 +61,8 @@ def follow_click(loupes: Any, app: Any, click: PairClick) -> None:
     if kind == "ba":
         # The laser loupe shows the render's crop after a click on the render (or in that loupe), else the BA's.
         loupes.show_render(click.key == RENDER_KEY or (click.key == "loupe_ba" and loupes.shows_render))
-    elif click.on_full_image and loupes.has_render and not _has_laser(app, click.pick_id):
+        loupes.prefers_ba = not loupes.shows_render  # a click on a BA image: its loupe stays the BA image's
+    elif click.on_full_image and loupes.has_render and not loupes.prefers_ba and not _has_laser(app, click.pick_id):
         # A photo end waiting for its laser end: the laser loupe shows the render at the same place, so that one
         # click in it makes the laser end (no rough click on the render first: run 8 took 4 clicks a pair).
         loupes.show_render(True)

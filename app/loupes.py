@@ -66,6 +66,7 @@ class Loupes:
         self._framing_of: dict[str, tuple] = {}  # kind -> inputs its outline (and centre marker) were drawn from
         self._clicked: dict[str, tuple] = {}  # kind -> the cell / pixel a click inside it chose: its title names it
         self.shows_render = False  # the laser loupe shows the camera-view render's crop (after a click on it)
+        self.prefers_ba = False  # the last laser click was on a BA image: a photo click keeps the BA image's loupe
         self._render: Any = None  # the render the render pane shows (app.shown_render.ShownRender; on_render)
         self.photo_gamma = 1.0  # the photo loupe's brightness (display only: "Photo loupe brightness")
         self._render_n: int | None = None  # the render loupe's own side (px; None: the camera loupe's), zoomed alone
@@ -182,8 +183,7 @@ class Loupes:
             self._show("ba")
 
     @property
-    def has_render(self) -> bool:
-        """Is there a render the laser loupe can show?"""
+    def has_render(self) -> bool:  # is there a render the laser loupe can show?
         return self._render is not None
 
     def _render_on(self) -> bool:

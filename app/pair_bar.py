@@ -124,10 +124,10 @@ def pending_hint(pending: Any) -> str:
     clicked, first (the line is cut on the right), in the words the page shows.  After a click on the photo the
     lower loupe shows the laser (render or BA image) at that place, so one click there makes the laser end."""
     if pending.pixel is not None:
-        return (f"Pair {pending.id}: click its laser point in the **lower loupe** · then refine the photo point "
-                f"in the photo loupe · waits for a BA click (**Cancel pair** or Esc drops it).")
-    return (f"Pair {pending.id}: click its photo point in the **photo loupe** (top right) · waits for a camera click "
-            f"(**Cancel pair** or Esc drops it).")
+        return (f"Pair {pending.id} waits for a BA click: its laser point in the **lower loupe** · then its exact "
+                f"photo point in the photo loupe · **Cancel pair** or Esc drops it.")
+    return (f"Pair {pending.id} waits for a camera click: its photo point in the **photo loupe** (top right) · "
+            f"**Cancel pair** or Esc drops it.")
 
 
 def made_hint(pick_id: int) -> str:
