@@ -25,7 +25,8 @@ if (!window.__baCalibEscape) {
     const t = event.target;
     // A dropdown keeps the focus after a choice (run 8: Escape then did nothing): only a box one types in, or an
     // open dropdown (Escape closes it), keeps the key.
-    const typing = t && t.tagName === "INPUT" && !t.readOnly && !/^(checkbox|radio|range|button)$/.test(t.type);
+    const typing = t && t.tagName === "INPUT" && !t.readOnly && t.getAttribute("role") !== "combobox"
+      && !/^(checkbox|radio|range|button)$/.test(t.type);
     if (t && (typing || t.tagName === "TEXTAREA" || t.isContentEditable)) return;
     if (t && t.getAttribute && t.getAttribute("aria-expanded") === "true") return;
     if (document.querySelector(".mantine-Modal-content")) return;
