@@ -62,3 +62,62 @@ def test_escape_cancels_a_half_pair_after_a_choice_in_the_render_shading_dropdow
             wait_for(lambda: app.state.pending() is None, "Escape to drop the half pair", timeout=10.0)
     finally:
         app.stop()
+
+
+N_FLOW_PAIRS = 6
+ROUGH_PX = (5.0, -4.0)  # how far the full-photo click lands from the corner (a person on the scaled-down photo)
+
+
+def test_pairs_in_three_clicks_photo_then_lower_loupe_then_photo_loupe_with_the_bar_saying_where(tmp_path):
+    """Run 8 (KITTI): 4 clicks a pair (photo, render, both loupes).  Here, with a pose (6 pairs imported), each new
+    pair is: a rough click on the full photo; a click in the lower loupe (the render at that place) on the cell the
+    render draws at the corner; a click in the photo loupe on the corner.  Counted as a person's actions; the pair
+    bar's text (as the page shows it) names the loupe of the next click."""
+    sync_api = pytest.importorskip("playwright.sync_api", reason="the playwright package is not installed")
+    import numpy as np
+
+    from calib_core.synthetic import load_sample, simulate_pairs
+
+    scene = load_sample(SAMPLE)
+    app, driver = start_sample_app(tmp_path, load_pairs_yaml(SAMPLE / "pairs.yaml")[:6])
+    taken = {tuple(p.laser_rc) for p in app.state.picks}
+    corners = [p for p in simulate_pairs(scene, 40, np.random.default_rng(21), pixel_noise_px=0.0)
+               if tuple(p.laser_rc) not in taken]
+    actions, made = 0, 0
+    try:
+        with sync_api.sync_playwright() as p:
+            tab = AnnotationTab(p, app, {"width": 1400, "height": 900})
+            page = tab.page
+            wait_for(lambda: driver.wait_render(), "the render")
+
+            def click(target: str, uv) -> None:
+                nonlocal actions
+                before = app.state.version
+                page.mouse.click(*tab.screen(target, uv))
+                actions += 1
+                wait_for(lambda: app.state.version > before, f"the click on {target} to register")
+                assert driver.wait_idle()
+
+            for pair in corners:
+                if made == N_FLOW_PAIRS:
+                    break
+                u, v = pair.pixel
+                cell = app.render_pane.cell_at_pixel(u, v)  # what the render draws at the corner
+                if cell is None or cell in taken:
+                    continue
+                click("camera", (u + ROUGH_PX[0], v + ROUGH_PX[1]))
+                pid = app.state.pending().id
+                wait_for(lambda: "laser point in the lower loupe" in page_text(page), "the bar naming the lower loupe")
+                assert app.loupes.shows_render
+                click("loupe_ba", (cell[1], cell[0]))
+                assert app.state.get(pid).laser_rc == cell and app.state.pending() is None
+                wait_for(lambda: f"Pair {pid} made" in page_text(page), "the bar naming the photo loupe")
+                click("loupe_camera", (u, v))
+                got = app.state.get(pid)
+                assert np.hypot(got.pixel[0] - u, got.pixel[1] - v) < 0.05 and got.laser_rc == cell
+                taken.add(cell)
+                made += 1
+    finally:
+        app.stop()
+    print(f"\nthree-click flow e2e: {made} pairs in {actions} actions ({actions / max(made, 1):.2f} per pair)")
+    assert made == N_FLOW_PAIRS and actions / made <= 3.0
