@@ -16,10 +16,21 @@ from .ui_common import md_escape
 PAGE_CSS = ("<style>.mantine-Notifications-root{top:auto!important;bottom:1em!important;left:auto!important;"
             "right:1em!important}</style>")
 #: Escape presses the "Cancel pair" button (viser sends no key events to Python).  Not while typing in a box, in
-#: an open dropdown or with a dialog open.  A fixed string, run once per tab.
+#: an open dropdown or with a dialog open.  Also closes viser's software-WebGL notice.  A fixed string, run once per tab.
 ESCAPE_JS = """
 if (!window.__baCalibEscape) {
   window.__baCalibEscape = true;
+  // viser's "Software WebGL rendering detected" notice covers the panel's lower end until closed by hand (runs 1-8:
+  // the first action of every walkthrough); the page closes it and keeps the word in the console.
+  setInterval(() => {
+    for (const n of document.querySelectorAll(".mantine-Notification-root")) {
+      const close = n.querySelector("button");
+      if (close && n.textContent.includes("Software WebGL rendering detected")) {
+        console.warn("ba-calib: " + n.textContent);
+        close.click();
+      }
+    }
+  }, 300);
   document.addEventListener("keydown", (event) => {
     if (event.key !== "Escape" || event.repeat) return;
     const t = event.target;

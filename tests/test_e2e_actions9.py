@@ -121,3 +121,33 @@ def test_pairs_in_three_clicks_photo_then_lower_loupe_then_photo_loupe_with_the_
         app.stop()
     print(f"\nthree-click flow e2e: {made} pairs in {actions} actions ({actions / max(made, 1):.2f} per pair)")
     assert made == N_FLOW_PAIRS and actions / made <= 3.0
+
+
+def test_the_page_closes_the_software_webgl_notice_itself(tmp_path):
+    """Runs 1-8: the first action of every walkthrough was a click on the close button of viser's "Software WebGL
+    rendering detected" notice (headless Chromium renders in software), which covers the panel's lower end."""
+    sync_api = pytest.importorskip("playwright.sync_api", reason="the playwright package is not installed")
+    from browser_helpers import CHROMIUM_ARGS
+    from app_driver import AppDriver
+
+    app, driver = start_sample_app(tmp_path, load_pairs_yaml(SAMPLE / "pairs.yaml")[:6])
+    try:
+        with sync_api.sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS)
+            page = browser.new_page(viewport={"width": 1400, "height": 900})
+            warnings: list[str] = []
+            page.on("console", lambda m: warnings.append(m.text) if m.type == "warning" else None)
+            page.goto(app.url)
+            d = AppDriver(app)
+            cid = wait_for(lambda: d.client_ids(), "the tab to connect")[0]
+            wait_for(lambda: app.view.view_settled(cid), "the annotation view to be set")
+            # The notice comes (software WebGL here) and goes without a click; the console keeps its words.
+            wait_for(lambda: page.wait_for_timeout(100) or any("Software WebGL" in w for w in warnings),
+                     "the notice to be seen and closed")  # (events arrive while playwright runs)
+            notice = page.locator(".mantine-Notification-root", has_text="Software WebGL")
+            wait_for(lambda: notice.count() == 0, "the notice to go", timeout=5.0)
+            page.wait_for_timeout(1500)
+            assert notice.count() == 0
+            browser.close()
+    finally:
+        app.stop()
