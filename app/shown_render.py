@@ -62,7 +62,8 @@ def cell_at_pixel(shown: ShownRender | None, u: float, v: float,
 
     ``edge_px``: how far (render pixels) the click may be off what the person aimed at (e.g. one screen pixel of a
     downscaled pane).  A surface nearer than the clicked pixel's by :data:`FOREGROUND_RATIO` within that distance
-    wins: at a depth edge the foreground's cell, the one drawn over the background."""
+    wins where the render outlines it (a depth edge, not a smooth surface such as the ground before a wall): the
+    foreground's cell, the one drawn over the background."""
     if shown is None:
         return None
     cells = shown.render.cell_rc
@@ -80,10 +81,12 @@ def cell_at_pixel(shown: ShownRender | None, u: float, v: float,
     if edge_px > 0:
         depth = np.asarray(getattr(shown.render, "camera_depth_m", shown.render.range_m), np.float64)[v0:v1, u0:u1]
         near = (window[..., 0] >= 0) & (dist2 <= edge_px * edge_px) & np.isfinite(depth)
+        edges = getattr(shown.render, "edge", None)  # depth edges: a jump, not a smooth surface (ground to wall)
         if near.any():
             front = float(depth[near].min())
             hit = depth.flat[k] if np.isfinite(d2.flat[k]) else np.inf
-            if not hit <= front * FOREGROUND_RATIO:  # the click sits behind a nearer surface it touches
+            outlined = edges is None or bool((near & (depth <= front * FOREGROUND_RATIO) & edges[v0:v1, u0:u1]).any())
+            if not hit <= front * FOREGROUND_RATIO and outlined:  # behind the outline of a nearer surface it touches
                 k = int(np.argmin(np.where(near & (depth <= front * FOREGROUND_RATIO), dist2, np.inf)))
                 return tuple(int(x) for x in window.reshape(-1, 2)[k])  # type: ignore[return-value]
     if not np.isfinite(d2.flat[k]) or d2.flat[k] > radius_px * radius_px:

@@ -94,7 +94,9 @@ def _edge_render(width: int = 40, height: int = 20):
     depth = np.full((height, width), 37.0, np.float32)
     cell_rc[:, 20:22] = (2, 7)
     depth[:, 20:22] = 30.0
-    render = SimpleNamespace(cell_rc=cell_rc, camera_depth_m=depth, range_m=depth)
+    edge = np.zeros((height, width), bool)
+    edge[:, 19:23] = True  # the render outlines the pole (both sides of each jump)
+    render = SimpleNamespace(cell_rc=cell_rc, camera_depth_m=depth, range_m=depth, edge=edge)
     from app.shown_render import ShownRender
 
     return ShownRender(np.eye(4), "range", "rough", render, np.zeros((height, width, 4), np.uint8), 0.0)
@@ -116,6 +118,10 @@ def test_a_click_beside_a_thin_near_object_takes_it_not_the_wall_behind():
     assert cell_at_pixel(shown, 22.0, 10.0, edge_px=0.0) == (5, 5)
     # The pole itself is never traded for the wall.
     assert cell_at_pixel(shown, 21.0, 10.0, edge_px=3.0) == (2, 7)
+    # A nearer surface the render does not outline (a smooth slope, e.g. the ground before a wall's foot) is no
+    # edge: the click keeps what is drawn.
+    shown.render.edge[:] = False
+    assert cell_at_pixel(shown, 22.0, 10.0, edge_px=1.5) == (5, 5)
 
 
 def test_a_click_on_the_render_at_a_depth_edge_takes_the_foreground(app, scene):
@@ -127,7 +133,7 @@ def test_a_click_on_the_render_at_a_depth_edge_takes_the_foreground(app, scene):
     h, w = depth.shape
     left = np.full_like(depth, np.inf)
     left[:, 1:] = depth[:, :-1]  # the depth one pixel to the left
-    behind = np.isfinite(depth) & (left * 1.1 < depth)
+    behind = np.isfinite(depth) & (left * 1.1 < depth) & r.edge & np.roll(r.edge, 1, axis=1)
     behind[:, :5] = behind[:, -5:] = False
     behind[:5] = behind[-5:] = False
     vs, us = np.nonzero(behind)
