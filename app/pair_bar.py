@@ -123,18 +123,16 @@ def pending_hint(pending: Any) -> str:
     """The status line while pair ``pending`` (a half-made :class:`app.picks.Pick`) waits: where its other end is
     clicked, first (the line is cut on the right), in the words the page shows.  After a click on the photo the
     lower loupe shows the laser (render or BA image) at that place, so one click there makes the laser end."""
-    if pending.pixel is not None:
-        return (f"Pair {pending.id} waits for a BA click: its laser point in the **lower loupe** · then its exact "
-                f"photo point in the photo loupe · **Cancel pair** or Esc drops it.")
-    return (f"Pair {pending.id} waits for a camera click: its photo point in the **photo loupe** (top right) · "
-            f"**Cancel pair** or Esc drops it.")
+    if pending.pixel is not None:  # the words that matter within the ~60 characters the line shows
+        return (f"Pair {pending.id} waits for a BA click → **lower loupe**, then photo loupe · **Cancel pair** or Esc "
+                f"drops it.")
+    return f"Pair {pending.id} waits for a camera click → **photo loupe** (top right) · **Cancel pair** or Esc drops it."
 
 
 def made_hint(pick_id: int) -> str:
     """The status line once a click in the lower loupe completed pair ``pick_id`` after a rough click on the photo:
     the next click in the photo loupe refines its photo point (a click on the full photo starts the next pair)."""
-    return (f"Pair {pick_id} made: click its exact photo point in the **photo loupe** (top right) · or start the "
-            f"next pair on the photo.")
+    return f"Pair {pick_id} made · exact photo point → **photo loupe** (top right) · or a new pair on the photo."
 
 
 def live_summary(live: Any, held: HeldQuality | None = None, fitted: bool = False) -> str:

@@ -43,7 +43,7 @@ def test_a_precise_pair_takes_three_clicks_photo_then_the_lower_loupe_then_the_p
     half = app.state.pending()
     assert half is not None and half.laser_rc is None
     assert app.loupes.shows_render  # the lower loupe shows the render at the photo click
-    assert "laser point in the **lower loupe**" in d.pair_status, d.pair_status
+    assert "waits for a BA click → **lower loupe**" in d.pair_status, d.pair_status
     # 2: a click in the lower loupe where it draws the corner's cell makes the laser end.
     where = d.loupe_display_pixel("ba", (cell[1], cell[0]))
     assert where is not None, "the corner's cell is not in the lower loupe"
