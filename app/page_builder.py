@@ -16,7 +16,8 @@ from .ui_common import md_escape
 PAGE_CSS = ("<style>.mantine-Notifications-root{top:auto!important;bottom:1em!important;left:auto!important;"
             "right:1em!important}</style>")
 #: Escape presses the "Cancel pair" button (viser sends no key events to Python).  Not while typing in a box, in
-#: an open dropdown or with a dialog open.  Also closes viser's software-WebGL notice.  A fixed string, run once per tab.
+#: an open dropdown or with a dialog open.  Also closes viser's software-WebGL notice.  A fixed string, run once
+#: per tab.
 ESCAPE_JS = """
 if (!window.__baCalibEscape) {
   window.__baCalibEscape = true;

@@ -126,7 +126,8 @@ def pending_hint(pending: Any) -> str:
     if pending.pixel is not None:  # the words that matter within the ~60 characters the line shows
         return (f"Pair {pending.id} waits for a BA click → **lower loupe**, then photo loupe · **Cancel pair** or Esc "
                 f"drops it.")
-    return f"Pair {pending.id} waits for a camera click → **photo loupe** (top right) · **Cancel pair** or Esc drops it."
+    return (f"Pair {pending.id} waits for a camera click → **photo loupe** (top right) · **Cancel pair** or Esc "
+            f"drops it.")
 
 
 def made_hint(pick_id: int) -> str:

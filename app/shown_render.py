@@ -149,7 +149,8 @@ def _footprint_middles(cells: np.ndarray, rc: np.ndarray, u: np.ndarray, v: np.n
     count = mine.sum(axis=(1, 2))  # >= 1: (u, v) itself
     mid_u = (us * mine).sum(axis=(1, 2)) / count
     mid_v = (vs * mine).sum(axis=(1, 2)) / count
-    d2 = np.where(mine, (us - mid_u[:, None, None]) ** 2 + (vs - mid_v[:, None, None]) ** 2, np.inf).reshape(len(rc), -1)
+    d2 = np.where(mine, (us - mid_u[:, None, None]) ** 2 + (vs - mid_v[:, None, None]) ** 2, np.inf)
+    d2 = d2.reshape(len(rc), -1)
     best = d2.argmin(axis=1)
     return np.stack([us.reshape(len(rc), -1)[np.arange(len(rc)), best],
                      vs.reshape(len(rc), -1)[np.arange(len(rc)), best]], axis=1).astype(np.float64)

@@ -21,8 +21,11 @@ INPUT_JS = """(label) => {
   for (const l of labels) {
     for (let row = l.parentElement; row; row = row.parentElement) {
       const input = row.querySelector('input[role="combobox"]');
-      if (input && input.getBoundingClientRect().width > 0) { input.scrollIntoView({block: 'center'}); const r = input.getBoundingClientRect();
-                   return [r.left, r.top, r.right, r.bottom]; }
+      if (input && input.getBoundingClientRect().width > 0) {
+        input.scrollIntoView({block: 'center'});
+        const r = input.getBoundingClientRect();
+        return [r.left, r.top, r.right, r.bottom];
+      }
     }
   }
   return null; }"""
@@ -107,7 +110,8 @@ def test_pairs_in_three_clicks_photo_then_lower_loupe_then_photo_loupe_with_the_
                     continue
                 click("camera", (u + ROUGH_PX[0], v + ROUGH_PX[1]))
                 pid = app.state.pending().id
-                wait_for(lambda: "waits for a BA click → lower loupe" in page_text(page), "the bar naming the lower loupe")
+                wait_for(lambda: "waits for a BA click → lower loupe" in page_text(page),
+                         "the bar naming the lower loupe")
                 assert app.loupes.shows_render
                 click("loupe_ba", (cell[1], cell[0]))
                 assert app.state.get(pid).laser_rc == cell and app.state.pending() is None
