@@ -61,6 +61,11 @@ def follow_click(loupes: Any, app: Any, click: PairClick) -> None:
     if kind == "ba":
         # The laser loupe shows the render's crop after a click on the render (or in that loupe), else the BA's.
         loupes.show_render(click.key == RENDER_KEY or (click.key == "loupe_ba" and loupes.shows_render))
+        loupes.prefers_ba = not loupes.shows_render  # a click on a BA image: its loupe stays the BA image's
+    elif click.on_full_image and loupes.has_render and not loupes.prefers_ba and not _has_laser(app, click.pick_id):
+        # A photo end waiting for its laser end: the laser loupe shows the render at the same place, so that one
+        # click in it makes the laser end (no rough click on the render first: run 8 took 4 clicks a pair).
+        loupes.show_render(True)
     if click.refines_loupes:
         # The loupes keep their crops (the next click may be planned from this look); the clicked loupe's title
         # names the new cell or pixel.  The other loupe moves only if the pair's other end (or its prediction)
@@ -70,6 +75,10 @@ def follow_click(loupes: Any, app: Any, click: PairClick) -> None:
     else:
         _frame(loupes, app, click.target, click.pick_id, click.on_full_image, click.render_uv)
     _hold_render_loupe(loupes, app, click.pick_id)
+
+
+def _has_laser(app: Any, pick_id: int) -> bool:
+    return any(p.id == pick_id and p.has_laser for p in app.state.picks)
 
 
 def _hold_render_loupe(loupes: Any, app: Any, pick_id: int | None) -> None:

@@ -66,6 +66,7 @@ class Loupes:
         self._framing_of: dict[str, tuple] = {}  # kind -> inputs its outline (and centre marker) were drawn from
         self._clicked: dict[str, tuple] = {}  # kind -> the cell / pixel a click inside it chose: its title names it
         self.shows_render = False  # the laser loupe shows the camera-view render's crop (after a click on it)
+        self.prefers_ba = False  # the last laser click was on a BA image: a photo click keeps the BA image's loupe
         self._render: Any = None  # the render the render pane shows (app.shown_render.ShownRender; on_render)
         self.photo_gamma = 1.0  # the photo loupe's brightness (display only: "Photo loupe brightness")
         self._render_n: int | None = None  # the render loupe's own side (px; None: the camera loupe's), zoomed alone
@@ -181,6 +182,10 @@ class Loupes:
         with self.app.ui_lock:
             self._show("ba")
 
+    @property
+    def has_render(self) -> bool:  # is there a render the laser loupe can show?
+        return self._render is not None
+
     def _render_on(self) -> bool:
         """Does the laser loupe show the render now (asked for, and a render exists)?"""
         return self.shows_render and self._render is not None
@@ -234,11 +239,25 @@ class Loupes:
         follow_click(self, self.app, click)
 
     def _on_state_change(self, state: Any) -> None:
+        self._forget_gone_ends(state.picks)
         selected = state.selected
         if selected != self._selected_seen:
             self._selected_seen = selected
             if selected is not None:
                 frame_pair(self, self.app, selected)
+
+    def _forget_gone_ends(self, picks: Any) -> None:
+        """A title naming a cell or pixel no pair has any more (an Undo took the click back: run 8) names the crop's
+        centre again, and the render loupe lets go of a laser end no pair has."""
+        cells, pixels = {p.laser_rc for p in picks}, {p.pixel for p in picks}
+        with self.app.ui_lock:
+            for kind, ends in (("ba", cells), ("camera", pixels)):
+                if kind in self._clicked and self._clicked[kind] not in ends:
+                    del self._clicked[kind]
+                    self._titles[kind].text = self.title(kind)
+            if self._render_anchor is not None and self._render_anchor[0] not in cells:
+                self._render_anchor = None
+                self._show("ba")
 
     def on_pair_cancelled(self) -> None:
         """A half-made pair was cancelled: a guided proposal's ellipse in the camera loupe goes too."""

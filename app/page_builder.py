@@ -15,16 +15,34 @@ from .ui_common import md_escape
 #: click meant for a toast's close button moved a pending point.)  A fixed string: no user text.
 PAGE_CSS = ("<style>.mantine-Notifications-root{top:auto!important;bottom:1em!important;left:auto!important;"
             "right:1em!important}</style>")
-#: Escape presses the "Cancel pair" button (viser sends no key events to Python).  Not while typing in a box or
-#: with a dialog open.  A fixed string, run once per tab.
+#: Escape presses the "Cancel pair" button (viser sends no key events to Python).  Not while typing in a box, in
+#: an open dropdown or with a dialog open.  Also closes viser's software-WebGL notice.  A fixed string, run once
+#: per tab.
 ESCAPE_JS = """
 if (!window.__baCalibEscape) {
   window.__baCalibEscape = true;
+  // viser's "Software WebGL rendering detected" notice covers the panel's lower end until closed by hand (runs 1-8:
+  // the first action of every walkthrough); the page closes it and keeps the word in the console.
+  setInterval(() => {
+    for (const n of document.querySelectorAll(".mantine-Notification-root")) {
+      const close = n.querySelector("button");
+      if (close && n.textContent.includes("Software WebGL rendering detected")) {
+        console.warn("ba-calib: " + n.textContent);
+        close.click();
+      }
+    }
+  }, 300);
   document.addEventListener("keydown", (event) => {
     if (event.key !== "Escape" || event.repeat) return;
     const t = event.target;
-    if (t && (t.tagName === "INPUT" || t.tagName === "TEXTAREA" || t.isContentEditable)) return;
+    // A dropdown keeps the focus after a choice (run 8: Escape then did nothing): only a box one types in, or an
+    // open dropdown (Escape closes it), keeps the key.
+    const typing = t && t.tagName === "INPUT" && !t.readOnly && t.getAttribute("role") !== "combobox"
+      && !/^(checkbox|radio|range|button)$/.test(t.type);
+    if (t && (typing || t.tagName === "TEXTAREA" || t.isContentEditable)) return;
+    if (t && t.getAttribute && t.getAttribute("aria-expanded") === "true") return;
     if (document.querySelector(".mantine-Modal-content")) return;
+    if (t && t.tagName === "INPUT" && t.blur) t.blur();  // the keys go back to the page
     const button = Array.from(document.querySelectorAll("button")).find(
       (b) => b.textContent.trim() === "Cancel pair");
     if (button) button.click();

@@ -119,6 +119,23 @@ def undo_note(before: list, after: list) -> str:
     return f"Undone: a change of pair {b.id}."
 
 
+def pending_hint(pending: Any) -> str:
+    """The status line while pair ``pending`` (a half-made :class:`app.picks.Pick`) waits: where its other end is
+    clicked, first (the line is cut on the right), in the words the page shows.  After a click on the photo the
+    lower loupe shows the laser (render or BA image) at that place, so one click there makes the laser end."""
+    if pending.pixel is not None:  # the words that matter within the ~60 characters the line shows
+        return (f"Pair {pending.id} waits for a BA click → **lower loupe**, then photo loupe · **Cancel pair** or Esc "
+                f"drops it.")
+    return (f"Pair {pending.id} waits for a camera click → **photo loupe** (top right) · **Cancel pair** or Esc "
+            f"drops it.")
+
+
+def made_hint(pick_id: int) -> str:
+    """The status line once a click in the lower loupe completed pair ``pick_id`` after a rough click on the photo:
+    the next click in the photo loupe refines its photo point (a click on the full photo starts the next pair)."""
+    return f"Pair {pick_id} made · exact photo point → **photo loupe** (top right) · or a new pair on the photo."
+
+
 def live_summary(live: Any, held: HeldQuality | None = None, fitted: bool = False) -> str:
     """``"N pairs · mean X px · left out Y px (warning above L) · Quality: ok"`` (markdown) of the solve
     ``live.bundle`` shows (``live``: a :class:`app.ui_common.SolveShown`).  N is the pairs in the fit; with too few
@@ -161,7 +178,20 @@ def live_summary(live: Any, held: HeldQuality | None = None, fitted: bool = Fals
         status, note = held.status(quality)
     shown = ("UNRELIABLE" if status == "unreliable" else status) + (" (held, near the limit)" if note else "")
     solving = " · solving…" if getattr(live, "solving", False) else ""
-    return f"**{n_fit} pairs · {errors} · Quality: {shown}**{solving}"
+    worst = worst_pair(bundle) if error_estimate_reason(n_fit) is None else ""
+    return f"**{n_fit} pairs · {errors} · Quality: {shown}**{worst}{solving}"
+
+
+def worst_pair(bundle: Any) -> str:
+    """`` · worst: pair N X.X px``: the fitted pair farthest from its click under the solve (its reprojection error,
+    the Calibration table's "px" column), where the person looks (run 8: that table was three scrolls away)."""
+    r = getattr(bundle, "result", None)
+    residuals = getattr(r, "residual_px", None)
+    if residuals is None or not len(residuals):
+        return ""
+    positions = getattr(r, "pair_positions", None) or list(range(len(residuals)))
+    k = max(range(len(residuals)), key=lambda i: float(residuals[i]) if residuals[i] == residuals[i] else -1.0)
+    return f" · worst: pair {bundle.pick_ids[positions[k]]} {float(residuals[k]):.1f} px"
 
 
 #: One line of constant height: a block that never wraps, ellipsised when longer than the panel is wide (the

@@ -16,7 +16,7 @@ from calib_core.panorama import refine_click_to_corner
 from .layout import RENDER_KEY
 from .loupe_framing import PairClick
 from .page_builder import install_page_script
-from .pair_bar import PAIR_BAR_JS, FixedLine, PairBar, one_line_markdown, undo_note
+from .pair_bar import PAIR_BAR_JS, FixedLine, PairBar, made_hint, one_line_markdown, pending_hint, undo_note
 from .pairs_import import import_upload
 from .ui_common import MIN_PAIRS, SNAP_RADIUS_PX, pick_tolerance_px
 
@@ -44,6 +44,7 @@ class PairsPanel:
         self._render_uv: tuple[float, float] | None = None  # the render pixel of the last render click resolved
         self._last_pick: dict[Any, tuple] = {}  # client id -> (kind, pick id, "full" | "loupe")
         self._loupes_pick: int | None = None  # the pair the loupes were last framed on (refining it keeps them still)
+        self._rough_photo: set[int] = set()  # pairs whose photo end was clicked on the full photo, not refined since
         self._undo_note: tuple[int, str] = (-1, "")  # (state version, what the last top Undo took back)
         self._click_listeners: list[Callable[[PairClick], None]] = []
         self._cancel_listeners: list[Callable[[], None]] = []
@@ -161,7 +162,9 @@ class PairsPanel:
                     doing += f" Predicted camera pixel: ({uv[0, 0]:.1f}, {uv[0, 1]:.1f}) (cross in the image)."
             status = [self._undo_note[1]] if self._undo_note[0] == state.version else []
             if pending is not None:
-                status.append(f"Pair {pending.id} waits for a {need} click (**Cancel pair** or Esc drops it).")
+                status.append(pending_hint(pending))
+            elif selected is None and (made := self._just_made(picks)) is not None:
+                status.append(made_hint(made))
             if selected is not None:
                 doing = f"**Pair {selected} selected:** clicks now move its ends (Deselect to add pairs)."
                 status.append(f"Pair {selected} selected: the next click moves it (**Cancel pair** deselects).")
@@ -184,6 +187,14 @@ class PairsPanel:
             want = "none" if selected is None else f"#{selected}"
             if self._dd_selected.value != want:
                 self._dd_selected.value = want
+
+    def _just_made(self, picks: list) -> int | None:
+        """The newest pair, if a click in the laser loupe just completed it after a click on the full photo: its
+        photo end is still the rough one (the hint then says where the refining click goes)."""
+        newest = max(picks, key=lambda p: p.id, default=None)
+        if newest is None or not newest.complete or newest.id not in self._rough_photo:
+            return None
+        return newest.id if ("ba", newest.id, "loupe") in self._last_pick.values() else None
 
     def on_download_pairs(self, event: Any) -> None:
         with tempfile.TemporaryDirectory() as tmp:
@@ -285,6 +296,9 @@ class PairsPanel:
             self.app.notify(client, "No change", f"Pair {out}: {what} as before; click one cell or pixel farther "
                                                  "off to move it.", color="yellow")
         self._last_pick[cid] = (kind, out, source)
+        if kind == "camera":  # a photo end from the full photo is rough until a photo-loupe click refines it
+            (self._rough_photo.add if source == "full" else self._rough_photo.discard)(out)
+        self.refresh()  # the status line says what the next click does (it depends on this click's place)
         if source == "loupe" and out == self._loupes_pick:  # a refining click inside a loupe: they keep their crops
             self._publish_click(PairClick(key, target, out, refines_loupes=True, client_id=cid))
             return out

@@ -38,6 +38,10 @@ OVERLAY_NODE = "/annot/render_over"
 #: or two beside it), at most :data:`NEAREST_MAX_PX` render pixels.
 SNAP_SCREEN_PX = 2.0
 NEAREST_MAX_PX = 24
+#: A click on the pane (scaled down on the page) takes the nearer surface seen within this many screen pixels
+#: (:data:`EDGE_RENDER_PX` render pixels at least; :func:`app.shown_render.cell_at_pixel`): run 8's pole edge.
+EDGE_SCREEN_PX = 1.5
+EDGE_RENDER_PX = 1.5
 #: A new solve is rendered at most this often (seconds): a burst of clicks solves many times, each render costs a
 #: core for 0.1-0.3 s.  Drags and the Align buttons render at once.
 SOLVE_RENDER_INTERVAL_S = 0.5
@@ -325,9 +329,10 @@ class RenderPane:
         self._worker.stop()
 
     # ------------------------------------------------------------------ clicks
-    def cell_at_pixel(self, u: float, v: float, radius_px: float = NEAREST_PX) -> tuple[int, int] | None:
+    def cell_at_pixel(self, u: float, v: float, radius_px: float = NEAREST_PX,
+                      edge_px: float = 0.0) -> tuple[int, int] | None:
         """Scan cell ``(row, col)`` the render draws at original-size pixel ``(u, v)`` (:func:`cell_at_pixel`)."""
-        return cell_at_pixel(self.current, u, v, radius_px)
+        return cell_at_pixel(self.current, u, v, radius_px, edge_px)
 
     def target_at(self, uv: tuple[float, float], display: bool = True, screen_units: float | None = None) -> tuple:
         """``("ba", key, row, col)``: the laser cell under pixel ``uv`` of the pane (``display``: in the camera
@@ -342,16 +347,17 @@ class RenderPane:
         stale = self.app.pose_source.stale_click_reason(self.current)  # planned on the render before a refit
         if stale is not None:
             raise CalibError(stale)
-        radius = float(NEAREST_PX)
+        radius, edge = float(NEAREST_PX), EDGE_RENDER_PX
         if display and screen_units is not None:
             per_px = self.app.slots[RENDER_KEY].units_per_px  # world units per pane pixel
             radius = float(min(max(radius, SNAP_SCREEN_PX * screen_units / per_px), NEAREST_MAX_PX))
+            edge = float(min(max(edge, EDGE_SCREEN_PX * screen_units / per_px), NEAREST_PX))
         if display:
             raw, ok = self.app.camera_view.pixels_from_display(np.array([uv], np.float64))
             if not ok[0]:
                 raise CalibError("the camera does not see that part of the panorama; click inside the picture")
             uv = (float(raw[0, 0]), float(raw[0, 1]))
-        cell = self.cell_at_pixel(float(uv[0]), float(uv[1]), radius)
+        cell = self.cell_at_pixel(float(uv[0]), float(uv[1]), radius, edge if display else 0.0)
         if cell is None:
             raise CalibError("no laser return here: click where the camera-view render shows the scan")
         self.last_pixel = (float(uv[0]), float(uv[1]))

@@ -49,23 +49,46 @@ def pane_texture(rgba: np.ndarray) -> np.ndarray:
     return ((rgba[..., :3].astype(np.uint16) * a + bg * (255 - a) + 127) // 255).astype(np.uint8)
 
 
+#: Near a depth edge a click takes the nearer surface when a pixel this much nearer (camera depth ratio) is within
+#: the click's edge radius: the person sees the thin near object, not the one render pixel behind it (run 8: a click
+#: on a pole's edge took the wall behind it, 36.96 m instead of about 30 m).
+FOREGROUND_RATIO = 1.1
+
+
 def cell_at_pixel(shown: ShownRender | None, u: float, v: float,
-                  radius_px: float = NEAREST_PX) -> tuple[int, int] | None:
-    """Scan cell ``(row, col)`` render ``shown`` draws at original-size pixel ``(u, v)``, or at the nearest rendered
-    pixel within ``radius_px`` render pixels; None if none (or no render)."""
+                  radius_px: float = NEAREST_PX, edge_px: float = 0.0) -> tuple[int, int] | None:
+    """Scan cell ``(row, col)`` render ``shown`` draws at original-size pixel ``(u, v)`` (the z-buffer's nearest
+    return there), or at the nearest rendered pixel within ``radius_px`` render pixels; None if none (or no render).
+
+    ``edge_px``: how far (render pixels) the click may be off what the person aimed at (e.g. one screen pixel of a
+    downscaled pane).  A surface nearer than the clicked pixel's by :data:`FOREGROUND_RATIO` within that distance
+    wins where the render outlines it (a depth edge, not a smooth surface such as the ground before a wall): the
+    foreground's cell, the one drawn over the background."""
     if shown is None:
         return None
     cells = shown.render.cell_rc
     h, w = cells.shape[:2]
     iu, iv = int(math.floor(u + 0.5)), int(math.floor(v + 0.5))
-    r = int(math.ceil(radius_px))
+    r = int(math.ceil(max(radius_px, edge_px)))
     u0, u1, v0, v1 = max(iu - r, 0), min(iu + r + 1, w), max(iv - r, 0), min(iv + r + 1, h)
     if u0 >= u1 or v0 >= v1:
         return None
     window = cells[v0:v1, u0:u1]
     vv, uu = np.mgrid[v0:v1, u0:u1]
-    d2 = np.where(window[..., 0] >= 0, (uu - u) ** 2 + (vv - v) ** 2, np.inf)
+    dist2 = (uu - u) ** 2 + (vv - v) ** 2
+    d2 = np.where(window[..., 0] >= 0, dist2, np.inf)
     k = int(np.argmin(d2))
+    if edge_px > 0:
+        depth = np.asarray(getattr(shown.render, "camera_depth_m", shown.render.range_m), np.float64)[v0:v1, u0:u1]
+        near = (window[..., 0] >= 0) & (dist2 <= edge_px * edge_px) & np.isfinite(depth)
+        edges = getattr(shown.render, "edge", None)  # depth edges: a jump, not a smooth surface (ground to wall)
+        if near.any():
+            front = float(depth[near].min())
+            hit = depth.flat[k] if np.isfinite(d2.flat[k]) else np.inf
+            outlined = edges is None or bool((near & (depth <= front * FOREGROUND_RATIO) & edges[v0:v1, u0:u1]).any())
+            if not hit <= front * FOREGROUND_RATIO and outlined:  # behind the outline of a nearer surface it touches
+                k = int(np.argmin(np.where(near & (depth <= front * FOREGROUND_RATIO), dist2, np.inf)))
+                return tuple(int(x) for x in window.reshape(-1, 2)[k])  # type: ignore[return-value]
     if not np.isfinite(d2.flat[k]) or d2.flat[k] > radius_px * radius_px:
         return None
     row, col = window.reshape(-1, 2)[k]
@@ -76,7 +99,8 @@ def pixel_of_cells(shown: ShownRender | None, camera: Any, depth: Any, rows_cols
     """Original camera pixels ``(N, 2)`` where render ``shown`` draws scan cells ``(N, 2)``: the cell's point
     projected under the render's pose, moved to the nearest pixel the render draws that cell on within
     :data:`NEAREST_PX` (a footprint is not centred on its point: run 7, a click on a pair's ring took the cell
-    beside it); NaN: not in view, or no render."""
+    beside it), then to the middle of what it draws there (run 8: not on its edge); NaN: not in view, or no
+    render."""
     rc = np.asarray(rows_cols, np.int64).reshape(-1, 2)
     out = np.full((len(rc), 2), np.nan)
     if shown is None or not len(rc):
@@ -100,9 +124,36 @@ def pixel_of_cells(shown: ShownRender | None, camera: Any, depth: Any, rows_cols
     flat = d2.reshape(len(k), -1)
     best = flat.argmin(axis=1)
     found = flat[np.arange(len(k)), best] <= r * r  # inf: the render draws the cell nowhere near its point
-    out[k[found], 0] = us.reshape(len(k), -1)[found, best[found]]
-    out[k[found], 1] = vs.reshape(len(k), -1)[found, best[found]]
+    near_u = us.reshape(len(k), -1)[found, best[found]]
+    near_v = vs.reshape(len(k), -1)[found, best[found]]
+    out[k[found]] = _footprint_middles(cells, rc[k[found]], near_u, near_v)
     return out
+
+
+#: How far (render pixels) from a pixel a cell draws :func:`pixel_of_cells` looks for the rest of its footprint.
+FOOTPRINT_PX = 16
+
+
+def _footprint_middles(cells: np.ndarray, rc: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """``(N, 2)`` pixels: for each cell ``rc[i]`` drawn at pixel ``(u[i], v[i])``, the pixel it draws nearest the
+    middle (centroid) of the pixels it draws within :data:`FOOTPRINT_PX`.  Run 8: a mark on the pixel nearest the
+    cell's point sat on the cell's edge, and a click 10 screen px beside it, meant for the next cell, took the same
+    one ("No change")."""
+    if not len(rc):
+        return np.empty((0, 2))
+    h, w = cells.shape[:2]
+    offsets = np.arange(-FOOTPRINT_PX, FOOTPRINT_PX + 1)
+    us, vs = np.broadcast_arrays(u[:, None, None] + offsets[None, None, :], v[:, None, None] + offsets[None, :, None])
+    inside = (us >= 0) & (us < w) & (vs >= 0) & (vs < h)
+    mine = inside & (cells[np.clip(vs, 0, h - 1), np.clip(us, 0, w - 1)] == rc[:, None, None, :]).all(axis=-1)
+    count = mine.sum(axis=(1, 2))  # >= 1: (u, v) itself
+    mid_u = (us * mine).sum(axis=(1, 2)) / count
+    mid_v = (vs * mine).sum(axis=(1, 2)) / count
+    d2 = np.where(mine, (us - mid_u[:, None, None]) ** 2 + (vs - mid_v[:, None, None]) ** 2, np.inf)
+    d2 = d2.reshape(len(rc), -1)
+    best = d2.argmin(axis=1)
+    return np.stack([us.reshape(len(rc), -1)[np.arange(len(rc)), best],
+                     vs.reshape(len(rc), -1)[np.arange(len(rc)), best]], axis=1).astype(np.float64)
 
 
 def loupe_texture(shown: ShownRender | None, camera: Any, u0: int, v0: int, n: int) -> np.ndarray:

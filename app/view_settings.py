@@ -77,7 +77,7 @@ class ViewSettings:
 
     panorama: bool = True
     show_reprojection: bool = True
-    show_edges: bool = True
+    show_edges: bool = False  # runs 7 and 8: the dots cluttered the zoomed photo while picking; ticked to verify
     snap: bool = False
     up_axis: str = "+z"
     ba_window_mode: str = "all"

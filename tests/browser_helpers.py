@@ -127,11 +127,13 @@ class AnnotationTab:
         self.page.goto(app.url)
         self.cid = wait_for(lambda: self.driver.client_ids(), "the tab to connect")[0]
         wait_for(lambda: app.view.view_settled(self.cid), "the annotation view to be set")
-        # The software-WebGL notice swallows clicks at the top left: close it.
+        # The software-WebGL notice swallows clicks: the page closes it itself (tests/test_e2e_actions9.py).
         notice = self.page.locator(".mantine-Notification-root", has_text="Software WebGL")
-        notice.first.wait_for(timeout=TIMEOUT_S * 1000)
-        notice.first.locator("button").click()
-        notice.first.wait_for(state="detached", timeout=TIMEOUT_S * 1000)
+        try:
+            notice.first.wait_for(state="attached", timeout=5000)  # shown first (software WebGL here) ...
+        except Exception:  # playwright's TimeoutError: already closed
+            pass
+        notice.first.wait_for(state="detached", timeout=TIMEOUT_S * 1000)  # ... then closed by the page
         self.box = self.page.locator("canvas").first.bounding_box()
         assert self.box is not None
 

@@ -79,6 +79,7 @@ def test_hide_marks_hides_every_mark_and_is_saved(tmp_path, scene):
     app = sample_app(tmp_path / "session.yaml")
     try:
         d = AppDriver(app)
+        app.state.set_view(show_edges=True)  # off by default since stop 28: every kind of mark is on before
         assert [t for t, _ in d.upload_pairs("pairs.yaml", pairs_file.read_bytes())] == ["Pairs imported"]
         assert d.wait_idle() and app.result is not None
         row, col = pairs[0].laser_rc

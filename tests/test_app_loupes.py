@@ -170,6 +170,7 @@ def test_loupe_shows_range_and_contrast_and_the_edge_overlay_stays_in_the_fishey
         ok = before > 0
         assert after[ok].std() > 1.3 * before[ok].std() and np.all(after[~ok] == 0)
 
+        app.state.set_view(show_edges=True)  # off by default since stop 28
         app.state.import_pairs(load_pairs_yaml(SAMPLE / "pairs.yaml"))
         assert d.wait_idle()
         pts, cols = d.drawn_points("/annot/overlay/edges")

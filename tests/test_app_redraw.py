@@ -89,7 +89,10 @@ def test_click_shows_moved_marker_and_the_new_solve(driver):
     assert len(segs) == len(ends)
     assert cKDTree(segs.reshape(-1, 4)).query(ends)[0].max() < 1e-2
 
-    # The BA-edge points: where the new pose puts them (every one drawn is one of them, and most are drawn).
+    # The BA-edge points (off by default since stop 28): where the new pose puts them (every one drawn is one of
+    # them, and most are drawn).
+    app.state.set_view(show_edges=True)
+    assert driver.wait_idle()
     edges = app.scene_data.edge_points_lidar
     e_uv, e_ok = app.camera.project(edges @ T[:3, :3].T + T[:3, 3])
     e_want = _display(driver, e_uv[e_ok], shown_only=True)

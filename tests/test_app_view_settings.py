@@ -24,7 +24,7 @@ def make_state(path, **kwargs) -> AnnotationState:
 
 
 # Every field set away from its default (checked below), so a round trip that drops one is caught.
-CHANGED = dict(panorama=False, show_reprojection=False, show_edges=False, snap=True, up_axis="-y",
+CHANGED = dict(panorama=False, show_reprojection=False, show_edges=True, snap=True, up_axis="-y",
                ba_window_mode="custom", ba_window_start=12, ba_window_width=40, contrast=2.25,
                loupe_shows="Range", last_pane_shows="Intensity", edge_opacity=0.3, hide_marks=True,
                render_mode="ba", render_blend=0.4,

@@ -115,17 +115,23 @@ def test_the_pair_bar_stays_in_view_and_delete_and_ctrl_z_keys(tmp_path):
             wait_for(lambda: page.evaluate("() => Object.keys(window.__baLoupeRects || {}).length === 2"),
                      "the loupes' places on the canvas")
             view = (tuple(client.camera.position), tuple(client.camera.look_at))
+            def side(kind: str) -> int:  # after a photo click the lower loupe shows the render (stop 28): its crop
+                return app.loupes.render_crop.n if kind == "ba" and app.loupes.shows_render else \
+                    driver.loupe_view(kind)["size"]
+
             for kind, label in (("camera", "loupe_camera"), ("ba", "loupe_ba")):
                 centre = driver.loupe_view(kind)["center"]
+                if kind == "ba" and app.loupes.shows_render:
+                    centre = app.render_pane.cell_at_pixel(*app.loupes.render_crop.center)
                 target = centre if kind == "camera" else (centre[1], centre[0])  # (col, row) of a cell
                 page.mouse.move(*tab.screen(label, target))
-                size = driver.loupe_view(kind)["size"]
+                size = side(kind)
                 page.mouse.wheel(0, -120)  # wheel up: magnify
-                wait_for(lambda: driver.loupe_view(kind)["size"] < size and not app.actions.busy,
+                wait_for(lambda: side(kind) < size and not app.actions.busy,
                          f"the wheel to magnify the {kind} loupe")
                 page.wait_for_timeout(300)
                 page.mouse.wheel(0, 120)  # wheel down: widen again
-                wait_for(lambda: driver.loupe_view(kind)["size"] == size and not app.actions.busy,
+                wait_for(lambda: side(kind) == size and not app.actions.busy,
                          f"the wheel to widen the {kind} loupe")
             page.wait_for_timeout(500)
             assert (tuple(client.camera.position), tuple(client.camera.look_at)) == view
