@@ -29,8 +29,12 @@ ROOT = Path(__file__).resolve().parents[1]
 PJLAB = ROOT.parent / "shared" / "data" / "pjlab_opencalib_lidar2camera" / "auto_calib"
 PAIRS = ROOT / "real_data" / "pairs" / "auto_calib_pairs.yaml"
 N_GUIDED = 12
-#: Fewest guided pairs the screen must offer here (it proposes only clear corners, issue 20).
-MIN_GUIDED = 6
+#: Fewest guided pairs the screen must offer here (it proposes only clear corners, issue 20).  5 since stop 28:
+#: a new cell's 3-sigma ellipse must fit the loupe unzoomed, which on KITTI kept only proposals at a clean photo
+#: corner (docs/perf/guide_clean_corners.md); here fewer new cells pass, so more of the guided pairs are re-clicks.
+MIN_GUIDED = 5
+#: Most actions per guided pair: a new cell takes one click, a re-click "Next pair" and a click.
+MAX_ACTIONS_PER_PAIR = 2.0
 
 
 def rough_extrinsic(T: np.ndarray, degrees: float = 2.0, metres: float = 0.20) -> np.ndarray:
@@ -108,4 +112,4 @@ def test_guided_pairs_on_the_real_scan_from_a_rough_extrinsic(tmp_path):
           f"{rot:.3f} deg, {100 * trans:.2f} cm from the published calibration")
     # Issue 9's real-scene target (there with 5 rough + 20 guided pairs): within 0.1 deg and 5 cm.
     assert rot <= 0.1 and trans <= 0.05
-    assert made >= MIN_GUIDED and actions / made <= 1.5
+    assert made >= MIN_GUIDED and actions / made <= MAX_ACTIONS_PER_PAIR
