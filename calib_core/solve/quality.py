@@ -241,6 +241,11 @@ LOO_NOISY_PX = 6.0
 #: A pair whose 2x2 hat-matrix block has an eigenvalue above this carries the pose: a mistake in it shows in
 #: its own residual at most ``1 - HIGH_LEVERAGE`` (10 %) of its size along that direction.
 HIGH_LEVERAGE = 0.9
+#: A pose whose translation moves more than this (metres) when one pair is left out hangs on that pair.  Measured on the 18 kept by-eye sessions of runs 1-9
+#: (docs/by_eye.md), solved as the app solves them: of the four "ok" results 22-65 cm from the published pose it
+#: warns on the worst (PJLab run 9, 64.6 cm off, 18.2 cm without one pair) and misses three (5.0-8.4 cm); it also
+#: warns on the one "ok" result 10.1 cm off (10.5 cm without one pair).
+LOO_SHIFT_M = 0.10
 
 
 @dataclass(frozen=True)
@@ -266,6 +271,11 @@ class LeaveOneOut:
     expected_loo_rms_px : float
         The RMS leave-one-out error the fit's own residuals predict (``s^2 trace((I - H_ii)^-1)``, with ``s`` the
         residual scale over ``2 n - 6`` degrees of freedom), px; NaN when unknown.
+    shift_m : (n,) ndarray
+        How far the translation of ``T_camera_lidar`` moves when the pose is fitted without each pair, metres
+        (the same case-deletion step, ``N^-1 J_i^T (I - H_ii)^-1 r_i``; NaN where ``loo_px`` is).
+    turn_deg : (n,) ndarray
+        How far the rotation turns then, degrees.
     """
 
     loo_px: np.ndarray
@@ -273,6 +283,8 @@ class LeaveOneOut:
     leverage: np.ndarray
     ids: list
     expected_loo_rms_px: float
+    shift_m: np.ndarray | None = None
+    turn_deg: np.ndarray | None = None
 
     @property
     def mean_px(self) -> float:
@@ -385,7 +397,15 @@ def leave_one_out_estimate(
         # Each pair's expected squared error, px^2: s^2 trace((I - H_ii)^-1) / w_i^2.
         expected = s2 * np.where(carried, np.nan, Ainv[:, 0, 0] + Ainv[:, 1, 1]) / w[ok] ** 2
         expected_rms = float(np.sqrt(np.nanmean(expected))) if np.isfinite(expected).any() else float("nan")
-    return LeaveOneOut(loo_px=loo, fit_px=fit, leverage=lev, ids=ids, expected_loo_rms_px=expected_rms)
+        # The pose fitted without pair i differs by N^-1 J_i^T z_i in (delta, t); the translation of T then
+        # moves by delta x t + dt.
+        d = np.einsum("ij,kaj,ka->ki", Ninv, Jw, z)
+        moved = np.cross(d[:, :3], T[:3, 3]) + d[:, 3:]
+        shift, turn = np.full(n, np.nan), np.full(n, np.nan)
+        shift[ok] = np.where(carried, np.nan, np.linalg.norm(moved, axis=1))
+        turn[ok] = np.where(carried, np.nan, np.degrees(np.linalg.norm(d[:, :3], axis=1)))
+    return LeaveOneOut(loo_px=loo, fit_px=fit, leverage=lev, ids=ids, expected_loo_rms_px=expected_rms,
+                       shift_m=shift, turn_deg=turn)
 
 
 def leave_one_out_reasons(loo: LeaveOneOut | None, fit_mean_px: float | None = None) -> list[str]:
@@ -400,6 +420,8 @@ def leave_one_out_reasons(loo: LeaveOneOut | None, fit_mean_px: float | None = N
       :data:`LOO_FLOOR_PX`): the pose bends towards pairs whose errors it hides.
     * A pair has a leverage over :data:`HIGH_LEVERAGE`: the pose rests on it, and an error in it would hardly
       show in its residual.
+    * Leaving one pair out moves the translation more than :data:`LOO_SHIFT_M`: the result hangs on that pair,
+      whatever the residuals say.
     """
     if loo is None:
         return []
@@ -426,6 +448,13 @@ def leave_one_out_reasons(loo: LeaveOneOut | None, fit_mean_px: float | None = N
             f"the pose rests on pair{'s' if len(carried) > 1 else ''} {names} (leverage up to "
             f"{loo.leverage[worst]:.2f}: an error there shows only {100 * (1 - loo.leverage[worst]):.0f} % in its "
             "residual); add pairs near it and elsewhere"
+        )
+    shift = np.full(len(loo.ids), np.nan) if loo.shift_m is None else np.asarray(loo.shift_m, np.float64)
+    if np.isfinite(shift).any() and np.nanmax(shift) > LOO_SHIFT_M:
+        i = int(np.nanargmax(shift))
+        reasons.append(
+            f"without pair {loo.ids[i]} the translation moves {100 * shift[i]:.1f} cm (above {100 * LOO_SHIFT_M:.0f} cm): "
+            "the result hangs on that pair; check it, and add pairs near it and at other depths"
         )
     return reasons
 
