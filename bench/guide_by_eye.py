@@ -683,12 +683,13 @@ def summary_rows(name: str, scene: RealScene, trials: int, paths: list[Path]) ->
 
 def ring_crossing_rows(name: str, scene: RealScene) -> list[str]:
     """Does the paint's corner rebuilt from the rings' crossings of its edges
-    (:func:`calib_core.guide.marking_corner.ring_crossing_corner`) lie closer to the photo's corner than the
+    (:func:`bench.ring_crossing.ring_crossing_corner`) lie closer to the photo's corner than the
     ``marking`` cell does?  Every marking candidate the camera sees under the published pose, within
     :data:`FAR_M`, with an isolated Harris corner within 20 px of the cell: the distance (published pose) from that
     corner of the cell, of the rebuilt corner and of the cell nearest the rebuilt corner (markdown rows)."""
     from calib_core.guide.candidates import KINDS, find_candidates
-    from calib_core.guide.marking_corner import edge_width_cells, point_at, ring_crossing_corner
+    from calib_core.guide.marking_corner import edge_width_cells
+    from bench.ring_crossing import point_at, ring_crossing_corner
     from calib_core.guide.visibility import visible_in_camera
 
     harris = harris_corners(scene.image)
