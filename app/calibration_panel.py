@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from calib_core.solve.quality import NO_ERROR_ESTIMATE, error_estimate_reason, pairs_in_fit
+from calib_core.solve.quality import NEAR_SINGULAR_DEG, NO_ERROR_ESTIMATE, error_estimate_reason, pairs_in_fit
 from calib_core.transforms import rpy_deg_from_R, viewing_direction
 
 from .ui_common import MIN_PAIRS, QUALITY_BADGES, HeldQuality, SolveBundle, SolveShown, md_escape, _fmt, outlier_change_note
@@ -18,6 +18,9 @@ from .ui_common import MIN_PAIRS, QUALITY_BADGES, HeldQuality, SolveBundle, Solv
 #: stack has (Arial / Liberation Sans, Roboto, Helvetica, DejaVu Sans).
 FONT_SAFE = "\u2022"  # bullet
 
+
+#: After the rpy line near pitch +-90 deg (run 9: "roll/yaw sigmas of about 12 deg alarm a new user").
+GIMBAL_LOCK_HINT = " (near gimbal lock roll and yaw trade off, so each alone is uncertain; the line above is not)"
 
 class CalibrationPanel:
     """The "Calibration" folder: it owns its widgets and shows what :meth:`show` is given (no app state).
@@ -113,10 +116,10 @@ class CalibrationPanel:
             error_line,
             f"t = ({t[0]:.4f}, {t[1]:.4f}, {t[2]:.4f}) m, sigma T = ({st[0] * 100:.2f}, {st[1] * 100:.2f}, "
             f"{st[2] * 100:.2f}) cm",
-            f"rpy = ({rpy[0]:.3f}, {rpy[1]:.3f}, {rpy[2]:.3f}) deg, sigma R = ({sr[0]:.3f}, {sr[1]:.3f}, "
-            f"{sr[2]:.3f}) deg",
             f"looking along az {_fmt(view.azimuth_deg)} deg, el {_fmt(view.elevation_deg)} deg (lidar frame), "
             f"roll about the axis {_fmt(view.roll_deg)} deg; sigma ({_fmt(sv[0])}, {_fmt(sv[1])}, {_fmt(sv[2])}) deg",
+            f"rpy = ({rpy[0]:.3f}, {rpy[1]:.3f}, {rpy[2]:.3f}) deg, sigma R = ({sr[0]:.3f}, {sr[1]:.3f}, "
+            f"{sr[2]:.3f}) deg" + (GIMBAL_LOCK_HINT if 90.0 - abs(rpy[1]) < NEAR_SINGULAR_DEG else ""),
         ]
         for w in r.warnings:
             if w not in reasons:  # notes on the output's form (reasons are shown above)
