@@ -4,7 +4,8 @@
 
 Each complete pair of the session is scored by the distance between its clicked pixel and the projection, under
 the reference (published) calibration, of the laser point it names.  The pairs are then solved as the app solves
-them (:func:`calib_core.solve.calibrate.calibrate`) and the result is compared with the reference: the rotation
+them (:func:`calib_core.solve.calibrate.calibrate`, each click weighted by its ``precision_px``; before stop 28 the
+weights were dropped here, see docs/by_eye.md) and the result is compared with the reference: the rotation
 angle after projecting both onto SO(3), and the translation difference.  The reference is used only here, never
 while clicking.
 """
@@ -58,7 +59,9 @@ def main(argv: list[str] | None = None) -> int:
                and (e.get("laser_rc") is not None or e.get("laser_xyz") is not None)]
     pairs = [Pair(laser_rc=tuple(e["laser_rc"]) if e.get("laser_rc") is not None else None,
                   laser_xyz=tuple(e["laser_xyz"]) if e.get("laser_rc") is None else None,
-                  pixel=tuple(e["pixel"]), id=int(e.get("id", k + 1))) for k, e in entries]
+                  pixel=tuple(e["pixel"]), id=int(e.get("id", k + 1)),
+                  precision_px=None if e.get("precision_px") is None else float(e["precision_px"]))
+             for k, e in entries]
     # Check pairs (left out of the fit in the app) are scored but, as in the app, not solved with.
     is_check = [bool(e.get("check", False)) for _, e in entries]
     print(f"{len(pairs)} complete pairs" + (f" ({sum(is_check)} of them check pairs, left out of the fit)"
