@@ -162,8 +162,8 @@ def test_the_bar_gives_guided_pickings_reason_when_it_has_no_proposal(app, scene
         assert d.press_guide("Skip") == [] and d.wait_guide()
     assert d.guide_proposal is None
     # The Guided folder's reason, with its count of candidates left out (the folder's own full text) ...
-    m = re.search(r"No new corner to propose here: of (\d+) corner-like spots? in the scan, most \((\d+)\) ([^;]+); "
-                  r"pick the next pairs by hand",
+    m = re.search(r"No new corner to propose here; pick the next pairs by hand: of (\d+) corner-like spots? in "
+                  r"the scan, most \((\d+)\) ([^;\n.]+)",
                   d.guide_panel.replace("\\", ""))
     assert m and int(m.group(1)) > 0, d.guide_panel
     # ... is in the pair bar's one line.

@@ -71,9 +71,8 @@ def test_reclicks_skipped_or_stopped_do_not_come_back_and_the_bar_says_why(app, 
     assert len(shown) == len(set(shown)) and 1 <= len(shown) <= 4, shown
     assert d.guide_proposal is None
     panel = d.guide_panel.replace("\\", "")  # markdown escapes
-    m = re.search(r"No new corner to propose here: of (\d+) corner-like spots? in the scan, most \(\d+\) "
-                  r"are too far away to place; "
-                  r"pick the next pairs by hand",
+    m = re.search(r"No new corner to propose here; pick the next pairs by hand: of (\d+) corner-like spots? in "
+                  r"the scan, most \(\d+\) are too far away to place",
                   panel)
     assert m and int(m.group(1)) > 0, panel
     # The bar gives the reason itself in its one line (run 7).

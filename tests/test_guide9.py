@@ -53,7 +53,8 @@ def test_the_note_without_a_proposal_names_no_screen_test():
     screened = {"intensity corner off the ground": 383, "junction on a coarse scan": 211, "far": 12,
                 "reclick ellipse or border": 4}
     note = no_new_corner_note(screened)
-    assert note.startswith("No new corner to propose here: of 606 corner-like spots in the scan, most (383) ")
+    assert note.startswith("No new corner to propose here; pick the next pairs by hand: of 606 corner-like spots in "
+                           "the scan, most (383) ")
     assert PLAIN_REASONS["intensity corner off the ground"] in note
     assert not any(test in note for test in screened)
     # Tests that say the same thing to a user are counted together: 3 + 4 along an edge beat 5 far.

@@ -74,8 +74,8 @@ def test_no_new_corner_says_so_with_the_main_reason(scene):
     props = session.proposals(20)
     assert all(p.replaces is not None for p in props)
     note = props.note
-    assert note is not None and note.startswith("No new corner to propose here: of ")
-    assert "are too far away to place" in note and note.endswith("pick the next pairs by hand")
+    assert note is not None and note.startswith("No new corner to propose here; pick the next pairs by hand: of ")
+    assert note.endswith("are too far away to place")
     n = int(note.split("of ")[1].split()[0])
     assert n == props.screened["far"] + sum(v for k, v in props.screened.items()
                                             if k not in ("far", "reclick ellipse or border"))

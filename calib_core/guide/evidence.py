@@ -154,8 +154,8 @@ PLAIN_REASONS = {
 def no_new_corner_note(screened: dict) -> str:
     """What the app says when no new cell passes the screen, in a user's words: how many corners the scan
     offered and what most of them are (:data:`PLAIN_REASONS`, tests with the same wording counted together),
-    e.g. "No new corner to propose here: of 412 corner-like spots in the scan, most (230) are too far away to
-    place; pick the next pairs by hand".
+    what to do first (a one-line status cuts the end off; by-eye runs 8-10), e.g. "No new corner to propose here;
+    pick the next pairs by hand: of 412 corner-like spots in the scan, most (230) are too far away to place".
 
     Parameters
     ----------
@@ -164,15 +164,15 @@ def no_new_corner_note(screened: dict) -> str:
     """
     counts = {k: int(v) for k, v in screened.items() if k not in RECLICK_SCREEN_KEYS and int(v) > 0}
     if not counts:
-        return "No new corner to propose here: the scan has no corner in view; pick the next pairs by hand"
+        return "No new corner to propose here; pick the next pairs by hand: the scan has no corner in view"
     n = sum(counts.values())
     plain: dict[str, int] = {}
     for test, k in counts.items():
         words = PLAIN_REASONS.get(test, f"fail the check '{test}'")
         plain[words] = plain.get(words, 0) + k
     words = max(plain, key=lambda w: plain[w])
-    return (f"No new corner to propose here: of {n} corner-like spot{'s' if n != 1 else ''} in the scan, most "
-            f"({plain[words]}) {words}; pick the next pairs by hand")
+    return (f"No new corner to propose here; pick the next pairs by hand: of {n} corner-like "
+            f"spot{'s' if n != 1 else ''} in the scan, most ({plain[words]}) {words}")
 
 
 @dataclass(frozen=True)
