@@ -241,10 +241,10 @@ LOO_NOISY_PX = 6.0
 #: A pair whose 2x2 hat-matrix block has an eigenvalue above this carries the pose: a mistake in it shows in
 #: its own residual at most ``1 - HIGH_LEVERAGE`` (10 %) of its size along that direction.
 HIGH_LEVERAGE = 0.9
-#: A pose whose translation moves more than this (metres) when one pair is left out hangs on that pair.  Measured on the 18 kept by-eye sessions of runs 1-9
-#: (docs/by_eye.md), solved as the app solves them: of the four "ok" results 22-65 cm from the published pose it
-#: warns on the worst (PJLab run 9, 64.6 cm off, 18.2 cm without one pair) and misses three (5.0-8.4 cm); it also
-#: warns on the one "ok" result 10.1 cm off (10.5 cm without one pair).
+#: A pose whose translation moves more than this (metres) when one pair is left out hangs on that pair.  Measured
+#: on the 18 kept by-eye sessions of runs 1-9 (docs/by_eye.md), solved as the app solves them: of the four "ok"
+#: results 22-65 cm from the published pose it warns on the worst (PJLab run 9, 64.6 cm off, 18.2 cm without one
+#: pair) and misses three (5.0-8.4 cm); it also warns on the one "ok" result 10.1 cm off (10.5 cm without one pair).
 LOO_SHIFT_M = 0.10
 
 
@@ -453,8 +453,9 @@ def leave_one_out_reasons(loo: LeaveOneOut | None, fit_mean_px: float | None = N
     if np.isfinite(shift).any() and np.nanmax(shift) > LOO_SHIFT_M:
         i = int(np.nanargmax(shift))
         reasons.append(
-            f"without pair {loo.ids[i]} the translation moves {100 * shift[i]:.1f} cm (above {100 * LOO_SHIFT_M:.0f} cm): "
-            "the result hangs on that pair; check it, and add pairs near it and at other depths"
+            f"without pair {loo.ids[i]} the translation moves {100 * shift[i]:.1f} cm (above "
+            f"{100 * LOO_SHIFT_M:.0f} cm): the result hangs on that pair; check it, and add pairs near it and at "
+            "other depths"
         )
     return reasons
 
