@@ -113,6 +113,16 @@ def real_scenes():
                          id="pjlab")]
 
 
+def _rough_start_sessions(scene, screen, starts: int):
+    """A fresh guided session from each of the bench's first ``starts`` rough starts (5 pairs, 5-15 px off their
+    projection under the published pose)."""
+    import bench.guide_by_eye as b
+
+    for k in range(starts):
+        pairs = b.by_eye_pairs(scene, np.random.default_rng([b.BENCH_SEED, k]))
+        yield GuidedSession(scene.depth, scene.camera, pairs, image=scene.image, screen=screen)
+
+
 @pytest.mark.parametrize("loader, min_new", real_scenes())
 def test_real_proposals_are_planar_resolved_and_fit_the_loupe(loader, min_new):
     import bench.guide_by_eye as b
@@ -120,16 +130,11 @@ def test_real_proposals_are_planar_resolved_and_fit_the_loupe(loader, min_new):
     scene = loader()
     noise = b.range_noise_m(scene.depth)
     screen = app_screen(scene.camera)
-    session, new = None, []
-    for k in range(3):
-        pairs = b.by_eye_pairs(scene, np.random.default_rng([b.BENCH_SEED, k]))
-        if session is None:
-            session = GuidedSession(scene.depth, scene.camera, pairs, image=scene.image, screen=screen)
-        else:
-            session.pairs = list(pairs)
-            session._update_state()
-        new += [p for p in session.proposals(20) if p.replaces is None]
-        for p in session.proposals(20):  # re-clicks too: the loupe must show where to click
+    new = []
+    for session in _rough_start_sessions(scene, screen, 3):
+        props = session.proposals(20)
+        new += [p for p in props if p.replaces is None]
+        for p in props:  # re-clicks too: the loupe must show where to click
             assert p.radius_3sigma_px <= loupe_half_px(scene.camera)
     assert len(new) >= min_new
     rng = np.random.default_rng(0)
@@ -155,14 +160,8 @@ def test_smeared_stripe_corners_left_out_on_pjlab_were_no_photo_corner():
     harris = b.harris_corners(scene.image)
     on = app_screen(scene.camera)
     off = replace(on, max_marking_edge_cells=1e9)
-    session, loose = None, []
-    for k in range(8):  # the bench's rough starts until the screen without the rule proposes stripe corners
-        pairs = b.by_eye_pairs(scene, np.random.default_rng([b.BENCH_SEED, k]))
-        if session is None:
-            session = GuidedSession(scene.depth, scene.camera, pairs, image=scene.image, screen=off)
-        else:
-            session.pairs = list(pairs)
-            session._update_state()
+    loose = []
+    for session in _rough_start_sessions(scene, off, 8):  # until the screen without the rule proposes stripe corners
         loose = [p for p in session.proposals(20) if p.replaces is None and p.kind == "marking"]
         if loose:
             break
