@@ -179,7 +179,30 @@ def live_summary(live: Any, held: HeldQuality | None = None, fitted: bool = Fals
     shown = ("UNRELIABLE" if status == "unreliable" else status) + (" (held, near the limit)" if note else "")
     solving = " · solving…" if getattr(live, "solving", False) else ""
     worst = worst_pair(bundle) if error_estimate_reason(n_fit) is None else ""
-    return f"**{n_fit} pairs · {errors} · Quality: {shown}**{worst}{solving}"
+    why = f" · why: {reason_head(quality)}" if status != "ok" and reason_head(quality) else ""
+    return f"**{n_fit} pairs · {errors} · Quality: {shown}**{why}{worst}{solving}"
+
+
+#: The longest reason head the live line shows (characters); the Calibration folder has the whole reason.
+REASON_HEAD_CHARS = 60
+
+
+def reason_head(quality: Any) -> str:
+    """The first of ``quality``'s reasons up to its first ``:`` or ``;`` (a parenthesis cut there is dropped; at most :data:`REASON_HEAD_CHARS`
+    characters, cut at a word), e.g. "only 5 pairs in the fit"; "" without reasons.  Run 10: leaving a pair out
+    turned "ok" into "warning" and the live line did not say why."""
+    reasons = list(getattr(quality, "reasons", None) or [])
+    if not reasons:
+        return ""
+    head = str(reasons[0])
+    for stop in (":", ";"):
+        head = head.split(stop, 1)[0]
+    if head.count("(") > head.count(")"):  # cut inside a parenthesis: drop it whole
+        head = head[: head.rfind("(")]
+    head = head.strip()
+    if len(head) > REASON_HEAD_CHARS:
+        head = head[: REASON_HEAD_CHARS - 1].rsplit(" ", 1)[0] + "…"
+    return head
 
 
 def worst_pair(bundle: Any) -> str:
