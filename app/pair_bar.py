@@ -223,14 +223,32 @@ _ONE_LINE = ('<span style="display:block;white-space:nowrap;overflow:hidden;text
              'title="{title}">{text}</span>')
 
 
+#: The live line's constant height, in lines: with the reason and the worst pair it takes three at the panel's width
+#: (run 11: as it grew from two lines to three, the Pairs folder's buttons below moved 18 px under a click).
+LIVE_LINES = 3
+_FIXED_LINES = ('<span style="display:-webkit-box;-webkit-box-orient:vertical;-webkit-line-clamp:{n};'
+                'overflow:hidden;line-height:1.45em;height:{height:.2f}em" title="{title}">{text}</span>')
+
+
+def fixed_lines_markdown(text: str, n: int) -> str:
+    """``text`` (markdown, app text only) in a block exactly ``n`` lines high: shorter text leaves blank lines,
+    longer text is cut with an ellipsis at the end of line ``n`` (the whole text in its hover title)."""
+    return _FIXED_LINES.format(n=int(n), height=1.45 * int(n), **_title_and_text(text))
+
+
 def one_line_markdown(text: str) -> str:
     """``text`` (one line of markdown, app text only) as a line of constant height: blank when ``text`` is empty,
     so that the line keeps its place (run 7: the panel's controls jumped about 18 px as a status line came and
     went, and clicks aimed at them landed on nothing)."""
+    return _ONE_LINE.format(**_title_and_text(text))
+
+
+def _title_and_text(text: str) -> dict[str, str]:
+    """The hover ``title`` (plain text) and the shown ``text`` of a status block, both HTML-escaped: a message may
+    quote a file name, and no user string goes into raw HTML.  Empty text shows a blank (the block keeps its
+    height)."""
     plain = re.sub(r"\\(.)", r"\1", text.replace("**", ""))
-    # Escaped too: a message may quote a file name, and no user string goes into raw HTML.
-    shown = html.escape(text, quote=False) if text else "&nbsp;"
-    return _ONE_LINE.format(title=html.escape(plain, quote=True), text=shown)
+    return {"title": html.escape(plain, quote=True), "text": html.escape(text, quote=False) if text else "&nbsp;"}
 
 
 class FixedLine:
@@ -275,7 +293,8 @@ class PairBar:
     """
 
     def __init__(self, gui: Any, live_order: float, guide_order: float) -> None:
-        self._md_live = gui.add_markdown("", order=live_order)
+        self._live_text = ""
+        self._md_live = gui.add_markdown(fixed_lines_markdown("", LIVE_LINES), order=live_order)
         # What the app did by itself (e.g. a rough pose the person did not make): one line, kept when blank.
         self._notice = FixedLine(gui, order=live_order + 0.05)
         self._notice_pairs: Any = None  # the pairs when the shown notice was made
@@ -309,7 +328,7 @@ class PairBar:
     @property
     def live_line(self) -> str:
         """The live solve's one-line summary (markdown; empty before the first solve)."""
-        return str(self._md_live.content)
+        return self._live_text
 
     @property
     def pose_note(self) -> str:
@@ -355,8 +374,9 @@ class PairBar:
         ``fitted``: the rough pose was turned to fit the pairs so far)."""
         with self._lock:
             text = live_summary(live, self._held, fitted)
-            if self._md_live.content != text:
-                self._md_live.content = text
+            if self._live_text != text:
+                self._live_text = text
+                self._md_live.content = fixed_lines_markdown(text, LIVE_LINES)
             bundle = getattr(live, "bundle", None)
             if bundle is not None and self._notice_kind == "pose":
                 self._show_notice("", "", None)  # the page shows the solve now, not the rough pose
