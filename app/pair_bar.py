@@ -121,9 +121,9 @@ def undo_note(before: list, after: list) -> str:
 
 def pending_hint(pending: Any) -> str:
     """The status line while pair ``pending`` (a half-made :class:`app.picks.Pick`) waits: where its other end is
-    clicked, first (the line is cut on the right), in the words the page shows.  After a click on the photo the
+    clicked, first (the bar shows two lines), in the words the page shows.  After a click on the photo the
     lower loupe shows the laser (render or BA image) at that place, so one click there makes the laser end."""
-    if pending.pixel is not None:  # the words that matter within the ~60 characters the line shows
+    if pending.pixel is not None:
         return (f"Pair {pending.id} waits for a BA click → **lower loupe**, then photo loupe · **Cancel pair** or Esc "
                 f"drops it.")
     return (f"Pair {pending.id} waits for a camera click → **photo loupe** (top right) · **Cancel pair** or Esc "
@@ -223,6 +223,9 @@ _ONE_LINE = ('<span style="display:block;white-space:nowrap;overflow:hidden;text
              'title="{title}">{text}</span>')
 
 
+#: The pair status and guided lines' height, in lines: one line cut their advice (runs 8, 9 and 11: "then photo
+#: lou...", "no proposal's 3-sigma ellipse fits th...").
+STATUS_LINES = 2
 #: The live line's constant height, in lines: with the reason and the worst pair it takes three at the panel's width
 #: (run 11: as it grew from two lines to three, the Pairs folder's buttons below moved 18 px under a click).
 LIVE_LINES = 3
@@ -252,12 +255,16 @@ def _title_and_text(text: str) -> dict[str, str]:
 
 
 class FixedLine:
-    """A markdown line of the pair bar that keeps its height whether it shows something or not
-    (:func:`one_line_markdown`).  Not locked: the owner updates it under its own lock."""
+    """A markdown line (or ``lines`` lines) of the pair bar that keeps its height whether it shows something or not
+    (:func:`one_line_markdown`, :func:`fixed_lines_markdown`).  Not locked: the owner updates it under its own lock."""
 
-    def __init__(self, gui: Any, order: float) -> None:
+    def __init__(self, gui: Any, order: float, lines: int = 1) -> None:
         self._text = ""
-        self._md = gui.add_markdown(one_line_markdown(""), order=order)
+        self._lines = int(lines)
+        self._md = gui.add_markdown(self._markup(""), order=order)
+
+    def _markup(self, text: str) -> str:
+        return one_line_markdown(text) if self._lines == 1 else fixed_lines_markdown(text, self._lines)
 
     @property
     def text(self) -> str:
@@ -269,7 +276,7 @@ class FixedLine:
         text = " ".join(text.split("  \n"))
         if text != self._text:
             self._text = text
-            self._md.content = one_line_markdown(text)
+            self._md.content = self._markup(text)
 
 
 #: Guided picking's actions the bar repeats while a proposal is shown (run 6: the person scrolled to the Guided
@@ -403,7 +410,7 @@ class PairBar:
         with self._lock:
             if self._guide_text != text:  # one line, ellipsised when long (the whole of it in its hover title)
                 self._guide_text = text
-                self._md_guide.content = one_line_markdown(text) if text else ""
+                self._md_guide.content = fixed_lines_markdown(text, STATUS_LINES) if text else ""
             self._guided_actions = shown
             if bool(self._bg_guided.visible) != bool(shown):
                 self._bg_guided.visible = bool(shown)

@@ -16,7 +16,8 @@ from calib_core.panorama import refine_click_to_corner
 from .layout import RENDER_KEY
 from .loupe_framing import PairClick
 from .page_builder import install_page_script
-from .pair_bar import PAIR_BAR_JS, FixedLine, PairBar, made_hint, one_line_markdown, pending_hint, undo_note
+from .pair_bar import (PAIR_BAR_JS, STATUS_LINES, FixedLine, PairBar, made_hint, one_line_markdown, pending_hint,
+                       undo_note)
 from .pairs_import import import_upload
 from .ui_common import MIN_PAIRS, SNAP_RADIUS_PX, pick_tolerance_px
 
@@ -56,7 +57,7 @@ class PairsPanel:
         self._bg_actions = gui.add_button_group("Pair", PAIR_ACTIONS, order=top - 1.0)
         self._bg_actions.on_click(self.pair_action_callback)
         # One line kept when blank: in run 7 the controls below jumped ~18 px as it came and went.
-        self._status_line = FixedLine(gui, order=top - 0.5)
+        self._status_line = FixedLine(gui, order=top - 0.5, lines=STATUS_LINES)
         # The live solve's figures right under the buttons, guided picking's status under the pair status.
         self.bar = PairBar(gui, live_order=top - 0.75, guide_order=top - 0.45)
         self.show_guide_status = self.bar.show_guide_status  # the Guide panel's hook
