@@ -15,7 +15,7 @@ from .checks import (
     MIN_PAIRS,
     conditioning_warning,
     validate_initial_T,
-    validate_pairs_frames,
+    validate_pairs,
     validate_pixels,
 )
 from .kernels import (
@@ -215,8 +215,8 @@ def solve_extrinsics(
     whiten_camera = camera if cost != "geodesic" else None
     by_camera = whiten_camera is not None and noise_rad is None  # whitening by the camera's tangent Jacobian
     # The checks, the bearings' frames and (by_camera) the probes of the camera's tangent Jacobian in one call.
-    points, bearings, warnings, frames, probes = validate_pairs_frames(points_lidar, bearings_camera,
-                                                                       STEP_RAD if by_camera else 0.0)
+    points, bearings, warnings, frames, probes = validate_pairs(points_lidar, bearings_camera,
+                                                                STEP_RAD if by_camera else 0.0)
     n = len(points)
     ids = _check_pair_ids(pair_ids, n)
     sigmas = check_pixel_sigma(pixel_sigma, n)
