@@ -28,7 +28,7 @@ import itertools
 import numpy as np
 
 from ..arrays import angle_between_rad
-from .kernels import p3p_grunert as compiled_p3p_grunert
+from .kernels import p3p_grunert
 from .checks import median
 from .rigid import rigid_fit
 
@@ -320,36 +320,6 @@ def quan_lan_pose(points_lidar: np.ndarray, bearings_camera: np.ndarray, seed: i
 # --------------------------------------------------------------------------
 # Grunert's P3P (Haralick et al. 1994)
 # --------------------------------------------------------------------------
-
-
-def p3p_grunert(points_lidar: np.ndarray, bearings_camera: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """All P3P poses of a batch of triples, Grunert's solution.
-
-    Notation of Haralick et al. (1994), Sec. 2: ``s1, s2, s3`` are the depths,
-    ``a = |p2 - p3|``, ``b = |p1 - p3|``, ``c = |p1 - p2|``, and
-    ``alpha, beta, gamma`` the angles between bearings (2,3), (1,3), (1,2).
-    With ``s2 = u s1`` and ``s3 = v s1`` the law of cosines gives the quartic
-    ``A4 v^4 + ... + A0 = 0`` (their eq. 9) and ``u`` from ``v`` (eq. 8).  Only
-    roots with ``u, v > 0`` are kept: the points lie in front along their
-    bearings.
-
-    Parameters
-    ----------
-    points_lidar : (M, 3, 3) ndarray
-        M triples of laser points, metres.
-    bearings_camera : (M, 3, 3) ndarray
-        Their unit bearings, camera frame.
-
-    Returns
-    -------
-    T_camera_lidar : (K, 4, 4) ndarray
-        Up to four poses per triple.
-    triple_index : (K,) int ndarray
-        The triple each pose comes from.
-    """
-    P = np.ascontiguousarray(points_lidar, dtype=np.float64).reshape(-1, 3, 3)
-    Bm = np.ascontiguousarray(bearings_camera, dtype=np.float64).reshape(-1, 3, 3)
-    return compiled_p3p_grunert(P, Bm)  # compiled: one implementation
 
 
 def _spread_order(bearings: np.ndarray, count: int) -> np.ndarray:
