@@ -652,16 +652,13 @@ def _log_intensity_windows(depth, rc: np.ndarray, half: int):
     """The scan's log intensity (:func:`calib_core.guide.candidates.intensity_log_image`) in each cell's
     ``(2 half + 1)^2`` window, (N, k, k) with NaN where a cell has none, and which cells have it; None
     without intensity."""
-    from .candidates import intensity_log_image
+    from .candidates import intensity_log_image, window_cells
 
     found = intensity_log_image(depth)
     if found is None:
         return None
     log_i, ok = found
-    H, W = depth.shape
-    off = np.arange(-half, half + 1)
-    rows = np.clip(rc[:, 0, None, None] + off[None, :, None], 0, H - 1)
-    cols = np.clip(rc[:, 1, None, None] + off[None, None, :], 0, W - 1)
+    rows, cols = window_cells(depth.shape, rc, half)
     inside = ok[rows, cols]
     return np.where(inside, log_i[rows, cols], np.nan), inside
 
