@@ -23,7 +23,6 @@ point lies at depth ``d > 0`` along it.
 from __future__ import annotations
 
 import functools
-import itertools
 
 import numpy as np
 
@@ -335,16 +334,24 @@ def _spread_order(bearings: np.ndarray, count: int) -> np.ndarray:
     return np.array(order)
 
 
+@functools.lru_cache(maxsize=32)
+def _all_triples(n: int) -> np.ndarray:
+    """All index triples ``i < j < k`` of ``n`` pairs, (m, 3), in lexicographic order (cached, read-only)."""
+    i, j, k = np.meshgrid(np.arange(n), np.arange(n), np.arange(n), indexing="ij")
+    keep = (i < j) & (j < k)
+    out = np.stack([i[keep], j[keep], k[keep]], axis=1)
+    out.flags.writeable = False
+    return out
+
+
 def _triples(bearings: np.ndarray, rng: np.random.Generator, max_random: int = 200) -> np.ndarray:
     """Triples for P3P: all of them for small N, else well-spread plus random ones."""
     n = len(bearings)
     if n <= 12:
-        return np.array(list(itertools.combinations(range(n), 3)))
-    spread = _spread_order(bearings, 8)
-    tri = [tuple(sorted(t)) for t in itertools.combinations(spread.tolist(), 3)]
+        return _all_triples(n)
+    spread = np.sort(_spread_order(bearings, 8)[_all_triples(8)], axis=1)
     rand = np.sort(np.argsort(rng.random((max_random, n)), axis=1)[:, :3], axis=1)
-    tri.extend(map(tuple, rand.tolist()))
-    return np.unique(np.array(tri), axis=0)
+    return np.unique(np.concatenate([spread, rand]), axis=0)
 
 
 #: Quan & Lan's pose is kept without a P3P search when its RMS angular error is below this.

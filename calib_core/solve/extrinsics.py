@@ -104,14 +104,6 @@ def _pose_matrix(R: np.ndarray, t: np.ndarray) -> np.ndarray:
     return T
 
 
-def _closed_form_start(points: np.ndarray, bearings: np.ndarray) -> tuple[np.ndarray, str]:
-    """Quan & Lan / P3P: the start where the linear DLT does not apply (n < 6, coplanar points)."""
-    T, method, init_cost = initial_pose(points, bearings)
-    if not np.isfinite(init_cost):
-        raise CalibError("no initial pose found from these pairs (all closed-form solutions failed)")
-    return T, method
-
-
 def solve_extrinsics(
     points_lidar: np.ndarray,
     bearings_camera: np.ndarray,
@@ -282,7 +274,10 @@ def solve_extrinsics(
             R, t, R0, t0, it, status, H, z = fit_pose(points, bearings, frames, W, R_in, t_in, use_dlt, LM_MAX_ITER)
         if use_dlt:
             if status == -3:
-                T_closed, method = _closed_form_start(points, bearings)
+                # Quan & Lan / P3P: the start where the linear DLT does not apply (n < 6, coplanar points).
+                T_closed, method, init_cost = initial_pose(points, bearings)
+                if not np.isfinite(init_cost):
+                    raise CalibError("no initial pose found from these pairs (all closed-form solutions failed)")
                 out = fit(T_closed, W, laser)
                 return out[:5] + (method,) + out[6:]
             T_start, method = _pose_matrix(R0, t0), "dlt"
