@@ -18,10 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
-from calib_core.solve import sigma_coverage
 
 from . import startup
-from .common import REPO, fmt_ms, log
+from .common import REPO, fmt_ms, log, sigma_coverage
 
 #: Pair counts of the side-by-side comparison (a subset of the accuracy sweep, to keep the run short).
 COMPARE_N = (4, 6, 10, 15, 20)

@@ -24,9 +24,8 @@ from scipy.optimize import minimize
 
 from calib_core.solve.whiten import PICK_CELL_SIGMA, PICK_RANGE_SIGMA_M, cell_pick_covariance
 
-from calib_core.solve import sigma_coverage
 
-from .common import load_scenes
+from .common import load_scenes, sigma_coverage
 
 #: chi-square quantiles, 2 degrees of freedom, of 68.27 % and 95.45 %.
 CHI2_1S, CHI2_2S = 2.296, 6.180

@@ -32,7 +32,7 @@ Sections
    ``bench.crb`` with the laser term (the realistic bound).
 4. **Sigma coverage**: the share of trials whose error lies within the
    reported 1 sigma and 2 sigma, per parameter (nominal 68.3 % and, as the Student-t
-   widened sigma of 10 pairs puts it, 94.3 %: :func:`calib_core.solve.sigma_coverage`).
+   widened sigma of 10 pairs puts it, 94.3 %: :func:`bench.common.sigma_coverage`).
 """
 
 from __future__ import annotations
@@ -48,9 +48,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from calib_core.solve import sigma_coverage
 
-from .common import BENCH_SEED, REPO, log
+from .common import BENCH_SEED, REPO, log, sigma_coverage
 
 PIN_SIZE = (1280, 960)
 PIN_F = 640.0
@@ -464,7 +463,7 @@ def markdown(jit, sp, pin_rows, omni_rows, cov, load, quick, cmd, laser=None, po
              f"`CalibrationResult.sigma_rpy_deg`). Nominal: {100 * one_nom:.1f} % and {100 * two_nom:.1f} %: the "
              f"sigma is widened by the Student-t factor of {2 * cov['n'] - 6} degrees of freedom so that 1 sigma covers "
              "68.27 %, and 2 such sigmas then cover the t distribution's share, less than the normal 95.45 % "
-             "(`calib_core.solve.sigma_coverage`). Tolerance of the target +-3 points "
+             "(`bench.common.sigma_coverage`). Tolerance of the target +-3 points "
              f"({100 * one_nom - 3:.1f}-{100 * one_nom + 3:.1f} % and {100 * two_nom - 3:.1f}-{100 * two_nom + 3:.1f} %). "
              "1 px clicks in all three. *clicks only*: the sample, the picked cells' "
              "points as exact laser points, clicks = their true projections + 1 px noise (`solve_extrinsics`): the "

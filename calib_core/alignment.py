@@ -59,21 +59,6 @@ def preset_T(name: str) -> np.ndarray:
     return MOUNTING_PRESETS[key].copy()
 
 
-def _rot_x(a: float) -> np.ndarray:
-    c, s = np.cos(a), np.sin(a)
-    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
-
-
-def _rot_y(a: float) -> np.ndarray:
-    c, s = np.cos(a), np.sin(a)
-    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
-
-
-def _rot_z(a: float) -> np.ndarray:
-    c, s = np.cos(a), np.sin(a)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
 def view_rotation(d_yaw_rad: float, d_pitch_rad: float, d_roll_rad: float = 0.0) -> np.ndarray:
     """The rotation ``R_delta`` (3, 3) applied to camera-frame points by :func:`rotate_about_camera`.
 
@@ -82,7 +67,10 @@ def view_rotation(d_yaw_rad: float, d_pitch_rad: float, d_roll_rad: float = 0.0)
     ``(sin(yaw), sin(pitch) cos(yaw), cos(pitch) cos(yaw))`` (before the roll): right for positive yaw,
     down for positive pitch.
     """
-    return _rot_z(float(d_roll_rad)) @ _rot_x(-float(d_pitch_rad)) @ _rot_y(float(d_yaw_rad))
+    from scipy.spatial.transform import Rotation  # (imported on first use, as in :mod:`.transforms`)
+
+    # Intrinsic "ZXY": the matrix is Rz @ Rx @ Ry.
+    return Rotation.from_euler("ZXY", [float(d_roll_rad), -float(d_pitch_rad), float(d_yaw_rad)]).as_matrix()
 
 
 def rotate_about_camera(T_camera_lidar, d_yaw_rad: float, d_pitch_rad: float, d_roll_rad: float = 0.0) -> np.ndarray:

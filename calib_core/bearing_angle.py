@@ -71,49 +71,6 @@ _COMMON_ORIGIN_TOL_M = 1e-6
 _TINY_COMPONENT = 1e-10
 
 
-def bearing_angle(range_prev, range_cur, cos_dphi) -> np.ndarray:
-    """Bearing angle of eq. 4 (law-of-cosines form), elementwise.
-
-    Parameters
-    ----------
-    range_prev : array_like
-        Range rho_{i-1} of the previous beam, metres.
-    range_cur : array_like
-        Range rho_i of the current beam, metres (same origin as the previous).
-    cos_dphi : array_like
-        Cosine of the angle between the two beams.  All three broadcast.
-
-    Returns
-    -------
-    ndarray, float64
-        The angle in [0, pi] radians between the current beam and the segment
-        from the previous point to the current one.  NaN where a range is not
-        finite or <= 0, ``cos_dphi`` is not finite or outside [-1, 1] (beyond
-        rounding), or the two points coincide.
-    """
-    rho_prev, rho_cur, cos_d = np.broadcast_arrays(
-        np.asarray(range_prev, dtype=np.float64),
-        np.asarray(range_cur, dtype=np.float64),
-        np.asarray(cos_dphi, dtype=np.float64),
-    )
-    with np.errstate(invalid="ignore", divide="ignore"):
-        ok = (
-            np.isfinite(rho_prev)
-            & np.isfinite(rho_cur)
-            & (rho_prev > 0.0)
-            & (rho_cur > 0.0)
-            & np.isfinite(cos_d)
-            & (np.abs(cos_d) <= 1.0 + 1e-9)
-        )
-        cos_d = np.clip(cos_d, -1.0, 1.0)
-        segment_sq = rho_cur**2 + rho_prev**2 - 2.0 * rho_cur * rho_prev * cos_d
-        segment = np.sqrt(np.maximum(segment_sq, 0.0))
-        ok &= segment > 0.0
-        # Clipping only absorbs rounding: |argument| <= 1 for any real triangle.
-        argument = np.clip((rho_cur - rho_prev * cos_d) / segment, -1.0, 1.0)
-        return np.where(ok, np.arccos(argument), np.nan)
-
-
 # ------------------------------------------------------------------ kernels
 # atan(t) = t P(t^2) on [0, 1]: minimax (absolute error) coefficients of
 # degree 15, fitted for this module.  In float32 the polynomial is within

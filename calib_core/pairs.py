@@ -188,13 +188,9 @@ def load_pairs_yaml(path: str | os.PathLike, max_pairs: int = MAX_PAIRS) -> list
     return [Pair.from_dict(e, f"{path}: pair {i}") for i, e in enumerate(entries)]
 
 
-def pairs_to_list(pairs: Sequence[Pair]) -> list[dict[str, Any]]:
-    return [p.to_dict() for p in pairs]
-
-
 def save_pairs_yaml(path: str | os.PathLike, pairs: Sequence[Pair]) -> None:
     """Write a pairs file atomically (temporary file, then rename)."""
-    write_yaml_atomic(path, {"pairs": pairs_to_list(pairs)})
+    write_yaml_atomic(path, {"pairs": [p.to_dict() for p in pairs]})
 
 
 def _pair_name(pairs: Sequence[Pair], i: int) -> str:

@@ -44,7 +44,6 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, field, replace
-from pathlib import Path
 from typing import Any, Sequence
 
 import numpy as np
@@ -116,8 +115,6 @@ class Shot:
         The scan (for proposals).
     name : str
         How reports name the shot's files (e.g. ``"scan.pcd + pairs.yaml"``).
-    image_path : Path or None
-        The photo, when known.
     """
 
     points_lidar: np.ndarray
@@ -131,10 +128,9 @@ class Shot:
     pairs: list = field(default_factory=list)
     depth: Any = None
     name: str = ""
-    image_path: Path | None = None
 
     @classmethod
-    def from_pairs(cls, pairs: Sequence[Any], depth, camera, *, name: str = "", image_path=None,
+    def from_pairs(cls, pairs: Sequence[Any], depth, camera, *, name: str = "",
                    cell_sigma: float | tuple[float, float] = PICK_CELL_SIGMA,
                    range_sigma_m: float = PICK_RANGE_SIGMA_M) -> "Shot":
         """Resolve :class:`calib_core.pairs.Pair` objects of one shot (as :func:`calib_core.solve.calibrate` does).
@@ -156,8 +152,7 @@ class Shot:
             laser_cov[has_cell] = cell_pick_covariance(depth, rc, cell_sigma, range_sigma_m)
         precision = np.array([np.nan if p.precision_px is None else p.precision_px for p in pairs], dtype=np.float64)
         return cls(points, bearings, pixels, laser_cov, has_cell, precision, [p.id for p in pairs],
-                   np.array([bool(getattr(p, "check", False)) for p in pairs], dtype=bool), pairs, depth, name,
-                   None if image_path is None else Path(image_path))
+                   np.array([bool(getattr(p, "check", False)) for p in pairs], dtype=bool), pairs, depth, name)
 
     @property
     def n_pairs(self) -> int:
@@ -824,7 +819,7 @@ def joint_pose_state(shots: Sequence[Shot], camera, T_initial: np.ndarray | None
     exceeds 1, plus the prior of ``T_initial`` when fewer than 4 pairs are given.
     """
     from .guide.information import fisher_information, information_inverse, pair_noise, pixel_jacobians
-    from .guide.pose_state import DEFAULT_CLICK_SIGMA_PX, DEFAULT_PRIOR_SIGMA, PoseState
+    from .guide.pose_state import DEFAULT_CLICK_SIGMA_PX, DEFAULT_PRIOR_SIGMA, PoseState, pose_state_of_fit
 
     shots = list(shots)
     ids = _global_ids(shots)
@@ -850,16 +845,8 @@ def joint_pose_state(shots: Sequence[Shot], camera, T_initial: np.ndarray | None
         keep = np.asarray(solved.result.inliers, dtype=bool)
         rows = dataclasses.replace(rows, points=rows.points[keep], pixels=rows.pixels[keep],
                                    sigma_full=rows.sigma_full[keep], laser_cov_full=rows.laser_cov_full[keep])
-    n = len(rows.points)
-    predicted, J_pose, J_point = pixel_jacobians(camera, T, rows.points)
-    S = pair_noise(rows.sigma_full, J_point, rows.laser_cov_full)
-    F = fisher_information(J_pose, S)
-    factor = 1.0
-    r = rows.pixels - predicted
-    if 2 * n - 6 > 0 and np.all(np.isfinite(r)):
-        factor = max(1.0, float(np.einsum("na,nab,nb->", r, np.linalg.inv(S), r)) / (2 * n - 6))
     source = "pairs of all shots" if T_initial is None else "pairs of all shots (started from the extrinsics)"
-    return PoseState(T, factor * information_inverse(F), factor, n, source)
+    return pose_state_of_fit(camera, T, rows.points, rows.pixels, rows.sigma_full, rows.laser_cov_full, source)
 
 
 def propose_shots(
@@ -971,13 +958,9 @@ def propose_shots(
 
 def shot_proposals_to_dict(proposals: Sequence[ShotProposal], state=None, shot_names: Sequence[str] = ()) -> dict:
     """The proposals file: ``proposals:`` (best first, each with ``shot``), the ``pose`` and the ``shots``' names."""
-    doc: dict = {"proposals": [p.to_dict() for p in proposals]}
-    if state is not None:
-        doc["pose"] = {
-            "T_camera_lidar": [[float(x) for x in row] for row in state.T_camera_lidar],
-            "from": state.source,
-            "n_pairs": int(state.n_pairs),
-        }
+    from .guide.propose import proposals_to_dict
+
+    doc = proposals_to_dict(proposals, state)
     if shot_names:
         doc["shots"] = [{"index": i, "name": str(nm)} for i, nm in enumerate(shot_names)]
     return doc

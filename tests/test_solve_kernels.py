@@ -7,8 +7,9 @@ import pytest
 from scipy.spatial.transform import Rotation
 from scipy.stats import norm
 
+from bench.common import sigma_coverage
 from calib_core.lidar.depth_matrix import DepthMatrix
-from calib_core.solve import kernels, sigma_coverage, solve_extrinsics, warm_up
+from calib_core.solve import kernels, solve_extrinsics, warm_up
 from calib_core.solve.whiten import cell_pick_covariance, whitening
 
 from test_solver import TinyPinhole, perturb, pinhole_scene, pose_error, random_scene

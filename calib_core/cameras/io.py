@@ -120,7 +120,7 @@ def pjlab_intrinsic_to_dict(data: dict[str, Any]) -> dict[str, Any]:
         "model": "pinhole",
         "width": param["img_dist_w"],
         "height": param["img_dist_h"],
-        "K": K.reshape(3, 3).tolist(),
+        "K": K.tolist(),
         "dist": dist,
     }
 
@@ -153,10 +153,6 @@ def camera_from_dict(data: dict[str, Any], base_dir: str | os.PathLike | None = 
         known = ", ".join(sorted(CAMERA_MODELS))
         raise CalibError(f"unknown camera model {name!r} (known: {known})")
     return CAMERA_MODELS[name].from_dict(data, Path(base_dir) if base_dir is not None else Path.cwd())
-
-
-def _read_json(path: Path) -> Any:
-    return parse_json_text(read_input_text(path, "camera file", MAX_CAMERA_BYTES), str(path))
 
 
 def is_kitti_calib(path: str | os.PathLike) -> bool:
@@ -238,7 +234,7 @@ def load_camera(
         if suffix in (".yaml", ".yml"):
             data = _normalise(read_yaml_mapping(path, "camera file", max_bytes=MAX_CAMERA_BYTES))
         elif suffix == ".json":
-            raw = _read_json(path)
+            raw = parse_json_text(read_input_text(path, "camera file", MAX_CAMERA_BYTES), str(path))
             if not isinstance(raw, dict):
                 raise CalibError(f"expected a JSON object, got {type(raw).__name__}")
             data = dict(raw) if "model" in raw else pjlab_intrinsic_to_dict(raw)

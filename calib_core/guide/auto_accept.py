@@ -32,7 +32,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .candidates import KINDS, near_fraction
+from .candidates import KINDS, near_fraction, window_cells
 from .image_corners import CornerGate, CornerImage, clean_corner, refine_subpixel, strongest_near
 from .propose import Proposal
 
@@ -79,11 +79,7 @@ def silhouette_contrast(image: np.ndarray, depth, camera, T_camera_lidar: np.nda
     (grey levels; the 4 keeps flat synthetic colours from dividing by 0).
     """
     rc = np.asarray(rows_cols, dtype=np.int64).reshape(-1, 2)
-    H, W = depth.shape
-    off = np.arange(-half, half + 1)
-    rows = np.clip(rc[:, 0, None, None] + off[None, :, None], 0, H - 1)
-    cols = np.clip(rc[:, 1, None, None] + off[None, None, :], 0, W - 1)
-    rows, cols = np.broadcast_arrays(rows, cols)
+    rows, cols = window_cells(depth.shape, rc, half)
     frac = near_fraction(depth, rc, half)
     ok_cell = depth.valid[rows, cols]
     lr = np.where(ok_cell, np.log(np.where(ok_cell, depth.range_m[rows, cols], 1.0)), np.nan)

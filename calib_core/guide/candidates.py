@@ -155,17 +155,22 @@ def cell_spacing_m(depth) -> np.ndarray:
     return np.where(depth.valid, depth.range_m, 0.0) * step
 
 
+def window_cells(shape, rows_cols: np.ndarray, half: int) -> tuple[np.ndarray, np.ndarray]:
+    """Rows and columns (N, k, k), ``k = 2 half + 1``, of the window around each cell, clipped to the matrix."""
+    rc = np.asarray(rows_cols, dtype=np.int64).reshape(-1, 2)
+    off = np.arange(-half, half + 1)
+    rows = np.clip(rc[:, 0, None, None] + off[None, :, None], 0, shape[0] - 1)
+    cols = np.clip(rc[:, 1, None, None] + off[None, None, :], 0, shape[1] - 1)
+    return tuple(np.broadcast_arrays(rows, cols))
+
+
 def near_fraction(depth, rows_cols: np.ndarray, half: int = 3) -> np.ndarray:
     """Share of the window's cells on the near side of the depth step through each cell (no return = far).
 
     About 1/4 at a convex corner of the near region, 3/4 at a concave one and
     1/2 on a straight depth edge; NaN where the window has no depth step.
     """
-    rc = np.asarray(rows_cols, dtype=np.int64).reshape(-1, 2)
-    H, W = depth.shape
-    off = np.arange(-half, half + 1)
-    rows = np.clip(rc[:, 0, None, None] + off[None, :, None], 0, H - 1)
-    cols = np.clip(rc[:, 1, None, None] + off[None, None, :], 0, W - 1)
+    rows, cols = window_cells(depth.shape, rows_cols, half)
     ok_cell = depth.valid[rows, cols]
     lr = np.where(ok_cell, np.log(np.where(ok_cell, depth.range_m[rows, cols], 1.0)), np.inf)
     lo = lr.min(axis=(1, 2))
@@ -176,12 +181,12 @@ def near_fraction(depth, rows_cols: np.ndarray, half: int = 3) -> np.ndarray:
     return np.where(hi - lo >= 0.005, frac, np.nan)
 
 
-def intensity_log_image(depth, despeckle: bool = True) -> tuple[np.ndarray, np.ndarray] | None:
+def intensity_log_image(depth) -> tuple[np.ndarray, np.ndarray] | None:
     """The scan's per-cell intensity as a log image and where it is defined, or None (no intensity field).
 
     ``log(I - I_1 + 0.05 max(|I_1|, 1))`` with ``I_1`` the 1st percentile:
     a step of 0.5 is a contrast of about 65 %, whatever the sensor's
-    intensity scale.  With ``despeckle``, no-return cells with at least 4
+    intensity scale.  No-return cells with at least 4
     returning neighbours get their median (twice: holes of two cells): a
     painted marking's outline, not dropout speckle.
     """
@@ -198,8 +203,6 @@ def intensity_log_image(depth, despeckle: bool = True) -> tuple[np.ndarray, np.n
         return None
     lo = float(np.percentile(values[ok], 1))
     log_i = np.log(np.maximum(np.where(ok, values, lo) - lo, 0.0) + 0.05 * max(abs(lo), 1.0)).astype(np.float32)
-    if not despeckle:
-        return log_i, ok
     # Dropouts on dark asphalt (a quarter of the road's cells at 20 m on a 64-beam scan) cut every gradient
     # window next to them: fill holes of one or two cells from their neighbours.
     for _ in range(2):
@@ -288,11 +291,7 @@ def find_candidates(depth, threshold: float = 0.5, min_distance: int = 1, min_sp
 
 def _log_range_windows(depth, rows_cols: np.ndarray, half: int) -> tuple[np.ndarray, np.ndarray]:
     """Log ranges (N, k, k) of the windows around cells (no return = far: the window's max + 1) and validity."""
-    rc = np.asarray(rows_cols, dtype=np.int64).reshape(-1, 2)
-    H, W = depth.shape
-    off = np.arange(-half, half + 1)
-    rows = np.clip(rc[:, 0, None, None] + off[None, :, None], 0, H - 1)
-    cols = np.clip(rc[:, 1, None, None] + off[None, None, :], 0, W - 1)
+    rows, cols = window_cells(depth.shape, rows_cols, half)
     ok = depth.valid[rows, cols]
     lr = np.log(np.where(ok, depth.range_m[rows, cols], 1.0))
     top = np.where(ok, lr, -np.inf).max(axis=(1, 2))
@@ -339,13 +338,9 @@ def plane_residual_m(depth, rows_cols: np.ndarray, half: int = 3) -> np.ndarray:
     grazing angle, whose normals are noisy enough to look like a junction);
     well above it where planes meet or a depth step crosses the window.
     """
-    rc = np.asarray(rows_cols, dtype=np.int64).reshape(-1, 2)
-    H, W = depth.shape
-    off = np.arange(-half, half + 1)
-    rows = np.clip(rc[:, 0, None, None] + off[None, :, None], 0, H - 1).repeat(len(off), axis=2)
-    cols = np.clip(rc[:, 1, None, None] + off[None, None, :], 0, W - 1).repeat(len(off), axis=1)
-    ok = depth.valid[rows, cols].reshape(len(rc), -1)
-    P = np.nan_to_num(depth.points[rows, cols].reshape(len(rc), -1, 3))
+    rows, cols = window_cells(depth.shape, rows_cols, half)
+    ok = depth.valid[rows, cols].reshape(len(rows), -1)
+    P = np.nan_to_num(depth.points[rows, cols].reshape(len(rows), -1, 3))
     n = ok.sum(axis=1)
     w = ok[:, :, None].astype(np.float64)
     mean = (P * w).sum(axis=1) / np.maximum(n, 1)[:, None]

@@ -3,69 +3,27 @@
 A D-optimal proposal is worthless when the person cannot find its corner:
 on vegetation (no corner at all), on far background, at the image border,
 in clutter of similar corners, or with a 3-sigma ellipse larger than the
-loupe it is shown in.  :class:`ProposalScreen` names each test's threshold;
-:func:`calib_core.guide.propose.propose` applies it.
+loupe it is shown in.  :class:`ProposalScreen` names each test's threshold (its attributes say what
+each test does); :func:`calib_core.guide.propose.propose` applies it.  In short:
 
 Laser side
-    *Locally planar structure.*  Every cell gets the RMS distance of its
-    3 x 3 neighbours on the same surface (range within ``same_surface_rel``)
-    from their least-squares plane (:func:`local_plane_residual_m`; NaN where
-    fewer than ``min_plane_neighbours`` such neighbours, or where they lie on
-    one line: no plane is defined).  A candidate's *support* is its
-    ``(2 plane_half + 1)^2`` window: the near side of the depth step through
-    it when there is one (the object whose corner is proposed), else every
-    valid cell.  :func:`planar_share` is the share of the support whose
-    residual is at most ``max_plane_rms_noise`` times the scan's range noise;
-    foliage scatters its returns in depth and fails, a box face, a wall, a
-    pole, the road pass.
-
-    *Resolution.*  :func:`cell_footprint_px` is the image length of one
-    cell step (row or column, the larger): the cell's angular size times the
-    camera's local focal length (``d pixel / d point``).  A cell longer than
-    ``max_footprint_px`` leaves the corner's pixel too uncertain for a loupe.
-    Note: for a lidar next to the camera the footprint is nearly the same at
-    every range (both are angles); cells on far background are left out by
-    ``max_range_m`` and, through their metric size, by ``max_cell_m`` of
-    :func:`~calib_core.guide.propose.propose`.
-
-    *A corner of its own kind* (the by-eye runs declined flat asphalt,
-    curbs, junctions on a flat door, shadows at an object's foot):
-    a depth-jump cell needs a step of ``min_depth_step`` (log range) against
-    *returns* (``min_far_share`` of its window; dropouts are filled first,
-    :func:`fill_holes`, so a hole in a surface is no step) and the near side
-    must be a corner of the object, not a straight stretch of its edge
-    (``max_convex_share`` / ``min_concave_share``; its outline turns,
-    ``min_edge_turn``).  Plane junctions need a
-    fine scan (``max_junction_footprint_px``).  Nothing on the ground
-    (:func:`ground_plane`: ``max_ground_share`` of the window within
-    ``ground_tol_m``) or lower than ``min_height_m`` above it, except
-    ``marking`` candidates (intensity corners of painted road markings) well
-    inside the road (``min_marking_ground_share``, ``min_marking_strength``),
-    at a corner of the paint: its bright side covers at most
-    ``max_convex_share`` or at least ``min_concave_share`` of the 7 x 7
-    window and touches the cell (:func:`bright_fraction`; a 64-beam scan's
-    stripes are banded ring by ring, which makes corner-like peaks along their
-    sides and on the asphalt next to them).
+    A locally planar support (:func:`local_plane_residual_m`, :func:`planar_share`: foliage scatters its
+    returns in depth and fails; a box face, a wall, a pole, the road pass); a cell step short enough in
+    the image (:func:`cell_footprint_px`; for a lidar next to the camera nearly the same at every range,
+    both being angles, so far background is left out by range and cell size instead); a corner of its own
+    kind (a depth step against returns, at a turn of the near side's outline; a plane junction only on a
+    fine scan; nothing on or at the foot of the ground but painted-marking corners well inside the road:
+    the by-eye runs declined flat asphalt, curbs, junctions on a flat door, shadows at an object's foot);
+    not in the scan's first or last rows, where an object may go on past the beam (a by-eye user met a
+    "corner" at row 1).
 
 Image side
-    *One dominant corner inside the 3-sigma ellipse* (:func:`dominant_corner`):
-    the local maxima of the structure tensor's ``lam_min``
-    (:mod:`.image_corners`) inside the ellipse; the strongest must be at least
-    ``min_corner_strength``, an L or X corner (``lam_min / lam_max >=
-    min_corner_ratio``) and ``min_corner_dominance`` times stronger than the
-    second strongest, and not a repeated texture: at most ``max_rivals``
-    corners of ``rival_fraction`` of its strength within ``rival_radius_px``
-    of it (:func:`corner_rivals`: a fence, a railing, foliage, a window grid).
-
-    *Inside the scan.*  Cells in the first or last ``scan_edge_rows`` rows
-    of the depth matrix are left out: the scan's top or bottom beam cannot show
-    where an object ends (it may go on past the beam), so a "corner" there is
-    the edge of the scan, not of the scene (a by-eye user met one at row 1).
+    One dominant L or X corner inside the 3-sigma ellipse (:func:`dominant_corner`), not a repeated
+    texture (:func:`corner_rivals`: a fence, a railing, foliage, a window grid).
 
 Both
-    The predicted pixel's 3-sigma box keeps ``border_margin_px`` from the
-    image border (and from the rim of a fisheye's image circle), and its
-    3-sigma radius (major half-axis) is at most ``max_ellipse_px``.
+    The 3-sigma box keeps a margin from the image border (and a fisheye's image circle), and the
+    3-sigma radius fits the loupe.
 """
 
 from __future__ import annotations
@@ -94,7 +52,6 @@ __all__ = [
     "ellipse_box_margin_px",
     "ground_plane",
     "height_above_ground_m",
-    "ground_cells",
     "window_share",
     "normal_span",
     "intensity_corner",
@@ -214,7 +171,7 @@ class ProposalScreen:
     scan_edge_rows : int
         Cells in this many first and last rows of the depth matrix are not proposed.
     ground_tol_m : float
-        Cells within this distance (m) of the scan's ground plane are ground cells (:func:`ground_cells`).
+        Cells within this distance (m) of the scan's ground plane are ground cells (:func:`height_above_ground_m`).
     max_ground_share : float
         A cell on the ground whose window is more than this share (0..1) ground is not proposed, unless it
         is a corner of a painted marking in the scan's intensity (:func:`intensity_corner`).
@@ -390,7 +347,7 @@ def _support(depth, rows_cols: np.ndarray, half: int, step_log: float = 0.05) ->
 
 def planar_share(depth, rows_cols: np.ndarray, residual_m: np.ndarray, tol_m: float,
                  half: int = 2) -> tuple[np.ndarray, np.ndarray]:
-    """Share of each cell's support that is planar, and the number of planar cells (module docstring).
+    """Share of each cell's support (:func:`_support`) that is planar, and the number of planar cells.
 
     Parameters
     ----------
@@ -560,12 +517,6 @@ def height_above_ground_m(depth, plane: tuple[np.ndarray, float] | None) -> np.n
     return np.where(np.asarray(depth.valid, dtype=bool), h, np.nan)
 
 
-def ground_cells(depth, tol_m: float, bottom_share: float = 0.25, min_inliers: float = 0.3) -> np.ndarray:
-    """Cells within ``tol_m`` (m) of the scan's :func:`ground_plane`, (H, W) bool (all False without one)."""
-    with np.errstate(invalid="ignore"):
-        return np.abs(height_above_ground_m(depth, ground_plane(depth, tol_m, bottom_share, min_inliers))) <= tol_m
-
-
 def window_share(mask: np.ndarray, depth, rows_cols: np.ndarray, half: int = 2) -> np.ndarray:
     """Share of the valid cells of each cell's ``(2 half + 1)^2`` window where ``mask`` holds, (N,)."""
     rows, cols, support = _support(depth, rows_cols, half, step_log=np.inf)
@@ -701,16 +652,13 @@ def _log_intensity_windows(depth, rc: np.ndarray, half: int):
     """The scan's log intensity (:func:`calib_core.guide.candidates.intensity_log_image`) in each cell's
     ``(2 half + 1)^2`` window, (N, k, k) with NaN where a cell has none, and which cells have it; None
     without intensity."""
-    from .candidates import intensity_log_image
+    from .candidates import intensity_log_image, window_cells
 
     found = intensity_log_image(depth)
     if found is None:
         return None
     log_i, ok = found
-    H, W = depth.shape
-    off = np.arange(-half, half + 1)
-    rows = np.clip(rc[:, 0, None, None] + off[None, :, None], 0, H - 1)
-    cols = np.clip(rc[:, 1, None, None] + off[None, None, :], 0, W - 1)
+    rows, cols = window_cells(depth.shape, rc, half)
     inside = ok[rows, cols]
     return np.where(inside, log_i[rows, cols], np.nan), inside
 

@@ -107,18 +107,6 @@ def fisher_information(J_pose: np.ndarray, S: np.ndarray) -> np.ndarray:
     return np.einsum("nai,nab,nbj->ij", J_pose[ok], W, J_pose[ok])
 
 
-def _inverse(F: np.ndarray) -> np.ndarray:
-    """Inverse of an information matrix, Jacobi-scaled (rad and m differ in scale)."""
-    d = np.sqrt(np.diag(F))
-    if not (np.all(d > 0) and np.all(np.isfinite(F))):
-        raise CalibError("the pose is not determined by these pairs (singular information matrix)")
-    scaled = F / d[:, None] / d[None, :]
-    w, V = np.linalg.eigh(scaled)
-    if w[0] <= 1e-12 * w[-1]:
-        raise CalibError("the pose is not determined by these pairs (singular information matrix)")
-    return (V / w) @ V.T / d[:, None] / d[None, :]
-
-
 def pose_pixel_covariance(J_pose: np.ndarray, pose_cov: np.ndarray) -> np.ndarray:
     """Pixel covariance (N, 2, 2), px^2, of predicted pixels from a pose covariance (6, 6)."""
     return J_pose @ pose_cov @ np.swapaxes(J_pose, 1, 2)
@@ -138,5 +126,14 @@ def d_optimal_gain(J_pose: np.ndarray, S: np.ndarray, pose_cov: np.ndarray) -> n
 
 
 def information_inverse(F: np.ndarray) -> np.ndarray:
-    """Pose covariance ``F^-1`` (6, 6); :class:`CalibError` when F is singular."""
-    return _inverse(np.asarray(F, dtype=np.float64))
+    """Pose covariance ``F^-1`` (6, 6), Jacobi-scaled (rad and m differ in scale); :class:`CalibError` when F
+    is singular."""
+    F = np.asarray(F, dtype=np.float64)
+    d = np.sqrt(np.diag(F))
+    if not (np.all(d > 0) and np.all(np.isfinite(F))):
+        raise CalibError("the pose is not determined by these pairs (singular information matrix)")
+    scaled = F / d[:, None] / d[None, :]
+    w, V = np.linalg.eigh(scaled)
+    if w[0] <= 1e-12 * w[-1]:
+        raise CalibError("the pose is not determined by these pairs (singular information matrix)")
+    return (V / w) @ V.T / d[:, None] / d[None, :]

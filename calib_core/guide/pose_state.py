@@ -61,6 +61,21 @@ def pair_sigmas(pairs: Sequence[Pair], default_px: float = DEFAULT_CLICK_SIGMA_P
     return np.array([default_px if p.precision_px is None else p.precision_px for p in pairs], dtype=np.float64)
 
 
+def pose_state_of_fit(camera, T: np.ndarray, points_lidar: np.ndarray, pixels: np.ndarray, sigma_px,
+                      laser_cov: np.ndarray, source: str, quality: Any = None) -> PoseState:
+    """The pose ``T`` and ``F^-1`` of its fit pairs (laser points in metres, clicked pixels, click sigmas in px,
+    laser covariances in metres^2), inflated by their whitened residuals' variance factor when it exceeds 1."""
+    predicted, J_pose, J_point = pixel_jacobians(camera, T, points_lidar)
+    S = pair_noise(sigma_px, J_point, laser_cov)
+    F = fisher_information(J_pose, S)
+    factor = 1.0
+    dof = 2 * len(points_lidar) - 6
+    r = pixels - predicted
+    if dof > 0 and np.all(np.isfinite(r)):
+        factor = max(1.0, float(np.einsum("na,nab,nb->", r, np.linalg.inv(S), r)) / dof)
+    return PoseState(T, factor * information_inverse(F), factor, len(points_lidar), source, quality)
+
+
 def current_pose(
     pairs: Sequence[Pair],
     depth,
@@ -99,19 +114,10 @@ def current_pose(
     points, _, pixels = resolve_pairs(fit, depth, camera)
     # Weighted by each pair's precision_px and whole-cell laser pick (robust: gross outliers left out).
     solved = calibrate(fit, depth, camera, initial_T_camera_lidar=T_initial)
-    T = solved.T_camera_lidar
-    predicted, J_pose, J_point = pixel_jacobians(camera, T, points)
     laser = np.zeros((len(fit), 3, 3))
     rc_idx = [i for i, p in enumerate(fit) if p.laser_rc is not None]
     if rc_idx:
         laser[rc_idx] = cell_covariance(depth, np.array([fit[i].laser_rc for i in rc_idx]), PICK_CELL_SIGMA)
-    S = pair_noise(pair_sigmas(fit), J_point, laser)
-    F = fisher_information(J_pose, S)
-    factor = 1.0
-    dof = 2 * len(fit) - 6
-    r = pixels - predicted
-    if dof > 0 and np.all(np.isfinite(r)):
-        chi2 = float(np.einsum("na,nab,nb->", r, np.linalg.inv(S), r))
-        factor = max(1.0, chi2 / dof)
     source = "pairs" if T_initial is None else "pairs (started from the extrinsics)"
-    return PoseState(T, factor * information_inverse(F), factor, len(fit), source, solved.quality)
+    return pose_state_of_fit(camera, solved.T_camera_lidar, points, pixels, pair_sigmas(fit), laser, source,
+                             solved.quality)

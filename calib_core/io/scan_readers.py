@@ -268,13 +268,8 @@ def load_scan(
         ``model`` key) is loaded with :func:`load_depth_npz` and the other
         options are ignored.
     organize, beams, n_cols, v_res_deg, h_res_deg, v_range_deg, wrap_cols, sensor_origin
-        How the cloud becomes a grid: see
-        :func:`calib_core.lidar.organize_cloud.organize_cloud` (``"auto"``: the
-        file's own grid, else the ring field, else the scan order, else
-        elevation clustering, else a spherical projection; the report says
-        which and why).  ``"organized"`` uses the file's grid (error if it has
-        none); ``"ring"``, ``"elevation"``, ``"firing_order"`` (alias
-        ``"firing"``), ``"spherical"`` force that method.
+        How the cloud becomes a grid: see :func:`calib_core.lidar.organize_cloud.organize_cloud`
+        (the report says which method and why).
     bin_columns : int, optional
         Float32 values per point of a ``.bin`` file; see :func:`read_point_cloud`.
     max_points : int

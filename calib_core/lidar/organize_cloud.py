@@ -145,7 +145,8 @@ def organize_cloud(
     organized_shape : (H, W), optional
         The file's own grid, when the cloud is organized.
     organize : str
-        One of :data:`ORGANIZE_METHODS`.
+        One of :data:`ORGANIZE_METHODS`: ``"auto"`` as above, ``"organized"`` the file's grid (an error without
+        one); the others force that method (``"firing"`` is ``"firing_order"``).
     beams, n_cols, v_res_deg, h_res_deg, v_range_deg, wrap_cols :
         See :mod:`calib_core.lidar.organize`.  Without ``n_cols``, a given
         ``h_res_deg`` (degrees) also sets the columns of the ring, firing

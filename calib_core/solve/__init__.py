@@ -25,7 +25,7 @@ re-exports their public names.
 
 from .calibrate import calibrate
 from .checks import MIN_PAIRS
-from .extrinsics import sigma_coverage, solve_extrinsics, warm_up
+from .extrinsics import solve_extrinsics, warm_up
 from .quality import Quality
 from .refine import PARAMETER_NAMES, PoseUncertainty, pose_covariance
 from .result import CalibrationResult
@@ -40,6 +40,5 @@ __all__ = [
     "Quality",
     "warm_up",
     "calibrate",
-    "sigma_coverage",
 ]
 

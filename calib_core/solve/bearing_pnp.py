@@ -23,12 +23,11 @@ point lies at depth ``d > 0`` along it.
 from __future__ import annotations
 
 import functools
-import itertools
 
 import numpy as np
 
 from ..arrays import angle_between_rad
-from .kernels import p3p_grunert as compiled_p3p_grunert
+from .kernels import p3p_grunert
 from .checks import median
 from .rigid import rigid_fit
 
@@ -322,36 +321,6 @@ def quan_lan_pose(points_lidar: np.ndarray, bearings_camera: np.ndarray, seed: i
 # --------------------------------------------------------------------------
 
 
-def p3p_grunert(points_lidar: np.ndarray, bearings_camera: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """All P3P poses of a batch of triples, Grunert's solution.
-
-    Notation of Haralick et al. (1994), Sec. 2: ``s1, s2, s3`` are the depths,
-    ``a = |p2 - p3|``, ``b = |p1 - p3|``, ``c = |p1 - p2|``, and
-    ``alpha, beta, gamma`` the angles between bearings (2,3), (1,3), (1,2).
-    With ``s2 = u s1`` and ``s3 = v s1`` the law of cosines gives the quartic
-    ``A4 v^4 + ... + A0 = 0`` (their eq. 9) and ``u`` from ``v`` (eq. 8).  Only
-    roots with ``u, v > 0`` are kept: the points lie in front along their
-    bearings.
-
-    Parameters
-    ----------
-    points_lidar : (M, 3, 3) ndarray
-        M triples of laser points, metres.
-    bearings_camera : (M, 3, 3) ndarray
-        Their unit bearings, camera frame.
-
-    Returns
-    -------
-    T_camera_lidar : (K, 4, 4) ndarray
-        Up to four poses per triple.
-    triple_index : (K,) int ndarray
-        The triple each pose comes from.
-    """
-    P = np.ascontiguousarray(points_lidar, dtype=np.float64).reshape(-1, 3, 3)
-    Bm = np.ascontiguousarray(bearings_camera, dtype=np.float64).reshape(-1, 3, 3)
-    return compiled_p3p_grunert(P, Bm)  # compiled: one implementation
-
-
 def _spread_order(bearings: np.ndarray, count: int) -> np.ndarray:
     """First ``count`` indices in farthest-point order on the sphere (greedy max-min angle)."""
     n = len(bearings)
@@ -365,16 +334,24 @@ def _spread_order(bearings: np.ndarray, count: int) -> np.ndarray:
     return np.array(order)
 
 
+@functools.lru_cache(maxsize=32)
+def _all_triples(n: int) -> np.ndarray:
+    """All index triples ``i < j < k`` of ``n`` pairs, (m, 3), in lexicographic order (cached, read-only)."""
+    i, j, k = np.meshgrid(np.arange(n), np.arange(n), np.arange(n), indexing="ij")
+    keep = (i < j) & (j < k)
+    out = np.stack([i[keep], j[keep], k[keep]], axis=1)
+    out.flags.writeable = False
+    return out
+
+
 def _triples(bearings: np.ndarray, rng: np.random.Generator, max_random: int = 200) -> np.ndarray:
     """Triples for P3P: all of them for small N, else well-spread plus random ones."""
     n = len(bearings)
     if n <= 12:
-        return np.array(list(itertools.combinations(range(n), 3)))
-    spread = _spread_order(bearings, 8)
-    tri = [tuple(sorted(t)) for t in itertools.combinations(spread.tolist(), 3)]
+        return _all_triples(n)
+    spread = np.sort(_spread_order(bearings, 8)[_all_triples(8)], axis=1)
     rand = np.sort(np.argsort(rng.random((max_random, n)), axis=1)[:, :3], axis=1)
-    tri.extend(map(tuple, rand.tolist()))
-    return np.unique(np.array(tri), axis=0)
+    return np.unique(np.concatenate([spread, rand]), axis=0)
 
 
 #: Quan & Lan's pose is kept without a P3P search when its RMS angular error is below this.

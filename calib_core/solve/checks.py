@@ -69,8 +69,10 @@ def _largest_angle_deg(bearings: np.ndarray, cos_min_to_mean: float) -> float:
     return float(np.degrees(angle_between_rad(bearings[i], bearings[j])))
 
 
-def validate_pairs(points_lidar: object, bearings_camera: object) -> tuple[np.ndarray, np.ndarray, list[str]]:
-    """Check laser points and bearings; return clean float64 copies and warnings.
+def validate_pairs(points_lidar: object, bearings_camera: object, probe_step_rad: float | None = None
+                   ) -> tuple[np.ndarray, np.ndarray, list[str], np.ndarray | None, np.ndarray | None]:
+    """Check laser points and bearings; return clean float64 copies, warnings and, from the same compiled
+    call, the bearings' frames and tangent probes.
 
     Parameters
     ----------
@@ -78,6 +80,8 @@ def validate_pairs(points_lidar: object, bearings_camera: object) -> tuple[np.nd
         Laser points, lidar frame, metres.
     bearings_camera : (N, 3) array_like
         Unit bearings, camera frame.  Norms within 1e-3 of 1 are renormalised.
+    probe_step_rad : float, optional
+        Step (radians) of the tangent probes; None for the plain checks (no frames, no probes).
 
     Returns
     -------
@@ -85,6 +89,10 @@ def validate_pairs(points_lidar: object, bearings_camera: object) -> tuple[np.nd
     bearings_camera : (N, 3) ndarray
         Exactly unit.
     warnings : list of str
+    frames : (N, 3, 3) ndarray or None
+        Rows ``e1, e2, b`` of each unit bearing (:func:`.kernels.bearing_frames`).
+    probes : (4N, 3) ndarray or None
+        Directions ``b +- h e1``, ``b +- h e2`` (:func:`.kernels.tangent_probes`, ``h = probe_step_rad``).
 
     Raises
     ------
@@ -94,14 +102,6 @@ def validate_pairs(points_lidar: object, bearings_camera: object) -> tuple[np.nd
         pairs (names them); coincident or (nearly) collinear laser points; all
         bearings within 2 deg of each other.
     """
-    return validate_pairs_frames(points_lidar, bearings_camera, None)[:3]
-
-
-def validate_pairs_frames(points_lidar: object, bearings_camera: object, probe_step_rad: float | None
-                          ) -> tuple[np.ndarray, np.ndarray, list[str], np.ndarray | None, np.ndarray | None]:
-    """:func:`validate_pairs`, then the frames of the unit bearings (rows ``e1, e2, b``,
-    :func:`.kernels.bearing_frames`) and, with a ``probe_step_rad``, their tangent probes
-    (:func:`.kernels.tangent_probes`), from the same compiled call (None, None without a step: the plain checks)."""
     points = np.ascontiguousarray(as_rows(points_lidar, "points_lidar", 3, single_row=False))
     bearings = np.ascontiguousarray(as_rows(bearings_camera, "bearings_camera", 3, single_row=False))
     if len(points) != len(bearings):

@@ -15,7 +15,7 @@ from .checks import (
     MIN_PAIRS,
     conditioning_warning,
     validate_initial_T,
-    validate_pairs_frames,
+    validate_pairs,
     validate_pixels,
 )
 from .kernels import (
@@ -43,7 +43,7 @@ from .result import CalibrationResult
 from .robust import inlier_k, robust_fit, robust_scale
 from .whiten import STEP_RAD, check_pixel_sigma, click_whitening_inputs, laser_tangent_covariance, whitening
 
-__all__ = ["COSTS", "NOISY_FACTOR", "PRIOR_PX", "sigma_coverage", "solve_extrinsics", "student_t_factor", "warm_up"]
+__all__ = ["COSTS", "NOISY_FACTOR", "PRIOR_PX", "solve_extrinsics", "student_t_factor", "warm_up"]
 
 
 #: Costs: "angular" = eq. 7 whitened by the camera (default), "geodesic" = eq. 7 as printed
@@ -78,21 +78,6 @@ def student_t_factor(dof: int) -> float:
     return float(stdtrit(dof, 0.5 * (1.0 + math.erf(1.0 / math.sqrt(2.0)))))
 
 
-def sigma_coverage(n_pairs: int) -> tuple[float, float]:
-    """Shares of solves whose error lies within 1 and 2 reported sigma, when the noise is estimated.
-
-    The reported sigma is widened by :func:`student_t_factor` of ``2 n - 6`` degrees of freedom, so
-    +-1 sigma covers 68.27 %; +-2 such sigmas cover ``P(|t| < 2 factor)``, less than the normal
-    95.45 % because the t distribution's tails are heavier (94.30 % at 10 pairs, 92.8 % at 6).
-    With known noise (``noise_rad``) the shares are the normal ones.
-    """
-    from scipy.special import stdtr
-
-    dof = 2 * int(n_pairs) - 6
-    f = student_t_factor(dof)
-    return float(2 * stdtr(dof, f) - 1), float(2 * stdtr(dof, 2 * f) - 1)
-
-
 def _check_pair_ids(pair_ids: object, n: int) -> list[int] | range:
     if pair_ids is None:
         return range(n)  # indexed like the list, without building it
@@ -117,26 +102,6 @@ def _pose_matrix(R: np.ndarray, t: np.ndarray) -> np.ndarray:
     T = _EYE4.copy()  # (a copy of a template: np.eye costs more than the rest of this)
     T[:3, :3], T[:3, 3] = R, t
     return T
-
-
-def _closed_form_start(points: np.ndarray, bearings: np.ndarray) -> tuple[np.ndarray, str]:
-    """Quan & Lan / P3P: the start where the linear DLT does not apply (n < 6, coplanar points)."""
-    T, method, init_cost = initial_pose(points, bearings)
-    if not np.isfinite(init_cost):
-        raise CalibError("no initial pose found from these pairs (all closed-form solutions failed)")
-    return T, method
-
-
-def _noisy_warning(noise_scale: float) -> str:
-    return (
-        f"the pairs fit to {noise_scale:.1f} px (1 sigma per axis), over {NOISY_FACTOR:g}x the {PRIOR_PX:g} px "
-        "expected of clicks and laser picks: check the camera model and the picks"
-    )
-
-
-def _gimbal_notes(T: np.ndarray) -> list[str]:
-    """Notes about the output's form, not the calibration's quality (:func:`.quality.orientation_notes`)."""
-    return orientation_notes(T[:3, :3])
 
 
 def solve_extrinsics(
@@ -215,8 +180,8 @@ def solve_extrinsics(
     whiten_camera = camera if cost != "geodesic" else None
     by_camera = whiten_camera is not None and noise_rad is None  # whitening by the camera's tangent Jacobian
     # The checks, the bearings' frames and (by_camera) the probes of the camera's tangent Jacobian in one call.
-    points, bearings, warnings, frames, probes = validate_pairs_frames(points_lidar, bearings_camera,
-                                                                       STEP_RAD if by_camera else 0.0)
+    points, bearings, warnings, frames, probes = validate_pairs(points_lidar, bearings_camera,
+                                                                STEP_RAD if by_camera else 0.0)
     n = len(points)
     ids = _check_pair_ids(pair_ids, n)
     sigmas = check_pixel_sigma(pixel_sigma, n)
@@ -309,7 +274,10 @@ def solve_extrinsics(
             R, t, R0, t0, it, status, H, z = fit_pose(points, bearings, frames, W, R_in, t_in, use_dlt, LM_MAX_ITER)
         if use_dlt:
             if status == -3:
-                T_closed, method = _closed_form_start(points, bearings)
+                # Quan & Lan / P3P: the start where the linear DLT does not apply (n < 6, coplanar points).
+                T_closed, method, init_cost = initial_pose(points, bearings)
+                if not np.isfinite(init_cost):
+                    raise CalibError("no initial pose found from these pairs (all closed-form solutions failed)")
                 out = fit(T_closed, W, laser)
                 return out[:5] + (method,) + out[6:]
             T_start, method = _pose_matrix(R0, t0), "dlt"
@@ -462,8 +430,10 @@ def solve_extrinsics(
     unreliable += bad_geo
     warnings += weak_geo
     if unit == "px" and np.isfinite(noise_scale) and noise_scale > NOISY_FACTOR * prior:
-        warnings.append(_noisy_warning(noise_scale))
-    notes = _gimbal_notes(T)
+        warnings.append(
+            f"the pairs fit to {noise_scale:.1f} px (1 sigma per axis), over {NOISY_FACTOR:g}x the {PRIOR_PX:g} px "
+            "expected of clicks and laser picks: check the camera model and the picks")
+    notes = orientation_notes(T[:3, :3])  # about the output's form, not the calibration's quality
     quality = Quality.from_reasons(unreliable, warnings)
     return CalibrationResult(
         T_camera_lidar=T,
@@ -505,25 +475,21 @@ def warm_up() -> float:
 
     t0 = time.perf_counter()
     with compiling():
-        _warm_up_calls()
+        from ..cameras.pinhole import PinholeCamera  # whitening through a camera
+
+        rng = np.random.default_rng(0)
+        d = rng.normal(size=(8, 3))
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        points = d * rng.uniform(2, 8, (8, 1))
+        bearings = d.copy()
+        bearings[0] = -bearings[0]  # one outlier: runs the robust path too
+        solve_extrinsics(points, bearings)  # DLT start, LM, robust search (P3P), report
+        solve_extrinsics(points[1:6], d[1:6])  # 5 pairs: Quan & Lan start (rigid fit)
+        cam = PinholeCamera(np.array([[300.0, 0, 320], [0, 300, 240], [0, 0, 1]]), np.zeros(5), 640, 480)
+        front = d.copy()
+        front[:, 2] = np.abs(front[:, 2]) + 1.0
+        front /= np.linalg.norm(front, axis=1, keepdims=True)
+        solve_extrinsics(front * 4.0, front, camera=cam, laser_cov_m2=np.broadcast_to(1e-4 * np.eye(3), (8, 3, 3)))
+        pose_covariance(np.eye(4), points, 1e-3)
     return time.perf_counter() - t0
-
-
-def _warm_up_calls() -> None:
-    rng = np.random.default_rng(0)
-    d = rng.normal(size=(8, 3))
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
-    points = d * rng.uniform(2, 8, (8, 1))
-    bearings = d.copy()
-    bearings[0] = -bearings[0]  # one outlier: runs the robust path too
-    solve_extrinsics(points, bearings)  # DLT start, LM, robust search (P3P), report
-    solve_extrinsics(points[1:6], d[1:6])  # 5 pairs: Quan & Lan start (rigid fit)
-    from ..cameras.pinhole import PinholeCamera  # whitening through a camera
-
-    cam = PinholeCamera(np.array([[300.0, 0, 320], [0, 300, 240], [0, 0, 1]]), np.zeros(5), 640, 480)
-    front = d.copy()
-    front[:, 2] = np.abs(front[:, 2]) + 1.0
-    front /= np.linalg.norm(front, axis=1, keepdims=True)
-    solve_extrinsics(front * 4.0, front, camera=cam, laser_cov_m2=np.broadcast_to(1e-4 * np.eye(3), (8, 3, 3)))
-    pose_covariance(np.eye(4), points, 1e-3)
 

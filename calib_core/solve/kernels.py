@@ -1429,19 +1429,28 @@ def _triangle_pose(p, pc, out):
 
 @kernel
 def p3p_grunert(P, B):
-    """All P3P poses of M triples (Grunert, in the notation of Haralick et al. 1994).
+    """All P3P poses of M triples (Grunert, in the notation of Haralick et al. 1994, Sec. 2).
 
-    ``P, B (M, 3, 3)``: laser points and unit bearings of each triple.  With
-    ``s2 = u s1`` and ``s3 = v s1`` the law of cosines gives a quartic in
-    ``v`` (their eq. 9), solved by the eigenvalues of its companion matrix;
-    ``s2`` is taken from whichever of the c-equation roots and Grunert's ``u``
-    (eq. 8) best satisfies the a-equation.  Only positive depths are kept.  The
-    quartic is solved in closed form (Ferrari, :func:`_quartic_real_roots`) and
-    the pose from the two triangles' edge frames (:func:`_triangle_pose`).
+    ``s1, s2, s3`` are the depths, ``a = |p2 - p3|``, ``b = |p1 - p3|``, ``c = |p1 - p2|``.  With
+    ``s2 = u s1`` and ``s3 = v s1`` the law of cosines gives a quartic in ``v`` (their eq. 9), solved in
+    closed form (Ferrari, :func:`_quartic_real_roots`); ``s2`` is taken from whichever of the c-equation
+    roots and Grunert's ``u`` (eq. 8) best satisfies the a-equation.  Only positive depths are kept: the
+    points lie in front along their bearings.  The pose comes from the two triangles' edge frames
+    (:func:`_triangle_pose`).
+
+    Parameters
+    ----------
+    P : (M, 3, 3) ndarray
+        M triples of laser points, lidar frame, metres.
+    B : (M, 3, 3) ndarray
+        Their unit bearings, camera frame.
 
     Returns
     -------
-    T : (K, 4, 4) poses ``T_camera_lidar``; tri : (K,) the triple of each.
+    T : (K, 4, 4) ndarray
+        Up to four poses ``T_camera_lidar`` per triple.
+    tri : (K,) int ndarray
+        The triple each pose comes from.
     """
     M = P.shape[0]
     Ts = np.empty((4 * M, 4, 4))

@@ -46,11 +46,8 @@ __all__ = [
     "pixel_jacobian",
     "refine_pose",
     "refine_angular",
-    "refine_angular_normal",
     "lm_failure",
     "pose_covariance",
-    "covariance_from_normal",
-    "uncertainty_from_covariance",
     "LM_MAX_ITER",
 ]
 
@@ -199,17 +196,9 @@ def refine_pose(
     else:
         raise CalibError(f"unknown cost {cost!r}; use 'angular' or 'pixel'")
     sol = _run_lm(fun, jac, x0, cost)
-    return _pose_matrix(sol.x, R0), _iterations(sol)
-
-
-def _pose_matrix(x: np.ndarray, R0: np.ndarray) -> np.ndarray:
     T = np.eye(4)
-    T[:3, :3], T[:3, 3] = _pose(x, R0)
-    return T
-
-
-def _iterations(sol: Any) -> int:
-    return int(sol.njev) if sol.njev is not None else int(sol.nfev)
+    T[:3, :3], T[:3, 3] = _pose(sol.x, R0)
+    return T, int(sol.njev) if sol.njev is not None else int(sol.nfev)
 
 
 def refine_angular(
@@ -234,19 +223,10 @@ def refine_angular(
     CalibError
         The normal equations are singular or the cost is not finite.
     """
-    T, iterations, _ = refine_angular_normal(T_initial, points_lidar, frames, W)
-    return T, iterations
-
-
-def refine_angular_normal(
-    T_initial: np.ndarray, points_lidar: np.ndarray, frames: np.ndarray, W: np.ndarray | None = None
-) -> tuple[np.ndarray, int, np.ndarray]:
-    """:func:`refine_angular`, also returning the normal matrix ``J^T J`` (6, 6) at the returned pose,
-    columns ``(delta, t)`` (rad, m): the covariance at the optimum needs no second pass over the pairs."""
     P = np.ascontiguousarray(points_lidar, dtype=np.float64)
     W = _identity_W(len(P)) if W is None else np.ascontiguousarray(W, dtype=np.float64)
     T0 = np.asarray(T_initial, dtype=np.float64)
-    R, t, iterations, status, H = lm_refine(
+    R, t, iterations, status, _ = lm_refine(
         np.ascontiguousarray(T0[:3, :3]), np.ascontiguousarray(T0[:3, 3]), P, frames, W, LM_MAX_ITER
     )
     failure = lm_failure(status, R, t)
@@ -254,7 +234,7 @@ def refine_angular_normal(
         raise CalibError(failure)
     T = np.eye(4)
     T[:3, :3], T[:3, 3] = R, t
-    return T, int(iterations), H
+    return T, int(iterations)
 
 
 def lm_failure(status: int, R: np.ndarray, t: np.ndarray) -> str | None:
@@ -290,29 +270,6 @@ class PoseUncertainty(NamedTuple):
     JtJ: np.ndarray
 
 
-def uncertainty_from_covariance(cov: np.ndarray, JtJ: np.ndarray, R: np.ndarray) -> PoseUncertainty:
-    """Sigmas of ``t`` and of roll/pitch/yaw from the 6x6 covariance of ``(delta, t)`` at rotation ``R``."""
-    sigma_t, sigma_rpy = rpy_sigmas(np.ascontiguousarray(R, dtype=np.float64), cov)
-    return PoseUncertainty(cov, sigma_t, sigma_rpy, JtJ)
-
-
-def covariance_from_normal(JtJ: np.ndarray, sigma: float, R: np.ndarray) -> PoseUncertainty:
-    """``sigma^2 (J^T J)^-1`` and the sigmas of ``t`` and of roll/pitch/yaw.
-
-    Parameters
-    ----------
-    JtJ : (6, 6) ndarray
-        Normal matrix of the residuals w.r.t. ``(delta, t)`` at the estimate.
-    sigma : float
-        Standard deviation of one residual component, in the residuals' unit.
-    R : (3, 3) ndarray
-        Estimated rotation (for the roll/pitch/yaw Jacobian).
-    """
-    JtJ = np.ascontiguousarray(JtJ, dtype=np.float64)
-    cov, _ = covariance(JtJ, float(sigma))
-    return uncertainty_from_covariance(cov, JtJ, np.asarray(R, dtype=np.float64))
-
-
 def pose_covariance(T_camera_lidar: np.ndarray, points_lidar: np.ndarray, noise_rad: float) -> PoseUncertainty:
     """Covariance of the angular-cost estimate for isotropic bearing noise.
 
@@ -337,4 +294,6 @@ def pose_covariance(T_camera_lidar: np.ndarray, points_lidar: np.ndarray, noise_
     frames = bearing_frames(bearings)
     R, t = np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3])
     H, _, _ = normal_equations(R, t, points, frames, _identity_W(len(points)))
-    return covariance_from_normal(H, float(noise_rad), T[:3, :3])
+    cov, _ = covariance(H, float(noise_rad))
+    sigma_t, sigma_rpy = rpy_sigmas(R, cov)
+    return PoseUncertainty(cov, sigma_t, sigma_rpy, H)

@@ -34,13 +34,12 @@ Gaussian residual exceeds ``k`` sigma with probability ``exp(-k^2 / 2)``):
 
 from __future__ import annotations
 
-import functools
 import math
 from typing import NamedTuple
 
 import numpy as np
 
-from .bearing_pnp import _spread_order, p3p_grunert
+from .bearing_pnp import _all_triples, _spread_order, p3p_grunert
 from .kernels import lm_refine, score_poses, whitened_residuals
 
 __all__ = [
@@ -137,20 +136,6 @@ def _triple_batches(bearings: np.ndarray, rng: np.random.Generator):
         t = rng.integers(0, n, (BATCH, 3))
         rep = (t[:, 0] == t[:, 1]) | (t[:, 0] == t[:, 2]) | (t[:, 1] == t[:, 2])
         yield t[~rep]
-
-
-@functools.lru_cache(maxsize=32)
-def _all_triples(n: int) -> np.ndarray:
-    i, j, k = np.meshgrid(np.arange(n), np.arange(n), np.arange(n), indexing="ij")
-    keep = (i < j) & (j < k)
-    out = np.stack([i[keep], j[keep], k[keep]], axis=1)
-    out.flags.writeable = False
-    return out
-
-
-def _poses(points, bearings, tri):
-    T, _ = p3p_grunert(points[tri], bearings[tri])
-    return np.ascontiguousarray(T[:, :3, :3]), np.ascontiguousarray(T[:, :3, 3])
 
 
 def cluster_width_rad(bearings: np.ndarray) -> float:
@@ -260,7 +245,8 @@ def robust_fit(
     preview = np.sort(rng.choice(n, min(n, PREVIEW), replace=False))
     kernel = pair_kernel(bearings, cluster_width_rad(bearings))
     for tri in _triple_batches(bearings, rng):
-        R_new, t_new = _poses(points, bearings, tri)
+        T_new, _ = p3p_grunert(points[tri], bearings[tri])
+        R_new, t_new = np.ascontiguousarray(T_new[:, :3, :3]), np.ascontiguousarray(T_new[:, :3, 3])
         Rs = np.concatenate([Rs, R_new]) if hypotheses == 0 else R_new
         ts = np.concatenate([ts, t_new]) if hypotheses == 0 else t_new
         hypotheses += len(Rs)
