@@ -56,12 +56,10 @@ HELP = (
 class AlignPanel:
     """The "Align" folder of one :class:`app.server.CalibrationApp` (``app.align``) and the alignment drags.
 
-    It owns its widgets, the undo history of the rough pose and the drag in progress.  Public:
-    :attr:`folder`, :attr:`drag_enabled`, :meth:`apply_preset`, :meth:`turn`, :meth:`move`, :meth:`on_drag`,
-    :meth:`undo`, :attr:`text`, :meth:`take_drag`.  The composition root passes what it uses of the render pane
-    and the page: ``add_render_controls(gui)`` (the render's widgets, in this folder), ``drag_nodes()`` (the scene
-    nodes a drag turns the view on, by slot key) and ``render_drag_callbacks`` (the render's own drag callbacks
-    on its nodes, by slot key).
+    It owns its widgets, the undo history of the rough pose and the drag in progress.  The composition root
+    passes what it uses of the render pane and the page: ``add_render_controls(gui)`` (the render's widgets, in
+    this folder), ``drag_nodes()`` (the scene nodes a drag turns the view on, by slot key) and
+    ``render_drag_callbacks`` (the render's own drag callbacks on its nodes, by slot key).
     """
 
     def __init__(self, app: Any, order: float | None = None, *, add_render_controls: Callable[[Any], None],

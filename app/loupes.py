@@ -24,7 +24,7 @@ from .loupe_crops import (BaCrop, CameraCrop, ba_crop_texture, camera_crop_textu
 from .loupe_framing import PairClick, follow_click, frame_pair
 from .loupe_marks import LEGEND, ba_title, camera_title, draw_camera_marks, draw_camera_outline
 from .shown_render import cell_at_pixel, loupe_texture, loupe_title, pixel_of_cells
-from .ui_common import marker_segments
+from .ui_common import marker_segments, segment_colours
 
 #: Columns the BA loupe shows at zoom 1 (the camera loupe's crop side: :data:`app.loupe_crops.CAMERA_LOUPE_PX`).
 BA_LOUPE_COLUMNS = 32
@@ -44,10 +44,6 @@ class Loupes:
     """The BA loupe and the camera loupe of one :class:`app.server.CalibrationApp`.
 
     It owns the "Loupes" folder (the zoom buttons; the display panel adds its loupe widgets there).
-    Public: :meth:`frame_ba`, :meth:`frame_camera`, :meth:`zoom`, :meth:`show_click`,
-    :meth:`relayout`, :attr:`ba_crop`, :attr:`camera_crop`, :meth:`slot`,
-    :meth:`target_at` (loupe pixel -> cell or original pixel) and
-    :meth:`display_of` (the inverse).
     """
 
     def __init__(self, app: Any, add_controls: Callable[[Any], None] = lambda gui: None) -> None:
@@ -416,8 +412,7 @@ class Loupes:
         inside = np.array([s.contains(p) for p in xy], bool)
         segs = marker_segments(s.world_from_pixel(xy[inside], z_offset=-0.01), radius, cell_half_size=cell,
                                ticks=True)
-        seg_cols = np.repeat(cols[inside], len(segs) // max(int(inside.sum()), 1) * 2, axis=0).reshape(-1, 2, 3)
-        nodes.lines("/annot/loupe/ba_marks", segs, seg_cols, thickness=2.5)
+        nodes.lines("/annot/loupe/ba_marks", segs, segment_colours(cols[inside], len(segs)), thickness=2.5)
 
     def _draw_camera_marks(self, picks: list) -> None:
         # Camera loupe: clicks as crosses, the pairs' laser points projected as rings (app.loupe_marks).

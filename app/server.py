@@ -37,7 +37,7 @@ from .render_pane import RenderPane
 from .scene_nodes import SceneNodes
 from .security import AccessPolicy, RefusalLog, start_guarded_viser
 from .state import AnnotationState
-from .ui_common import page_url
+from .ui_common import page_url, units_per_screen_px
 from .verify_panel import VerifyPanel
 from .view_panel import ViewPanel
 from .picks import ShotFiles
@@ -199,7 +199,7 @@ class CalibrationApp:
             self.loupes = Loupes(self, add_controls=self.display.add_loupe_controls)
             self.pairs_panel.resolve_clicks_with(  # a click in a loupe or on the render picks what it shows there
                 loupe=self.loupes.target_at, render=lambda uv, client: (self.render_pane.target_at(
-                    uv, screen_units=self.view.units_per_screen_px(client)), self.render_pane.last_pixel))
+                    uv, screen_units=units_per_screen_px(getattr(client, "camera", None))), self.render_pane.last_pixel))
             self.overlays.place_loupes_by(self.loupes.display_of)  # the marks in the loupes, Shift+click on them
             self.overlays.subscribe(self.loupes.draw_marks)  # the loupes show the marks magnified
             self.pairs_panel.subscribe_clicks(self.loupes.on_pair_click)  # the loupes follow each click
@@ -275,7 +275,7 @@ class CalibrationApp:
             self.align.show()
         self.overlays.invalidate()
         self.overlays.refresh()
-        self.live.show_panels()
+        self.live.redraw()
         guide = getattr(self, "guide", None)
         if guide is not None:  # proposals can start from the imported pose
             guide.update()
@@ -288,89 +288,67 @@ class CalibrationApp:
         if hasattr(self, "server") and not self._stopped:
             self.notify(None, "Session file not updated (retrying; no change lost)", message)
 
-    # ================================================================ services (app/app_services.py)
+    # ================================================================ services
+    # What panels may use of the app; each is documented once, in app/app_services.py (AppServices).
     def guard(self, fn: Callable) -> Callable:
-        """A viser callback that queues ``fn(action)`` on the ordered action worker (:meth:`ActionQueue.guard`)."""
         return self.actions.guard(fn)
 
     def post(self, fn: Callable[[], Any], client: Any = None, wait: bool = False) -> None:
-        """Run ``fn()`` on the action worker after the actions queued before it (:meth:`ActionQueue.post`)."""
         self.actions.post(fn, client, wait)
 
     def notify(self, client: Any, title: str, body: str, color: str = "red") -> None:
-        """A notification in tab ``client`` (None: every tab); the text is shown as is."""
         notify_tabs(self.server, client, title, body, color)
 
-    slots = property(lambda self: self.view.slots, doc="Where each image lies on the page, by key.")
-    ba_window = property(lambda self: self.view.ba_window, doc="The scan columns the BA images show.")
-
-    camera_view = property(lambda self: self.view.camera_view,
-                           doc="The visible camera view (:class:`app.camera_view.CameraView`: raw or panorama).")
+    slots = property(lambda self: self.view.slots)
+    ba_window = property(lambda self: self.view.ba_window)
+    camera_view = property(lambda self: self.view.camera_view)
 
     def slot_of(self, key: str) -> Any:
-        """The image slot of click key ``key``: a BA key, ``raw``, ``panorama``, ``loupe_ba`` or ``loupe_camera``."""
         if key.startswith("loupe_"):
             return self.loupes.slot(key[len("loupe_"):])
         return self.view.slots[key]
 
     def camera_slot(self) -> Any:
-        """The page slot of the visible camera view."""
         return self.view.camera_slot()
 
     def display_from_pixels(self, pixels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Display pixels (visible camera view) of original camera pixels, and which are shown."""
         return self.view.camera_view.display_from_pixels(pixels)
 
     def make_click_handler(self, key: str) -> Callable:
-        """The on-click callback of image slot ``key`` (:meth:`PairsPanel.make_click_handler`)."""
         return self.pairs_panel.make_click_handler(key)
 
     def make_drag_handler(self, key: str) -> Callable:
-        """The on-drag callback of image slot ``key`` (:meth:`PairsPanel.make_drag_handler`: moves a pair end)."""
         return self.pairs_panel.make_drag_handler(key)
 
     def make_select_handler(self, key: str) -> Callable:
-        """The Shift+click callback of image slot ``key`` (:meth:`PairsPanel.make_select_handler`)."""
         return self.pairs_panel.make_select_handler(key)
 
     def camera_click_source(self, pick_id: int) -> str | None:
-        """Where the last camera click on pick ``pick_id`` landed: ``"loupe"``, ``"full"`` or None."""
         return self.pairs_panel.camera_click_source(pick_id)
 
     def forget_last_picks(self) -> None:
-        """Forget every tab's last click (the next loupe click adds an end)."""
         self.pairs_panel.forget_last_picks()
 
     def subscribe_solve(self, listener: Callable[[Any], None]) -> None:
-        """Call ``listener(shown)`` (:class:`app.ui_common.SolveShown`) on every redraw of what the live solve
-        shows (:meth:`LiveSolveCoordinator.subscribe`: under the UI lock, in the redraw's message batch)."""
         self.live.subscribe(listener)
 
     def subscribe_solved(self, listener: Callable[[Any], None]) -> None:
-        """Call ``listener(shown)`` after each finished solve is shown, outside the UI lock
-        (:meth:`LiveSolveCoordinator.subscribe_solved`)."""
         self.live.subscribe_solved(listener)
 
     def solve_shown(self) -> Any:
-        """What the live solve shows now (:class:`app.ui_common.SolveShown`)."""
         return self.live.shown()
 
-    solve_bundle = property(lambda self: self.live.bundle, doc="The last good solve (:class:`SolveBundle`), or None.")
-    result = property(lambda self: getattr(self.live.bundle, "result", None),
-                      doc="The last good :class:`calib_core.solve.CalibrationResult`, or None.")
+    solve_bundle = property(lambda self: self.live.bundle)
+    result = property(lambda self: getattr(self.live.bundle, "result", None))
 
     def pose(self) -> np.ndarray | None:
-        """``T_camera_lidar`` predictions use: the last good solve, else the imported initial extrinsic, else None."""
         return self.pose_source.pose()
 
-    initial_T_camera_lidar = property(lambda self: self.pose_source.initial_T_camera_lidar,
-                                      doc="The imported rough ``T_camera_lidar`` (None: none imported).")
-
+    initial_T_camera_lidar = property(lambda self: self.pose_source.initial_T_camera_lidar)
     last_update_time = property(lambda self: self.live.last_update_time,
                                 doc="``perf_counter()`` when the newest change's solve was shown.")
 
     def wait_idle(self, timeout: float = 30.0) -> bool:
-        """Block until queued user actions are applied and the live solve and its follow-up work are idle."""
         return self.live.wait_idle(timeout)
 
     def stop(self) -> None:
