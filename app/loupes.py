@@ -20,7 +20,7 @@ from calib_core.errors import CalibError
 
 from .layout import ImageSlot, LoupeArea, bounds_of, loupe_areas
 from .loupe_crops import (BaCrop, CameraCrop, ba_crop_texture, camera_crop_texture, default_camera_crop_px,
-                          draw_ba_outline, draw_camera_centre, node_name, render_crop_around, render_crop_of, slot_key)
+                          draw_ba_outline, draw_camera_centre, node_name, crop_around, render_crop_of, slot_key)
 from .loupe_framing import PairClick, follow_click, frame_pair
 from .loupe_marks import LEGEND, ba_title, camera_title, draw_camera_marks, draw_camera_outline
 from .shown_render import cell_at_pixel, loupe_texture, loupe_title, pixel_of_cells
@@ -56,7 +56,7 @@ class Loupes:
         self._cam_n = default_camera_crop_px(cam_w, cam_h)
         self._cam_n_chosen = self._cam_n  # the side the zoom buttons chose; framing may show more, never less
         self.ba_crop = self._make_ba_crop(app.ba_keys[0], n_rows // 2, n_cols // 2)
-        self.camera_crop = self._make_camera_crop((cam_w - 1) / 2.0, (cam_h - 1) / 2.0, None)
+        self.camera_crop = crop_around((cam_w - 1) / 2.0, (cam_h - 1) / 2.0, self._cam_n)
         self._slots: dict[str, ImageSlot] = {}
         self._marks_of: dict[str, tuple] = {}  # kind -> inputs its marks were last drawn from
         self._framing_of: dict[str, tuple] = {}  # kind -> inputs its outline (and centre marker) were drawn from
@@ -153,7 +153,7 @@ class Loupes:
             self._render_anchor = None  # the render loupe follows the camera loupe again (until anchor_render)
             side = self._cam_n_chosen if min_side_px is None else max(self._cam_n_chosen, math.ceil(min_side_px))
             self._cam_n = int(min(side, CAMERA_PX_LIMITS[1]))
-            crop = self._make_camera_crop(float(u), float(v), cov)
+            crop = crop_around(float(u), float(v), self._cam_n, cov)
             if crop != self.camera_crop:
                 self.camera_crop = crop
                 self._show("camera")
@@ -195,7 +195,7 @@ class Loupes:
             uv = pixel_of_cells(self._render, self.app.camera, self.app.depth, np.array([anchor[0]]))[0]
             if np.isfinite(uv).all():
                 n = self.camera_crop.n if self._render_n is None else self._render_n
-                return render_crop_around(uv[0] + anchor[1][0], uv[1] + anchor[1][1], n)
+                return crop_around(uv[0] + anchor[1][0], uv[1] + anchor[1][1], n)
         return render_crop_of(self.camera_crop, self._render_n)
 
     def anchor_render(self, cell: tuple[int, int] | None) -> None:
@@ -227,7 +227,7 @@ class Loupes:
                 lo, hi = CAMERA_PX_LIMITS
                 self._cam_n = self._cam_n_chosen = int(min(max(round(self._cam_n / factor), lo), hi))
                 c = self.camera_crop
-                self.camera_crop = self._make_camera_crop(*c.center, c.cov_px2)
+                self.camera_crop = crop_around(*c.center, self._cam_n, c.cov_px2)
             self._show(kind)
 
     def on_pair_click(self, click: PairClick) -> None:
@@ -425,10 +425,6 @@ class Loupes:
         aspect = self.app.ba_cell_aspect
         n_rows = int(min(max(round(n_cols / aspect), 1), n_rows_scan))
         return BaCrop(key, int(row) - n_rows // 2, int(col) - n_cols // 2, n_rows, n_cols, (int(row), int(col)))
-
-    def _make_camera_crop(self, u: float, v: float, cov) -> CameraCrop:
-        n = self._cam_n
-        return CameraCrop(int(round(u)) - n // 2, int(round(v)) - n // 2, n, (float(u), float(v)), cov)
 
     def _ba_texture(self) -> np.ndarray:
         if self._render_on():
