@@ -125,9 +125,6 @@ class CalibrationApp:
         # Every change is on disk (an fsync'd journal line) before the UI shows it; the journal is compacted into
         # the session YAML in the background and by stop().  The view settings live in ``state.view`` only.
         self._stopped = False
-        # The BA panes show the columns the camera sees (under the rough pose, else the "+x" preset) by default.
-        # The render is shaded by intensity where the scan has it: in the by-eye trials range shading hid the
-        # doors, bins and boxes that intensity shows, and every clicker switched (docs/by_eye.md).
         self._owns_state = state is None
         self.state = state or AnnotationState(self.depth.valid, (self.camera.width, self.camera.height),
                                               self.session_path, on_save_error=self._on_save_error,
@@ -229,13 +226,7 @@ class CalibrationApp:
             self.export_panel.verification = self.verify_panel.report_for  # the YAML carries the Verify report
             self.format_export.reference_listeners.append(self.verify_panel.set_reference)
         except BaseException:
-            self.actions.stop()
-            if hasattr(self, "render_pane"):
-                self.render_pane.stop()
-            self.live.stop()
-            self.server.stop()
-            self.state.close() if self._owns_state else self.state.clear_listeners()
-            blas_threads.unlimit()
+            self.stop()
             raise
 
     def _on_connect(self, client: Any) -> None:
@@ -352,13 +343,14 @@ class CalibrationApp:
         return self.live.wait_idle(timeout)
 
     def stop(self) -> None:
-        """Stop the threads and the server once the session file holds every change (CalibError if it cannot)."""
+        """Stop the threads and the server once the session file holds every change (CalibError if it cannot);
+        also what a construction that failed part way had started."""
         self._stopped = True
         self.actions.stop()
         self.live.stop()
-        self.render_pane.stop()
-        self.guide.stop()
-        self.verify_panel.stop()
+        for part in ("render_pane", "guide", "verify_panel"):
+            if hasattr(self, part):  # built
+                getattr(self, part).stop()
         try:
             self.state.close() if self._owns_state else self.state.clear_listeners()
         finally:
