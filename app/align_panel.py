@@ -1,18 +1,10 @@
-"""The Align folder: a rough pose before any pair, in under a minute.
+"""The Align folder: a rough pose before any pair, in under a minute (how it is used: docs/app.md, "The scan seen
+from the camera, and a rough pose by drag").
 
-Start from a mounting preset (the camera looks along lidar +x, -y, +y or -x) or the imported extrinsic (the
-``--initial-extrinsics`` file, a bag's ``/tf_static``, or the per-tab "Import initial extrinsics" button), then, with
-"Align by drag" on, drag the camera image or the camera-view render: the view turns about the camera centre so that
-the laser content follows the mouse (Shift+drag rolls it about the principal point).  Step buttons turn by 0.5 deg and
-move the camera by 5 cm.  The render (and its copy over the photo) follows every drag at once; the rest of the page
-(predictions, BA columns, proposals, the session file) takes the new pose when the drag ends.
-
-The result is an ordinary initial extrinsic (``app.pose_source``): predictions, loupes and proposals use it until
-4 pairs are solved, and while the solve's quality is "unreliable".  After the 2nd and the 3rd complete pair, and after
-each unreliable solve (:meth:`AlignPanel.fit_to_pairs`), the rough pose is turned about the camera centre so that the
-pairs line up (:func:`calib_core.alignment.fit_rotation_about_centre`): one ordinary align step, which "Undo align
-step" takes back and a drag or a turn button changes further.  The maths is :mod:`calib_core.alignment`; this panel
-only maps widgets and drags to it.
+The result is an ordinary initial extrinsic (``app.pose_source``).  The render follows every drag at once; the rest
+of the page takes the new pose when the drag ends.  After the 2nd and 3rd pair, and after each unreliable solve
+(:meth:`AlignPanel.fit_to_pairs`), the rough pose is turned about the camera centre to fit the pairs: one align
+step.  The maths is :mod:`calib_core.alignment`; this panel only maps widgets and drags to it.
 """
 
 from __future__ import annotations

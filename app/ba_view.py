@@ -70,23 +70,13 @@ class ColumnWindow:
     """The scan columns shown in the BA panes: display column ``u`` is scan column ``(start + u) mod n_cols``.
 
     Build with :meth:`make`, which normalises the numbers.
-
-    Attributes
-    ----------
-    start : int
-        Scan column shown at display column 0.
-    width : int
-        Number of columns shown (1 ... n_cols).
-    n_cols : int
-        Columns of the depth matrix.
-    wrap : bool
-        The scan closes on itself (360 deg): a window may run past the last
-        column into column 0.  Otherwise the window stays inside the scan.
     """
 
-    start: int
-    width: int
-    n_cols: int
+    start: int  # scan column shown at display column 0
+    width: int  # number of columns shown (1 ... n_cols)
+    n_cols: int  # columns of the depth matrix
+    # The scan closes on itself (360 deg): a window may run past the last column into column 0.  Otherwise the
+    # window stays inside the scan.
     wrap: bool
 
     @classmethod

@@ -1,40 +1,12 @@
-"""The Guide panel: guided picking in the app (issue 9).
+"""The Guide panel: guided picking in the app (issue 9; how it is used: docs/app.md, "Guided picking").
 
-Once a calibration exists (4 pairs, or an imported initial extrinsic) a
-:class:`calib_core.guide.session.GuidedSession` -- built once per scene --
-ranks the laser cells worth pairing next; its proposals are recomputed in a
-worker thread after every change of the pairs, never on a viser callback.
-
-"Next pair" starts a pick at the shown proposal's cell (laser end only,
-``source="guided"``, ``precision_px`` = the guided click's 0.3 px) and frames
-the loupes on the cell and on the predicted pixel with its 3-sigma ellipse;
-a proposal to re-click a rough pair selects that pair instead, so the click
-moves its pixel (0.3 px; it keeps its source, e.g. ``clicked``).
-One click on the camera (loupe or image) completes the pair through the
-ordinary pick logic; when the new proposals arrive the next one is started
-and framed by itself, so a guided pair costs one click; after a re-click a next re-click is not started by itself (its
-pair is not selected behind the person's back: "Next pair" selects it).  "Skip" moves the half pick to the next proposal
-(it comes back last; a re-click never), "Not a corner" drops the cell for good, "Stop" removes the half pick (and
-a re-click shown, for good).  "Next pair" while a proposal is started skips it, and ending a re-click's selection
-(Cancel pair) declines it for good.  One undo takes back a guided click with the precision the panel gives it.
-
-Proposals pass the clear-evidence screen of :mod:`calib_core.guide.evidence`
-with a 3-sigma radius of at most half the camera loupe's side at zoom 1
-(:func:`max_ellipse_px_for`); the camera loupe zooms out (never in) to
-show a proposal's ellipse whole and keeps that zoom until "Stop" (steady from
-one proposal to the next), and the ellipse is drawn inside the loupe only.  When no cell qualifies the panel says why (e.g. "do a better rough
-alignment first").  Guided picking is not offered while the calibration is
-unreliable (the live solve's quality verdict, or the guide's own solve of
-the same pairs): "Next pair" refuses with the reason, and a guided session
-stops framing new pairs.  "Stop" also removes the ellipse and the proposal
-text.
-
-With "Auto-accept" on, proposals whose camera corner passes the strict gate
-of :mod:`calib_core.guide.auto_accept` are added as pairs tagged ``auto``
-(one undoable step per batch).
-
-With several shots, proposals are ranked across all of them and the page switches to the next proposal's
-shot by itself (:mod:`app.guide_shots`).
+A :class:`calib_core.guide.session.GuidedSession`, built once per scene, ranks the laser cells worth pairing next;
+the proposals are recomputed in a worker thread after every change of the pairs (never on a viser callback), and
+only while someone is guided or auto-accepts.  Beyond what docs/app.md says: after a re-click the next re-click is
+not started by itself (its pair is not selected behind the person's back: "Next pair" selects it); "Next pair"
+while a proposal is started skips it; ending a re-click's selection (Cancel pair) declines it for good; one undo
+takes back a guided click with the precision the panel gives it; the camera loupe zooms out (never in) to show a
+proposal's ellipse whole and keeps that zoom until "Stop".  With several shots: :mod:`app.guide_shots`.
 
 All maths is :mod:`calib_core.guide`; this module routes buttons and draws text.
 """

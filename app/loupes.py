@@ -1,12 +1,10 @@
-"""The two loupes: magnified, clickable crops of one BA image and of the original camera image.
+"""The two loupes: magnified, clickable crops of one BA image and of the original camera image (how they are used:
+docs/app.md, "Loupes").
 
-They sit right of the camera and BA images (:func:`app.layout.loupe_areas`), so the whole page and both loupes
-are visible at once.  Each is a viser scene image whose texture is a crop enlarged by nearest neighbour (crisp
-cells and pixels).  A click in a loupe maps back exactly: sub-pixel for the camera (the loupe shows the *original*
-image, whatever the main view shows), a whole scan cell for the BA loupe.
-
-They follow each click (:mod:`app.loupe_framing`: to the click and the other end's prediction); the zoom steps
-change how much they show around the same centre.  Display plumbing only (predictions: :mod:`calib_core.predict`).
+Each is a viser scene image whose texture is a crop enlarged by nearest neighbour (crisp cells and pixels).  A click
+in a loupe maps back exactly: sub-pixel for the camera (the loupe shows the *original* image, whatever the main view
+shows), a whole scan cell for the BA loupe.  They follow each click (:mod:`app.loupe_framing`).  Display plumbing
+only (predictions: :mod:`calib_core.predict`).
 """
 
 from __future__ import annotations

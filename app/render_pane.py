@@ -1,15 +1,10 @@
-"""The camera-view laser pane: the scan rendered from the camera under the current pose, below the camera image.
+"""The camera-view laser pane: the scan rendered from the camera under the current pose, below the camera image
+(what it shows and how it is used: docs/app.md, "The scan seen from the camera").
 
-The render has the camera image's size and framing (:func:`calib_core.render.render_from_camera`), and is shown
-as the camera image is (raw, or unwrapped into the same panorama), so a corner sits at nearly the same place in
-the photo and in the render once the pose is roughly right.  The pose is the solve
-if there is one, else the rough pose (Align folder, imported or saved), else the "+x" preset
-(:meth:`app.pose_source.PoseSource.view_pose`).  A click on the render picks the laser cell drawn there: an
-ordinary laser end, through the pairs panel like a BA click.  The same render can be drawn over the photo
-("Render over photo"), and the laser loupe shows a crop of it after a click on it (:class:`app.loupes.Loupes`).
-
-Rendering runs in one background thread that always renders the newest pose (:class:`app.live_solver.LiveSolver`);
-clicks never wait for it.  Display plumbing only: the render and its shading come from :mod:`calib_core.render`.
+The pose is :meth:`app.pose_source.PoseSource.view_pose`.  A click on the render picks the laser cell drawn there,
+through the pairs panel like a BA click.  Rendering runs in one background thread that always renders the newest
+pose (:class:`app.live_solver.LiveSolver`); clicks never wait for it.  Display plumbing only: the render and its
+shading come from :mod:`calib_core.render`.
 """
 
 from __future__ import annotations

@@ -64,24 +64,12 @@ _fdatasync = getattr(os, "fdatasync", os.fsync)
 
 @dataclass(frozen=True)
 class JournalRecord:
-    """One intact journal line.
+    """One intact journal line."""
 
-    Attributes
-    ----------
-    seq : int
-        Sequence number of the change.
-    session : dict
-        The whole session after the change.
-    session_id : str or None
-        The session file's id (None: a journal of an older ba-calib).
-    filed : bool
-        Whether a session YAML with this id had been written when the line was.
-    """
-
-    seq: int
-    session: dict
-    session_id: str | None = None
-    filed: bool = True
+    seq: int  # sequence number of the change
+    session: dict  # the whole session after the change
+    session_id: str | None = None  # the session file's id (None: a journal of an older ba-calib)
+    filed: bool = True  # a session YAML with this id had been written when the line was
 
 
 def encode_record(seq: int, data: dict, session_id: str | None = None, filed: bool = True) -> bytes:
