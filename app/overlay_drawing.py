@@ -76,9 +76,7 @@ class OverlayDrawing:
                 for other in ("raw", "panorama"):
                     if other in app.slots and other != cam_slot.key:
                         self._marker_cache.pop(other, None)
-                        for name in (f"/annot/markers/{other}/halo", f"/annot/markers/{other}/ring",
-                                     f"/annot/selected/{other}"):
-                            app.nodes.lines(name, np.empty((0, 2, 3)), (0, 0, 0))
+                        draw_ring_markers(app.nodes, other, np.empty((0, 3)), np.empty((0, 3)), 1.0, [])
                 self._camera_view_drawn = cam_slot.key
             drawn = self._labels_drawn
             if labels != drawn:  # usually one slot's labels moved, or none: only those are touched
