@@ -284,9 +284,7 @@ class SessionStore:
 
     def _remove_journal_locked(self) -> None:
         """Close and delete the journal: the YAML holds every change it held (or it was another session's)."""
-        if self._fd is not None:
-            os.close(self._fd)
-            self._fd = None
+        self._close_journal_locked()
         self._bytes = self._records = self._new_bytes = 0
         try:
             os.unlink(self.journal_path)
@@ -361,18 +359,20 @@ class SessionStore:
             self.compact()
         except BaseException:
             with self._lock:
-                if self._fd is not None:
-                    os.close(self._fd)
-                    self._fd = None
+                self._close_journal_locked()
             raise
         with self._lock:
             # The YAML holds every change (or there were none): no journal outlives this session,
             # also not one this store only read (restored from) or ignored.
             if self._seq <= self._compacted:
                 self._remove_journal_locked()
-            elif self._fd is not None:
-                os.close(self._fd)
-                self._fd = None
+            else:
+                self._close_journal_locked()
+
+    def _close_journal_locked(self) -> None:
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
 
     # --------------------------------------------------------------- background
     def _ensure_thread(self) -> None:
