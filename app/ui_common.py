@@ -126,21 +126,14 @@ def page_url(host: str, port: int, token: str | None) -> str:
     return f"http://{shown}:{port}" + ("" if token is None else f"/?{TOKEN_QUERY}={token}")
 
 
+#: What :func:`md_escape` writes for each character markdown or HTML would read.
+_MD_ESCAPES = {ord("&"): "&amp;", ord("<"): "&lt;", ord(">"): "&gt;",
+               **{ord(c): "\\" + c for c in "\\`*_{}[]()#+-.!|~"}}
+
+
 def md_escape(text: str) -> str:
     """Text safe to show literally inside viser markdown (no HTML, no markup)."""
-    out = []
-    for ch in str(text).replace("\r", " ").replace("\n", " "):
-        if ch == "&":
-            out.append("&amp;")
-        elif ch == "<":
-            out.append("&lt;")
-        elif ch == ">":
-            out.append("&gt;")
-        elif ch in "\\`*_{}[]()#+-.!|~":
-            out.append("\\" + ch)
-        else:
-            out.append(ch)
-    return "".join(out)
+    return str(text).replace("\r", " ").replace("\n", " ").translate(_MD_ESCAPES)
 
 
 def _fmt(x: float, digits: int = 3) -> str:
