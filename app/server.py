@@ -24,7 +24,7 @@ from .camera_view import camera_views
 from .cloud_pane import CloudPane
 from .display_panel import DisplayPanel
 from .export_panel import ExportPanel, FormatExportPanel
-from .guide_panel import attach_guide_panel
+from .guide_panel import GuidePanel
 from .laser_images import LaserImages
 from .layout import RENDER_KEY
 from .live_coordinator import LiveSolveCoordinator
@@ -213,7 +213,7 @@ class CalibrationApp:
             # In the action worker, so a click is never mapped through a window that changed under it.
             self.live.subscribe_facing(lambda: self.post(self.view.apply_ba_window))
             self.live.start()
-            self.guide = attach_guide_panel(  # guided picking (app/guide_panel.py); it frames the loupes
+            self.guide = GuidePanel(  # guided picking (app/guide_panel.py); it frames the loupes
                 self, loupes=lambda: self.loupes, on_status=self.pairs_panel.show_guide_status)
             self.pairs_panel.set_next_pair_handler(self.guide.callback("Next pair"))  # its button in the pair actions
             self.state.subscribe(self.live.on_state_change)
