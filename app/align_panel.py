@@ -57,7 +57,7 @@ class AlignPanel:
     def __init__(self, app: Any, order: float | None = None, *, add_render_controls: Callable[[Any], None],
                  drag_nodes: Callable[[], dict[str, Any]], render_drag_callbacks: dict[str, Callable]) -> None:
         self.app = app
-        self._drag_nodes = drag_nodes
+        self.drag_nodes = drag_nodes  # () -> the scene nodes a drag turns the view on, by slot key
         self._history: list[np.ndarray | None] = []
         self._drag: dict | None = None  # the drag in progress: its start pose and pixel, and its slot
         self._fitted_to: tuple | None = None  # the pair ids the rough pose was last turned to fit (shown)
@@ -321,10 +321,6 @@ class AlignPanel:
     def drag_callbacks(self, key: str, modifier: str | None) -> list:
         """The drag callbacks node ``key`` (a camera view, ``"render"``, ``"camera_overlay"``) has for ``modifier``."""
         return list(self._callbacks[(key, modifier)])
-
-    def drag_nodes(self) -> dict[str, Any]:
-        """The scene nodes a drag turns the view on: the camera views, the render and its copy over the photo."""
-        return self._drag_nodes()
 
     def take_drag(self, key: str, event: Any) -> bool:
         """While "Align by drag" is on, turn the view with this drag phase on slot ``key`` (:meth:`on_drag`) and

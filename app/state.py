@@ -105,7 +105,8 @@ class AnnotationState(StateShots):
                 self._restore(data, self.session_path if from_yaml else store.journal_path, tuple(shots))
             self._store = store
             compact_at_exit(store)
-        self._settle_active(active_shot)
+        # The shot shown: ``active_shot``, else the session's, within the shots.
+        self._active = min(max(self._active if active_shot is None else int(active_shot), 0), self.n_shots - 1)
 
     # ------------------------------------------------------------------ queries
     @property

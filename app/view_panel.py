@@ -269,12 +269,8 @@ class ViewPanel(ViewEvents):
         self._loupe_rects.pop(client_id, None)
         self._update_cloud_visibility()
 
-    def any_tab_in_3d(self) -> bool:
-        """True while some tab shows the 3-D view."""
-        return any(m == "3d" for m in list(self._client_mode.values()))
-
     def _update_cloud_visibility(self) -> None:
-        shown = self.any_tab_in_3d()
+        shown = any(m == "3d" for m in list(self._client_mode.values()))  # some tab shows the 3-D view
         for listener in list(self._3d_listeners):
             listener(shown)
 
