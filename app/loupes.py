@@ -169,12 +169,8 @@ class Loupes:
         if what == "render":
             self._render = shown
             if self.shows_render:
-                self.refresh_ba()
-
-    def refresh_ba(self) -> None:
-        """Re-send the laser loupe (e.g. a new render arrived)."""
-        with self.app.ui_lock:
-            self._show("ba")
+                with self.app.ui_lock:
+                    self._show("ba")
 
     @property
     def has_render(self) -> bool:  # is there a render the laser loupe can show?
@@ -376,8 +372,8 @@ class Loupes:
         self._marks_of[kind] = inputs
         if kind == "ba":
             self._draw_ba_marks(list(picks))
-        else:
-            self._draw_camera_marks(list(picks))
+        else:  # clicks as crosses, the pairs' laser points projected as rings (app.loupe_marks)
+            draw_camera_marks(app, self._slots["camera"], self.camera_crop, list(picks), app.pose())
         # The outline on the main image (and the camera loupe's centre marker) follow the crop, not the picks.
         framing = (crop, self._slots[kind], main, app.ba_window, hidden)
         if self._framing_of.get(kind) != framing:
@@ -411,10 +407,6 @@ class Loupes:
         segs = marker_segments(s.world_from_pixel(xy[inside], z_offset=-0.01), radius, cell_half_size=cell,
                                ticks=True)
         nodes.lines("/annot/loupe/ba_marks", segs, segment_colours(cols[inside], len(segs)), thickness=2.5)
-
-    def _draw_camera_marks(self, picks: list) -> None:
-        # Camera loupe: clicks as crosses, the pairs' laser points projected as rings (app.loupe_marks).
-        draw_camera_marks(self.app, self._slots["camera"], self.camera_crop, picks, self.app.pose())
 
     # ------------------------------------------------------------------ internals
     def _make_ba_crop(self, key: str, row: int, col: int) -> BaCrop:

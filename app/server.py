@@ -208,7 +208,7 @@ class CalibrationApp:
             self.format_export = FormatExportPanel(self)  # verify: its own widgets (formats, reference import)
             self.display.subscribe(self._on_display_change)
             self.server.on_client_connect(self._on_connect)
-            self.server.on_client_disconnect(self._on_disconnect)
+            self.server.on_client_disconnect(lambda client: self.view.forget_tab(client.client_id))
             self.subscribe_solved(lambda shown: self.render_pane.request())  # the render follows the solve shown
             # In the action worker, so a click is never mapped through a window that changed under it.
             self.live.subscribe_facing(lambda: self.post(self.view.apply_ba_window))
@@ -270,9 +270,6 @@ class CalibrationApp:
         guide = getattr(self, "guide", None)
         if guide is not None:  # proposals can start from the imported pose
             guide.update()
-
-    def _on_disconnect(self, client: Any) -> None:
-        self.view.forget_tab(client.client_id)
 
     def _on_save_error(self, message: str) -> None:
         # On the compactor's thread; the journal holds every change, the compaction is retried.
