@@ -1,15 +1,9 @@
 """What a panel may use of the app: the public services of :class:`app.server.CalibrationApp`.
 
-Panels (:mod:`app.guide_panel`, :mod:`app.verify_panel`, :mod:`app.export_panel`,
-:mod:`app.loupes`, ...) get the app as their ``app`` argument and use only
-these names, never its private members, so the app's insides can change
-without touching them.  :class:`AppServices` is a structural type: the app
-satisfies it, a test may pass anything else that does.
-
-``tests/test_panel_reaches.py`` enforces it: an ``app/`` module (but the composition roots ``app/server.py`` and
-``app/serving.py``) that uses ``app.<name>`` must find ``name`` here, and may not use a sibling panel (``app.loupes``,
-``app.render_pane``, ...) at all: panels talk through the state, the panels' events, callables the composition root
-passes them, and these services.
+Panels get the app as their ``app`` argument and use only these names, never its private members nor a sibling
+panel (``app.loupes``, ``app.render_pane``, ...): they talk through the state, the panels' events, callables the
+composition root passes them, and these services (``tests/test_panel_reaches.py`` enforces it).  A structural
+type: the app satisfies it, a test may pass anything else that does.
 """
 
 from __future__ import annotations

@@ -45,9 +45,8 @@ from .pose_source import PoseSource, read_extrinsics
 from .warm_up import WarmUp
 
 
-# The composition root: one object per concern, owning its state and widgets, as a public attribute: actions, display,
-# live, overlays, cloud, page, pairs_panel, calibration_panel, view, export_panel, loupes, format_export,
-# guide, verify_panel.  Panels use only the public services below (app/app_services.py).
+# The composition root: one object per concern (a public attribute each, e.g. ``live``, ``loupes``); panels use only
+# its services (app/app_services.py).
 class CalibrationApp:
     """The annotation app on one scene; the viser server runs from construction.
 
