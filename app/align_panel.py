@@ -1,18 +1,10 @@
-"""The Align folder: a rough pose before any pair, in under a minute.
+"""The Align folder: a rough pose before any pair, in under a minute (how it is used: docs/app.md, "The scan seen
+from the camera, and a rough pose by drag").
 
-Start from a mounting preset (the camera looks along lidar +x, -y, +y or -x) or the imported extrinsic (the
-``--initial-extrinsics`` file, a bag's ``/tf_static``, or the per-tab "Import initial extrinsics" button), then, with
-"Align by drag" on, drag the camera image or the camera-view render: the view turns about the camera centre so that
-the laser content follows the mouse (Shift+drag rolls it about the principal point).  Step buttons turn by 0.5 deg and
-move the camera by 5 cm.  The render (and its copy over the photo) follows every drag at once; the rest of the page
-(predictions, BA columns, proposals, the session file) takes the new pose when the drag ends.
-
-The result is an ordinary initial extrinsic (``app.pose_source``): predictions, loupes and proposals use it until
-4 pairs are solved, and while the solve's quality is "unreliable".  After the 2nd and the 3rd complete pair, and after
-each unreliable solve (:meth:`AlignPanel.fit_to_pairs`), the rough pose is turned about the camera centre so that the
-pairs line up (:func:`calib_core.alignment.fit_rotation_about_centre`): one ordinary align step, which "Undo align
-step" takes back and a drag or a turn button changes further.  The maths is :mod:`calib_core.alignment`; this panel
-only maps widgets and drags to it.
+The result is an ordinary initial extrinsic (``app.pose_source``).  The render follows every drag at once; the rest
+of the page takes the new pose when the drag ends.  After the 2nd and 3rd pair, and after each unreliable solve
+(:meth:`AlignPanel.fit_to_pairs`), the rough pose is turned about the camera centre to fit the pairs: one align
+step.  The maths is :mod:`calib_core.alignment`; this panel only maps widgets and drags to it.
 """
 
 from __future__ import annotations
@@ -56,18 +48,16 @@ HELP = (
 class AlignPanel:
     """The "Align" folder of one :class:`app.server.CalibrationApp` (``app.align``) and the alignment drags.
 
-    It owns its widgets, the undo history of the rough pose and the drag in progress.  Public:
-    :attr:`folder`, :attr:`drag_enabled`, :meth:`apply_preset`, :meth:`turn`, :meth:`move`, :meth:`on_drag`,
-    :meth:`undo`, :attr:`text`, :meth:`take_drag`.  The composition root passes what it uses of the render pane
-    and the page: ``add_render_controls(gui)`` (the render's widgets, in this folder), ``drag_nodes()`` (the scene
-    nodes a drag turns the view on, by slot key) and ``render_drag_callbacks`` (the render's own drag callbacks
-    on its nodes, by slot key).
+    It owns its widgets, the undo history of the rough pose and the drag in progress.  The composition root
+    passes what it uses of the render pane and the page: ``add_render_controls(gui)`` (the render's widgets, in
+    this folder), ``drag_nodes()`` (the scene nodes a drag turns the view on, by slot key) and
+    ``render_drag_callbacks`` (the render's own drag callbacks on its nodes, by slot key).
     """
 
     def __init__(self, app: Any, order: float | None = None, *, add_render_controls: Callable[[Any], None],
                  drag_nodes: Callable[[], dict[str, Any]], render_drag_callbacks: dict[str, Callable]) -> None:
         self.app = app
-        self._drag_nodes = drag_nodes
+        self.drag_nodes = drag_nodes  # () -> the scene nodes a drag turns the view on, by slot key
         self._history: list[np.ndarray | None] = []
         self._drag: dict | None = None  # the drag in progress: its start pose and pixel, and its slot
         self._fitted_to: tuple | None = None  # the pair ids the rough pose was last turned to fit (shown)
@@ -331,10 +321,6 @@ class AlignPanel:
     def drag_callbacks(self, key: str, modifier: str | None) -> list:
         """The drag callbacks node ``key`` (a camera view, ``"render"``, ``"camera_overlay"``) has for ``modifier``."""
         return list(self._callbacks[(key, modifier)])
-
-    def drag_nodes(self) -> dict[str, Any]:
-        """The scene nodes a drag turns the view on: the camera views, the render and its copy over the photo."""
-        return self._drag_nodes()
 
     def take_drag(self, key: str, event: Any) -> bool:
         """While "Align by drag" is on, turn the view with this drag phase on slot ``key`` (:meth:`on_drag`) and

@@ -1,15 +1,9 @@
 """What a panel may use of the app: the public services of :class:`app.server.CalibrationApp`.
 
-Panels (:mod:`app.guide_panel`, :mod:`app.verify_panel`, :mod:`app.export_panel`,
-:mod:`app.loupes`, ...) get the app as their ``app`` argument and use only
-these names, never its private members, so the app's insides can change
-without touching them.  :class:`AppServices` is a structural type: the app
-satisfies it, a test may pass anything else that does.
-
-``tests/test_panel_reaches.py`` enforces it: an ``app/`` module (but the composition roots ``app/server.py`` and
-``app/serving.py``) that uses ``app.<name>`` must find ``name`` here, and may not use a sibling panel (``app.loupes``,
-``app.render_pane``, ...) at all: panels talk through the state, the panels' events, callables the composition root
-passes them, and these services.
+Panels get the app as their ``app`` argument and use only these names, never its private members nor a sibling
+panel (``app.loupes``, ``app.render_pane``, ...): they talk through the state, the panels' events, callables the
+composition root passes them, and these services (``tests/test_panel_reaches.py`` enforces it).  A structural
+type: the app satisfies it, a test may pass anything else that does.
 """
 
 from __future__ import annotations
@@ -25,103 +19,43 @@ __all__ = ["AppServices", "UiLock"]  # UiLock: the redraw lock, defined with the
 
 
 class AppServices(Protocol):
-    """The services of the app that panels use.
+    """The services of the app that panels use."""
 
-    Attributes
-    ----------
-    server : viser.ViserServer
-        The running server (its ``gui`` and ``scene``).
-    state : AnnotationState
-        The pairs and the view settings (``state.view``); every change goes through it.
-    ui_lock : UiLock
-        Held while the scene and the panels are redrawn; hold it to read or change several widgets at once.
-    folder_lock : threading.Lock
-        Held while one tab's own widgets are added into a shared folder (one GUI context at a time).
-    depth, camera, image
-        The scan's depth matrix, the camera model and the camera image (original pixels).
-    ba_keys : tuple of str
-        The BA directions shown, in page order.
-    slots : dict
-        Where each image lies on the page (:class:`app.layout.ImageSlot`), by key.
-    camera_sizes : dict
-        ``(width, height)`` of each camera view (``raw``, ``panorama``), by key.
-    wrap_cols : bool
-        The scan's last column is next to its first (a 360 degree scan).
-    ba_cell_aspect : float
-        Drawn height / width of one BA cell.
-    ba_window : app.ba_view.ColumnWindow
-        The scan columns the BA images show.
-    all_points_lidar : ndarray, shape (N, 3)
-        Every valid scan point, lidar frame (metres).
-    nodes : app.scene_nodes.SceneNodes
-        The scene's diffed line, point and label nodes (a redraw sends only what changed).
-    pairs_folder
-        The "Pairs" folder (panels place themselves relative to its ``order``).
-    output_path, session_path : Path or None
-        Where "Download extrinsics YAML" also writes; the session file.
-    solve_bundle, result
-        The last good solve (:class:`app.ui_common.SolveBundle`) and its
-        :class:`calib_core.solve.CalibrationResult`, or None.
-    initial_T_camera_lidar : ndarray, shape (4, 4), or None
-        The imported rough extrinsic predictions use before a solve.
-    active_shot : int
-        The shot these panes show (0-based; ``state.picks`` are its picks, ``state.all_picks`` every shot's).
-    shot_scenes : list of app.prepared_scene.PreparedScene
-        Every shot's scene, in shot order (one for a one-shot session); the live solve uses them all.
-    scene_data : app.prepared_scene.PreparedScene
-        This shot's scene (``depth``, ``camera``, ``image`` ... above are its parts).
-    ba_gray, image_gray : dict, ndarray
-        The BA images' grey levels by key, and the camera image's.
-    cloud_points_lidar : ndarray, shape (K, 3)
-        The points the 3-D pane shows, lidar frame (metres).
-    camera_view : app.camera_view.CameraView
-        The visible camera view (raw image or panorama).
-    camera_views : dict
-        The camera views (:class:`app.camera_view.CameraView`: ``raw``, and ``panorama`` for wide lenses), by key.
-    title : str
-        The page title.
-    laser_images : app.laser_images.LaserImages
-        The laser images as the page shows them (contrast applied; ``ba_display``, ``ba_title``, ``loupe_image``).
-    pose_source : app.pose_source.PoseSource
-        The pose predictions, the render and the BA columns use (solved, else rough, else the "+x" preset), the
-        predictions both ways under it, and the rough pose (``adopt_rough_pose``; ``subscribe`` to its changes).
-    actions : app.action_queue.ActionQueue
-        The ordered worker every user action runs on (``busy``: an action runs or waits).
-    """
-
-    server: Any
-    state: AnnotationState
-    ui_lock: UiLock
-    folder_lock: Any
-    depth: Any
-    camera: Any
-    image: np.ndarray
-    ba_keys: tuple[str, ...]
-    slots: dict
-    camera_sizes: dict[str, tuple[int, int]]
-    wrap_cols: bool
-    ba_cell_aspect: float
-    ba_window: Any
-    all_points_lidar: np.ndarray
-    nodes: Any
-    pairs_folder: Any
-    output_path: Any
-    session_path: Any
-    solve_bundle: Any
-    result: Any
-    initial_T_camera_lidar: np.ndarray | None
-    active_shot: int
-    shot_scenes: list
-    scene_data: Any
-    ba_gray: dict
-    image_gray: np.ndarray
-    cloud_points_lidar: np.ndarray
-    camera_view: Any
-    camera_views: dict
-    title: str
-    actions: Any
-    pose_source: Any
-    laser_images: Any
+    server: Any  # the running viser.ViserServer (its ``gui`` and ``scene``)
+    state: AnnotationState  # the pairs and the view settings (``state.view``); every change goes through it
+    ui_lock: UiLock  # held while the scene and the panels are redrawn; hold it to change several widgets at once
+    folder_lock: Any  # threading.Lock held while one tab's own widgets are added into a shared folder
+    depth: Any  # the scan's depth matrix
+    camera: Any  # the camera model
+    image: np.ndarray  # the camera image (original pixels)
+    ba_keys: tuple[str, ...]  # the BA directions shown, in page order
+    slots: dict  # where each image lies on the page (app.layout.ImageSlot), by key
+    camera_sizes: dict[str, tuple[int, int]]  # ``(width, height)`` of each camera view (raw, panorama), by key
+    wrap_cols: bool  # the scan's last column is next to its first (a 360 degree scan)
+    ba_cell_aspect: float  # drawn height / width of one BA cell
+    ba_window: Any  # app.ba_view.ColumnWindow: the scan columns the BA images show
+    all_points_lidar: np.ndarray  # (N, 3) every valid scan point, lidar frame (metres)
+    nodes: Any  # app.scene_nodes.SceneNodes: the scene's diffed nodes (a redraw sends only what changed)
+    pairs_folder: Any  # the "Pairs" folder (panels place themselves relative to its ``order``)
+    output_path: Any  # Path or None: where "Download extrinsics YAML" also writes
+    session_path: Any  # the session file
+    solve_bundle: Any  # the last good solve (app.ui_common.SolveBundle), or None
+    result: Any  # its calib_core.solve.CalibrationResult, or None
+    initial_T_camera_lidar: np.ndarray | None  # (4, 4) the imported rough extrinsic predictions use before a solve
+    active_shot: int  # the shot these panes show, 0-based (``state.picks`` its picks, ``state.all_picks`` all)
+    shot_scenes: list  # every shot's app.prepared_scene.PreparedScene, in shot order; the live solve uses them all
+    scene_data: Any  # this shot's PreparedScene (``depth``, ``camera``, ``image`` ... above are its parts)
+    ba_gray: dict  # the BA images' grey levels, by key
+    image_gray: np.ndarray  # the camera image's grey levels
+    cloud_points_lidar: np.ndarray  # (K, 3) the points the 3-D pane shows, lidar frame (metres)
+    camera_view: Any  # the visible app.camera_view.CameraView (raw image or panorama)
+    camera_views: dict  # the camera views (``raw``, and ``panorama`` for wide lenses), by key
+    title: str  # the page title
+    # The pose predictions, the render and the BA columns use (solved, else rough, else the "+x" preset), the
+    # predictions both ways under it, and the rough pose (``adopt_rough_pose``; ``subscribe`` to its changes).
+    pose_source: Any  # app.pose_source.PoseSource
+    actions: Any  # app.action_queue.ActionQueue: the ordered worker of every user action (``busy``)
+    laser_images: Any  # app.laser_images.LaserImages: the laser images as shown (contrast applied)
 
     def subscribe_solve(self, listener: Callable[[Any], None]) -> None:
         """Call ``listener(shown)`` (:class:`app.ui_common.SolveShown`) on every redraw of what the live solve shows."""

@@ -22,6 +22,7 @@ from __future__ import annotations
 import math
 import warnings
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -69,23 +70,13 @@ class ColumnWindow:
     """The scan columns shown in the BA panes: display column ``u`` is scan column ``(start + u) mod n_cols``.
 
     Build with :meth:`make`, which normalises the numbers.
-
-    Attributes
-    ----------
-    start : int
-        Scan column shown at display column 0.
-    width : int
-        Number of columns shown (1 ... n_cols).
-    n_cols : int
-        Columns of the depth matrix.
-    wrap : bool
-        The scan closes on itself (360 deg): a window may run past the last
-        column into column 0.  Otherwise the window stays inside the scan.
     """
 
-    start: int
-    width: int
-    n_cols: int
+    start: int  # scan column shown at display column 0
+    width: int  # number of columns shown (1 ... n_cols)
+    n_cols: int  # columns of the depth matrix
+    # The scan closes on itself (360 deg): a window may run past the last column into column 0.  Otherwise the
+    # window stays inside the scan.
     wrap: bool
 
     @classmethod
@@ -225,6 +216,23 @@ def ba_texture(gray: np.ndarray, window: ColumnWindow, factor: int) -> np.ndarra
     -------
     (H * factor, window.width * factor) uint8
     """
-    shown = np.asarray(gray)[:, window.columns]
+    return enlarged(np.asarray(gray)[:, window.columns], factor)
+
+
+def enlarged(image: np.ndarray, factor: int) -> np.ndarray:
+    """Each pixel of ``image`` as a ``factor`` x ``factor`` block (nearest neighbour: crisp cells and pixels)."""
     k = max(int(factor), 1)
-    return np.repeat(np.repeat(shown, k, axis=0), k, axis=1)
+    return np.repeat(np.repeat(image, k, axis=0), k, axis=1)
+
+
+def crop_texture(image: np.ndarray, rows: np.ndarray, cols: np.ndarray, pad: Any, factor: int,
+                 lut: np.ndarray | None = None) -> np.ndarray:
+    """A loupe's texture: the ``rows`` x ``cols`` (index arrays) of uint8 ``image`` (grey or RGB; ``pad`` where
+    a row or column lies outside it), mapped through ``lut`` (256 levels) if given, :func:`enlarged`."""
+    h, w = image.shape[:2]
+    ok = ((rows >= 0) & (rows < h))[:, None] & ((cols >= 0) & (cols < w))[None, :]
+    crop = image[np.clip(rows, 0, h - 1)][:, np.clip(cols, 0, w - 1)]
+    if lut is not None:
+        crop = lut[crop]
+    ok = ok.reshape(ok.shape + (1,) * (crop.ndim - 2))
+    return enlarged(np.where(ok, crop, np.asarray(pad, np.uint8)).astype(np.uint8), factor)

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Sequence
 
 from calib_core import __version__, compile_events
+from calib_core.errors import CalibError
 
 from .cli_guard import (  # noqa: F401  (with_default_command, load_camera_from_args: public, used elsewhere)
     EXIT_USAGE,
@@ -59,12 +60,16 @@ class Outcome:
 # --- commands ----------------------------------------------------------------
 
 
+def _exit_for(quality) -> int | Outcome:
+    """0, or :data:`EXIT_UNRELIABLE` with its reason when the solve's quality is unreliable."""
+    if quality.status == "unreliable":
+        return Outcome(EXIT_UNRELIABLE, f"unreliable: {quality.reasons[0]} (exit code {EXIT_UNRELIABLE})")
+    return 0
+
+
 def cmd_solve(args: argparse.Namespace) -> int | Outcome:
     if check_shot_form(args, "solve"):
-        quality = cmd_solve_shots(args)
-        if quality.status == "unreliable":
-            return Outcome(EXIT_UNRELIABLE, f"unreliable: {quality.reasons[0]} (exit code {EXIT_UNRELIABLE})")
-        return 0
+        return _exit_for(cmd_solve_shots(args))
     from calib_core.io.atomic import write_yaml_atomic
     from calib_core.verify import extrinsics_document
     from calib_core.pairs import load_pairs_yaml
@@ -74,8 +79,6 @@ def cmd_solve(args: argparse.Namespace) -> int | Outcome:
     camera = load_camera_from_args(args)
     needs_scan = any(p.laser_rc is not None for p in pairs)
     if needs_scan and args.scan is None:
-        from calib_core.errors import CalibError
-
         raise CalibError(f"{args.pairs}: pairs name depth-matrix cells (laser_rc); give the scan with --scan")
     depth = load_scan_from_args(args) if args.scan is not None else None
     initial = None
@@ -92,9 +95,7 @@ def cmd_solve(args: argparse.Namespace) -> int | Outcome:
     for note in notes:
         print(f"note: {note}")
     print(f"\nwrote {args.output}")
-    if result.quality.status == "unreliable":
-        return Outcome(EXIT_UNRELIABLE, f"unreliable: {result.quality.reasons[0]} (exit code {EXIT_UNRELIABLE})")
-    return 0
+    return _exit_for(result.quality)
 
 
 def cmd_propose(args: argparse.Namespace) -> int:
@@ -136,8 +137,6 @@ def cmd_ba_images(args: argparse.Namespace) -> int:
     depth = load_scan_from_args(args)
     images = bearing_angle_images(depth)
     if args.output.exists() and not args.output.is_dir():
-        from calib_core.errors import CalibError
-
         raise CalibError(f"{args.output}: exists and is not a folder; -o names the folder for the four PNGs")
     args.output.mkdir(parents=True, exist_ok=True)
     for name in BA_DIRECTIONS:
@@ -191,8 +190,6 @@ def cmd_sample(args: argparse.Namespace) -> int:
     from calib_core.synthetic import write_sample
 
     if args.output.exists() and not args.output.is_dir():
-        from calib_core.errors import CalibError
-
         raise CalibError(f"{args.output}: exists and is not a folder; -o names the folder for the sample scene")
     t0 = time.perf_counter()
     print(f"Generating the synthetic scene (seed {args.seed}) into {args.output} ...", flush=True)

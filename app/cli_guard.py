@@ -9,6 +9,8 @@ import sys
 from pathlib import Path
 from typing import Sequence
 
+from calib_core.errors import CalibError
+
 EXIT_USAGE = 2
 
 
@@ -37,8 +39,6 @@ class OneLineParser(argparse.ArgumentParser):
 
 def check_args(args: argparse.Namespace) -> None:
     """Numeric options that argparse's types let through but no command can use."""
-    from calib_core.errors import CalibError
-
     def bad(option: str, value, want: str) -> None:
         raise CalibError(f"{option}: expected {want}, got {value!r}")
 
@@ -128,7 +128,6 @@ def load_camera_from_args(args: argparse.Namespace):
 
 def check_image_fits_camera(image, camera, args: argparse.Namespace) -> None:
     """Refuse an image whose header size is not the camera model's (before it is decoded)."""
-    from calib_core.errors import CalibError
     from calib_core.io.images import image_header_size
 
     width, height = image_header_size(image)
@@ -222,8 +221,6 @@ class Noise:
 
 def error_line(exc: BaseException) -> tuple[str, int]:
     """The one ``error:`` line and exit code for an exception a command raised."""
-    from calib_core.errors import CalibError
-
     if isinstance(exc, CalibError):
         return " ".join(str(exc).split()), EXIT_USAGE
     if isinstance(exc, OSError):

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from calib_core.errors import CalibError
+
 
 def cmd_serve(args: argparse.Namespace) -> int:
     from app.serving import serve
@@ -18,15 +20,11 @@ def cmd_serve(args: argparse.Namespace) -> int:
     if getattr(args, "bag", None) is not None and (args.frames is not None or several):
         return _serve_bag_shots(args)
     if args.frames is not None or several:
-        from calib_core.errors import CalibError
-
         raise CalibError(f"{', '.join(several) or '--frames'} choose(s) frames of a bag: give --bag too")
     if getattr(args, "bag", None) is not None:
         from app.serving import BagSource
 
         if args.scan is not None or args.image is not None:
-            from calib_core.errors import CalibError
-
             raise CalibError("serve --bag takes the scan and the image from the bag: leave out --scan and --image")
         source = BagSource(args.bag, cloud_topic=args.cloud_topic, image_topic=args.image_topic,
                            camera_info_topic=args.camera_info_topic, index=None if args.index is None else args.index[0],
@@ -40,8 +38,6 @@ def cmd_serve(args: argparse.Namespace) -> int:
                                ("--camera-info-topic", args.camera_info_topic), ("--index", args.index),
                                ("--time", args.time), ("--frames-dir", args.frames_dir)) if v is not None]
     if bag_only:
-        from calib_core.errors import CalibError
-
         raise CalibError(f"{', '.join(bag_only)} choose(s) what to read from a bag: give --bag too")
     if args.scan is None and args.image is None and args.camera is None:
         sample = default_sample_dir()
@@ -50,8 +46,6 @@ def cmd_serve(args: argparse.Namespace) -> int:
             args.session = Path.cwd() / "ba-calib-sample-session.yaml"
     missing = [n for n in ("scan", "image", "camera") if getattr(args, n) is None]
     if missing:
-        from calib_core.errors import CalibError
-
         raise CalibError("serve needs --scan, --image and --camera (or none of them, for the sample); missing: " + ", ".join("--" + m for m in missing))
     serve(
         args.scan,
@@ -72,7 +66,6 @@ def cmd_serve(args: argparse.Namespace) -> int:
 def _serve_bag_shots(args: argparse.Namespace) -> int:
     """``serve --bag BAG --frames N`` (or several ``--time`` / ``--index``): the frames written as shots
     (:func:`calib_core.io.bag_frames.shots_from_bag`), then served as one session of several shots."""
-    from calib_core.errors import CalibError
     from calib_core.io.bag_frames import default_frames_dir, shots_from_bag
 
     from app.serving import serve
@@ -106,8 +99,6 @@ def _serve_bag_shots(args: argparse.Namespace) -> int:
 
 def _serve_shots(args: argparse.Namespace) -> int:
     """``serve --camera C --shot SCAN IMAGE [--shot ...]``: the files checked first, one line per problem."""
-    from calib_core.errors import CalibError
-
     from app.serving import serve
 
     from .cli_common import scan_options

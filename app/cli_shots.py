@@ -6,6 +6,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from calib_core.errors import CalibError
+
 from .cli_common import add_bag_topic_args
 
 
@@ -25,8 +27,6 @@ def add_shot_args(p: argparse.ArgumentParser, *, images: bool = False) -> None:
 
 def check_shot_form(args: argparse.Namespace, command: str) -> bool:
     """True for the ``--shot`` form; one clear error when the two forms are mixed or neither is given."""
-    from calib_core.errors import CalibError
-
     shots = getattr(args, "shot", None)
     if shots:
         mixed = [opt for opt, key in (("--scan", "scan"), ("--pairs", "pairs"), ("--image", "image"))
@@ -45,7 +45,6 @@ def check_shot_form(args: argparse.Namespace, command: str) -> bool:
 
 def load_shots(args: argparse.Namespace, camera):
     """Each ``--shot``'s scan and pairs, resolved (the organisation report of each scan is printed)."""
-    from calib_core.errors import CalibError
     from calib_core.io.scan_readers import load_scan
     from calib_core.pairs import load_pairs_yaml
     from calib_core.shots import Shot
@@ -100,7 +99,6 @@ def cmd_solve_shots(args: argparse.Namespace):
 
 def cmd_propose_shots(args: argparse.Namespace) -> int:
     """``propose --shot SCAN PAIRS ...``: proposals over all shots, each with its ``shot``."""
-    from calib_core.errors import CalibError
     from calib_core.io.atomic import write_yaml_atomic
     from calib_core.io.extrinsics import load_extrinsics_yaml
     from calib_core.io.images import load_image_rgb

@@ -7,11 +7,11 @@ import os
 import sys
 from pathlib import Path
 
+from calib_core.errors import CalibError
+
 
 def _check_output_file(path: Path) -> None:
     """Refuse to replace anything but a regular file (a folder, a device, a fifo)."""
-    from calib_core.errors import CalibError
-
     if os.path.lexists(path) and not path.is_file():
         raise CalibError(f"{path}: exists and is not a regular file; not replacing it")
 

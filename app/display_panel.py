@@ -16,9 +16,7 @@ class DisplayPanel:
     It owns its widgets, which the loupes place in their folder
     (:meth:`add_loupe_controls`) and the view panel in the View folder
     (:meth:`add_last_pane_control`, :meth:`add_edge_control`); the images they
-    choose are the ``laser_images`` service.  Public: :attr:`edge_opacity`,
-    :meth:`subscribe` (what shows the laser panes redraws on its changes)
-    and the widgets' handlers (``on_*``).
+    choose are the ``laser_images`` service.
     """
 
     def __init__(self, app: Any) -> None:

@@ -1,14 +1,5 @@
-"""The export panels.
-
-* :class:`ExportPanel` (owns its widgets): extrinsics YAML with its
-  ``verification:`` block (written to ``output_path`` with file references
-  relative to its folder; the download carries the camera inline) and the
-  coloured PLY (:func:`calib_core.overlays.export_colored_scan`).
-* :class:`FormatExportPanel` (owns its widgets): the extrinsics in any format of
-  :data:`calib_core.io.extrinsic_formats.FORMATS`, with the parent and child
-  frames in either order and the direction stated; and "Import reference
-  extrinsic" (any of those formats) for the Verify panel.
-"""
+"""The export panels: the extrinsics YAML and coloured PLY (:class:`ExportPanel`), the extrinsics in robotics
+formats and the reference import for the Verify panel (:class:`FormatExportPanel`)."""
 
 from __future__ import annotations
 

@@ -1,40 +1,12 @@
-"""The Guide panel: guided picking in the app (issue 9).
+"""The Guide panel: guided picking in the app (issue 9; how it is used: docs/app.md, "Guided picking").
 
-Once a calibration exists (4 pairs, or an imported initial extrinsic) a
-:class:`calib_core.guide.session.GuidedSession` -- built once per scene --
-ranks the laser cells worth pairing next; its proposals are recomputed in a
-worker thread after every change of the pairs, never on a viser callback.
-
-"Next pair" starts a pick at the shown proposal's cell (laser end only,
-``source="guided"``, ``precision_px`` = the guided click's 0.3 px) and frames
-the loupes on the cell and on the predicted pixel with its 3-sigma ellipse;
-a proposal to re-click a rough pair selects that pair instead, so the click
-moves its pixel (0.3 px; it keeps its source, e.g. ``clicked``).
-One click on the camera (loupe or image) completes the pair through the
-ordinary pick logic; when the new proposals arrive the next one is started
-and framed by itself, so a guided pair costs one click; after a re-click a next re-click is not started by itself (its
-pair is not selected behind the person's back: "Next pair" selects it).  "Skip" moves the half pick to the next proposal
-(it comes back last; a re-click never), "Not a corner" drops the cell for good, "Stop" removes the half pick (and
-a re-click shown, for good).  "Next pair" while a proposal is started skips it, and ending a re-click's selection
-(Cancel pair) declines it for good.  One undo takes back a guided click with the precision the panel gives it.
-
-Proposals pass the clear-evidence screen of :mod:`calib_core.guide.evidence`
-with a 3-sigma radius of at most half the camera loupe's side at zoom 1
-(:func:`max_ellipse_px_for`); the camera loupe zooms out (never in) to
-show a proposal's ellipse whole and keeps that zoom until "Stop" (steady from
-one proposal to the next), and the ellipse is drawn inside the loupe only.  When no cell qualifies the panel says why (e.g. "do a better rough
-alignment first").  Guided picking is not offered while the calibration is
-unreliable (the live solve's quality verdict, or the guide's own solve of
-the same pairs): "Next pair" refuses with the reason, and a guided session
-stops framing new pairs.  "Stop" also removes the ellipse and the proposal
-text.
-
-With "Auto-accept" on, proposals whose camera corner passes the strict gate
-of :mod:`calib_core.guide.auto_accept` are added as pairs tagged ``auto``
-(one undoable step per batch).
-
-With several shots, proposals are ranked across all of them and the page switches to the next proposal's
-shot by itself (:mod:`app.guide_shots`).
+A :class:`calib_core.guide.session.GuidedSession`, built once per scene, ranks the laser cells worth pairing next;
+the proposals are recomputed in a worker thread after every change of the pairs (never on a viser callback), and
+only while someone is guided or auto-accepts.  Beyond what docs/app.md says: after a re-click the next re-click is
+not started by itself (its pair is not selected behind the person's back: "Next pair" selects it); "Next pair"
+while a proposal is started skips it; ending a re-click's selection (Cancel pair) declines it for good; one undo
+takes back a guided click with the precision the panel gives it; the camera loupe zooms out (never in) to show a
+proposal's ellipse whole and keeps that zoom until "Stop".  With several shots: :mod:`app.guide_shots`.
 
 All maths is :mod:`calib_core.guide`; this module routes buttons and draws text.
 """
@@ -64,68 +36,34 @@ BUTTONS = ("Next pair", "Skip", "Not a corner", "Stop")
 
 
 class GuidePanel(GuideShotsMixin):
-    """The Guide folder of the control panel and the guided-picking flow.
+    """The "Guided picking" folder of one :class:`app.server.CalibrationApp` (``app.guide``) and the guided flow.
 
     Parameters
     ----------
-    gui : viser GUI API
-        Where the folder is added (``server.gui``).
-    state : AnnotationState
-        The pairs; the panel subscribes to its changes.
-    depth, camera, image
-        The scan's depth matrix, the camera model and the RGB camera image.
-    guard : callable
-        ``guard(fn)`` -> a viser callback that runs ``fn(action)`` on the app's
-        ordered action worker (a CalibError becomes a notification).
-    post : callable
-        ``post(fn)`` runs ``fn()`` on that same worker, after the queued actions.
-    initial_T : callable
-        ``initial_T()`` -> the imported initial ``T_camera_lidar`` (4x4) or None.
+    app : app.app_services.AppServices
+        Used: ``state`` (the panel subscribes to it), ``depth``, ``camera``, ``image``, ``guard`` and ``post`` (the
+        ordered action worker), the imported rough pose, the live solve's verdict, with several shots every shot's
+        scene; ``camera_click_source`` (a guided pair clicked on the full image gets the default precision and waits
+        for a refining click in the camera loupe, which makes it 0.3 px, before the next proposal is framed) and
+        ``forget_last_picks`` (after a guided half pick is started, a loupe click completes it).
     loupes : callable
-        ``loupes()`` -> the app's loupes (``frame_ba(key, row, col)``,
-        ``frame_camera(u, v, cov_px2=None)``) or None.
-    ba_key : str
-        The BA image the BA loupe shows.
-    auto_gate : AutoGate, optional
-        The auto-accept gate (default: the strict one of :mod:`calib_core.guide.auto_accept`);
-        the attribute :attr:`auto_gate` may be changed later.
-    click_source : callable, optional
-        ``click_source(pick_id)`` -> ``"loupe"`` or ``"full"``: where the
-        camera click that last set that pick's pixel landed (None: unknown).
-        A guided pair clicked on the full image gets the default precision
-        and waits for a refining click in the camera loupe (which makes it
-        0.3 px again) before the next proposal is framed.
-    on_start : callable, optional
-        Called after a guided half pick is started (the app forgets which
-        full-image click a loupe click would refine: the loupe click now
-        completes the new pick).
-    solve_quality : callable, optional
-        ``solve_quality()`` -> ``(pairs solved, status, reasons)`` of the live
-        solve shown (:class:`calib_core.solve.quality.Quality`), or None.
-    order : float, optional
-        Position of the folder in the control panel.
-    shots : callable, optional
-        ``shots()`` -> ``(depths, images, shown shot)`` of every shot of a session of several (else None).
+        ``loupes()`` -> the app's loupes (``frame_ba(key, row, col)``, ``frame_camera(u, v, cov_px2=None)``).
+    on_status : callable
+        ``on_status(guiding, lines, actions=...)``: the guided line of the pair bar, and the buttons it repeats.
     """
 
-    def __init__(self, gui: Any, state: AnnotationState, depth: Any, camera: Any, image: np.ndarray, *,
-                 guard: Callable, post: Callable[[Callable[[], None]], None],
-                 initial_T: Callable[[], np.ndarray | None] = lambda: None,
-                 loupes: Callable[[], Any] = lambda: None, ba_key: str = "horizontal",
-                 order: float | None = None, auto_gate: AutoGate | None = None,
-                 click_source: Callable[[int], str | None] = lambda pick_id: None,
-                 on_start: Callable[[], None] = lambda: None,
-                 solve_quality: Callable[[], tuple | None] = lambda: None,
-                 shots: Callable[[], Any] | None = None, on_status: Callable | None = None) -> None:
-        self._init_shots(shots)
-        self.state, self.depth, self.camera, self.image = state, depth, camera, image
-        self._solve_quality, self._on_status = solve_quality, on_status or (lambda *status, **actions: None)  # pair bar
+    def __init__(self, app: Any, *, loupes: Callable[[], Any], on_status: Callable) -> None:
+        self._init_shots(None if len(app.shot_scenes) < 2 else lambda: (
+            [sc.depth for sc in app.shot_scenes], [sc.image for sc in app.shot_scenes], app.active_shot))
+        self.state, self.depth, self.camera, self.image = app.state, app.depth, app.camera, app.image
+        self._solve_quality, self._on_status = (lambda: live_quality(app)), on_status  # the live verdict; pair bar
         self._job_quality: tuple | None = None  # (pairs, status, reasons) of the guide's own solve, last job
         self._reason: str | None = None  # why the last proposals are empty
         #: The screen of the proposals; its 3-sigma limit follows the camera loupe (:func:`max_ellipse_px_for`).
-        self.screen = ProposalScreen(max_ellipse_px=max_ellipse_px_for(camera.width, camera.height))
-        self._post, self._initial_T, self._loupes, self._ba_key = post, initial_T, loupes, ba_key
-        self._on_start, self._click_source = on_start, click_source
+        self.screen = ProposalScreen(max_ellipse_px=max_ellipse_px_for(app.camera.width, app.camera.height))
+        self._post, self._loupes, self._ba_key = app.post, loupes, app.ba_keys[0]
+        self._initial_T = lambda: app.initial_T_camera_lidar  # the imported rough pose, or None
+        self._on_start, self._click_source = app.forget_last_picks, app.camera_click_source
         self._watch: list | None = None  # [id, pixel seen] of the guided pick started last
         self._refine: int | None = None  # a guided pick clicked on the full image, not yet refined in the loupe
         self._reclick: int | None = None  # the rough pair selected for a re-click
@@ -133,7 +71,7 @@ class GuidePanel(GuideShotsMixin):
         self._hands_off = False  # the next start follows an accepted re-click: a re-click then waits for Next pair
         self._moved_on: str | None = None  # what the last Next pair or Cancel pair skipped, shown once
         self._reclick_of: dict[tuple[int, int], int] = {}  # cell -> pick id of the re-click proposals
-        self.auto_gate = auto_gate if auto_gate is not None else AutoGate()
+        self.auto_gate = AutoGate()  #: the auto-accept gate (the strict one of calib_core.guide.auto_accept)
         self._auto_tried: set[tuple[int, int]] = set()  # cells auto-accepted once: never again (an undo sticks)
         self._lock = threading.RLock()
         self._session: GuidedSession | None = None  # only touched on the worker thread
@@ -150,7 +88,8 @@ class GuidePanel(GuideShotsMixin):
         self._guided_side = 0.0  # the camera loupe's side (px) during this guided session: never shrinks
         self._callbacks: dict[str, Callable] = {}
 
-        folder = gui.add_folder("Guided picking", **({} if order is None else {"order": order}))
+        gui, guard = app.server.gui, app.guard
+        folder = gui.add_folder("Guided picking", order=app.pairs_folder.order + 0.5)
         with folder:
             # The buttons come first: the status text below them changes height with every proposal, and
             # buttons under it would jump between a person's look and their click (by-eye trial, issue 20).
@@ -167,8 +106,8 @@ class GuidePanel(GuideShotsMixin):
             self._cb_auto.on_update(self._callbacks["auto"])
             self._md = gui.add_markdown("")
         self._worker = LiveSolver(self._job, self._on_done, name="ba-calib-guide")
-        state.subscribe(self._on_state_change)
-        self._on_state_change(state)
+        app.state.subscribe(self._on_state_change)
+        self._on_state_change(app.state)
 
     # ---------------------------------------------------------------- reading
     @property
@@ -484,16 +423,3 @@ class GuidePanel(GuideShotsMixin):
                         actions={k: self._callbacks[k] for k in BUTTONS[1:]} if shown else None)
         lines.append(pair_counts_line(self.state.complete_picks()))
         self._md.content = "  \n".join(lines)
-
-
-def attach_guide_panel(app: Any, *, loupes: Callable[[], Any], on_status: Callable) -> GuidePanel:
-    """The panel wired to a :class:`app.server.CalibrationApp` (the composition root's one line for it); ``loupes``
-    and ``on_status`` are :class:`GuidePanel`'s (the root passes them: a panel never reaches into a sibling)."""
-    return GuidePanel(app.server.gui, app.state, app.depth, app.camera, app.image, guard=app.guard, post=app.post,
-                      initial_T=lambda: getattr(app, "initial_T_camera_lidar", None),
-                      loupes=loupes, ba_key=app.ba_keys[0],
-                      order=app.pairs_folder.order + 0.5,
-                      click_source=app.camera_click_source, on_start=app.forget_last_picks,
-                      solve_quality=lambda: live_quality(app), on_status=on_status,
-                      shots=None if len(app.shot_scenes) < 2 else lambda: (
-                          [sc.depth for sc in app.shot_scenes], [sc.image for sc in app.shot_scenes], app.active_shot))

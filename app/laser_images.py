@@ -18,11 +18,7 @@ from .view_settings import AS_CLICKED
 
 
 class LaserImages:
-    """The laser images of one :class:`app.server.CalibrationApp` as shown (``app.laser_images``).
-
-    Public: :meth:`ba_display`, :meth:`ba_title`, :meth:`loupe_image`, :meth:`loupe_sources`, :attr:`loupe_source`,
-    :meth:`last_pane_sources`, :attr:`last_pane_source` and :meth:`recontrast` (after a contrast change).
-    """
+    """The laser images of one :class:`app.server.CalibrationApp` as shown (``app.laser_images``)."""
 
     def __init__(self, app: Any) -> None:
         self.app = app

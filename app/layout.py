@@ -1,29 +1,15 @@
 """Where the 2-D annotation images sit in the viser scene, and click geometry.
 
-The annotation view is a flat arrangement of scene images in the world plane
-``z = 0``, looked at from ``-z`` (camera looking along ``+z`` with up ``-y``),
-so that world ``+x`` is screen-right and world ``+y`` is screen-down, like
-image coordinates.  A viser scene image lies in its node's local XY plane,
-centred on the node, ``+x`` image-right and ``+y`` image-down.
+The annotation view is a flat arrangement of scene images in the world plane ``z = 0``, looked at from ``-z``
+(camera looking along ``+z`` with up ``-y``), so that world ``+x`` is screen-right and world ``+y`` is screen-down,
+like image coordinates.  A viser scene image lies in its node's local XY plane, centred on the node, ``+x``
+image-right and ``+y`` image-down.  The camera image (raw or panorama, :data:`CAMERA_WIDTH` wide) is on top, the
+camera-view render below it, then the BA images; the loupes in a column on the right.
 
-Layout (world units)::
-
-    +---------------------------------------+
-    |      camera image (raw or panorama)    |   width CAMERA_WIDTH
-    +-------------------+-------------------+
-    | BA horizontal     | BA vertical       |
-    +-------------------+-------------------+
-    | BA +45 deg        | BA -45 deg        |
-    +-------------------+-------------------+
-
-The BA images are arranged 2 x 2 as above, stacked 4 x 1 when they are very
-wide (a whole 360 deg lidar scan), or side by side 1 x 4 when they are tall
-(a narrow column window): whichever gives the biggest cells once the block is
-fitted into a typical browser view.  A BA slot counts pixels in *cells* of the
-shown window; a cell may be drawn taller than wide (``cell_aspect``).
-
-This is display geometry only (pixels <-> scene positions); no calibration
-maths lives here.
+The BA images are arranged 2 x 2, stacked 4 x 1 when they are very wide (a whole 360 deg lidar scan), or side by
+side 1 x 4 when they are tall (a narrow column window): whichever gives the biggest cells once the block is fitted
+into a typical browser view.  A BA slot counts pixels in *cells* of the shown window; a cell may be drawn taller
+than wide (``cell_aspect``).  Display geometry only (pixels <-> scene positions); no calibration maths.
 """
 
 from __future__ import annotations
@@ -186,36 +172,25 @@ def annotation_layout(
 RENDER_KEY = "render"
 
 
-def with_render_slot(slots: dict[str, ImageSlot], view_key: str = "raw") -> dict[str, ImageSlot]:
-    """``slots`` with the render's slot right below the camera views, the same size as the camera view shown
-    (``view_key``: ``raw`` or ``panorama``); the images below the camera views (the BA panes) move down to make room.
+def layout_with_render(camera_sizes: dict[str, tuple[int, int]], view_key: str, ba_size: tuple[int, int],
+                       ba_keys: tuple[str, ...], cell_aspect: float) -> dict[str, ImageSlot]:
+    """The page layout (:func:`annotation_layout`) with the render's slot right below camera view ``view_key``
+    (``raw`` or ``panorama``), the same size; the BA panes move down to make room, their grid chosen for the whole
+    column (camera view, render, BA panes).
 
     Stacked rather than side by side: with the loupe column on the right, the camera image gets more screen
     for any image wider than about 3:4, and a corner in the photo lies straight above the same corner in the render.
     """
-    raw = slots[view_key]
-    camera_keys = [k for k, s in slots.items() if s.center[1] < 0.0]  # the camera views sit above y = 0
-    shift = raw.render_height + GAP + LABEL_HEIGHT
-    out = {}
-    for key, s in slots.items():
-        if key in camera_keys:
-            out[key] = s
-        else:
-            out[key] = replace(s, center=(s.center[0], s.center[1] + shift, s.center[2]))
-    out[RENDER_KEY] = ImageSlot(RENDER_KEY, raw.width_px, raw.height_px,
-                                (raw.center[0], LABEL_HEIGHT + raw.render_height / 2, 0.0), raw.render_width,
-                                raw.render_height)
-    return out
-
-
-def layout_with_render(camera_sizes: dict[str, tuple[int, int]], view_key: str, ba_size: tuple[int, int],
-                       ba_keys: tuple[str, ...], cell_aspect: float) -> dict[str, ImageSlot]:
-    """The page layout (:func:`app.layout.annotation_layout`) with the render below camera view ``view_key``; the
-    BA grid is chosen for the whole column (camera view, render, BA panes)."""
     view_w, view_h = camera_sizes[view_key]
     render_band = CAMERA_WIDTH * view_h / view_w + GAP + LABEL_HEIGHT
     slots = annotation_layout(camera_sizes, ba_size, ba_keys, cell_aspect=cell_aspect, above_height=render_band)
-    return with_render_slot(slots, view_key)
+    view = slots[view_key]
+    out = {key: s if s.center[1] < 0.0 else replace(s, center=(s.center[0], s.center[1] + render_band, s.center[2]))
+           for key, s in slots.items()}  # the camera views sit above y = 0 and stay
+    out[RENDER_KEY] = ImageSlot(RENDER_KEY, view.width_px, view.height_px,
+                                (view.center[0], LABEL_HEIGHT + view.render_height / 2, 0.0), view.render_width,
+                                view.render_height)
+    return out
 
 
 @dataclass(frozen=True)

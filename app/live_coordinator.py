@@ -42,17 +42,8 @@ class _CheckShots:
 
 
 class LiveSolveCoordinator:
-    """The live solve of one :class:`app.server.CalibrationApp` (``app.live``): it owns the solve shown.
-
-    Public: :attr:`bundle` (the last good solve), :attr:`solve_error`,
-    :attr:`solving`, :meth:`subscribe_facing` (the scan columns the camera sees,
-    :attr:`app.pose_source.PoseSource.facing`, were recomputed),
-    :meth:`on_state_change` (subscribed to the state), :meth:`subscribe` and
-    :meth:`subscribe_solved` and :meth:`subscribe_cloud` (its events), :meth:`show_3d` (whether a tab shows the
-    3-D pane), :meth:`wait_idle`,
-    :meth:`last_click_to_update`.  :meth:`start` starts its two worker
-    threads, :meth:`stop` ends them.
-    """
+    """The live solve of one :class:`app.server.CalibrationApp` (``app.live``): it owns the solve shown and its
+    two worker threads (:meth:`start`, :meth:`stop`)."""
 
     def __init__(self, app: Any) -> None:
         self.app = app
@@ -202,10 +193,6 @@ class LiveSolveCoordinator:
         """Wait until the solve of ``job`` (or a newer one) has been shown; False on timeout."""
         with self._shown:
             return self._shown.wait_for(lambda: self._shown_job >= job or self._stopped, timeout) and not self._stopped
-
-    def show_panels(self) -> None:
-        """Redraw what the solve shows (:meth:`redraw`; the name app/pose_source.py calls)."""
-        self.redraw()
 
     def _solve_job(self, payload: Any) -> SolveBundle:
         """The solve and what the error display and the 2-D overlays need (the cloud comes later)."""

@@ -11,6 +11,7 @@ import numpy as np
 
 from calib_core.predict import ellipse_outline
 
+from .ba_view import crop_texture
 from .loupe_marks import tick_segments
 
 #: The camera loupe's crop side for a 640 px wide image (original-image px, zoom 1).
@@ -56,50 +57,35 @@ class CameraCrop:
     cov_px2: tuple | None  # 2x2 covariance of the framed point (pixels^2), drawn as a 3-sigma ellipse
 
 
+def crop_around(u: float, v: float, n: int, cov_px2: tuple | None = None) -> CameraCrop:
+    """Original-image pixels ``n`` on a side around ``(u, v)`` (the camera loupe's view, or the laser loupe's while
+    it shows the render; ``cov_px2``: the ellipse drawn, :class:`CameraCrop`)."""
+    return CameraCrop(int(round(u)) - n // 2, int(round(v)) - n // 2, int(n), (float(u), float(v)), cov_px2)
+
+
 def render_crop_of(camera_crop: CameraCrop, n: int | None) -> CameraCrop:
     """The laser loupe's view while it shows the camera-view render: original-image pixels around
     ``camera_crop``'s centre, ``n`` on a side (None: the camera loupe's side); no ellipse."""
     if n is None or n == camera_crop.n:
         return CameraCrop(camera_crop.u0, camera_crop.v0, camera_crop.n, camera_crop.center, None)
-    u, v = camera_crop.center
-    return CameraCrop(int(round(u)) - n // 2, int(round(v)) - n // 2, int(n), (float(u), float(v)), None)
-
-
-def render_crop_around(u: float, v: float, n: int) -> CameraCrop:
-    """The laser loupe's view while it is held on a pair's laser end (:meth:`app.loupes.Loupes.anchor_render`):
-    original-image pixels ``n`` on a side around ``(u, v)``; no ellipse."""
-    return CameraCrop(int(round(u)) - n // 2, int(round(v)) - n // 2, int(n), (float(u), float(v)), None)
+    return crop_around(*camera_crop.center, n)
 
 
 def camera_crop_texture(image: np.ndarray, c: CameraCrop, gamma: float, texels: int, pad: int) -> np.ndarray:
     """The camera loupe's texture: ``image``'s pixels of crop ``c`` (gray ``pad`` outside the image), their
     shadows lifted by ``gamma`` (``255 * (x / 255) ** (1 / gamma)``; 1: as they are), enlarged by nearest neighbour
     to about ``texels`` texels a side."""
-    h, w = image.shape[:2]
-    us, vs = c.u0 + np.arange(c.n), c.v0 + np.arange(c.n)
-    ok = ((vs >= 0) & (vs < h))[:, None] & ((us >= 0) & (us < w))[None, :]
-    crop = image[np.clip(vs, 0, h - 1)][:, np.clip(us, 0, w - 1)]
-    if gamma != 1.0:
-        crop = np.round(255.0 * (np.arange(256) / 255.0) ** (1.0 / gamma)).astype(np.uint8)[crop]
-    crop = np.where(ok[..., None], crop, np.uint8(pad)).astype(np.uint8)
-    k = max(1, texels // c.n)
-    return np.repeat(np.repeat(crop, k, axis=0), k, axis=1)
+    lut = None if gamma == 1.0 else np.round(255.0 * (np.arange(256) / 255.0) ** (1.0 / gamma)).astype(np.uint8)
+    return crop_texture(image, c.v0 + np.arange(c.n), c.u0 + np.arange(c.n), pad, texels // c.n, lut)
 
 
 def ba_crop_texture(gray: np.ndarray, c: BaCrop, wrap_cols: bool, texels: int, pad: int) -> np.ndarray:
     """The BA loupe's texture: the cells of crop ``c`` of laser image ``gray`` (rows x columns; columns wrap
     around a 360-degree scan with ``wrap_cols``; gray ``pad`` outside), enlarged by nearest neighbour."""
-    n_rows, n_cols = gray.shape
-    rows = c.row0 + np.arange(c.n_rows)
     cols = c.col0 + np.arange(c.n_cols)
     if wrap_cols:
-        cols %= n_cols
-    ok_r = (rows >= 0) & (rows < n_rows)
-    ok_c = (cols >= 0) & (cols < n_cols)
-    crop = gray[np.clip(rows, 0, n_rows - 1)][:, np.clip(cols, 0, n_cols - 1)]
-    crop = np.where(ok_r[:, None] & ok_c[None, :], crop, np.uint8(pad)).astype(np.uint8)
-    k = max(1, texels // max(c.n_rows, c.n_cols))
-    return np.repeat(np.repeat(crop, k, axis=0), k, axis=1)
+        cols %= gray.shape[1]
+    return crop_texture(gray, c.row0 + np.arange(c.n_rows), cols, pad, texels // max(c.n_rows, c.n_cols))
 
 
 def draw_camera_centre(app: Any, s: Any, c: CameraCrop) -> None:

@@ -20,30 +20,14 @@ STEADY_MARGIN = 0.15
 
 @dataclass(frozen=True)
 class PairClick:
-    """A click on an image slot, as the pairs panel applied it.
+    """A click on an image slot, as the pairs panel applied it."""
 
-    Attributes
-    ----------
-    key : str
-        The slot clicked: a BA key, a camera view, the render (:data:`app.layout.RENDER_KEY`) or ``loupe_*``.
-    target : tuple
-        ``("ba", key, row, col)`` (scan cell) or ``("camera", u, v)`` (original camera pixel).
-    pick_id : int or None
-        The pair whose end the click made or moved; None: the state refused it (e.g. a cell with no return).
-    refines_loupes : bool
-        A click inside a loupe on the pair the loupes show: they keep their crops.
-    render_uv : (u, v) or None
-        The camera pixel of a click on the render (original pixels).
-    client_id : int or None
-        The tab that clicked (None: not from a tab).
-    """
-
-    key: str
-    target: tuple
-    pick_id: int | None
-    refines_loupes: bool = False
-    render_uv: tuple[float, float] | None = None
-    client_id: int | None = None
+    key: str  # the slot clicked: a BA key, a camera view, the render (app.layout.RENDER_KEY) or loupe_*
+    target: tuple  # ("ba", key, row, col) (scan cell) or ("camera", u, v) (original camera pixel)
+    pick_id: int | None  # the pair whose end the click made or moved; None: the state refused it
+    refines_loupes: bool = False  # a click inside a loupe on the pair the loupes show: they keep their crops
+    render_uv: tuple[float, float] | None = None  # the camera pixel (original) of a click on the render
+    client_id: int | None = None  # the tab that clicked (None: not from a tab)
 
     @property
     def on_full_image(self) -> bool:
@@ -81,10 +65,25 @@ def _has_laser(app: Any, pick_id: int) -> bool:
     return any(p.id == pick_id and p.has_laser for p in app.state.picks)
 
 
+def _pick(app: Any, pick_id: int | None) -> Any:
+    return next((p for p in app.state.picks if p.id == pick_id), None)
+
+
+def _end(app: Any, pick: Any, kind: str) -> tuple | None:
+    """Pair ``pick``'s laser cell ``(row, col)`` (``kind`` "ba") or camera pixel ``(u, v)`` ("camera"); an end not
+    clicked yet: its prediction under the app's pose from the other end (None: neither)."""
+    poses = app.pose_source
+    if kind == "ba":
+        return pick.laser_rc if pick.laser_rc is not None else (
+            None if pick.pixel is None else poses.predict_cell(*pick.pixel))
+    return pick.pixel if pick.pixel is not None else (
+        None if pick.laser_rc is None else poses.predict_pixel(*pick.laser_rc))
+
+
 def _hold_render_loupe(loupes: Any, app: Any, pick_id: int | None) -> None:
     """While the laser loupe shows the render, hold it on pair ``pick_id``'s laser end as it shows it now (a refit
     of the rough pose then leaves that end where it is in the loupe: run 7)."""
-    pick = next((p for p in app.state.picks if p.id == pick_id), None)
+    pick = _pick(app, pick_id)
     if loupes.shows_render:
         loupes.anchor_render(None if pick is None else pick.laser_rc)
 
@@ -93,18 +92,15 @@ def _keep_other_end_shown(loupes: Any, app: Any, clicked: str, pick_id: int) -> 
     """After a refining click in loupe ``clicked``: frame the other loupe on pick ``pick_id``'s other end (or
     its prediction) only if that is not inside the middle of what it shows (a margin of
     :data:`STEADY_MARGIN` of its side)."""
-    poses = app.pose_source
-    pick = next((p for p in app.state.picks if p.id == pick_id), None)
+    pick = _pick(app, pick_id)
     if pick is None or (clicked == "camera" and loupes.shows_render):
         return  # the laser loupe shows the camera loupe's crop of the render: both stay
     if clicked == "ba":
-        uv = pick.pixel if pick.pixel is not None else (
-            None if pick.laser_rc is None else poses.predict_pixel(*pick.laser_rc))
+        uv = _end(app, pick, "camera")
         if uv is not None and not _well_inside(loupes, "camera", (uv[0], uv[1])):
             loupes.frame_camera(*uv)
         return
-    cell = pick.laser_rc if pick.laser_rc is not None else (
-        None if pick.pixel is None else poses.predict_cell(*pick.pixel))
+    cell = _end(app, pick, "ba")
     if cell is not None and not _well_inside(loupes, "ba", (cell[1], cell[0])):
         loupes.frame_ba(loupes.ba_crop.key, *cell)
 
@@ -124,7 +120,7 @@ def _frame(loupes: Any, app: Any, target: tuple, pick_id: int, recentre: bool,
            render_uv: tuple[float, float] | None = None) -> None:
     """After a click: the clicked loupe on the click, the other loupe on the pair's other end or its prediction
     (a click on the render: the camera loupe on the clicked pixel, the laser loupe showing the same crop)."""
-    pick = next((p for p in app.state.picks if p.id == pick_id), None)
+    pick = _pick(app, pick_id)
     if target[0] == "ba":
         if recentre:
             loupes.frame_ba(*target[1:])
@@ -154,13 +150,10 @@ def _frame(loupes: Any, app: Any, target: tuple, pick_id: int, recentre: bool,
 def frame_pair(loupes: Any, app: Any, pick_id: int) -> None:
     """Frame both ``loupes`` on pair ``pick_id``'s two ends (an end not clicked yet: its prediction under the
     app's pose), e.g. when it is selected (run 6: selecting a pair left the loupes where they were)."""
-    pick = next((p for p in app.state.picks if p.id == pick_id), None)
+    pick = _pick(app, pick_id)
     if pick is None:
         return
-    cell = pick.laser_rc if pick.laser_rc is not None else (
-        None if pick.pixel is None else app.pose_source.predict_cell(*pick.pixel))
-    uv = pick.pixel if pick.pixel is not None else (
-        None if pick.laser_rc is None else app.pose_source.predict_pixel(*pick.laser_rc))
+    cell, uv = _end(app, pick, "ba"), _end(app, pick, "camera")
     if cell is not None:
         loupes.frame_ba(loupes.ba_crop.key, *cell)
     if uv is not None:

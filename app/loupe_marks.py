@@ -17,7 +17,7 @@ import numpy as np
 
 from calib_core.overlays import project_lidar_points
 
-from .ui_common import marker_segments
+from .ui_common import marker_segments, segment_colours
 
 #: The longest loupe title, characters.  The titles' font is viser's 12 CSS px screen em x 0.9 (about 6 px a
 #: character, 7 at most); at 1400 x 900 a loupe is about 320 (KITTI) to 410 (PJLab) screen px wide
@@ -60,10 +60,6 @@ def tick_segments(centres: np.ndarray, radius: float) -> np.ndarray:
     return (c[:, None, None, :] + ticks[None]).reshape(-1, 2, 3)
 
 
-def _colours(cols: np.ndarray, n_segments: int, n_marks: int) -> np.ndarray:
-    return np.repeat(cols, n_segments // max(n_marks, 1) * 2, axis=0).reshape(-1, 2, 3)
-
-
 def draw_camera_marks(app: Any, slot: Any, crop: Any, picks: list, pose: np.ndarray | None) -> None:
     """The camera loupe's marks: each pair's clicked pixel as a cross and its laser cell projected under ``pose``
     as a ring, both in the pair's colour (only those the loupe shows)."""
@@ -74,8 +70,7 @@ def draw_camera_marks(app: Any, slot: Any, crop: Any, picks: list, pose: np.ndar
     cols = np.array([p.color for p in clicked], np.uint8).reshape(-1, 3)
     inside = np.array([slot.contains(p) for p in px], bool)
     segs = cross_segments(slot.world_from_pixel(px[inside], z_offset=-0.01), r)
-    nodes.lines("/annot/loupe/camera_marks", segs, _colours(cols[inside], len(segs), int(inside.sum())),
-                thickness=2.5)
+    nodes.lines("/annot/loupe/camera_marks", segs, segment_colours(cols[inside], len(segs)), thickness=2.5)
     cells = [p for p in picks if p.laser_rc is not None]
     segs, seg_cols = np.empty((0, 2, 3)), np.empty((0, 2, 3), np.uint8)
     if pose is not None and cells:
@@ -83,8 +78,7 @@ def draw_camera_marks(app: Any, slot: Any, crop: Any, picks: list, pose: np.ndar
         xy = np.asarray(uv, np.float64).reshape(-1, 2) - [crop.u0, crop.v0]
         keep = np.asarray(ok, bool) & np.array([slot.contains(p) for p in xy], bool)
         segs = marker_segments(slot.world_from_pixel(xy[keep], z_offset=-0.009), 0.8 * r, ticks=False)
-        seg_cols = _colours(np.array([p.color for p in cells], np.uint8).reshape(-1, 3)[keep], len(segs),
-                            int(keep.sum()))
+        seg_cols = segment_colours(np.array([p.color for p in cells], np.uint8).reshape(-1, 3)[keep], len(segs))
     nodes.lines("/annot/loupe/camera_laser", segs, seg_cols, thickness=2.0)
 
 

@@ -14,6 +14,8 @@ from typing import Any
 
 import numpy as np
 
+from .page_builder import run_script
+
 #: Run once per tab: a wheel over a loupe rectangle (``window.__baLoupeRects``: kind -> [x0, y0, x1, y1] as
 #: fractions of the canvas) presses that loupe's zoom button, at most one press per 150 ms, and never reaches the
 #: view's camera controls.  A fixed string: no user text.
@@ -73,11 +75,5 @@ def canvas_rects(camera: Any, bounds: dict[str, tuple[float, float, float, float
 
 def send_loupe_rects(client: Any, rects: dict[str, list[float]]) -> bool:
     """Tell tab ``client`` where the loupes lie on its canvas (:func:`canvas_rects`); False if this viser cannot."""
-    try:
-        from viser._messages import RunJavascriptMessage  # how viser itself sends plotly.js
-
-        source = f"window.__baLoupeRects = {json.dumps(rects)};"  # numbers only
-        client._websock_connection.queue_message(RunJavascriptMessage(source=source))
-    except (ImportError, AttributeError, TypeError):
-        return False
-    return True
+    source = f"window.__baLoupeRects = {json.dumps(rects)};"  # numbers only
+    return run_script(getattr(client, "_websock_connection", None), source)

@@ -1,12 +1,10 @@
-"""The two loupes: magnified, clickable crops of one BA image and of the original camera image.
+"""The two loupes: magnified, clickable crops of one BA image and of the original camera image (how they are used:
+docs/app.md, "Loupes").
 
-They sit right of the camera and BA images (:func:`app.layout.loupe_areas`), so the whole page and both loupes
-are visible at once.  Each is a viser scene image whose texture is a crop enlarged by nearest neighbour (crisp
-cells and pixels).  A click in a loupe maps back exactly: sub-pixel for the camera (the loupe shows the *original*
-image, whatever the main view shows), a whole scan cell for the BA loupe.
-
-They follow each click (:mod:`app.loupe_framing`: to the click and the other end's prediction); the zoom steps
-change how much they show around the same centre.  Display plumbing only (predictions: :mod:`calib_core.predict`).
+Each is a viser scene image whose texture is a crop enlarged by nearest neighbour (crisp cells and pixels).  A click
+in a loupe maps back exactly: sub-pixel for the camera (the loupe shows the *original* image, whatever the main view
+shows), a whole scan cell for the BA loupe.  They follow each click (:mod:`app.loupe_framing`).  Display plumbing
+only (predictions: :mod:`calib_core.predict`).
 """
 
 from __future__ import annotations
@@ -20,11 +18,11 @@ from calib_core.errors import CalibError
 
 from .layout import ImageSlot, LoupeArea, bounds_of, loupe_areas
 from .loupe_crops import (BaCrop, CameraCrop, ba_crop_texture, camera_crop_texture, default_camera_crop_px,
-                          draw_ba_outline, draw_camera_centre, node_name, render_crop_around, render_crop_of, slot_key)
+                          draw_ba_outline, draw_camera_centre, node_name, crop_around, render_crop_of, slot_key)
 from .loupe_framing import PairClick, follow_click, frame_pair
 from .loupe_marks import LEGEND, ba_title, camera_title, draw_camera_marks, draw_camera_outline
 from .shown_render import cell_at_pixel, loupe_texture, loupe_title, pixel_of_cells
-from .ui_common import marker_segments
+from .ui_common import marker_segments, segment_colours
 
 #: Columns the BA loupe shows at zoom 1 (the camera loupe's crop side: :data:`app.loupe_crops.CAMERA_LOUPE_PX`).
 BA_LOUPE_COLUMNS = 32
@@ -44,10 +42,6 @@ class Loupes:
     """The BA loupe and the camera loupe of one :class:`app.server.CalibrationApp`.
 
     It owns the "Loupes" folder (the zoom buttons; the display panel adds its loupe widgets there).
-    Public: :meth:`frame_ba`, :meth:`frame_camera`, :meth:`zoom`, :meth:`show_click`,
-    :meth:`relayout`, :attr:`ba_crop`, :attr:`camera_crop`, :meth:`slot`,
-    :meth:`target_at` (loupe pixel -> cell or original pixel) and
-    :meth:`display_of` (the inverse).
     """
 
     def __init__(self, app: Any, add_controls: Callable[[Any], None] = lambda gui: None) -> None:
@@ -60,7 +54,7 @@ class Loupes:
         self._cam_n = default_camera_crop_px(cam_w, cam_h)
         self._cam_n_chosen = self._cam_n  # the side the zoom buttons chose; framing may show more, never less
         self.ba_crop = self._make_ba_crop(app.ba_keys[0], n_rows // 2, n_cols // 2)
-        self.camera_crop = self._make_camera_crop((cam_w - 1) / 2.0, (cam_h - 1) / 2.0, None)
+        self.camera_crop = crop_around((cam_w - 1) / 2.0, (cam_h - 1) / 2.0, self._cam_n)
         self._slots: dict[str, ImageSlot] = {}
         self._marks_of: dict[str, tuple] = {}  # kind -> inputs its marks were last drawn from
         self._framing_of: dict[str, tuple] = {}  # kind -> inputs its outline (and centre marker) were drawn from
@@ -157,7 +151,7 @@ class Loupes:
             self._render_anchor = None  # the render loupe follows the camera loupe again (until anchor_render)
             side = self._cam_n_chosen if min_side_px is None else max(self._cam_n_chosen, math.ceil(min_side_px))
             self._cam_n = int(min(side, CAMERA_PX_LIMITS[1]))
-            crop = self._make_camera_crop(float(u), float(v), cov)
+            crop = crop_around(float(u), float(v), self._cam_n, cov)
             if crop != self.camera_crop:
                 self.camera_crop = crop
                 self._show("camera")
@@ -175,12 +169,8 @@ class Loupes:
         if what == "render":
             self._render = shown
             if self.shows_render:
-                self.refresh_ba()
-
-    def refresh_ba(self) -> None:
-        """Re-send the laser loupe (e.g. a new render arrived)."""
-        with self.app.ui_lock:
-            self._show("ba")
+                with self.app.ui_lock:
+                    self._show("ba")
 
     @property
     def has_render(self) -> bool:  # is there a render the laser loupe can show?
@@ -199,7 +189,7 @@ class Loupes:
             uv = pixel_of_cells(self._render, self.app.camera, self.app.depth, np.array([anchor[0]]))[0]
             if np.isfinite(uv).all():
                 n = self.camera_crop.n if self._render_n is None else self._render_n
-                return render_crop_around(uv[0] + anchor[1][0], uv[1] + anchor[1][1], n)
+                return crop_around(uv[0] + anchor[1][0], uv[1] + anchor[1][1], n)
         return render_crop_of(self.camera_crop, self._render_n)
 
     def anchor_render(self, cell: tuple[int, int] | None) -> None:
@@ -231,7 +221,7 @@ class Loupes:
                 lo, hi = CAMERA_PX_LIMITS
                 self._cam_n = self._cam_n_chosen = int(min(max(round(self._cam_n / factor), lo), hi))
                 c = self.camera_crop
-                self.camera_crop = self._make_camera_crop(*c.center, c.cov_px2)
+                self.camera_crop = crop_around(*c.center, self._cam_n, c.cov_px2)
             self._show(kind)
 
     def on_pair_click(self, click: PairClick) -> None:
@@ -382,8 +372,8 @@ class Loupes:
         self._marks_of[kind] = inputs
         if kind == "ba":
             self._draw_ba_marks(list(picks))
-        else:
-            self._draw_camera_marks(list(picks))
+        else:  # clicks as crosses, the pairs' laser points projected as rings (app.loupe_marks)
+            draw_camera_marks(app, self._slots["camera"], self.camera_crop, list(picks), app.pose())
         # The outline on the main image (and the camera loupe's centre marker) follow the crop, not the picks.
         framing = (crop, self._slots[kind], main, app.ba_window, hidden)
         if self._framing_of.get(kind) != framing:
@@ -416,12 +406,7 @@ class Loupes:
         inside = np.array([s.contains(p) for p in xy], bool)
         segs = marker_segments(s.world_from_pixel(xy[inside], z_offset=-0.01), radius, cell_half_size=cell,
                                ticks=True)
-        seg_cols = np.repeat(cols[inside], len(segs) // max(int(inside.sum()), 1) * 2, axis=0).reshape(-1, 2, 3)
-        nodes.lines("/annot/loupe/ba_marks", segs, seg_cols, thickness=2.5)
-
-    def _draw_camera_marks(self, picks: list) -> None:
-        # Camera loupe: clicks as crosses, the pairs' laser points projected as rings (app.loupe_marks).
-        draw_camera_marks(self.app, self._slots["camera"], self.camera_crop, picks, self.app.pose())
+        nodes.lines("/annot/loupe/ba_marks", segs, segment_colours(cols[inside], len(segs)), thickness=2.5)
 
     # ------------------------------------------------------------------ internals
     def _make_ba_crop(self, key: str, row: int, col: int) -> BaCrop:
@@ -430,10 +415,6 @@ class Loupes:
         aspect = self.app.ba_cell_aspect
         n_rows = int(min(max(round(n_cols / aspect), 1), n_rows_scan))
         return BaCrop(key, int(row) - n_rows // 2, int(col) - n_cols // 2, n_rows, n_cols, (int(row), int(col)))
-
-    def _make_camera_crop(self, u: float, v: float, cov) -> CameraCrop:
-        n = self._cam_n
-        return CameraCrop(int(round(u)) - n // 2, int(round(v)) - n // 2, n, (float(u), float(v)), cov)
 
     def _ba_texture(self) -> np.ndarray:
         if self._render_on():

@@ -5,7 +5,6 @@
 from __future__ import annotations
 
 import contextlib
-import math
 from typing import Any, Callable, Iterator
 
 import numpy as np
@@ -13,7 +12,8 @@ import numpy as np
 
 from .layout import ImageSlot
 from .state import Pick
-from .ui_common import LABEL_EM_SCREEN_PX, MARKER_SIZE, PICK_RADII, RING_CELLS, RING_MIN_RADIUS, EDGE_MIN_SIZE, marker_segments
+from .ui_common import (EDGE_MIN_SIZE, LABEL_EM_SCREEN_PX, MARKER_SIZE, PICK_RADII, draw_ring_markers, marker_segments,
+                        ring_radius, units_per_screen_px)
 
 
 class OverlayDrawing:
@@ -76,9 +76,7 @@ class OverlayDrawing:
                 for other in ("raw", "panorama"):
                     if other in app.slots and other != cam_slot.key:
                         self._marker_cache.pop(other, None)
-                        for name in (f"/annot/markers/{other}/halo", f"/annot/markers/{other}/ring",
-                                     f"/annot/selected/{other}"):
-                            app.nodes.lines(name, np.empty((0, 2, 3)), (0, 0, 0))
+                        draw_ring_markers(app.nodes, other, np.empty((0, 3)), np.empty((0, 3)), 1.0, [])
                 self._camera_view_drawn = cam_slot.key
             drawn = self._labels_drawn
             if labels != drawn:  # usually one slot's labels moved, or none: only those are touched
@@ -147,20 +145,11 @@ class OverlayDrawing:
         ids, uv = self.pick_ends(key) if picks else ([], np.empty((0, 2)))
         world = slot.world_from_pixel(uv, z_offset=-0.01)
         colors = np.array([picks[i].color for i in ids], np.uint8).reshape(-1, 3)
-        r = self.ring_radius(slot)
+        r = ring_radius(slot.units_per_px, slot.units_per_px_y)
         # Hollow rings with ticks pointing at the clicked spot, and on BA images the
         # outline of the picked cell: they mark the spot without hiding it.
         outline = (0.5 * slot.units_per_px, 0.5 * slot.units_per_px_y) if key in app.ba_keys else None
-        segs = marker_segments(world, r, cell_half_size=outline)
-        per = len(segs) // max(len(ids), 1)
-        seg_colors = np.repeat(colors, per * 2, axis=0).reshape(-1, 2, 3)
-        app.nodes.lines(f"/annot/markers/{key}/halo", segs + np.array([0.0, 0.0, 0.002]),
-                        np.full(seg_colors.shape, 25, np.uint8), thickness=4.5)
-        app.nodes.lines(f"/annot/markers/{key}/ring", segs, seg_colors, thickness=2.0)
-        sel = [k for k, i in enumerate(ids) if i == selected]
-        # One colour per segment of whatever the ring is made of (ticks included).
-        sel_segs = marker_segments(world[sel] + [0.0, 0.0, 0.003], 1.5 * r)
-        app.nodes.lines(f"/annot/selected/{key}", sel_segs, np.full(sel_segs.shape, 255, np.uint8), thickness=4.0)
+        draw_ring_markers(app.nodes, key, world, colors, r, [k for k, i in enumerate(ids) if i == selected], outline)
         offset = np.array([0.75 * r, -0.75 * r, -0.005])
         labels = {f"/annot/labels/{key}/{i}": (str(i), tuple(float(x) for x in w + offset)) for i, w in zip(ids, world)}
         self._marker_cache[key] = (inputs, labels)
@@ -177,7 +166,7 @@ class OverlayDrawing:
         delta = ends - np.asarray(uv, dtype=np.float64)
         d = np.hypot(delta[:, 0] * slot.units_per_px, delta[:, 1] * slot.units_per_px_y)  # world units
         k = int(np.argmin(d))
-        if d[k] <= PICK_RADII * self.ring_radius(slot):
+        if d[k] <= PICK_RADII * ring_radius(slot.units_per_px, slot.units_per_px_y):
             return ids[k]
         return self._label_under(key, uv, slot, client)
 
@@ -186,7 +175,7 @@ class OverlayDrawing:
 
         The labels keep a constant size on screen (:data:`app.ui_common.LABEL_EM_SCREEN_PX` per em); their box
         starts at the label's anchor and goes right and up the screen (world -y: the annotation camera's up)."""
-        units = _units_per_screen_px(getattr(client, "camera", None))
+        units = units_per_screen_px(getattr(client, "camera", None))
         cached = self._marker_cache.get(key)
         if units is None or cached is None or not cached[1]:
             return None
@@ -205,11 +194,6 @@ class OverlayDrawing:
         hit = np.flatnonzero(inside)
         best = hit[int(np.argmin(np.hypot(*(anchors[hit] - [x, y]).T)))]
         return int(names[best].rsplit("/", 1)[1])
-
-    @staticmethod
-    def ring_radius(slot: ImageSlot) -> float:
-        """Pick-marker ring radius on ``slot`` (world units): a few cells, never vanishingly small."""
-        return max(RING_CELLS * max(slot.units_per_px, slot.units_per_px_y), RING_MIN_RADIUS)
 
     def _draw_overlays(self, picks: dict[int, Pick], predictions: list[tuple[int, np.ndarray]]) -> None:
         """Reprojected pairs, residual lines, BA-edge points and predicted-pixel crosses on the camera view."""
@@ -282,7 +266,6 @@ class OverlayDrawing:
         return [(pid, uv[k]) for k, pid in enumerate(ids) if ok[k]]
 
 
-
 #: The widest a BA-edge dot is drawn, in photo pixels: in by-eye run 4 the dots (then squares of up to 2.9 pixels of a
 #: 1920 px photo) covered small corners once 4 pairs were solved.
 EDGE_MAX_PX = 2.0
@@ -293,14 +276,3 @@ def edge_dot_size(units_per_px: float) -> float:
     :data:`EDGE_MIN_SIZE` world units (one pixel of a 1920 px photo is too small to see in the full view) but at
     most :data:`EDGE_MAX_PX` pixels."""
     return max(units_per_px * 1.6, min(EDGE_MIN_SIZE, units_per_px * EDGE_MAX_PX))
-
-
-def _units_per_screen_px(camera: Any) -> float | None:
-    """World units per canvas pixel on the annotation plane for a tab's ``camera`` (looking along +z at it), or
-    None when it has not reported one."""
-    try:
-        dist = abs(float(camera.look_at[2]) - float(camera.position[2]))
-        units = 2.0 * dist * math.tan(float(camera.fov) / 2.0) / max(int(camera.image_height), 1)
-    except (AssertionError, AttributeError, TypeError, ValueError):
-        return None
-    return units if math.isfinite(units) and units > 0.0 else None

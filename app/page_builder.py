@@ -156,10 +156,16 @@ class PageBuilder:
 def install_page_script(server: Any, source: str) -> bool:
     """Run the fixed script ``source`` in every tab of ``server``, present and future (viser replays it to new
     tabs); False if this viser cannot (then the page works without it: e.g. Escape does nothing)."""
+    return run_script(getattr(server.gui, "_websock_interface", None), source)
+
+
+def run_script(channel: Any, source: str) -> bool:
+    """Send the fixed script ``source`` down viser message ``channel`` (the server's, or one tab's connection);
+    False if this viser cannot."""
     try:
         from viser._messages import RunJavascriptMessage  # how viser itself sends plotly.js
 
-        server.gui._websock_interface.queue_message(RunJavascriptMessage(source=source))
+        channel.queue_message(RunJavascriptMessage(source=source))
     except (ImportError, AttributeError, TypeError):
         return False
     return True

@@ -31,38 +31,18 @@ def pair_color(pick_id: int) -> tuple[int, int, int]:
 
 @dataclass(frozen=True)
 class Pick:
-    """One pair, possibly incomplete.
+    """One pair, possibly incomplete."""
 
-    Attributes
-    ----------
-    id : int
-        Stable number shown on the markers (1, 2, ...); a new pick takes the one above the highest existing
-        (:func:`next_number`).
-    laser_rc : (row, col) or None
-        Depth-matrix cell, 0-based.
-    laser_xyz : (x, y, z) or None
-        Laser point in the lidar frame, metres (imported pairs only).
-    pixel : (u, v) or None
-        Pixel in the original camera image, (column, row), top-left centre 0.
-    source : {"clicked", "guided", "auto"}
-        How the pair was made (:data:`calib_core.pairs.PAIR_SOURCES`): an
-        unguided click, a click on a guided proposal, or accepted without a click.
-    precision_px : float or None
-        1-sigma of the pixel in px, when known (None: the solve's default).
-    check : bool
-        A check pair: left out of the fit, its error reported apart (Verify panel).
-    shot : int
-        The shot (scan and photo) the pick belongs to, 0-based (:class:`ShotFiles`).
-    """
-
-    id: int
-    laser_rc: tuple[int, int] | None = None
-    laser_xyz: tuple[float, float, float] | None = None
-    pixel: tuple[float, float] | None = None
+    id: int  # the number on the markers (1, 2, ...); a new pick takes the one above the highest (next_number)
+    laser_rc: tuple[int, int] | None = None  # depth-matrix cell (row, col), 0-based
+    laser_xyz: tuple[float, float, float] | None = None  # laser point, lidar frame, metres (imported pairs only)
+    pixel: tuple[float, float] | None = None  # (u, v) in the original camera image, top-left pixel's centre 0
+    # How the pair was made (calib_core.pairs.PAIR_SOURCES): "clicked" (unguided), "guided" (a click on a guided
+    # proposal) or "auto" (accepted without a click).
     source: str = "clicked"
-    precision_px: float | None = None
-    check: bool = False
-    shot: int = 0
+    precision_px: float | None = None  # 1-sigma of the pixel in px, when known (None: the solve's default)
+    check: bool = False  # a check pair: left out of the fit, its error reported apart (Verify panel)
+    shot: int = 0  # the shot (scan and photo) the pick belongs to, 0-based (ShotFiles)
 
     @property
     def has_laser(self) -> bool:

@@ -120,9 +120,7 @@ class PoseSource:
         """``T_camera_lidar`` predictions use: the last good solve unless unreliable, else the rough pose, else
         None."""
         bundle = self.trusted_bundle()
-        if bundle is not None:
-            return bundle.result.T_camera_lidar
-        return self.initial_T_camera_lidar
+        return self.initial_T_camera_lidar if bundle is None else bundle.result.T_camera_lidar
 
     def view_pose(self) -> tuple[np.ndarray, str]:
         """The pose the camera-view render and the BA columns use, and where it comes from: the last good solve
@@ -131,26 +129,20 @@ class PoseSource:
         bundle = self.trusted_bundle()
         if bundle is not None:
             return bundle.result.T_camera_lidar, "solve"
+        rough = self.initial_T_camera_lidar
         if self.solve_unreliable:
-            rough = self.initial_T_camera_lidar
             return (preset_T(DEFAULT_PRESET) if rough is None else rough), "unreliable"
-        if self.initial_T_camera_lidar is not None:
-            return self.initial_T_camera_lidar, "rough"
-        return preset_T(DEFAULT_PRESET), "default"
+        return (preset_T(DEFAULT_PRESET), "default") if rough is None else (rough, "rough")
 
     def predict_pixel(self, row: int, col: int) -> tuple[float, float] | None:
         """Original camera pixel where :meth:`pose` expects scan cell ``(row, col)``; None without a pose or unseen."""
         T = self.pose()
-        if T is None:
-            return None
-        return predict_pixel(T, self.app.camera, self.app.depth, row, col)
+        return None if T is None else predict_pixel(T, self.app.camera, self.app.depth, row, col)
 
     def predict_cell(self, u: float, v: float) -> tuple[int, int] | None:
         """Scan cell ``(row, col)`` the camera sees at original pixel ``(u, v)`` under :meth:`pose`; None if unknown."""
         T = self.pose()
-        if T is None:
-            return None
-        return self.projection(T).cell_at(float(u), float(v))
+        return None if T is None else self.projection(T).cell_at(float(u), float(v))
 
     def predicted_pixels(self, picks: dict) -> tuple[list[int], np.ndarray]:
         """Original camera pixels ``(M, 2)`` where :meth:`pose` expects the picks (by id) that have only a laser

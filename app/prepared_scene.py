@@ -33,59 +33,31 @@ MAX_EDGE_POINTS = 3000
 
 @dataclass(eq=False)
 class PreparedScene:
-    """The inputs of one calibration and what the views need from them.
-
-    Attributes
-    ----------
-    depth : DepthMatrix
-        The organised scan (lidar frame, metres).
-    camera : CameraModel
-    image : (H, W, 3) uint8
-        The camera image.
-    ba_rad : dict of str to (R, C) float
-        Bearing Angle images (radians) per direction; ``ba_keys`` the directions present.
-    ba_gray : dict of str to (R, C) uint8
-        The BA images as shown.
-    panorama : Panorama or None
-        The unwrapping of an ``ocam`` / ``fisheye`` image, with ``pano_image`` (RGB) and ``pano_gray``.
-    edge_points_lidar : (M, 3) float
-        BA-edge points for the overlay (lidar frame, metres).
-    all_points_lidar, all_rows_cols : (N, 3) float, (N, 2) int
-        The valid scan points and their cells.
-    cloud_points_lidar : (K, 3) float
-        The subsample shown in the 3-D pane.
-    ba_cell_aspect : float
-        Row stretch that makes cells about square in angle.
-    wrap_cols : bool
-        Whether the scan's columns wrap around (a full revolution).
-    laser_images : dict of str to (R, C) uint8
-        Other grey views of the scan for the BA loupe: ``"Range"`` always, ``"Intensity"`` when the scan
-        has a reflectance field (0 where no value).
-    image_valid : (H, W) bool
-        Pixels the camera lights (not the pure-black border of a fisheye circle).
-    """
+    """The inputs of one calibration and what the views need from them."""
 
     scan_path: Path
     image_path: Path
     camera_path: Path
-    depth: Any
-    camera: Any
-    image: np.ndarray
-    ba_rad: dict
-    ba_keys: tuple
-    ba_gray: dict
+    depth: Any  # DepthMatrix: the organised scan (lidar frame, metres)
+    camera: Any  # CameraModel
+    image: np.ndarray  # (H, W, 3) uint8: the camera image
+    ba_rad: dict  # Bearing Angle images (R, C) float (radians) per direction
+    ba_keys: tuple  # the directions present
+    ba_gray: dict  # the BA images as shown, (R, C) uint8
     image_gray: np.ndarray
-    panorama: Panorama | None
+    panorama: Panorama | None  # the unwrapping of an ocam / fisheye image, with pano_image (RGB) and pano_gray
     pano_image: np.ndarray | None
     pano_gray: np.ndarray | None
-    edge_points_lidar: np.ndarray
-    all_points_lidar: np.ndarray
-    all_rows_cols: np.ndarray
-    cloud_points_lidar: np.ndarray
-    ba_cell_aspect: float
-    wrap_cols: bool
+    edge_points_lidar: np.ndarray  # (M, 3) BA-edge points for the overlay (lidar frame, metres)
+    all_points_lidar: np.ndarray  # (N, 3) the valid scan points (lidar frame, metres) ...
+    all_rows_cols: np.ndarray  # (N, 2) int: ... and their cells
+    cloud_points_lidar: np.ndarray  # (K, 3) the subsample shown in the 3-D pane
+    ba_cell_aspect: float  # row stretch that makes cells about square in angle
+    wrap_cols: bool  # the scan's columns wrap around (a full revolution)
+    # Other grey views (R, C) uint8 of the scan for the BA loupe: "Range" always, "Intensity" when the scan has a
+    # reflectance field (0 where no value).
     laser_images: dict
-    image_valid: np.ndarray
+    image_valid: np.ndarray  # (H, W) bool: pixels the camera lights (not the black border of a fisheye circle)
 
     @classmethod
     def load(

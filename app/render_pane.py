@@ -1,15 +1,10 @@
-"""The camera-view laser pane: the scan rendered from the camera under the current pose, below the camera image.
+"""The camera-view laser pane: the scan rendered from the camera under the current pose, below the camera image
+(what it shows and how it is used: docs/app.md, "The scan seen from the camera").
 
-The render has the camera image's size and framing (:func:`calib_core.render.render_from_camera`), and is shown
-as the camera image is (raw, or unwrapped into the same panorama), so a corner sits at nearly the same place in
-the photo and in the render once the pose is roughly right.  The pose is the solve
-if there is one, else the rough pose (Align folder, imported or saved), else the "+x" preset
-(:meth:`app.pose_source.PoseSource.view_pose`).  A click on the render picks the laser cell drawn there: an
-ordinary laser end, through the pairs panel like a BA click.  The same render can be drawn over the photo
-("Render over photo"), and the laser loupe shows a crop of it after a click on it (:class:`app.loupes.Loupes`).
-
-Rendering runs in one background thread that always renders the newest pose (:class:`app.live_solver.LiveSolver`);
-clicks never wait for it.  Display plumbing only: the render and its shading come from :mod:`calib_core.render`.
+The pose is :meth:`app.pose_source.PoseSource.view_pose`.  A click on the render picks the laser cell drawn there,
+through the pairs panel like a BA click.  Rendering runs in one background thread that always renders the newest
+pose (:class:`app.live_solver.LiveSolver`); clicks never wait for it.  Display plumbing only: the render and its
+shading come from :mod:`calib_core.render`.
 """
 
 from __future__ import annotations
@@ -27,7 +22,7 @@ from calib_core.render import render_from_camera, shade_render
 from .layout import RENDER_KEY, ImageSlot
 from .live_solver import LiveSolver
 from .shown_render import NEAREST_PX, NO_RETURN_RGB, ShownRender, cell_at_pixel, pane_texture, pixel_of_cells
-from .ui_common import marker_segments
+from .ui_common import PICK_RADII, draw_ring_markers
 from .view_settings import RENDER_MODES
 
 #: The render's scene nodes (its page slot and click key: :data:`app.layout.RENDER_KEY`).
@@ -60,10 +55,9 @@ class RenderPane:
     """The camera-view laser pane of one :class:`app.server.CalibrationApp` (``app.render_pane``).
 
     It owns its scene nodes (the pane, its title, the copy drawn over the photo, the markers on it), the render
-    worker, and the widgets it adds to the Align folder (:meth:`add_controls`).  Public: :attr:`current` (the
-    render the page shows), :meth:`request`, :meth:`target_at`, :meth:`pixel_of_cells`, :meth:`subscribe`,
-    :meth:`hand_plain_drags_to`.  The composition root passes what it uses of its siblings: ``laser_key()`` (the BA
-    image a laser end picked on it names: the laser loupe's) and ``click_at(key, uv, client)`` (the pairs panel's).
+    worker, and the widgets it adds to the Align folder (:meth:`add_controls`).  The composition root passes
+    what it uses of its siblings: ``laser_key()`` (the BA image a laser end picked on it names: the laser loupe's)
+    and ``click_at(key, uv, client)`` (the pairs panel's).
     """
 
     def __init__(self, app: Any, *, laser_key: Callable[[], str], click_at: Callable[[str, tuple, Any], Any]) -> None:
@@ -379,7 +373,7 @@ class RenderPane:
         d = np.where(shown, np.hypot(xy[:, 0] - uv[0], xy[:, 1] - uv[1]), np.inf)
         d = np.where(np.isfinite(d), d, np.inf)
         k = int(np.argmin(d))
-        self.app.state.select(picks[k].id if d[k] * slot.units_per_px <= 2.5 * self._ring_radius(slot) else None)
+        self.app.state.select(picks[k].id if d[k] * slot.units_per_px <= PICK_RADII * self._ring_radius(slot) else None)
 
     def _on_plain_drag(self, event: Any) -> None:
         """A left-drag on the render: turns the view while "Align by drag" is on; a shaky click is a click."""
@@ -413,12 +407,5 @@ class RenderPane:
         ok &= np.isfinite(xy).all(axis=1)
         world = slot.world_from_pixel(xy[ok], z_offset=-0.01)
         colors = np.array([c for _, _, c in picks], np.uint8).reshape(-1, 3)[ok]
-        segs = marker_segments(world, self._ring_radius(slot))
-        per = len(segs) // max(int(ok.sum()), 1)
-        seg_colors = np.repeat(colors, per * 2, axis=0).reshape(-1, 2, 3)
-        app.nodes.lines("/annot/markers/render/halo", segs + np.array([0.0, 0.0, 0.002]),
-                        np.full(seg_colors.shape, 25, np.uint8), thickness=4.5)
-        app.nodes.lines("/annot/markers/render/ring", segs, seg_colors, thickness=2.0)
         sel = [k for k, (pid, _, _) in enumerate(p for p, good in zip(picks, ok) if good) if pid == app.state.selected]
-        sel_segs = marker_segments(world[sel] + [0.0, 0.0, 0.003], 1.5 * self._ring_radius(slot))
-        app.nodes.lines("/annot/selected/render", sel_segs, np.full(sel_segs.shape, 255, np.uint8), thickness=4.0)
+        draw_ring_markers(app.nodes, RENDER_KEY, world, colors, self._ring_radius(slot), sel)

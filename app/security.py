@@ -87,21 +87,11 @@ def cookie_name(port: int) -> str:
 
 @dataclass(frozen=True)
 class AccessPolicy:
-    """What a request must carry to be served.
+    """What a request must carry to be served."""
 
-    Parameters
-    ----------
-    bind_host : str
-        The address the server was started on (``--host``).
-    token : str or None
-        Required secret, or None (loopback binds).
-    extra_hosts : frozenset of str
-        More host names the server may be reached by (e.g. a DNS name of a
-        wildcard bind), lower case.
-    """
-
-    bind_host: str
-    token: str | None = None
+    bind_host: str  # the address the server was started on (--host)
+    token: str | None = None  # the required secret, or None (loopback binds)
+    # More host names the server may be reached by (e.g. a DNS name of a wildcard bind), lower case.
     extra_hosts: frozenset[str] = field(default_factory=frozenset)
 
     @classmethod

@@ -24,7 +24,7 @@ from .camera_view import camera_views
 from .cloud_pane import CloudPane
 from .display_panel import DisplayPanel
 from .export_panel import ExportPanel, FormatExportPanel
-from .guide_panel import attach_guide_panel
+from .guide_panel import GuidePanel
 from .laser_images import LaserImages
 from .layout import RENDER_KEY
 from .live_coordinator import LiveSolveCoordinator
@@ -37,7 +37,7 @@ from .render_pane import RenderPane
 from .scene_nodes import SceneNodes
 from .security import AccessPolicy, RefusalLog, start_guarded_viser
 from .state import AnnotationState
-from .ui_common import page_url
+from .ui_common import page_url, units_per_screen_px
 from .verify_panel import VerifyPanel
 from .view_panel import ViewPanel
 from .picks import ShotFiles
@@ -45,9 +45,8 @@ from .pose_source import PoseSource, read_extrinsics
 from .warm_up import WarmUp
 
 
-# The composition root: one object per concern, owning its state and widgets, as a public attribute: actions, display,
-# live, overlays, cloud, page, pairs_panel, calibration_panel, view, export_panel, loupes, format_export,
-# guide, verify_panel.  Panels use only the public services below (app/app_services.py).
+# The composition root: one object per concern (a public attribute each, e.g. ``live``, ``loupes``); panels use only
+# its services (app/app_services.py).
 class CalibrationApp:
     """The annotation app on one scene; the viser server runs from construction.
 
@@ -125,9 +124,6 @@ class CalibrationApp:
         # Every change is on disk (an fsync'd journal line) before the UI shows it; the journal is compacted into
         # the session YAML in the background and by stop().  The view settings live in ``state.view`` only.
         self._stopped = False
-        # The BA panes show the columns the camera sees (under the rough pose, else the "+x" preset) by default.
-        # The render is shaded by intensity where the scan has it: in the by-eye trials range shading hid the
-        # doors, bins and boxes that intensity shows, and every clicker switched (docs/by_eye.md).
         self._owns_state = state is None
         self.state = state or AnnotationState(self.depth.valid, (self.camera.width, self.camera.height),
                                               self.session_path, on_save_error=self._on_save_error,
@@ -199,7 +195,7 @@ class CalibrationApp:
             self.loupes = Loupes(self, add_controls=self.display.add_loupe_controls)
             self.pairs_panel.resolve_clicks_with(  # a click in a loupe or on the render picks what it shows there
                 loupe=self.loupes.target_at, render=lambda uv, client: (self.render_pane.target_at(
-                    uv, screen_units=self.view.units_per_screen_px(client)), self.render_pane.last_pixel))
+                    uv, screen_units=units_per_screen_px(getattr(client, "camera", None))), self.render_pane.last_pixel))
             self.overlays.place_loupes_by(self.loupes.display_of)  # the marks in the loupes, Shift+click on them
             self.overlays.subscribe(self.loupes.draw_marks)  # the loupes show the marks magnified
             self.pairs_panel.subscribe_clicks(self.loupes.on_pair_click)  # the loupes follow each click
@@ -211,12 +207,12 @@ class CalibrationApp:
             self.format_export = FormatExportPanel(self)  # verify: its own widgets (formats, reference import)
             self.display.subscribe(self._on_display_change)
             self.server.on_client_connect(self._on_connect)
-            self.server.on_client_disconnect(self._on_disconnect)
+            self.server.on_client_disconnect(lambda client: self.view.forget_tab(client.client_id))
             self.subscribe_solved(lambda shown: self.render_pane.request())  # the render follows the solve shown
             # In the action worker, so a click is never mapped through a window that changed under it.
             self.live.subscribe_facing(lambda: self.post(self.view.apply_ba_window))
             self.live.start()
-            self.guide = attach_guide_panel(  # guided picking (app/guide_panel.py); it frames the loupes
+            self.guide = GuidePanel(  # guided picking (app/guide_panel.py); it frames the loupes
                 self, loupes=lambda: self.loupes, on_status=self.pairs_panel.show_guide_status)
             self.pairs_panel.set_next_pair_handler(self.guide.callback("Next pair"))  # its button in the pair actions
             self.state.subscribe(self.live.on_state_change)
@@ -229,13 +225,7 @@ class CalibrationApp:
             self.export_panel.verification = self.verify_panel.report_for  # the YAML carries the Verify report
             self.format_export.reference_listeners.append(self.verify_panel.set_reference)
         except BaseException:
-            self.actions.stop()
-            if hasattr(self, "render_pane"):
-                self.render_pane.stop()
-            self.live.stop()
-            self.server.stop()
-            self.state.close() if self._owns_state else self.state.clear_listeners()
-            blas_threads.unlimit()
+            self.stop()
             raise
 
     def _on_connect(self, client: Any) -> None:
@@ -275,112 +265,88 @@ class CalibrationApp:
             self.align.show()
         self.overlays.invalidate()
         self.overlays.refresh()
-        self.live.show_panels()
+        self.live.redraw()
         guide = getattr(self, "guide", None)
         if guide is not None:  # proposals can start from the imported pose
             guide.update()
-
-    def _on_disconnect(self, client: Any) -> None:
-        self.view.forget_tab(client.client_id)
 
     def _on_save_error(self, message: str) -> None:
         # On the compactor's thread; the journal holds every change, the compaction is retried.
         if hasattr(self, "server") and not self._stopped:
             self.notify(None, "Session file not updated (retrying; no change lost)", message)
 
-    # ================================================================ services (app/app_services.py)
+    # ================================================================ services
+    # What panels may use of the app; each is documented once, in app/app_services.py (AppServices).
     def guard(self, fn: Callable) -> Callable:
-        """A viser callback that queues ``fn(action)`` on the ordered action worker (:meth:`ActionQueue.guard`)."""
         return self.actions.guard(fn)
 
     def post(self, fn: Callable[[], Any], client: Any = None, wait: bool = False) -> None:
-        """Run ``fn()`` on the action worker after the actions queued before it (:meth:`ActionQueue.post`)."""
         self.actions.post(fn, client, wait)
 
     def notify(self, client: Any, title: str, body: str, color: str = "red") -> None:
-        """A notification in tab ``client`` (None: every tab); the text is shown as is."""
         notify_tabs(self.server, client, title, body, color)
 
-    slots = property(lambda self: self.view.slots, doc="Where each image lies on the page, by key.")
-    ba_window = property(lambda self: self.view.ba_window, doc="The scan columns the BA images show.")
-
-    camera_view = property(lambda self: self.view.camera_view,
-                           doc="The visible camera view (:class:`app.camera_view.CameraView`: raw or panorama).")
+    slots = property(lambda self: self.view.slots)
+    ba_window = property(lambda self: self.view.ba_window)
+    camera_view = property(lambda self: self.view.camera_view)
 
     def slot_of(self, key: str) -> Any:
-        """The image slot of click key ``key``: a BA key, ``raw``, ``panorama``, ``loupe_ba`` or ``loupe_camera``."""
         if key.startswith("loupe_"):
             return self.loupes.slot(key[len("loupe_"):])
         return self.view.slots[key]
 
     def camera_slot(self) -> Any:
-        """The page slot of the visible camera view."""
         return self.view.camera_slot()
 
     def display_from_pixels(self, pixels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Display pixels (visible camera view) of original camera pixels, and which are shown."""
         return self.view.camera_view.display_from_pixels(pixels)
 
     def make_click_handler(self, key: str) -> Callable:
-        """The on-click callback of image slot ``key`` (:meth:`PairsPanel.make_click_handler`)."""
         return self.pairs_panel.make_click_handler(key)
 
     def make_drag_handler(self, key: str) -> Callable:
-        """The on-drag callback of image slot ``key`` (:meth:`PairsPanel.make_drag_handler`: moves a pair end)."""
         return self.pairs_panel.make_drag_handler(key)
 
     def make_select_handler(self, key: str) -> Callable:
-        """The Shift+click callback of image slot ``key`` (:meth:`PairsPanel.make_select_handler`)."""
         return self.pairs_panel.make_select_handler(key)
 
     def camera_click_source(self, pick_id: int) -> str | None:
-        """Where the last camera click on pick ``pick_id`` landed: ``"loupe"``, ``"full"`` or None."""
         return self.pairs_panel.camera_click_source(pick_id)
 
     def forget_last_picks(self) -> None:
-        """Forget every tab's last click (the next loupe click adds an end)."""
         self.pairs_panel.forget_last_picks()
 
     def subscribe_solve(self, listener: Callable[[Any], None]) -> None:
-        """Call ``listener(shown)`` (:class:`app.ui_common.SolveShown`) on every redraw of what the live solve
-        shows (:meth:`LiveSolveCoordinator.subscribe`: under the UI lock, in the redraw's message batch)."""
         self.live.subscribe(listener)
 
     def subscribe_solved(self, listener: Callable[[Any], None]) -> None:
-        """Call ``listener(shown)`` after each finished solve is shown, outside the UI lock
-        (:meth:`LiveSolveCoordinator.subscribe_solved`)."""
         self.live.subscribe_solved(listener)
 
     def solve_shown(self) -> Any:
-        """What the live solve shows now (:class:`app.ui_common.SolveShown`)."""
         return self.live.shown()
 
-    solve_bundle = property(lambda self: self.live.bundle, doc="The last good solve (:class:`SolveBundle`), or None.")
-    result = property(lambda self: getattr(self.live.bundle, "result", None),
-                      doc="The last good :class:`calib_core.solve.CalibrationResult`, or None.")
+    solve_bundle = property(lambda self: self.live.bundle)
+    result = property(lambda self: getattr(self.live.bundle, "result", None))
 
     def pose(self) -> np.ndarray | None:
-        """``T_camera_lidar`` predictions use: the last good solve, else the imported initial extrinsic, else None."""
         return self.pose_source.pose()
 
-    initial_T_camera_lidar = property(lambda self: self.pose_source.initial_T_camera_lidar,
-                                      doc="The imported rough ``T_camera_lidar`` (None: none imported).")
-
+    initial_T_camera_lidar = property(lambda self: self.pose_source.initial_T_camera_lidar)
     last_update_time = property(lambda self: self.live.last_update_time,
                                 doc="``perf_counter()`` when the newest change's solve was shown.")
 
     def wait_idle(self, timeout: float = 30.0) -> bool:
-        """Block until queued user actions are applied and the live solve and its follow-up work are idle."""
         return self.live.wait_idle(timeout)
 
     def stop(self) -> None:
-        """Stop the threads and the server once the session file holds every change (CalibError if it cannot)."""
+        """Stop the threads and the server once the session file holds every change (CalibError if it cannot);
+        also what a construction that failed part way had started."""
         self._stopped = True
         self.actions.stop()
         self.live.stop()
-        self.render_pane.stop()
-        self.guide.stop()
-        self.verify_panel.stop()
+        for part in ("render_pane", "guide", "verify_panel"):
+            if hasattr(self, part):  # built
+                getattr(self, part).stop()
         try:
             self.state.close() if self._owns_state else self.state.clear_listeners()
         finally:

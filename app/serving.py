@@ -1,17 +1,8 @@
-"""Serve the annotation app until Ctrl+C (what ``ba-calib`` and ``ba-calib serve`` run).
+"""Serve the annotation app until Ctrl+C (what ``ba-calib`` and ``ba-calib serve`` run; docs/cli.md).
 
-``serve --bag BAG`` serves one frame of a ROS bag (:class:`BagSource`): the
-chosen cloud, the image nearest to it in time and the camera from the bag's
-CameraInfo (or ``--camera``), extracted into a folder of files.  The page gets
-a "Bag frame" folder to choose another cloud: the app is then restarted on the
-same port with that frame (each frame has its own session file) and the page
-reconnects.  ``/tf_static`` between the cloud's and the image's frames is
-offered as the initial extrinsic.
-
-``serve --shot SCAN IMAGE --shot ...`` serves a session of several shots of one rig (:class:`ShotServer`):
-every shot's scene is loaded once, one :class:`app.state.AnnotationState` holds every shot's pairs (one
-session file, one undo history) and the live solve uses them all; the panes show one shot, and the page's
-"Shots" folder (:class:`app.shots_panel.ShotsPanel`) restarts the app on another shot the same way.
+``serve --bag BAG`` serves one frame of a ROS bag (:class:`BagServer`), and ``serve --shot ...`` a session of
+several shots of one rig (:class:`ShotServer`: one state holds every shot's pairs, the live solve uses them all).
+Both restart the app on the same port to show another frame or shot; the page reconnects.
 """
 
 from __future__ import annotations
@@ -54,34 +45,20 @@ class BagFrame:
 
 @dataclass
 class BagSource:
-    """Where ``serve --bag`` takes its frames from.
+    """Where ``serve --bag`` takes its frames from."""
 
-    Parameters
-    ----------
-    bag : path
-        ``.bag``, or a ROS 2 bag folder (or a file in it).
-    cloud_topic, image_topic, camera_info_topic : str, optional
-        Default: the bag's only topic of that type.
-    index, time_s : optional
-        The first frame: the cloud with this index on its topic, or the one
-        nearest to this many seconds after the bag's start (default index 0).
-    camera : path, optional
-        Camera file, for bags without CameraInfo (it wins over CameraInfo).
-    frames_dir : path, optional
-        Where frames are extracted (default ``./<bag name>.ba-calib-frames``).
-    session : path, optional
-        Session file of the first frame; other frames get ``<stem>.frameN<suffix>``
-        beside it (default ``./<bag name>.frameN.ba-calib-session.yaml``).
-    """
-
-    bag: Path
-    cloud_topic: str | None = None
+    bag: Path  # .bag, or a ROS 2 bag folder (or a file in it)
+    cloud_topic: str | None = None  # the three topics: default, the bag's only topic of that type
     image_topic: str | None = None
     camera_info_topic: str | None = None
+    # The first frame: the cloud with this index on its topic, or the one nearest to this many seconds after the
+    # bag's start (default index 0).
     index: int | None = None
     time_s: float | None = None
-    camera: Path | None = None
-    frames_dir: Path | None = None
+    camera: Path | None = None  # camera file, for bags without CameraInfo (it wins over CameraInfo)
+    frames_dir: Path | None = None  # where frames are extracted (default ./<bag name>.ba-calib-frames)
+    # Session file of the first frame; other frames get <stem>.frameN<suffix> beside it (default
+    # ./<bag name>.frameN.ba-calib-session.yaml).
     session: Path | None = None
     n_clouds: int = field(default=0, init=False)
     first_index: int | None = field(default=None, init=False)
@@ -154,7 +131,36 @@ class BagFramePanel:
         self._on_request(index)
 
 
-class BagServer:
+class _Restarts:
+    """Serving that restarts the app on the same port to show another frame or shot (the page reconnects)."""
+
+    app: CalibrationApp | None
+    app_options: dict
+
+    def _restart(self, start: Any, new: Any, previous: Any) -> CalibrationApp:
+        """Stop the app shown and ``start(new, options)`` on its port; if that fails, ``start(previous, options)``
+        (None: nothing to go back to) keeps the old one served, and the error is raised."""
+        options = dict(self.app_options)
+        if self.app is not None:
+            options["port"] = self.app.port
+            self.app.stop()  # a state shared by shots lives on; the stopped app's listeners are dropped
+            self.app = None
+        try:
+            return start(new, options)
+        except CalibError:
+            if previous is None:
+                raise
+            start(previous, options)
+            raise
+
+    def stop(self) -> None:
+        """Stop the app shown."""
+        if self.app is not None:
+            self.app.stop()
+            self.app = None
+
+
+class BagServer(_Restarts):
     """Serve frames of a bag one at a time; :meth:`load` restarts the app on another frame (same port)."""
 
     def __init__(self, source: BagSource, *, initial_extrinsics_path: str | os.PathLike | None = None,
@@ -170,19 +176,7 @@ class BagServer:
     def load(self, index: int | None = None) -> CalibrationApp:
         """Stop the current app (if any) and serve frame ``index`` (None: the first frame)."""
         frame = self.source.extract(index)  # a bad frame leaves the current app running
-        options = dict(self.app_options)
-        previous = self.frame
-        if self.app is not None:
-            options["port"] = self.app.port
-            self.app.stop()
-            self.app = None
-        try:
-            return self._start(frame, options)
-        except CalibError:
-            if previous is None:
-                raise
-            self._start(previous, options)  # the frame shown before keeps being served
-            raise
+        return self._restart(self._start, frame, self.frame)
 
     def _start(self, frame: BagFrame, options: dict) -> CalibrationApp:
         initial = self.initial_extrinsics_path or frame.initial_extrinsics
@@ -194,13 +188,8 @@ class BagServer:
             print(f"ba-calib: {note}", flush=True)
         return self.app
 
-    def stop(self) -> None:
-        if self.app is not None:
-            self.app.stop()
-            self.app = None
 
-
-class ShotServer:
+class ShotServer(_Restarts):
     """Serve a session of several shots, one shot's panes at a time (same port); :meth:`load` shows another.
 
     Parameters
@@ -276,21 +265,10 @@ class ShotServer:
 
     def load(self, shot: int | None = None) -> CalibrationApp:
         """Stop the current app (if any) and serve shot ``shot`` (None: the session's active shot)."""
-        options = dict(self.app_options)
-        previous = self.state.active_shot
         if shot is not None and not 0 <= shot < self.state.n_shots:
             raise CalibError(f"no shot {shot}: the session has {self.state.n_shots} (0-based)")
-        if self.app is not None:
-            options["port"] = self.app.port
-            self.app.stop()  # the state lives on; the stopped app's listeners are dropped
-            self.app = None
-        try:
-            return self._start(shot, options)
-        except CalibError:
-            if shot is None or shot == previous:
-                raise
-            self._start(previous, options)  # the shot shown before keeps being served
-            raise
+        previous = self.state.active_shot
+        return self._restart(self._start, shot, None if shot is None or shot == previous else previous)
 
     def _start(self, shot: int | None, options: dict) -> CalibrationApp:
         if shot is not None:
@@ -313,9 +291,7 @@ class ShotServer:
 
     def stop(self) -> None:
         """Stop the app and close the session (its YAML then holds every change)."""
-        if self.app is not None:
-            self.app.stop()
-            self.app = None
+        super().stop()
         self.state.close()
 
 

@@ -64,24 +64,12 @@ _fdatasync = getattr(os, "fdatasync", os.fsync)
 
 @dataclass(frozen=True)
 class JournalRecord:
-    """One intact journal line.
+    """One intact journal line."""
 
-    Attributes
-    ----------
-    seq : int
-        Sequence number of the change.
-    session : dict
-        The whole session after the change.
-    session_id : str or None
-        The session file's id (None: a journal of an older ba-calib).
-    filed : bool
-        Whether a session YAML with this id had been written when the line was.
-    """
-
-    seq: int
-    session: dict
-    session_id: str | None = None
-    filed: bool = True
+    seq: int  # sequence number of the change
+    session: dict  # the whole session after the change
+    session_id: str | None = None  # the session file's id (None: a journal of an older ba-calib)
+    filed: bool = True  # a session YAML with this id had been written when the line was
 
 
 def encode_record(seq: int, data: dict, session_id: str | None = None, filed: bool = True) -> bytes:
@@ -296,9 +284,7 @@ class SessionStore:
 
     def _remove_journal_locked(self) -> None:
         """Close and delete the journal: the YAML holds every change it held (or it was another session's)."""
-        if self._fd is not None:
-            os.close(self._fd)
-            self._fd = None
+        self._close_journal_locked()
         self._bytes = self._records = self._new_bytes = 0
         try:
             os.unlink(self.journal_path)
@@ -373,18 +359,20 @@ class SessionStore:
             self.compact()
         except BaseException:
             with self._lock:
-                if self._fd is not None:
-                    os.close(self._fd)
-                    self._fd = None
+                self._close_journal_locked()
             raise
         with self._lock:
             # The YAML holds every change (or there were none): no journal outlives this session,
             # also not one this store only read (restored from) or ignored.
             if self._seq <= self._compacted:
                 self._remove_journal_locked()
-            elif self._fd is not None:
-                os.close(self._fd)
-                self._fd = None
+            else:
+                self._close_journal_locked()
+
+    def _close_journal_locked(self) -> None:
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
 
     # --------------------------------------------------------------- background
     def _ensure_thread(self) -> None:

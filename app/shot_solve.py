@@ -28,20 +28,11 @@ from .ui_common import SolveBundle, _fmt, md_escape
 
 @dataclass(eq=False)
 class JointSolve:
-    """A joint solve of several shots: the result, the shots it was made of, each row's shot.
-
-    Attributes
-    ----------
-    solved : ShotsResult
-    shots : list of Shot
-        One per shot of the session, in shot order (a shot without pairs is empty).
-    shot_of : (N,) int ndarray
-        The shot of each pair of the bundle (``SolveBundle.pick_ids`` order: shot, then creation order).
-    """
+    """A joint solve of several shots: the result, the shots it was made of, each row's shot."""
 
     solved: ShotsResult
-    shots: list[Shot]
-    shot_of: np.ndarray
+    shots: list[Shot]  # one per shot of the session, in shot order (a shot without pairs is empty)
+    shot_of: np.ndarray  # (N,) int: each pair's shot (SolveBundle.pick_ids order: shot, then creation order)
 
 
 def shot_name(files: Any) -> str:
@@ -77,6 +68,16 @@ def make_shots(pairs: Sequence[Pair], shot_of: np.ndarray, depths: Sequence[Any]
     return out
 
 
+def grouped_shots(app: Any, ids: Sequence[int], pairs: Sequence[Pair], shot_of: Sequence[int],
+                  cache: dict | None = None) -> tuple[list, list, np.ndarray, list[Shot]]:
+    """``ids``, ``pairs`` and ``shot_of`` in the joint solve's row order (:func:`by_shot`), and one
+    :class:`calib_core.shots.Shot` per shot of ``app``'s session holding its pairs (:func:`make_shots`)."""
+    ids, pairs, shot_of = by_shot(ids, pairs, shot_of)
+    names = [shot_name(f) for f in app.state.shots]
+    return ids, pairs, shot_of, make_shots(pairs, shot_of, [sc.depth for sc in app.shot_scenes], app.camera, names,
+                                           cache)
+
+
 def joint_bundle(app: Any, ids: Sequence[int], pairs: Sequence[Pair], shot_of: Sequence[int], *,
                  checks: bool = True, cache: dict | None = None) -> SolveBundle:
     """The live solve of every shot's pairs: a :class:`SolveBundle` whose rows are in shot order.
@@ -87,9 +88,7 @@ def joint_bundle(app: Any, ids: Sequence[int], pairs: Sequence[Pair], shot_of: S
     :func:`checked_bundle` adds the shots' checks.  ``cache``: as for :func:`make_shots`.
     """
     t0 = time.perf_counter()
-    ids, pairs, shot_of = by_shot(ids, pairs, shot_of)
-    names = [shot_name(f) for f in app.state.shots]
-    shots = make_shots(pairs, shot_of, [sc.depth for sc in app.shot_scenes], app.camera, names, cache)
+    ids, pairs, shot_of, shots = grouped_shots(app, ids, pairs, shot_of, cache)
     return _bundle(app, ids, pairs, shot_of, shots, solve_shots(shots, app.camera, checks=checks), t0)
 
 

@@ -1,13 +1,7 @@
-"""The "Shots" folder: a session of several shots (scan + photo of one rig), one shot's panes at a time.
-
-It shows which shot the panes show and how many pairs each shot has (every shot's pairs go into the one
-live solve: :mod:`app.shot_solve`).  "Show this shot" restarts the app on another shot
-(:meth:`app.serving.ShotServer.load`, through the server's request queue, as the "Bag frame" folder does):
-the page reconnects showing that shot's camera image, laser panes, loupes and render.  "Add this shot"
-loads a scan and its photo, named by their paths on the machine that serves the page, and adds them as a
-new shot in one undoable step (Pairs → Undo removes it again), then shows it.  Guided picking asks for
-the shot of its next proposal the same way (:meth:`ShotsPanel.show_for_guide`), and the page shown then goes
-on with the guided session.
+"""The "Shots" folder: a session of several shots (scan + photo of one rig), one shot's panes at a time (what it
+offers: docs/cli.md, "In the app").  Showing another shot restarts the app on it (:meth:`app.serving.ShotServer.load`,
+through the server's request queue, as the "Bag frame" folder does); guided picking asks for the shot of its next
+proposal the same way (:meth:`ShotsPanel.show_for_guide`), and the page shown then goes on with the guided session.
 """
 
 from __future__ import annotations

@@ -16,6 +16,8 @@ import numpy as np
 
 from calib_core.overlays import project_lidar_points
 
+from .ba_view import crop_texture
+
 #: What the pane shows where the scan has no return (dark, so range colours and white depth edges stand out).
 NO_RETURN_RGB = (30, 30, 34)
 #: Outside the render in a loupe crop.
@@ -159,14 +161,9 @@ def _footprint_middles(cells: np.ndarray, rc: np.ndarray, u: np.ndarray, v: np.n
 def loupe_texture(shown: ShownRender | None, camera: Any, u0: int, v0: int, n: int) -> np.ndarray:
     """Render ``shown``'s pixels ``[u0, u0 + n) x [v0, v0 + n)`` (the camera loupe's crop), enlarged by nearest
     neighbour as the camera loupe is; :data:`PAD_RGB` outside the image."""
-    h, w = camera.height, camera.width
-    pane = (np.full((h, w, 3), NO_RETURN_RGB, np.uint8) if shown is None else pane_texture(shown.rgba))
-    us, vs = u0 + np.arange(n), v0 + np.arange(n)
-    ok = ((vs >= 0) & (vs < h))[:, None] & ((us >= 0) & (us < w))[None, :]
-    crop = pane[np.clip(vs, 0, h - 1)][:, np.clip(us, 0, w - 1)]
-    crop = np.where(ok[..., None], crop, np.asarray(PAD_RGB, np.uint8)).astype(np.uint8)
-    k = max(1, TEXTURE_TEXELS // n)
-    return np.repeat(np.repeat(crop, k, axis=0), k, axis=1)
+    pane = (np.full((camera.height, camera.width, 3), NO_RETURN_RGB, np.uint8) if shown is None
+            else pane_texture(shown.rgba))
+    return crop_texture(pane, v0 + np.arange(n), u0 + np.arange(n), PAD_RGB, TEXTURE_TEXELS // n)
 
 
 def loupe_title(shown: ShownRender | None, depth: Any, center: tuple[float, float],

@@ -3,15 +3,11 @@
 A *pick* (:class:`app.picks.Pick`) is one correspondence under construction; its two clicks can come in
 either order.  Every change goes through :class:`AnnotationState`, which
 
-* checks the input (invalid laser cell, pixel outside the image -> :class:`calib_core.errors.CalibError`
-  with a one-line message; a bad view setting likewise, :class:`app.view_settings.ViewSettings`),
-* keeps an undo/redo history of whole snapshots of the picks (every change of them is undoable, including
-  *clear all* and *import*; view settings are not part of it),
-* puts every change on disk before it returns (and so before any listener shows it): an fsync'd journal
-  line beside the session file, compacted into the session YAML in the background
-  (:class:`app.session_store.SessionStore`), so that closing the tab or killing the server loses no
-  acknowledged click; a change that cannot be saved is refused and undone.  The session is restored on
-  start; :meth:`AnnotationState.flush_session` and :meth:`AnnotationState.close` bring the YAML up to date,
+* checks the input (invalid laser cell, pixel outside the image, bad view setting -> one-line CalibError),
+* keeps an undo/redo history of whole snapshots of the picks (*clear all* and *import* included; the view
+  settings are not part of it),
+* puts every change on disk before it returns, so before any listener shows it (:class:`app.session_store.SessionStore`:
+  a change that cannot be saved is refused and undone), and restores the session on start,
 * is thread-safe: viser runs callbacks on a thread pool, and two browser tabs share one state,
 * holds several *shots* (a scan and a photo each, one rig): every pick belongs to one; the panes show the
   *active* shot, whose picks :attr:`AnnotationState.picks` are (:attr:`AnnotationState.all_picks`: every shot's).
@@ -109,7 +105,8 @@ class AnnotationState(StateShots):
                 self._restore(data, self.session_path if from_yaml else store.journal_path, tuple(shots))
             self._store = store
             compact_at_exit(store)
-        self._settle_active(active_shot)
+        # The shot shown: ``active_shot``, else the session's, within the shots.
+        self._active = min(max(self._active if active_shot is None else int(active_shot), 0), self.n_shots - 1)
 
     # ------------------------------------------------------------------ queries
     @property
@@ -182,44 +179,22 @@ class AnnotationState(StateShots):
         laser end (two BA clicks in a row) the end is replaced; if there is no
         incomplete pick a new one starts.
         """
-        rc = self.check_laser_cell(row, col)
-        with self._lock:
-            out = self._add_locked(laser_rc=rc)
-        self._notify()
-        return out
+        return self._changed(self._add_locked, laser_rc=self.check_laser_cell(row, col))
 
     def add_pixel(self, u: float, v: float) -> int:
         """Record a click on the camera image (original-image pixel); returns the pick id.
 
         Symmetric to :meth:`add_laser`.
         """
-        uv = self.check_pixel(u, v)
-        with self._lock:
-            out = self._add_locked(pixel=uv)
-        self._notify()
-        return out
+        return self._changed(self._add_locked, pixel=self.check_pixel(u, v))
 
     def click_laser(self, row: int, col: int) -> int:
         """A BA click as the UI routes it: moves the selected pick's laser end, else :meth:`add_laser`."""
-        rc = self.check_laser_cell(row, col)
-        with self._lock:
-            if self._selected is not None:
-                out = self._move_locked(self._selected, laser_rc=rc)
-            else:
-                out = self._add_locked(laser_rc=rc)
-        self._notify()
-        return out
+        return self._changed(self._click_locked, laser_rc=self.check_laser_cell(row, col))
 
     def click_pixel(self, u: float, v: float) -> int:
         """A camera click as the UI routes it: moves the selected pick's pixel, else :meth:`add_pixel`."""
-        uv = self.check_pixel(u, v)
-        with self._lock:
-            if self._selected is not None:
-                out = self._move_locked(self._selected, pixel=uv)
-            else:
-                out = self._add_locked(pixel=uv)
-        self._notify()
-        return out
+        return self._changed(self._click_locked, pixel=self.check_pixel(u, v))
 
     def start_pick(self, row: int, col: int, *, source: str = "guided", precision_px: float | None = None) -> int:
         """A new pick with only its laser end, tagged (guided "Next pair"); the next camera click completes it.
@@ -237,23 +212,15 @@ class AnnotationState(StateShots):
 
     def move_laser(self, pick_id: int, row: int, col: int) -> int:
         """Set the laser end of pick ``pick_id`` to a cell."""
-        rc = self.check_laser_cell(row, col)
-        with self._lock:
-            out = self._move_locked(pick_id, laser_rc=rc)
-        self._notify()
-        return out
+        return self._changed(self._move_locked, pick_id, laser_rc=self.check_laser_cell(row, col))
 
     def move_pixel(self, pick_id: int, u: float, v: float, *, same_step: bool = False, **tags: Any) -> int:
         """Set the camera end of pick ``pick_id`` to an original-image pixel (and ``precision_px``, ``source`` if given).
 
         With ``same_step`` the change joins the newest undo step when that step changed only this pick (the
         guide tagging the click it just saw: one undo takes back both)."""
-        uv = self.check_pixel(u, v)
-        with self._lock:
-            out = self._move_locked(pick_id, pixel=uv, amend=same_step,
-                                    **{k: tags[k] for k in ("precision_px", "source") if k in tags})
-        self._notify()
-        return out
+        return self._changed(self._move_locked, pick_id, pixel=self.check_pixel(u, v), amend=same_step,
+                             **{k: tags[k] for k in ("precision_px", "source") if k in tags})
 
     def delete(self, pick_id: int) -> None:
         """Remove pick ``pick_id`` (its number is reused only if it was the highest: see :func:`next_number`)."""
@@ -327,24 +294,20 @@ class AnnotationState(StateShots):
 
     def undo(self) -> bool:
         """Step back one change; False if there is nothing to undo."""
-        with self._lock:
-            if not self._undo:
-                return False
-            before = self._checkpoint_locked()
-            self._redo.append(self._snap)
-            self._snap = self._undo.pop()
-            self._after_change_locked(before)
-        self._notify()
-        return True
+        return self._step(back=True)
 
     def redo(self) -> bool:
         """Re-apply the last undone change; False if there is nothing to redo."""
+        return self._step(back=False)
+
+    def _step(self, back: bool) -> bool:
         with self._lock:
-            if not self._redo:
+            source, target = (self._undo, self._redo) if back else (self._redo, self._undo)
+            if not source:
                 return False
             before = self._checkpoint_locked()
-            self._undo.append(self._snap)
-            self._snap = self._redo.pop()
+            target.append(self._snap)
+            self._snap = source.pop()
             self._after_change_locked(before)
         self._notify()
         return True
@@ -420,6 +383,18 @@ class AnnotationState(StateShots):
             store.close()
 
     # -------------------------------------------------------------- internals
+    def _changed(self, change: Callable[..., int], *args: Any, **kwargs: Any) -> int:
+        """``change(*args, **kwargs)`` under the lock, then the listeners told; returns what ``change`` returns."""
+        with self._lock:
+            out = change(*args, **kwargs)
+        self._notify()
+        return out
+
+    def _click_locked(self, laser_rc=None, pixel=None) -> int:
+        if self._selected is not None:
+            return self._move_locked(self._selected, laser_rc=laser_rc, pixel=pixel)
+        return self._add_locked(laser_rc=laser_rc, pixel=pixel)
+
     def _with(self, picks: tuple[Pick, ...]) -> Snapshot:
         return Snapshot(picks, self._snap.next_id, self._snap.shots)
 

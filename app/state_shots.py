@@ -51,12 +51,6 @@ class StateShots:
             raise CalibError(f"pixel ({uf:.1f}, {vf:.1f}) is outside the {self._width}x{self._height} camera image")
         return uf, vf
 
-    def _settle_active(self, active_shot: int | None) -> None:
-        """After the restore: the shot shown (``active_shot``, else the session's), within the shots."""
-        if active_shot is not None:
-            self._active = int(active_shot)
-        self._active = min(max(self._active, 0), self.n_shots - 1)
-
     @property
     def all_picks(self) -> tuple[Pick, ...]:
         """Every shot's picks, in creation order."""

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -37,10 +38,27 @@ PICK_RADII = 2.5
 LABEL_EM_SCREEN_PX = 12.0 * 0.8
 
 
+def ring_radius(units_per_px: float, units_per_px_y: float) -> float:
+    """Pick-marker ring radius (world units) on a slot of ``units_per_px`` x ``units_per_px_y`` world units per
+    display pixel: a few cells, never vanishingly small."""
+    return max(RING_CELLS * max(units_per_px, units_per_px_y), RING_MIN_RADIUS)
+
+
 def pick_tolerance_px(units_per_px: float, units_per_px_y: float) -> float:
     """How far (display pixels along x) from a pick marker a Shift+click or a drag still takes it, on a slot of
     ``units_per_px`` x ``units_per_px_y`` world units per display pixel: :data:`PICK_RADII` ring radii."""
-    return PICK_RADII * max(RING_CELLS * max(units_per_px, units_per_px_y), RING_MIN_RADIUS) / units_per_px
+    return PICK_RADII * ring_radius(units_per_px, units_per_px_y) / units_per_px
+
+
+def units_per_screen_px(camera: Any) -> float | None:
+    """World units per canvas pixel on the annotation plane for a tab's ``camera`` (looking along +z at it), or
+    None when it has not reported one."""
+    try:
+        dist = abs(float(camera.look_at[2]) - float(camera.position[2]))
+        units = 2.0 * dist * math.tan(float(camera.fov) / 2.0) / max(int(camera.image_height), 1)
+    except (AssertionError, AttributeError, TypeError, ValueError):
+        return None
+    return units if math.isfinite(units) and units > 0.0 else None
 #: "Zoom: on last click" magnifies by ZOOM_STEP per press, up to this many
 #: screen pixels per BA cell (narrow side) or per camera-image pixel.
 ZOOM_PX_PER_CELL = 14.0
@@ -108,21 +126,14 @@ def page_url(host: str, port: int, token: str | None) -> str:
     return f"http://{shown}:{port}" + ("" if token is None else f"/?{TOKEN_QUERY}={token}")
 
 
+#: What :func:`md_escape` writes for each character markdown or HTML would read.
+_MD_ESCAPES = {ord("&"): "&amp;", ord("<"): "&lt;", ord(">"): "&gt;",
+               **{ord(c): "\\" + c for c in "\\`*_{}[]()#+-.!|~"}}
+
+
 def md_escape(text: str) -> str:
     """Text safe to show literally inside viser markdown (no HTML, no markup)."""
-    out = []
-    for ch in str(text).replace("\r", " ").replace("\n", " "):
-        if ch == "&":
-            out.append("&amp;")
-        elif ch == "<":
-            out.append("&lt;")
-        elif ch == ">":
-            out.append("&gt;")
-        elif ch in "\\`*_{}[]()#+-.!|~":
-            out.append("\\" + ch)
-        else:
-            out.append(ch)
-    return "".join(out)
+    return str(text).replace("\r", " ").replace("\n", " ").translate(_MD_ESCAPES)
 
 
 def _fmt(x: float, digits: int = 3) -> str:
@@ -198,6 +209,25 @@ def _marker_shape(radius: float, cell_half_size: tuple[float, float] | None, tic
     segs = np.concatenate(shape)
     segs.flags.writeable = False
     return segs
+
+
+def segment_colours(colours: np.ndarray, n_segments: int) -> np.ndarray:
+    """Colours ``(n_segments, 2, 3)`` of the segments of equal markers, one ``(3,)`` colour per marker."""
+    colours = np.asarray(colours, np.uint8).reshape(-1, 3)
+    return np.repeat(colours, n_segments // max(len(colours), 1) * 2, axis=0).reshape(-1, 2, 3)
+
+
+def draw_ring_markers(nodes: Any, key: str, world: np.ndarray, colours: np.ndarray, radius: float,
+                      selected: list[int], cell_half_size: tuple[float, float] | None = None) -> None:
+    """The pick markers of slot ``key``: a ring (:func:`marker_segments`) on a dark halo at each world point in its
+    colour, and a white ring around the rows ``selected``."""
+    segs = marker_segments(world, radius, cell_half_size=cell_half_size)
+    seg_colours = segment_colours(colours, len(segs))
+    nodes.lines(f"/annot/markers/{key}/halo", segs + np.array([0.0, 0.0, 0.002]),
+                np.full(seg_colours.shape, 25, np.uint8), thickness=4.5)
+    nodes.lines(f"/annot/markers/{key}/ring", segs, seg_colours, thickness=2.0)
+    sel_segs = marker_segments(world[selected] + [0.0, 0.0, 0.003], 1.5 * radius)
+    nodes.lines(f"/annot/selected/{key}", sel_segs, np.full(sel_segs.shape, 255, np.uint8), thickness=4.0)
 
 
 class _Action:

@@ -1,20 +1,10 @@
-"""The Verify panel: how far to trust the calibration, from clicks it was not fitted to.
+"""The Verify panel: how far to trust the calibration, from clicks it was not fitted to (what it shows:
+docs/bags_and_exports.md, "In the app").
 
-* Pairs can be marked as *check pairs* (:meth:`app.state.AnnotationState.set_check`):
-  the fit leaves them out and their errors are shown apart.
-* Every fit pair's leave-one-out error, the expected reprojection error over
-  the image (a heat map propagated from the pose covariance) and the
-  difference to an imported reference extrinsic (degrees, cm, pixels).
-* Plots (viser's uPlot widget): error per pair, error against the number of
-  pairs so far, sigma per parameter.
-* With several shots (:mod:`app.shot_solve`): every shot's pairs, each shot's error under the joint pose,
-  leave-one-shot-out per shot (its pairs under the pose fitted to the other shots) and the shot that
-  disagrees with the others, named.
-
-All numbers come from :mod:`calib_core.verify`; they are computed in this
-panel's own worker thread after a change of the pairs (never on a viser
-callback thread), a short while after the last change so that a burst of
-clicks costs one computation.  The panel owns its widgets.
+Check pairs (:meth:`app.state.AnnotationState.set_check`), leave-one-out errors, the expected-error heat map, the
+difference to an imported reference, plots (viser's uPlot), and with several shots the per-shot checks
+(:mod:`app.shot_solve`).  All numbers come from :mod:`calib_core.verify`; they are computed in this panel's own
+worker thread, a short while after the last change of the pairs so that a burst of clicks costs one computation.
 """
 
 from __future__ import annotations
@@ -37,7 +27,7 @@ from calib_core.solve import calibrate
 from calib_core.verify import VerifyReport, expected_error_map, verify_pairs
 
 from .live_solver import LiveSolver
-from .shot_solve import JointSolve, by_shot, make_shots, shot_name, shots_markdown
+from .shot_solve import JointSolve, grouped_shots, shots_markdown
 from .ui_common import MIN_PAIRS, _fmt, md_escape
 
 #: Seconds of quiet after a change before the verification runs (a click burst costs one run).
@@ -50,6 +40,15 @@ HEAT_WIDTH = 480
 HEAT_PERCENTILE = 98.0
 CHECK_CHOICES = ("Make check pair", "Put back in fit")
 _COLORS = {"fit": "#1c7ed6", "loo": "#e8590c", "check": "#2f9e44", "rot": "#ae3ec9"}
+#: The three plots, by key: title, the x series' label, and each y series' label and colour.
+PLOTS = {
+    "pairs": ("Error per pair: in the fit vs left out (LOO / check)", "pair id",
+              (("under the fit (px)", "fit"), ("left out (px)", "loo"))),
+    "count": ("Error against the number of pairs so far", "pairs",
+              (("fit residual (px)", "fit"), ("check pairs (px)", "check"))),
+    "sigma": ("Sigma per parameter", "1 = x / roll, 2 = y / pitch, 3 = z / yaw",
+              (("sigma translation (cm)", "fit"), ("sigma rotation (deg)", "rot"))),
+}
 #: uPlot's x scale is a time axis unless told otherwise: these plots count pairs and parameters.
 NUMERIC_X = {"x": {"time": False}}
 #: What the table and the summary say of a check pair whose laser point projects off the image under the fit.
@@ -77,6 +76,12 @@ def _series(label: str, color: str | None = None) -> uplot.Series:
     if color is not None:
         s.update(stroke=color, width=2, points={"show": True, "size": 7, "fill": color})
     return s  # type: ignore[return-value]
+
+
+def _plot_series(key: str) -> list[uplot.Series]:
+    """The series of plot ``key`` of :data:`PLOTS`: x first."""
+    _, x_label, ys = PLOTS[key]
+    return [_series(x_label)] + [_series(label, _COLORS[colour]) for label, colour in ys]
 
 
 def finite_plot(x_series: uplot.Series, x: np.ndarray, columns: list[tuple[uplot.Series, np.ndarray]]
@@ -142,18 +147,8 @@ class VerifyPanel:
             self._bg_check = gui.add_button_group("Check pair", CHECK_CHOICES)
             self._bg_check.on_click(guard(self._on_check_button))
             empty = (np.zeros(0), np.zeros(0), np.zeros(0))
-            self._plot_pairs = gui.add_uplot(
-                empty, (_series("pair id"), _series("under the fit (px)", _COLORS["fit"]),
-                        _series("left out (px)", _COLORS["loo"])),
-                title="Error per pair: in the fit vs left out (LOO / check)", aspect=1.6, scales=NUMERIC_X)
-            self._plot_count = gui.add_uplot(
-                empty, (_series("pairs"), _series("fit residual (px)", _COLORS["fit"]),
-                        _series("check pairs (px)", _COLORS["check"])),
-                title="Error against the number of pairs so far", aspect=1.6, scales=NUMERIC_X)
-            self._plot_sigma = gui.add_uplot(
-                empty, (_series("1 = x / roll, 2 = y / pitch, 3 = z / yaw"),
-                        _series("sigma translation (cm)", _COLORS["fit"]), _series("sigma rotation (deg)", _COLORS["rot"])),
-                title="Sigma per parameter", aspect=1.6, scales=NUMERIC_X)
+            self._plots = {key: gui.add_uplot(empty, tuple(_plot_series(key)), title=title, aspect=1.6,
+                                              scales=NUMERIC_X) for key, (title, _, _) in PLOTS.items()}
             self._img_heat = gui.add_image(np.full((8, 8, 3), 230, np.uint8), label="Expected error over the image",
                                            format="jpeg", jpeg_quality=85)
             self._md_heat = gui.add_markdown("")
@@ -197,17 +192,14 @@ class VerifyPanel:
     def _on_state_change(self, state: Any) -> None:
         picks = state.picks
         options = ("none",) + tuple(f"#{p.id} (check)" if p.check else f"#{p.id}" for p in picks if p.complete)
+        by_name = {o.split()[0]: o for o in options}
+        want = by_name.get(f"#{state.selected}")  # the selected pair, else the choice stays
         if tuple(self._dd_pair.options) != options:
             current = str(self._dd_pair.value).split()[0]
             self._dd_pair.options = options
-            keep = next((o for o in options if o.split()[0] == current), None)
-            sel = state.selected
-            want = next((o for o in options if o.split()[0] == f"#{sel}"), None) if sel is not None else None
-            self._dd_pair.value = want or keep or "none"
-        elif state.selected is not None:
-            want = next((o for o in options if o.split()[0] == f"#{state.selected}"), None)
-            if want is not None and self._dd_pair.value != want:
-                self._dd_pair.value = want
+            self._dd_pair.value = want or by_name.get(current) or "none"
+        elif want is not None and self._dd_pair.value != want:
+            self._dd_pair.value = want
         self._submit()
 
     def _submit(self, force: bool = False) -> None:
@@ -227,9 +219,7 @@ class VerifyPanel:
     def _joint_job(self, ids: list[int], pairs: list[Pair], shot_of: tuple, ref: Any) -> tuple:
         """A session of several shots: the joint solve, its Verify report, the per-shot text, ids in row order."""
         app = self.app
-        ids, pairs, rows_shot = by_shot(ids, pairs, shot_of)
-        names = [shot_name(f) for f in app.state.shots]
-        shots = make_shots(pairs, rows_shot, [sc.depth for sc in app.shot_scenes], app.camera, names)
+        ids, pairs, rows_shot, shots = grouped_shots(app, ids, pairs, shot_of)
         joint = JointSolve(solve_shots(shots, app.camera), shots, rows_shot)
         report = verify_shots(joint.solved, shots, app.camera, T_reference=None if ref is None else ref[0],
                               scene_points_lidar=self._scene_points)
@@ -296,7 +286,7 @@ class VerifyPanel:
             # No stale figures beside a "not verified": the plots and the map empty out.
             empty = np.zeros(0)
             with self.app.server.atomic():
-                for plot in (self._plot_pairs, self._plot_count, self._plot_sigma):
+                for plot in self._plots.values():
                     plot.data = tuple(empty for _ in plot.series)
                 self._img_heat.image = np.full((8, 8, 3), 230, np.uint8)
             return
@@ -360,19 +350,12 @@ class VerifyPanel:
         st, sr = 100.0 * np.asarray(r.sigma_translation_m), np.asarray(r.sigma_rpy_deg)
         # All three parameters or none: a NaN sigma (undetermined pose) empties the plot rather than leave it stale.
         sigma_x = np.array([1.0, 2.0, 3.0]) if np.isfinite(st).all() and np.isfinite(sr).all() else np.full(3, np.nan)
-        plots = [
-            (self._plot_pairs, finite_plot(_series("pair id"), x, [
-                (_series("under the fit (px)", _COLORS["fit"]), under),
-                (_series("left out (px)", _COLORS["loo"]), left)])),
-            (self._plot_count, finite_plot(_series("pairs"), count["n_pairs"], [
-                (_series("fit residual (px)", _COLORS["fit"]), count["fit_px"]),
-                (_series("check pairs (px)", _COLORS["check"]), count["check_px"])])),
-            (self._plot_sigma, finite_plot(_series("1 = x / roll, 2 = y / pitch, 3 = z / yaw"), sigma_x, [
-                (_series("sigma translation (cm)", _COLORS["fit"]), st),
-                (_series("sigma rotation (deg)", _COLORS["rot"]), sr)])),
-        ]
+        columns = {"pairs": (x, under, left), "count": (count["n_pairs"], count["fit_px"], count["check_px"]),
+                   "sigma": (sigma_x, st, sr)}
         with self.app.server.atomic():
-            for plot, (series, data) in plots:
+            for key, plot in self._plots.items():
+                x_series, *y_series = _plot_series(key)
+                series, data = finite_plot(x_series, columns[key][0], list(zip(y_series, columns[key][1:])))
                 if tuple(plot.series) != series:
                     plot.series = series
                 plot.data = data
@@ -413,8 +396,7 @@ class VerifyPanel:
 
     def plot_data(self) -> dict[str, tuple[np.ndarray, ...]]:
         """The data the three plots show: ``pairs``, ``count``, ``sigma``."""
-        return {"pairs": tuple(self._plot_pairs.data), "count": tuple(self._plot_count.data),
-                "sigma": tuple(self._plot_sigma.data)}
+        return {key: tuple(plot.data) for key, plot in self._plots.items()}
 
     def report_for(self, pairs: list[Pair], result: Any) -> VerifyReport:
         """The verification of ``pairs`` fitted as ``result``: the panel's if it is of the same pairs and

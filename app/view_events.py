@@ -11,13 +11,8 @@ from typing import Any, Callable
 
 @dataclass(frozen=True)
 class BaWindowShown:
-    """What the BA images show after the column window or the page layout changed (the page places them).
-
-    Attributes
-    ----------
-    textures, titles, slots : dict
-        By BA key: the texture (cut to the window, enlarged), the title and the page slot.
-    """
+    """What the BA images show after the column window or the page layout changed (the page places them): by BA
+    key, the texture (cut to the window, enlarged), the title and the page slot."""
 
     textures: dict
     titles: dict

@@ -269,12 +269,8 @@ class ViewPanel(ViewEvents):
         self._loupe_rects.pop(client_id, None)
         self._update_cloud_visibility()
 
-    def any_tab_in_3d(self) -> bool:
-        """True while some tab shows the 3-D view."""
-        return any(m == "3d" for m in list(self._client_mode.values()))
-
     def _update_cloud_visibility(self) -> None:
-        shown = self.any_tab_in_3d()
+        shown = any(m == "3d" for m in list(self._client_mode.values()))  # some tab shows the 3-D view
         for listener in list(self._3d_listeners):
             listener(shown)
 
@@ -313,16 +309,6 @@ class ViewPanel(ViewEvents):
         cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
         look = np.array([cx + (w_px - usable_px) / 2 * units_per_px, cy, 0.0])
         self._apply_camera(client, look + np.array([0.0, 0.0, -dist]), look, np.array([0.0, -1.0, 0.0]), fov)
-
-    def units_per_screen_px(self, client: Any) -> float | None:
-        """World units per canvas pixel on the annotation plane in tab ``client`` (None: no camera reported yet)."""
-        try:
-            cam = client.camera
-            dist = abs(float(cam.look_at[2]) - float(cam.position[2]))
-            units = 2.0 * dist * math.tan(float(cam.fov) / 2.0) / max(int(cam.image_height), 1)
-        except (AssertionError, AttributeError, TypeError, ValueError):
-            return None
-        return units if math.isfinite(units) and units > 0.0 else None
 
     def _zoom(self, client: Any, factor: float = 1.0, centre: np.ndarray | None = None,
               units_per_screen_px: float | None = None, min_units: float = 0.0) -> None:

@@ -36,60 +36,30 @@ RENDER_BLEND_RANGE = (0.0, 1.0)
 
 @dataclass(frozen=True)
 class ViewSettings:
-    """How the page shows the scene (no pairs: changing these is not an undoable step).
+    """How the page shows the scene (no pairs: changing these is not an undoable step)."""
 
-    Attributes
-    ----------
-    panorama : bool
-        Show the camera image unwrapped (when the camera model has a panorama).
-    show_reprojection, show_edges : bool
-        Draw the reprojected pairs with their residuals / the reprojected BA-edge points.
-    snap : bool
-        Snap clicks to the nearest corner.
-    up_axis : str
-        Key of :data:`UP_AXES`: the 3-D pane's up direction.
-    ba_window_mode : str
-        Key of :data:`BA_WINDOW_MODES`.
-    ba_window_start, ba_window_width : int
-        The custom column window (scan columns); width 0 means every column.
-        The app clips them to the scan (:meth:`app.ba_view.ColumnWindow.make`).
-    contrast : float
-        Contrast of the laser panes, in :data:`CONTRAST_RANGE`.
-    loupe_shows : str
-        What the BA loupe shows: :data:`AS_CLICKED` or a name of the scene's laser images.
-    last_pane_shows : str
-        What the last (bottom) laser pane shows instead of its BA direction: a name of the scene's
-        laser images (``Intensity``, ``Range``), or ``""`` for its BA direction.
-    edge_opacity : float
-        Opacity of the BA-edge overlay, in :data:`EDGE_OPACITY_RANGE` (0 hides it).
-    hide_marks : bool
-        Hide every mark drawn over the images and in the loupes (pair markers, their numbers, the
-        selection, predictions, reprojection overlays, the loupes' outlines), to see what lies under them.
-    render_mode : str
-        Key of :data:`RENDER_MODES`: how the scan seen from the camera is shaded.
-    render_blend : float
-        Opacity of that render drawn over the camera image, in :data:`RENDER_BLEND_RANGE` (0 hides it).
-    rough_T_camera_lidar : tuple of float
-        The rough pose set in the Align folder or imported (predictions use it until a solve exists):
-        ``T_camera_lidar`` (maps lidar points into the camera frame, metres) as 16 numbers, row by row;
-        empty: none set.
-    """
-
-    panorama: bool = True
-    show_reprojection: bool = True
-    show_edges: bool = False  # runs 7 and 8: the dots cluttered the zoomed photo while picking; ticked to verify
-    snap: bool = False
-    up_axis: str = "+z"
-    ba_window_mode: str = "all"
+    panorama: bool = True  # show the camera image unwrapped (when the camera model has a panorama)
+    show_reprojection: bool = True  # draw the reprojected pairs with their residuals
+    show_edges: bool = False  # the reprojected BA-edge points; runs 7 and 8: they cluttered the zoomed photo
+    snap: bool = False  # snap clicks to the nearest corner
+    up_axis: str = "+z"  # key of UP_AXES: the 3-D pane's up direction
+    ba_window_mode: str = "all"  # key of BA_WINDOW_MODES
+    # The custom column window (scan columns; width 0: every column), clipped to the scan by ColumnWindow.make.
     ba_window_start: int = 0
     ba_window_width: int = 0
-    contrast: float = 1.0
-    loupe_shows: str = AS_CLICKED
+    contrast: float = 1.0  # of the laser panes, in CONTRAST_RANGE
+    loupe_shows: str = AS_CLICKED  # what the BA loupe shows: AS_CLICKED or a name of the scene's laser images
+    # What the last (bottom) laser pane shows instead of its BA direction: a name of the scene's laser images
+    # ("Intensity", "Range"), or "" for its BA direction.
     last_pane_shows: str = ""
-    edge_opacity: float = 0.8
+    edge_opacity: float = 0.8  # of the BA-edge overlay, in EDGE_OPACITY_RANGE (0 hides it)
+    # Hide every mark drawn over the images and in the loupes (pair markers, their numbers, the selection,
+    # predictions, reprojection overlays, the loupes' outlines), to see what lies under them.
     hide_marks: bool = False
-    render_mode: str = "range"
-    render_blend: float = 0.0
+    render_mode: str = "range"  # key of RENDER_MODES: how the scan seen from the camera is shaded
+    render_blend: float = 0.0  # opacity of that render over the camera image, in RENDER_BLEND_RANGE (0 hides it)
+    # The rough pose set in the Align folder or imported (predictions use it until a solve exists):
+    # T_camera_lidar (maps lidar points into the camera frame, metres) as 16 numbers, row by row; empty: none set.
     rough_T_camera_lidar: tuple = ()
 
     def __post_init__(self) -> None:
@@ -160,10 +130,7 @@ def _checked_pose(value: Any) -> tuple | None:
     return tuple(float(x) for x in T.reshape(-1))
 
 
-_FIELDS = {"panorama": bool, "show_reprojection": bool, "show_edges": bool, "snap": bool, "up_axis": str,
-           "ba_window_mode": str, "ba_window_start": int, "ba_window_width": int, "contrast": float,
-           "loupe_shows": str, "last_pane_shows": str, "edge_opacity": float, "hide_marks": bool,
-           "render_mode": str, "render_blend": float, "rough_T_camera_lidar": tuple}
+#: Each setting's type, the type of its default.
+_FIELDS = {f.name: type(f.default) for f in fields(ViewSettings)}
 _CHOICES = {"up_axis": tuple(UP_AXES), "ba_window_mode": tuple(BA_WINDOW_MODES), "render_mode": tuple(RENDER_MODES)}
 _RANGES = {"contrast": CONTRAST_RANGE, "edge_opacity": EDGE_OPACITY_RANGE, "render_blend": RENDER_BLEND_RANGE}
-assert tuple(_FIELDS) == tuple(f.name for f in fields(ViewSettings)), "ViewSettings and _FIELDS disagree"
