@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import replace
 from typing import Any, Callable
 
 import numpy as np
@@ -24,6 +25,16 @@ from .ui_common import (
 )
 from .view_events import BaWindowShown, ViewEvents
 from .view_settings import BA_WINDOW_MODES, UP_AXES
+
+
+#: How far the BA window's width may drift from the width the page was laid out for (a factor) before the page is
+#: laid out again (:meth:`ViewPanel._layout`).
+LAYOUT_WIDTH_SLACK = 1.5
+
+
+def geometry(slot: ImageSlot) -> tuple:
+    """Where ``slot`` lies on the page (centre and size, world units), whatever its pixel count."""
+    return slot.center, slot.render_width, slot.render_height
 
 
 class ViewPanel(ViewEvents):
@@ -97,9 +108,18 @@ class ViewPanel(ViewEvents):
         return self._ba_window
 
     def _layout(self) -> dict[str, ImageSlot]:
+        """The page's slots for the window shown: the BA panes keep the size they were laid out for while the
+        window's width stays within :data:`LAYOUT_WIDTH_SLACK` of it (their cells drawn that much narrower or
+        wider).  By-eye run 11: the 4th pair's solve widened the camera-facing window from 272 to 352 columns and
+        the 5th narrowed it to 280; each time the whole page moved about 7 screen px under the person's pointer."""
         app = self.app  # the camera-view render goes below the camera view, as large and in its framing
-        return layout_with_render(app.camera_sizes, self.camera_view.key, (self._ba_window.width, app.depth.shape[0]),
-                                  app.ba_keys, app.ba_cell_aspect)
+        shown = self._ba_window.width
+        laid = getattr(self, "_laid_out_width", None)  # None while the panel is being built
+        width = laid if laid is not None and laid / LAYOUT_WIDTH_SLACK <= shown <= laid * LAYOUT_WIDTH_SLACK else shown
+        self._laid_out_width = width
+        slots = layout_with_render(app.camera_sizes, self.camera_view.key, (width, app.depth.shape[0]), app.ba_keys,
+                                   app.ba_cell_aspect)
+        return {k: replace(s, width_px=shown) if k in app.ba_keys else s for k, s in slots.items()}
 
     def _wanted_ba_window(self) -> ColumnWindow:
         """The column window the current mode asks for (custom until a solve says what the camera sees)."""
@@ -150,7 +170,7 @@ class ViewPanel(ViewEvents):
                 for listener in list(self._window_listeners):
                     listener(shown)
             self.sync_window_widgets(typed)
-        moved = self.slots != old_slots
+        moved = {k: geometry(s) for k, s in self.slots.items()} != {k: geometry(s) for k, s in old_slots.items()}
         self._publish_layout(moved)
         if not moved:
             return  # same size (only the first column moved): keep every tab's zoom and pan
