@@ -180,7 +180,7 @@ def live_summary(live: Any, held: HeldQuality | None = None, fitted: bool = Fals
     solving = " · solving…" if getattr(live, "solving", False) else ""
     worst = worst_pair(bundle) if error_estimate_reason(n_fit) is None else ""
     why = f" · why: {reason_head(quality)}" if status != "ok" and reason_head(quality) else ""
-    return f"**{n_fit} pairs · {errors} · Quality: {shown}**{why}{worst}{solving}"
+    return f"**{n_fit} pairs · {errors} · Quality: {shown}**{worst}{why}{solving}"
 
 
 #: The longest reason head the live line shows (characters); the Calibration folder has the whole reason.
@@ -226,9 +226,10 @@ _ONE_LINE = ('<span style="display:block;white-space:nowrap;overflow:hidden;text
 #: The pair status and guided lines' height, in lines: one line cut their advice (runs 8, 9 and 11: "then photo
 #: lou...", "no proposal's 3-sigma ellipse fits th...").
 STATUS_LINES = 2
-#: The live line's constant height, in lines: with the reason and the worst pair it takes three at the panel's width
-#: (run 11: as it grew from two lines to three, the Pairs folder's buttons below moved 18 px under a click).
-LIVE_LINES = 3
+#: The live line's constant height, in lines (run 11: as it grew from two lines to three, the Pairs folder's buttons
+#: below moved 18 px under a click).  Two: a third pushed the Loupes folder out of a 900 px high page; the reason,
+#: last, is what a longer line loses (the whole text is in its hover title and the Calibration folder).
+LIVE_LINES = 2
 _FIXED_LINES = ('<span style="display:-webkit-box;-webkit-box-orient:vertical;-webkit-line-clamp:{n};'
                 'overflow:hidden;line-height:1.45em;height:{height:.2f}em" title="{title}">{text}</span>')
 

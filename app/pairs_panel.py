@@ -174,10 +174,11 @@ class PairsPanel:
             turn = app.pose_source.last_turn  # its reason names the pairs a refit fitted (app.align_panel)
             self.bar.show_live(app.solve_shown(), fitted=getattr(turn, "why", "") == f"refitted from {total} pairs")
             left_out = [f"#{p.id}" for p in complete if p.check]
-            # Three lines, so that the Loupes folder below stays in view without scrolling at 1400 x 900.
+            # Two lines, so that the Loupes folder below stays in view without scrolling at 1400 x 900.
             count += f" · pick {MIN_PAIRS - total} more to calibrate" if total < MIN_PAIRS else ""
+            count += f" · left out (check pairs): {', '.join(left_out)}" if left_out else ""
             count += f" · undo: {'yes' if state.can_undo else 'no'}, redo: {'yes' if state.can_redo else 'no'}"
-            lines = [count, doing, f"Left out of the fit (check pairs): {', '.join(left_out)}." if left_out else ""]
+            lines = [count, doing]
             self._summary = "  \n".join(line for line in lines if line)
             shown = "\n".join(one_line_markdown(line) for line in lines)
             if self._md_pairs.content != shown:

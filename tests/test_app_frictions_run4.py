@@ -155,11 +155,11 @@ def test_leave_the_selected_pair_out_of_the_fit_and_put_it_back(driver):
     app.state.select(pid)
     assert press() == [] and d.wait_idle()
     assert app.state.get(pid).check and pairs_in_fit(app.result) == n - 1
-    assert f"Left out of the fit (check pairs): #{pid}." in d.pairs_panel
+    assert f"left out (check pairs): #{pid} ·" in d.pairs_panel
     app.state.select(pid)  # the press ended the selection (run 7): select it again to put it back
     assert press() == [] and d.wait_idle()
     assert not app.state.get(pid).check and pairs_in_fit(app.result) == n
-    assert "Left out of the fit" not in d.pairs_panel
+    assert "left out (check pairs)" not in d.pairs_panel
     reset(d)
 
 

@@ -95,7 +95,7 @@ def test_the_live_line_shows_the_solve_figures_at_the_top(app, scene):
     line = app.pairs_panel.bar.live_line
     m = re.fullmatch(r"\*\*(\d+) pairs · mean ([0-9.]+) px · left out ([0-9.]+) px \(warning above 6\) · "
                      r"Quality: (ok|warning|UNRELIABLE)"
-                     r"\*\*( · why: [^·]+)?( · worst: pair \d+ [0-9.]+ px)?", line)  # tests/test_app_live_why.py
+                     r"\*\*( · worst: pair \d+ [0-9.]+ px)?( · why: [^·]+)?", line)  # tests/test_app_live_why.py
     assert m, line
     pairs = app.state.pairs()
     assert int(m.group(1)) == len(pairs)
