@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import io
 import itertools
 import math
@@ -77,6 +78,22 @@ def start_sample_app(tmp_path: Path, pairs, session_path: Path | None = None):
         app.stop()
         raise
     return app, driver
+
+
+@contextlib.contextmanager
+def open_sample_tab(tmp_path: Path, viewport: dict, n_pairs: int = 6):
+    """``(app, driver, tab)``: :func:`start_sample_app` with the sample's first ``n_pairs`` pairs and an
+    :class:`AnnotationTab` of size ``viewport`` on it; the browser and the app are stopped on leaving.  Skips the
+    test when the playwright package is not installed."""
+    sync_api = pytest.importorskip("playwright.sync_api", reason="the playwright package is not installed")
+    from calib_core.pairs import load_pairs_yaml
+
+    app, driver = start_sample_app(tmp_path, load_pairs_yaml(SAMPLE / "pairs.yaml")[:n_pairs])
+    try:
+        with sync_api.sync_playwright() as p:
+            yield app, driver, AnnotationTab(p, app, viewport)
+    finally:
+        app.stop()
 
 
 def wait_for(condition, what: str, timeout: float = TIMEOUT_S, interval: float = 0.05):
