@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import io
 import itertools
 import math
@@ -79,6 +80,22 @@ def start_sample_app(tmp_path: Path, pairs, session_path: Path | None = None):
     return app, driver
 
 
+@contextlib.contextmanager
+def open_sample_tab(tmp_path: Path, viewport: dict, n_pairs: int = 6):
+    """``(app, driver, tab)``: :func:`start_sample_app` with the sample's first ``n_pairs`` pairs and an
+    :class:`AnnotationTab` of size ``viewport`` on it; the browser and the app are stopped on leaving.  Skips the
+    test when the playwright package is not installed."""
+    sync_api = pytest.importorskip("playwright.sync_api", reason="the playwright package is not installed")
+    from calib_core.pairs import load_pairs_yaml
+
+    app, driver = start_sample_app(tmp_path, load_pairs_yaml(SAMPLE / "pairs.yaml")[:n_pairs])
+    try:
+        with sync_api.sync_playwright() as p:
+            yield app, driver, AnnotationTab(p, app, viewport)
+    finally:
+        app.stop()
+
+
 def wait_for(condition, what: str, timeout: float = TIMEOUT_S, interval: float = 0.05):
     """Poll ``condition()`` until it returns something truthy; fail naming ``what``."""
     deadline = time.monotonic() + timeout
@@ -111,6 +128,32 @@ def page_text(page) -> str:
     return " ".join(page.inner_text("body").split())
 
 
+class WebGLNotice:
+    """viser's "Software WebGL rendering detected" notice on ``page`` (headless Chromium renders in software): it
+    covers the panel's lower end and swallows clicks.  viser checks WebGL once per load of its page and logs it
+    ("WebGL support: ..."); the page closes the notice itself and logs that too (``app.page_builder.ESCAPE_JS``),
+    often before the tab's view is set.  Made before ``page.goto``, to hear both."""
+
+    def __init__(self, page) -> None:
+        self.page, self.loads, self.closed = page, 0, 0
+        page.on("console", self._on_console)
+
+    def _on_console(self, message) -> None:
+        if message.text.startswith("WebGL support:"):
+            self.loads += 1
+        elif message.text.startswith("ba-calib: ") and "Software WebGL" in message.text:
+            self.closed += 1
+
+    def wait_closed(self, timeout: float = 5.0) -> None:
+        """Wait until the page has closed the notice of every load of viser's page (up to ``timeout`` s: a tab with
+        hardware WebGL gets none; a reconnected tab, not loaded again, gets no new one), then until none is shown."""
+        deadline = time.monotonic() + timeout
+        while not (self.loads and self.closed >= self.loads) and time.monotonic() < deadline:
+            self.page.wait_for_timeout(50)  # (playwright delivers console events while it runs)
+        notice = self.page.locator(".mantine-Notification-root", has_text="Software WebGL")
+        notice.first.wait_for(state="detached", timeout=TIMEOUT_S * 1000)
+
+
 class AnnotationTab:
     """A headless-Chromium tab on a running app, connected, its annotation view set, the WebGL notice closed.
 
@@ -124,16 +167,11 @@ class AnnotationTab:
         self.app, self.driver = app, AppDriver(app)
         self.browser = playwright.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS)
         self.page = self.browser.new_page(viewport=viewport, **page_options)
+        notice = WebGLNotice(self.page)
         self.page.goto(app.url)
         self.cid = wait_for(lambda: self.driver.client_ids(), "the tab to connect")[0]
         wait_for(lambda: app.view.view_settled(self.cid), "the annotation view to be set")
-        # The software-WebGL notice swallows clicks: the page closes it itself (tests/test_e2e_actions9.py).
-        notice = self.page.locator(".mantine-Notification-root", has_text="Software WebGL")
-        try:
-            notice.first.wait_for(state="attached", timeout=5000)  # shown first (software WebGL here) ...
-        except Exception:  # playwright's TimeoutError: already closed
-            pass
-        notice.first.wait_for(state="detached", timeout=TIMEOUT_S * 1000)  # ... then closed by the page
+        notice.wait_closed()  # it swallows clicks
         self.box = self.page.locator("canvas").first.bounding_box()
         assert self.box is not None
 

@@ -2,6 +2,7 @@
 
 import os
 import sys
+import time
 from pathlib import Path
 
 import pytest  # does not load numpy: the BLAS variables below still come first
@@ -58,6 +59,37 @@ def pytest_collection_modifyitems(config, items):
         return
     rank = {name: k for k, name in enumerate(SLOW_FILES_FIRST)}
     items.sort(key=lambda item: rank.get(item.path.name, len(rank)))
+
+
+#: Under pytest-xdist, in the controller: ``(worker, test file) -> [start, end]`` (``time.monotonic()`` seconds),
+#: from the reports the workers send, for the schedule lines of the terminal summary.
+_FILE_SPANS: dict[tuple[str, str], list[float]] = {}
+_RUN_START = time.monotonic()
+
+
+def pytest_runtest_logreport(report):
+    node = getattr(report, "node", None)  # the worker that ran it: set in the pytest-xdist controller only
+    if node is None:
+        return
+    now = time.monotonic()
+    span = _FILE_SPANS.setdefault((node.gateway.id, report.nodeid.split("::", 1)[0]), [now, now])
+    span[0], span[1] = min(span[0], now - report.duration), now
+
+
+def pytest_terminal_summary(terminalreporter):
+    """Under pytest-xdist: when each worker ran its last test, and when the longest files ran (seconds from the
+    start): a worker idle at the end while another runs a long file shows here (the order: SLOW_FILES_FIRST)."""
+    if not _FILE_SPANS:
+        return
+    ends: dict[str, float] = {}
+    for (worker, _), (_, end) in _FILE_SPANS.items():
+        ends[worker] = max(ends.get(worker, 0.0), end - _RUN_START)
+    last = max(ends.values())
+    terminalreporter.write_line("xdist schedule: " + ", ".join(
+        f"{w} done at {t:.0f} s (idle {last - t:.0f} s)" for w, t in sorted(ends.items())))
+    longest = sorted(_FILE_SPANS.items(), key=lambda kv: kv[1][0] - kv[1][1])[:8]
+    terminalreporter.write_line("longest files: " + ", ".join(
+        f"{name.rsplit('/', 1)[-1]} {w} {a - _RUN_START:.0f}-{b - _RUN_START:.0f} s" for (w, name), (a, b) in longest))
 
 
 @pytest.fixture(scope="session")

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import pytest
 
-from browser_helpers import CHROMIUM, AnnotationTab, page_text, start_sample_app, wait_for
+from browser_helpers import CHROMIUM, open_sample_tab, page_text, start_sample_app, wait_for
 from calib_core.pairs import load_pairs_yaml
 from repo_paths import SAMPLE
 
@@ -32,39 +32,33 @@ INPUT_JS = """(label) => {
 
 
 def test_escape_cancels_a_half_pair_after_a_choice_in_the_render_shading_dropdown(tmp_path):
-    sync_api = pytest.importorskip("playwright.sync_api", reason="the playwright package is not installed")
-    app, driver = start_sample_app(tmp_path, load_pairs_yaml(SAMPLE / "pairs.yaml")[:6])
-    try:
-        with sync_api.sync_playwright() as p:
-            tab = AnnotationTab(p, app, {"width": 1400, "height": 1000})
-            page = tab.page
-            # A half pair: a click on the photo; then (run 8) a change of the render's shading before Escape.
-            page.mouse.click(*tab.screen("camera", (300.0, 250.0)))
-            wait_for(lambda: app.state.pending() is not None, "the half pair")
-            wait_for(lambda: "waits for a" in page_text(page), "the pending pair's status line")
-            wait_for(lambda: "Align (rough pose)" in page_text(page), "the Align folder")
-            if not page.evaluate(INPUT_JS, "Render shading"):
-                page.get_by_text("Align (rough pose)", exact=True).first.click()  # open the folder
-            expanded = "() => document.activeElement && document.activeElement.getAttribute('aria-expanded') === 'true'"
-            for _ in range(5):  # the folder opens with an animation: aim again until the dropdown is open
-                page.wait_for_timeout(600)
-                box = wait_for(lambda: page.evaluate(INPUT_JS, "Render shading"), "the Render shading dropdown")
-                page.mouse.click((box[0] + box[2]) / 2, (box[1] + box[3]) / 2)
-                page.wait_for_timeout(300)
-                if page.evaluate(expanded):
-                    break
-            assert page.evaluate(expanded), "the Render shading dropdown did not open"
-            option = page.locator("[role=option]:visible").filter(has_text="Intensity").first
-            option.wait_for(state="visible", timeout=5000)
-            option.click()
-            wait_for(lambda: app.state.view.render_mode == "intensity" and not app.actions.busy, "the new shading")
-            page.wait_for_timeout(500)
-            focused = page.evaluate("() => document.activeElement && document.activeElement.tagName")
-            assert focused == "INPUT"  # the dropdown keeps the focus, as in run 8
-            page.keyboard.press("Escape")
-            wait_for(lambda: app.state.pending() is None, "Escape to drop the half pair", timeout=10.0)
-    finally:
-        app.stop()
+    with open_sample_tab(tmp_path, {"width": 1400, "height": 1000}) as (app, driver, tab):
+        page = tab.page
+        # A half pair: a click on the photo; then (run 8) a change of the render's shading before Escape.
+        page.mouse.click(*tab.screen("camera", (300.0, 250.0)))
+        wait_for(lambda: app.state.pending() is not None, "the half pair")
+        wait_for(lambda: "waits for a" in page_text(page), "the pending pair's status line")
+        wait_for(lambda: "Align (rough pose)" in page_text(page), "the Align folder")
+        if not page.evaluate(INPUT_JS, "Render shading"):
+            page.get_by_text("Align (rough pose)", exact=True).first.click()  # open the folder
+        expanded = "() => document.activeElement && document.activeElement.getAttribute('aria-expanded') === 'true'"
+        for _ in range(5):  # the folder opens with an animation: aim again until the dropdown is open
+            page.wait_for_timeout(600)
+            box = wait_for(lambda: page.evaluate(INPUT_JS, "Render shading"), "the Render shading dropdown")
+            page.mouse.click((box[0] + box[2]) / 2, (box[1] + box[3]) / 2)
+            page.wait_for_timeout(300)
+            if page.evaluate(expanded):
+                break
+        assert page.evaluate(expanded), "the Render shading dropdown did not open"
+        option = page.locator("[role=option]:visible").filter(has_text="Intensity").first
+        option.wait_for(state="visible", timeout=5000)
+        option.click()
+        wait_for(lambda: app.state.view.render_mode == "intensity" and not app.actions.busy, "the new shading")
+        page.wait_for_timeout(500)
+        focused = page.evaluate("() => document.activeElement && document.activeElement.tagName")
+        assert focused == "INPUT"  # the dropdown keeps the focus, as in run 8
+        page.keyboard.press("Escape")
+        wait_for(lambda: app.state.pending() is None, "Escape to drop the half pair", timeout=10.0)
 
 
 N_FLOW_PAIRS = 6
@@ -76,53 +70,47 @@ def test_pairs_in_three_clicks_photo_then_lower_loupe_then_photo_loupe_with_the_
     pair is: a rough click on the full photo; a click in the lower loupe (the render at that place) on the cell the
     render draws at the corner; a click in the photo loupe on the corner.  Counted as a person's actions; the pair
     bar's text (as the page shows it) names the loupe of the next click."""
-    sync_api = pytest.importorskip("playwright.sync_api", reason="the playwright package is not installed")
     import numpy as np
 
     from calib_core.synthetic import load_sample, simulate_pairs
 
     scene = load_sample(SAMPLE)
-    app, driver = start_sample_app(tmp_path, load_pairs_yaml(SAMPLE / "pairs.yaml")[:6])
-    taken = {tuple(p.laser_rc) for p in app.state.picks}
-    corners = [p for p in simulate_pairs(scene, 40, np.random.default_rng(21), pixel_noise_px=0.0)
-               if tuple(p.laser_rc) not in taken]
     actions, made = 0, 0
-    try:
-        with sync_api.sync_playwright() as p:
-            tab = AnnotationTab(p, app, {"width": 1400, "height": 900})
-            page = tab.page
-            wait_for(lambda: driver.wait_render(), "the render")
+    with open_sample_tab(tmp_path, {"width": 1400, "height": 900}) as (app, driver, tab):
+        taken = {tuple(p.laser_rc) for p in app.state.picks}
+        corners = [p for p in simulate_pairs(scene, 40, np.random.default_rng(21), pixel_noise_px=0.0)
+                   if tuple(p.laser_rc) not in taken]
+        page = tab.page
+        wait_for(lambda: driver.wait_render(), "the render")
 
-            def click(target: str, uv) -> None:
-                nonlocal actions
-                before = app.state.version
-                page.mouse.click(*tab.screen(target, uv))
-                actions += 1
-                wait_for(lambda: app.state.version > before, f"the click on {target} to register")
-                assert driver.wait_idle()
+        def click(target: str, uv) -> None:
+            nonlocal actions
+            before = app.state.version
+            page.mouse.click(*tab.screen(target, uv))
+            actions += 1
+            wait_for(lambda: app.state.version > before, f"the click on {target} to register")
+            assert driver.wait_idle()
 
-            for pair in corners:
-                if made == N_FLOW_PAIRS:
-                    break
-                u, v = pair.pixel
-                cell = app.render_pane.cell_at_pixel(u, v)  # what the render draws at the corner
-                if cell is None or cell in taken:
-                    continue
-                click("camera", (u + ROUGH_PX[0], v + ROUGH_PX[1]))
-                pid = app.state.pending().id
-                wait_for(lambda: "waits for a BA click → lower loupe" in page_text(page),
-                         "the bar naming the lower loupe")
-                assert app.loupes.shows_render
-                click("loupe_ba", (cell[1], cell[0]))
-                assert app.state.get(pid).laser_rc == cell and app.state.pending() is None
-                wait_for(lambda: f"Pair {pid} made" in page_text(page), "the bar naming the photo loupe")
-                click("loupe_camera", (u, v))
-                got = app.state.get(pid)
-                assert np.hypot(got.pixel[0] - u, got.pixel[1] - v) < 0.05 and got.laser_rc == cell
-                taken.add(cell)
-                made += 1
-    finally:
-        app.stop()
+        for pair in corners:
+            if made == N_FLOW_PAIRS:
+                break
+            u, v = pair.pixel
+            cell = app.render_pane.cell_at_pixel(u, v)  # what the render draws at the corner
+            if cell is None or cell in taken:
+                continue
+            click("camera", (u + ROUGH_PX[0], v + ROUGH_PX[1]))
+            pid = app.state.pending().id
+            wait_for(lambda: "waits for a BA click → lower loupe" in page_text(page),
+                     "the bar naming the lower loupe")
+            assert app.loupes.shows_render
+            click("loupe_ba", (cell[1], cell[0]))
+            assert app.state.get(pid).laser_rc == cell and app.state.pending() is None
+            wait_for(lambda: f"Pair {pid} made" in page_text(page), "the bar naming the photo loupe")
+            click("loupe_camera", (u, v))
+            got = app.state.get(pid)
+            assert np.hypot(got.pixel[0] - u, got.pixel[1] - v) < 0.05 and got.laser_rc == cell
+            taken.add(cell)
+            made += 1
     print(f"\nthree-click flow e2e: {made} pairs in {actions} actions ({actions / max(made, 1):.2f} per pair)")
     assert made == N_FLOW_PAIRS and actions / made <= 3.0
 

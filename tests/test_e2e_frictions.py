@@ -17,9 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from browser_helpers import CHROMIUM, TIMEOUT_S, AnnotationTab, page_text, screen_rect, start_sample_app, wait_for
-from calib_core.pairs import load_pairs_yaml
-from repo_paths import SAMPLE
+from browser_helpers import CHROMIUM, TIMEOUT_S, open_sample_tab, page_text, screen_rect, wait_for
 
 #: Set BA_CALIB_SHOTS=dir to keep a screenshot of the page with the notification (for looking, not for checking).
 SHOT_DIR = Path(os.environ["BA_CALIB_SHOTS"]) if os.environ.get("BA_CALIB_SHOTS") else None
@@ -42,50 +40,44 @@ def overlaps(a, b) -> bool:
 
 
 def test_notifications_the_panels_top_and_escape_in_the_browser(tmp_path):
-    sync_api = pytest.importorskip("playwright.sync_api", reason="the playwright package is not installed")
-    app, driver = start_sample_app(tmp_path, load_pairs_yaml(SAMPLE / "pairs.yaml")[:6])
-    try:
-        with sync_api.sync_playwright() as p:
-            tab = AnnotationTab(p, app, {"width": 1400, "height": 900})
-            page, cid = tab.page, tab.cid
-            client = app.server.get_clients()[cid]
+    with open_sample_tab(tmp_path, {"width": 1400, "height": 900}) as (app, driver, tab):
+        page, cid = tab.page, tab.cid
+        client = app.server.get_clients()[cid]
 
-            # --- the pair actions: first in the panel, above the intro and the Pairs folder, on screen.
-            cancel = wait_for(lambda: page.evaluate(RECT_JS, ["Cancel pair", True]), "the Cancel pair button")
-            intro = page.evaluate(RECT_JS, ["Click a point in any", False])
-            pairs = page.evaluate(RECT_JS, ["Pairs", True])
-            assert intro is not None and pairs is not None
-            assert 0 <= cancel[1] and cancel[3] <= 900 and cancel[3] <= intro[1] < pairs[1], (cancel, intro, pairs)
-            for label in ("Undo", "Next pair"):
-                button = page.evaluate(RECT_JS, [label, True])
-                assert button is not None and abs(button[1] - cancel[1]) < 2, (label, button, cancel)
+        # --- the pair actions: first in the panel, above the intro and the Pairs folder, on screen.
+        cancel = wait_for(lambda: page.evaluate(RECT_JS, ["Cancel pair", True]), "the Cancel pair button")
+        intro = page.evaluate(RECT_JS, ["Click a point in any", False])
+        pairs = page.evaluate(RECT_JS, ["Pairs", True])
+        assert intro is not None and pairs is not None
+        assert 0 <= cancel[1] and cancel[3] <= 900 and cancel[3] <= intro[1] < pairs[1], (cancel, intro, pairs)
+        for label in ("Undo", "Next pair"):
+            button = page.evaluate(RECT_JS, [label, True])
+            assert button is not None and abs(button[1] - cancel[1]) < 2, (label, button, cancel)
 
-            # --- a notification: on screen, over none of the images and loupes.
-            app.notify(client, "Not accepted", "frictions test: no laser return here")
-            toast = page.locator(".mantine-Notification-root", has_text="frictions test")
-            toast.first.wait_for(timeout=TIMEOUT_S * 1000)
-            box = toast.first.bounding_box()
-            rect = (box["x"], box["y"], box["x"] + box["width"], box["y"] + box["height"])
-            assert 0 <= rect[0] and 0 <= rect[1] and rect[2] <= 1400 and rect[3] <= 900, rect
-            assert app.view.view_settled(cid)
-            canvas = page.locator("canvas").first.bounding_box()
-            slots = {"loupe " + k: app.loupes.slot(k) for k in ("ba", "camera")}
-            slots |= {k: app.slots[k] for k in (*app.ba_keys, "render", app.camera_slot().key)}
-            for name, slot in slots.items():
-                shown = screen_rect(client.camera, canvas, slot.bounds())
-                assert not overlaps(rect, shown), (name, shown, rect)
-            if SHOT_DIR is not None:
-                page.screenshot(path=str(SHOT_DIR / "frictions_toast.png"))
-            toast.first.locator("button").click()
+        # --- a notification: on screen, over none of the images and loupes.
+        app.notify(client, "Not accepted", "frictions test: no laser return here")
+        toast = page.locator(".mantine-Notification-root", has_text="frictions test")
+        toast.first.wait_for(timeout=TIMEOUT_S * 1000)
+        box = toast.first.bounding_box()
+        rect = (box["x"], box["y"], box["x"] + box["width"], box["y"] + box["height"])
+        assert 0 <= rect[0] and 0 <= rect[1] and rect[2] <= 1400 and rect[3] <= 900, rect
+        assert app.view.view_settled(cid)
+        canvas = page.locator("canvas").first.bounding_box()
+        slots = {"loupe " + k: app.loupes.slot(k) for k in ("ba", "camera")}
+        slots |= {k: app.slots[k] for k in (*app.ba_keys, "render", app.camera_slot().key)}
+        for name, slot in slots.items():
+            shown = screen_rect(client.camera, canvas, slot.bounds())
+            assert not overlaps(rect, shown), (name, shown, rect)
+        if SHOT_DIR is not None:
+            page.screenshot(path=str(SHOT_DIR / "frictions_toast.png"))
+        toast.first.locator("button").click()
 
-            # --- Escape cancels a half-made pair.
-            n = len(app.state.picks)
-            page.mouse.click(*tab.screen("camera", (300.0, 250.0)))
-            half = wait_for(lambda: app.state.pending(), "a click on the photo to start a pair")
-            wait_for(lambda: f"Pair {half.id} waits for a BA click" in page_text(page), "the half pair's status")
-            page.keyboard.press("Escape")
-            wait_for(lambda: app.state.pending() is None and not app.actions.busy, "Escape to cancel the half pair")
-            assert len(app.state.picks) == n
-            wait_for(lambda: "waits for a BA click" not in page_text(page), "the status line to go")
-    finally:
-        app.stop()
+        # --- Escape cancels a half-made pair.
+        n = len(app.state.picks)
+        page.mouse.click(*tab.screen("camera", (300.0, 250.0)))
+        half = wait_for(lambda: app.state.pending(), "a click on the photo to start a pair")
+        wait_for(lambda: f"Pair {half.id} waits for a BA click" in page_text(page), "the half pair's status")
+        page.keyboard.press("Escape")
+        wait_for(lambda: app.state.pending() is None and not app.actions.busy, "Escape to cancel the half pair")
+        assert len(app.state.picks) == n
+        wait_for(lambda: "waits for a BA click" not in page_text(page), "the status line to go")

@@ -14,7 +14,7 @@ import time
 
 import numpy as np
 import pytest
-from browser_helpers import CHROMIUM, CHROMIUM_ARGS, TIMEOUT_S, free_port, page_text, wait_for
+from browser_helpers import CHROMIUM, CHROMIUM_ARGS, WebGLNotice, free_port, page_text, wait_for
 
 from app_driver import AppDriver
 from calib_core.shots import Shot, solve_shots
@@ -22,16 +22,6 @@ from calib_core.synthetic import simulate_pairs
 from repo_paths import SAMPLE
 
 pytestmark = pytest.mark.browser
-
-
-def _close_webgl_notice(page) -> None:
-    notice = page.locator(".mantine-Notification-root", has_text="Software WebGL")
-    try:
-        notice.first.wait_for(timeout=5000)
-        notice.first.locator("button").click()
-        notice.first.wait_for(state="detached", timeout=TIMEOUT_S * 1000)
-    except Exception:  # the notice shows once per page; after a reconnect it may not come back
-        pass
 
 
 @pytest.mark.skipif(not CHROMIUM.exists(), reason="/usr/bin/chromium is missing (apt-get install chromium); CI installs it")
@@ -52,9 +42,10 @@ def test_add_a_shot_in_the_page_pick_in_it_and_see_it_in_the_joint_solve(tmp_pat
         with sync_api.sync_playwright() as p:
             browser = p.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS)
             page = browser.new_page(viewport={"width": 1400, "height": 900})
+            notice = WebGLNotice(page)
             page.goto(app.url)
             wait_for(lambda: "Showing shot 0 of 1" in page_text(page), "the Shots folder on shot 0")
-            _close_webgl_notice(page)
+            notice.wait_closed()
             for label, value in (("New shot: scan", str(scan1)), ("New shot: photo", str(image1))):
                 box = page.locator(f'div:has(label:text-is("{label}")):has(input)').last.locator("input")
                 box.fill(value)
@@ -75,7 +66,7 @@ def test_add_a_shot_in_the_page_pick_in_it_and_see_it_in_the_joint_solve(tmp_pat
             # A reconnected tab reports its camera only when it changes: a resize makes it report.
             page.set_viewport_size({"width": 1400, "height": 901})
             wait_for(lambda: app.view.view_settled(cid), "the annotation view to be set")
-            _close_webgl_notice(page)
+            notice.wait_closed()  # the notice shows once per load of the page: a reconnect brings none, a reload one
             canvas = page.locator("canvas").first.bounding_box()
             candidates = simulate_pairs(s1, 12, np.random.default_rng(3), pixel_noise_px=0.0)
             pair = next(q for q in candidates if app.ba_window.display_cols(np.array([q.laser_rc[1]]))[1][0])

@@ -93,7 +93,7 @@ def test_wheel_install_serves_the_sample_from_another_folder(tmp_path):
                     page = resp.status
                     break
             except OSError:
-                time.sleep(2)
+                time.sleep(0.2)  # (the sample is generated first: seconds)
         assert page == 200, f"server exited with {server.poll()} or never answered"
     finally:
         server.terminate()
