@@ -161,9 +161,14 @@ def _footprint_middles(cells: np.ndarray, rc: np.ndarray, u: np.ndarray, v: np.n
 def loupe_texture(shown: ShownRender | None, camera: Any, u0: int, v0: int, n: int) -> np.ndarray:
     """Render ``shown``'s pixels ``[u0, u0 + n) x [v0, v0 + n)`` (the camera loupe's crop), enlarged by nearest
     neighbour as the camera loupe is; :data:`PAD_RGB` outside the image."""
-    pane = (np.full((camera.height, camera.width, 3), NO_RETURN_RGB, np.uint8) if shown is None
-            else pane_texture(shown.rgba))
-    return crop_texture(pane, v0 + np.arange(n), u0 + np.arange(n), PAD_RGB, TEXTURE_TEXELS // n)
+    rows, cols = v0 + np.arange(n), u0 + np.arange(n)
+    r0, r1, c0, c1 = max(v0, 0), min(v0 + n, camera.height), max(u0, 0), min(u0 + n, camera.width)
+    if r1 <= r0 or c1 <= c0:  # wholly off the image: all padding
+        return crop_texture(np.zeros((1, 1, 3), np.uint8), np.full(n, -1), np.full(n, -1), PAD_RGB, TEXTURE_TEXELS // n)
+    # Only the crop's pixels are blended: the whole pane took 10-30 ms a click (190 ms at 1920 x 1080 under load).
+    part = (np.full((r1 - r0, c1 - c0, 3), NO_RETURN_RGB, np.uint8) if shown is None
+            else pane_texture(shown.rgba[r0:r1, c0:c1]))
+    return crop_texture(part, rows - r0, cols - c0, PAD_RGB, TEXTURE_TEXELS // n)
 
 
 def loupe_title(shown: ShownRender | None, depth: Any, center: tuple[float, float],
