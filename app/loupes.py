@@ -149,6 +149,8 @@ class Loupes:
         with self.app.ui_lock:
             self._clicked.pop("camera", None)
             self._render_anchor = None  # the render loupe follows the camera loupe again (until anchor_render)
+            if self._render_on():  # ... and its title names its new centre, not the last pair's laser end (run 12)
+                self._clicked.pop("ba", None)
             side = self._cam_n_chosen if min_side_px is None else max(self._cam_n_chosen, math.ceil(min_side_px))
             self._cam_n = int(min(side, CAMERA_PX_LIMITS[1]))
             crop = crop_around(float(u), float(v), self._cam_n, cov)
@@ -156,6 +158,8 @@ class Loupes:
                 self.camera_crop = crop
                 self._show("camera")
             self._titles["camera"].text = self.title("camera")
+            if self._render_on():
+                self._titles["ba"].text = self.title("ba")
 
     def show_render(self, on: bool) -> None:
         """Let the laser loupe show the camera-view render's crop (the camera loupe's crop), or the BA image's."""
