@@ -149,7 +149,8 @@ class Loupes:
         with self.app.ui_lock:
             self._clicked.pop("camera", None)
             self._render_anchor = None  # the render loupe follows the camera loupe again (until anchor_render)
-            if self._render_on():  # ... and its title names its new centre, not the last pair's laser end (run 12)
+            follows = self._render_on()
+            if follows:  # ... and its title names its new centre, not the last pair's laser end (run 12)
                 self._clicked.pop("ba", None)
             side = self._cam_n_chosen if min_side_px is None else max(self._cam_n_chosen, math.ceil(min_side_px))
             self._cam_n = int(min(side, CAMERA_PX_LIMITS[1]))
@@ -158,7 +159,7 @@ class Loupes:
                 self.camera_crop = crop
                 self._show("camera")
             self._titles["camera"].text = self.title("camera")
-            if self._render_on():
+            if follows:
                 self._titles["ba"].text = self.title("ba")
 
     def show_render(self, on: bool) -> None:

@@ -179,7 +179,8 @@ def live_summary(live: Any, held: HeldQuality | None = None, fitted: bool = Fals
     shown = ("UNRELIABLE" if status == "unreliable" else status) + (" (held, near the limit)" if note else "")
     solving = " · solving…" if getattr(live, "solving", False) else ""
     worst = worst_pair(bundle) if error_estimate_reason(n_fit) is None else ""
-    why = f" · why: {reason_head(quality)}" if status != "ok" and reason_head(quality) else ""
+    head = reason_head(quality) if status != "ok" else ""
+    why = f" · why: {head}" if head else ""
     return f"**{n_fit} pairs · {errors} · Quality: {shown}**{worst}{why}{solving}"
 
 
@@ -188,9 +189,9 @@ REASON_HEAD_CHARS = 60
 
 
 def reason_head(quality: Any) -> str:
-    """The first of ``quality``'s reasons up to its first ``:`` or ``;`` (a parenthesis cut there is dropped; at most :data:`REASON_HEAD_CHARS`
-    characters, cut at a word), e.g. "only 5 pairs in the fit"; "" without reasons.  Run 10: leaving a pair out
-    turned "ok" into "warning" and the live line did not say why."""
+    """The first of ``quality``'s reasons up to its first ``:`` or ``;`` (a parenthesis cut there is dropped; at
+    most :data:`REASON_HEAD_CHARS` characters, cut at a word), e.g. "only 5 pairs in the fit"; "" without reasons.
+    Run 10: leaving a pair out turned "ok" into "warning" and the live line did not say why."""
     reasons = list(getattr(quality, "reasons", None) or [])
     if not reasons:
         return ""

@@ -59,6 +59,7 @@ class ViewPanel(ViewEvents):
         ViewEvents.__init__(self)
         install_page_script(app.server, LOUPE_WHEEL_JS)  # the wheel over a loupe zooms the loupe
         self._ba_window = self._wanted_ba_window()
+        self._laid_out_width: int | None = None  # the BA width the page was laid out for (_layout)
         self.slots: dict[str, ImageSlot] = self._layout()
         self._build_folder(app.server.gui, add_last_pane_control, add_edge_control)
         self.sync_window_widgets()
@@ -114,7 +115,7 @@ class ViewPanel(ViewEvents):
         the 5th narrowed it to 280; each time the whole page moved about 7 screen px under the person's pointer."""
         app = self.app  # the camera-view render goes below the camera view, as large and in its framing
         shown = self._ba_window.width
-        laid = getattr(self, "_laid_out_width", None)  # None while the panel is being built
+        laid = self._laid_out_width
         width = laid if laid is not None and laid / LAYOUT_WIDTH_SLACK <= shown <= laid * LAYOUT_WIDTH_SLACK else shown
         self._laid_out_width = width
         slots = layout_with_render(app.camera_sizes, self.camera_view.key, (width, app.depth.shape[0]), app.ba_keys,
