@@ -3,7 +3,8 @@
 :func:`calibrate` resolves the pairs (laser cells or points, clicked pixels),
 takes each pair's id and ``precision_px``, models the laser pick of a whole
 depth-matrix cell (:func:`calib_core.solve.whiten.cell_pick_covariance`) and
-calls :func:`calib_core.solve.solve_extrinsics`.
+the error by-eye pairs share (:data:`calib_core.solve.whiten.BY_EYE_SHARED_RATIO`),
+and calls :func:`calib_core.solve.solve_extrinsics`.
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from .whiten import PICK_CELL_SIGMA, PICK_RANGE_SIGMA_M
+from .whiten import BY_EYE_SHARED_RATIO, PICK_CELL_SIGMA, PICK_RANGE_SIGMA_M
 
 __all__ = ["calibrate", "pair_ids_and_sigmas"]
 
@@ -34,7 +35,7 @@ def pair_ids_and_sigmas(pairs: Sequence[Any]) -> tuple[list[int], np.ndarray | N
 
 def calibrate(pairs: Sequence[Any], depth: Any, camera: Any, *, cost: str = "angular",
               cell_sigma: float | tuple[float, float] = PICK_CELL_SIGMA, range_sigma_m: float = PICK_RANGE_SIGMA_M,
-              **options: Any):
+              shared_ratio: float = BY_EYE_SHARED_RATIO, **options: Any):
     """Solve ``T_camera_lidar`` from :class:`calib_core.pairs.Pair` objects.
 
     Parameters
@@ -49,6 +50,11 @@ def calibrate(pairs: Sequence[Any], depth: Any, camera: Any, *, cost: str = "ang
         The laser pick model of the pairs that name a cell (cells across the beam, rows then
         columns; metres along it): :func:`calib_core.solve.whiten.cell_pick_covariance`'s
         defaults unless a study of the model asks for others.
+    shared_ratio : float
+        The part of the pairs' error they share, as a variance ratio to the independent part
+        (:data:`calib_core.solve.whiten.BY_EYE_SHARED_RATIO`, the default: pairs picked by eye); the
+        covariance and sigmas are ``1 + shared_ratio`` times wider in variance than the residuals
+        alone say.  0 for simulated clicks, whose errors are independent.
     **options
         Passed to :func:`calib_core.solve.solve_extrinsics` (e.g. ``robust``).
 
@@ -78,7 +84,7 @@ def calibrate(pairs: Sequence[Any], depth: Any, camera: Any, *, cost: str = "ang
         laser_cov[cells] = cell_pick_covariance(depth, rc, cell_sigma, range_sigma_m)
     result = solve_extrinsics(
         points, bearings, camera=camera, pixels=pixels, cost=cost, pair_ids=[all_ids[i] for i in fit],
-        pixel_sigma=sigmas, laser_cov_m2=laser_cov, **options,
+        pixel_sigma=sigmas, laser_cov_m2=laser_cov, shared_ratio=shared_ratio, **options,
     )
     from .quality import with_leave_one_out  # leave-one-out errors and leverages: does the fit flatter few pairs?
 
