@@ -123,14 +123,15 @@ def main(argv: list[str] | None = None) -> int:
                     alone = calibrate(fit, depth, camera, shared_ratio=0.0)  # the same pose, independent noise only
                     d2s.append(float(e @ np.linalg.solve(alone.covariance_6x6, e)))
                     row.append(f"{deg:.2f} deg / {cm:.1f} cm, d2 {d2s[-1]:.1f} (independent), {d2_model[-1]:.1f} "
-                               f"(with the shared part), {res.quality.status}")
+                               f"(with the shared part); quality {alone.quality.status} -> {res.quality.status}")
+                    first_reason = res.quality.reasons[0] if res.quality.reasons else ""
             res = calibrate(fit, depth, camera, cell_sigma=1.0)
             table["cell sigma 1"].append(pose_error(res.T_camera_lidar, T_ref)[:2])
             points, _, pixels = resolve_pairs(pairs, depth, camera)
             projected, _ = camera.project(transform_points(T_ref, points))
             err = np.asarray(pixels, dtype=np.float64) - projected
             biases.append(np.c_[err, np.linalg.norm(points, axis=1)])
-            print(f"{f.name:26s} {len(fit):2d} pairs in the fit: {row[0]}")
+            print(f"{f.name:26s} {len(fit):2d} pairs in the fit: {row[0]}\n{'':29s}first reason: {first_reason}")
         print("\nsolve variant        median deg  median cm   mean deg   mean cm")
         for name, vals in table.items():
             a = np.array(vals)

@@ -442,7 +442,10 @@ def solve_extrinsics(
         weak = conditioning_warning(H)
         if weak:
             warnings.append(weak)
-    bad_geo, weak_geo = geometry_reasons(stats[3:6], n_in, sigma_rotation, sigma_t, float(stats[2]))
+    cov_t = np.asarray(cov, dtype=np.float64)[3:, 3:]
+    worst_t = math.sqrt(max(float(np.linalg.eigvalsh(cov_t)[-1]), 0.0)) if np.isfinite(cov_t).all() else math.inf
+    bad_geo, weak_geo = geometry_reasons(stats[3:6], n_in, sigma_rotation, sigma_t, float(stats[2]), worst_t,
+                                         goal=shared_ratio > 0)
     unreliable += bad_geo
     warnings += weak_geo
     if unit == "px" and np.isfinite(noise_scale) and noise_scale > NOISY_FACTOR * prior:

@@ -75,9 +75,11 @@ PICK_RANGE_SIGMA_M = 0.015
 #:    footprint -- the cell's angular size (the depth matrix's row and column steps) times the range,
 #:    seen through the camera at the pose (:func:`cell_pick_covariance`, :func:`laser_tangent_covariance`,
 #:    ``C_i = sigma_i^2 A_i^-1 A_i^-T + Sigma_L,i``).  Also independent, so the residuals measure the
-#:    sum of 1 and 2 and the solve scales its covariance by them (Student-t): a 0.3 px loupe click
-#:    weighs little more than a 1 px one where the cell's footprint is a few px (KITTI 2.7 x 4.8 px,
-#:    PJLab 7.7 x 6.4 px per cell, medians of the kept sessions);
+#:    sum of 1 and 2 and the solve scales its covariance by them (Student-t).  This term already keeps a
+#:    0.3 px loupe click from outweighing a 1 px one: with cells of 2.7 x 4.8 px (KITTI) and 7.7 x 6.4 px
+#:    (PJLab; medians of the kept sessions, column x row), times PICK_CELL_SIGMA, it weighs 1.3-1.4x
+#:    (KITTI) and 1.1-1.2x (PJLab) as much, not 11x; the sessions solved without any click weighting
+#:    end within 0.01 deg of the app's (bench.by_eye_limits, "unweighted");
 #: 3. a part the session's pairs have in common -- a person reads "the corner" of every object
 #:    the same way (the same side of an edge, the same cell of a corner), so the offsets repeat
 #:    across pairs in a pattern the pose can follow.  The fit absorbs it whole: it moves the pose and
@@ -93,8 +95,8 @@ PICK_RANGE_SIGMA_M = 0.015
 #: offset of all pairs (it explains 2 of the 6 directions: d^2 stays near 20 and 30 however large), a
 #: shared term growing with the number of pairs (a worse likelihood), widening the correspondence
 #: term to a whole cell (d^2 38 and 50 instead of 49 and 65: the independent part was not the gap).
-#: Simulated clicks have no shared part: their solves (solve_extrinsics, or calibrate with
-#: ``shared_ratio=0``) keep the exact covariance.
+#: Where it applies: :func:`calib_core.solve.calibrate.default_shared_ratio` (cells of a measured scan).
+#: Simulated clicks on synthetic scenes have no shared part: their solves keep the exact covariance.
 BY_EYE_SHARED_RATIO = 8.4
 
 
