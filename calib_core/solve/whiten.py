@@ -78,8 +78,8 @@ PICK_RANGE_SIGMA_M = 0.015
 #:    sum of 1 and 2 and the solve scales its covariance by them (Student-t).  This term already keeps a
 #:    0.3 px loupe click from outweighing a 1 px one: with cells of 2.7 x 4.8 px (KITTI) and 7.7 x 6.4 px
 #:    (PJLab; medians of the kept sessions, column x row), times PICK_CELL_SIGMA, it weighs 1.3-1.4x
-#:    (KITTI) and 1.1-1.2x (PJLab) as much, not 11x; the sessions solved without any click weighting
-#:    end within 0.01 deg of the app's (bench.by_eye_limits, "unweighted");
+#:    (KITTI) and 1.1-1.2x (PJLab) as much, not 11x; solved without any click weighting, the sessions'
+#:    median results move by 0.01 deg and 0.1 cm (bench.by_eye_limits, "unweighted");
 #: 3. a part the session's pairs have in common -- a person reads "the corner" of every object
 #:    the same way (the same side of an edge, the same cell of a corner), so the offsets repeat
 #:    across pairs in a pattern the pose can follow.  The fit absorbs it whole: it moves the pose and
