@@ -140,7 +140,8 @@ def main(argv: list[str] | None = None) -> int:
         d2, dm = np.array(d2s), np.array(d2_model)
         independent_d2[scene] = d2
         for label, v in (("independent noise only", d2), (f"app, shared ratio {BY_EYE_SHARED_RATIO:g}", dm)):
-            print(f"\nMahalanobis d^2 of the pose error ({label}): median {np.median(v):.1f} (honest: {CHI2_6_MEDIAN}): "
+            print(f"\nMahalanobis d^2 of the pose error ({label}): median {np.median(v):.1f} "
+                  f"(honest: {CHI2_6_MEDIAN}): "
                   f"the stated sigma understates the error {np.sqrt(np.median(v) / CHI2_6_MEDIAN):.2f}x; true error "
                   f"inside the stated 95 % region in {int((v <= CHI2_6_95).sum())} of {len(v)} sessions")
         B = np.vstack(biases)

@@ -198,8 +198,13 @@ def solve_extrinsics(
         laser_cov = np.ascontiguousarray(laser_cov_m2, dtype=np.float64)
         if laser_cov.shape != (n, 3, 3) or not math.isfinite(float(laser_cov.sum())):  # (a NaN or inf spreads)
             raise CalibError(f"laser_cov_m2 must be {n} finite 3x3 covariances, got shape {laser_cov.shape}")
+    given_ratio = shared_ratio
+    try:
+        shared_ratio = float(shared_ratio)
+    except (TypeError, ValueError):
+        shared_ratio = math.nan
     if not (math.isfinite(shared_ratio) and shared_ratio >= 0):
-        raise CalibError(f"shared_ratio must be a number >= 0, got {shared_ratio!r}")
+        raise CalibError(f"shared_ratio must be a number >= 0, got {given_ratio!r}")
     if noise_rad is not None and not (np.isfinite(noise_rad) and noise_rad > 0):
         raise CalibError(f"noise_rad must be a positive number, got {noise_rad!r}")
     if pixels is not None:
