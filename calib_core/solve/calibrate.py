@@ -3,7 +3,8 @@
 :func:`calibrate` resolves the pairs (laser cells or points, clicked pixels),
 takes each pair's id and ``precision_px``, models the laser pick of a whole
 depth-matrix cell (:func:`calib_core.solve.whiten.cell_pick_covariance`) and
-calls :func:`calib_core.solve.solve_extrinsics`.
+the error by-eye pairs share (:data:`calib_core.solve.whiten.BY_EYE_SHARED_RATIO`),
+and calls :func:`calib_core.solve.solve_extrinsics`.
 """
 
 from __future__ import annotations
@@ -12,9 +13,25 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from .whiten import PICK_CELL_SIGMA, PICK_RANGE_SIGMA_M
+from .whiten import BY_EYE_SHARED_RATIO, PICK_CELL_SIGMA, PICK_RANGE_SIGMA_M
 
-__all__ = ["calibrate", "pair_ids_and_sigmas"]
+__all__ = ["calibrate", "default_shared_ratio", "pair_ids_and_sigmas"]
+
+
+def default_shared_ratio(pairs: Sequence[Any], depth: Any) -> float:
+    """The shared part of the pairs' error (:data:`calib_core.solve.whiten.BY_EYE_SHARED_RATIO`) where it applies.
+
+    It was measured on cells of measured scans (organised from a sensor's points: ``depth.meta["model"] ==
+    "organized"``) picked by eye and scored against published calibrations, so it holds what such pairs
+    share: a person's reading of where an object's corner is, and the sensor's own part (edge returns,
+    motion during the sweep, the reference's error).  An ideal synthetic scan (the sample, the simulated
+    scenes: its points exact by construction, its clicks simulated in the tests) has no such measurement:
+    0 there, and for pairs that name a lidar point instead of a cell.  With some pairs of each kind, the
+    ratio times the share of the pairs that name a cell of a measured scan.
+    """
+    if not pairs or depth is None or getattr(depth, "meta", {}).get("model") != "organized":
+        return 0.0
+    return BY_EYE_SHARED_RATIO * sum(p.laser_rc is not None for p in pairs) / len(pairs)
 
 
 def pair_ids_and_sigmas(pairs: Sequence[Any]) -> tuple[list[int], np.ndarray | None]:
@@ -34,7 +51,7 @@ def pair_ids_and_sigmas(pairs: Sequence[Any]) -> tuple[list[int], np.ndarray | N
 
 def calibrate(pairs: Sequence[Any], depth: Any, camera: Any, *, cost: str = "angular",
               cell_sigma: float | tuple[float, float] = PICK_CELL_SIGMA, range_sigma_m: float = PICK_RANGE_SIGMA_M,
-              **options: Any):
+              shared_ratio: float | None = None, **options: Any):
     """Solve ``T_camera_lidar`` from :class:`calib_core.pairs.Pair` objects.
 
     Parameters
@@ -49,6 +66,11 @@ def calibrate(pairs: Sequence[Any], depth: Any, camera: Any, *, cost: str = "ang
         The laser pick model of the pairs that name a cell (cells across the beam, rows then
         columns; metres along it): :func:`calib_core.solve.whiten.cell_pick_covariance`'s
         defaults unless a study of the model asks for others.
+    shared_ratio : float, optional
+        The part of the pairs' error they share, as a variance ratio to the independent part: the
+        covariance and sigmas are ``1 + shared_ratio`` times wider in variance than the residuals
+        alone say.  None (default): :func:`default_shared_ratio` (by-eye picks on a measured scan);
+        0 for errors known to be independent (simulated clicks).
     **options
         Passed to :func:`calib_core.solve.solve_extrinsics` (e.g. ``robust``).
 
@@ -65,6 +87,8 @@ def calibrate(pairs: Sequence[Any], depth: Any, camera: Any, *, cost: str = "ang
     from .whiten import cell_pick_covariance
 
     all_ids, _ = pair_ids_and_sigmas(pairs)
+    if shared_ratio is None:
+        shared_ratio = default_shared_ratio([p for p in pairs if not getattr(p, "check", False)], depth)
     fit = [i for i, p in enumerate(pairs) if not getattr(p, "check", False)]
     checks = [i for i, p in enumerate(pairs) if getattr(p, "check", False)]
     fit_pairs = [pairs[i] for i in fit]
@@ -78,7 +102,7 @@ def calibrate(pairs: Sequence[Any], depth: Any, camera: Any, *, cost: str = "ang
         laser_cov[cells] = cell_pick_covariance(depth, rc, cell_sigma, range_sigma_m)
     result = solve_extrinsics(
         points, bearings, camera=camera, pixels=pixels, cost=cost, pair_ids=[all_ids[i] for i in fit],
-        pixel_sigma=sigmas, laser_cov_m2=laser_cov, **options,
+        pixel_sigma=sigmas, laser_cov_m2=laser_cov, shared_ratio=shared_ratio, **options,
     )
     from .quality import with_leave_one_out  # leave-one-out errors and leverages: does the fit flatter few pairs?
 

@@ -117,6 +117,7 @@ def solve_extrinsics(
     laser_cov_m2: np.ndarray | None = None,
     pair_ids: np.ndarray | list[int] | None = None,
     robust: bool = True,
+    shared_ratio: float = 0.0,
 ) -> CalibrationResult:
     """Estimate ``T_camera_lidar`` from n >= 4 laser-point / bearing pairs.
 
@@ -161,6 +162,13 @@ def solve_extrinsics(
         their positions.  ``outliers`` always holds positions.
     robust : bool
         Find and leave out gross outliers (default).  False fits all pairs.
+    shared_ratio : float
+        Variance of the part of the pairs' errors that they share (a pose-like error the fit absorbs
+        whole, so the residuals cannot show it), as a ratio to the independent part's: the covariance,
+        the sigmas and the quality's uncertainty checks are taken ``1 + shared_ratio`` times wider
+        (:data:`calib_core.solve.whiten.BY_EYE_SHARED_RATIO` for picks by eye, which
+        :func:`calib_core.solve.calibrate` uses).  Default 0: the errors are independent (simulated
+        clicks, a known ``noise_rad``).
 
     Returns
     -------
@@ -190,6 +198,13 @@ def solve_extrinsics(
         laser_cov = np.ascontiguousarray(laser_cov_m2, dtype=np.float64)
         if laser_cov.shape != (n, 3, 3) or not math.isfinite(float(laser_cov.sum())):  # (a NaN or inf spreads)
             raise CalibError(f"laser_cov_m2 must be {n} finite 3x3 covariances, got shape {laser_cov.shape}")
+    given_ratio = shared_ratio
+    try:
+        shared_ratio = float(shared_ratio)
+    except (TypeError, ValueError):
+        shared_ratio = math.nan
+    if not (math.isfinite(shared_ratio) and shared_ratio >= 0):
+        raise CalibError(f"shared_ratio must be a number >= 0, got {given_ratio!r}")
     if noise_rad is not None and not (np.isfinite(noise_rad) and noise_rad > 0):
         raise CalibError(f"noise_rad must be a positive number, got {noise_rad!r}")
     if pixels is not None:
@@ -386,6 +401,12 @@ def solve_extrinsics(
             *((z,) if lm_at_T else ()),
         )
     noise_scale = float(noise_scale)
+    if shared_ratio:
+        # The shared part moves the pose as the independent part does, shared_ratio times as much in variance
+        # (whiten.BY_EYE_SHARED_RATIO): every figure of the uncertainty widens alike, before the quality checks.
+        widen = 1.0 + shared_ratio
+        cov, sigma_t, sigma_rpy = cov * widen, sigma_t * math.sqrt(widen), sigma_rpy * math.sqrt(widen)
+        sigma_rotation = sigma_rotation * math.sqrt(widen)
 
     # 5. Report.
     residual_deg = np.degrees(theta)
@@ -426,7 +447,10 @@ def solve_extrinsics(
         weak = conditioning_warning(H)
         if weak:
             warnings.append(weak)
-    bad_geo, weak_geo = geometry_reasons(stats[3:6], n_in, sigma_rotation, sigma_t, float(stats[2]))
+    cov_t = np.asarray(cov, dtype=np.float64)[3:, 3:]
+    worst_t = math.sqrt(max(float(np.linalg.eigvalsh(cov_t)[-1]), 0.0)) if np.isfinite(cov_t).all() else math.inf
+    bad_geo, weak_geo = geometry_reasons(stats[3:6], n_in, sigma_rotation, sigma_t, float(stats[2]), worst_t,
+                                         goal=shared_ratio > 0)
     unreliable += bad_geo
     warnings += weak_geo
     if unit == "px" and np.isfinite(noise_scale) and noise_scale > NOISY_FACTOR * prior:
