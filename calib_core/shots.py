@@ -50,6 +50,7 @@ import numpy as np
 
 from .errors import CalibError
 from .solve import MIN_PAIRS, CalibrationResult, Quality, solve_extrinsics
+from .solve.calibrate import default_shared_ratio
 from .solve.whiten import PICK_CELL_SIGMA, PICK_RANGE_SIGMA_M, cell_pick_covariance
 
 __all__ = [
@@ -178,6 +179,7 @@ class _Rows:
     position: np.ndarray
     laser_cov_full: np.ndarray  # zeros where unmodelled, for the predictive test
     sigma_full: np.ndarray  # 1 px where unstated
+    shared_ratio: float = 0.0  # the by-eye shared error, as calibrate() models it (pairs weighted by count)
 
 
 def _global_ids(shots: Sequence[Shot]) -> list[list[int]]:
@@ -214,6 +216,8 @@ def _rows(shots: Sequence[Shot], use: Sequence[int], ids: list[list[int]]) -> _R
         position=np.concatenate([pos for _, pos in parts]).astype(np.int64),
         laser_cov_full=cov,
         sigma_full=sigma_full,
+        shared_ratio=sum(default_shared_ratio([shots[k].pairs[int(i)] for i in pos], shots[k].depth) * len(pos)
+                         for k, pos in parts if shots[k].pairs) / max(len(points), 1),
     )
 
 
@@ -236,7 +240,8 @@ def _refuse_shared_points(rows: _Rows) -> None:
 
 def _solve_rows(rows: _Rows, camera, cost: str, options: dict) -> CalibrationResult:
     return solve_extrinsics(rows.points, rows.bearings, camera=camera, pixels=rows.pixels, cost=cost,
-                            pair_ids=rows.ids, pixel_sigma=rows.sigmas, laser_cov_m2=rows.laser_cov, **options)
+                            pair_ids=rows.ids, pixel_sigma=rows.sigmas, laser_cov_m2=rows.laser_cov,
+                            shared_ratio=rows.shared_ratio, **options)
 
 
 # --------------------------------------------------------------------------------------

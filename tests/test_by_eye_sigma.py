@@ -195,3 +195,19 @@ def test_one_pairs_noise_in_pixels_by_hand():
           f"sigmas by hand {np.sqrt(np.diag(by_hand)).round(3)} px, solve {np.sqrt(np.diag(solve_px)).round(3)} px")
     # The bearing is the click's, not the point's projection (5 px apart here): a few % between the two Jacobians.
     np.testing.assert_allclose(solve_px, by_hand, rtol=0.05, atol=0.02)
+
+
+@needs_data
+def test_a_shots_solve_states_the_same_widened_covariance_as_calibrate():
+    """The multi-shot solve models the by-eye shared error as calibrate() does: one shot of a kept session gives
+    calibrate's covariance, (1 + ratio) times the independent one (it kept the narrow one before)."""
+    from calib_core.shots import Shot, solve_shots
+
+    depth, camera, _ = _load("kitti")
+    pairs = _sessions("kitti")[-1]
+    one = solve_shots([Shot.from_pairs(pairs, depth, camera)], camera).result
+    alone = calibrate(pairs, depth, camera)
+    narrow = calibrate(pairs, depth, camera, shared_ratio=0.0)
+    assert np.allclose(one.T_camera_lidar, alone.T_camera_lidar, atol=1e-9)
+    assert np.allclose(one.covariance_6x6, alone.covariance_6x6, rtol=1e-6, atol=0)
+    assert np.allclose(one.covariance_6x6, (1 + BY_EYE_SHARED_RATIO) * narrow.covariance_6x6, rtol=1e-6, atol=0)
