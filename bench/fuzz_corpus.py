@@ -1,0 +1,83 @@
+"""The whole fuzz corpus, and the check that CI's part of it keeps every behaviour (issue 22).
+
+CI (``tests/test_fuzz_corpus.py``) runs one case per behaviour of the corpus
+(``tests.fuzz.generate.behaviour``: the file kind, the exit code, and the error line with its paths,
+quoted values and numbers blanked); the others, listed in ``tests/fuzz/bench_only.txt``, run here.
+This runs every case under the same rules, groups the results by behaviour, and checks that each
+group holds a case CI runs: a behaviour seen only here (a bench-only case that now ends differently
+from its siblings) fails it.  ``--write`` rewrites ``bench_only.txt`` from this run: in each group the
+case with the least CPU stays in CI.
+
+``python -m bench.fuzz_corpus [--workers N] [--write] [--out DIR]`` (about 75 s on 2 cores).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+from collections import Counter, defaultdict
+from pathlib import Path
+
+from .common import REPO
+
+if str(REPO) not in sys.path:
+    sys.path.insert(0, str(REPO))
+
+from tests.fuzz.generate import (  # noqa: E402
+    BENCH_ONLY_FILE, HANG_LIMIT_S, RSS_LIMIT_MB, behaviour, bench_only, build_corpus, check_result,
+)
+from tests.fuzz.runner import run_cases  # noqa: E402
+
+_HEADER = """\
+# Fuzz cases that only the full corpus runs (python -m bench.fuzz_corpus, or BA_CALIB_FUZZ_FULL=1 for
+# tests/test_fuzz_corpus.py): each has a sibling of the same behaviour (file kind, exit code, error line
+# shape: tests.fuzz.generate.behaviour) that CI runs.  Written by python -m bench.fuzz_corpus --write.
+"""
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--workers", type=int, default=3)
+    ap.add_argument("--write", action="store_true", help="rewrite tests/fuzz/bench_only.txt from this run")
+    ap.add_argument("--out", type=Path, default=None, help="where the corpus is written (default: a temp folder)")
+    args = ap.parse_args(argv)
+    with tempfile.TemporaryDirectory(prefix="ba-calib-fuzz-") as tmp:
+        folder = (args.out or Path(tmp)).resolve()
+        cases = build_corpus(folder / "corpus")
+        t0 = time.monotonic()
+        results = run_cases(cases, folder / "runs", workers=args.workers, timeout=HANG_LIMIT_S,
+                            rss_limit_mb=RSS_LIMIT_MB)
+        seconds = time.monotonic() - t0
+    failures = [f"{r.name}: {why}" for r in results if (why := check_result(r))]
+    groups: dict[tuple, list] = defaultdict(list)
+    for r in results:
+        groups[behaviour(r)].append(r)
+    skip = bench_only()
+    unknown = sorted(skip - {c.name for c in cases})
+    if args.write:
+        keep = {min(members, key=lambda r: (r.cpu_seconds, r.name)).name for members in groups.values()}
+        skip = frozenset(c.name for c in cases if c.name not in keep)
+        BENCH_ONLY_FILE.write_text(_HEADER + "".join(f"{name}\n" for name in sorted(skip)), encoding="utf-8")
+        unknown = []
+    uncovered = [key for key, members in groups.items() if all(r.name in skip for r in members)]
+    in_ci = [r for r in results if r.name not in skip]
+    codes = Counter(r.returncode for r in results)
+    print(f"full corpus: {len(results)} cases in {seconds:.1f} s with {args.workers} workers, "
+          f"{len(failures)} broke the rules; exit codes {dict(sorted(codes.items()))}; "
+          f"case CPU {sum(r.cpu_seconds for r in results):.1f} s")
+    print(f"{len(groups)} behaviours; CI runs {len(in_ci)} cases (case CPU {sum(r.cpu_seconds for r in in_ci):.1f} s); "
+          f"behaviours without a CI case: {len(uncovered)}; bench-only names not in the corpus: {len(unknown)}"
+          + ("; bench_only.txt rewritten" if args.write else ""))
+    for line in failures:
+        print("FAIL", line)
+    for kind, code, shape in uncovered:
+        print(f"NOT IN CI {kind} exit {code}: {shape[:160]}  ({', '.join(r.name for r in groups[kind, code, shape][:3])})")
+    for name in unknown:
+        print("UNKNOWN", name)
+    return 1 if failures or uncovered or unknown else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
