@@ -37,7 +37,6 @@ SLOW_FILES_FIRST = (
     "test_e2e_guided.py",
     "test_app_concurrency.py",
     "test_e2e_verify.py",
-    "test_kernels_interpreted.py",
     "test_e2e_shots.py",
     "test_app_guided.py",
     "test_app_real_scene.py",
