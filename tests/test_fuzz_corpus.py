@@ -7,9 +7,9 @@ in exit 0 (or 3 from solve: a result marked unreliable), or exit 2 with exactly 
 on stderr; never a traceback; within 10 s of CPU and 1 GiB peak RSS (killed as hung after 60 s wall).  ``python -m tests.fuzz.generate OUT
 --run`` does the same by hand.
 
-CI runs one case per behaviour (file kind, exit code, error line shape: ``tests.fuzz.generate.behaviour``), 619 of
-the 972 cases; ``BA_CALIB_FUZZ_FULL=1`` runs them all, and ``python -m bench.fuzz_corpus`` runs them all and checks
-that every behaviour they show has a case in CI (docs/testing.md).
+CI runs one case per behaviour (file kind, exit code, error line shape: ``tests.fuzz.generate.behaviour``) and
+every case near a resource limit, 620 of the 972 cases; ``BA_CALIB_FUZZ_FULL=1`` runs them all, and ``python -m
+bench.fuzz_corpus`` runs them all and checks that every behaviour they show has a case in CI (docs/testing.md).
 """
 
 from __future__ import annotations
