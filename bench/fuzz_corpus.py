@@ -10,7 +10,8 @@ quarter of the memory limit (:data:`HEAVY_CPU_S`, :data:`HEAVY_RSS_MB`) must run
 behaviour.  ``--write`` rewrites ``bench_only.txt`` from this run: in each group the case with the least
 CPU stays in CI, and so does every heavy case.
 
-``python -m bench.fuzz_corpus [--workers N] [--write] [--out DIR]`` (about 75 s on 2 cores).
+``python -m bench.fuzz_corpus [--workers N] [--write] [--out DIR]`` (35-95 s on 2 cores).  Run it with numba's
+cache filled (the test session fills it, or a first run): a kernel a case compiles counts in that case's CPU.
 """
 
 from __future__ import annotations
