@@ -37,7 +37,6 @@ SLOW_FILES_FIRST = (
     "test_e2e_guided.py",
     "test_app_concurrency.py",
     "test_e2e_verify.py",
-    "test_kernels_interpreted.py",
     "test_e2e_shots.py",
     "test_app_guided.py",
     "test_app_real_scene.py",
@@ -94,13 +93,30 @@ def pytest_terminal_summary(terminalreporter):
 
 @pytest.fixture(scope="session")
 def second_shot(tmp_path_factory):
-    """``shots_helpers.write_second_shot``, once per test process (about 10 s of ray casting).
+    """``shots_helpers.write_second_shot``, once per test run (about 10 s of CPU: ray casting).
 
-    The several-shot test files share these scenes and files and only read them.
+    The several-shot test files share these scenes and files and only read them.  Under pytest-xdist the workers
+    of one run share the parent of their temp folders: the first worker that needs the scenes writes them there
+    (files and a pickle of what the helper returns, under a lock), the others load them.
     """
     from shots_helpers import write_second_shot
 
-    return write_second_shot(tmp_path_factory.mktemp("second_shot"))
+    if not os.environ.get("PYTEST_XDIST_WORKER"):
+        return write_second_shot(tmp_path_factory.mktemp("second_shot"))
+    import fcntl
+    import pickle
+
+    shared = tmp_path_factory.getbasetemp().parent / "second_shot"
+    shared.mkdir(exist_ok=True)
+    with open(shared / ".lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
+        done = shared / "second_shot.pickle"
+        if done.exists():
+            return pickle.loads(done.read_bytes())
+        scenes = write_second_shot(shared)
+        done.with_suffix(".partial").write_bytes(pickle.dumps(scenes))
+        done.with_suffix(".partial").replace(done)
+        return scenes
 
 
 def pytest_sessionstart(session):

@@ -5,7 +5,14 @@ As a script::
     python -m tests.fuzz.generate OUT_DIR          # write the corpus and OUT_DIR/cases.json
     python -m tests.fuzz.generate OUT_DIR --run    # ... and run it, printing one line per failure
 
-As a library: :func:`case_modules`, :func:`build_corpus`, :func:`check_result`.
+As a library: :func:`case_modules`, :func:`build_corpus`, :func:`check_result`, :func:`ci_cases`,
+:func:`behaviour`.
+
+CI (``tests/test_fuzz_corpus.py``) runs one case per behaviour (:func:`behaviour`: the file kind, the
+exit code, the error line with its paths, quoted values and numbers blanked): the cases named in
+``bench_only.txt`` have a sibling of the same behaviour in CI and run only in the full corpus
+(``--run`` here, ``python -m bench.fuzz_corpus``, or ``BA_CALIB_FUZZ_FULL=1`` for the test).  A new
+case runs in CI until that list names it.
 """
 
 from __future__ import annotations
@@ -14,6 +21,7 @@ import argparse
 import importlib
 import json
 import pkgutil
+import re
 import sys
 import time
 from pathlib import Path
@@ -57,6 +65,53 @@ def build_corpus(folder: str | Path) -> list[FuzzCase]:
     if dupes:
         raise ValueError(f"duplicate fuzz case names: {dupes[:10]}")
     return cases
+
+
+#: The cases that only the full corpus runs, one name a line (``#`` comments): written by
+#: ``python -m bench.fuzz_corpus --write``, which keeps in CI the cheapest case of each behaviour.
+BENCH_ONLY_FILE = Path(__file__).with_name("bench_only.txt")
+
+
+def bench_only() -> frozenset[str]:
+    """The case names of :data:`BENCH_ONLY_FILE`."""
+    lines = BENCH_ONLY_FILE.read_text(encoding="utf-8").splitlines() if BENCH_ONLY_FILE.exists() else []
+    return frozenset(line.strip() for line in lines if line.strip() and not line.startswith("#"))
+
+
+def ci_cases(cases: list[FuzzCase]) -> list[FuzzCase]:
+    """``cases`` without those of :func:`bench_only` (each has a sibling of the same :func:`behaviour` kept)."""
+    skip = bench_only()
+    return [c for c in cases if c.name not in skip]
+
+
+def file_kind(name: str) -> str:
+    """What a case feeds the CLI, from its name: ``config/<file>`` (with the command for outputs and
+    arguments, the mutated file for mutations), or ``<group>/<format>`` for scans and images
+    (``scan/pcd_ascii``, ``mutant/ply``, ``image/.png``, ``special/fifo``)."""
+    parts = name.split("/")
+    if parts[0] == "config":
+        if parts[1] == "mutation":
+            return "config/mutation/" + re.sub(r"_\d+$", "", parts[2])
+        if parts[1] in ("output", "args") and len(parts) > 3:
+            return f"config/{parts[1]}/{parts[2]}"
+        return "config/" + parts[1]
+    base = re.sub(r"^m\d+_", "", parts[-1])  # a mutant of the file it names
+    if parts[0] == "image" or base.startswith("img_"):
+        return f"{parts[0]}/image{Path(base).suffix}"
+    return f"{parts[0]}/" + re.match(r"pcd_binary_compressed|pcd_ascii|pcd_binary|[a-z0-9]+", base).group(0)
+
+
+def error_shape(text: str) -> str:
+    """A message with its paths, quoted values and numbers replaced by ``<path>``, ``<q>``, ``<n>``."""
+    text = re.sub(r"(/[^\s:'\"(),]+)+", "<path>", text.strip())
+    text = re.sub(r"'[^']*'|\"[^\"]*\"", "<q>", text)
+    return re.sub(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?", "<n>", text)
+
+
+def behaviour(result) -> tuple[str, int, str]:
+    """``(file kind, exit code, error shape)`` of a :class:`~tests.fuzz.runner.CaseResult` (no shape for exit 0):
+    the cases of one behaviour take the same path through the code to the same kind of end."""
+    return file_kind(result.name), result.returncode, error_shape(result.stderr) if result.returncode else ""
 
 
 def check_result(result) -> str | None:
