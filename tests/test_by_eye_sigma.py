@@ -50,6 +50,8 @@ needs_data = pytest.mark.skipif(not DATA.is_dir(), reason=f"real data not found 
 CHI2_6_MEDIAN = 5.348
 #: The target band of the median d^2: the stated sigma within 1.5x of the truth (5.348 / 1.5^2 .. 5.348 * 1.5^2).
 BAND = (2.5, 12.0)
+#: The walkthrough runs the shared ratio was fitted on.
+FIT_RUNS = range(1, 13)
 
 
 def _load(scene: str):
@@ -60,8 +62,8 @@ def _load(scene: str):
 
 
 def _sessions(scene: str):
-    files = sorted(SESSIONS.glob(f"{scene}_run*.yaml"), key=lambda p: int(p.stem.rsplit("run", 1)[1]))
-    assert len(files) == 12
+    # Runs 1-12 are the set BY_EYE_SHARED_RATIO was fitted on; later runs are held out (docs/by_eye.md).
+    files = [SESSIONS / f"{scene}_run{n}.yaml" for n in FIT_RUNS]
     return [[p for p in load_pairs_yaml(f) if not p.check] for f in files]
 
 
