@@ -314,6 +314,11 @@ class GuidePanel(GuideShotsMixin):
         if rid is None:
             self._watch, self._refine = [half.id, None], None
         self._on_start()
+        self._frame(p)
+        self._refresh()
+
+    def _frame(self, p: Any) -> None:
+        """Frame both loupes on proposal ``p``: its cell, and its pixel with the 3-sigma ellipse."""
         loupes = self._loupes()
         if loupes is not None:
             loupes.frame_ba(self._ba_key, int(p.laser_rc[0]), int(p.laser_rc[1]))
@@ -322,7 +327,6 @@ class GuidePanel(GuideShotsMixin):
             self._guided_side = max(self._guided_side, 2.0 * p.radius_3sigma_px + ELLIPSE_MARGIN_PX)
             loupes.frame_camera(float(p.pixel[0]), float(p.pixel[1]), cov_px2=np.asarray(p.pixel_cov),
                                 min_side_px=self._guided_side)
-        self._refresh()
 
     def _on_button(self, label: str) -> None:
         if label == "Stop":
@@ -333,7 +337,8 @@ class GuidePanel(GuideShotsMixin):
             self._drop_unfinished()
             return
         if not self._active(self._n_complete()):
-            raise CalibError(f"guided picking starts after {MIN_PAIRS} pairs or an imported initial extrinsic")
+            raise CalibError(f"guided picking starts after {MIN_PAIRS} pairs (or an imported initial extrinsic), once "
+                             "the calibration is reliable")
         reason = self._unreliable()
         if reason is not None:
             self._guiding = self._want_next = False

@@ -195,6 +195,8 @@ class GuideShotsMixin:
         if label in ("Skip", "Not a corner") and getattr(declined, "replaces", None) is not None \
                 and self._reclick_id(self.current) is not None:
             self._end_reclick()
+            if self.shot_of(self.current) == self.active_shot:  # runs 12 and 13: they stayed on the skipped one
+                self._frame(self.current)
             self._refresh()
             return
         self._start_current()
