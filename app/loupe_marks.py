@@ -35,9 +35,14 @@ def ba_title(name: str, row: int, col: int, range_m: float | None) -> str:
     return f"{name} loupe · r{row} c{col} · {shown}"
 
 
-def render_title(cell: tuple[int, int] | None, range_m: float | None) -> str:
-    """The laser loupe's title while it shows the camera-view render (same crop as the camera loupe)."""
-    return "Render loupe · no return here" if cell is None else ba_title("Render", cell[0], cell[1], range_m)
+def render_title(cell: tuple[int, int] | None, range_m: float | None, side_px: int | None = None) -> str:
+    """The laser loupe's title while it shows the camera-view render: the cell and its range, and with ``side_px``
+    the crop's side in image px, as the photo loupe's title gives its own (run 13: the two scales could not be
+    compared); "loupe" is left out then, so the title keeps within :data:`TITLE_MAX_CHARS`."""
+    if side_px is None:
+        return "Render loupe · no return here" if cell is None else ba_title("Render", cell[0], cell[1], range_m)
+    shown = "no return here" if cell is None else ba_title("Render", cell[0], cell[1], range_m).replace(" loupe", "", 1)
+    return f"Render · {shown} · {int(side_px)} px" if cell is None else f"{shown} · {int(side_px)} px"
 
 
 def camera_title(u: float, v: float, n: int) -> str:

@@ -459,7 +459,8 @@ class Loupes:
         """The loupe's title as the page shows it."""
         if kind == "ba" and self._render_on():  # the pair's cell it is held on, else the cell a click inside chose
             held = None if self._render_anchor is None else self._render_anchor[0]
-            return loupe_title(self._render, self.app.depth, self.render_crop.center, held or self._clicked.get("ba"))
+            return loupe_title(self._render, self.app.depth, self.render_crop.center, held or self._clicked.get("ba"),
+                               self.render_crop.n)
         if kind == "ba":
             c = self.ba_crop
             row, col = self._clicked.get("ba", c.center)

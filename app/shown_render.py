@@ -172,10 +172,10 @@ def loupe_texture(shown: ShownRender | None, camera: Any, u0: int, v0: int, n: i
 
 
 def loupe_title(shown: ShownRender | None, depth: Any, center: tuple[float, float],
-                clicked: tuple[int, int] | None = None) -> str:
+                clicked: tuple[int, int] | None = None, side_px: int | None = None) -> str:
     """The laser loupe's title while it shows render ``shown``: the cell a click inside the loupe chose
-    (``clicked``, ``(row, col)``), else the cell at the crop's centre; and its range."""
+    (``clicked``, ``(row, col)``), else the cell at the crop's centre; its range; and the crop's side ``side_px``."""
     from .loupe_marks import render_title
 
     cell = (int(clicked[0]), int(clicked[1])) if clicked is not None else cell_at_pixel(shown, *center)
-    return render_title(cell, None if cell is None else float(depth.range_m[cell]))
+    return render_title(cell, None if cell is None else float(depth.range_m[cell]), side_px)

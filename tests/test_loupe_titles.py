@@ -40,6 +40,7 @@ def test_the_longest_titles_fit_the_loupe(camera_size, ba_size, cell_aspect):
     width = loupe_width_px(camera_size, ba_size, cell_aspect)
     longest = [ba_title("BA horizontal", 127, 4095, 120.0), ba_title("Intensity", 127, 4095, None),
                render_title((127, 4095), 120.0), render_title(None, None),
+               render_title((127, 4095), 120.0, 1200), render_title(None, None, 1200),
                camera_title(camera_size[0] - 0.5, camera_size[1] - 0.5, 1200)]
     for title in longest:
         assert len(title) <= TITLE_MAX_CHARS, title
@@ -108,3 +109,11 @@ def test_app_titles_and_the_two_marks_after_a_refining_click(tmp_path, scene):
         assert np.linalg.norm(uv[0] - [u, v]) > 0.1
     finally:
         app.stop()
+
+
+def test_the_render_loupe_names_its_side_as_the_photo_loupe_does():
+    """Run 13: the photo loupe's title gave its side in px and the render loupe's did not, so their scales could not
+    be compared."""
+    assert render_title((4, 893), 10.2, 72) == "Render · r4 c893 · 10.20 m · 72 px"
+    assert render_title(None, None, 108) == "Render · no return here · 108 px"
+    assert camera_title(620.5, 187.0, 72).endswith("· 72 px")
