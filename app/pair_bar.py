@@ -357,11 +357,12 @@ class PairBar:
     def show_pose_turn(self, turn: Any, pairs: Any = None) -> None:
         """Show the notice of rough pose change ``turn`` (:class:`app.pose_source.PoseTurn`, or None) under the live
         line, where the person looks while picking (run 6: the render rolled 2.2-3 deg after the 2nd pair with no
-        word near it): e.g. "Pose refitted from 2 pairs: turned 2.6 deg".  A step by hand clears it, so does the
-        first solve (:meth:`show_live`).  ``pairs``: the pairs when the pose turned (e.g. ``state.all_picks``);
-        the notice goes once they change (:meth:`pairs_changed`: run 7, it stayed after later pairs)."""
-        note = "" if turn is None else turn.note()
-        text = f"⚠ **{note}**: the render moved; look again before the next click." if note else ""
+        word near it): e.g. "Look again: the render turned 2.6 deg (pose refitted from 2 pairs)", what to do first
+        (runs 12 and 13: the line's end, "look again", was cut off).  A step by hand clears it, so does the first
+        solve (:meth:`show_live`).  ``pairs``: the pairs when the pose turned (e.g. ``state.all_picks``); the notice
+        goes once they change (:meth:`pairs_changed`: run 7, it stayed after later pairs)."""
+        text = "" if turn is None or not turn.why else (
+            f"⚠ **Look again:** the render turned {turn.degrees:.1f} deg (pose {turn.why})")
         with self._lock:
             self._show_notice("pose", text, pairs)
 

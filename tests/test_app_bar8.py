@@ -100,7 +100,7 @@ def test_the_refit_notice_shows_the_latest_refit_and_goes_with_the_next_pair(app
     key = app.ba_keys[0]
     for pair in made[:2]:
         assert d.click_cell(key, *pair.laser_rc) == [] and d.click_camera(*pair.pixel) == []
-    assert d.wait_idle() and "Pose refitted from 2 pairs" in bar.pose_note, bar.pose_note
+    assert d.wait_idle() and "(pose refitted from 2 pairs)" in bar.pose_note, bar.pose_note
     # The next pair started (its laser end clicked): the notice of the old refit goes.
     assert d.click_cell(key, *made[2].laser_rc) == [] and d.wait_idle()
     assert bar.pose_note == "", bar.pose_note
@@ -111,7 +111,7 @@ def test_the_refit_notice_shows_the_latest_refit_and_goes_with_the_next_pair(app
             assert bar.pose_note == "", bar.pose_note
         else:
             turned = np.degrees(Rotation.from_matrix(before[:3, :3].T @ after[:3, :3]).magnitude())
-            assert f"Pose refitted from {n} pairs: turned {turned:.1f} deg" in bar.pose_note, bar.pose_note
+            assert f"the render turned {turned:.1f} deg (pose refitted from {n} pairs)" in bar.pose_note, bar.pose_note
 
     T = d.rough_pose.copy()
     assert d.click_camera(*made[2].pixel) == [] and d.wait_idle()

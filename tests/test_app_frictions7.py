@@ -84,7 +84,9 @@ def test_a_refit_of_the_rough_pose_is_noticed_in_the_bar_and_a_click_planned_bef
     assert not np.allclose(T1, T0)
     # The turn, computed here from the two poses (scipy's rotation of R0^T R1).
     turned = np.degrees(Rotation.from_matrix(T0[:3, :3].T @ T1[:3, :3]).magnitude())
-    assert f"Pose refitted from 2 pairs: turned {turned:.1f} deg" in bar.pose_note, bar.pose_note
+    assert f"the render turned {turned:.1f} deg (pose refitted from 2 pairs)" in bar.pose_note, bar.pose_note
+    # What to do comes first: the one-line notice is cut at its end (runs 12 and 13 lost "look again").
+    assert bar.pose_note.startswith("⚠ **Look again:**"), bar.pose_note
     # A click on the old render (still shown while the new one renders) is not placed ...
     reason = app.pose_source.stale_click_reason(old_render)
     assert reason is not None and "refitted from 2 pairs" in reason
