@@ -145,6 +145,10 @@ def test_goal_line_by_hand():
     line = goal_reason(0.3, 0.04, 20.0)
     assert line.startswith("rotation uncertain to +/- 0.6 deg") and "spread over the whole image" in line
     assert goal_reason(0.2, 0.04, 20.0) is None
+    # 0.5 m 1-sigma at 20 m: 10 cm would need pairs 20 * 0.10 / 1.0 = 2 m away, which few scenes have.
+    line = goal_reason(0.2, 0.5, 20.0)
+    assert "+/- 100 cm" in line and "add pairs as near as the scene has, and more of them" in line
+    assert "nearer than" not in line
 
 
 def test_no_shared_part_on_a_synthetic_scan():

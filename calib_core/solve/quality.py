@@ -63,7 +63,8 @@ FEW_INLIERS = 6
 GOAL_ROTATION_DEG = 0.5
 GOAL_TRANSLATION_M = 0.10
 GOAL_SIGMAS = 2.0
-#: :func:`goal_reason` names no nearer range than this (m) to add pairs at: few scenes have corners nearer.
+#: :func:`goal_reason` names no nearer range than this (m) to add pairs at (it asks for more, and the nearest the
+#: scene has, instead): few scenes have corners nearer.
 NEAR_ADVICE_MIN_M = 3.0
 #: Fewest pairs in the fit whose residuals estimate the error (:func:`error_estimate_reason`).
 MIN_PAIRS_FOR_ERROR = 5
@@ -124,7 +125,9 @@ def goal_reason(rotation_sigma_deg: float, translation_sigma_m: float, median_ra
     if trans > GOAL_TRANSLATION_M:
         parts.append(f"translation uncertain to +/- {100 * trans:.0f} cm")
         near = median_range_m * GOAL_TRANSLATION_M / trans if median_range_m > 0 else 0.0
-        advice.append(f"nearer than {near if near >= NEAR_ADVICE_MIN_M else NEAR_ADVICE_MIN_M:.0f} m")
+        # Under a few metres there is seldom anything to pair (run 13: "nearer than 3 m" on PJLab, where nothing is).
+        advice.append(f"nearer than {near:.0f} m" if near >= NEAR_ADVICE_MIN_M
+                      else "as near as the scene has, and more of them")
         advice.append("at several depths")
     if rot > GOAL_ROTATION_DEG:
         parts.append(f"rotation uncertain to +/- {rot:.1f} deg")
