@@ -33,18 +33,9 @@ from calib_core.solve.whiten import (
     tangent_to_pixel,
 )
 from calib_core.solve.kernels import bearing_frames
-from repo_paths import REPO, SAMPLE
+from bench.by_eye_limits import DATA, SCENES, SESSIONS  # the scenes' files and the kept sessions
+from repo_paths import SAMPLE
 
-SESSIONS = REPO / "tests" / "by_eye_sessions"
-DATA = REPO.parent / "shared" / "data"
-KITTI = DATA / "kitti_object_000002"
-PJLAB = DATA / "pjlab_opencalib_lidar2camera" / "manual_calib"
-SCENES = {
-    "kitti": (KITTI / "velodyne" / "000002.bin", REPO / "real_data" / "kitti_000002_camera.yaml", None,
-              KITTI / "calib" / "000002.txt"),
-    "pjlab_manual": (PJLAB / "0.pcd", PJLAB / "center_camera-intrinsic.json", (1920, 1200),
-                     PJLAB / "top_center_lidar-to-center_camera-extrinsic.json"),
-}
 needs_data = pytest.mark.skipif(not DATA.is_dir(), reason=f"real data not found at {DATA}")
 #: Median of chi^2 with 6 dof (scipy.stats.chi2(6).median()).
 CHI2_6_MEDIAN = 5.348
