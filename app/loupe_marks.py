@@ -28,21 +28,24 @@ TITLE_MAX_CHARS = 44
 LEGEND = "+ your click · O laser point projected"
 
 
+def _cell_text(row: int, col: int, range_m: float | None) -> str:
+    """``"r4 c893 · 10.20 m"``: a scan cell and its range (``range_m`` None or NaN: "no return")."""
+    shown = "no return" if range_m is None or not np.isfinite(range_m) else f"{range_m:.2f} m"
+    return f"r{row} c{col} · {shown}"
+
+
 def ba_title(name: str, row: int, col: int, range_m: float | None) -> str:
     """The laser loupe's title for scan cell ``(row, col)`` of the ``name`` image: e.g.
     ``"Range loupe · r4 c893 · 10.20 m"``; ``range_m`` None: no return there."""
-    shown = "no return" if range_m is None or not np.isfinite(range_m) else f"{range_m:.2f} m"
-    return f"{name} loupe · r{row} c{col} · {shown}"
+    return f"{name} loupe · {_cell_text(row, col, range_m)}"
 
 
 def render_title(cell: tuple[int, int] | None, range_m: float | None, side_px: int | None = None) -> str:
     """The laser loupe's title while it shows the camera-view render: the cell and its range, and with ``side_px``
     the crop's side in image px, as the photo loupe's title gives its own (run 13: the two scales could not be
     compared); "loupe" is left out then, so the title keeps within :data:`TITLE_MAX_CHARS`."""
-    if side_px is None:
-        return "Render loupe · no return here" if cell is None else ba_title("Render", cell[0], cell[1], range_m)
-    shown = "no return here" if cell is None else ba_title("Render", cell[0], cell[1], range_m).replace(" loupe", "", 1)
-    return f"Render · {shown} · {int(side_px)} px" if cell is None else f"{shown} · {int(side_px)} px"
+    where = "no return here" if cell is None else _cell_text(cell[0], cell[1], range_m)
+    return f"Render loupe · {where}" if side_px is None else f"Render · {where} · {int(side_px)} px"
 
 
 def camera_title(u: float, v: float, n: int) -> str:
