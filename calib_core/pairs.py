@@ -11,6 +11,8 @@ File format (YAML)::
         source: guided              # optional: clicked (default) | guided | auto
         precision_px: 0.3           # optional: 1-sigma of the pixel, px (weights the solve)
         check: true                 # optional: a check pair, left out of the fit and reported apart
+        edge_deg: 30.0              # optional: the pixel lies on a straight image edge at this angle (degrees
+                                    # from +u towards +v, [0, 180)) and may slide along it (a point-on-line pair)
 
 Pixels use the package convention: the centre of the top-left pixel is (0, 0).
 """
@@ -30,9 +32,11 @@ from .io.atomic import write_yaml_atomic
 from .io.yaml_files import finite_vector, read_yaml_mapping
 
 
-def tag_fields(source: str, precision_px: float | None, check: bool) -> dict[str, Any]:
+def tag_fields(source: str, precision_px: float | None, check: bool, *, edge_deg: float | None = None
+               ) -> dict[str, Any]:
     """A pair's tags as file fields, each written only when not the default (so files of
-    unguided, all-fit pairs stay as they were): ``source``, ``precision_px`` (px), ``check``."""
+    unguided, all-fit, corner pairs stay as they were): ``source``, ``precision_px`` (px), ``check``,
+    ``edge_deg`` (degrees, :attr:`Pair.edge_deg`; written in [0, 180))."""
     out: dict[str, Any] = {}
     if source != "clicked":
         out["source"] = source
@@ -40,7 +44,18 @@ def tag_fields(source: str, precision_px: float | None, check: bool) -> dict[str
         out["precision_px"] = float(precision_px)
     if check:
         out["check"] = True
+    if edge_deg is not None:
+        out["edge_deg"] = float(edge_deg) % 180.0
     return out
+
+
+def parse_edge_deg(value: Any, where: str) -> float:
+    """An ``edge_deg`` value: a finite number of degrees, returned in [0, 180) (a line's direction is
+    the same at ``a`` and ``a + 180``); anything else one :class:`CalibError` line naming ``where``."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
+            or not np.isfinite(float(value)):
+        raise CalibError(f"{where} edge_deg: expected a finite angle in degrees (0 to 180), got {value!r}"[:300])
+    return float(value) % 180.0
 
 
 @dataclass(frozen=True)
@@ -63,6 +78,13 @@ class Pair:
         1-sigma of the pixel in px, when known; None means the solve's default.
     check : bool
         A check pair: left out of the fit, its error reported separately.
+    edge_deg : float or None
+        None: an ordinary (corner) pair, the pixel is where the laser point is seen.  A number: the
+        pixel lies on a straight image edge at this angle (degrees from +u towards +v, in [0, 180))
+        and may slide along it -- a point-on-line constraint, e.g. a laser ring crossing a painted
+        lane line, whose place along the line the photo cannot show.  The solve trusts such a pixel
+        only across the edge (:data:`calib_core.solve.edges.EDGE_SLIDE`), and its reported pixel
+        error is the distance across the edge.
     """
 
     laser_rc: tuple[int, int] | None
@@ -72,6 +94,7 @@ class Pair:
     source: str = "clicked"
     precision_px: float | None = None
     check: bool = False
+    edge_deg: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {}
@@ -82,7 +105,7 @@ class Pair:
         out["pixel"] = [float(self.pixel[0]), float(self.pixel[1])]
         if self.id is not None:
             out["id"] = int(self.id)
-        out.update(tag_fields(self.source, self.precision_px, self.check))
+        out.update(tag_fields(self.source, self.precision_px, self.check, edge_deg=self.edge_deg))
         return out
 
     @staticmethod
@@ -90,7 +113,8 @@ class Pair:
         """Parse one entry of a pairs file; ``where`` names it in errors."""
         if not isinstance(entry, dict):
             raise CalibError(f"{where}: expected a mapping with laser_rc or laser_xyz and pixel")
-        unknown = set(entry) - {"laser_rc", "laser_xyz", "pixel", "id", "label", "source", "precision_px", "check"}
+        unknown = set(entry) - {"laser_rc", "laser_xyz", "pixel", "id", "label", "source", "precision_px", "check",
+                                "edge_deg"}
         if unknown:
             raise CalibError(f"{where}: unknown key(s) {sorted(unknown)}")
         has_rc, has_xyz = "laser_rc" in entry, "laser_xyz" in entry
@@ -138,7 +162,7 @@ def parse_laser_rc(value: Any, where: str) -> tuple[int, int]:
 
 
 def _optional_fields(entry: dict, where: str) -> dict[str, Any]:
-    """The optional ``id``, ``source``, ``precision_px`` and ``check`` of a pairs-file entry, checked."""
+    """The optional ``id``, ``source``, ``precision_px``, ``check`` and ``edge_deg`` of a pairs-file entry, checked."""
     out: dict[str, Any] = {}
     if entry.get("id") is not None:
         pid = entry["id"]
@@ -158,6 +182,9 @@ def _optional_fields(entry: dict, where: str) -> dict[str, Any]:
         if not isinstance(entry["check"], bool):
             raise CalibError(f"{where} check: expected true or false, got {entry['check']!r}")
         out["check"] = entry["check"]
+    if entry.get("edge_deg") is not None:
+        name = where if out.get("id") is None else f"{where} (id {out['id']})"
+        out["edge_deg"] = parse_edge_deg(entry["edge_deg"], name)
     return out
 
 

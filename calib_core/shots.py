@@ -50,7 +50,8 @@ import numpy as np
 
 from .errors import CalibError
 from .solve import MIN_PAIRS, CalibrationResult, Quality, solve_extrinsics
-from .solve.calibrate import default_shared_ratio
+from .solve.calibrate import default_shared_ratio, pair_edge_degrees
+from .solve.edges import edge_click_covariance, edge_pixel_errors, slide_along_edges
 from .solve.whiten import PICK_CELL_SIGMA, PICK_RANGE_SIGMA_M, cell_pick_covariance
 
 __all__ = [
@@ -116,6 +117,9 @@ class Shot:
         The scan (for proposals).
     name : str
         How reports name the shot's files (e.g. ``"scan.pcd + pairs.yaml"``).
+    edge_deg : (N,) ndarray or None
+        Each pair's ``edge_deg`` (degrees; NaN for a corner pair), None when no pair is an edge pair
+        (:attr:`calib_core.pairs.Pair.edge_deg`): solved as point-on-line pairs, their pixel errors across the edge.
     """
 
     points_lidar: np.ndarray
@@ -129,6 +133,7 @@ class Shot:
     pairs: list = field(default_factory=list)
     depth: Any = None
     name: str = ""
+    edge_deg: np.ndarray | None = None
 
     @classmethod
     def from_pairs(cls, pairs: Sequence[Any], depth, camera, *, name: str = "",
@@ -153,7 +158,12 @@ class Shot:
             laser_cov[has_cell] = cell_pick_covariance(depth, rc, cell_sigma, range_sigma_m)
         precision = np.array([np.nan if p.precision_px is None else p.precision_px for p in pairs], dtype=np.float64)
         return cls(points, bearings, pixels, laser_cov, has_cell, precision, [p.id for p in pairs],
-                   np.array([bool(getattr(p, "check", False)) for p in pairs], dtype=bool), pairs, depth, name)
+                   np.array([bool(getattr(p, "check", False)) for p in pairs], dtype=bool), pairs, depth, name,
+                   pair_edge_degrees(pairs))
+
+    def edges_at(self, positions: np.ndarray) -> np.ndarray | None:
+        """``edge_deg`` of the pairs at ``positions`` (NaN for corner pairs), None when the shot has no edge pair."""
+        return None if self.edge_deg is None else np.asarray(self.edge_deg, dtype=np.float64)[positions]
 
     @property
     def n_pairs(self) -> int:
@@ -179,7 +189,8 @@ class _Rows:
     position: np.ndarray
     laser_cov_full: np.ndarray  # zeros where unmodelled, for the predictive test
     sigma_full: np.ndarray  # 1 px where unstated
-    shared_ratio: float = 0.0  # the by-eye shared error, as calibrate() models it (pairs weighted by count)
+    shared_ratio: float = 0.0
+    edge_deg: np.ndarray | None = None  # degrees, NaN for corner pairs; None when no row is an edge pair  # the by-eye shared error, as calibrate() models it (pairs weighted by count)
 
 
 def _global_ids(shots: Sequence[Shot]) -> list[list[int]]:
@@ -204,6 +215,8 @@ def _rows(shots: Sequence[Shot], use: Sequence[int], ids: list[list[int]]) -> _R
     has_cell = cat(lambda s: s.has_cell).reshape(-1).astype(bool)
     cov = cat(lambda s: s.laser_cov_m2).reshape(-1, 3, 3)
     sigma_full = np.where(np.isfinite(precision), precision, 1.0)
+    edges = np.concatenate([np.full(len(pos), np.nan) if shots[k].edge_deg is None else shots[k].edges_at(pos)
+                            for k, pos in parts]).reshape(-1)
     return _Rows(
         points=points,
         bearings=cat(lambda s: s.bearings).reshape(-1, 3),
@@ -218,6 +231,7 @@ def _rows(shots: Sequence[Shot], use: Sequence[int], ids: list[list[int]]) -> _R
         sigma_full=sigma_full,
         shared_ratio=sum(default_shared_ratio([shots[k].pairs[int(i)] for i in pos], shots[k].depth) * len(pos)
                          for k, pos in parts if shots[k].pairs) / max(len(points), 1),
+        edge_deg=edges if np.isfinite(edges).any() else None,
     )
 
 
@@ -241,7 +255,8 @@ def _refuse_shared_points(rows: _Rows) -> None:
 def _solve_rows(rows: _Rows, camera, cost: str, options: dict) -> CalibrationResult:
     return solve_extrinsics(rows.points, rows.bearings, camera=camera, pixels=rows.pixels, cost=cost,
                             pair_ids=rows.ids, pixel_sigma=rows.sigmas, laser_cov_m2=rows.laser_cov,
-                            shared_ratio=rows.shared_ratio, **options)
+                            shared_ratio=rows.shared_ratio,
+                            **({} if rows.edge_deg is None else {"pixel_edge_deg": rows.edge_deg}), **options)
 
 
 # --------------------------------------------------------------------------------------
@@ -385,12 +400,18 @@ class ShotsResult:
 # --------------------------------------------------------------------------------------
 
 
-def _errors(camera, T: np.ndarray, points: np.ndarray, pixels: np.ndarray, bearings: np.ndarray):
-    """Pixel (NaN where not projectable) and angular (deg) errors of pairs under ``T``."""
+def _errors(camera, T: np.ndarray, points: np.ndarray, pixels: np.ndarray, bearings: np.ndarray,
+            edges: np.ndarray | None = None):
+    """Pixel (NaN where not projectable; an edge pair's across its edge, ``edges`` degrees or NaN) and angular
+    (deg) errors of pairs under ``T``."""
     from .verify import angular_errors_deg, pixel_errors
 
     if len(points) == 0:
         return np.zeros(0), np.zeros(0)
+    if edges is not None:
+        projected, valid = camera.project(points @ T[:3, :3].T + T[:3, 3])
+        px = np.where(np.asarray(valid, bool), edge_pixel_errors(np.asarray(projected, np.float64), pixels, edges), np.nan)
+        return px, angular_errors_deg(T, points, bearings)
     return pixel_errors(T, points, pixels, camera), angular_errors_deg(T, points, bearings)
 
 
@@ -420,12 +441,15 @@ class _HeldOut:
     result: CalibrationResult
 
 
-def _noise(camera, T, points, laser_cov, sigma):
-    """Predicted pixels, pose Jacobians (N, 2, 6), scan-rotation Jacobians (N, 2, 3) and noise (N, 2, 2) px^2."""
+def _noise(camera, T, points, laser_cov, sigma, edges=None):
+    """Predicted pixels, pose Jacobians (N, 2, 6), scan-rotation Jacobians (N, 2, 3) and noise (N, 2, 2) px^2
+    (an edge pair's click noise along its edge :data:`calib_core.solve.edges.EDGE_SLIDE` times wider)."""
     from .guide.information import pair_noise, pixel_jacobians
 
     pred, J_pose, J_point = pixel_jacobians(camera, T, points)
     S = pair_noise(sigma, J_point, laser_cov)
+    if edges is not None:
+        S = S + edge_click_covariance(sigma, edges) - np.asarray(sigma, np.float64)[:, None, None] ** 2 * np.eye(2)
     # Scan turned by a small rotation w about the lidar origin: X -> X + w x X, d pixel / d w = J_X (-[X]x);
     # a row d times -[X]x is X x d.
     A = np.cross(points[:, None, :], J_point)
@@ -444,8 +468,9 @@ def _held_out(rows: _Rows, camera, cost: str, options: dict) -> _HeldOut | None:
         return None
     T = fit.T_camera_lidar
     keep = np.asarray(fit.inliers, dtype=bool) if fit.inliers is not None else np.ones(len(rows.points), bool)
-    pred, J_pose, _, S = _noise(camera, T, rows.points[keep], rows.laser_cov_full[keep], rows.sigma_full[keep])
-    r = rows.pixels[keep] - pred
+    edges = None if rows.edge_deg is None else rows.edge_deg[keep]
+    pred, J_pose, _, S = _noise(camera, T, rows.points[keep], rows.laser_cov_full[keep], rows.sigma_full[keep], edges)
+    r = slide_along_edges(pred, rows.pixels[keep], edges) - pred  # (an edge pair's: across its edge)
     ok = np.all(np.isfinite(r), axis=1) & np.all(np.isfinite(J_pose), axis=(1, 2))
     F = fisher_information(J_pose[ok], S[ok])
     try:
@@ -501,8 +526,9 @@ def _test_shot(k: int, shot: Shot, held: _HeldOut, camera) -> ShotTest | None:
     if pos.size == 0:
         return None
     sigma = np.where(np.isfinite(shot.precision_px[pos]), shot.precision_px[pos], 1.0)
-    pred, J_pose, A, S = _noise(camera, held.T, shot.points_lidar[pos], shot.laser_cov_m2[pos], sigma)
-    r = shot.pixels[pos] - pred
+    edges = shot.edges_at(pos)
+    pred, J_pose, A, S = _noise(camera, held.T, shot.points_lidar[pos], shot.laser_cov_m2[pos], sigma, edges)
+    r = slide_along_edges(pred, shot.pixels[pos], edges) - pred  # (an edge pair's: across its edge)
     ok = np.all(np.isfinite(r), axis=1) & np.all(np.isfinite(J_pose), axis=(1, 2)) & np.all(np.isfinite(A), axis=(1, 2))
     if not ok.any():
         return None
@@ -585,7 +611,7 @@ def _loso_entry(k: int, shot: Shot, T: np.ndarray | None, camera, skip: set[int]
         empty = np.zeros(0)
         return LeaveOneShotOut(k, None, empty, empty, pos, float("nan"), float("nan"), float("nan"),
                                note or "no pairs to check")
-    px, deg = _errors(camera, T, shot.points_lidar[pos], shot.pixels[pos], shot.bearings[pos])
+    px, deg = _errors(camera, T, shot.points_lidar[pos], shot.pixels[pos], shot.bearings[pos], shot.edges_at(pos))
     finite = px[np.isfinite(px)]
     rms = float(np.sqrt(np.mean(finite**2))) if finite.size else float("nan")
     return LeaveOneShotOut(k, T, px, deg, pos, _finite_mean(px), rms, _finite_mean(deg), note)
@@ -714,7 +740,7 @@ def solve_shots(
     for k, s in enumerate(shots):
         skip = set(outliers_by_shot.get(k, []))
         pos = np.array([p for p in s.fit_positions if p not in skip], dtype=np.int64)
-        px, deg = _errors(camera, T, s.points_lidar[pos], s.pixels[pos], s.bearings[pos])
+        px, deg = _errors(camera, T, s.points_lidar[pos], s.pixels[pos], s.bearings[pos], s.edges_at(pos))
         reports.append(ShotReport(k, s.name, s.n_pairs, len(s.fit_positions), int(s.check.sum()), k in kept,
                                   sorted(skip), _finite_mean(px), _finite_std(px), _finite_mean(deg), _finite_std(deg)))
     loso: list[LeaveOneShotOut] = []
@@ -744,7 +770,10 @@ def _with_checks(result: CalibrationResult, shots: Sequence[Shot], kept: list[in
     pts = np.array([shots[k].points_lidar[p] for k, p in checks])
     pix = np.array([shots[k].pixels[p] for k, p in checks])
     bear = np.array([shots[k].bearings[p] for k, p in checks])
-    px, deg = _errors(camera, T, pts, pix, bear)
+    edges = None
+    if any(shots[k].edge_deg is not None for k, _ in checks):
+        edges = np.array([np.nan if shots[k].edge_deg is None else shots[k].edge_deg[p] for k, p in checks])
+    px, deg = _errors(camera, T, pts, pix, bear, edges)
     result.check_residual_px, result.check_residual_deg = px, deg
     if len(shots) == 1:  # positions in the one shot's pairs, exactly as calibrate() reports them
         ids = _global_ids(shots)[0]

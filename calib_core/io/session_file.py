@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import CalibError
-from ..pairs import MAX_COORDINATE_M, MAX_PAIRS, MAX_PIXEL, VALUES_PER_PAIR, parse_laser_rc
+from ..pairs import MAX_COORDINATE_M, MAX_PAIRS, MAX_PIXEL, VALUES_PER_PAIR, parse_edge_deg, parse_laser_rc
 from .input_files import MAX_SESSION_BYTES
 from .yaml_files import finite_vector, read_yaml_mapping
 
@@ -105,12 +105,15 @@ def parse_session(data: dict[str, Any], where: str, max_pairs: int = MAX_PAIRS) 
         at = f"{where}: pair {i}"
         if not isinstance(e, dict) or "id" not in e:
             raise CalibError(f"{at}: expected a mapping with an id")
-        unknown = set(e) - {"id", "laser_rc", "laser_xyz", "pixel", "source", "precision_px", "check", "shot"}
+        unknown = set(e) - {"id", "laser_rc", "laser_xyz", "pixel", "source", "precision_px", "check", "shot",
+                                "edge_deg"}
         if unknown:
             raise CalibError(f"{at}: unknown key(s) {sorted(map(str, unknown))}"[:300])
         pick_id = _whole(e["id"], f"{at} id", 0, MAX_ID)
         if "shot" in e:
             _whole(e["shot"], f"{at} shot", 0, MAX_ID)
+        if e.get("edge_deg") is not None:  # (the app reads it back; refused here when not an angle)
+            parse_edge_deg(e["edge_deg"], at)
         if pick_id in seen:
             raise CalibError(f"{at}: duplicate id {pick_id}")
         seen.add(pick_id)

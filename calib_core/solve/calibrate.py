@@ -15,7 +15,7 @@ import numpy as np
 
 from .whiten import BY_EYE_SHARED_RATIO, PICK_CELL_SIGMA, PICK_RANGE_SIGMA_M
 
-__all__ = ["calibrate", "default_shared_ratio", "pair_ids_and_sigmas"]
+__all__ = ["calibrate", "default_shared_ratio", "pair_edge_degrees", "pair_ids_and_sigmas"]
 
 
 def default_shared_ratio(pairs: Sequence[Any], depth: Any) -> float:
@@ -49,6 +49,36 @@ def pair_ids_and_sigmas(pairs: Sequence[Any]) -> tuple[list[int], np.ndarray | N
     return ids, np.array([p.precision_px if p.precision_px is not None else 1.0 for p in pairs], dtype=np.float64)
 
 
+def pair_edge_degrees(pairs: Sequence[Any]) -> np.ndarray | None:
+    """Each pair's ``edge_deg`` (degrees, :attr:`calib_core.pairs.Pair.edge_deg`) for
+    :func:`calib_core.solve.solve_extrinsics`' ``pixel_edge_deg``: NaN for a corner pair, None when no pair
+    is an edge pair.
+
+    Raises
+    ------
+    CalibError
+        An ``edge_deg`` that is not a finite number (one line naming the pair by its id, else its position).
+    """
+    from ..errors import CalibError
+
+    edges = [getattr(p, "edge_deg", None) for p in pairs]
+    if all(e is None for e in edges):
+        return None
+    out = np.full(len(pairs), np.nan)
+    for k, e in enumerate(edges):  # (a Python list of pairs: one check per pair, no array yet)
+        if e is None:
+            continue
+        try:
+            value = float(e)
+        except (TypeError, ValueError):
+            value = float("nan")
+        if isinstance(e, bool) or not np.isfinite(value):
+            name = f"pair {pairs[k].id}" if getattr(pairs[k], "id", None) is not None else f"pair {k}"
+            raise CalibError(f"{name}: edge_deg must be a finite angle in degrees, got {e!r}"[:300])
+        out[k] = value % 180.0
+    return out
+
+
 def calibrate(pairs: Sequence[Any], depth: Any, camera: Any, *, cost: str = "angular",
               cell_sigma: float | tuple[float, float] = PICK_CELL_SIGMA, range_sigma_m: float = PICK_RANGE_SIGMA_M,
               shared_ratio: float | None = None, **options: Any):
@@ -78,12 +108,16 @@ def calibrate(pairs: Sequence[Any], depth: Any, camera: Any, *, cost: str = "ang
     -------
     CalibrationResult
         Pairs marked ``check`` are left out of the fit; their errors at the pose are in
-        ``check_residual_px`` / ``check_residual_deg``, and ``pair_positions`` maps the
+        ``check_residual_px`` / ``check_residual_deg``.  Edge pairs (``edge_deg`` set) are solved as
+        point-on-line pairs (``pixel_edge_deg`` of :func:`calib_core.solve.solve_extrinsics`), and their
+        pixel errors (``residual_px``, the mean, ``check_residual_px``, the leave-one-out errors) are
+        distances ACROSS the edge; and ``pair_positions`` maps the
         result's rows (and ``outliers``) to positions in ``pairs``.  ``outlier_ids`` are ids.
     """
     from ..pairs import resolve_pairs
     from .extrinsics import solve_extrinsics
     from .bearing_pnp import angular_errors_rad
+    from .edges import edge_pixel_errors
     from .whiten import cell_pick_covariance
 
     all_ids, _ = pair_ids_and_sigmas(pairs)
@@ -94,6 +128,8 @@ def calibrate(pairs: Sequence[Any], depth: Any, camera: Any, *, cost: str = "ang
     fit_pairs = [pairs[i] for i in fit]
     points, bearings, pixels = resolve_pairs(fit_pairs, depth, camera)
     _, sigmas = pair_ids_and_sigmas(fit_pairs)
+    edges = pair_edge_degrees(fit_pairs)
+    check_edges = pair_edge_degrees([pairs[i] for i in checks])
     laser_cov = None
     cells = [k for k, p in enumerate(fit_pairs) if p.laser_rc is not None]
     if cells and depth is not None:
@@ -102,16 +138,17 @@ def calibrate(pairs: Sequence[Any], depth: Any, camera: Any, *, cost: str = "ang
         laser_cov[cells] = cell_pick_covariance(depth, rc, cell_sigma, range_sigma_m)
     result = solve_extrinsics(
         points, bearings, camera=camera, pixels=pixels, cost=cost, pair_ids=[all_ids[i] for i in fit],
-        pixel_sigma=sigmas, laser_cov_m2=laser_cov, shared_ratio=shared_ratio, **options,
+        pixel_sigma=sigmas, laser_cov_m2=laser_cov, shared_ratio=shared_ratio,
+        **({} if edges is None else {"pixel_edge_deg": edges}), **options,
     )
     from .quality import with_leave_one_out  # leave-one-out errors and leverages: does the fit flatter few pairs?
 
-    with_leave_one_out(result, points, pixels, camera, sigmas, [all_ids[i] for i in fit])
+    with_leave_one_out(result, points, pixels, camera, sigmas, [all_ids[i] for i in fit], pixel_edge_deg=edges)
     if checks:
         T = result.T_camera_lidar
         cp, cb, cpx = resolve_pairs([pairs[i] for i in checks], depth, camera)
         uv, ok = camera.project(cp @ T[:3, :3].T + T[:3, 3])
-        err = np.linalg.norm(np.asarray(uv, dtype=np.float64) - cpx, axis=1)
+        err = edge_pixel_errors(np.asarray(uv, dtype=np.float64), cpx, check_edges)  # (across an edge pair's edge)
         result.check_residual_px = np.where(np.asarray(ok, dtype=bool) & np.isfinite(err), err, np.nan)
         result.check_residual_deg = np.degrees(angular_errors_rad(T, cp, cb))
         result.pair_positions = fit

@@ -41,6 +41,7 @@ from .refine import (
 )
 from .result import CalibrationResult
 from .robust import inlier_k, robust_fit, robust_scale
+from .edges import check_edge_deg, edge_tangent_jacobian, slide_along_edges
 from .whiten import STEP_RAD, check_pixel_sigma, click_whitening_inputs, laser_tangent_covariance, whitening
 
 __all__ = ["COSTS", "NOISY_FACTOR", "PRIOR_PX", "solve_extrinsics", "student_t_factor", "warm_up"]
@@ -58,11 +59,14 @@ NOISY_FACTOR = 3.0
 
 
 def _pixel_errors(camera: Any, points_camera: np.ndarray, pixels: np.ndarray,
-                  inliers: np.ndarray) -> tuple[np.ndarray, float, float, int]:
+                  inliers: np.ndarray, edges: np.ndarray | None = None) -> tuple[np.ndarray, float, float, int]:
     """Pixel errors (NaN where not projectable) of the laser points in the camera frame (metres), their mean
-    and std over the inliers, and how many inliers have none (:func:`.kernels.pixel_errors`)."""
+    and std over the inliers, and how many inliers have none (:func:`.kernels.pixel_errors`).  An edge pair's
+    (``edges`` not NaN, degrees) is its distance across the edge (:func:`.edges.slide_along_edges`)."""
     projected, valid = camera.project(points_camera)
-    return pixel_errors(np.ascontiguousarray(projected, dtype=np.float64), np.ascontiguousarray(valid, dtype=bool),
+    projected = np.ascontiguousarray(projected, dtype=np.float64)
+    pixels = slide_along_edges(projected, pixels, edges)
+    return pixel_errors(projected, np.ascontiguousarray(valid, dtype=bool),
                         np.ascontiguousarray(pixels, dtype=np.float64), inliers)
 
 
@@ -104,6 +108,26 @@ def _pose_matrix(R: np.ndarray, t: np.ndarray) -> np.ndarray:
     return T
 
 
+def _corner_start(points: np.ndarray, bearings: np.ndarray, edges: np.ndarray, *, camera: Any,
+                  pixels: np.ndarray | None, sigmas: np.ndarray | None, laser_cov: np.ndarray | None,
+                  robust: bool) -> np.ndarray:
+    """The start of a solve with edge pairs: the pose solved from its corner pairs alone (the closed-form
+    starts use the bearings, and an edge pair's clicked bearing is anywhere along its edge)."""
+    corner = np.isnan(edges)
+    if corner.sum() < MIN_PAIRS:
+        raise CalibError(
+            f"edge pairs need at least {MIN_PAIRS} corner pairs to start from ({int(corner.sum())} of {len(edges)} "
+            "pairs are corner pairs); add corner pairs or give an initial pose")
+    try:
+        start = solve_extrinsics(
+            points[corner], bearings[corner], camera=camera, pixels=None if pixels is None else pixels[corner],
+            pixel_sigma=None if sigmas is None else sigmas[corner],
+            laser_cov_m2=None if laser_cov is None else laser_cov[corner], robust=robust)
+    except CalibError as exc:
+        raise CalibError(f"the corner pairs alone (the start for the edge pairs) cannot be solved: {exc}") from None
+    return start.T_camera_lidar
+
+
 def solve_extrinsics(
     points_lidar: np.ndarray,
     bearings_camera: np.ndarray,
@@ -118,6 +142,7 @@ def solve_extrinsics(
     pair_ids: np.ndarray | list[int] | None = None,
     robust: bool = True,
     shared_ratio: float = 0.0,
+    pixel_edge_deg: np.ndarray | None = None,
 ) -> CalibrationResult:
     """Estimate ``T_camera_lidar`` from n >= 4 laser-point / bearing pairs.
 
@@ -169,11 +194,20 @@ def solve_extrinsics(
         (:data:`calib_core.solve.whiten.BY_EYE_SHARED_RATIO` for picks by eye, which
         :func:`calib_core.solve.calibrate` uses).  Default 0: the errors are independent (simulated
         clicks, a known ``noise_rad``).
+    pixel_edge_deg : (N,) array_like, optional
+        Edge pairs (:attr:`calib_core.pairs.Pair.edge_deg`): the angle (degrees from +u towards +v) of
+        the straight image edge a pair's pixel lies on and may slide along; NaN for an ordinary (corner)
+        pair.  The click's covariance is then ``sigma^2 (n n^T + k^2 t t^T)`` px^2 (``t`` the edge's
+        direction, ``n`` its normal, ``k`` = :data:`calib_core.solve.edges.EDGE_SLIDE`).  Edge pairs need
+        ``cost="angular"`` with a camera and no ``noise_rad``, and, without ``initial_T_camera_lidar``, at
+        least 4 corner pairs: the start is solved from the corner pairs alone (an edge pair's bearing is
+        not its laser point's).
 
     Returns
     -------
     CalibrationResult
-        Always check ``result.quality.status``: ``"unreliable"`` means the
+        ``residual_px``, ``mean_px`` and ``std_px`` of an edge pair count its distance ACROSS the edge,
+        ``|(projected - clicked) . n|``: the along-edge offset is no error.  Always check ``result.quality.status``: ``"unreliable"`` means the
         pose must not be used (the reasons say why).
 
     Raises
@@ -212,18 +246,25 @@ def solve_extrinsics(
     if cost == "pixel":
         if camera is None or pixels is None:
             raise CalibError("cost='pixel' needs a camera and the clicked pixels")
+    edges = check_edge_deg(pixel_edge_deg, n)
+    if edges is not None and not (by_camera and cost == "angular"):
+        raise CalibError("edge pairs (pixel_edge_deg) need cost='angular' with a camera and no noise_rad: "
+                         "their weight comes from the camera's pixels")
 
     # 1. Whitening, computed once per solve (its laser term, which depends on the pose, inside the LM).
     tangent = []  # tangent_to_pixel of the camera at the bearings: pose-free, computed once
     all_ok = False
     given = None if initial_T_camera_lidar is None else validate_initial_T(initial_T_camera_lidar)
+    if edges is not None and given is None:
+        given = _corner_start(points, bearings, edges, camera=camera, pixels=pixels, sigmas=sigmas,
+                              laser_cov=laser_cov, robust=robust)
     use_dlt = given is None
     R_in = _EYE3 if use_dlt else np.ascontiguousarray(given[:3, :3])
     t_in = _ZERO3 if use_dlt else np.ascontiguousarray(given[:3, 3])
     fused = None  # fit_and_report's outputs when the call below made them
     if by_camera:
         uv = np.ascontiguousarray(whiten_camera.project(probes)[0], dtype=np.float64)
-        if cost != "pixel":
+        if cost != "pixel" and edges is None:
             # The camera's tangent Jacobian (whiten.tangent_to_pixel), and where every pair has one, step 2 and
             # (fit_and_report) steps 3-4 below, in one compiled call; the expected noise as for all_ok below.
             laser = laser_cov is not None
@@ -237,6 +278,9 @@ def solve_extrinsics(
                 fused = None
         else:
             A, ok, all_ok = probe_jacobians_all(uv, STEP_RAD)
+            if edges is not None:
+                # M^-1 A: the click's covariance sigma^2 (n n^T + k^2 t t^T) through all that follows (.edges).
+                A = edge_tangent_jacobian(A, edges)
         tangent.append((A, ok))
 
     def whiten(T_at: np.ndarray | None) -> tuple[np.ndarray, str]:
@@ -414,7 +458,7 @@ def solve_extrinsics(
         if pixels is None:
             projected, valid = camera.project(bearings)
             pixels = np.where(np.asarray(valid, dtype=bool)[:, None], np.asarray(projected, dtype=np.float64), np.nan)
-        residual_px, mean_px, std_px, n_off = _pixel_errors(camera, points_camera[0], pixels, inliers)
+        residual_px, mean_px, std_px, n_off = _pixel_errors(camera, points_camera[0], pixels, inliers, edges)
         if n_off:
             off = np.flatnonzero(~np.isfinite(residual_px[idx]))
             warnings.append(

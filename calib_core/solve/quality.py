@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .edges import EDGE_SLIDE, edge_frames
 from .kernels import so3_exp
 
 __all__ = [
@@ -395,6 +396,7 @@ def leave_one_out_estimate(
     camera,
     pixel_sigma: np.ndarray | None = None,
     ids=None,
+    pixel_edge_deg: np.ndarray | None = None,
 ) -> LeaveOneOut | None:
     """Leave-one-out errors and leverages of the pairs of a fit, from its hat matrix (:class:`LeaveOneOut`).
 
@@ -409,6 +411,10 @@ def leave_one_out_estimate(
         1-sigma of each click (px), as the fit weighed them; None: all alike.
     ids : sequence, optional
         The pairs' ids, for messages (default positions).
+    pixel_edge_deg : (n,) array, optional
+        Edge pairs' edge angles, degrees (NaN for a corner pair; :mod:`calib_core.solve.edges`): weighed with
+        their anisotropic click covariance, and their fit and leave-one-out errors (and expected error) are the
+        distance ACROSS the edge.
 
     Returns
     -------
@@ -422,6 +428,17 @@ def leave_one_out_estimate(
     n = len(pts)
     ids = list(range(n)) if ids is None else list(ids)
     w = np.ones(n) if pixel_sigma is None else 1.0 / np.asarray(pixel_sigma, np.float64).reshape(n)
+    edges = None if pixel_edge_deg is None else np.asarray(pixel_edge_deg, np.float64).reshape(n)
+    # Per-pair pixel whitening Wp = M^-1 / sigma (M = I for a corner pair, n n^T + k t t^T for an edge pair), its
+    # inverse, and the part of an error that is reported (I, or n n^T: across the edge).
+    M_inv, M, report = (np.broadcast_to(np.eye(2), (n, 2, 2)),) * 3
+    if edges is not None and np.isfinite(edges).any():
+        M_inv, M, report = (np.array(M_inv), np.array(M), np.array(report))
+        edge = np.isfinite(edges)
+        t, nrm = edge_frames(edges[edge])
+        nn, tt = nrm[:, :, None] * nrm[:, None, :], t[:, :, None] * t[:, None, :]
+        M_inv[edge], M[edge], report[edge] = nn + tt / EDGE_SLIDE, nn + EDGE_SLIDE * tt, nn
+    Wp = M_inv * w[:, None, None]
     loo, fit, lev = np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan)
     # The hat matrix holds at the optimum of the weighted pixel cost: a few Gauss-Newton steps take the given
     # pose there (the solve's own cost weighs pairs a little differently: angles, the laser pick).
@@ -432,8 +449,8 @@ def leave_one_out_estimate(
         m = int(ok.sum())
         if m < MIN_PAIRS_FOR_ERROR:
             return None
-        Jw = J[ok] * w[ok, None, None]  # (m, 2, 6)
-        rw = e[ok] * w[ok, None]  # (m, 2)
+        Jw = Wp[ok] @ J[ok]  # (m, 2, 6)
+        rw = np.einsum("kab,kb->ka", Wp[ok], e[ok])  # (m, 2)
         N = np.einsum("kai,kaj->ij", Jw, Jw)
         if not np.isfinite(N).all() or np.linalg.cond(N) > 1e12:
             return None
@@ -445,7 +462,8 @@ def leave_one_out_estimate(
             break
         R_step = so3_exp(np.ascontiguousarray(step[:3]))
         T[:3, :3], T[:3, 3] = R_step @ T[:3, :3], R_step @ T[:3, 3] + step[3:]
-    fit[ok] = np.hypot(e[ok, 0], e[ok, 1])
+    e_shown = np.einsum("kab,kb->ka", report[ok], e[ok])  # (across an edge pair's edge)
+    fit[ok] = np.hypot(e_shown[:, 0], e_shown[:, 1])
     H = Jw @ Ninv @ np.transpose(Jw, (0, 2, 1))  # (m, 2, 2) diagonal blocks of the hat matrix
     H = 0.5 * (H + np.transpose(H, (0, 2, 1)))
     tr, det = H[:, 0, 0] + H[:, 1, 1], H[:, 0, 0] * H[:, 1, 1] - H[:, 0, 1] * H[:, 1, 0]
@@ -457,10 +475,14 @@ def leave_one_out_estimate(
     with np.errstate(divide="ignore", invalid="ignore"):
         Ainv = adj / detA[:, None, None]
         z = np.einsum("kab,kb->ka", Ainv, rw)  # weighted leave-one-out residuals
-        loo[ok] = np.where(carried, np.nan, np.hypot(z[:, 0], z[:, 1])) / w[ok]
+        B = report[ok] @ M[ok] / w[ok, None, None]  # whitened -> shown px: Wp^-1, then across an edge pair's edge
+        z_px = np.einsum("kab,kb->ka", B, z)
+        loo[ok] = np.where(carried, np.nan, np.hypot(z_px[:, 0], z_px[:, 1]))
         s2 = float(np.sum(rw**2)) / (2 * m - 6)
-        # Each pair's expected squared error, px^2: s^2 trace((I - H_ii)^-1) / w_i^2.
-        expected = s2 * np.where(carried, np.nan, Ainv[:, 0, 0] + Ainv[:, 1, 1]) / w[ok] ** 2
+        # Each pair's expected squared error, px^2: s^2 trace(B (I - H_ii)^-1 B^T) (s^2 trace((I - H_ii)^-1) / w_i^2
+        # for a corner pair).
+        BAB = np.einsum("kab,kbc,kdc->kad", B, Ainv, B)
+        expected = s2 * np.where(carried, np.nan, BAB[:, 0, 0] + BAB[:, 1, 1])
         expected_rms = float(np.sqrt(np.nanmean(expected))) if np.isfinite(expected).any() else float("nan")
         # The pose fitted without pair i differs by N^-1 J_i^T z_i in (delta, t); the translation of T then
         # moves by delta x t + dt.
@@ -585,7 +607,7 @@ def _with_plane_advice(reasons: list, result, points_lidar, pixels, camera) -> l
     return out
 
 
-def with_leave_one_out(result, points_lidar, pixels, camera, pixel_sigma=None, pair_ids=None):
+def with_leave_one_out(result, points_lidar, pixels, camera, pixel_sigma=None, pair_ids=None, *, pixel_edge_deg=None):
     """Add the leave-one-out check to a solve's result in place: ``result.quality`` (with its
     :attr:`Quality.leave_one_out`) and ``result.warnings`` get :func:`leave_one_out_reasons`.
 
@@ -599,6 +621,8 @@ def with_leave_one_out(result, points_lidar, pixels, camera, pixel_sigma=None, p
         As given to the solve.
     pair_ids : sequence, optional
         As given to the solve (default positions).
+    pixel_edge_deg : (n,) array, optional
+        As given to the solve (NaN for a corner pair): edge pairs' errors are across their edge.
 
     Returns
     -------
@@ -612,8 +636,9 @@ def with_leave_one_out(result, points_lidar, pixels, camera, pixel_sigma=None, p
     all_ids = list(range(len(keep))) if pair_ids is None else list(pair_ids)
     ids = [all_ids[i] for i in np.flatnonzero(keep)]
     sig = None if pixel_sigma is None else np.asarray(pixel_sigma, np.float64)[keep]
+    edges = None if pixel_edge_deg is None else np.asarray(pixel_edge_deg, np.float64)[keep]
     loo = leave_one_out_estimate(result.T_camera_lidar, np.asarray(points_lidar)[keep],
-                                 np.asarray(pixels)[keep], camera, sig, ids)
+                                 np.asarray(pixels)[keep], camera, sig, ids, pixel_edge_deg=edges)
     old = result.quality
     new_reasons = [r for r in leave_one_out_reasons(loo, getattr(result, "mean_px", None)) if r not in old.reasons]
     status = old.status if (old.status == "unreliable" or not new_reasons) else "warning"
