@@ -60,6 +60,17 @@ def cross_segments(centres: np.ndarray, half: float) -> np.ndarray:
     return (c[:, None, None, :] + arms[None]).reshape(-1, 2, 3)
 
 
+def edge_segments(pixels: np.ndarray, edge_deg: np.ndarray, half_px: float) -> np.ndarray:
+    """An edge pair's photo mark, in pixels ``(N * 2, 2, 2)``: a line of half-length ``2.5 half_px`` along the edge
+    (``edge_deg``, degrees from +u towards +v) and a short bar across it, at each pixel ``(N, 2)``."""
+    c = np.asarray(pixels, dtype=np.float64).reshape(-1, 2)
+    a = np.radians(np.asarray(edge_deg, dtype=np.float64).reshape(-1))
+    along = np.stack([np.cos(a), np.sin(a)], axis=1)
+    across = np.stack([-along[:, 1], along[:, 0]], axis=1)
+    arms = np.stack([2.5 * half_px * along, 0.5 * half_px * across], axis=1)  # (N, 2, 2)
+    return np.stack([c[:, None] - arms, c[:, None] + arms], axis=2).reshape(-1, 2, 2)
+
+
 def tick_segments(centres: np.ndarray, radius: float) -> np.ndarray:
     """Four ticks from ``radius`` to ``0.4 * radius`` around each world point (a crosshair with a gap, no ring)."""
     c = np.asarray(centres, dtype=np.float64).reshape(-1, 3)
@@ -69,16 +80,23 @@ def tick_segments(centres: np.ndarray, radius: float) -> np.ndarray:
 
 
 def draw_camera_marks(app: Any, slot: Any, crop: Any, picks: list, pose: np.ndarray | None) -> None:
-    """The camera loupe's marks: each pair's clicked pixel as a cross and its laser cell projected under ``pose``
-    as a ring, both in the pair's colour (only those the loupe shows)."""
+    """The camera loupe's marks: each pair's clicked pixel as a cross (a pair on an edge: a line along the edge)
+    and its laser cell projected under ``pose`` as a ring, both in the pair's colour (only those the loupe shows)."""
     nodes = app.nodes
-    r = max(3.0, 0.06 * crop.n) * slot.units_per_px
+    r_px = max(3.0, 0.06 * crop.n)
+    r = r_px * slot.units_per_px
     clicked = [p for p in picks if p.pixel is not None]
     px = np.array([p.pixel for p in clicked], np.float64).reshape(-1, 2) - [crop.u0, crop.v0]
     cols = np.array([p.color for p in clicked], np.uint8).reshape(-1, 3)
     inside = np.array([slot.contains(p) for p in px], bool)
-    segs = cross_segments(slot.world_from_pixel(px[inside], z_offset=-0.01), r)
-    nodes.lines("/annot/loupe/camera_marks", segs, segment_colours(cols[inside], len(segs)), thickness=2.5)
+    on_edge = np.array([p.edge_deg is not None for p in clicked], bool)
+    corner, edge = inside & ~on_edge, inside & on_edge
+    segs = cross_segments(slot.world_from_pixel(px[corner], z_offset=-0.01), r)
+    ends = edge_segments(px[edge], [p.edge_deg for p, e in zip(clicked, edge) if e], r_px).reshape(-1, 2)
+    segs = np.concatenate([segs, slot.world_from_pixel(ends, z_offset=-0.01).reshape(-1, 2, 3)])
+    seg_cols = np.concatenate([segment_colours(cols[corner], 2 * int(corner.sum())),
+                               segment_colours(cols[edge], 2 * int(edge.sum()))])
+    nodes.lines("/annot/loupe/camera_marks", segs, seg_cols, thickness=2.5)
     cells = [p for p in picks if p.laser_rc is not None]
     segs, seg_cols = np.empty((0, 2, 3)), np.empty((0, 2, 3), np.uint8)
     if pose is not None and cells:

@@ -130,10 +130,12 @@ def pending_hint(pending: Any) -> str:
             f"drops it.")
 
 
-def made_hint(pick_id: int) -> str:
+def made_hint(pick_id: int, edge_deg: float | None = None) -> str:
     """The status line once a click in the lower loupe completed pair ``pick_id`` after a rough click on the photo:
-    the next click in the photo loupe refines its photo point (a click on the full photo starts the next pair)."""
-    return f"Pair {pick_id} made · exact photo point → **photo loupe** (top right) · or a new pair on the photo."
+    the next click in the photo loupe refines its photo point (a click on the full photo starts the next pair).
+    ``edge_deg``: its photo end lies on an edge at that angle (degrees), which the line says."""
+    made = f"Pair {pick_id} made" + ("" if edge_deg is None else f" (photo end on an edge at {edge_deg:.0f}°)")
+    return f"{made} · exact photo point → **photo loupe** (top right) · or a new pair on the photo."
 
 
 def live_summary(live: Any, held: HeldQuality | None = None, fitted: bool = False) -> str:

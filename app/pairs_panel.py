@@ -11,6 +11,7 @@ import numpy as np
 import viser
 
 from calib_core.errors import CalibError
+from calib_core.image_edges import edge_at
 from calib_core.panorama import refine_click_to_corner
 
 from .layout import RENDER_KEY
@@ -56,6 +57,13 @@ class PairsPanel:
         self.pair_action_callback = self._on_pair_action_event
         self._bg_actions = gui.add_button_group("Pair", PAIR_ACTIONS, order=top - 1.0)
         self._bg_actions.on_click(self.pair_action_callback)
+        # In the pinned bar: a person switches it on for a run of lane-line crossings and off again.
+        self.edge_checkbox = gui.add_checkbox(
+            "Photo end on an edge", initial_value=app.state.view.edge_pairs, order=top - 0.9,
+            hint="For a laser point on a straight edge, e.g. where a laser ring crosses a lane line or a pole's side: "
+                 "click anywhere on that edge in the photo. The pair's photo end may slide along the edge; only its "
+                 "distance across the edge counts. Needs 4 corner pairs besides.")
+        self.edge_checkbox.on_update(guard(self.on_edge_pairs))
         # One line kept when blank: in run 7 the controls below jumped ~18 px as it came and went.
         self._status_line = FixedLine(gui, order=top - 0.5, lines=STATUS_LINES)
         # The live solve's figures right under the buttons, guided picking's status under the pair status.
@@ -137,6 +145,24 @@ class PairsPanel:
         """Forget the last click of every tab, so that the next loupe click adds an end instead of refining one."""
         self._last_pick.clear()
 
+    def on_edge_pairs(self, event: Any) -> None:
+        """The "Photo end on an edge" checkbox: the photo clicks from now on are on an edge (or corners again)."""
+        self.app.state.set_view(edge_pairs=bool(event.value))
+        self.refresh()
+
+    def _photo_tags(self, u: float, v: float, client: Any) -> dict:
+        """``edge_deg`` of a photo click at original pixel ``(u, v)``: the photo's edge direction there while
+        "Photo end on an edge" is on, else None (a corner).  Without a clear straight edge the pair stays a
+        corner pair, and the person is told."""
+        if not self.app.state.view.edge_pairs:
+            return {"edge_deg": None}
+        edge = edge_at(self.app.image_gray, (u, v))
+        if not edge.ok:
+            self.app.notify(client, "No straight edge here", f"The photo shows no single straight edge at "
+                            f"({u:.0f}, {v:.0f}): this end is a corner. Click on the edge itself.", color="yellow")
+            return {"edge_deg": None}
+        return {"edge_deg": edge.angle_deg}
+
     def on_snap(self, event: Any) -> None:
         """The "Snap clicks to corners" checkbox."""
         self.app.state.set_view(snap=bool(self.snap_checkbox.value))
@@ -165,7 +191,7 @@ class PairsPanel:
             if pending is not None:
                 status.append(pending_hint(pending))
             elif selected is None and (made := self._just_made(picks)) is not None:
-                status.append(made_hint(made))
+                status.append(made_hint(made, next((p.edge_deg for p in picks if p.id == made), None)))
             if selected is not None:
                 doing = f"**Pair {selected} selected:** clicks now move its ends (Deselect to add pairs)."
                 status.append(f"Pair {selected} selected: the next click moves it (**Cancel pair** deselects).")
@@ -177,6 +203,8 @@ class PairsPanel:
             # Two lines, so that the Loupes folder below stays in view without scrolling at 1400 x 900.
             count += f" · pick {MIN_PAIRS - total} more to calibrate" if total < MIN_PAIRS else ""
             count += f" · left out (check pairs): {', '.join(left_out)}" if left_out else ""
+            on_edges = sum(1 for p in complete if p.edge_deg is not None)
+            count += f" · {on_edges} on an edge" if on_edges else ""
             count += f" · undo: {'yes' if state.can_undo else 'no'}, redo: {'yes' if state.can_redo else 'no'}"
             lines = [count, doing]
             self._summary = "  \n".join(line for line in lines if line)
@@ -290,7 +318,9 @@ class PairsPanel:
                 raise
         else:
             _, u, v = target
-            out = self.app.state.move_pixel(pick_id, u, v) if pick_id is not None else self.app.state.click_pixel(u, v)
+            tags = self._photo_tags(u, v, client)
+            out = (self.app.state.move_pixel(pick_id, u, v, **tags) if pick_id is not None
+                   else self.app.state.click_pixel(u, v, **tags))
         if moves_selected:
             self.app.state.select(None)
         if refined is not None and refined in self.app.state.picks:  # run 4: refining clicks that moved nothing
@@ -409,6 +439,9 @@ class PairsPanel:
             if sel is None:
                 raise CalibError("select a pair first (shift+click its marker or use the dropdown)")
             self.app.state.delete(sel)
+            # Run 14: Delete (the key) removed the pair without a word in the bar.
+            self._undo_note = (self.app.state.version, f"Deleted pair {sel} (Ctrl+Z or Undo brings it back).")
+            self.refresh()
 
     def on_leave_out(self, event: Any) -> None:
         """Leave the selected pair out of the fit (a check pair), or put it back."""

@@ -42,6 +42,9 @@ class Pick:
     source: str = "clicked"
     precision_px: float | None = None  # 1-sigma of the pixel in px, when known (None: the solve's default)
     check: bool = False  # a check pair: left out of the fit, its error reported apart (Verify panel)
+    # The photo end lies on a straight image edge at this angle (degrees from +u towards +v): it may slide
+    # along the edge; None: a corner pair (calib_core.pairs.Pair.edge_deg).
+    edge_deg: float | None = None
     shot: int = 0  # the shot (scan and photo) the pick belongs to, 0-based (ShotFiles)
 
     @property
@@ -62,14 +65,14 @@ class Pick:
             raise CalibError(f"pair {self.id} is incomplete")
         return Pair(self.laser_rc, None if self.laser_rc is not None else self.laser_xyz, self.pixel,  # type: ignore[arg-type]
                     id=int(self.id), source=self.source, precision_px=self.precision_px,
-                    check=bool(self.check))
+                    check=bool(self.check), edge_deg=self.edge_deg)
 
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {"id": int(self.id)}
         out["laser_rc"] = None if self.laser_rc is None else [int(v) for v in self.laser_rc]
         out["laser_xyz"] = None if self.laser_xyz is None else [float(v) for v in self.laser_xyz]
         out["pixel"] = None if self.pixel is None else [float(v) for v in self.pixel]
-        out.update(tag_fields(self.source, self.precision_px, self.check))
+        out.update(tag_fields(self.source, self.precision_px, self.check, edge_deg=self.edge_deg))
         out["shot"] = int(self.shot)
         return out
 
@@ -140,7 +143,7 @@ def new_ends(checked: Sequence[Pick], existing: Sequence[Pick]) -> list[Pick]:
 
 
 def pick_tags(entry: dict, where: str) -> dict[str, Any]:
-    """The ``source`` and ``precision_px`` of a session entry, checked (absent: the defaults)."""
+    """The ``source``, ``precision_px`` and ``edge_deg`` of a session entry, checked (absent: the defaults)."""
     out: dict[str, Any] = {}
     source = entry.get("source", "clicked")
     if source not in PAIR_SOURCES:
@@ -151,6 +154,9 @@ def pick_tags(entry: dict, where: str) -> dict[str, Any]:
         if not 0.0 < sigma <= 1000.0:
             raise CalibError(f"{where}: precision_px must be a positive number of pixels, got {sigma}")
         out["precision_px"] = float(sigma)
+    if entry.get("edge_deg") is not None:
+        (deg,) = finite_vector([entry["edge_deg"]], 1, f"{where} edge_deg")
+        out["edge_deg"] = float(deg) % 180.0
     return out
 
 
@@ -168,7 +174,8 @@ def checked_picks(pairs: Sequence[Pair], check_cell: Callable, check_pixel: Call
         except CalibError as exc:
             raise CalibError(f"{name}: {exc}") from None
         checked.append(Pick(-1 if p.id is None else int(p.id), laser_rc=rc, laser_xyz=None if rc is not None else xyz,
-                            pixel=uv, source=p.source, precision_px=p.precision_px, check=bool(p.check)))
+                            pixel=uv, source=p.source, precision_px=p.precision_px, check=bool(p.check),
+                            edge_deg=p.edge_deg))
     return checked
 
 
@@ -196,7 +203,7 @@ def restore_session(data: dict, path: Path, check_cell: Callable, check_pixel: C
             # The file's ids when every pair has a distinct one: one id in the UI, files and messages.
             pid = p.id if keep_ids else i + 1
             picks.append(Pick(pid, laser_rc=p.laser_rc, laser_xyz=p.laser_xyz, pixel=p.pixel, source=p.source,
-                              precision_px=p.precision_px, check=bool(p.check)))
+                              precision_px=p.precision_px, check=bool(p.check), edge_deg=p.edge_deg))
         return Snapshot(tuple(picks), max([len(picks)] + [p.id for p in picks]) + 1), None
     if data.get("version") not in READABLE_VERSIONS:
         raise CalibError(f"{path}: session version {data.get('version')!r} is not supported "

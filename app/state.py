@@ -192,9 +192,10 @@ class AnnotationState(StateShots):
         """A BA click as the UI routes it: moves the selected pick's laser end, else :meth:`add_laser`."""
         return self._changed(self._click_locked, laser_rc=self.check_laser_cell(row, col))
 
-    def click_pixel(self, u: float, v: float) -> int:
-        """A camera click as the UI routes it: moves the selected pick's pixel, else :meth:`add_pixel`."""
-        return self._changed(self._click_locked, pixel=self.check_pixel(u, v))
+    def click_pixel(self, u: float, v: float, **tags: Any) -> int:
+        """A camera click as the UI routes it: moves the selected pick's pixel, else :meth:`add_pixel`.
+        ``tags``: ``edge_deg`` (the photo end lies on an edge at this angle, degrees; None: a corner)."""
+        return self._changed(self._click_locked, pixel=self.check_pixel(u, v), **_pixel_tags(tags))
 
     def start_pick(self, row: int, col: int, *, source: str = "guided", precision_px: float | None = None) -> int:
         """A new pick with only its laser end, tagged (guided "Next pair"); the next camera click completes it.
@@ -215,12 +216,13 @@ class AnnotationState(StateShots):
         return self._changed(self._move_locked, pick_id, laser_rc=self.check_laser_cell(row, col))
 
     def move_pixel(self, pick_id: int, u: float, v: float, *, same_step: bool = False, **tags: Any) -> int:
-        """Set the camera end of pick ``pick_id`` to an original-image pixel (and ``precision_px``, ``source`` if given).
+        """Set the camera end of pick ``pick_id`` to an original-image pixel (and ``precision_px``, ``source``,
+        ``edge_deg`` if given).
 
         With ``same_step`` the change joins the newest undo step when that step changed only this pick (the
         guide tagging the click it just saw: one undo takes back both)."""
         return self._changed(self._move_locked, pick_id, pixel=self.check_pixel(u, v), amend=same_step,
-                             **{k: tags[k] for k in ("precision_px", "source") if k in tags})
+                             **{k: tags[k] for k in ("precision_px", "source", "edge_deg") if k in tags})
 
     def delete(self, pick_id: int) -> None:
         """Remove pick ``pick_id`` (its number is reused only if it was the highest: see :func:`next_number`)."""
@@ -390,10 +392,10 @@ class AnnotationState(StateShots):
         self._notify()
         return out
 
-    def _click_locked(self, laser_rc=None, pixel=None) -> int:
+    def _click_locked(self, laser_rc=None, pixel=None, **tags: Any) -> int:
         if self._selected is not None:
-            return self._move_locked(self._selected, laser_rc=laser_rc, pixel=pixel)
-        return self._add_locked(laser_rc=laser_rc, pixel=pixel)
+            return self._move_locked(self._selected, laser_rc=laser_rc, pixel=pixel, **tags)
+        return self._add_locked(laser_rc=laser_rc, pixel=pixel, **tags)
 
     def _with(self, picks: tuple[Pick, ...]) -> Snapshot:
         return Snapshot(picks, self._snap.next_id, self._snap.shots)
@@ -404,13 +406,13 @@ class AnnotationState(StateShots):
                 return p
         return None
 
-    def _add_locked(self, laser_rc=None, pixel=None) -> int:
+    def _add_locked(self, laser_rc=None, pixel=None, **tags: Any) -> int:
         target = self._pending_locked()
         if target is None:
-            new = Pick(self._snap.next_id, laser_rc=laser_rc, pixel=pixel, shot=self._active)
+            new = Pick(self._snap.next_id, laser_rc=laser_rc, pixel=pixel, shot=self._active, **tags)
             self._commit_locked(self._with(self._snap.picks + (new,)))
             return new.id
-        return self._move_locked(target.id, laser_rc=laser_rc, pixel=pixel)
+        return self._move_locked(target.id, laser_rc=laser_rc, pixel=pixel, **tags)
 
     def _move_locked(self, pick_id: int, laser_rc=None, pixel=None, amend: bool = False, **tags: Any) -> int:
         old = self.get(pick_id)
@@ -466,3 +468,16 @@ class AnnotationState(StateShots):
     def _notify(self) -> None:
         for listener in list(self._listeners):
             listener(self)
+
+
+def _pixel_tags(tags: dict[str, Any]) -> dict[str, Any]:
+    """The tags a camera click may carry: ``edge_deg`` only (degrees, folded into [0, 180); None: a corner)."""
+    unknown = set(tags) - {"edge_deg"}
+    if unknown:
+        raise CalibError(f"a camera click takes no {', '.join(sorted(unknown))}")
+    if "edge_deg" in tags and tags["edge_deg"] is not None:
+        deg = float(tags["edge_deg"])
+        if not np.isfinite(deg):
+            raise CalibError(f"edge_deg must be a finite angle in degrees, got {tags['edge_deg']!r}")
+        return {"edge_deg": deg % 180.0}
+    return dict(tags)

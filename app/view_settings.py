@@ -42,6 +42,9 @@ class ViewSettings:
     show_reprojection: bool = True  # draw the reprojected pairs with their residuals
     show_edges: bool = False  # the reprojected BA-edge points; runs 7 and 8: they cluttered the zoomed photo
     snap: bool = False  # snap clicks to the nearest corner
+    # The photo clicks made now are on a straight edge (a lane line crossed by a ring, a pole's side): the
+    # pair's photo end may slide along that edge (calib_core.pairs.Pair.edge_deg).
+    edge_pairs: bool = False
     up_axis: str = "+z"  # key of UP_AXES: the 3-D pane's up direction
     ba_window_mode: str = "all"  # key of BA_WINDOW_MODES
     # The custom column window (scan columns; width 0: every column), clipped to the scan by ColumnWindow.make.

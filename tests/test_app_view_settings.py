@@ -27,7 +27,7 @@ def make_state(path, **kwargs) -> AnnotationState:
 CHANGED = dict(panorama=False, show_reprojection=False, show_edges=True, snap=True, up_axis="-y",
                ba_window_mode="custom", ba_window_start=12, ba_window_width=40, contrast=2.25,
                loupe_shows="Range", last_pane_shows="Intensity", edge_opacity=0.3, hide_marks=True,
-               render_mode="ba", render_blend=0.4,
+               render_mode="ba", render_blend=0.4, edge_pairs=True,
                rough_T_camera_lidar=(0.0, -1.0, 0.0, 0.1, 0.0, 0.0, -1.0, 0.2, 1.0, 0.0, 0.0, 0.3, 0.0, 0.0, 0.0, 1.0))
 
 

@@ -131,6 +131,11 @@ class AppDriver(RenderDriver):
         return self._fire(self.app.guard(self.app.display.on_hide_marks), SimpleNamespace(
             client=self.tab, target=SimpleNamespace(value=bool(on))))
 
+    def set_edge_pairs(self, on: bool) -> list[tuple[str, str]]:
+        """Tick (or clear) "Photo end on an edge" in the pinned pair bar."""
+        return self._fire(self.app.guard(self.app.pairs_panel.on_edge_pairs), SimpleNamespace(
+            client=self.tab, target=SimpleNamespace(value=bool(on))))
+
     def drawn_labels(self) -> dict[str, str]:
         """The number labels the scene shows now, by node name (``/annot/labels/<image>/<id>``): their texts."""
         return {name: spec[1] for name, (_, spec) in self.app.nodes.drawn.items() if spec[0] == "label"}

@@ -1,0 +1,112 @@
+"""Edge pairs in the app: with "Photo end on an edge" ticked, a photo click on a straight edge makes a pair whose
+photo end may slide along that edge (``Pick.edge_deg``, the photo's edge direction there); the pair keeps it in the
+session, hands it to the solve and draws its photo end as a line along the edge.
+
+The photo is the sample's with a painted band at a known angle, so the expected direction is known by
+construction, not from the code under test."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from app_driver import AppDriver
+from repo_paths import SAMPLE
+
+BAND_DEG = 30.0  # from +u towards +v
+BAND_CENTRE = (320.0, 240.0)
+FLAT_PIXEL = (80.0, 420.0)  # inside a uniform patch
+
+
+@pytest.fixture
+def band_app(tmp_path):
+    from app.server import CalibrationApp
+
+    image = cv2.imread(str(SAMPLE / "image.png"))
+    image[380:460, 40:120] = 90  # the uniform patch around FLAT_PIXEL
+    a = np.radians(BAND_DEG)
+    d = np.array([np.cos(a), np.sin(a)])
+    p0, p1 = (np.array(BAND_CENTRE) - 150 * d), (np.array(BAND_CENTRE) + 150 * d)
+    image[200:280, 240:400] = 40
+    cv2.line(image, tuple(int(round(x)) for x in p0), tuple(int(round(x)) for x in p1), (230, 230, 230), 11,
+             lineType=cv2.LINE_AA)
+    photo = tmp_path / "image.png"
+    cv2.imwrite(str(photo), image)
+    app = CalibrationApp(SAMPLE / "scan.npz", photo, SAMPLE / "camera.yaml", session_path=tmp_path / "session.yaml",
+                         port=0)
+    yield app, photo, tmp_path / "session.yaml"
+    app.stop()
+
+
+def _fold(deg: float) -> float:
+    return float(deg) % 180.0
+
+
+def _angle_diff(a: float, b: float) -> float:
+    d = abs(_fold(a) - _fold(b))
+    return min(d, 180.0 - d)
+
+
+def test_a_click_on_a_band_takes_its_direction_and_keeps_it(band_app):
+    app, photo, session = band_app
+    d = AppDriver(app)
+    assert d.set_edge_pairs(True) == []
+    assert d.click_cell(app.ba_keys[0], 20, 100) == []
+    assert d.click_camera(*BAND_CENTRE) == []
+    (pick,) = app.state.complete_picks()
+    assert pick.edge_deg is not None and _angle_diff(pick.edge_deg, BAND_DEG) <= 3.0, pick.edge_deg
+    assert app.state.pairs()[0].edge_deg == pick.edge_deg  # what the solve gets
+    assert "on an edge" in d.pairs_panel  # the Pairs summary counts it
+    # The session keeps it: a new app on the same files reads the pair back with its edge.
+    app.stop()
+    from app.server import CalibrationApp
+
+    again = CalibrationApp(SAMPLE / "scan.npz", photo, SAMPLE / "camera.yaml", session_path=session, port=0)
+    try:
+        (back,) = again.state.complete_picks()
+        assert back.edge_deg == pytest.approx(pick.edge_deg)
+        assert again.state.view.edge_pairs  # the tick is a view setting, saved too
+    finally:
+        again.stop()
+
+
+def test_the_photo_loupe_draws_an_edge_end_along_the_edge(band_app):
+    app, _, _ = band_app
+    d = AppDriver(app)
+    d.set_edge_pairs(True)
+    d.click_cell(app.ba_keys[0], 20, 100)
+    d.click_camera(*BAND_CENTRE)
+    segs = d.drawn_segment_pixels("/annot/loupe/camera_marks", "loupe_camera")
+    assert len(segs) == 2  # one line along the edge and a short bar across, no "+"
+    vec = segs[:, 1] - segs[:, 0]
+    lengths = np.hypot(vec[:, 0], vec[:, 1])
+    along = vec[np.argmax(lengths)]
+    assert _angle_diff(np.degrees(np.arctan2(along[1], along[0])), BAND_DEG) <= 3.0
+    assert lengths.max() >= 4 * lengths.min()
+
+
+def test_no_straight_edge_means_a_corner_pair_and_says_so(band_app):
+    app, _, _ = band_app
+    d = AppDriver(app)
+    d.set_edge_pairs(True)
+    d.click_cell(app.ba_keys[0], 20, 100)
+    notes = d.click_camera(*FLAT_PIXEL)
+    assert any("no single straight edge" in " ".join(n).lower() for n in notes), notes
+    (pick,) = app.state.complete_picks()
+    assert pick.edge_deg is None
+
+
+def test_unticked_a_moved_photo_end_is_a_corner_again(band_app):
+    app, _, _ = band_app
+    d = AppDriver(app)
+    d.set_edge_pairs(True)
+    d.click_cell(app.ba_keys[0], 20, 100)
+    d.click_camera(*BAND_CENTRE)
+    (pick,) = app.state.complete_picks()
+    assert pick.edge_deg is not None
+    d.set_edge_pairs(False)
+    # A refining click in the photo loupe moves the photo end: made without the tick, it is a corner.
+    assert d.click_loupe_camera(BAND_CENTRE[0] + 1.0, BAND_CENTRE[1]) == []
+    (moved,) = app.state.complete_picks()
+    assert moved.pixel[0] == pytest.approx(BAND_CENTRE[0] + 1.0, abs=0.6) and moved.edge_deg is None
