@@ -296,3 +296,32 @@ def test_the_session_file_accepts_edge_deg_and_refuses_a_bad_one():
     doc["pairs"][0]["edge_deg"] = float("nan")
     with pytest.raises(CalibError, match="pair 0 edge_deg"):
         parse_session(doc, "s.yaml")
+
+
+def test_edge_pairs_on_cells_take_the_laser_pick_term(scene):
+    """Cells of the scan (the whole-cell pick covariance enters the whitening, re-whitened in the LM): the sample's
+    10 clicked corner pairs plus 10 edge pairs on random cells, their pixels 15-35 px along a known direction."""
+    corners = load_pairs_yaml(SAMPLE / "pairs.yaml")
+    T = scene.T_camera_lidar
+    depth = scene.depth
+    rng = np.random.default_rng(7)
+    rows, cols = np.nonzero(np.asarray(depth.valid))
+    P = np.asarray(depth.points)[rows, cols]
+    uv, ok = scene.camera.project(P @ T[:3, :3].T + T[:3, 3])
+    uv, ok = np.asarray(uv), np.asarray(ok, bool)
+    usable = np.flatnonzero(ok & (np.hypot(uv[:, 0] - 320, uv[:, 1] - 240) < 180))
+    edges = []
+    for k, i in enumerate(rng.choice(usable, 10, replace=False)):
+        angle = float(rng.uniform(0, 180))
+        t, n = _unit(angle)
+        pixel = uv[i] + rng.normal(0, 0.5) * n + rng.choice([-1, 1]) * rng.uniform(15, 35) * t
+        edges.append(Pair((int(rows[i]), int(cols[i])), None, tuple(pixel), edge_deg=angle))
+    res = calibrate(corners + edges, depth, scene.camera, shared_ratio=0.0)
+    assert not res.outliers and res.quality.status != "unreliable"
+    angle_err, dt = _pose_errors(res.T_camera_lidar, T)
+    assert np.all(np.abs(dt) < 4 * res.sigma_translation_m), (dt, res.sigma_translation_m)
+    assert angle_err < 4 * float(np.linalg.norm(res.sigma_rpy_deg))
+    assert np.all(res.residual_px[len(corners):] < 4.0)  # across the edge: the along offsets are no error
+    plain = calibrate(corners + [dataclasses.replace(p, edge_deg=None) for p in edges], depth, scene.camera,
+                      shared_ratio=0.0, robust=False)
+    assert np.linalg.norm(_pose_errors(plain.T_camera_lidar, T)[1]) > 3 * max(np.linalg.norm(dt), 0.01)
