@@ -166,9 +166,36 @@ def loupe_texture(shown: ShownRender | None, camera: Any, u0: int, v0: int, n: i
     if r1 <= r0 or c1 <= c0:  # wholly off the image: all padding
         return crop_texture(np.zeros((1, 1, 3), np.uint8), np.full(n, -1), np.full(n, -1), PAD_RGB, TEXTURE_TEXELS // n)
     # Only the crop's pixels are blended: the whole pane took 10-30 ms a click (190 ms at 1920 x 1080 under load).
-    part = (np.full((r1 - r0, c1 - c0, 3), NO_RETURN_RGB, np.uint8) if shown is None
-            else pane_texture(shown.rgba[r0:r1, c0:c1]))
+    if shown is None:
+        part = np.full((r1 - r0, c1 - c0, 3), NO_RETURN_RGB, np.uint8)
+    else:
+        rgba = shown.rgba[r0:r1, c0:c1]
+        part = pane_texture(stretched_grey(rgba) if shown.mode != "range" else rgba)
     return crop_texture(part, rows - r0, cols - c0, PAD_RGB, TEXTURE_TEXELS // n)
+
+
+#: The render loupe's grey shading (intensity, BA) is stretched over its own crop, from this percentile to 100 minus
+#: it, onto :data:`STRETCH_MIN_GREY`..255: on a road, paint is only 20-30 grey levels above the asphalt in the
+#: whole-scan shading, too faint to find a lane line's crossing of a ring by eye.
+STRETCH_PERCENTILE = 2.0
+STRETCH_MIN_GREY = 24
+
+
+def stretched_grey(rgba: np.ndarray) -> np.ndarray:
+    """``rgba`` (H, W, 4) uint8 with its grey returns (alpha > 0, R = G = B, below white: the depth-edge lines stay
+    white) stretched linearly from their :data:`STRETCH_PERCENTILE` percentiles onto ``STRETCH_MIN_GREY..255``; as
+    it is when fewer than 16 such pixels or a spread under 4 levels."""
+    r, g, b, a = (rgba[..., k] for k in range(4))
+    grey = (a > 0) & (r == g) & (g == b) & (r < 255)
+    if grey.sum() < 16:
+        return rgba
+    lo, hi = np.percentile(r[grey], [STRETCH_PERCENTILE, 100.0 - STRETCH_PERCENTILE])
+    if hi - lo < 4:
+        return rgba
+    scaled = np.clip((r.astype(np.float32) - lo) / (hi - lo), 0.0, 1.0) * (255 - STRETCH_MIN_GREY) + STRETCH_MIN_GREY
+    out = rgba.copy()
+    out[..., :3] = np.where(grey[..., None], np.round(scaled).astype(np.uint8)[..., None], rgba[..., :3])
+    return out
 
 
 def loupe_title(shown: ShownRender | None, depth: Any, center: tuple[float, float],

@@ -23,3 +23,26 @@ def test_delete_says_in_the_bar_which_pair_it_removed(app, scene):
     assert f"Deleted pair {ids[0]}" in status and "Undo" in status, status
     assert d.press_pair_action("Undo") == []  # and it comes back
     assert [p.id for p in app.state.complete_picks()] == ids
+
+
+def test_the_render_loupe_stretches_grey_shading_over_its_crop():
+    """PJLab check before run 15: a lane line's paint on the near rings was about 20-30 grey levels above the
+    asphalt in the render loupe (Intensity), too faint to find.  Its grey returns are stretched over the crop;
+    depth-edge lines (white), no-return pixels (alpha 0) and coloured pixels stay as they are."""
+    from app.shown_render import STRETCH_MIN_GREY, stretched_grey
+
+    rgba = np.zeros((10, 10, 4), np.uint8)
+    rgba[..., 3] = 255
+    rgba[:, :5, :3] = 40  # asphalt
+    rgba[:, 5:, :3] = 70  # paint
+    rgba[0, 0] = (255, 255, 255, 255)  # a depth-edge line
+    rgba[0, 1] = (10, 10, 10, 0)  # no return
+    rgba[0, 2] = (200, 30, 30, 255)  # colour: not a grey shading
+    out = stretched_grey(rgba)
+    assert out[5, 0, 0] == STRETCH_MIN_GREY and out[5, 9, 0] == 255  # 40 -> the floor, 70 -> white
+    assert (out[5, 0, :3] == out[5, 0, 0]).all()  # still grey
+    assert tuple(out[0, 0]) == (255, 255, 255, 255) and tuple(out[0, 1]) == (10, 10, 10, 0)
+    assert tuple(out[0, 2]) == (200, 30, 30, 255)
+    flat = np.full((10, 10, 4), 90, np.uint8)
+    flat[..., 3] = 255
+    assert (stretched_grey(flat) == flat).all()  # no spread: left alone
