@@ -112,8 +112,11 @@ def test_the_render_pane_a_click_on_it_and_the_ba_columns_before_any_pair(tmp_pa
             crop = app.loupes.camera_crop
             tex = d.loupe_texture("ba")
             k_tex = tex.shape[0] // crop.n
-            pane = d.render_texture()
-            assert np.array_equal(tex[::k_tex, ::k_tex], pane[crop.v0:crop.v0 + crop.n, crop.u0:crop.u0 + crop.n])
+            # (its grey shading stretched over the crop: app.shown_render.stretched_grey, checked on its own)
+            from app.shown_render import pane_texture, stretched_grey
+
+            part = d.render_shown.rgba[crop.v0:crop.v0 + crop.n, crop.u0:crop.u0 + crop.n]
+            assert np.array_equal(tex[::k_tex, ::k_tex], pane_texture(stretched_grey(part)))
         # Two laser clicks in a row replace the laser end: one pick, an ordinary laser_rc end ...
         assert len(app.state.picks) == 1
         # ... which a camera click completes into an ordinary pair.
