@@ -9,6 +9,7 @@ from typing import Any, Callable, Iterator
 
 import numpy as np
 
+from calib_core.solve.edges import slide_along_edges
 
 from .layout import ImageSlot
 from .state import Pick
@@ -214,7 +215,13 @@ class OverlayDrawing:
         edge_world, edge_cols = np.empty((0, 3)), np.empty((0, 3), np.uint8)
         if bundle is not None:
             if view.show_reprojection and len(bundle.pick_ids):
-                clicked, ok_c = app.display_from_pixels(bundle.pixels)
+                pixels = bundle.pixels
+                edges = np.array([np.nan if picks.get(pid) is None or picks[pid].edge_deg is None
+                                  else picks[pid].edge_deg for pid in bundle.pick_ids], np.float64)
+                if np.isfinite(edges).any():  # an edge pair's residual runs across its edge, not along it
+                    raw_proj, _ = camera.project(bundle.points_camera)
+                    pixels = slide_along_edges(np.asarray(raw_proj, np.float64), pixels, edges)
+                clicked, ok_c = app.display_from_pixels(pixels)
                 proj, ok_p = cview.display_from_camera_points(bundle.points_camera)
                 colors = np.array([picks[pid].color if pid in picks else (255, 255, 0) for pid in bundle.pick_ids],
                                   np.uint8).reshape(-1, 3)

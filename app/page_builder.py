@@ -51,14 +51,10 @@ if (!window.__baCalibEscape) {
 """
 
 INTRO = (
-    "Click a point in any **BA image** or in the **camera-view laser** render (the scan seen from the camera, "
-    "below the photo) and the same point in the **camera image** (either order) "
-    "to make a pair. No pose yet? **Align** first: a preset, then drag the render onto the photo. "
-    "**Shift+click** a marker to select its pair; then clicks move it. "
-    "**Drag** a marker to move it. The two **loupes** on the right magnify the last click and the "
-    "predicted other end; click in them for exact cells and sub-pixel points (a loupe click refines the pair "
-    "they show; a new pair starts on the full images). Wheel zooms on the view centre, right-drag pans. "
-    "**BA columns** shows only part of a wide scan, e.g. the part facing the camera."
+    "Click a point in any **BA image** or in the **camera-view laser** render (below the photo) and the same point "
+    "in the **camera image** (either order) to make a pair. No pose yet? **Align** first: a preset, then drag the "
+    "render onto the photo. **Shift+click** a marker selects its pair, **drag** moves it. The **loupes** on the "
+    "right magnify both ends: a click in them refines the pair they show. Wheel zooms, right-drag pans."
 )
 
 

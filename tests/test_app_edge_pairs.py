@@ -110,3 +110,53 @@ def test_unticked_a_moved_photo_end_is_a_corner_again(band_app):
     assert d.click_loupe_camera(BAND_CENTRE[0] + 1.0, BAND_CENTRE[1]) == []
     (moved,) = app.state.complete_picks()
     assert moved.pixel[0] == pytest.approx(BAND_CENTRE[0] + 1.0, abs=0.6) and moved.edge_deg is None
+
+
+def test_an_edge_pairs_residual_line_runs_across_its_edge(tmp_path, scene):
+    """The photo's residual lines join each click to its reprojected laser point; for an edge pair the click may
+    lie anywhere along the edge, so its line goes to the foot on the edge: the across-edge error only."""
+    from app.server import CalibrationApp
+    from calib_core.synthetic import simulate_pairs
+    from calib_core.transforms import transform_points
+
+    corners = simulate_pairs(scene, 6, np.random.default_rng(11), pixel_noise_px=0.3)
+    # An edge pair's laser end: a valid cell near the image centre, away from the corner pairs' cells.
+    valid = np.argwhere(np.asarray(scene.depth.valid))
+    uv, ok = scene.camera.project(transform_points(scene.T_camera_lidar, scene.depth.points[valid[:, 0], valid[:, 1]]))
+    uv = np.asarray(uv)
+    centre = np.array([scene.camera.width / 2, scene.camera.height / 2])
+    far = np.min([np.hypot(*(uv - np.array(p.pixel)).T) for p in corners], axis=0)
+    score = np.where(np.asarray(ok) & (far > 40), np.hypot(*(uv - centre).T), np.inf)
+    k = int(np.argmin(score))
+    cell, true_px = tuple(int(x) for x in valid[k]), uv[k]
+    # The photo: a band at BAND_DEG through the cell's true projection; the click 25 px along the band.
+    image = cv2.imread(str(SAMPLE / "image.png"))
+    a = np.radians(BAND_DEG)
+    d_band = np.array([np.cos(a), np.sin(a)])
+    cv2.circle(image, tuple(int(x) for x in true_px), 60, (40, 40, 40), -1)
+    cv2.line(image, tuple(int(x) for x in true_px - 55 * d_band), tuple(int(x) for x in true_px + 55 * d_band),
+             (230, 230, 230), 11, lineType=cv2.LINE_AA)
+    photo = tmp_path / "image.png"
+    cv2.imwrite(str(photo), image)
+    app = CalibrationApp(SAMPLE / "scan.npz", photo, SAMPLE / "camera.yaml", session_path=tmp_path / "s.yaml", port=0)
+    try:
+        d = AppDriver(app)
+        for p in corners:
+            assert d.click_cell(app.ba_keys[0], *p.laser_rc) == [] and d.click_camera(*p.pixel) == []
+        d.set_edge_pairs(True)
+        click = true_px + 25.0 * d_band
+        assert d.click_cell(app.ba_keys[0], *cell) == [] and d.click_camera(*click) == []
+        edge_pick = app.state.complete_picks()[-1]
+        assert edge_pick.edge_deg is not None and _angle_diff(edge_pick.edge_deg, BAND_DEG) <= 3.0
+        assert d.wait_idle()
+        segs = d.drawn_segment_pixels("/annot/overlay/residuals", d.camera_key)
+        assert len(segs) == 7
+        # The edge pair's line starts at the foot on the edge (not at the click, 25 px along it) ...
+        clicked_disp = np.asarray(d.camera_display_pixel(*click))
+        starts = segs[:, 0]
+        assert np.min(np.hypot(*(starts - clicked_disp).T)) > 5.0
+        # ... and is short: the click is on the band through the true projection.
+        lengths = np.hypot(*(segs[:, 1] - segs[:, 0]).T)
+        assert lengths.max() < 6.0, lengths
+    finally:
+        app.stop()

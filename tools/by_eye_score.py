@@ -3,7 +3,8 @@
     python tools/by_eye_score.py --scan S --camera C --reference REF SESSION.yaml [--actions LOG_DIR/actions.jsonl]
 
 Each complete pair of the session is scored by the distance between its clicked pixel and the projection, under
-the reference (published) calibration, of the laser point it names.  The pairs are then solved as the app solves
+the reference (published) calibration, of the laser point it names (an edge pair, ``edge_deg``: the distance across
+its edge).  The pairs are then solved as the app solves
 them (:func:`calib_core.solve.calibrate.calibrate`, each click weighted by its ``precision_px``; before stop 28 the
 weights were dropped here, see docs/by_eye.md) and the result is compared with the reference: the rotation
 angle after projecting both onto SO(3), and the translation difference.  The reference is used only here, never
@@ -25,6 +26,7 @@ from calib_core.io.scan_readers import load_scan
 from calib_core.io.yaml_files import read_yaml_mapping
 from calib_core.pairs import Pair, resolve_pairs
 from calib_core.solve.calibrate import calibrate
+from calib_core.solve.edges import edge_pixel_errors
 from calib_core.transforms import transform_points
 
 
@@ -60,7 +62,8 @@ def main(argv: list[str] | None = None) -> int:
     pairs = [Pair(laser_rc=tuple(e["laser_rc"]) if e.get("laser_rc") is not None else None,
                   laser_xyz=tuple(e["laser_xyz"]) if e.get("laser_rc") is None else None,
                   pixel=tuple(e["pixel"]), id=int(e.get("id", k + 1)),
-                  precision_px=None if e.get("precision_px") is None else float(e["precision_px"]))
+                  precision_px=None if e.get("precision_px") is None else float(e["precision_px"]),
+                  edge_deg=None if e.get("edge_deg") is None else float(e["edge_deg"]))
              for k, e in entries]
     # Check pairs (left out of the fit in the app) are scored but, as in the app, not solved with.
     is_check = [bool(e.get("check", False)) for _, e in entries]
@@ -69,10 +72,13 @@ def main(argv: list[str] | None = None) -> int:
     if pairs:
         points, _, pixels = resolve_pairs(pairs, depth, camera)
         projected, ok = camera.project(transform_points(T_ref, points))
-        errors = np.where(ok, np.linalg.norm(projected - pixels, axis=1), np.nan)
+        # An edge pair's error is its distance across its edge (its click may lie anywhere along the edge).
+        edges = np.array([np.nan if p.edge_deg is None else p.edge_deg for p in pairs], np.float64)
+        errors = np.where(ok, edge_pixel_errors(projected, pixels, edges), np.nan)
         for p, e in zip(pairs, errors):
             print(f"  pair {p.id}: laser_rc {p.laser_rc}, pixel ({p.pixel[0]:.1f}, {p.pixel[1]:.1f}): "
-                  f"{e:.1f} px from the reference projection")
+                  f"{e:.1f} px from the reference projection" + ("" if p.edge_deg is None else
+                                                                 f" across its edge ({p.edge_deg:.0f} deg)"))
         print(f"pair errors: median {np.nanmedian(errors):.1f} px, range {np.nanmin(errors):.1f}-"
               f"{np.nanmax(errors):.1f} px")
     fitted = [p for p, c in zip(pairs, is_check) if not c]
