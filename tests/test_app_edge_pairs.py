@@ -48,12 +48,19 @@ def _angle_diff(a: float, b: float) -> float:
     return min(d, 180.0 - d)
 
 
-def test_a_click_on_a_band_takes_its_direction_and_keeps_it(band_app):
-    app, photo, session = band_app
+def _edge_pair_at(app, uv) -> tuple[AppDriver, list]:
+    """With "Photo end on an edge" ticked: a laser click, then a photo click at original pixel ``uv``; the
+    driver and the photo click's notifications."""
     d = AppDriver(app)
     assert d.set_edge_pairs(True) == []
     assert d.click_cell(app.ba_keys[0], 20, 100) == []
-    assert d.click_camera(*BAND_CENTRE) == []
+    return d, d.click_camera(*uv)
+
+
+def test_a_click_on_a_band_takes_its_direction_and_keeps_it(band_app):
+    app, photo, session = band_app
+    d, notes = _edge_pair_at(app, BAND_CENTRE)
+    assert notes == []
     (pick,) = app.state.complete_picks()
     assert pick.edge_deg is not None and _angle_diff(pick.edge_deg, BAND_DEG) <= 3.0, pick.edge_deg
     assert app.state.pairs()[0].edge_deg == pick.edge_deg  # what the solve gets
@@ -72,11 +79,7 @@ def test_a_click_on_a_band_takes_its_direction_and_keeps_it(band_app):
 
 
 def test_the_photo_loupe_draws_an_edge_end_along_the_edge(band_app):
-    app, _, _ = band_app
-    d = AppDriver(app)
-    d.set_edge_pairs(True)
-    d.click_cell(app.ba_keys[0], 20, 100)
-    d.click_camera(*BAND_CENTRE)
+    d, _ = _edge_pair_at(band_app[0], BAND_CENTRE)
     segs = d.drawn_segment_pixels("/annot/loupe/camera_marks", "loupe_camera")
     assert len(segs) == 2  # one line along the edge and a short bar across, no "+"
     vec = segs[:, 1] - segs[:, 0]
@@ -87,22 +90,16 @@ def test_the_photo_loupe_draws_an_edge_end_along_the_edge(band_app):
 
 
 def test_no_straight_edge_means_a_corner_pair_and_says_so(band_app):
-    app, _, _ = band_app
-    d = AppDriver(app)
-    d.set_edge_pairs(True)
-    d.click_cell(app.ba_keys[0], 20, 100)
-    notes = d.click_camera(*FLAT_PIXEL)
+    app = band_app[0]
+    d, notes = _edge_pair_at(app, FLAT_PIXEL)
     assert any("no single straight edge" in " ".join(n).lower() for n in notes), notes
     (pick,) = app.state.complete_picks()
     assert pick.edge_deg is None
 
 
 def test_unticked_a_moved_photo_end_is_a_corner_again(band_app):
-    app, _, _ = band_app
-    d = AppDriver(app)
-    d.set_edge_pairs(True)
-    d.click_cell(app.ba_keys[0], 20, 100)
-    d.click_camera(*BAND_CENTRE)
+    app = band_app[0]
+    d, _ = _edge_pair_at(app, BAND_CENTRE)
     (pick,) = app.state.complete_picks()
     assert pick.edge_deg is not None
     d.set_edge_pairs(False)
