@@ -189,8 +189,8 @@ class _Rows:
     position: np.ndarray
     laser_cov_full: np.ndarray  # zeros where unmodelled, for the predictive test
     sigma_full: np.ndarray  # 1 px where unstated
-    shared_ratio: float = 0.0
-    edge_deg: np.ndarray | None = None  # degrees, NaN for corner pairs; None when no row is an edge pair  # the by-eye shared error, as calibrate() models it (pairs weighted by count)
+    shared_ratio: float = 0.0  # the by-eye shared error, as calibrate() models it (pairs weighted by count)
+    edge_deg: np.ndarray | None = None  # degrees, NaN for corner pairs; None when no row is an edge pair
 
 
 def _global_ids(shots: Sequence[Shot]) -> list[list[int]]:
@@ -868,7 +868,7 @@ def joint_pose_state(shots: Sequence[Shot], camera, T_initial: np.ndarray | None
         if n:
             _, J_pose, J_point = pixel_jacobians(camera, T, rows.points)
             sig = np.where(np.isfinite(rows.sigma_full), rows.sigma_full, DEFAULT_CLICK_SIGMA_PX)
-            F = F + fisher_information(J_pose, pair_noise(sig, J_point, rows.laser_cov_full))
+            F = F + fisher_information(J_pose, pair_noise(sig, J_point, rows.laser_cov_full, rows.edge_deg))
         return PoseState(T, information_inverse(F), 1.0, n, "extrinsics")
     opts = {} if T_initial is None else {"initial_T_camera_lidar": T_initial}
     solved = solve_shots(shots, camera, **opts)
@@ -878,9 +878,11 @@ def joint_pose_state(shots: Sequence[Shot], camera, T_initial: np.ndarray | None
     if solved.result.inliers is not None and len(solved.result.inliers) == len(rows.points):
         keep = np.asarray(solved.result.inliers, dtype=bool)
         rows = dataclasses.replace(rows, points=rows.points[keep], pixels=rows.pixels[keep],
-                                   sigma_full=rows.sigma_full[keep], laser_cov_full=rows.laser_cov_full[keep])
+                                   sigma_full=rows.sigma_full[keep], laser_cov_full=rows.laser_cov_full[keep],
+                                   edge_deg=None if rows.edge_deg is None else rows.edge_deg[keep])
     source = "pairs of all shots" if T_initial is None else "pairs of all shots (started from the extrinsics)"
-    return pose_state_of_fit(camera, T, rows.points, rows.pixels, rows.sigma_full, rows.laser_cov_full, source)
+    return pose_state_of_fit(camera, T, rows.points, rows.pixels, rows.sigma_full, rows.laser_cov_full, source,
+                             edge_deg=rows.edge_deg)
 
 
 def propose_shots(

@@ -325,3 +325,40 @@ def test_edge_pairs_on_cells_take_the_laser_pick_term(scene):
     plain = calibrate(corners + [dataclasses.replace(p, edge_deg=None) for p in edges], depth, scene.camera,
                       shared_ratio=0.0, robust=False)
     assert np.linalg.norm(_pose_errors(plain.T_camera_lidar, T)[1]) > 3 * max(np.linalg.norm(dt), 0.01)
+
+
+def test_the_guides_pose_covariance_counts_an_edge_pair_only_across_its_edge(scene):
+    """Guided picking's pose state (``pose_state_of_fit``): an edge pair informs less than the same pair as a
+    corner and more than no pair (Loewner order of the covariances), and moving its pixel along its edge changes
+    nothing (the residual variance factor stays 1), while moving a corner's does."""
+    from calib_core.guide.pose_state import pose_state_of_fit
+    from calib_core.transforms import transform_points
+
+    rng = np.random.default_rng(21)
+    idx = rng.choice(len(scene.corners_lidar), 8, replace=False)
+    points = np.asarray(scene.corners_lidar, np.float64)[idx]
+    uv, ok = scene.camera.project(transform_points(scene.T_camera_lidar, points))
+    assert np.all(ok)
+    pixels = np.asarray(uv, np.float64)
+    T, sig, laser = scene.T_camera_lidar, np.ones(8), np.zeros((8, 3, 3))
+    edges = np.full(8, np.nan)
+    edges[5:] = [0.0, 60.0, 120.0]
+
+    def cov(px, e, keep=slice(None)):
+        state = pose_state_of_fit(scene.camera, T, points[keep], px[keep], sig[keep], laser[keep], "test",
+                                  edge_deg=None if e is None else e[keep])
+        return state.covariance, state.variance_factor
+
+    corners, f0 = cov(pixels, None)
+    with_edges, f1 = cov(pixels, edges)
+    without, _ = cov(pixels, None, slice(0, 5))
+    assert f0 == f1 == 1.0
+    assert np.linalg.eigvalsh(with_edges - corners).min() > -1e-12 and np.trace(with_edges) > 1.01 * np.trace(corners)
+    assert np.linalg.eigvalsh(without - with_edges).min() > -1e-12
+    a = np.radians(edges[5:])
+    slid = pixels.copy()
+    slid[5:] += 30.0 * np.stack([np.cos(a), np.sin(a)], axis=1)
+    moved, f2 = cov(slid, edges)
+    assert f2 == 1.0 and np.allclose(moved, with_edges)
+    _, f3 = cov(slid, None)
+    assert f3 > 10.0

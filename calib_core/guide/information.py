@@ -78,7 +78,8 @@ def pixel_jacobians(camera, T_camera_lidar: np.ndarray, points_lidar: np.ndarray
     return pixels, J_pose, J_point
 
 
-def pair_noise(sigma_px, J_point: np.ndarray, laser_cov: np.ndarray | None = None) -> np.ndarray:
+def pair_noise(sigma_px, J_point: np.ndarray, laser_cov: np.ndarray | None = None,
+               edge_deg: np.ndarray | None = None) -> np.ndarray:
     """Pixel-residual covariances ``S_i`` (N, 2, 2), px^2 (module docstring).
 
     Parameters
@@ -89,10 +90,15 @@ def pair_noise(sigma_px, J_point: np.ndarray, laser_cov: np.ndarray | None = Non
         From :func:`pixel_jacobians`.
     laser_cov : (N, 3, 3) ndarray, optional
         Laser-point error covariance, metres^2; None for exact points.
+    edge_deg : (N,) ndarray, optional
+        Edge pairs' edge angles, degrees (NaN for a corner): their click noise is
+        :func:`calib_core.solve.edges.edge_click_covariance`, next to nothing along the edge.
     """
+    from ..solve.edges import edge_click_covariance
+
     n = len(J_point)
     s = np.broadcast_to(np.asarray(sigma_px, dtype=np.float64), (n,))
-    S = s[:, None, None] ** 2 * np.eye(2)[None]
+    S = edge_click_covariance(s, edge_deg)
     if laser_cov is not None:
         S = S + J_point @ laser_cov @ np.swapaxes(J_point, 1, 2)
     return S

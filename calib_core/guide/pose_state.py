@@ -19,6 +19,8 @@ import numpy as np
 from ..errors import CalibError
 from ..pairs import Pair, resolve_pairs
 from ..solve import MIN_PAIRS, calibrate
+from ..solve.calibrate import pair_edge_degrees
+from ..solve.edges import slide_along_edges
 from .information import fisher_information, information_inverse, pair_noise, pixel_jacobians
 from .laser_noise import PICK_CELL_SIGMA, cell_covariance
 
@@ -62,15 +64,17 @@ def pair_sigmas(pairs: Sequence[Pair], default_px: float = DEFAULT_CLICK_SIGMA_P
 
 
 def pose_state_of_fit(camera, T: np.ndarray, points_lidar: np.ndarray, pixels: np.ndarray, sigma_px,
-                      laser_cov: np.ndarray, source: str, quality: Any = None) -> PoseState:
+                      laser_cov: np.ndarray, source: str, quality: Any = None,
+                      edge_deg: np.ndarray | None = None) -> PoseState:
     """The pose ``T`` and ``F^-1`` of its fit pairs (laser points in metres, clicked pixels, click sigmas in px,
-    laser covariances in metres^2), inflated by their whitened residuals' variance factor when it exceeds 1."""
+    laser covariances in metres^2, edge pairs' angles in degrees, NaN for corners), inflated by their whitened
+    residuals' variance factor when it exceeds 1."""
     predicted, J_pose, J_point = pixel_jacobians(camera, T, points_lidar)
-    S = pair_noise(sigma_px, J_point, laser_cov)
+    S = pair_noise(sigma_px, J_point, laser_cov, edge_deg)
     F = fisher_information(J_pose, S)
     factor = 1.0
     dof = 2 * len(points_lidar) - 6
-    r = pixels - predicted
+    r = slide_along_edges(predicted, pixels, edge_deg) - predicted  # an edge pair: only across its edge
     if dof > 0 and np.all(np.isfinite(r)):
         factor = max(1.0, float(np.einsum("na,nab,nb->", r, np.linalg.inv(S), r)) / dof)
     return PoseState(T, factor * information_inverse(F), factor, len(points_lidar), source, quality)
@@ -120,4 +124,4 @@ def current_pose(
         laser[rc_idx] = cell_covariance(depth, np.array([fit[i].laser_rc for i in rc_idx]), PICK_CELL_SIGMA)
     source = "pairs" if T_initial is None else "pairs (started from the extrinsics)"
     return pose_state_of_fit(camera, solved.T_camera_lidar, points, pixels, pair_sigmas(fit), laser, source,
-                             solved.quality)
+                             solved.quality, pair_edge_degrees(fit))
