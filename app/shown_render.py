@@ -175,22 +175,25 @@ def loupe_texture(shown: ShownRender | None, camera: Any, u0: int, v0: int, n: i
 
 
 #: The render loupe's grey shading (intensity, BA) is stretched over its own crop, from this percentile to 100 minus
-#: it, onto :data:`STRETCH_MIN_GREY`..255: on a road, paint is only 20-30 grey levels above the asphalt in the
-#: whole-scan shading, too faint to find a lane line's crossing of a ring by eye.
+#: it, onto :data:`STRETCH_MIN_GREY`..255, where it spans fewer than :data:`STRETCH_BELOW` grey levels: on a road,
+#: paint is only 20-30 levels above the asphalt in the whole-scan shading (PJLab: crops of the road span 25-55),
+#: too faint to find a lane line's crossing of a ring by eye; a crop of mixed objects (KITTI: 150 and more) is
+#: left as it is, as the by-eye runs read it.
 STRETCH_PERCENTILE = 2.0
 STRETCH_MIN_GREY = 24
+STRETCH_BELOW = 96
 
 
 def stretched_grey(rgba: np.ndarray) -> np.ndarray:
     """``rgba`` (H, W, 4) uint8 with its grey returns (alpha > 0, R = G = B, below white: the depth-edge lines stay
     white) stretched linearly from their :data:`STRETCH_PERCENTILE` percentiles onto ``STRETCH_MIN_GREY..255``; as
-    it is when fewer than 16 such pixels or a spread under 4 levels."""
+    it is when fewer than 16 such pixels, or a spread under 4 levels or of :data:`STRETCH_BELOW` and more."""
     r, g, b, a = (rgba[..., k] for k in range(4))
     grey = (a > 0) & (r == g) & (g == b) & (r < 255)
     if grey.sum() < 16:
         return rgba
     lo, hi = np.percentile(r[grey], [STRETCH_PERCENTILE, 100.0 - STRETCH_PERCENTILE])
-    if hi - lo < 4:
+    if not 4 <= hi - lo < STRETCH_BELOW:
         return rgba
     scaled = np.clip((r.astype(np.float32) - lo) / (hi - lo), 0.0, 1.0) * (255 - STRETCH_MIN_GREY) + STRETCH_MIN_GREY
     out = rgba.copy()

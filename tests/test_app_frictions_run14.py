@@ -28,7 +28,8 @@ def test_delete_says_in_the_bar_which_pair_it_removed(app, scene):
 def test_the_render_loupe_stretches_grey_shading_over_its_crop():
     """PJLab check before run 15: a lane line's paint on the near rings was about 20-30 grey levels above the
     asphalt in the render loupe (Intensity), too faint to find.  Its grey returns are stretched over the crop;
-    depth-edge lines (white), no-return pixels (alpha 0) and coloured pixels stay as they are."""
+    depth-edge lines (white), no-return pixels (alpha 0) and coloured pixels stay as they are, and so does a crop
+    whose grey levels already spread widely (KITTI's mixed objects, as runs 1-14 read them)."""
     from app.shown_render import STRETCH_MIN_GREY, stretched_grey
 
     rgba = np.zeros((10, 10, 4), np.uint8)
@@ -46,3 +47,6 @@ def test_the_render_loupe_stretches_grey_shading_over_its_crop():
     flat = np.full((10, 10, 4), 90, np.uint8)
     flat[..., 3] = 255
     assert (stretched_grey(flat) == flat).all()  # no spread: left alone
+    mixed = rgba.copy()
+    mixed[:, 5:, :3] = 200  # a crop of mixed objects, already 160 levels apart: left as it is
+    assert (stretched_grey(mixed) == mixed).all()
