@@ -21,7 +21,8 @@ from .ui_common import MIN_PAIRS, HeldQuality, _fmt, outlier_change_note
 #: intro) in view while the control panel scrolls: each scroll shifts those rows down by what scrolled away, over the
 #: rows below (in run 4, 15 of 67 actions were panel scrolls back to it).  A shift rather than ``position: sticky``:
 #: an ``overflow: hidden`` box between the rows and viser's scroll area defeats sticky.  Also the keys viser does not
-#: send to Python: Delete / Backspace press Edit -> Delete while a pair is selected; Ctrl+Z (Cmd+Z) presses the top
+#: send to Python: Delete / Backspace press Edit -> Delete (the selected pair, else the newest one the loupes show,
+#: :meth:`app.pairs_panel.PairsPanel.on_edit`); Ctrl+Z (Cmd+Z) presses the top
 #: Undo and Ctrl+Shift+Z / Ctrl+Y Edit -> Redo, taking the key from whatever widget has the focus (in run 4 Ctrl+Z
 #: in the page reset the "Render over photo" slider); not while typing in a text area.  A fixed string: no user text.
 PAIR_BAR_JS = """
@@ -78,8 +79,7 @@ if (!window.__baCalibPairBar) {
     if (command && !event.altKey && key === "z") label = event.shiftKey ? "Redo" : "Undo";
     else if (command && !event.altKey && key === "y") label = "Redo";
     else if (!command && !inBox && (event.key === "Delete" || event.key === "Backspace")) {
-      const rows = barRows();
-      if (rows && rows.some((e) => / selected: /.test(e.textContent))) label = "Delete";
+      label = "Delete";  // the selected pair, else the newest one the loupes show (Python decides)
     }
     if (!label) return;
     event.preventDefault();

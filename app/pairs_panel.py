@@ -226,6 +226,12 @@ class PairsPanel:
             return None
         return newest.id if ("ba", newest.id, "loupe") in self._last_pick.values() else None
 
+    def _loupes_newest(self) -> int | None:
+        """The pair the loupes show when it is the newest complete pair of the shot (just made or refined)."""
+        picks = self.app.state.picks
+        newest = max((p for p in picks if p.complete), key=lambda p: p.id, default=None)
+        return newest.id if newest is not None and newest.id == self._loupes_pick else None
+
     def on_download_pairs(self, event: Any) -> None:
         with tempfile.TemporaryDirectory() as tmp:
             path = Path(tmp) / "pairs.yaml"
@@ -435,7 +441,9 @@ class PairsPanel:
         elif action == "Deselect":
             self.app.state.select(None)
         elif action == "Delete":
-            sel = self.app.state.selected
+            # Run 15: right after a pair was made and refined nothing is selected, yet Delete meant that pair
+            # (removing it took three Undos): without a selection, Delete takes the newest pair the loupes show.
+            sel = self.app.state.selected or self._loupes_newest()
             if sel is None:
                 raise CalibError("select a pair first (shift+click its marker or use the dropdown)")
             self.app.state.delete(sel)

@@ -50,3 +50,26 @@ def test_the_render_loupe_stretches_grey_shading_over_its_crop():
     mixed = rgba.copy()
     mixed[:, 5:, :3] = 200  # a crop of mixed objects, already 160 levels apart: left as it is
     assert (stretched_grey(mixed) == mixed).all()
+
+
+def test_delete_without_a_selection_takes_the_pair_just_made_and_refined(app, scene):
+    """Run 15: right after a pair was made and its photo end refined in the loupe, nothing is selected and Delete
+    did nothing; removing the bad pair took three Undos.  Delete now takes the newest pair the loupes show, and
+    only that one."""
+    from calib_core.synthetic import simulate_pairs
+
+    d = AppDriver(app)
+    pairs = simulate_pairs(scene, 2, np.random.default_rng(6), pixel_noise_px=0.5)
+    for pair in pairs:
+        assert d.click_cell(app.ba_keys[0], *pair.laser_rc) == [] and d.click_camera(*pair.pixel) == []
+    first, newest = [p.id for p in app.state.complete_picks()]
+    u, v = pairs[1].pixel
+    assert d.click_loupe_camera(u + 1.0, v) == []  # refines the newest pair's photo end
+    assert app.state.selected is None
+    assert d.press_edit("Delete") == []
+    assert [p.id for p in app.state.complete_picks()] == [first]
+    assert f"Deleted pair {newest}" in d.pair_status
+    # The loupes no longer show a pair (theirs is gone): Delete asks for a selection and removes nothing.
+    notes = d.press_edit("Delete")
+    assert notes and "select a pair first" in " ".join(notes[0]).lower(), notes
+    assert [p.id for p in app.state.complete_picks()] == [first]
