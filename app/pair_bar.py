@@ -123,9 +123,9 @@ def pending_hint(pending: Any) -> str:
     """The status line while pair ``pending`` (a half-made :class:`app.picks.Pick`) waits: where its other end is
     clicked, first (the bar shows two lines), in the words the page shows.  After a click on the photo the
     lower loupe shows the laser (render or BA image) at that place, so one click there makes the laser end."""
-    if pending.pixel is not None:
-        return (f"Pair {pending.id} waits for a BA click → **lower loupe**, then photo loupe · **Cancel pair** or Esc "
-                f"drops it.")
+    if pending.pixel is not None:  # run 15: a second photo click moved the photo point, and nothing said so
+        return (f"Pair {pending.id} waits for a BA click → **lower loupe** · a photo click moves its photo point · "
+                f"**Cancel pair** or Esc drops it.")
     return (f"Pair {pending.id} waits for a camera click → **photo loupe** (top right) · **Cancel pair** or Esc "
             f"drops it.")
 

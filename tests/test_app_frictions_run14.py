@@ -73,3 +73,15 @@ def test_delete_without_a_selection_takes_the_pair_just_made_and_refined(app, sc
     notes = d.press_edit("Delete")
     assert notes and "select a pair first" in " ".join(notes[0]).lower(), notes
     assert [p.id for p in app.state.complete_picks()] == [first]
+
+
+def test_a_second_photo_click_on_a_half_pair_moves_its_photo_point_and_the_bar_says_so(app, scene):
+    """Run 15: a second photo click while the laser end was pending moved the pending photo point instead of
+    starting a pair; useful, but nothing said so."""
+    d = AppDriver(app)
+    assert d.click_camera(300.0, 200.0) == []
+    half = app.state.pending()
+    assert "a photo click moves its photo point" in d.pair_status, d.pair_status
+    assert d.click_camera(310.0, 205.0) == []
+    (moved,) = app.state.picks
+    assert moved.id == half.id and np.allclose(moved.pixel, (310.0, 205.0), atol=1e-6) and moved.laser_rc is None
