@@ -52,7 +52,7 @@ from .errors import CalibError
 from .solve import MIN_PAIRS, CalibrationResult, Quality, solve_extrinsics
 from .solve.calibrate import default_shared_ratio, pair_edge_degrees
 from .solve.edges import edge_click_covariance, edge_pixel_errors, slide_along_edges
-from .solve.whiten import PICK_CELL_SIGMA, PICK_RANGE_SIGMA_M, cell_pick_covariance
+from .solve.whiten import PICK_CELL_SIGMA, PICK_RANGE_SIGMA_M, pairs_pick_covariance
 
 __all__ = [
     "Shot",
@@ -152,10 +152,8 @@ class Shot:
         points, bearings, pixels = resolve_pairs(pairs, depth, camera)
         n = len(pairs)
         has_cell = np.array([p.laser_rc is not None for p in pairs], dtype=bool)
-        laser_cov = np.zeros((n, 3, 3))
-        if has_cell.any() and depth is not None:
-            rc = np.array([p.laser_rc for p in pairs if p.laser_rc is not None], dtype=np.int64)
-            laser_cov[has_cell] = cell_pick_covariance(depth, rc, cell_sigma, range_sigma_m)
+        laser_cov = pairs_pick_covariance(pairs, depth, cell_sigma, range_sigma_m)
+        laser_cov = np.zeros((n, 3, 3)) if laser_cov is None else laser_cov
         precision = np.array([np.nan if p.precision_px is None else p.precision_px for p in pairs], dtype=np.float64)
         return cls(points, bearings, pixels, laser_cov, has_cell, precision, [p.id for p in pairs],
                    np.array([bool(getattr(p, "check", False)) for p in pairs], dtype=bool), pairs, depth, name,

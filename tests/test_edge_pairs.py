@@ -362,3 +362,29 @@ def test_the_guides_pose_covariance_counts_an_edge_pair_only_across_its_edge(sce
     assert f2 == 1.0 and np.allclose(moved, with_edges)
     _, f3 = cov(slid, None)
     assert f3 > 10.0
+
+
+def test_an_edge_pairs_laser_end_has_no_row_offset(scene):
+    """The laser end of an edge pair is the measured point where its ring crosses the photo's line: only which
+    cell along the ring (the column) is a guess, plus the range; a corner's cell also guesses the row.  Hand-built
+    from the depth matrix's directions (central differences) and ranges."""
+    from calib_core.solve.whiten import PICK_CELL_SIGMA, PICK_RANGE_SIGMA_M, pairs_pick_covariance
+
+    depth = scene.depth
+    valid = np.argwhere(np.asarray(depth.valid))
+    r, c = (int(x) for x in valid[len(valid) // 2])
+    corner = Pair((r, c), None, (10.0, 10.0))
+    edge = dataclasses.replace(corner, edge_deg=35.0)
+    xyz = Pair(None, (3.0, 0.5, 0.2), (12.0, 10.0), edge_deg=35.0)
+    cov = pairs_pick_covariance([corner, edge, xyz], depth)
+    dirs, rho = np.asarray(depth.directions, np.float64), float(depth.range_m[r, c])
+    W = depth.shape[1]
+    g_row = (dirs[r + 1, c] - dirs[r - 1, c]) / 2
+    g_col = (dirs[r, (c + 1) % W] - dirs[r, (c - 1) % W]) / 2
+    beam = dirs[r, c]
+    s_row, s_col = PICK_CELL_SIGMA
+    along = PICK_RANGE_SIGMA_M**2 * np.outer(beam, beam)
+    assert np.allclose(cov[0], rho**2 * (s_row**2 * np.outer(g_row, g_row) + s_col**2 * np.outer(g_col, g_col)) + along)
+    assert np.allclose(cov[1], rho**2 * s_col**2 * np.outer(g_col, g_col) + along)
+    assert np.all(cov[2] == 0)
+    assert pairs_pick_covariance([xyz], depth) is None

@@ -1,6 +1,7 @@
 """Score a by-eye walkthrough afterwards (docs/by_eye.md): each pair's own error and the result against a reference.
 
     python tools/by_eye_score.py --scan S --camera C --reference REF SESSION.yaml [--actions LOG_DIR/actions.jsonl]
+        [--image-size W H]
 
 Each complete pair of the session is scored by the distance between its clicked pixel and the projection, under
 the reference (published) calibration, of the laser point it names (an edge pair, ``edge_deg``: the distance across
@@ -51,10 +52,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--camera", required=True)
     ap.add_argument("--reference", required=True, help="the published calibration (any extrinsics format)")
     ap.add_argument("--actions", help="the driver's actions.jsonl, to count UI actions and minutes")
+    ap.add_argument("--image-size", type=int, nargs=2, metavar=("W", "H"),
+                    help="the image's size when the camera file states another (PJLab manual_calib: 1920 1200)")
     args = ap.parse_args(argv)
 
     depth = load_scan(args.scan)
-    camera = load_camera(args.camera)
+    camera = load_camera(args.camera, image_size=tuple(args.image_size)) if args.image_size else load_camera(args.camera)
     T_ref = load_extrinsics_any(args.reference)  # a KITTI calib file: rectified camera 2, the one its image shows
     session = read_yaml_mapping(args.session, "session file")
     entries = [(k, e) for k, e in enumerate(session.get("pairs", [])) if e.get("pixel") is not None

@@ -21,8 +21,9 @@ from ..pairs import Pair, resolve_pairs
 from ..solve import MIN_PAIRS, calibrate
 from ..solve.calibrate import pair_edge_degrees
 from ..solve.edges import slide_along_edges
+from ..solve.whiten import pairs_pick_covariance
 from .information import fisher_information, information_inverse, pair_noise, pixel_jacobians
-from .laser_noise import PICK_CELL_SIGMA, cell_covariance
+from .laser_noise import PICK_CELL_SIGMA
 
 __all__ = ["PoseState", "current_pose", "DEFAULT_CLICK_SIGMA_PX", "DEFAULT_PRIOR_SIGMA"]
 
@@ -118,10 +119,8 @@ def current_pose(
     points, _, pixels = resolve_pairs(fit, depth, camera)
     # Weighted by each pair's precision_px and whole-cell laser pick (robust: gross outliers left out).
     solved = calibrate(fit, depth, camera, initial_T_camera_lidar=T_initial)
-    laser = np.zeros((len(fit), 3, 3))
-    rc_idx = [i for i, p in enumerate(fit) if p.laser_rc is not None]
-    if rc_idx:
-        laser[rc_idx] = cell_covariance(depth, np.array([fit[i].laser_rc for i in rc_idx]), PICK_CELL_SIGMA)
+    laser = pairs_pick_covariance(fit, depth, PICK_CELL_SIGMA)
+    laser = np.zeros((len(fit), 3, 3)) if laser is None else laser
     source = "pairs" if T_initial is None else "pairs (started from the extrinsics)"
     return pose_state_of_fit(camera, solved.T_camera_lidar, points, pixels, pair_sigmas(fit), laser, source,
                              solved.quality, pair_edge_degrees(fit))

@@ -118,7 +118,7 @@ def calibrate(pairs: Sequence[Any], depth: Any, camera: Any, *, cost: str = "ang
     from .extrinsics import solve_extrinsics
     from .bearing_pnp import angular_errors_rad
     from .edges import edge_pixel_errors
-    from .whiten import cell_pick_covariance
+    from .whiten import pairs_pick_covariance
 
     all_ids, _ = pair_ids_and_sigmas(pairs)
     if shared_ratio is None:
@@ -130,12 +130,7 @@ def calibrate(pairs: Sequence[Any], depth: Any, camera: Any, *, cost: str = "ang
     _, sigmas = pair_ids_and_sigmas(fit_pairs)
     edges = pair_edge_degrees(fit_pairs)
     check_edges = pair_edge_degrees([pairs[i] for i in checks])
-    laser_cov = None
-    cells = [k for k, p in enumerate(fit_pairs) if p.laser_rc is not None]
-    if cells and depth is not None:
-        laser_cov = np.zeros((len(fit_pairs), 3, 3))
-        rc = np.array([fit_pairs[k].laser_rc for k in cells], dtype=np.int64)
-        laser_cov[cells] = cell_pick_covariance(depth, rc, cell_sigma, range_sigma_m)
+    laser_cov = pairs_pick_covariance(fit_pairs, depth, cell_sigma, range_sigma_m)
     result = solve_extrinsics(
         points, bearings, camera=camera, pixels=pixels, cost=cost, pair_ids=[all_ids[i] for i in fit],
         pixel_sigma=sigmas, laser_cov_m2=laser_cov, shared_ratio=shared_ratio,

@@ -30,6 +30,7 @@ from ..errors import CalibError
 from .kernels import laser_bearing_cov, laser_whitening, probe_jacobians, tangent_probes
 
 __all__ = ["tangent_to_pixel", "whitening", "click_whitening_inputs", "check_pixel_sigma", "cell_pick_covariance",
+           "pairs_pick_covariance",
            "laser_tangent_covariance", "PICK_CELL_SIGMA", "PICK_RANGE_SIGMA_M",
            "BY_EYE_SHARED_RATIO"]
 
@@ -152,6 +153,30 @@ def cell_pick_covariance(depth: Any, rows_cols: np.ndarray, cell_sigma: float | 
         return a[:, :, None] * a[:, None, :]
 
     return (rho**2)[:, None, None] * (s_row**2 * outer(g_row) + s_col**2 * outer(g_col)) + range_sigma_m**2 * outer(beam)
+
+
+def pairs_pick_covariance(pairs: Any, depth: Any, cell_sigma: float | tuple[float, float] = PICK_CELL_SIGMA,
+                          range_sigma_m: float = PICK_RANGE_SIGMA_M) -> np.ndarray | None:
+    """Laser-point covariance ``(N, 3, 3)`` (metres^2, lidar frame) of :class:`calib_core.pairs.Pair` objects:
+    :func:`cell_pick_covariance` for a pair naming a cell, zero for a ``laser_xyz`` pair; None when no pair names a
+    cell (or there is no depth matrix).
+
+    An edge pair (``edge_deg`` set) takes no offset along the row axis: its laser end is the measured point
+    where one ring crosses the photo's line, on that ring by definition; only which cell along the ring is on the
+    line is a guess (the column axis).  (With the corner's row term, PJLab's lane-line pairs 8-14 m away weighed
+    next to nothing: by-eye run 16's result moved from 41.6 to 15.9 cm without it.)
+    """
+    rows = [k for k, p in enumerate(pairs) if p.laser_rc is not None]
+    if not rows or depth is None:
+        return None
+    cov = np.zeros((len(pairs), 3, 3))
+    rc = np.array([pairs[k].laser_rc for k in rows], dtype=np.int64)
+    cov[rows] = cell_pick_covariance(depth, rc, cell_sigma, range_sigma_m)
+    edge = [j for j, k in enumerate(rows) if getattr(pairs[k], "edge_deg", None) is not None]
+    if edge:
+        col_sigma = np.broadcast_to(np.asarray(cell_sigma, dtype=np.float64), (2,))[1]
+        cov[[rows[j] for j in edge]] = cell_pick_covariance(depth, rc[edge], (0.0, float(col_sigma)), range_sigma_m)
+    return cov
 
 
 def laser_tangent_covariance(T_camera_lidar: np.ndarray, points_lidar: np.ndarray, frames: np.ndarray,
