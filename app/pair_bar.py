@@ -149,6 +149,10 @@ def live_summary(live: Any, held: HeldQuality | None = None, fitted: bool = Fals
     the line showed nothing)."""
     bundle = getattr(live, "bundle", None)
     r = getattr(bundle, "result", None)
+    error = getattr(live, "error", None)
+    if error and not getattr(live, "solving", False):  # run 16: the line kept the last good solve's figures
+        shown = error if len(error) <= REASON_HEAD_CHARS else error[:REASON_HEAD_CHARS - 1] + "…"
+        return f"**Solve failed:** {shown}" + (" · the page shows the last good solve" if r is not None else "")
     if r is None:
         if held is not None:
             held.status(None)  # a new start: the next verdict is shown plain

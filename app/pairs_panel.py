@@ -60,9 +60,7 @@ class PairsPanel:
         # In the pinned bar: a person switches it on for a run of lane-line crossings and off again.
         self.edge_checkbox = gui.add_checkbox(
             "Photo end on an edge", initial_value=app.state.view.edge_pairs, order=top - 0.9,
-            hint="For a laser point on a straight edge, e.g. where a laser ring crosses a lane line or a pole's side: "
-                 "click anywhere on that edge in the photo. The pair's photo end may slide along the edge; only its "
-                 "distance across the edge counts. Needs 4 corner pairs besides.")
+            hint="The pair's photo end lies on a straight edge (a lane line, a pole's side) and may slide along it")
         self.edge_checkbox.on_update(guard(self.on_edge_pairs))
         # One line kept when blank: in run 7 the controls below jumped ~18 px as it came and went.
         self._status_line = FixedLine(gui, order=top - 0.5, lines=STATUS_LINES)
@@ -148,13 +146,23 @@ class PairsPanel:
     def on_edge_pairs(self, event: Any) -> None:
         """The "Photo end on an edge" checkbox: the photo clicks from now on are on an edge (or corners again)."""
         self.app.state.set_view(edge_pairs=bool(event.value))
+        # Run 16: ticked after the photo click of the pair being made, the tick did not reach that photo end (a
+        # finished pair keeps its kind: the tick is usually meant for the next one).
+        half = self.app.state.pending()
+        if half is not None and half.pixel is not None:
+            tags = self._photo_tags(*half.pixel, event.client, bool(event.value))
+            if tags["edge_deg"] != half.edge_deg:
+                self.app.state.move_pixel(half.id, *half.pixel, **tags)
         self.refresh()
 
-    def _photo_tags(self, u: float, v: float, client: Any) -> dict:
-        """``edge_deg`` of a photo click at original pixel ``(u, v)``: the photo's edge direction there while
-        "Photo end on an edge" is on, else None (a corner).  Without a clear straight edge the pair stays a
-        corner pair, and the person is told."""
-        if not self.app.state.view.edge_pairs:
+    def _newest(self) -> Any:
+        """The newest pair of the shot (the one being made or just made), or None."""
+        return max(self.app.state.picks, key=lambda p: p.id, default=None)
+
+    def _photo_tags(self, u: float, v: float, client: Any, on_edge: bool) -> dict:
+        """``edge_deg`` of a photo click at original pixel ``(u, v)``: the photo's edge direction there for an end
+        ``on_edge``, else None (a corner).  Without a clear straight edge it is a corner, and the person is told."""
+        if not on_edge:
             return {"edge_deg": None}
         edge = edge_at(self.app.image_gray, (u, v))
         if not edge.ok:
@@ -225,12 +233,6 @@ class PairsPanel:
         if newest is None or not newest.complete or newest.id not in self._rough_photo:
             return None
         return newest.id if ("ba", newest.id, "loupe") in self._last_pick.values() else None
-
-    def _loupes_newest(self) -> int | None:
-        """The pair the loupes show when it is the newest complete pair of the shot (just made or refined)."""
-        picks = self.app.state.picks
-        newest = max((p for p in picks if p.complete), key=lambda p: p.id, default=None)
-        return newest.id if newest is not None and newest.id == self._loupes_pick else None
 
     def on_download_pairs(self, event: Any) -> None:
         with tempfile.TemporaryDirectory() as tmp:
@@ -324,7 +326,12 @@ class PairsPanel:
                 raise
         else:
             _, u, v = target
-            tags = self._photo_tags(u, v, client)
+            # The tick sets the kind of the pair being made; an older pair moved keeps its own (run 16: a corner
+            # pair moved with the tick on became an edge pair, unasked).
+            moved = pick_id if pick_id is not None else self.app.state.selected
+            on_edge = (self.app.state.view.edge_pairs if moved is None or moved == self._newest().id
+                       else self.app.state.get(moved).edge_deg is not None)
+            tags = self._photo_tags(u, v, client, on_edge)
             out = (self.app.state.move_pixel(pick_id, u, v, **tags) if pick_id is not None
                    else self.app.state.click_pixel(u, v, **tags))
         if moves_selected:
@@ -352,9 +359,6 @@ class PairsPanel:
             raise CalibError("the camera does not see that part of the panorama; click inside the picture")
         return float(raw[0, 0]), float(raw[0, 1])
 
-    def _nearest_pick(self, key: str, uv: tuple[float, float]) -> int | None:
-        return self._nearest_pick_at(key, uv, self.app.slot_of(key))
-
     def make_select_handler(self, key: str) -> Callable:
         """The Shift+click callback of image slot ``key``: selects the pair whose marker is nearest."""
         def on_shift_click(event: Any) -> None:
@@ -376,7 +380,7 @@ class PairsPanel:
             slot = self.app.slots[key]
             start = slot.pixel_from_world(np.asarray(event.start_position)[None])[0]
             end = slot.pixel_from_world(np.asarray(event.end_position)[None])[0]
-            pick_id = self._nearest_pick(key, tuple(start))
+            pick_id = self._nearest_pick_at(key, tuple(start), self.app.slot_of(key))
             moved = np.hypot(*(np.asarray(event.end_screen_pos) - np.asarray(event.start_screen_pos)))
             if pick_id is None:
                 if moved < 0.01 and slot.contains(start):  # a shaky click, not a drag
@@ -443,7 +447,9 @@ class PairsPanel:
         elif action == "Delete":
             # Run 15: right after a pair was made and refined nothing is selected, yet Delete meant that pair
             # (removing it took three Undos): without a selection, Delete takes the newest pair the loupes show.
-            sel = self.app.state.selected or self._loupes_newest()
+            newest = self._newest()
+            sel = self.app.state.selected or (newest.id if newest is not None and newest.complete
+                                              and newest.id == self._loupes_pick else None)
             if sel is None:
                 raise CalibError("select a pair first (shift+click its marker or use the dropdown)")
             self.app.state.delete(sel)

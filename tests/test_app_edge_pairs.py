@@ -157,3 +157,51 @@ def test_an_edge_pairs_residual_line_runs_across_its_edge(tmp_path, scene):
         assert lengths.max() < 6.0, lengths
     finally:
         app.stop()
+
+
+def test_ticked_after_the_photo_click_the_tick_reaches_the_pair_being_made(band_app):
+    """Run 16 (KITTI): a photo click, then the tick, then the laser click: the pair stayed a corner pair (43 px
+    off) until its photo end was clicked again."""
+    app = band_app[0]
+    d = AppDriver(app)
+    assert d.click_camera(*BAND_CENTRE) == []
+    assert app.state.pending().edge_deg is None
+    assert d.set_edge_pairs(True) == []
+    assert _angle_diff(app.state.pending().edge_deg, BAND_DEG) <= 3.0
+    assert d.click_cell(app.ba_keys[0], 20, 100) == []
+    (pick,) = app.state.complete_picks()
+    assert pick.edge_deg is not None
+
+
+def test_an_older_pair_moved_with_the_tick_on_keeps_its_kind(band_app):
+    """Run 16 (PJLab): with the tick on, moving a corner pair's photo end (selected by Shift+click) made it an
+    edge pair, unasked."""
+    app = band_app[0]
+    d = AppDriver(app)
+    assert d.click_cell(app.ba_keys[0], 20, 100) == [] and d.click_camera(*BAND_CENTRE) == []  # a corner pair
+    corner = app.state.complete_picks()[0]
+    d, _ = _edge_pair_at(app, (BAND_CENTRE[0] + 20 * np.cos(np.radians(BAND_DEG)),
+                               BAND_CENTRE[1] + 20 * np.sin(np.radians(BAND_DEG))))
+    assert app.state.complete_picks()[1].edge_deg is not None  # the newest: an edge pair
+    assert d.select_in_dropdown(corner.id) == []
+    assert d.click_camera(BAND_CENTRE[0] - 3.0, BAND_CENTRE[1] - 1.5) == []  # moves the selected corner pair
+    moved = app.state.get(corner.id)
+    assert moved.pixel[0] == pytest.approx(BAND_CENTRE[0] - 3.0, abs=0.6) and moved.edge_deg is None
+
+
+def test_a_failed_solve_says_so_in_the_live_line(band_app, scene):
+    """Run 16 (PJLab): with fewer than 4 corner pairs left beside the edge pairs the solve failed, but the live
+    line kept the last good solve's figures; only the Calibration panel said so."""
+    from calib_core.synthetic import simulate_pairs
+
+    app = band_app[0]
+    d = AppDriver(app)
+    for pair in simulate_pairs(scene, 4, np.random.default_rng(8), pixel_noise_px=0.3):
+        assert d.click_cell(app.ba_keys[0], *pair.laser_rc) == [] and d.click_camera(*pair.pixel) == []
+    _edge_pair_at(app, BAND_CENTRE)
+    assert d.wait_idle() and "Quality" in app.pairs_panel.bar.live_line
+    first = app.state.complete_picks()[0].id
+    assert d.select_in_dropdown(first) == [] and d.press_edit("Delete") == []
+    assert d.wait_idle()
+    line = app.pairs_panel.bar.live_line
+    assert line.startswith("**Solve failed:**") and "4 corner pairs" in line, line
